@@ -1,0 +1,23 @@
+"""The bench: parameters, physics blocks, geometry and the assembled plant model."""
+
+from fsmbench.bench.params import (
+    Bench,
+    BenchParams,
+    ParamsError,
+    PerAxis,
+    default_bench,
+    load_bench,
+    param_rows,
+    save_bench,
+)
+
+__all__ = [
+    "Bench",
+    "BenchParams",
+    "ParamsError",
+    "PerAxis",
+    "default_bench",
+    "load_bench",
+    "param_rows",
+    "save_bench",
+]

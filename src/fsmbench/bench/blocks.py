@@ -1,0 +1,386 @@
+"""The bench's transfer-function blocks from physics, and the assembled plant.
+
+Blocks and signal names follow the seed (sections 1.1, 2.2, 2.5):
+
+====  ===========================  ==========================  =======
+name  from                         to                          unit
+====  ===========================  ==========================  =======
+Gi    Uch, Ucv  (DAC voltage)      Ich, Icv  (coil current)    A/V
+Zc    Ich, Icv                     Vtch, Vtcv (coil voltage)   V/A
+Ga    Vtch, Vtcv                   Vch, Vcv  (amplified)       V/V
+Gc    Ich, Icv                     Vpch, Vpcv (4QD part)       V/A
+Gn    Unh, Unv  (Newport command)  Vpnh, Vpnv (4QD part)       V/V
+Gd    Rh, Rv    (beam angle)       Vph, Vpv  (4QD output)      V/rad
+====  ===========================  ==========================  =======
+
+The full system has inputs ``Uch, Ucv, Unh, Unv`` and outputs
+``Vch, Vcv, Ich, Icv, Rh, Rv, Vph, Vpv`` and is assembled exactly as the
+seed's ``connect(Gi, Zc, Ga, Gc, Gn, inv(Gd), Sh, Sv, inputs, outputs)``.
+
+Every dynamic block is realised in modal (block-diagonal) form with states
+scaled to the block's output unit: a lightly damped mode with
+``x = [angle, angle_rate / w0]`` has A = [[0, w0], [-w0, -2 xi w0]], whose
+condition number is independent of w0, unlike the companion form.
+
+Pure delays cannot live in a python-control state-space model; the plant
+carries them as per-input delays (like MATLAB's ``InputDelay``) and
+:meth:`PlantModel.frequency_response` applies them exactly.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import control as ct
+import numpy as np
+import xarray as xr
+
+from fsmbench.bench.params import BenchParams
+
+__all__ = [
+    "PLANT_INPUTS",
+    "PLANT_OUTPUTS",
+    "PlantModel",
+    "assemble_plant",
+    "coil_impedance",
+    "current_amplifier",
+    "input_delays_s",
+    "mode_block",
+    "newport",
+    "newport_angles",
+    "newport_beam_matrix",
+    "physical_plant",
+    "quad_diode",
+    "rotation",
+    "sercalo",
+    "sercalo_angles",
+    "sercalo_beam_matrix",
+    "ss_frequency_response",
+    "voltage_amplifier",
+]
+
+PLANT_INPUTS = ("Uch", "Ucv", "Unh", "Unv")
+PLANT_OUTPUTS = ("Vch", "Vcv", "Ich", "Icv", "Rh", "Rv", "Vph", "Vpv")
+
+
+def mode_block(*, freq_hz: float, damping_ratio: float) -> ct.StateSpace:
+    """Modal realisation of ``1 / (1 + 2 xi s/w0 + s**2/w0**2)`` with unit DC gain.
+
+    Parameters
+    ----------
+    freq_hz : float
+        Natural frequency f0 [Hz].
+    damping_ratio : float
+        Damping ratio xi [1] (> 1 gives two real poles; the form still holds).
+
+    Returns
+    -------
+    control.StateSpace
+        SISO, A (2, 2), B (2, 1), C (1, 2); states are ``[y, dy/dt / w0]``.
+    """
+    w0 = 2.0 * np.pi * freq_hz
+    a = np.array([[0.0, w0], [-w0, -2.0 * damping_ratio * w0]])
+    b = np.array([[0.0], [w0]])
+    c = np.array([[1.0, 0.0]])
+    return ct.ss(a, b, c, np.zeros((1, 1)))
+
+
+def rotation(angle_rad: float) -> np.ndarray:
+    """Coordinates of a vector in a frame rotated by ``angle_rad``, shape (2, 2)."""
+    c, s = np.cos(angle_rad), np.sin(angle_rad)
+    return np.array([[c, s], [-s, c]])
+
+
+def current_amplifier(p: BenchParams) -> ct.StateSpace:
+    """Gi: ``Ic/Uc = 1 / (R + R_buffer + Rc + Lc s)`` per axis [A/V] (seed 2.2 eq. 2)."""
+    r_tot = (p.current_amplifier.r_ohm.as_array() + p.current_amplifier.r_buffer_ohm.as_array()
+             + p.sercalo.r_coil_ohm.as_array())
+    l_h = p.sercalo.l_coil_h.as_array()
+    # State: coil current [A]. The pole (R_tot/Lc, ~125 kHz) is kept: it is physics,
+    # and exact discretisation handles the stiffness.
+    return ct.ss(np.diag(-r_tot / l_h), np.diag(1.0 / l_h), np.eye(2), np.zeros((2, 2)),
+                 inputs=["Uch", "Ucv"], outputs=["Ich", "Icv"], states=["Ich", "Icv"], name="Gi")
+
+
+def coil_impedance(p: BenchParams) -> ct.StateSpace:
+    """Zc: static coil resistance Rc [V/A] (seed 2.2, "Important 2").
+
+    The inductive term ``Lc s`` has its zero at Rc/Lc (14.8 kHz for the h axis),
+    above the 5 kHz Nyquist frequency: |1 + j w Lc/Rc| - 1 < 0.25 % below 1 kHz.
+    A state-space model cannot hold the improper ``Rc + Lc s``; the twin uses
+    the exact circuit equation instead.
+    """
+    return ct.ss([], [], [], np.diag(p.sercalo.r_coil_ohm.as_array()),
+                 inputs=["Ich", "Icv"], outputs=["Vtch", "Vtcv"], name="Zc")
+
+
+def voltage_amplifier(p: BenchParams) -> ct.StateSpace:
+    """Ga: ``Ga0 / (1 + s/wc)`` per axis [V/V] (seed 2.2 eq. 7)."""
+    wc = 2.0 * np.pi * p.voltage_amplifier.cutoff_hz
+    g = p.voltage_amplifier.gain
+    return ct.ss(-wc * np.eye(2), wc * g * np.eye(2), np.eye(2), np.zeros((2, 2)),
+                 inputs=["Vtch", "Vtcv"], outputs=["Vch", "Vcv"], states=["Vch", "Vcv"],
+                 name="Ga")
+
+
+def sercalo_angles(p: BenchParams) -> ct.StateSpace:
+    """Coil currents to Sercalo mirror angles ``theta_ch, theta_cv`` [rad/A] (seed 1.2).
+
+    Per axis a mass-spring-damper ``theta/I = g0 / (1 + 2 xi s/w0 + s**2/w0**2)``;
+    the coils' torques couple the axes through ``coupling_*``.
+    """
+    s = p.sercalo
+    a = np.zeros((4, 4))
+    b = np.zeros((4, 2))
+    c = np.zeros((2, 4))
+    torque = np.array([[1.0, s.coupling_v_to_h], [s.coupling_h_to_v, 1.0]])
+    for i, axis in enumerate(("h", "v")):
+        mode = mode_block(freq_hz=s.resonance_hz[axis], damping_ratio=s.damping_ratio[axis])
+        ai, bi, ci = mode.A, mode.B, mode.C
+        a[2 * i:2 * i + 2, 2 * i:2 * i + 2] = ai
+        b[2 * i:2 * i + 2, :] = bi @ (s.dc_gain_rad_per_a[axis] * torque[i:i + 1, :])
+        c[i, 2 * i:2 * i + 2] = ci[0]
+    return ct.ss(a, b, c, np.zeros((2, 2)), inputs=["Ich", "Icv"],
+                 outputs=["theta_ch", "theta_cv"],
+                 states=["theta_ch", "dtheta_ch", "theta_cv", "dtheta_cv"], name="Gc_angles")
+
+
+def newport_angles(p: BenchParams) -> ct.StateSpace:
+    """Newport commands to mirror angles ``theta_nh, theta_nv`` [rad/V] (seed 1.4).
+
+    ``theta_n = gn * wn**2 / (s**2 + 2 zeta wn s + wn**2) * Un``, the datasheet
+    fit of ``docs/model.md``; the internal lag is a pure delay (:func:`input_delays_s`).
+    """
+    n = p.newport
+    a = np.zeros((4, 4))
+    b = np.zeros((4, 2))
+    c = np.zeros((2, 4))
+    for i, axis in enumerate(("h", "v")):
+        mode = mode_block(freq_hz=n.natural_freq_hz, damping_ratio=n.damping_ratio)
+        ai, bi, ci = mode.A, mode.B, mode.C
+        a[2 * i:2 * i + 2, 2 * i:2 * i + 2] = ai
+        b[2 * i:2 * i + 2, i:i + 1] = bi * n.gain_rad_per_v[axis]
+        c[i, 2 * i:2 * i + 2] = ci[0]
+    return ct.ss(a, b, c, np.zeros((2, 2)), inputs=["Unh", "Unv"],
+                 outputs=["theta_nh", "theta_nv"],
+                 states=["theta_nh", "dtheta_nh", "theta_nv", "dtheta_nv"], name="Gn_angles")
+
+
+def sercalo_beam_matrix(p: BenchParams) -> np.ndarray:
+    """Beam angle in the 4QD frame per Sercalo mirror angle, shape (2, 2) [rad/rad].
+
+    Two reflections (``beam_angle_per_mirror_angle``, signed), then the 4QD's rotation.
+    """
+    return rotation(p.quad_diode.rotation_rad) @ np.diag(
+        p.sercalo.beam_angle_per_mirror_angle.as_array())
+
+
+def newport_beam_matrix(p: BenchParams) -> np.ndarray:
+    """Beam angle in the 4QD frame per Newport mirror angle, shape (2, 2) [rad/rad]."""
+    return rotation(p.quad_diode.rotation_rad) * p.newport.beam_angle_per_mirror_angle
+
+
+def sercalo(p: BenchParams) -> ct.StateSpace:
+    """Gc: coil currents to the Sercalo's share of the 4QD outputs [V/A] (seed 1.2, 2.3).
+
+    Mirror angles (:func:`sercalo_angles`), two reflections and the 4QD
+    rotation (:func:`sercalo_beam_matrix`), then the 4QD gain.
+    """
+    m = sercalo_angles(p)
+    c = np.diag(p.quad_diode.gain_v_per_rad.as_array()) @ sercalo_beam_matrix(p) @ m.C
+    return ct.ss(m.A, m.B, c, np.zeros((2, 2)), inputs=["Ich", "Icv"],
+                 outputs=["Vpch", "Vpcv"], states=list(m.state_labels), name="Gc")
+
+
+def newport(p: BenchParams) -> ct.StateSpace:
+    """Gn: Newport commands to the Newport's share of the 4QD outputs [V/V] (seed 1.4, 2.4).
+
+    Mirror angles (:func:`newport_angles`), beam angle twice the mirror angle
+    (seed 2.1) in the 4QD frame, then the 4QD gain.
+    """
+    m = newport_angles(p)
+    c = np.diag(p.quad_diode.gain_v_per_rad.as_array()) @ newport_beam_matrix(p) @ m.C
+    return ct.ss(m.A, m.B, c, np.zeros((2, 2)), inputs=["Unh", "Unv"],
+                 outputs=["Vpnh", "Vpnv"], states=list(m.state_labels), name="Gn")
+
+
+def quad_diode(p: BenchParams) -> ct.StateSpace:
+    """Gd: beam angle to 4QD output, static diagonal [V/rad] (seed 2.1, Table 2)."""
+    return ct.ss([], [], [], np.diag(p.quad_diode.gain_v_per_rad.as_array()),
+                 inputs=["Rh", "Rv"], outputs=["Vph", "Vpv"], name="Gd")
+
+
+def input_delays_s(p: BenchParams) -> dict[str, float]:
+    """Pure delay of each plant input [s], as an identification sees it.
+
+    DAC commands reach the plant ``dac_delay_samples`` later and are then held
+    for one sample; a zero-order hold looks like a delay of half a sample below
+    Nyquist. The Newport adds its internal lag (seed 2.4: 0.5 ms in total).
+    """
+    ts = p.converter.ts_s
+    dac = (p.converter.dac_delay_samples + 0.5) * ts
+    return {"Uch": dac, "Ucv": dac, "Unh": dac + p.newport.internal_delay_s,
+            "Unv": dac + p.newport.internal_delay_s}
+
+
+def ss_frequency_response(sys: ct.StateSpace, f_hz: np.ndarray) -> np.ndarray:
+    """Complex response ``C (sI - A)^-1 B + D`` at ``s = j 2 pi f``, shape (nf, p, m).
+
+    One batched solve over all frequencies instead of a Python loop.
+    """
+    f = np.asarray(f_hz, dtype=float).ravel()
+    a, b, c, d = (np.asarray(x, dtype=float) for x in (sys.A, sys.B, sys.C, sys.D))
+    n = a.shape[0]
+    if n == 0:
+        return np.broadcast_to(d, (f.size, *d.shape)).astype(complex)
+    s = 2j * np.pi * f
+    lhs = s[:, None, None] * np.eye(n)[None] - a[None]
+    x = np.linalg.solve(lhs, np.broadcast_to(b, (f.size, *b.shape)).astype(complex))
+    return np.einsum("pn,fnm->fpm", c, x) + d[None]
+
+
+@dataclass(frozen=True)
+class PlantModel:
+    """The bench as named LTI blocks plus the assembled system and its input delays.
+
+    Attributes
+    ----------
+    blocks : mapping of str to control.StateSpace
+        ``Gi, Zc, Ga, Gc, Gn, Gd`` with the seed's signal names.
+    sys : control.StateSpace
+        Delay-free full system, inputs :data:`PLANT_INPUTS`, outputs :data:`PLANT_OUTPUTS`.
+    input_delay_s : mapping of str to float
+        Pure delay at each input of ``sys`` [s].
+    source : str
+        Where the model comes from, e.g. ``"physical (true)"`` or ``"identified"``.
+    """
+
+    blocks: Mapping[str, ct.StateSpace]
+    sys: ct.StateSpace
+    input_delay_s: Mapping[str, float]
+    source: str
+
+    def frequency_response(self, f_hz: np.ndarray, *, outputs: Sequence[str] | None = None,
+                           inputs: Sequence[str] | None = None,
+                           with_delay: bool = True) -> xr.DataArray:
+        """Exact frequency response including the input delays.
+
+        Parameters
+        ----------
+        f_hz : array, shape (nf,)
+            Frequencies [Hz].
+        outputs, inputs : sequence of str, optional
+            Signal names to keep (default: all).
+        with_delay : bool
+            Apply the pure input delays (default True).
+
+        Returns
+        -------
+        xarray.DataArray, complex, dims (frequency, output, input).
+        """
+        outs = list(self.sys.output_labels if outputs is None else outputs)
+        ins = list(self.sys.input_labels if inputs is None else inputs)
+        sub = self.subsystem(outputs=outs, inputs=ins)
+        f = np.asarray(f_hz, dtype=float).ravel()
+        h = ss_frequency_response(sub, f)
+        if with_delay:
+            tau = np.array([self.input_delay_s.get(name, 0.0) for name in ins])
+            h = h * np.exp(-2j * np.pi * f[:, None, None] * tau[None, None, :])
+        return xr.DataArray(h, dims=("frequency", "output", "input"),
+                            coords={"frequency": f, "output": outs, "input": ins},
+                            attrs={"units_frequency": "Hz", "source": self.source})
+
+    def subsystem(self, *, outputs: Sequence[str], inputs: Sequence[str]) -> ct.StateSpace:
+        """The delay-free sub-system between named inputs and outputs."""
+        out_idx = [_index(self.sys.output_labels, n, "output") for n in outputs]
+        in_idx = [_index(self.sys.input_labels, n, "input") for n in inputs]
+        return ct.ss(self.sys.A, self.sys.B[:, in_idx], self.sys.C[out_idx, :],
+                     self.sys.D[np.ix_(out_idx, in_idx)], inputs=list(inputs),
+                     outputs=list(outputs), states=self.sys.state_labels)
+
+    def dc_gain(self, *, output: str, input: str) -> float:
+        """Static gain from ``input`` to ``output`` [output unit / input unit]."""
+        return float(np.real(self.frequency_response(np.array([0.0]), outputs=[output],
+                                                     inputs=[input]).values[0, 0, 0]))
+
+    def with_pade(self, *, order: int = 6) -> ct.StateSpace:
+        """``sys`` with each input delay replaced by a Pade approximation of ``order``."""
+        parts = []
+        for name in self.sys.input_labels:
+            tau = self.input_delay_s.get(name, 0.0)
+            if tau > 0:
+                num, den = ct.pade(tau, order)
+                d = ct.tf2ss(ct.tf(num, den))
+            else:
+                d = ct.ss([], [], [], [[1.0]])
+            parts.append(ct.ss(d.A, d.B, d.C, d.D, inputs=[name], outputs=[f"{name}_delayed"]))
+        delays = ct.append(*parts)
+        delays = ct.ss(delays.A, delays.B, delays.C, delays.D,
+                       inputs=list(self.sys.input_labels),
+                       outputs=[f"{n}_delayed" for n in self.sys.input_labels])
+        plant = ct.ss(self.sys.A, self.sys.B, self.sys.C, self.sys.D,
+                      inputs=[f"{n}_delayed" for n in self.sys.input_labels],
+                      outputs=list(self.sys.output_labels))
+        return ct.interconnect([delays, plant], inplist=list(self.sys.input_labels),
+                               outlist=list(self.sys.output_labels),
+                               inputs=list(self.sys.input_labels),
+                               outputs=list(self.sys.output_labels))
+
+    def summary(self) -> dict[str, Any]:
+        """JSON-ready description: source, sizes, delays, DC gains of the main paths."""
+        paths = [("Vch", "Uch"), ("Vcv", "Ucv"), ("Ich", "Uch"), ("Icv", "Ucv"),
+                 ("Vph", "Uch"), ("Vpv", "Ucv"), ("Vph", "Unh"), ("Vpv", "Unv")]
+        return {
+            "source": self.source,
+            "n_states": int(self.sys.nstates),
+            "inputs": list(self.sys.input_labels),
+            "outputs": list(self.sys.output_labels),
+            "input_delay_s": {k: float(v) for k, v in self.input_delay_s.items()},
+            "dc_gain": {f"{i}->{o}": self.dc_gain(output=o, input=i) for o, i in paths},
+        }
+
+
+def _index(labels: Sequence[str], name: str, kind: str) -> int:
+    try:
+        return list(labels).index(name)
+    except ValueError:
+        raise KeyError(f"no {kind} named {name!r}; {kind}s are {list(labels)}") from None
+
+
+def assemble_plant(*, gi: ct.StateSpace, zc: ct.StateSpace, ga: ct.StateSpace,
+                   gc: ct.StateSpace, gn: ct.StateSpace, gd: ct.StateSpace,
+                   input_delay_s: Mapping[str, float], source: str) -> PlantModel:
+    """Connect the blocks as the seed's 2.5 ``connect`` does and return the plant.
+
+    ``Vph = Vpch + Vpnh``, ``Vpv = Vpcv + Vpnv`` and ``[Rh, Rv] = inv(Gd) [Vph, Vpv]``.
+    Used for the physical model and for the identified one alike, so the two
+    can be compared and swapped.
+    """
+    sh = ct.summing_junction(inputs=["Vpch", "Vpnh"], output="Vph", name="Sh")
+    sv = ct.summing_junction(inputs=["Vpcv", "Vpnv"], output="Vpv", name="Sv")
+    gd_inv = ct.ss([], [], [], np.linalg.inv(np.asarray(gd.D, dtype=float)),
+                   inputs=["Vph", "Vpv"], outputs=["Rh", "Rv"], name="Gd_inv")
+    sys = ct.interconnect([gi, zc, ga, gc, gn, gd_inv, sh, sv], inplist=list(PLANT_INPUTS),
+                          outlist=list(PLANT_OUTPUTS), inputs=list(PLANT_INPUTS),
+                          outputs=list(PLANT_OUTPUTS), name="sys")
+    sys = ct.ss(sys.A, sys.B, sys.C, sys.D, inputs=list(PLANT_INPUTS),
+                outputs=list(PLANT_OUTPUTS), states=list(sys.state_labels), name="sys")
+    blocks = {"Gi": gi, "Zc": zc, "Ga": ga, "Gc": gc, "Gn": gn, "Gd": gd}
+    return PlantModel(blocks=blocks, sys=sys, input_delay_s=dict(input_delay_s), source=source)
+
+
+def physical_plant(p: BenchParams, *, source: str = "physical") -> PlantModel:
+    """The plant from physics for one parameter set (``bench.nominal`` or ``bench.true``)."""
+    return assemble_plant(gi=current_amplifier(p), zc=coil_impedance(p), ga=voltage_amplifier(p),
+                          gc=sercalo(p), gn=newport(p), gd=quad_diode(p),
+                          input_delay_s=input_delays_s(p), source=source)
+
+
+def replace_params(p: BenchParams, **changes: Any) -> BenchParams:
+    """``dataclasses.replace`` on a nested group, e.g. ``sercalo={"damping_ratio": ...}``."""
+    groups = {name: dataclasses.replace(getattr(p, name), **values)
+              for name, values in changes.items()}
+    return dataclasses.replace(p, **groups)

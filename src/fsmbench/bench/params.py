@@ -1,0 +1,589 @@
+"""Bench parameters: every number of the Sercalo test bench, with its unit and source.
+
+Three views of the bench are kept apart (see ``docs/model.md``):
+
+``datasheet``
+    Numbers as the vendors document them (seed Table 1, Figure 4). They are
+    not used by the model directly; ``docs/model.md`` derives the nominal
+    model parameters from them.
+``nominal``
+    The model parameters an engineer would use before identifying anything:
+    datasheet derivations, measured component values and the seed's own
+    identified values where the seed gives them (Table 2).
+``true``
+    What the digital twin simulates. It differs from ``nominal`` where the
+    real bench did (the seed's section 2.2 finds a current-amplifier gain far
+    from ``1/(R+Rc)``) and, on purpose, by a few per cent elsewhere, so that an
+    identification that merely echoes the nominal values fails its tests.
+
+Numbers live in ``default_bench.toml``; units, sources and descriptions live
+in the field metadata below, so ``fsmbench params`` and :func:`save_bench`
+can always print them.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import tomllib
+from collections.abc import Iterator
+from dataclasses import dataclass, field
+from importlib import resources
+from pathlib import Path
+from typing import Any, get_type_hints
+
+import numpy as np
+
+__all__ = [
+    "AttocubeParams",
+    "Bench",
+    "BenchParams",
+    "ConverterParams",
+    "CurrentAmplifierParams",
+    "Datasheet",
+    "EnvironmentParams",
+    "GeometryParams",
+    "NewportDatasheet",
+    "NewportParams",
+    "ParamRow",
+    "ParamsError",
+    "PerAxis",
+    "QuadDiodeParams",
+    "ScalingParams",
+    "SercaloDatasheet",
+    "SercaloParams",
+    "VoltageAmplifierParams",
+    "default_bench",
+    "load_bench",
+    "param_rows",
+    "save_bench",
+]
+
+AXES = ("h", "v")
+
+
+class ParamsError(ValueError):
+    """A parameter file is malformed; the message names the file and the key."""
+
+
+@dataclass(frozen=True)
+class PerAxis:
+    """One value per mirror axis: ``h`` (horizontal, Sercalo AX1) and ``v`` (vertical, AX2)."""
+
+    h: float
+    v: float
+
+    def __getitem__(self, axis: str) -> float:
+        if axis not in AXES:
+            raise KeyError(f"axis must be 'h' or 'v', not {axis!r}")
+        return float(getattr(self, axis))
+
+    def as_array(self) -> np.ndarray:
+        """The values as a float array ``[h, v]``, shape (2,)."""
+        return np.array([self.h, self.v], dtype=float)
+
+
+def _p(unit: str, source: str, doc: str) -> Any:
+    """A parameter field: its unit, the seed section it comes from and what it is."""
+    return field(metadata={"unit": unit, "source": source, "doc": doc})
+
+
+# --------------------------------------------------------------------------- datasheets
+
+
+@dataclass(frozen=True)
+class SercaloDatasheet:
+    """Sercalo mirror as documented by its vendor (seed Table 1)."""
+
+    max_stroke_deg: PerAxis = _p("deg", "seed 1.2 Table 1", "maximum mechanical stroke")
+    resonance_hz: PerAxis = _p("Hz", "seed 1.2 Table 1", "resonance frequency")
+    dc_gain_ma_per_deg: PerAxis = _p(
+        "mA/deg", "seed 1.2 Table 1", "coil current per mirror angle at DC"
+    )
+    gain_at_resonance_deg_per_v: PerAxis = _p(
+        "deg/V", "seed 1.2 Table 1", "mirror angle per volt at the resonance"
+    )
+    r_coil_ohm: float = _p("Ohm", "seed 1.2 Table 1", "coil resistance (AX1; AX2 is blank)")
+
+
+@dataclass(frozen=True)
+class NewportDatasheet:
+    """Newport FSM-300 as documented by its vendor (seed Figure 4)."""
+
+    range_rad: float = _p("rad", "seed Fig. 4", "mechanical angular range for the full command")
+    range_v: float = _p("V", "seed Fig. 4", "command giving the full angular range")
+    amplitude_bandwidth_hz: float = _p(
+        "Hz", "seed Fig. 4", "closed-loop amplitude bandwidth (-3 dB, 10 mV)"
+    )
+    phase_bandwidth_hz: float = _p("Hz", "seed Fig. 4", "closed-loop phase bandwidth")
+    phase_bandwidth_lag_deg: float = _p(
+        "deg", "seed Fig. 4", "phase lag defining the phase bandwidth"
+    )
+    peaking_max_db: float = _p("dB", "seed Fig. 4", "maximum response peaking")
+    noise_equivalent_angle_rad: float = _p(
+        "rad rms", "seed Fig. 4", "noise-equivalent angle, 1 Hz to 10 kHz, mechanical"
+    )
+    local_sensor_resolution_rad: float = _p(
+        "rad", "seed Fig. 4", "resolution of the local position sensor"
+    )
+    repeatability_rad: float = _p("rad rms", "seed Fig. 4", "repeatability, mechanical")
+    thermal_drift_rad_per_k: float = _p("rad/K", "seed Fig. 4", "mirror thermal drift")
+
+
+@dataclass(frozen=True)
+class Datasheet:
+    """Vendor numbers; ``docs/model.md`` derives the nominal model from them."""
+
+    sercalo: SercaloDatasheet
+    newport: NewportDatasheet
+
+
+# --------------------------------------------------------------------------- model parameters
+
+
+@dataclass(frozen=True)
+class ConverterParams:
+    """ADC and DAC of the real-time target (seed 1.6 and 4.5a)."""
+
+    fs_hz: float = _p("Hz", "seed 1.6", "sampling frequency of ADC, DAC and controller")
+    range_v: float = _p("V", "seed 1.6", "full span of ADC and DAC (-10 V to +10 V)")
+    bits: int = _p("bit", "seed 1.6", "resolution of ADC and DAC")
+    dac_delay_samples: int = _p(
+        "sample",
+        "seed 2.3d",
+        "samples between a command being computed and the DAC applying it",
+    )
+
+    @property
+    def ts_s(self) -> float:
+        """Sampling period [s]."""
+        return 1.0 / self.fs_hz
+
+    @property
+    def lsb_v(self) -> float:
+        """Quantisation step q = range / 2**bits [V]."""
+        return self.range_v / 2**self.bits
+
+    @property
+    def quantisation_psd_v2_per_hz(self) -> float:
+        """One-sided-equivalent PSD used by the seed, q**2 / (12 fs) [V**2/Hz] (seed eq. 12)."""
+        return self.lsb_v**2 / (12.0 * self.fs_hz)
+
+
+@dataclass(frozen=True)
+class SercaloParams:
+    """Sercalo voice-coil mirror: one mass-spring-damper per axis (seed 1.2)."""
+
+    resonance_hz: PerAxis = _p("Hz", "seed 1.2, 9.2", "undamped natural frequency of each axis")
+    damping_ratio: PerAxis = _p("1", "seed 1.2", "modal damping ratio of each axis")
+    dc_gain_rad_per_a: PerAxis = _p(
+        "rad/A", "seed 1.2 Table 1", "mechanical mirror angle per coil current at DC"
+    )
+    r_coil_ohm: PerAxis = _p("Ohm", "seed 1.2, 2.2", "coil DC resistance Rc (measured)")
+    l_coil_h: PerAxis = _p("H", "seed 1.2, 2.2", "coil inductance Lc (measured)")
+    coupling_h_to_v: float = _p(
+        "1", "fsmbench", "torque on the v axis per h-coil current, relative to the v coil"
+    )
+    coupling_v_to_h: float = _p(
+        "1", "fsmbench", "torque on the h axis per v-coil current, relative to the h coil"
+    )
+    beam_angle_per_mirror_angle: PerAxis = _p(
+        "rad/rad",
+        "seed 4.1, 4.5c",
+        "beam angle at the 4QD per Sercalo mirror angle (two reflections: 4, signed)",
+    )
+    max_stroke_rad: float = _p("rad", "seed 1.2 Table 1", "maximum mechanical stroke")
+
+
+@dataclass(frozen=True)
+class CurrentAmplifierParams:
+    """Buffer and series resistor that drive the Sercalo coils (seed 2.2, Fig. 11)."""
+
+    r_ohm: PerAxis = _p("Ohm", "seed 2.2", "series resistor R that sets the gain")
+    r_buffer_ohm: PerAxis = _p(
+        "Ohm",
+        "seed 2.2",
+        "buffer output and wiring resistance in series with R and Rc (zero in the schematic)",
+    )
+
+
+@dataclass(frozen=True)
+class VoltageAmplifierParams:
+    """Amplifier of the voltage across the Sercalo coil (seed 2.2)."""
+
+    gain: float = _p("V/V", "seed 2.2", "DC gain Ga0 (60 dB)")
+    cutoff_hz: float = _p("Hz", "seed 2.2", "first-order cut-off frequency")
+    noise_rms_v: float = _p("V rms", "fsmbench", "white noise at the amplifier output")
+
+
+@dataclass(frozen=True)
+class NewportParams:
+    """Newport FSM-300 used as a disturbance generator (seed 1.4, 2.1, 2.4, 4.5)."""
+
+    gain_rad_per_v: PerAxis = _p(
+        "rad/V", "seed 1.4, Fig. 4", "mechanical mirror angle per command volt"
+    )
+    metrology_gain_rad_per_v: float = _p(
+        "rad/V", "seed 2.1 (gn0)", "mirror angle per volt of the metrology outputs Vnh, Vnv"
+    )
+    natural_freq_hz: float = _p(
+        "Hz", "docs/model.md from Fig. 4", "natural frequency of the second-order response"
+    )
+    damping_ratio: float = _p(
+        "1", "docs/model.md from Fig. 4", "damping ratio of the second-order response"
+    )
+    internal_delay_s: float = _p(
+        "s",
+        "seed 2.4 and Fig. 4",
+        "transport lag inside the FSM electronics (path total with DAC and hold: seed's 0.5 ms)",
+    )
+    beam_angle_per_mirror_angle: float = _p(
+        "rad/rad", "seed 2.1", "beam angle at the 4QD per Newport mirror angle"
+    )
+    angle_noise_rms_rad: float = _p(
+        "rad rms", "seed Fig. 4, 4.5a", "mechanical angle noise (noise-equivalent angle)"
+    )
+    metrology_noise_rms_rad: float = _p(
+        "rad rms", "seed Fig. 4", "noise of the local position sensor behind Vnh, Vnv"
+    )
+    concave_radius_m: float = _p("m", "seed 4.5a", "radius of the concave Newport mirror")
+
+
+@dataclass(frozen=True)
+class QuadDiodeParams:
+    """Four-quadrant photodiode and its amplifier (seed 1.5, 2.1 Table 2, 4.5b)."""
+
+    gain_v_per_rad: PerAxis = _p(
+        "V/rad", "seed 2.1 Table 2", "4QD output voltage per beam angle (signed)"
+    )
+    rotation_rad: float = _p(
+        "rad", "fsmbench", "rotation of the 4QD axes relative to the mirror axes"
+    )
+    noise_rms_v: PerAxis = _p(
+        "V rms", "seed 4.5b", "white electronic noise of the 4QD outputs Vph, Vpv"
+    )
+
+
+@dataclass(frozen=True)
+class AttocubeParams:
+    """Attocube interferometer measuring the beam path (seed 2, 3, 4)."""
+
+    noise_rms_m: float = _p("m rms", "fsmbench", "white noise of the displacement output Va")
+    resolution_m: float = _p("m", "fsmbench", "output resolution of Va")
+    wavelength_m: float = _p("m", "fsmbench", "laser wavelength (for the refractive index)")
+
+
+@dataclass(frozen=True)
+class GeometryParams:
+    """Beam-path geometry (seed 4.1, 4.2, 4.4, 11.3)."""
+
+    h_m: float = _p("m", "seed 4.1", "distance Sercalo to Newport (H)")
+    l_m: float = _p("m", "seed 4.1", "distance Attocube to Sercalo (L)")
+    sercalo_spot_offset_m: float = _p(
+        "m", "seed 4.2", "beam spot offset from the Sercalo rotation axis (piston per angle)"
+    )
+    newport_spot_offset_m: float = _p(
+        "m", "seed 4.2", "beam spot offset from the Newport rotation axis (piston per angle)"
+    )
+    frame_length_m: float = _p("m", "seed 4.4", "metrology-frame length Attocube head to target")
+    frame_expansion_per_k: float = _p(
+        "1/K", "seed 4.4", "linear thermal expansion of the frame (aluminium)"
+    )
+
+    @property
+    def measured_distance_m(self) -> float:
+        """One-way distance the Attocube measures, L + H [m] (seed 4.3: 100 mm)."""
+        return self.l_m + self.h_m
+
+
+@dataclass(frozen=True)
+class EnvironmentParams:
+    """Air and temperature disturbances of the huddle-test configurations (seed 3, 4.3, 4.4).
+
+    Each drift is a stationary first-order Gauss-Markov process with the given
+    standard deviation and correlation time, so its rms is well defined.
+    """
+
+    room_temperature_rms_k: float = _p("K", "seed 4.3", "room air temperature drift")
+    room_temperature_tau_s: float = _p("s", "fsmbench", "correlation time of the room drift")
+    room_pressure_rms_pa: float = _p("Pa", "seed 4.3", "room pressure drift")
+    room_pressure_tau_s: float = _p("s", "fsmbench", "correlation time of the pressure drift")
+    room_humidity_rms_pct: float = _p("%RH", "seed 4.3", "room relative-humidity drift")
+    room_humidity_tau_s: float = _p("s", "fsmbench", "correlation time of the humidity drift")
+    beam_path_temperature_rms_k: float = _p(
+        "K", "seed 3, 4.3", "local air-temperature fluctuation along the beam (convection)"
+    )
+    beam_path_temperature_tau_s: float = _p(
+        "s", "fsmbench", "correlation time of the local fluctuation"
+    )
+    shielding_attenuation: float = _p(
+        "1", "seed 3 Table 3", "factor by which the aluminium shield reduces the local fluctuation"
+    )
+    ecu_temperature_error_k: float = _p(
+        "K", "seed 4.3", "error of the compensation unit's temperature reading"
+    )
+    ecu_pressure_error_pa: float = _p(
+        "Pa", "seed 4.3", "error of the compensation unit's pressure reading"
+    )
+    ecu_humidity_error_pct: float = _p(
+        "%RH", "seed 4.3", "error of the compensation unit's humidity reading"
+    )
+    ecu_error_tau_s: float = _p("s", "fsmbench", "correlation time of the sensor errors")
+    frame_time_constant_s: float = _p(
+        "s", "seed 4.4", "thermal time constant of the metrology frame"
+    )
+    reference_temperature_c: float = _p("degC", "seed 4.3", "mean air temperature")
+    reference_pressure_pa: float = _p("Pa", "seed 4.3", "mean air pressure")
+    reference_humidity_pct: float = _p("%RH", "seed 4.3", "mean relative humidity")
+
+
+@dataclass(frozen=True)
+class ScalingParams:
+    """Plant scaling and control objective (seed Table 5 and 6.1)."""
+
+    un_max_v: float = _p("V", "seed Table 5", "expected Newport perturbation command")
+    uc_max_v: float = _p("V", "seed Table 5", "maximum Sercalo command")
+    error_max_rad: float = _p("rad", "seed Table 5, 6.1", "maximum wanted beam-angle error")
+    noise_rad: float = _p("rad", "seed Table 5", "measured beam-angle noise")
+    stroke_max_rad: float = _p("rad", "seed 6.1", "maximum expected beam stroke at f0")
+    objective_freq_hz: float = _p("Hz", "seed 6.1", "frequency of the stroke, f0")
+
+
+@dataclass(frozen=True)
+class BenchParams:
+    """Every model parameter of the bench (one instance for ``nominal``, one for ``true``)."""
+
+    converter: ConverterParams
+    sercalo: SercaloParams
+    current_amplifier: CurrentAmplifierParams
+    voltage_amplifier: VoltageAmplifierParams
+    newport: NewportParams
+    quad_diode: QuadDiodeParams
+    attocube: AttocubeParams
+    geometry: GeometryParams
+    environment: EnvironmentParams
+    scaling: ScalingParams
+
+    def current_amp_gain_a_per_v(self) -> PerAxis:
+        """Static current-amplifier gain 1/(R + R_buffer + Rc) [A/V] (seed 2.2 eq. 3)."""
+        r_total = (
+            self.current_amplifier.r_ohm.as_array()
+            + self.current_amplifier.r_buffer_ohm.as_array()
+            + self.sercalo.r_coil_ohm.as_array()
+        )
+        g = 1.0 / r_total
+        return PerAxis(h=float(g[0]), v=float(g[1]))
+
+
+@dataclass(frozen=True)
+class Bench:
+    """The bench: vendor numbers, the nominal model and the twin's true model."""
+
+    datasheet: Datasheet
+    nominal: BenchParams
+    true: BenchParams
+
+    def to_toml(self) -> str:
+        """The bench as TOML text, every value commented with unit and source."""
+        lines = [
+            "# fsmbench bench parameters.",
+            "# [datasheet]: vendor numbers; [nominal]: model before identification;",
+            "# [true]: what the digital twin simulates (keys missing here default to nominal).",
+        ]
+        for name in ("datasheet", "nominal", "true"):
+            _emit_toml(getattr(self, name), name, lines)
+        return "\n".join(lines) + "\n"
+
+
+# --------------------------------------------------------------------------- TOML (de)serialisation
+
+
+def _toml_value(value: Any) -> str:
+    if isinstance(value, PerAxis):
+        return f"{{ h = {_toml_value(value.h)}, v = {_toml_value(value.v)} }}"
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, int):
+        return str(value)
+    if isinstance(value, float):
+        if math.isnan(value):
+            return "nan"
+        if math.isinf(value):
+            return "inf" if value > 0 else "-inf"
+        return repr(value)  # repr round-trips a float exactly
+    if isinstance(value, str):
+        escaped = value.replace("\\", "\\\\").replace('"', '\\"')
+        return f'"{escaped}"'
+    raise TypeError(f"cannot write {type(value).__name__} to TOML")
+
+
+def _emit_toml(obj: Any, prefix: str, lines: list[str]) -> None:
+    scalars = []
+    children = []
+    for f in dataclasses.fields(obj):
+        value = getattr(obj, f.name)
+        if dataclasses.is_dataclass(value) and not isinstance(value, PerAxis):
+            children.append((f.name, value))
+        else:
+            scalars.append((f, value))
+    if scalars:
+        lines.append("")
+        lines.append(f"[{prefix}]")
+        for f, value in scalars:
+            meta = f.metadata
+            lines.append(f"# {meta['doc']} [{meta['unit']}] ({meta['source']})")
+            lines.append(f"{f.name} = {_toml_value(value)}")
+    for name, child in children:
+        _emit_toml(child, f"{prefix}.{name}", lines)
+
+
+def _build(cls: type, data: Any, where: str, origin: str, base: Any = None) -> Any:
+    """Build dataclass ``cls`` from a TOML table; ``base`` supplies missing keys."""
+    if not isinstance(data, dict):
+        raise ParamsError(f"{origin}: [{where}] must be a table")
+    hints = get_type_hints(cls)
+    names = {f.name for f in dataclasses.fields(cls)}
+    unknown = sorted(set(data) - names)
+    if unknown:
+        raise ParamsError(f"{origin}: unknown key(s) {unknown} in [{where}]")
+    kwargs: dict[str, Any] = {}
+    for f in dataclasses.fields(cls):
+        key = f"{where}.{f.name}"
+        typ = hints[f.name]
+        if f.name not in data:
+            if base is None:
+                raise ParamsError(f"{origin}: missing key '{key}'")
+            kwargs[f.name] = getattr(base, f.name)
+            continue
+        raw = data[f.name]
+        sub_base = None if base is None else getattr(base, f.name)
+        if typ is PerAxis:
+            if isinstance(raw, dict):
+                merged = {} if sub_base is None else {"h": sub_base.h, "v": sub_base.v}
+                merged.update(raw)
+                if set(merged) != {"h", "v"}:
+                    raise ParamsError(f"{origin}: '{key}' needs exactly the keys h and v")
+                kwargs[f.name] = PerAxis(h=_number(merged["h"], key, origin),
+                                         v=_number(merged["v"], key, origin))
+            else:
+                raise ParamsError(f"{origin}: '{key}' must be a table {{ h = ..., v = ... }}")
+        elif dataclasses.is_dataclass(typ):
+            kwargs[f.name] = _build(typ, raw, key, origin, sub_base)  # type: ignore[arg-type]
+        elif typ is int:
+            if not isinstance(raw, int) or isinstance(raw, bool):
+                raise ParamsError(f"{origin}: '{key}' must be an integer, got {raw!r}")
+            kwargs[f.name] = raw
+        elif typ is float:
+            kwargs[f.name] = _number(raw, key, origin)
+        else:  # pragma: no cover - every field type is handled above
+            raise ParamsError(f"{origin}: unsupported type for '{key}'")
+    return cls(**kwargs)
+
+
+def _number(raw: Any, key: str, origin: str) -> float:
+    if isinstance(raw, bool) or not isinstance(raw, int | float):
+        raise ParamsError(f"{origin}: '{key}' must be a number, got {raw!r}")
+    value = float(raw)
+    if not math.isfinite(value):
+        raise ParamsError(f"{origin}: '{key}' must be finite, got {raw!r}")
+    return value
+
+
+def _bench_from_mapping(data: dict[str, Any], origin: str) -> Bench:
+    for section in ("datasheet", "nominal"):
+        if section not in data:
+            raise ParamsError(f"{origin}: missing table [{section}]")
+    unknown = sorted(set(data) - {"datasheet", "nominal", "true"})
+    if unknown:
+        raise ParamsError(f"{origin}: unknown top-level table(s) {unknown}")
+    datasheet = _build(Datasheet, data["datasheet"], "datasheet", origin)
+    nominal = _build(BenchParams, data["nominal"], "nominal", origin)
+    true = _build(BenchParams, data.get("true", {}), "true", origin, base=nominal)
+    return Bench(datasheet=datasheet, nominal=nominal, true=true)
+
+
+def default_bench() -> Bench:
+    """The Sercalo test bench of the seed, from the packaged ``default_bench.toml``."""
+    text = resources.files("fsmbench.bench").joinpath("default_bench.toml").read_text("utf-8")
+    return _bench_from_mapping(tomllib.loads(text), "default_bench.toml")
+
+
+def load_bench(path: str | Path | None = None) -> Bench:
+    """Load bench parameters from a TOML file.
+
+    Parameters
+    ----------
+    path : str or Path, optional
+        TOML file with tables ``[datasheet.*]``, ``[nominal.*]`` and optionally
+        ``[true.*]``; keys missing from ``[true]`` take the nominal value. With
+        ``None`` the packaged default bench is returned.
+
+    Raises
+    ------
+    ParamsError
+        The file is not TOML, or a key is missing, unknown, or of the wrong type.
+    """
+    if path is None:
+        return default_bench()
+    p = Path(path)
+    try:
+        data = tomllib.loads(p.read_text("utf-8"))
+    except FileNotFoundError:
+        raise ParamsError(f"{p}: no such parameter file") from None
+    except tomllib.TOMLDecodeError as exc:
+        raise ParamsError(f"{p}: not valid TOML ({exc})") from None
+    return _bench_from_mapping(data, str(p))
+
+
+def save_bench(bench: Bench, path: str | Path) -> Path:
+    """Write ``bench`` as TOML to ``path`` atomically; returns the path."""
+    from fsmbench.io.atomic import atomic_write_text
+
+    return atomic_write_text(Path(path), bench.to_toml())
+
+
+# --------------------------------------------------------------------------- tabulation
+
+
+@dataclass(frozen=True)
+class ParamRow:
+    """One printable parameter: dotted key, nominal and true values, unit, source, description."""
+
+    key: str
+    nominal: str
+    true: str
+    unit: str
+    source: str
+    doc: str
+
+
+def _walk(obj: Any, prefix: str) -> Iterator[tuple[str, Any, dataclasses.Field[Any]]]:
+    for f in dataclasses.fields(obj):
+        value = getattr(obj, f.name)
+        key = f"{prefix}.{f.name}" if prefix else f.name
+        if dataclasses.is_dataclass(value) and not isinstance(value, PerAxis):
+            yield from _walk(value, key)
+        else:
+            yield key, value, f
+
+
+def _fmt(value: Any) -> str:
+    if isinstance(value, PerAxis):
+        return f"h {_fmt(value.h)}, v {_fmt(value.v)}"
+    if isinstance(value, float):
+        return f"{value:.6g}"
+    return str(value)
+
+
+def param_rows(bench: Bench) -> list[ParamRow]:
+    """Every parameter as a row (datasheet rows have no ``true`` column)."""
+    rows = [
+        ParamRow(f"datasheet.{k}", _fmt(v), "", f.metadata["unit"], f.metadata["source"],
+                 f.metadata["doc"])
+        for k, v, f in _walk(bench.datasheet, "")
+    ]
+    true_values = {k: v for k, v, _ in _walk(bench.true, "")}
+    for k, v, f in _walk(bench.nominal, ""):
+        rows.append(ParamRow(k, _fmt(v), _fmt(true_values[k]), f.metadata["unit"],
+                             f.metadata["source"], f.metadata["doc"]))
+    return rows

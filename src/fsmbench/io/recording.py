@@ -1,0 +1,538 @@
+"""Recordings of the bench as ``xarray.Dataset``: build, check, read, write.
+
+A recording holds one float64 variable per signal on the dimension ``"t"``:
+
+* coordinate ``t``, in s (attrs ``units="s"``, ``long_name="Time"``);
+* each signal: attrs ``units`` and ``long_name`` from
+  :data:`fsmbench.io.signals.SIGNALS`; a variable the seed does not know is
+  kept with ``units=""`` and a ``note`` saying so;
+* dataset attrs ``fs_hz`` (sampling frequency, Hz, float), ``experiment``
+  (e.g. ``"data_uch"``) and ``source`` (the file read, or ``""``).
+
+Files are MATLAB v5/v7 or v7.3 MAT-files (what the seed's ``load`` reads) or
+the NeXus archive of :mod:`fsmbench.io.nexus`; the format is told from the
+content. Every problem is a :class:`~fsmbench.io.errors.RecordingError` that
+names the file and the variable.
+"""
+
+from __future__ import annotations
+
+import os
+import warnings
+from collections.abc import Iterable, Mapping
+from pathlib import Path
+from typing import Any, Final, Literal
+
+import numpy as np
+import scipy.sparse
+import xarray as xr
+
+from fsmbench.io.errors import RecordingError, SaturationWarning
+from fsmbench.io.matfile import detect_format, load_mat, save_mat
+from fsmbench.io.signals import ADC_SIGNALS, EXPERIMENTS, SIGNALS, TIME
+
+__all__ = [
+    "RecordingFormat",
+    "find_experiments",
+    "make_recording",
+    "read_recording",
+    "validate_recording",
+    "write_recording",
+]
+
+#: Formats :func:`write_recording` writes.
+RecordingFormat = Literal["mat5", "mat73", "nexus"]
+
+# Sampling is "uniform" when every step is within 1e-3 of the median step: far
+# above float64 rounding of t = (0:N-1)/fs (~1e-12 relative, even summed over
+# millions of samples) yet far below a dropped or doubled sample (100 %).
+_STEP_TOLERANCE: Final = 1e-3
+_UNKNOWN_NOTE: Final = "not in the seed's signal table (fsmbench.io.signals.SIGNALS)"
+_SUFFIXES: Final = (".mat", ".h5", ".nxs")  # find_experiments' preference order
+
+
+# --------------------------------------------------------------------------- helpers
+def _shape_text(shape: tuple[int, ...]) -> str:
+    return "x".join(str(d) for d in shape)
+
+
+def _as_vector(name: str, value: Any, origin: str) -> np.ndarray:
+    """``value`` as a new 1-D float64 array, or a RecordingError saying why not.
+
+    N×1, 1×N and 1-D arrays are vectors (MATLAB saves both orientations).
+    """
+    if isinstance(value, str):
+        raise RecordingError(origin, f"holds text ({value[:30]!r}), not samples", variable=name)
+    if isinstance(value, Mapping):
+        fields = ", ".join(map(str, value)) or "none"
+        raise RecordingError(origin, f"holds a struct (fields: {fields}), not samples",
+                             variable=name)
+    if isinstance(value, list):
+        raise RecordingError(origin, f"holds a cell array of {len(value)} elements, "
+                             "not samples", variable=name)
+    if scipy.sparse.issparse(value):
+        raise RecordingError(origin, "holds a sparse matrix, not samples", variable=name)
+    arr = np.asarray(value)
+    kind = arr.dtype.kind
+    if kind == "c":
+        raise RecordingError(origin, f"holds complex values (dtype {arr.dtype}); a signal "
+                             "must be real", variable=name)
+    if kind == "b":
+        raise RecordingError(origin, "holds logical (true/false) values, not numbers",
+                             variable=name)
+    if kind not in "iuf":
+        raise RecordingError(origin, f"is not numeric (dtype {arr.dtype})", variable=name)
+    if arr.ndim > 2 or (arr.ndim == 2 and min(arr.shape) > 1):
+        what = "matrix" if arr.ndim == 2 else "array"
+        raise RecordingError(
+            origin, f"is a {_shape_text(arr.shape)} {what}, not a vector (N x 1 or 1 x N)",
+            variable=name,
+        )
+    # np.array copies: the caller's arrays are never aliased nor modified.
+    return np.array(arr.reshape(-1), dtype=np.float64, copy=True)
+
+
+def _check_lengths(vectors: Mapping[str, np.ndarray], origin: str) -> int:
+    """Common length of ``vectors`` (``t`` first if present), else an error."""
+    ref = TIME if TIME in vectors else next(iter(vectors))
+    n = vectors[ref].size
+    for name, v in vectors.items():
+        if v.size != n:
+            raise RecordingError(
+                origin, f"has {v.size} samples but variable '{ref}' has {n}", variable=name
+            )
+    return n
+
+
+def _nonfinite_problem(v: np.ndarray, t: np.ndarray | None) -> str | None:
+    bad = ~np.isfinite(v)
+    if not bad.any():
+        return None
+    n_nan = int(np.count_nonzero(np.isnan(v)))
+    n_inf = int(np.count_nonzero(bad)) - n_nan
+    counts = [f"{c} {kind}" for c, kind in ((n_nan, "NaN"), (n_inf, "Inf")) if c]
+    total = n_nan + n_inf
+    first = int(np.argmax(bad))
+    where = f"first at index {first}"
+    if t is not None:
+        where += f", t = {t[first]:.10g} s"
+    return f"holds {' and '.join(counts)} value{'s' if total > 1 else ''} ({where})"
+
+
+def _check_time(t: np.ndarray, origin: str) -> float:
+    """Check that ``t`` (s) is finite, increasing and uniform; return the median step (s)."""
+    problem = _nonfinite_problem(t, None)
+    if problem:
+        raise RecordingError(origin, problem, variable=TIME)
+    dt = np.diff(t)
+    not_up = ~(dt > 0)
+    if not_up.any():
+        i = int(np.argmax(not_up))
+        raise RecordingError(
+            origin,
+            f"is not increasing at index {i + 1}: t[{i}] = {t[i]:.10g} s, "
+            f"t[{i + 1}] = {t[i + 1]:.10g} s",
+            variable=TIME,
+        )
+    step = float(np.median(dt))
+    off = np.abs(dt - step) > _STEP_TOLERANCE * step
+    if off.any():
+        i = int(np.argmax(off))
+        raise RecordingError(
+            origin,
+            f"is not uniformly sampled at index {i + 1}: t[{i}] = {t[i]:.10g} s, "
+            f"t[{i + 1}] = {t[i + 1]:.10g} s, a step of {dt[i]:.6g} s where the median "
+            f"step is {step:.6g} s (tolerance {100 * _STEP_TOLERANCE:g} % of it)",
+            variable=TIME,
+        )
+    return step
+
+
+def _fs_from_time(t: np.ndarray) -> float:
+    """Sampling frequency (Hz) of a uniform ``t`` (s).
+
+    The mean step over the whole record is exact to ~1e-15 relative; rounding
+    to 12 significant digits then recovers the nominal value (10000.0, not
+    9999.999999999998), so round trips through MAT-files keep ``fs_hz``.
+    """
+    span = float(t[-1] - t[0])
+    return float(f"{(t.size - 1) / span:.12g}")
+
+
+def _signal_attrs(name: str) -> dict[str, str]:
+    info = SIGNALS.get(name)
+    if info is None:
+        return {"units": "", "long_name": name, "note": _UNKNOWN_NOTE}
+    return {"units": info.units, "long_name": info.long_name}
+
+
+def _ordered(names: Iterable[str]) -> list[str]:
+    """Signals in the seed's table order, then the others as given."""
+    names = [n for n in names if n != TIME]
+    return [n for n in SIGNALS if n in names] + [n for n in names if n not in SIGNALS]
+
+
+def _assemble(
+    vectors: Mapping[str, np.ndarray], *, fs_hz: float, experiment: str, source: str
+) -> xr.Dataset:
+    t = vectors[TIME]
+    data_vars = {n: (TIME, vectors[n], _signal_attrs(n)) for n in _ordered(vectors)}
+    return xr.Dataset(
+        data_vars,
+        coords={TIME: (TIME, t, {"units": "s", "long_name": "Time"})},
+        attrs={"fs_hz": float(fs_hz), "experiment": str(experiment), "source": str(source)},
+    )
+
+
+def _check_saturation(
+    ds: xr.Dataset, origin: str, adc_range_v: float, adc_bits: int, stacklevel: int
+) -> None:
+    lsb = adc_range_v / 2**adc_bits
+    # A bipolar converter's codes span -range/2 .. range/2 - 1 LSB: the upper
+    # rail is one LSB below range/2. Allowing half an LSB more for the rounding
+    # of a reading stored as volts catches both rails and nothing inside them.
+    limit = adc_range_v / 2 - 1.5 * lsb
+    for name in ADC_SIGNALS:
+        if name in ds.data_vars:
+            v = ds[name].values
+            count = int(np.count_nonzero(np.abs(v) >= limit))
+            if count:
+                warnings.warn(SaturationWarning(origin, name, count, v.size, limit),
+                              stacklevel=stacklevel)
+
+
+def _validate(
+    ds: xr.Dataset,
+    *,
+    origin: str,
+    require: Iterable[str],
+    adc_range_v: float,
+    adc_bits: int,
+    saturation: bool,
+    stacklevel: int,
+) -> None:
+    if TIME not in ds.coords and TIME not in ds.variables:
+        present = ", ".join(map(str, ds.data_vars)) or "nothing"
+        raise RecordingError(origin, "is missing: a recording needs its time vector t, in s "
+                             f"(present: {present})", variable=TIME)
+    missing = [r for r in require if r not in ds.variables]
+    if missing:
+        present = ", ".join([TIME, *map(str, ds.data_vars)])
+        also = f" (and so are {', '.join(repr(m) for m in missing[1:])})" if missing[1:] else ""
+        raise RecordingError(origin, f"is missing{also}; present: {present}",
+                             variable=missing[0])
+    for name, var in ds.variables.items():
+        if var.dims != (TIME,):
+            raise RecordingError(origin, f"has dims {var.dims}, expected ('t',)",
+                                 variable=str(name))
+        if var.dtype.kind not in "iuf":
+            raise RecordingError(origin, f"is not real numeric (dtype {var.dtype})",
+                                 variable=str(name))
+    t = np.asarray(ds[TIME].values, dtype=np.float64)
+    if t.size < 2:
+        raise RecordingError(origin, f"holds {t.size} sample{'s' if t.size != 1 else ''}; "
+                             "a recording needs at least 2", variable=TIME)
+    step = _check_time(t, origin)
+    for name in ds.data_vars:
+        problem = _nonfinite_problem(np.asarray(ds[name].values), t)
+        if problem:
+            raise RecordingError(origin, problem, variable=str(name))
+    fs = ds.attrs.get("fs_hz")
+    if not isinstance(fs, (int, float, np.floating, np.integer)) or not np.isfinite(fs) or fs <= 0:
+        raise RecordingError(origin, f"attribute 'fs_hz' is {fs!r}; it must be the sampling "
+                             "frequency in Hz, a positive number")
+    if abs(float(fs) * step - 1.0) > _STEP_TOLERANCE:
+        raise RecordingError(origin, f"attribute 'fs_hz' = {float(fs):.10g} Hz disagrees with "
+                             f"t, whose median step {step:.6g} s means {1 / step:.10g} Hz")
+    if saturation:
+        _check_saturation(ds, origin, adc_range_v, adc_bits, stacklevel + 1)
+
+
+# --------------------------------------------------------------------------- public API
+def validate_recording(
+    ds: xr.Dataset,
+    *,
+    origin: str | os.PathLike[str],
+    require: Iterable[str] = (),
+    adc_range_v: float = 20.0,
+    adc_bits: int = 16,
+) -> None:
+    """Check a recording; raise on the first problem, warn on ADC saturation.
+
+    Parameters
+    ----------
+    ds : xarray.Dataset
+        The recording (see the module docstring), N samples on ``"t"``.
+    origin : str or os.PathLike
+        File (or label) named in the messages.
+    require : iterable of str, default ()
+        Variables that must be present (``t`` always is).
+    adc_range_v : float, default 20.0
+        Full input range ΔV of the ADC, in V (±10 V: 20 V, seed section 1.6).
+    adc_bits : int, default 16
+        ADC resolution n, in bits.
+
+    Raises
+    ------
+    RecordingError
+        ``t`` or a required variable missing, a variable not 1-D on ``t`` or
+        not real numeric, fewer than 2 samples, ``t`` not finite, not
+        increasing or not uniform (a step off the median step by more than
+        1e-3 of it), NaN/Inf in a signal, ``fs_hz`` missing or off ``t``.
+
+    Warns
+    -----
+    SaturationWarning
+        For each of :data:`~fsmbench.io.signals.ADC_SIGNALS` with samples at
+        the converter rails, ``|v| >= adc_range_v/2 - 1.5 LSB`` with
+        ``LSB = adc_range_v / 2**adc_bits``.
+    """
+    _validate(ds, origin=os.fspath(origin), require=require, adc_range_v=adc_range_v,
+              adc_bits=adc_bits, saturation=True, stacklevel=3)
+
+
+def make_recording(
+    signals: Mapping[str, np.ndarray],
+    *,
+    t: np.ndarray | None = None,
+    fs_hz: float | None = None,
+    experiment: str,
+    source: str = "",
+    adc_range_v: float = 20.0,
+    adc_bits: int = 16,
+) -> xr.Dataset:
+    """Build a checked recording from arrays.
+
+    Parameters
+    ----------
+    signals : mapping of str to array_like
+        Signal name to samples, each of shape (N,), (N, 1) or (1, N), real,
+        in the unit of :data:`~fsmbench.io.signals.SIGNALS` (V, or m for
+        ``Va``). May hold ``"t"`` instead of the ``t`` argument. Copied,
+        never modified.
+    t : array_like, optional
+        Sample times, in s, shape (N,). Default ``arange(N) / fs_hz``.
+    fs_hz : float, optional
+        Sampling frequency, in Hz. Default: from ``t``. At least one of
+        ``t`` and ``fs_hz`` is needed; given both, they must agree.
+    experiment : str
+        Experiment name, e.g. ``"data_uch"``.
+    source : str, default ""
+        File the samples came from; also names the recording in messages.
+    adc_range_v, adc_bits : float, int
+        ADC range (V) and resolution (bits) for the saturation check.
+
+    Returns
+    -------
+    xarray.Dataset
+        The recording; signals in the seed's table order, then the others.
+
+    Raises
+    ------
+    RecordingError
+        As :func:`validate_recording`, plus wrong shapes, types and lengths.
+    ValueError
+        Neither ``t`` nor ``fs_hz``, or ``t`` given twice.
+    """
+    origin = source or f"recording '{experiment}'"
+    if TIME in signals and t is not None:
+        raise ValueError(f"{origin}: t is given both in signals and as the t argument")
+    raw: dict[str, Any] = dict(signals)
+    if t is not None:
+        raw[TIME] = t
+    vectors = {name: _as_vector(name, value, origin) for name, value in raw.items()}
+    if TIME not in vectors:
+        if fs_hz is None:
+            raise ValueError(f"{origin}: give t (s) or fs_hz (Hz)")
+        if not vectors:
+            raise ValueError(f"{origin}: no signals and no t")
+        n = _check_lengths(vectors, origin)
+        vectors[TIME] = np.arange(n, dtype=np.float64) / float(fs_hz)
+    n = _check_lengths(vectors, origin)
+    if fs_hz is None:
+        time = vectors[TIME]
+        fs_hz = _fs_from_time(time) if n >= 2 and np.all(np.isfinite(time[[0, -1]])) \
+            and time[-1] > time[0] else float("nan")
+    ds = _assemble(vectors, fs_hz=float(fs_hz), experiment=experiment, source=source)
+    _validate(ds, origin=origin, require=(), adc_range_v=adc_range_v, adc_bits=adc_bits,
+              saturation=True, stacklevel=3)
+    return ds
+
+
+def _default_require(*names: str) -> tuple[str, ...]:
+    for name in names:
+        if name in EXPERIMENTS:
+            return EXPERIMENTS[name].required
+    return (TIME,)
+
+
+def read_recording(
+    path: str | os.PathLike[str],
+    *,
+    experiment: str | None = None,
+    require: Iterable[str] | None = None,
+    adc_range_v: float = 20.0,
+    adc_bits: int = 16,
+) -> xr.Dataset:
+    """Read and check a recording from a MAT-file (v4, v5/v7, v7.3) or NeXus archive.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The file; its format is told from its content, not its suffix. It is
+        opened read-only and never modified.
+    experiment : str, optional
+        Experiment name; default the archive's own (NeXus) or the file stem.
+    require : iterable of str, optional
+        Variables that must be present. Default: the seed's ``load`` list
+        (:data:`~fsmbench.io.signals.EXPERIMENTS`) when the experiment or the
+        stem is known, else only ``t``.
+    adc_range_v : float, default 20.0
+        ADC input range, in V, for the saturation check.
+    adc_bits : int, default 16
+        ADC resolution, in bits.
+
+    Returns
+    -------
+    xarray.Dataset
+        The recording. ``source`` is the absolute path read (NeXus archives
+        keep the ``source`` stored in them); ``fs_hz`` comes from ``t``.
+        Variables of a MAT-file that are not sampled on ``t`` (scalars,
+        strings, structs) are left out with a ``UserWarning``.
+
+    Raises
+    ------
+    RecordingError
+        Any problem of the file or its content (see :func:`validate_recording`).
+    """
+    p = Path(path)
+    origin = os.fspath(p)
+    fmt = detect_format(p)
+    from fsmbench.io import nexus  # nexus builds on this module: imported here
+
+    if fmt == "hdf5" and nexus.is_nexus(p):
+        ds = nexus.read_nexus(p)
+        if experiment is not None:
+            ds.attrs["experiment"] = experiment
+        req = _default_require(ds.attrs["experiment"], p.stem) if require is None else require
+        _validate(ds, origin=origin, require=req, adc_range_v=adc_range_v,
+                  adc_bits=adc_bits, saturation=True, stacklevel=3)
+        return ds
+    experiment = p.stem if experiment is None else experiment
+    req = tuple(_default_require(experiment, p.stem) if require is None else require)
+    raw = load_mat(p, skip_unreadable=True)
+    if TIME not in raw:
+        present = ", ".join(raw) or "nothing"
+        raise RecordingError(origin, "is missing: a recording needs its time vector t, in s "
+                             f"(the file holds: {present})", variable=TIME)
+    missing = [r for r in req if r not in raw]
+    if missing:
+        also = f" (and so are {', '.join(repr(m) for m in missing[1:])})" if missing[1:] else ""
+        raise RecordingError(
+            origin, f"is missing{also}; {experiment} needs {', '.join(req)} "
+            f"(the file holds: {', '.join(raw)})", variable=missing[0],
+        )
+    vectors = {TIME: _as_vector(TIME, raw[TIME], origin)}
+    n = vectors[TIME].size
+    known = [k for k in raw if k == TIME or k in SIGNALS or k in req]
+    for name in [k for k in raw if k != TIME]:
+        try:
+            v = _as_vector(name, raw[name], origin)
+        except RecordingError as exc:
+            if name in known:
+                raise
+            warnings.warn(f"{origin}: variable '{name}' left out: {exc.problem}", UserWarning,
+                          stacklevel=2)
+            continue
+        if v.size != n and name not in known:
+            warnings.warn(f"{origin}: variable '{name}' left out: it has {v.size} values and "
+                          f"t has {n}, so it is not sampled on t", UserWarning, stacklevel=2)
+            continue
+        vectors[name] = v
+    _check_lengths(vectors, origin)
+    t = vectors[TIME]
+    fs = _fs_from_time(t) if n >= 2 and np.isfinite(t[[0, -1]]).all() and t[-1] > t[0] \
+        else float("nan")
+    ds = _assemble(vectors, fs_hz=fs, experiment=experiment, source=os.path.abspath(p))
+    _validate(ds, origin=origin, require=req, adc_range_v=adc_range_v, adc_bits=adc_bits,
+              saturation=True, stacklevel=3)
+    return ds
+
+
+def write_recording(
+    ds: xr.Dataset,
+    path: str | os.PathLike[str],
+    *,
+    format: RecordingFormat = "mat5",
+    compress: bool | None = None,
+) -> Path:
+    """Write a recording, atomically (complete file or none).
+
+    Parameters
+    ----------
+    ds : xarray.Dataset
+        A valid recording (checked first; nothing is written if it fails).
+    path : str or os.PathLike
+        Destination; its folder must exist.
+    format : {"mat5", "mat73", "nexus"}, default "mat5"
+        MATLAB v7 (v5 layout, compressed), MATLAB v7.3 (HDF5), or the NeXus
+        archive of :mod:`fsmbench.io.nexus`. MAT-files hold ``t`` and each
+        signal as an N×1 double column, which MATLAB's ``load`` reads as the
+        seed does; units and attributes are kept by NeXus only.
+    compress : bool, optional
+        Compress the samples; default: yes for mat5, no otherwise.
+
+    Returns
+    -------
+    Path
+        The destination.
+    """
+    dest = Path(path)
+    _validate(ds, origin=os.fspath(dest), require=(), adc_range_v=20.0, adc_bits=16,
+              saturation=False, stacklevel=3)
+    if format == "nexus":
+        from fsmbench.io import nexus  # nexus builds on this module: imported here
+
+        return nexus.write_nexus(ds, dest, compress=bool(compress))
+    if format not in ("mat5", "mat73"):
+        raise ValueError(f"{dest}: unknown recording format {format!r}; "
+                         "use 'mat5', 'mat73' or 'nexus'")
+    variables: dict[str, Any] = {TIME: np.asarray(ds[TIME].values, dtype=np.float64)}
+    for name in ds.data_vars:
+        variables[str(name)] = np.asarray(ds[name].values, dtype=np.float64)
+    return save_mat(dest, variables, version="5" if format == "mat5" else "7.3",
+                    compress=compress)
+
+
+def find_experiments(folder: str | os.PathLike[str]) -> dict[str, Path]:
+    """Which of the seed's experiments a folder holds.
+
+    Parameters
+    ----------
+    folder : str or os.PathLike
+        Folder to look in (not recursively).
+
+    Returns
+    -------
+    dict of str to Path
+        Experiment name to file, for each ``<name>.mat``, ``<name>.h5`` or
+        ``<name>.nxs`` found, in :data:`~fsmbench.io.signals.EXPERIMENTS`
+        order. When several exist, ``.mat`` (the original) wins over ``.h5``
+        over ``.nxs``.
+
+    Raises
+    ------
+    NotADirectoryError
+        ``folder`` is not a folder.
+    """
+    root = Path(folder)
+    if not root.is_dir():
+        raise NotADirectoryError(f"{root}: not a folder")
+    found: dict[str, Path] = {}
+    for name in EXPERIMENTS:
+        for suffix in _SUFFIXES:
+            candidate = root / f"{name}{suffix}"
+            if candidate.is_file():
+                found[name] = candidate
+                break
+    return found

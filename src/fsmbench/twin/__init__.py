@@ -1,0 +1,1 @@
+"""The digital twin (re-exports restored once io lands)."""

@@ -1,0 +1,145 @@
+"""What the Attocube measures: the distance signal ``Va`` and its error sources.
+
+``Va`` [m] is the one-way distance the interferometer reports (half the
+round-trip optical path change, seed 4.2). The twin builds it from the
+sources of the seed's error budget (section 4):
+
+geometric (4.1)
+    the exact ray trace of :mod:`fsmbench.bench.geometry` for the Sercalo's
+    angle error in each plane; the error is the beam angle in the table frame
+    divided by the Sercalo's beam factor (4: two reflections);
+perpendicular (4.2)
+    each mirror's surface moves along its normal by its spot offset times its
+    angle (a repeatable, angle-dependent piston);
+air (4.3)
+    refractive-index change along the measured distance, from room drift and
+    local convection (reduced by the aluminium shield); with the compensation
+    unit on, only the local part and the unit's sensor errors remain;
+frame (4.4)
+    thermal expansion of the metrology frame following the room temperature
+    with the frame's time constant;
+noise
+    the interferometer's own white noise; the output is rounded to its resolution.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+
+from fsmbench.bench.air import sensitivities
+from fsmbench.bench.geometry import sercalo_path_error_m
+from fsmbench.bench.params import BenchParams
+from fsmbench.twin.noise import first_order_lag, gauss_markov, white_noise
+
+__all__ = ["AirSensitivity", "VaComponents", "air_sensitivity", "attocube_distance"]
+
+
+@dataclass(frozen=True)
+class AirSensitivity:
+    """Refractive-index sensitivities at the bench's operating point.
+
+    Attributes
+    ----------
+    dn_dt_per_k, dn_dp_per_pa, dn_drh_per_pct : float
+        [1/K], [1/Pa], [1/%RH]
+    """
+
+    dn_dt_per_k: float
+    dn_dp_per_pa: float
+    dn_drh_per_pct: float
+
+
+def air_sensitivity(p: BenchParams) -> AirSensitivity:
+    """Sensitivities of the air index at the reference conditions and laser wavelength."""
+    env = p.environment
+    s = sensitivities(temperature_c=env.reference_temperature_c,
+                      pressure_pa=env.reference_pressure_pa,
+                      humidity_pct=env.reference_humidity_pct,
+                      wavelength_m=p.attocube.wavelength_m)
+    return AirSensitivity(dn_dt_per_k=float(s.dn_dt_per_k), dn_dp_per_pa=float(s.dn_dp_per_pa),
+                          dn_drh_per_pct=float(s.dn_drh_per_pct))
+
+
+@dataclass(frozen=True)
+class VaComponents:
+    """Each error source's contribution to ``Va`` [m], arrays of shape (n,)."""
+
+    geometric_m: np.ndarray
+    perpendicular_m: np.ndarray
+    air_m: np.ndarray
+    frame_m: np.ndarray
+    noise_m: np.ndarray
+    total_m: np.ndarray
+
+    def std_m(self) -> dict[str, float]:
+        """Standard deviation (rms about the mean) of each component [m]."""
+        return {name: float(np.std(getattr(self, f"{name}_m")))
+                for name in ("geometric", "perpendicular", "air", "frame", "noise", "total")}
+
+
+def attocube_distance(p: BenchParams, *, theta_c_rad: np.ndarray, theta_n_rad: np.ndarray,
+                      compensation_unit: bool, shielding: bool, fs_hz: float,
+                      rng_for: Callable[[str], np.random.Generator]) -> VaComponents:
+    """Simulate ``Va`` for one record.
+
+    Parameters
+    ----------
+    p : BenchParams
+        The twin's true parameters.
+    theta_c_rad, theta_n_rad : arrays (n, 2)
+        Sercalo and Newport mirror angles (h, v) [rad], Newport noise included.
+    compensation_unit, shielding : bool
+        Table 3 configuration.
+    fs_hz : float
+    rng_for : callable
+        Returns the generator of a named noise source.
+    """
+    n = theta_c_rad.shape[0]
+    env = p.environment
+    geo = p.geometry
+
+    b_c = p.sercalo.beam_angle_per_mirror_angle.as_array()
+    beam_table = theta_c_rad * b_c + p.newport.beam_angle_per_mirror_angle * theta_n_rad
+    sercalo_error = beam_table / np.abs(b_c)
+    geometric = 0.5 * (sercalo_path_error_m(sercalo_error[:, 0], h_m=geo.h_m, l_m=geo.l_m)
+                       + sercalo_path_error_m(sercalo_error[:, 1], h_m=geo.h_m, l_m=geo.l_m))
+
+    perpendicular = (geo.sercalo_spot_offset_m * theta_c_rad.sum(axis=1)
+                     + geo.newport_spot_offset_m * theta_n_rad.sum(axis=1))
+
+    def gm(source: str, rms: float, tau: float) -> np.ndarray:
+        return gauss_markov(rng_for(source), n, rms=rms, tau_s=tau, fs_hz=fs_hz)
+
+    room_t = gm("room_temperature", env.room_temperature_rms_k, env.room_temperature_tau_s)
+    room_p = gm("room_pressure", env.room_pressure_rms_pa, env.room_pressure_tau_s)
+    room_h = gm("room_humidity", env.room_humidity_rms_pct, env.room_humidity_tau_s)
+    local_t = gm("beam_path_temperature", env.beam_path_temperature_rms_k,
+                 env.beam_path_temperature_tau_s)
+    if shielding:
+        local_t = local_t / env.shielding_attenuation
+    sens = air_sensitivity(p)
+    if compensation_unit:
+        # The unit corrects for what its sensors read (room air, with their
+        # errors); the beam's local fluctuation is invisible to it.
+        err_t = gm("ecu_temperature_error", env.ecu_temperature_error_k, env.ecu_error_tau_s)
+        err_p = gm("ecu_pressure_error", env.ecu_pressure_error_pa, env.ecu_error_tau_s)
+        err_h = gm("ecu_humidity_error", env.ecu_humidity_error_pct, env.ecu_error_tau_s)
+        dn = (sens.dn_dt_per_k * (local_t - err_t) - sens.dn_dp_per_pa * err_p
+              - sens.dn_drh_per_pct * err_h)
+    else:
+        dn = (sens.dn_dt_per_k * (room_t + local_t) + sens.dn_dp_per_pa * room_p
+              + sens.dn_drh_per_pct * room_h)
+    air = geo.measured_distance_m * dn
+
+    frame_t = first_order_lag(room_t, tau_s=env.frame_time_constant_s, fs_hz=fs_hz)
+    frame = geo.frame_expansion_per_k * geo.frame_length_m * frame_t
+
+    noise = white_noise(rng_for("attocube"), n, rms=p.attocube.noise_rms_m)
+    raw = geometric + perpendicular + air + frame + noise
+    res = p.attocube.resolution_m
+    total = np.round(raw / res) * res if res > 0 else raw
+    return VaComponents(geometric_m=geometric, perpendicular_m=perpendicular, air_m=air,
+                        frame_m=frame, noise_m=noise, total_m=total)

@@ -1,0 +1,69 @@
+"""Controllers wired into the twin, and the stability check of its loop."""
+
+from __future__ import annotations
+
+import control as ct
+import numpy as np
+
+from fsmbench.bench.params import PerAxis
+from fsmbench.control.seed import tustin
+from fsmbench.twin.discretize import DiscretePlant
+from fsmbench.twin.engine import DiscreteController
+from fsmbench.twin.plant import ADC_CHANNELS, DAC_CHANNELS
+
+__all__ = ["closed_loop_spectral_radius", "feedback_controller"]
+
+
+def feedback_controller(k: ct.StateSpace, *, gd_v_per_rad: PerAxis, ts_s: float,
+                        name: str = "K") -> DiscreteController:
+    """Wire a controller ``K: [Rh, Rv] -> [Uch, Ucv]`` into the twin as ``u = -K R``.
+
+    Parameters
+    ----------
+    k : control.StateSpace
+        Continuous (discretised here by Tustin at ``ts_s``) or already discrete
+        with sampling time ``ts_s``; inputs ``Rh, Rv`` [rad], outputs ``Uch, Ucv`` [V].
+    gd_v_per_rad : PerAxis
+        4QD gains the real-time code divides by to get radians (the calibrated
+        ones, not the twin's truth).
+    ts_s : float
+        Controller sampling period [s].
+    """
+    if list(k.input_labels) != ["Rh", "Rv"] or list(k.output_labels) != ["Uch", "Ucv"]:
+        raise ValueError(f"controller must map Rh, Rv to Uch, Ucv; got {k.input_labels} -> "
+                         f"{k.output_labels}")
+    if k.dt == 0 or k.dt is None:
+        kd = tustin(k, ts_s=ts_s)
+    elif not np.isclose(k.dt, ts_s):
+        raise ValueError(f"controller sampled at {k.dt} s, twin runs at {ts_s} s")
+    else:
+        kd = k
+    scale = np.diag(1.0 / gd_v_per_rad.as_array())
+    return DiscreteController(
+        a=np.asarray(kd.A, dtype=float), b=np.asarray(kd.B, dtype=float) @ scale,
+        c=-np.asarray(kd.C, dtype=float), d=-np.asarray(kd.D, dtype=float) @ scale,
+        adc_inputs=(ADC_CHANNELS.index("Vph"), ADC_CHANNELS.index("Vpv")),
+        dac_outputs=(DAC_CHANNELS.index("Uch"), DAC_CHANNELS.index("Ucv")), name=name)
+
+
+def closed_loop_spectral_radius(plant: DiscretePlant, controller: DiscreteController, *,
+                                n_adc: int) -> float:
+    """Largest |eigenvalue| of the linear closed loop (converters ideal).
+
+    Below 1 means the twin's loop is stable. The engine's ordering is
+    respected: the controller reads ``y[k] = C z[k]`` and its output enters
+    the plant in the same step.
+    """
+    a, b, c = plant.a, plant.b, plant.c[:n_adc]
+    nz, nk = a.shape[0], controller.a.shape[0]
+    sel_in = np.zeros((len(controller.adc_inputs), n_adc))
+    sel_in[np.arange(len(controller.adc_inputs)), controller.adc_inputs] = 1.0
+    sel_out = np.zeros((b.shape[1], len(controller.dac_outputs)))
+    sel_out[controller.dac_outputs, np.arange(len(controller.dac_outputs))] = 1.0
+    e_from_z = sel_in @ c
+    big = np.zeros((nz + nk, nz + nk))
+    big[:nz, :nz] = a + b @ sel_out @ controller.d @ e_from_z
+    big[:nz, nz:] = b @ sel_out @ controller.c
+    big[nz:, :nz] = controller.b @ e_from_z
+    big[nz:, nz:] = controller.a
+    return float(np.max(np.abs(np.linalg.eigvals(big))))

@@ -1,0 +1,180 @@
+"""The seed's experiments as protocols the twin runs.
+
+Thirteen records, named and shaped as the seed loads them:
+
+==========================  ======  ===========================================
+file                        seed    what happens
+==========================  ======  ===========================================
+data_cal_pd_h / _v          2.1     slow Newport motion on one axis (4QD calibration)
+data_uch / data_ucv         2.2-2.3 white noise on one Sercalo input, after 1 s off
+data_unh / data_unv         2.4     white noise on one Newport input (from 3 s / 1.5 s)
+data_huddle_test_1 .. _5    3       no excitation; Table 3 configurations
+data_rep_h / data_rep_v     11      closed loop, periodic 1 s Newport motion
+==========================  ======  ===========================================
+
+Start times match the seed's trimming (``t0`` in its scripts); default
+lengths give the seed's 100 s huddle tests after its 1 s trim.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+from typing import Literal
+
+__all__ = [
+    "EXPERIMENT_NAMES",
+    "MIN_DURATION_S",
+    "Excitation",
+    "ExperimentSpec",
+    "seed_experiments",
+]
+
+ExcitationKind = Literal["noise", "sine"]
+
+
+@dataclass(frozen=True)
+class Excitation:
+    """An open-loop command on one DAC channel.
+
+    Attributes
+    ----------
+    channel : str
+        ``Uch``, ``Ucv``, ``Unh`` or ``Unv``.
+    kind : {"noise", "sine"}
+        White Gaussian noise of standard deviation ``amplitude_v``, or a sine
+        of amplitude ``amplitude_v`` and frequency ``freq_hz`` starting at phase 0.
+    amplitude_v : float
+        [V]
+    start_s : float
+        The command is zero before this time [s].
+    freq_hz : float
+        Sine frequency [Hz] (unused for noise).
+    """
+
+    channel: str
+    kind: ExcitationKind
+    amplitude_v: float
+    start_s: float
+    freq_hz: float = 0.0
+
+
+@dataclass(frozen=True)
+class ExperimentSpec:
+    """One experiment of the seed.
+
+    Attributes
+    ----------
+    name : str
+        File stem, e.g. ``data_uch``.
+    description : str
+    seed_section : str
+    duration_s : float
+        Record length [s].
+    excitations : tuple of Excitation
+    closed_loop : bool
+        Sercalo loop closed with the twin's controller.
+    compensation_unit : bool
+        Attocube environmental compensation unit on (Table 3).
+    shielding : bool
+        Aluminium shielding of the beam path (Table 3).
+    """
+
+    name: str
+    description: str
+    seed_section: str
+    duration_s: float
+    excitations: tuple[Excitation, ...]
+    closed_loop: bool
+    compensation_unit: bool
+    shielding: bool
+
+    def min_duration_s(self) -> float:
+        """Shortest record the seed's processing of this experiment accepts [s]."""
+        return MIN_DURATION_S[self.name]
+
+
+# Identification excitation levels: white noise keeps the coil-voltage
+# channel (Uch -> Vch: 119 V/V at DC, 1 kHz low pass) below 1.5 V rms, far
+# from the 10 V rails, while the 4QD coherence stays above 0.9 up to 1 kHz.
+UC_NOISE_RMS_V = 0.02
+UN_NOISE_RMS_V = 0.1
+CAL_AMPLITUDE_V = 2.0
+CAL_FREQ_HZ = 0.2
+REP_AMPLITUDE_V = 1.0  # seed Table 5: expected perturbation 1 V
+REP_FREQ_HZ = 1.0  # seed 11: 1 s periods
+
+# Shortest lengths: start time plus what the seed's scripts then need
+# (two 1 s Welch windows, or alignment + two whole periods for 11.1).
+MIN_DURATION_S = {
+    "data_cal_pd_h": 3.0, "data_cal_pd_v": 3.0,
+    "data_uch": 3.0, "data_ucv": 3.0,
+    "data_unh": 5.0, "data_unv": 3.5,
+    **{f"data_huddle_test_{i}": 3.0 for i in range(1, 6)},
+    "data_rep_h": 4.5, "data_rep_v": 4.5,
+}
+
+EXPERIMENT_NAMES = tuple(MIN_DURATION_S)
+
+
+def _huddle(i: int, closed: bool, comp: bool, alu: bool) -> ExperimentSpec:
+    parts = ["closed loop" if closed else "open loop"]
+    if comp:
+        parts.append("compensation unit")
+    if alu:
+        parts.append("aluminium shielding")
+    return ExperimentSpec(
+        name=f"data_huddle_test_{i}", description=f"Huddle test {i}: " + ", ".join(parts),
+        seed_section="3, Table 3", duration_s=101.0, excitations=(), closed_loop=closed,
+        compensation_unit=comp, shielding=alu)
+
+
+def seed_experiments(*, duration_s: float | None = None) -> tuple[ExperimentSpec, ...]:
+    """The thirteen experiments, at the seed's lengths or all at ``duration_s``.
+
+    Raises
+    ------
+    ValueError
+        ``duration_s`` is shorter than an experiment's minimum (named).
+    """
+    specs = (
+        ExperimentSpec("data_cal_pd_h", "4QD calibration, slow horizontal Newport motion",
+                       "2.1", 11.0,
+                       (Excitation("Unh", "sine", CAL_AMPLITUDE_V, 1.0, CAL_FREQ_HZ),),
+                       False, True, False),
+        ExperimentSpec("data_cal_pd_v", "4QD calibration, slow vertical Newport motion",
+                       "2.1", 11.0,
+                       (Excitation("Unv", "sine", CAL_AMPLITUDE_V, 1.0, CAL_FREQ_HZ),),
+                       False, True, False),
+        ExperimentSpec("data_uch", "Noise on the horizontal Sercalo input (Sercalo off 1 s)",
+                       "2.2, 2.3", 31.0, (Excitation("Uch", "noise", UC_NOISE_RMS_V, 1.0),),
+                       False, True, False),
+        ExperimentSpec("data_ucv", "Noise on the vertical Sercalo input (Sercalo off 1 s)",
+                       "2.2, 2.3", 31.0, (Excitation("Ucv", "noise", UC_NOISE_RMS_V, 1.0),),
+                       False, True, False),
+        ExperimentSpec("data_unh", "Noise on the horizontal Newport input", "2.4", 33.0,
+                       (Excitation("Unh", "noise", UN_NOISE_RMS_V, 3.0),), False, True, False),
+        ExperimentSpec("data_unv", "Noise on the vertical Newport input", "2.4", 31.5,
+                       (Excitation("Unv", "noise", UN_NOISE_RMS_V, 1.5),), False, True, False),
+        _huddle(1, False, False, False),
+        _huddle(2, False, True, False),
+        _huddle(3, True, True, False),
+        _huddle(4, False, True, True),
+        _huddle(5, True, True, True),
+        ExperimentSpec("data_rep_h", "Repeatability, closed loop, 1 s periodic horizontal "
+                       "Newport motion", "11", 42.0,
+                       (Excitation("Unh", "sine", REP_AMPLITUDE_V, 1.0, REP_FREQ_HZ),),
+                       True, True, True),
+        ExperimentSpec("data_rep_v", "Repeatability, closed loop, 1 s periodic vertical "
+                       "Newport motion", "11", 42.0,
+                       (Excitation("Unv", "sine", REP_AMPLITUDE_V, 1.0, REP_FREQ_HZ),),
+                       True, True, True),
+    )
+    if duration_s is None:
+        return specs
+    too_short = [s.name for s in specs if duration_s < s.min_duration_s()]
+    if too_short:
+        need = max(MIN_DURATION_S[n] for n in too_short)
+        raise ValueError(f"--duration {duration_s:g} s is too short for {', '.join(too_short)}: "
+                         f"they need at least {need:g} s")
+    return tuple(dataclasses.replace(s, duration_s=float(duration_s)) for s in specs)

@@ -1,0 +1,225 @@
+"""Run the seed's experiments on the twin and write them in the seed's layout.
+
+>>> run = simulate_bench(seed=1, duration_s=5.0)          # doctest: +SKIP
+>>> write_twin(run, "twin-data")                          # doctest: +SKIP
+
+writes ``data_cal_pd_h.mat`` ... ``data_rep_v.mat`` (MATLAB v5, column
+vectors, the seed's variable names) and ``twin_truth.json``.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import xarray as xr
+
+from fsmbench.bench.blocks import newport_beam_matrix
+from fsmbench.bench.params import Bench, BenchParams, default_bench
+from fsmbench.control.seed import seed_decentralised_controller
+from fsmbench.io.atomic import atomic_write_text
+from fsmbench.io.recording import make_recording, write_recording
+from fsmbench.twin.attocube import attocube_distance
+from fsmbench.twin.controller import closed_loop_spectral_radius, feedback_controller
+from fsmbench.twin.discretize import DiscretePlant
+from fsmbench.twin.engine import DiscreteController, Quantiser, run_loop
+from fsmbench.twin.experiments import ExperimentSpec, seed_experiments
+from fsmbench.twin.noise import source_rng, white_noise
+from fsmbench.twin.plant import ADC_CHANNELS, DAC_CHANNELS, INTERNAL_SIGNALS, twin_discrete
+from fsmbench.twin.truth import twin_truth
+
+__all__ = [
+    "ExperimentResult",
+    "TwinRun",
+    "simulate_bench",
+    "simulate_experiment",
+    "write_twin",
+]
+
+
+@dataclass(frozen=True)
+class ExperimentResult:
+    """One simulated record and what the twin injected into it.
+
+    Attributes
+    ----------
+    recording : xarray.Dataset
+        The seed's signals (see :mod:`fsmbench.io.recording`).
+    realized : dict
+        Standard deviation of every injected noise and of each ``Va``
+        component in this record, SI units.
+    """
+
+    recording: xr.Dataset
+    realized: dict[str, float]
+
+
+@dataclass(frozen=True)
+class TwinRun:
+    """All records of one twin run, the truth to compare identifications with."""
+
+    recordings: Mapping[str, xr.Dataset]
+    truth: Mapping[str, Any]
+    seed: int
+    experiments: tuple[ExperimentSpec, ...] = field(default=())
+
+
+def _excitation(spec: ExperimentSpec, n: int, fs_hz: float, seed: int) -> np.ndarray:
+    u = np.zeros((n, len(DAC_CHANNELS)))
+    t = np.arange(n) / fs_hz
+    for ex in spec.excitations:
+        col = DAC_CHANNELS.index(ex.channel)
+        on = t >= ex.start_s
+        if ex.kind == "noise":
+            rng = source_rng(seed, spec.name, f"excitation_{ex.channel}")
+            u[on, col] = white_noise(rng, int(on.sum()), rms=ex.amplitude_v)
+        else:
+            u[on, col] = ex.amplitude_v * np.sin(2 * np.pi * ex.freq_hz * (t[on] - ex.start_s))
+    return u
+
+
+def simulate_experiment(bench: Bench, spec: ExperimentSpec, *, seed: int,
+                        plant: DiscretePlant | None = None,
+                        controller: DiscreteController | None = None) -> ExperimentResult:
+    """Simulate one experiment on the twin (the bench's ``true`` parameters).
+
+    Parameters
+    ----------
+    bench : Bench
+    spec : ExperimentSpec
+    seed : int
+        Run seed; each noise source derives its own stream from it.
+    plant : DiscretePlant, optional
+        Pre-computed :func:`twin_discrete` of ``bench.true`` (saves time over many runs).
+    controller : DiscreteController, optional
+        Used when ``spec.closed_loop``; default: the seed's decentralised
+        controller of 9.2, Tustin at the converter rate.
+    """
+    p: BenchParams = bench.true
+    fs = p.converter.fs_hz
+    n = round(spec.duration_s * fs)
+    plant = twin_discrete(p) if plant is None else plant
+    if spec.closed_loop and controller is None:
+        controller = feedback_controller(seed_decentralised_controller(),
+                                         gd_v_per_rad=bench.nominal.quad_diode.gain_v_per_rad,
+                                         ts_s=p.converter.ts_s, name="seed K (9.2)")
+
+    def rng_for(source: str) -> np.random.Generator:
+        return source_rng(seed, spec.name, source)
+
+    # Noise at the ADC inputs. The Newport's angle noise moves its mirror, so
+    # it reaches the 4QD through the optics and the metrology through its gain.
+    n_theta = np.column_stack([white_noise(rng_for(f"newport_angle_{a}"), n,
+                                           rms=p.newport.angle_noise_rms_rad) for a in "hv"])
+    n_metro = np.column_stack([white_noise(rng_for(f"metrology_{a}"), n,
+                                           rms=p.newport.metrology_noise_rms_rad) for a in "hv"])
+    n_qd = np.column_stack([white_noise(rng_for(f"qd_{a}"), n, rms=p.quad_diode.noise_rms_v[a])
+                            for a in "hv"])
+    n_vc = np.column_stack([white_noise(rng_for(f"vc_{a}"), n, rms=p.voltage_amplifier.noise_rms_v)
+                            for a in "hv"])
+    gd = np.diag(p.quad_diode.gain_v_per_rad.as_array())
+    beam_noise = n_theta @ newport_beam_matrix(p).T  # beam angle in the 4QD frame
+    adc_noise = np.column_stack([n_vc, n_qd + beam_noise @ gd.T,
+                                 (n_theta + n_metro) / p.newport.metrology_gain_rad_per_v])
+
+    conv = Quantiser(range_v=p.converter.range_v, bits=p.converter.bits)
+    u_ext = _excitation(spec, n, fs, seed)
+    loop = run_loop(plant, u_ext=u_ext, adc_noise=adc_noise, adc=conv, dac=conv,
+                    controller=controller if spec.closed_loop else None,
+                    n_adc=len(ADC_CHANNELS))
+    internal = {name: loop.internal[:, i] for i, name in enumerate(INTERNAL_SIGNALS)}
+    theta_c = np.column_stack([internal["theta_ch"], internal["theta_cv"]])
+    theta_n = np.column_stack([internal["theta_nh"], internal["theta_nv"]]) + n_theta
+    va = attocube_distance(p, theta_c_rad=theta_c, theta_n_rad=theta_n,
+                           compensation_unit=spec.compensation_unit, shielding=spec.shielding,
+                           fs_hz=fs, rng_for=rng_for)
+
+    signals = {name: loop.dac[:, i] for i, name in enumerate(DAC_CHANNELS)}
+    signals.update({name: loop.adc[:, i] for i, name in enumerate(ADC_CHANNELS)})
+    signals["Va"] = va.total_m
+    recording = make_recording(signals, fs_hz=fs, experiment=spec.name, source="fsmbench twin")
+    realized = {
+        **{f"qd_noise_v.{a}": float(np.std(n_qd[:, i])) for i, a in enumerate("hv")},
+        **{f"newport_angle_noise_rad.{a}": float(np.std(n_theta[:, i]))
+           for i, a in enumerate("hv")},
+        **{f"newport_metrology_noise_rad.{a}": float(np.std(n_metro[:, i]))
+           for i, a in enumerate("hv")},
+        **{f"vc_noise_v.{a}": float(np.std(n_vc[:, i])) for i, a in enumerate("hv")},
+        **{f"va_{k}": v for k, v in va.std_m().items()},
+    }
+    return ExperimentResult(recording=recording, realized=realized)
+
+
+def simulate_bench(bench: Bench | None = None, *, seed: int = 0, duration_s: float | None = None,
+                   experiments: Sequence[str] | None = None,
+                   controller: DiscreteController | None = None,
+                   progress: Callable[[str], None] | None = None) -> TwinRun:
+    """Run the seed's experiments on the twin.
+
+    Parameters
+    ----------
+    bench : Bench, optional
+        Default: the packaged bench.
+    seed : int
+        Same seed, same records, bit for bit.
+    duration_s : float, optional
+        Length of every record [s]; default: the seed's lengths.
+    experiments : sequence of str, optional
+        Names to run (default: all thirteen).
+    controller : DiscreteController, optional
+        Closed-loop controller; default the seed's of 9.2 (checked stable).
+    progress : callable, optional
+        Called with a short message before each experiment.
+    """
+    bench = default_bench() if bench is None else bench
+    specs = seed_experiments(duration_s=duration_s)
+    if experiments is not None:
+        unknown = sorted(set(experiments) - {s.name for s in specs})
+        if unknown:
+            raise ValueError(f"unknown experiment(s) {unknown}; known: {[s.name for s in specs]}")
+        specs = tuple(s for s in specs if s.name in set(experiments))
+    p = bench.true
+    plant = twin_discrete(p)
+    if controller is None and any(s.closed_loop for s in specs):
+        controller = feedback_controller(seed_decentralised_controller(),
+                                         gd_v_per_rad=bench.nominal.quad_diode.gain_v_per_rad,
+                                         ts_s=p.converter.ts_s, name="seed K (9.2)")
+    if controller is not None:
+        rho = closed_loop_spectral_radius(plant, controller, n_adc=len(ADC_CHANNELS))
+        if rho >= 1.0:
+            raise ValueError(f"controller '{controller.name}' does not stabilise the twin's plant "
+                             f"(closed-loop spectral radius {rho:.6f} >= 1)")
+    recordings: dict[str, xr.Dataset] = {}
+    realized: dict[str, dict[str, float]] = {}
+    for i, spec in enumerate(specs, start=1):
+        if progress is not None:
+            progress(f"[{i}/{len(specs)}] simulating {spec.name} ({spec.duration_s:g} s)")
+        res = simulate_experiment(bench, spec, seed=seed, plant=plant, controller=controller)
+        recordings[spec.name] = res.recording
+        realized[spec.name] = res.realized
+    truth = twin_truth(bench, seed=seed, experiments=specs, realized=realized,
+                       controller_name=None if controller is None else controller.name)
+    return TwinRun(recordings=recordings, truth=truth, seed=seed, experiments=specs)
+
+
+def write_twin(run: TwinRun, out_dir: str | Path, *, format: str = "mat5") -> list[Path]:
+    """Write every record as ``<name>.mat`` (or ``.h5`` for NeXus) and ``twin_truth.json``.
+
+    Each file is written atomically; returns the paths written.
+    """
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    suffix = ".h5" if format == "nexus" else ".mat"
+    paths = []
+    for name, ds in run.recordings.items():
+        path = out / f"{name}{suffix}"
+        write_recording(ds, path, format=format)
+        paths.append(path)
+    truth_path = out / "twin_truth.json"
+    atomic_write_text(truth_path, json.dumps(run.truth, indent=2, sort_keys=True) + "\n")
+    paths.append(truth_path)
+    return paths

@@ -1,0 +1,89 @@
+"""``twin_truth.json``: what an identification of the twin's records should find.
+
+The keys are shared with ``identification.json`` so that a result can be
+compared with the truth key by key:
+
+``fs_hz``, ``qd_gain_v_per_rad.{h,v}``, ``current_amp_gain_a_per_v.{h,v}``,
+``sercalo.{h,v}.{resonance_hz, damping_ratio, dc_gain_v_per_a}`` (Ich->Vph,
+Icv->Vpv), ``newport_gain_v_per_v.{h,v}`` (Unh->Vph, Unv->Vpv at low
+frequency, signed), ``delay_s.{sercalo, newport}``; then ``noise_rms`` (every
+injected noise, stationary values), ``realized`` (the same, measured on each
+record) and descriptive extras.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+import numpy as np
+
+from fsmbench import __version__
+from fsmbench.bench.blocks import input_delays_s, physical_plant
+from fsmbench.bench.params import Bench
+from fsmbench.twin.experiments import ExperimentSpec
+
+__all__ = ["twin_truth"]
+
+
+def _dc(sys: Any, out: int, inp: int) -> float:
+    return float(np.real(sys.dcgain()[out, inp]))
+
+
+def twin_truth(bench: Bench, *, seed: int, experiments: Sequence[ExperimentSpec],
+               realized: Mapping[str, Mapping[str, float]],
+               controller_name: str | None) -> dict[str, Any]:
+    """The truth of a twin run as a JSON-ready dict (SI units, Hz)."""
+    p = bench.true
+    plant = physical_plant(p, source="physical (true)")
+    gc, gn = plant.blocks["Gc"], plant.blocks["Gn"]
+    gi = p.current_amp_gain_a_per_v()
+    delays = input_delays_s(p)
+    lsb = p.converter.lsb_v
+    env = p.environment
+    return {
+        "fs_hz": p.converter.fs_hz,
+        "qd_gain_v_per_rad": {"h": p.quad_diode.gain_v_per_rad.h,
+                              "v": p.quad_diode.gain_v_per_rad.v},
+        "current_amp_gain_a_per_v": {"h": gi.h, "v": gi.v},
+        "sercalo": {
+            axis: {"resonance_hz": p.sercalo.resonance_hz[axis],
+                   "damping_ratio": p.sercalo.damping_ratio[axis],
+                   "dc_gain_v_per_a": _dc(gc, i, i)}
+            for i, axis in enumerate(("h", "v"))
+        },
+        "newport_gain_v_per_v": {"h": _dc(gn, 0, 0), "v": _dc(gn, 1, 1)},
+        "delay_s": {"sercalo": delays["Uch"], "newport": delays["Unh"]},
+        "noise_rms": {
+            "qd_noise_v": {"h": p.quad_diode.noise_rms_v.h, "v": p.quad_diode.noise_rms_v.v},
+            "newport_angle_noise_rad": p.newport.angle_noise_rms_rad,
+            "newport_metrology_noise_rad": p.newport.metrology_noise_rms_rad,
+            "vc_noise_v": p.voltage_amplifier.noise_rms_v,
+            "attocube_noise_m": p.attocube.noise_rms_m,
+            "adc_quantisation_v": lsb / np.sqrt(12.0),
+            "dac_quantisation_v": lsb / np.sqrt(12.0),
+            "room_temperature_k": env.room_temperature_rms_k,
+            "room_pressure_pa": env.room_pressure_rms_pa,
+            "room_humidity_pct": env.room_humidity_rms_pct,
+            "beam_path_temperature_k": env.beam_path_temperature_rms_k,
+            "ecu_temperature_error_k": env.ecu_temperature_error_k,
+            "ecu_pressure_error_pa": env.ecu_pressure_error_pa,
+            "ecu_humidity_error_pct": env.ecu_humidity_error_pct,
+        },
+        "realized": {name: dict(values) for name, values in realized.items()},
+        "cross_coupling_dc_gain": {
+            "Ich->Vpv_v_per_a": _dc(gc, 1, 0), "Icv->Vph_v_per_a": _dc(gc, 0, 1),
+            "Unh->Vpv_v_per_v": _dc(gn, 1, 0), "Unv->Vph_v_per_v": _dc(gn, 0, 1),
+        },
+        "delay_components_s": {
+            "dac_transport": p.converter.dac_delay_samples * p.converter.ts_s,
+            "zero_order_hold": 0.5 * p.converter.ts_s,
+            "newport_internal": p.newport.internal_delay_s,
+        },
+        "experiments": {s.name: {k: v for k, v in dataclasses.asdict(s).items() if k != "name"}
+                        for s in experiments},
+        "seed": seed,
+        "controller": controller_name,
+        "fsmbench_version": __version__,
+    }
