@@ -26,7 +26,7 @@ FILTERS = {
 
 @pytest.fixture
 def rng() -> np.random.Generator:
-    """Fixed-seed generator: statistical tolerances are set for any seed, the seed makes runs repeatable."""
+    """Fixed-seed generator: tolerances hold for any seed; the seed makes runs repeatable."""
     return np.random.default_rng(20240611)
 
 

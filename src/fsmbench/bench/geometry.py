@@ -11,18 +11,15 @@ Sercalo and returns to the plane ``x = -L``. With a Sercalo angle error
 
 The tracer
 ----------
-Rays are a point and a unit direction, mirrors and the Attocube plane are
-lines through a pivot with a normal, reflection is specular and nothing is
-linearised. Points are complex numbers. To keep the path error exact down to
-the seed's smallest angle (1e-7 rad, where it is 1e-14 m against a 0.2 m path)
-every quantity is carried as *nominal + deviation*: the nominal bench is
-axis-aligned, so nominal points and directions are exact, directions are
-``i**q · exp(i·dev)`` (quarter turns are exact in floating point) and each
-segment's length change is computed from small quantities only. A plain
-``path − 2(L+H)`` in float64 (the seed's MATLAB code) has an absolute floor of
-~1e-16 m, i.e. 0.5 % at 1e-7 rad; here the only rounding left is in the two
-first-order terms that cancel (±4Hθ, below), ~1e-23 m absolute, i.e. < 1e-9
-relative over the seed's range.
+Rays are a point and a unit direction (complex numbers), mirrors and the
+Attocube plane are lines through a pivot with a normal, reflection is
+specular; nothing is linearised. At 1e-7 rad the path error is 1e-14 m on a
+0.2 m path, so a plain ``path − 2(L+H)`` in float64 (the seed's MATLAB code)
+is off by ~1e-16 m, 0.5 %. Here everything is *nominal + deviation*: the
+nominal bench is axis-aligned (exact), directions are ``i**q·exp(i·dev)``
+(quarter turns are exact) and each segment's length change is computed from
+small quantities only; what rounding is left (~1e-23 m, in the ±4Hθ terms
+that cancel, below) is < 1e-9 relative over the seed's range.
 
 Derivation of the small-angle law (flat Newport, no translation)
 -----------------------------------------------------------------
@@ -61,7 +58,7 @@ error is ``(k4/k)·θ²`` (6.47·θ² for H = L): 6.5e-8 at the seed's largest a
 For H = L = 0.05 m, ``k = 1.0 m/rad²``: that is why the seed's eq. (8)
 ``δL = δθc²`` looks right, but the coefficient carries units (m/rad²) and
 depends on H and L, and 1 µrad gives 1e-12 m = 1 pm of path (0.5 pm
-measured), not the 1 nm of the seed's Table 4 (docs/seed-errata.md).
+measured), not the 1 nm of the seed's Table 4.
 
 Relation to seed 11.3 (``ΔL = L/cos α − L ≈ Lα²/2``): that is the excess of
 *one straight leg* of length L tilted by α (:func:`tilted_leg_excess`). In
@@ -215,8 +212,7 @@ def _propagate(ray: _Ray, line: _Line) -> tuple[_Ray, FloatArray, FloatArray]:
         excess = _cross(small - t0 * d_minus_d0, u) / denom
     length = t0 + excess
     bad = ~np.isfinite(length) | (length <= 0.0)  # parallel, or the line is behind the ray
-    excess = np.where(bad, np.nan, excess)
-    length = np.where(bad, np.nan, length)
+    excess, length, s = (np.where(bad, np.nan, a) for a in (excess, length, s))
     hit = _Ray(line.pivot, line.shift * line.normal() + s * u, ray.quarter, ray.dev)
     return hit, length, excess
 
@@ -311,32 +307,22 @@ def trace_bench(
     attocube = _Line(-length + 0j, 2, zero, zero, +1)  # x = −L
 
     ray = _Ray(-length + 0j, zero.astype(complex), 0, zero)
-    hits: list[_Ray] = []
-    lengths: list[FloatArray] = []
-    excesses: list[FloatArray] = []
-    for line, reflect in ((sercalo, True), (newport, True), (sercalo, True), (attocube, False)):
+    hits, lengths, excesses = [], [], []
+    for line in (sercalo, newport, sercalo, attocube):
         ray, seg, excess = _propagate(ray, line)
-        hits.append(ray)
+        hits.append(_points(ray.nominal + ray.offset))
         lengths.append(seg)
         excesses.append(excess)
-        if reflect:
+        if line is not attocube:
             ray = _reflect(ray, line)
     # The first-order length changes of Y→M and M→T cancel; summing the
     # excesses (not the lengths) keeps the second-order result exact.
     path_error = excesses[0] + excesses[1] + excesses[2] + excesses[3]
-    s_hit, y_hit, m_hit, t_hit = (r.nominal + r.offset for r in hits)
     return BeamPath(
-        h_m=h,
-        l_m=length,
-        theta_rad=_frozen(theta),
-        newport_angle_rad=_frozen(alpha),
-        sercalo_shift_m=_frozen(dc),
-        newport_shift_m=_frozen(dn),
+        h_m=h, l_m=length, theta_rad=_frozen(theta), newport_angle_rad=_frozen(alpha),
+        sercalo_shift_m=_frozen(dc), newport_shift_m=_frozen(dn),
         O=_points(np.full_like(theta, -length, dtype=complex)),
-        S=_points(s_hit),
-        Y=_points(y_hit),
-        M=_points(m_hit),
-        T=_points(t_hit),
+        S=hits[0], Y=hits[1], M=hits[2], T=hits[3],
         segment_lengths_m=_frozen(np.stack(lengths, axis=-1)),
         path_length_m=_frozen(2.0 * (length + h) + path_error),
         path_error_m=_frozen(path_error),
@@ -482,16 +468,10 @@ def fit_quadratic_law(
     law = small_angle_law(h_m=h_m, l_m=l_m)
     slope = float(np.polyfit(np.log(np.abs(th)), np.log(path.path_error_m), 1)[0])
     return QuadraticLawFit(
-        h_m=path.h_m,
-        l_m=path.l_m,
-        theta_min_rad=float(np.min(np.abs(th))),
-        theta_max_rad=float(np.max(np.abs(th))),
-        n_points=int(th.size),
-        k_fit_m_per_rad2=k_fit,
-        k_derived_m_per_rad2=law.k_m_per_rad2,
-        relative_difference=k_fit / law.k_m_per_rad2 - 1.0,
-        max_relative_residual=float(np.max(np.abs(ratio / k_fit - 1.0))),
-        loglog_slope=slope,
+        h_m=path.h_m, l_m=path.l_m, theta_min_rad=float(np.min(np.abs(th))),
+        theta_max_rad=float(np.max(np.abs(th))), n_points=int(th.size), k_fit_m_per_rad2=k_fit,
+        k_derived_m_per_rad2=law.k_m_per_rad2, relative_difference=k_fit / law.k_m_per_rad2 - 1,
+        max_relative_residual=float(np.max(np.abs(ratio / k_fit - 1.0))), loglog_slope=slope,
     )
 
 
@@ -557,11 +537,7 @@ class PerpendicularMotion:
 
 
 def perpendicular_motion(
-    shift_m: ArrayLike,
-    *,
-    mirror: Literal["sercalo", "newport"],
-    h_m: float,
-    l_m: float,
+    shift_m: ArrayLike, *, mirror: Literal["sercalo", "newport"], h_m: float, l_m: float,
     theta_rad: float = 0.0,
 ) -> PerpendicularMotion:
     """Round-trip path change when ``mirror`` moves by ``shift_m`` along its normal.
@@ -639,11 +615,8 @@ def beam_path_figure_data(
     u = np.array([np.cos(np.pi / 4 - theta_rad), np.sin(np.pi / 4 - theta_rad)])
     ys = np.array([beam[:, 1].min(), beam[:, 1].max()])
     return BeamPathFigure(
-        theta_rad=float(theta_rad),
-        labels=("O", "S", "Y", "M", "T"),
-        beam=_frozen(beam),
-        nominal_beam=_frozen(nominal),
-        sercalo_mirror=_frozen(np.stack([-half * u, half * u])),
+        theta_rad=float(theta_rad), labels=("O", "S", "Y", "M", "T"), beam=_frozen(beam),
+        nominal_beam=_frozen(nominal), sercalo_mirror=_frozen(np.stack([-half * u, half * u])),
         newport_mirror=_frozen([[-half, h], [half, h]]),
         attocube_plane=_frozen([[-length, ys[0] - half], [-length, ys[1] + half]]),
     )

@@ -342,7 +342,7 @@ def _multi_input(
     h = syx @ inv
     gnn = np.clip(pyy - np.einsum("fki,fki->fk", h, syx.conj()).real, 0.0, None)
     inv_diag = np.diagonal(inv, axis1=1, axis2=2).real
-    eps = np.sqrt(gnn[:, :, None] * inv_diag[:, None, :] / (2.0 * (n_d - m + 1))) / np.abs(h)
+    eps = np.sqrt(gnn[:, :, None] * inv_diag[:, None, :] / (1.0 * (n_d - m + 1))) / np.abs(h)
     h[singular] = np.nan
     eps[singular] = np.nan
     return h, eps

@@ -384,7 +384,9 @@ def cross_spectral_density(
             windowed = windowed.reshape(c, windowed.shape[1], -1, nfft).sum(axis=2)
         spectra = scipy.fft.rfft(windowed, n=nfft, axis=-1)  # every segment x channel at once
         for a in range(c):
-            for b in range(a, c):
+            # |X|^2 as re^2 + im^2: a complex product may use FMA and leave a 1e-22 imaginary part
+            acc[a, a] += (spectra[a].real ** 2 + spectra[a].imag ** 2).sum(axis=0)
+            for b in range(a + 1, c):
                 acc[a, b] += (spectra[a] * spectra[b].conj()).sum(axis=0)
     for a in range(c):
         for b in range(a):

@@ -60,6 +60,7 @@ __all__ = [
     "MatVersion",
     "detect_format",
     "load_mat",
+    "mat5_header",
     "mat73_header",
     "save_mat",
 ]
@@ -441,8 +442,9 @@ def mat73_header(*, platform: str | None = None, created: float | None = None) -
     platform : str, optional
         Text after ``Platform:``; defaults to ``"fsmbench <version>"``.
     created : float, optional
-        Creation time, in s since the epoch; defaults to now (local time, as
-        MATLAB writes it).
+        Creation time, in s since the epoch, written as UTC (a fixed value
+        gives byte-identical files); defaults to now, in local time as MATLAB
+        writes it.
 
     Returns
     -------
@@ -461,16 +463,38 @@ def mat73_header(*, platform: str | None = None, created: float | None = None) -
     and matio's/hdf5-pure's ``mat/userblock.rs`` (bytes 124..127 =
     ``00 02 'I' 'M'``, zeros to 512, HDF5 superblock at 512).
     """
-    from fsmbench import __version__
-
-    now = time.localtime(created)
-    # English names by hand: strftime's %a/%b follow the locale.
-    stamp = (f"{_DAYS[now.tm_wday]} {_MONTHS[now.tm_mon - 1]} {now.tm_mday:02d} "
-             f"{now.tm_hour:02d}:{now.tm_min:02d}:{now.tm_sec:02d} {now.tm_year}")
-    plat = platform if platform is not None else f"fsmbench {__version__}"
-    text = f"MATLAB 7.3 MAT-file, Platform: {plat}, Created on: {stamp} HDF5 schema 1.00 ."
+    text = (f"MATLAB 7.3 MAT-file, Platform: {_platform(platform)}, "
+            f"Created on: {_stamp(created)} HDF5 schema 1.00 .")
     raw = text.encode("ascii", "replace")[:116]
     return raw.ljust(116, b" ") + b"\x00" * 8 + b"\x00\x02" + b"IM"
+
+
+def mat5_header(*, platform: str | None = None, created: float | None = None) -> bytes:
+    """The 128-byte header of a MATLAB v5/v7 MAT-file (little-endian).
+
+    Same text and ``created`` convention as :func:`mat73_header`; bytes
+    116..123 are the subsystem offset (zeros), 124..125 the version 0x0100
+    and 126..127 the endian indicator ``IM``, as the MAT-File Format
+    document specifies and ``scipy.io.savemat`` writes.
+    """
+    text = f"MATLAB 5.0 MAT-file, Platform: {_platform(platform)}, Created on: {_stamp(created)}"
+    raw = text.encode("ascii", "replace")[:116]
+    return raw.ljust(116, b" ") + b"\x00" * 8 + b"\x00\x01" + b"IM"
+
+
+def _platform(platform: str | None) -> str:
+    from fsmbench import __version__
+
+    return platform if platform is not None else f"fsmbench {__version__}"
+
+
+def _stamp(created: float | None) -> str:
+    now = time.localtime() if created is None else time.gmtime(created)
+    # English names by hand: strftime's %a/%b follow the locale.
+    return (f"{_DAYS[now.tm_wday]} {_MONTHS[now.tm_mon - 1]} {now.tm_mday:02d} "
+            f"{now.tm_hour:02d}:{now.tm_min:02d}:{now.tm_sec:02d} {now.tm_year}")
+
+
 
 
 def save_mat(
@@ -479,6 +503,7 @@ def save_mat(
     *,
     version: MatVersion = "5",
     compress: bool | None = None,
+    created: float | None = None,
 ) -> Path:
     """Write variables to a MAT-file, atomically.
 
@@ -500,6 +525,9 @@ def save_mat(
     compress : bool, optional
         Compress the data. Default: yes for v5, no for v7.3 (v7.3 is chosen
         for large files, where HDF5's single-threaded deflate dominates).
+    created : float, optional
+        Creation time for the header [s since the epoch]; default now. A
+        fixed value makes the file a pure function of the variables.
 
     Returns
     -------
@@ -510,9 +538,11 @@ def save_mat(
     for name in variables:
         _check_name(name, dest)
     if version == "5":
-        _save_v5(dest, variables, compress=True if compress is None else compress)
+        _save_v5(dest, variables, compress=True if compress is None else compress,
+                 header=mat5_header(created=created))
     elif version == "7.3":
-        _save_v73(dest, variables, compress=False if compress is None else compress)
+        _save_v73(dest, variables, compress=False if compress is None else compress,
+                  header=mat73_header(created=created))
     else:
         raise ValueError(f"{dest}: unknown MAT-file version {version!r}; use '5' or '7.3'")
     return dest
@@ -539,7 +569,7 @@ def _to_scipy(value: Any, where: str, dest: Path) -> Any:
         for i, v in enumerate(value):
             cell[0, i] = _to_scipy(v, f"{where}{{{i + 1}}}", dest)
         return cell
-    arr = np.asarray(value)
+    arr = _as_array(value, where, dest)
     if arr.dtype.kind in "US":
         return str(arr.item()) if arr.ndim == 0 else _to_scipy(arr.tolist(), where, dest)
     if arr.dtype == object:
@@ -547,41 +577,66 @@ def _to_scipy(value: Any, where: str, dest: Path) -> Any:
         for idx, v in np.ndenumerate(arr):
             out[idx] = _to_scipy(v, where, dest)
         return out
-    if arr.dtype.kind not in "biufc" or arr.dtype.itemsize > 16 or arr.dtype == np.float16:
+    if f"{arr.dtype.kind}{arr.dtype.itemsize}" not in _CLASS_OF:
         raise TypeError(f"{dest}: variable '{where}': cannot store {type(value).__name__} "
                         f"(dtype {arr.dtype}) in a MAT-file")
     return arr
 
 
-def _v5_element(name: str, value: Any, compress: bool) -> tuple[bytes, bytes]:
-    """(file header, data element) of one variable, as savemat encodes it."""
+def _as_array(value: Any, where: str, dest: Path) -> np.ndarray:
+    """``np.asarray(value)``, refusing objects numpy can only wrap (None, sets, ...)."""
+    arr = np.asarray(value)
+    if arr.dtype == object and arr.ndim == 0:
+        raise TypeError(f"{dest}: variable '{where}': cannot store "
+                        f"{type(value).__name__} in a MAT-file")
+    return arr
+
+
+def _worth_compressing(data: bytes) -> bool:
+    """Whether zlib shrinks ``data`` by 10 % or more, judged on a 256 KiB sample.
+
+    Noise-like float64 signals barely compress (~0.96 of their size) yet cost
+    as much time as any other; they are stored plain (a v5 file may mix plain
+    and compressed variables), 16-bit ADC data (~0.42) and ``t`` (~0.3) are not.
+    """
+    size = 1 << 18
+    if len(data) <= 2 * size:
+        return True
+    start = (len(data) // 2) & ~7
+    sample = data[start:start + size]
+    return len(zlib.compress(sample, _ZLIB_LEVEL)) < 0.9 * len(sample)
+
+
+def _v5_element(name: str, value: Any, compress: bool) -> bytes:
+    """The data element of one variable, as savemat encodes it."""
     buf = io.BytesIO()
     scipy.io.savemat(buf, {name: value}, format="5", oned_as="column",
                      do_compression=False, long_field_names=True)
     raw = buf.getvalue()
     element = raw[128:]
-    if compress:
+    if compress and _worth_compressing(element):
         # Same framing as savemat(do_compression=True): an miCOMPRESSED tag
         # around the zlib stream of the miMATRIX element, no padding.
         packed = zlib.compress(element, _ZLIB_LEVEL)
         element = np.array([_MI_COMPRESSED, len(packed)], dtype=np.uint32).tobytes() + packed
-    return raw[:128], element
+    return element
 
 
-def _save_v5(dest: Path, variables: Mapping[str, Any], *, compress: bool) -> None:
+def _save_v5(dest: Path, variables: Mapping[str, Any], *, compress: bool,
+             header: bytes) -> None:
     items = [(k, _to_scipy(v, k, dest)) for k, v in variables.items()]
     workers = max(1, min(len(items), os.cpu_count() or 1))
     # Variables are encoded and zlib-compressed in threads (zlib releases the
     # GIL): savemat's own compression is single-threaded and ~5x slower.
-    with concurrent.futures.ThreadPoolExecutor(max_workers=workers) as pool, \
-            atomic_path(dest) as tmp, open(tmp, "wb") as fh:
-        if not items:  # header only: a valid MAT-file with no variables
-            fh.write(_v5_element("x", np.zeros((0, 0)), False)[0])
-        parts = pool.map(lambda kv: _v5_element(kv[0], kv[1], compress), items)
-        for i, (head, element) in enumerate(parts):
-            if i == 0:
-                fh.write(head)
-            fh.write(element)
+    pool = concurrent.futures.ThreadPoolExecutor(max_workers=workers)
+    try:
+        with atomic_path(dest) as tmp, open(tmp, "wb") as fh:
+            fh.write(header)
+            for element in pool.map(lambda kv: _v5_element(kv[0], kv[1], compress), items):
+                fh.write(element)
+    finally:
+        # on failure (Ctrl-C included) drop the variables not started yet
+        pool.shutdown(wait=True, cancel_futures=True)
 
 
 class _H5Writer:
@@ -616,7 +671,7 @@ class _H5Writer:
             return self._cell(group, name, cell, where)
         if scipy.sparse.issparse(value):
             raise TypeError(f"{self.dest}: variable '{where}': sparse matrices need version '5'")
-        arr = np.asarray(value)
+        arr = _as_array(value, where, self.dest)
         if arr.dtype.kind in "US":
             if arr.ndim == 0:
                 return self._char(group, name, str(arr.item()))
@@ -632,7 +687,8 @@ class _H5Writer:
         return self._numeric(group, name, np.atleast_2d(arr), _CLASS_OF[key])
 
     def _empty(self, group: h5py.Group, name: str, shape: tuple[int, ...], cls: str) -> Any:
-        ds = group.create_dataset(name, data=np.array(shape, dtype=np.uint64))
+        ds = group.create_dataset(name, data=np.array(shape, dtype=np.uint64),
+                                   track_times=False)
         ds.attrs["MATLAB_class"] = np.bytes_(cls)
         ds.attrs["MATLAB_empty"] = np.uint8(1)
         return ds
@@ -651,7 +707,8 @@ class _H5Writer:
         opts: dict[str, Any] = {}
         if self.compress and data.size > 1:
             opts = {"compression": "gzip", "compression_opts": 1, "chunks": True}
-        ds = group.create_dataset(name, data=np.ascontiguousarray(data), **opts)
+        ds = group.create_dataset(name, data=np.ascontiguousarray(data), track_times=False,
+                                   **opts)
         ds.attrs["MATLAB_class"] = np.bytes_(cls)
         if cls == "logical":
             ds.attrs["MATLAB_int_decode"] = np.int32(1)
@@ -662,7 +719,7 @@ class _H5Writer:
         codes = np.frombuffer(text.encode("utf-16-le"), dtype="<u2")
         if codes.size == 0:
             return self._empty(group, name, (0, 0), "char")
-        ds = group.create_dataset(name, data=codes.reshape(-1, 1))
+        ds = group.create_dataset(name, data=codes.reshape(-1, 1), track_times=False)
         ds.attrs["MATLAB_class"] = np.bytes_("char")
         ds.attrs["MATLAB_int_decode"] = np.int32(2)
         return ds
@@ -677,7 +734,7 @@ class _H5Writer:
         for idx, elem in np.ndenumerate(data):
             obj = self.write(self._refs, self._ref_name(), elem, f"{where}{{{idx}}}")
             refs[idx] = obj.ref
-        ds = group.create_dataset(name, data=refs)
+        ds = group.create_dataset(name, data=refs, track_times=False)
         ds.attrs["MATLAB_class"] = np.bytes_("cell")
         return ds
 
@@ -696,7 +753,8 @@ class _H5Writer:
         return g
 
 
-def _save_v73(dest: Path, variables: Mapping[str, Any], *, compress: bool) -> None:
+def _save_v73(dest: Path, variables: Mapping[str, Any], *, compress: bool,
+              header: bytes) -> None:
     with atomic_path(dest) as tmp:
         # userblock_size=512: MATLAB's header lives there, the HDF5 superblock at 512.
         with h5py.File(tmp, "w", userblock_size=_USERBLOCK, libver="earliest") as f:
@@ -704,4 +762,4 @@ def _save_v73(dest: Path, variables: Mapping[str, Any], *, compress: bool) -> No
             for name, value in variables.items():
                 writer.write(f, name, value, name)
         with open(tmp, "r+b") as fh:
-            fh.write(mat73_header().ljust(_USERBLOCK, b"\x00"))
+            fh.write(header.ljust(_USERBLOCK, b"\x00"))

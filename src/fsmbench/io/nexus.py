@@ -74,7 +74,8 @@ def is_nexus(path: str | os.PathLike[str]) -> bool:
         return False
 
 
-def write_nexus(ds: xr.Dataset, path: str | os.PathLike[str], *, compress: bool = False) -> Path:
+def write_nexus(ds: xr.Dataset, path: str | os.PathLike[str], *, compress: bool = False,
+                created: float | None = None) -> Path:
     """Write a recording as a NeXus archive, atomically.
 
     Parameters
@@ -87,6 +88,9 @@ def write_nexus(ds: xr.Dataset, path: str | os.PathLike[str], *, compress: bool 
     compress : bool, default False
         gzip (level 1) with byte shuffling: about half the size for 16-bit ADC
         data, several times slower to write.
+    created : float, optional
+        ``file_time`` [s since the epoch]; default now. A fixed value makes
+        the file a pure function of ``ds``.
 
     Returns
     -------
@@ -102,30 +106,31 @@ def write_nexus(ds: xr.Dataset, path: str | os.PathLike[str], *, compress: bool 
     opts: dict[str, Any] = (
         {"compression": "gzip", "compression_opts": 1, "shuffle": True} if compress else {}
     )
-    with atomic_path(dest) as tmp:
-        with h5py.File(tmp, "w") as f:
-            f.attrs["default"] = _ENTRY
-            f.attrs["creator"] = f"fsmbench {__version__}"
-            f.attrs["file_time"] = datetime.datetime.now().astimezone().isoformat()
-            f.attrs["HDF5_Version"] = h5py.version.hdf5_version
-            entry = f.create_group(_ENTRY)
-            entry.attrs["NX_class"] = "NXentry"
-            entry.attrs["default"] = _DATA
-            for key, value in ds.attrs.items():
-                entry.attrs[key] = value
-            data = entry.create_group(_DATA)
-            data.attrs["NX_class"] = "NXdata"
-            data.attrs["axes"] = TIME
-            data.attrs[f"{TIME}_indices"] = np.int32(0)
-            if names:
-                data.attrs["signal"] = names[0]
-            if len(names) > 1:
-                data.attrs["auxiliary_signals"] = names[1:]
-            for name in [TIME, *names]:
-                values = np.ascontiguousarray(ds[name].values, dtype=np.float64)
-                dset = data.create_dataset(name, data=values, **opts)
-                for key, value in ds[name].attrs.items():
-                    dset.attrs[key] = value
+    with atomic_path(dest) as tmp, h5py.File(tmp, "w") as f:
+        f.attrs["default"] = _ENTRY
+        f.attrs["creator"] = f"fsmbench {__version__}"
+        f.attrs["file_time"] = (
+            datetime.datetime.now().astimezone() if created is None
+            else datetime.datetime.fromtimestamp(created, tz=datetime.UTC)).isoformat()
+        f.attrs["HDF5_Version"] = h5py.version.hdf5_version
+        entry = f.create_group(_ENTRY)
+        entry.attrs["NX_class"] = "NXentry"
+        entry.attrs["default"] = _DATA
+        for key, value in ds.attrs.items():
+            entry.attrs[key] = value
+        data = entry.create_group(_DATA)
+        data.attrs["NX_class"] = "NXdata"
+        data.attrs["axes"] = TIME
+        data.attrs[f"{TIME}_indices"] = np.int32(0)
+        if names:
+            data.attrs["signal"] = names[0]
+        if len(names) > 1:
+            data.attrs["auxiliary_signals"] = names[1:]
+        for name in [TIME, *names]:
+            values = np.ascontiguousarray(ds[name].values, dtype=np.float64)
+            dset = data.create_dataset(name, data=values, track_times=False, **opts)
+            for key, value in ds[name].attrs.items():
+                dset.attrs[key] = value
     return dest
 
 

@@ -359,11 +359,12 @@ def make_recording(
     return ds
 
 
-def _default_require(*names: str) -> tuple[str, ...]:
+def _default_require(*names: str) -> tuple[str, tuple[str, ...]]:
+    """(experiment whose load list applies, that list); the first known name wins."""
     for name in names:
         if name in EXPERIMENTS:
-            return EXPERIMENTS[name].required
-    return (TIME,)
+            return name, EXPERIMENTS[name].required
+    return names[0], (TIME,)
 
 
 def read_recording(
@@ -414,12 +415,15 @@ def read_recording(
         ds = nexus.read_nexus(p)
         if experiment is not None:
             ds.attrs["experiment"] = experiment
-        req = _default_require(ds.attrs["experiment"], p.stem) if require is None else require
+        req = (_default_require(ds.attrs["experiment"], p.stem)[1] if require is None
+               else tuple(require))
         _validate(ds, origin=origin, require=req, adc_range_v=adc_range_v,
                   adc_bits=adc_bits, saturation=True, stacklevel=3)
         return ds
     experiment = p.stem if experiment is None else experiment
-    req = tuple(_default_require(experiment, p.stem) if require is None else require)
+    needs, req = _default_require(experiment, p.stem)
+    if require is not None:
+        needs, req = "the caller", tuple(require)
     raw = load_mat(p, skip_unreadable=True)
     if TIME not in raw:
         present = ", ".join(raw) or "nothing"
@@ -429,7 +433,7 @@ def read_recording(
     if missing:
         also = f" (and so are {', '.join(repr(m) for m in missing[1:])})" if missing[1:] else ""
         raise RecordingError(
-            origin, f"is missing{also}; {experiment} needs {', '.join(req)} "
+            origin, f"is missing{also}; {needs} needs {', '.join(req)} "
             f"(the file holds: {', '.join(raw)})", variable=missing[0],
         )
     vectors = {TIME: _as_vector(TIME, raw[TIME], origin)}
@@ -445,8 +449,9 @@ def read_recording(
                           stacklevel=2)
             continue
         if v.size != n and name not in known:
-            warnings.warn(f"{origin}: variable '{name}' left out: it has {v.size} values and "
-                          f"t has {n}, so it is not sampled on t", UserWarning, stacklevel=2)
+            values = f"{v.size} value{'s' if v.size != 1 else ''}"
+            warnings.warn(f"{origin}: variable '{name}' left out: it has {values} and t has "
+                          f"{n}, so it is not sampled on t", UserWarning, stacklevel=2)
             continue
         vectors[name] = v
     _check_lengths(vectors, origin)
@@ -465,6 +470,7 @@ def write_recording(
     *,
     format: RecordingFormat = "mat5",
     compress: bool | None = None,
+    created: float | None = None,
 ) -> Path:
     """Write a recording, atomically (complete file or none).
 
@@ -481,6 +487,9 @@ def write_recording(
         seed does; units and attributes are kept by NeXus only.
     compress : bool, optional
         Compress the samples; default: yes for mat5, no otherwise.
+    created : float, optional
+        Creation time stamped in the file [s since the epoch, UTC]; default
+        now. A fixed value makes the file a pure function of ``ds``.
 
     Returns
     -------
@@ -493,7 +502,7 @@ def write_recording(
     if format == "nexus":
         from fsmbench.io import nexus  # nexus builds on this module: imported here
 
-        return nexus.write_nexus(ds, dest, compress=bool(compress))
+        return nexus.write_nexus(ds, dest, compress=bool(compress), created=created)
     if format not in ("mat5", "mat73"):
         raise ValueError(f"{dest}: unknown recording format {format!r}; "
                          "use 'mat5', 'mat73' or 'nexus'")
@@ -501,7 +510,7 @@ def write_recording(
     for name in ds.data_vars:
         variables[str(name)] = np.asarray(ds[name].values, dtype=np.float64)
     return save_mat(dest, variables, version="5" if format == "mat5" else "7.3",
-                    compress=compress)
+                    compress=compress, created=created)
 
 
 def find_experiments(folder: str | os.PathLike[str]) -> dict[str, Path]:

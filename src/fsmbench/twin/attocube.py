@@ -30,7 +30,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from fsmbench.bench.air import sensitivities
-from fsmbench.bench.geometry import sercalo_path_error_m
+from fsmbench.bench.geometry import closed_form_path_error
 from fsmbench.bench.params import BenchParams
 from fsmbench.twin.noise import first_order_lag, gauss_markov, white_noise
 
@@ -104,8 +104,8 @@ def attocube_distance(p: BenchParams, *, theta_c_rad: np.ndarray, theta_n_rad: n
     b_c = p.sercalo.beam_angle_per_mirror_angle.as_array()
     beam_table = theta_c_rad * b_c + p.newport.beam_angle_per_mirror_angle * theta_n_rad
     sercalo_error = beam_table / np.abs(b_c)
-    geometric = 0.5 * (sercalo_path_error_m(sercalo_error[:, 0], h_m=geo.h_m, l_m=geo.l_m)
-                       + sercalo_path_error_m(sercalo_error[:, 1], h_m=geo.h_m, l_m=geo.l_m))
+    geometric = 0.5 * (closed_form_path_error(sercalo_error[:, 0], h_m=geo.h_m, l_m=geo.l_m)
+                       + closed_form_path_error(sercalo_error[:, 1], h_m=geo.h_m, l_m=geo.l_m))
 
     perpendicular = (geo.sercalo_spot_offset_m * theta_c_rad.sum(axis=1)
                      + geo.newport_spot_offset_m * theta_n_rad.sum(axis=1))

@@ -19,6 +19,7 @@ as plain Python (numba's ``py_func``), for the benchmark and as a cross-check.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from numba import njit
@@ -187,7 +188,7 @@ def _csr(m: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 
 def _prepare(plant: DiscretePlant, *, u_ext: np.ndarray, adc_noise: np.ndarray,
              adc: Quantiser, dac: Quantiser, controller: DiscreteController | None,
-             n_adc: int, z0: np.ndarray | None) -> tuple[object, ...]:
+             n_adc: int, z0: np.ndarray | None) -> tuple[Any, ...]:
     n_steps = u_ext.shape[0]
     if u_ext.shape[1] != plant.b.shape[1]:
         raise ValueError(f"u_ext has {u_ext.shape[1]} columns, plant has {plant.b.shape[1]} inputs")
@@ -249,7 +250,7 @@ def run_loop(plant: DiscretePlant, *, u_ext: np.ndarray, adc_noise: np.ndarray, 
     args = _prepare(plant, u_ext=u_ext, adc_noise=adc_noise, adc=adc, dac=dac,
                     controller=controller, n_adc=n_adc, z0=z0)
     _loop_body(*args)
-    return LoopResult(adc=args[-3], dac=args[-2], internal=args[-1])  # type: ignore[arg-type]
+    return LoopResult(adc=args[-3], dac=args[-2], internal=args[-1])
 
 
 def run_loop_python(plant: DiscretePlant, *, u_ext: np.ndarray, adc_noise: np.ndarray,
@@ -260,4 +261,4 @@ def run_loop_python(plant: DiscretePlant, *, u_ext: np.ndarray, adc_noise: np.nd
                     controller=controller, n_adc=n_adc, z0=z0)
     # py_func is the undecorated Python source of the compiled loop.
     _loop_body.py_func(*args)
-    return LoopResult(adc=args[-3], dac=args[-2], internal=args[-1])  # type: ignore[arg-type]
+    return LoopResult(adc=args[-3], dac=args[-2], internal=args[-1])

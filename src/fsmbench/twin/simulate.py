@@ -22,7 +22,8 @@ from fsmbench.bench.blocks import newport_beam_matrix
 from fsmbench.bench.params import Bench, BenchParams, default_bench
 from fsmbench.control.seed import seed_decentralised_controller
 from fsmbench.io.atomic import atomic_write_text
-from fsmbench.io.recording import make_recording, write_recording
+from fsmbench.io.recording import RecordingFormat, make_recording, write_recording
+from fsmbench.io.signals import EXPERIMENTS
 from fsmbench.twin.attocube import attocube_distance
 from fsmbench.twin.controller import closed_loop_spectral_radius, feedback_controller
 from fsmbench.twin.discretize import DiscretePlant
@@ -138,9 +139,14 @@ def simulate_experiment(bench: Bench, spec: ExperimentSpec, *, seed: int,
                            compensation_unit=spec.compensation_unit, shielding=spec.shielding,
                            fs_hz=fs, rng_for=rng_for)
 
-    signals = {name: loop.dac[:, i] for i, name in enumerate(DAC_CHANNELS)}
-    signals.update({name: loop.adc[:, i] for i, name in enumerate(ADC_CHANNELS)})
-    signals["Va"] = va.total_m
+    channels = {name: loop.dac[:, i] for i, name in enumerate(DAC_CHANNELS)}
+    channels.update({name: loop.adc[:, i] for i, name in enumerate(ADC_CHANNELS)})
+    channels["Va"] = va.total_m
+    # A file holds what the seed loads from it. The other channels are not
+    # recorded: e.g. in closed loop the 60 dB coil-voltage amplifier (Vch,
+    # Vcv) sits on the ADC rails, which the real bench's files would show as
+    # clipped data nobody uses.
+    signals = {name: channels[name] for name in EXPERIMENTS[spec.name].required if name != "t"}
     recording = make_recording(signals, fs_hz=fs, experiment=spec.name, source="fsmbench twin")
     realized = {
         **{f"qd_noise_v.{a}": float(np.std(n_qd[:, i])) for i, a in enumerate("hv")},
@@ -206,7 +212,13 @@ def simulate_bench(bench: Bench | None = None, *, seed: int = 0, duration_s: flo
     return TwinRun(recordings=recordings, truth=truth, seed=seed, experiments=specs)
 
 
-def write_twin(run: TwinRun, out_dir: str | Path, *, format: str = "mat5") -> list[Path]:
+# Files stamp this creation time (the epoch, UTC), not the wall clock, so the
+# same seed gives byte-identical files.
+TWIN_CREATED_S = 0.0
+
+
+def write_twin(run: TwinRun, out_dir: str | Path, *,
+               format: RecordingFormat = "mat5") -> list[Path]:
     """Write every record as ``<name>.mat`` (or ``.h5`` for NeXus) and ``twin_truth.json``.
 
     Each file is written atomically; returns the paths written.
@@ -217,7 +229,7 @@ def write_twin(run: TwinRun, out_dir: str | Path, *, format: str = "mat5") -> li
     paths = []
     for name, ds in run.recordings.items():
         path = out / f"{name}{suffix}"
-        write_recording(ds, path, format=format)
+        write_recording(ds, path, format=format, created=TWIN_CREATED_S)
         paths.append(path)
     truth_path = out / "twin_truth.json"
     atomic_write_text(truth_path, json.dumps(run.truth, indent=2, sort_keys=True) + "\n")
