@@ -6,6 +6,7 @@ import pytest
 
 from fsmbench.bench.blocks import PlantModel, physical_plant
 from fsmbench.bench.params import Bench, default_bench
+from fsmbench.twin import TwinRun, simulate_bench
 
 
 @pytest.fixture(scope="session")
@@ -24,3 +25,15 @@ def true_plant(bench: Bench) -> PlantModel:
 def nominal_plant(bench: Bench) -> PlantModel:
     """Physical plant with the nominal parameters."""
     return physical_plant(bench.nominal, source="physical (nominal)")
+
+
+@pytest.fixture(scope="session")
+def short_twin() -> TwinRun:
+    """All thirteen experiments, 5 s each (the shortest every protocol accepts)."""
+    return simulate_bench(seed=1, duration_s=5.0)
+
+
+@pytest.fixture(scope="session")
+def ident_twin() -> TwinRun:
+    """The four identification experiments at the seed's lengths (31–33 s)."""
+    return simulate_bench(seed=0, experiments=["data_uch", "data_ucv", "data_unh", "data_unv"])

@@ -19,6 +19,7 @@ lengths give the seed's 100 s huddle tests after its 1 s trim.
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Literal
 
@@ -28,6 +29,7 @@ __all__ = [
     "Excitation",
     "ExperimentSpec",
     "seed_experiments",
+    "with_duration",
 ]
 
 ExcitationKind = Literal["noise", "sine"]
@@ -170,8 +172,18 @@ def seed_experiments(*, duration_s: float | None = None) -> tuple[ExperimentSpec
                        (Excitation("Unv", "sine", REP_AMPLITUDE_V, 1.0, REP_FREQ_HZ),),
                        True, True, True),
     )
-    if duration_s is None:
-        return specs
+    return specs if duration_s is None else with_duration(specs, duration_s=duration_s)
+
+
+def with_duration(specs: Sequence[ExperimentSpec], *,
+                  duration_s: float) -> tuple[ExperimentSpec, ...]:
+    """The same experiments, all ``duration_s`` long [s].
+
+    Raises
+    ------
+    ValueError
+        ``duration_s`` is shorter than an experiment's minimum (named).
+    """
     too_short = [s.name for s in specs if duration_s < s.min_duration_s()]
     if too_short:
         need = max(MIN_DURATION_S[n] for n in too_short)

@@ -28,7 +28,7 @@ from fsmbench.twin.attocube import attocube_distance
 from fsmbench.twin.controller import closed_loop_spectral_radius, feedback_controller
 from fsmbench.twin.discretize import DiscretePlant
 from fsmbench.twin.engine import DiscreteController, Quantiser, run_loop
-from fsmbench.twin.experiments import ExperimentSpec, seed_experiments
+from fsmbench.twin.experiments import ExperimentSpec, seed_experiments, with_duration
 from fsmbench.twin.noise import source_rng, white_noise
 from fsmbench.twin.plant import ADC_CHANNELS, DAC_CHANNELS, INTERNAL_SIGNALS, twin_discrete
 from fsmbench.twin.truth import twin_truth
@@ -182,12 +182,14 @@ def simulate_bench(bench: Bench | None = None, *, seed: int = 0, duration_s: flo
         Called with a short message before each experiment.
     """
     bench = default_bench() if bench is None else bench
-    specs = seed_experiments(duration_s=duration_s)
+    specs = seed_experiments()
     if experiments is not None:
         unknown = sorted(set(experiments) - {s.name for s in specs})
         if unknown:
             raise ValueError(f"unknown experiment(s) {unknown}; known: {[s.name for s in specs]}")
         specs = tuple(s for s in specs if s.name in set(experiments))
+    if duration_s is not None:
+        specs = with_duration(specs, duration_s=duration_s)
     p = bench.true
     plant = twin_discrete(p)
     if controller is None and any(s.closed_loop for s in specs):

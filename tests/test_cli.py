@@ -1,0 +1,64 @@
+"""The ``fsmbench`` command line."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+import scipy.io
+
+from fsmbench.cli import main
+
+
+def test_params_table_has_units_and_sources(capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["params"]) == 0
+    out = capsys.readouterr().out
+    line = next(x for x in out.splitlines() if x.startswith("converter.fs_hz"))
+    assert "10000" in line and "Hz" in line and "seed 1.6" in line
+
+
+def test_params_json_and_roundtrip(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["params", "--json", "--out", str(tmp_path)]) == 0
+    rows = json.loads(capsys.readouterr().out)
+    assert {"key", "nominal", "true", "unit", "source"} <= set(rows[0])
+    assert main(["params", "--json", "--params", str(tmp_path / "bench.toml")]) == 0
+    assert json.loads(capsys.readouterr().out) == rows  # saved TOML reloads to the same
+
+
+def test_simulate_writes_the_requested_records(tmp_path: Path,
+                                               capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["simulate", str(tmp_path), "--duration", "3", "--seed", "2",
+                 "--experiments", "data_uch", "data_cal_pd_h"]) == 0
+    names = sorted(p.name for p in tmp_path.iterdir())
+    assert names == ["data_cal_pd_h.mat", "data_uch.mat", "twin_truth.json"]
+    data = scipy.io.loadmat(tmp_path / "data_uch.mat")
+    assert data["Uch"].shape == (30000, 1)
+    assert json.loads((tmp_path / "twin_truth.json").read_text())["seed"] == 2
+
+
+@pytest.mark.parametrize(("argv", "message"), [
+    (["simulate", "OUT", "--duration", "1"], "too short"),
+    (["simulate", "OUT", "--experiments", "data_nope"], "unknown experiment"),
+    (["study", "--data", "NOWHERE", "--out", "OUT"], "NOWHERE"),
+    (["params", "--params", "MISSING.toml"], "MISSING.toml"),
+])
+def test_errors_exit_2_with_one_line(tmp_path: Path, capsys: pytest.CaptureFixture[str],
+                                     argv: list[str], message: str) -> None:
+    argv = [str(tmp_path / a) if a.isupper() or a.endswith(".toml") else a for a in argv]
+    assert main(argv) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err[-1].startswith(f"fsmbench {argv[0]}: error: ") and message in err[-1]
+
+
+def test_bad_params_file_names_the_problem(tmp_path: Path,
+                                           capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["params", "--out", str(tmp_path)]) == 0
+    bad = tmp_path / "bench.toml"
+    text = bad.read_text()
+    good = "(seed 1.6)\nfs_hz = 10000.0"
+    assert text.count(good) >= 1
+    bad.write_text(text.replace(good, "(seed 1.6)\nfs_hz = 'fast'", 1))
+    assert main(["params", "--params", str(bad)]) == 2
+    err = capsys.readouterr().err
+    assert "bench.toml" in err and "fs_hz" in err

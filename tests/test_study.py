@@ -1,0 +1,72 @@
+"""``fsmbench study`` on recorded data: stages, skipped experiments, untouched inputs."""
+
+from __future__ import annotations
+
+import hashlib
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+import scipy.io
+
+from fsmbench.study import run_study
+from fsmbench.twin import TwinRun, write_twin
+
+
+def _digest(folder: Path) -> dict[str, str]:
+    return {p.name: hashlib.sha256(p.read_bytes()).hexdigest() for p in sorted(folder.iterdir())}
+
+
+@pytest.fixture
+def data_dir(short_twin: TwinRun, tmp_path: Path) -> Path:
+    folder = tmp_path / "data"
+    folder.mkdir()
+    sub = TwinRun(recordings={k: v for k, v in short_twin.recordings.items()
+                              if k in ("data_uch", "data_ucv", "data_huddle_test_1")},
+                  truth=short_twin.truth, seed=short_twin.seed,
+                  experiments=short_twin.experiments)
+    write_twin(sub, folder)
+    return folder
+
+
+def test_study_on_a_partial_folder_says_what_it_skipped(data_dir: Path, tmp_path: Path) -> None:
+    before = _digest(data_dir)
+    # A broken file: NaN in a signal. It must be skipped with the reason.
+    bad = {"t": np.arange(30000) / 1e4, "Unh": np.zeros(30000), "Vph": np.zeros(30000),
+           "Vpv": np.zeros(30000)}
+    bad["Vph"][123] = np.nan
+    scipy.io.savemat(data_dir / "data_unh.mat", bad)
+    before = _digest(data_dir)
+    result = run_study(out_dir=tmp_path / "out", data_dir=data_dir)
+    assert _digest(data_dir) == before  # inputs are never modified
+    assert set(result.experiments) == {"data_uch", "data_ucv", "data_huddle_test_1"}
+    assert "data_unh.mat" in result.skipped_experiments["data_unh"]
+    assert "Vph" in result.skipped_experiments["data_unh"]
+    assert "NaN" in result.skipped_experiments["data_unh"]
+    assert "no data_rep_h.mat" in result.skipped_experiments["data_rep_h"]
+    report = Path(result.report).read_text()
+    assert "skipped: " in report and "data_unh" in report
+    summary = json.loads((tmp_path / "out" / "study.json").read_text())
+    assert summary["experiments"] == list(result.experiments)
+
+
+def test_study_refuses_to_write_into_the_data_folder(data_dir: Path) -> None:
+    with pytest.raises(ValueError, match="inside the data folder"):
+        run_study(out_dir=data_dir / "report", data_dir=data_dir)
+    with pytest.raises(ValueError, match="inside the data folder"):
+        run_study(out_dir=data_dir, data_dir=data_dir)
+
+
+def test_missing_data_folder_is_named(tmp_path: Path) -> None:
+    with pytest.raises(FileNotFoundError, match="nowhere"):
+        run_study(out_dir=tmp_path / "out", data_dir=tmp_path / "nowhere")
+
+
+def test_study_on_the_twin_writes_its_data_and_report(tmp_path: Path) -> None:
+    messages: list[str] = []
+    result = run_study(out_dir=tmp_path, duration_s=5.0, progress=messages.append)
+    assert len(result.experiments) == 13 and not result.skipped_experiments
+    assert (tmp_path / "twin-data" / "twin_truth.json").is_file()
+    assert Path(result.report).stat().st_size > 100_000  # figures are embedded
+    assert any("simulating" in m for m in messages)  # progress is shown
