@@ -35,5 +35,6 @@ def short_twin() -> TwinRun:
 
 @pytest.fixture(scope="session")
 def ident_twin() -> TwinRun:
-    """The four identification experiments at the seed's lengths (31–33 s)."""
-    return simulate_bench(seed=0, experiments=["data_uch", "data_ucv", "data_unh", "data_unv"])
+    """The six identification experiments at the seed's lengths (11–33 s)."""
+    return simulate_bench(seed=0, experiments=["data_cal_pd_h", "data_cal_pd_v", "data_uch",
+                                               "data_ucv", "data_unh", "data_unv"])

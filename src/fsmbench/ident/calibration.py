@@ -1,0 +1,255 @@
+"""Static calibrations of the seed's section 2: the 4QD gains (2.1) and the
+current-amplifier gains (2.2).
+
+4QD (2.1)
+    The Newport moves slowly; its metrology ``Vn`` [V] times its gain
+    ``gn0`` [rad/V] is the mirror angle, and the beam turns by twice that
+    (one reflection). A straight-line fit ``Vp = a·(2·gn0·Vn) + b`` gives the
+    4QD gain ``a`` [V/rad], the seed's ``bh = [1 2*gn0*Vnh] \\ Vph``. The
+    seed reads ``a`` as rad/V in its text (errata E6); it is V/rad, and its
+    inverse is reported in µrad/mV. Standard error, R² and residual rms come
+    from the ordinary least-squares fit. The metrology noise (0.5 µrad) is
+    errors-in-variables noise on the regressor, which biases ``a`` towards 0
+    by ``var(noise)/var(x) < 1e-7`` here: negligible.
+
+Current amplifier (2.2)
+    ``Uc → Vc`` measures ``Ga·Zc·Gi``. The seed takes the voltage amplifier
+    ``Ga = 1000/(1 + s/ω_c)`` and the coil ``Zc = Rc + Lc·s`` as known and
+    divides them out of ``|tfestimate(Uc, Vc)|``, then averages over
+    20–200 Hz, where ``Gi`` is flat. Delays do not enter (magnitudes only).
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+from typing import Any
+
+import numpy as np
+import xarray as xr
+
+from fsmbench.bench.params import BenchParams
+from fsmbench.ident.frf import spectral_matrix
+from fsmbench.ident.welch import hanning
+
+__all__ = [
+    "CurrentAmplifierGain",
+    "QdCalibration",
+    "calibrate_current_amplifier",
+    "calibrate_qd",
+    "known_ga_zc",
+    "trim_recording",
+]
+
+_AXES = {"h": ("Vph", "Vnh"), "v": ("Vpv", "Vnv")}
+_CURRENT = {"h": ("Uch", "Vch"), "v": ("Ucv", "Vcv")}
+
+
+def trim_recording(ds: xr.Dataset, *, t0_s: float) -> xr.Dataset:
+    """The record from ``t >= t0_s`` on, as the seed's ``x(t < t0) = []`` (a copy; input untouched).
+
+    Raises ``ValueError`` naming the experiment if nothing is left.
+    """
+    t = np.asarray(ds["t"].values)
+    keep = t >= t0_s
+    if keep.sum() < 2:
+        raise ValueError(f"{ds.attrs.get('experiment', 'recording')}: nothing left after "
+                         f"removing t < {t0_s:g} s (record ends at {t[-1]:g} s)")
+    return ds.isel(t=np.flatnonzero(keep))
+
+
+@dataclass(frozen=True)
+class QdCalibration:
+    """4QD gain of one axis from the Newport metrology (seed 2.1, Fig. 10, Table 2).
+
+    Attributes
+    ----------
+    axis : {"h", "v"}
+    gain_v_per_rad : float
+        Slope ``a`` [V/rad] of 4QD voltage against beam angle (signed).
+    offset_v : float
+        Intercept ``b`` [V].
+    gain_std_v_per_rad : float
+        Standard error of the slope [V/rad].
+    r_squared : float
+        Coefficient of determination of the fit.
+    residual_rms_v : float
+        Rms of the residuals [V].
+    n_samples : int
+    beam_angle_range_rad : float
+        Peak-to-peak beam angle covered by the record [rad].
+    trim_s, metrology_gain_rad_per_v, beam_factor : float
+        Options used: first seconds removed, Newport metrology gain ``gn0``,
+        beam angle per mirror angle (2).
+    experiment : str
+    """
+
+    axis: str
+    gain_v_per_rad: float
+    offset_v: float
+    gain_std_v_per_rad: float
+    r_squared: float
+    residual_rms_v: float
+    n_samples: int
+    beam_angle_range_rad: float
+    trim_s: float
+    metrology_gain_rad_per_v: float
+    beam_factor: float
+    experiment: str
+
+    @property
+    def sensitivity_urad_per_mv(self) -> float:
+        """Inverse gain in µrad/mV (the seed's 32.3 and 27.6 figures, errata E6/E7)."""
+        return 1e3 / self.gain_v_per_rad
+
+    def to_json(self) -> dict[str, Any]:
+        """Plain floats; units in the keys."""
+        return {**asdict(self), "sensitivity_urad_per_mv": self.sensitivity_urad_per_mv}
+
+
+def calibrate_qd(ds: xr.Dataset, *, axis: str, metrology_gain_rad_per_v: float,
+                 beam_factor: float = 2.0, trim_s: float = 1.0) -> QdCalibration:
+    """Fit the 4QD gain of ``axis`` from a calibration record (``data_cal_pd_h``/``_v``).
+
+    Parameters
+    ----------
+    ds : xarray.Dataset
+        Recording with ``t`` [s], ``Vph``/``Vpv`` [V] and ``Vnh``/``Vnv`` [V].
+    axis : {"h", "v"}
+    metrology_gain_rad_per_v : float
+        Newport metrology gain ``gn0`` [rad/V] (seed: 2.62e-3).
+    beam_factor : float
+        Beam angle per Newport mirror angle (2: one reflection).
+    trim_s : float
+        Seconds removed at the start (seed: 1 s).
+
+    Raises
+    ------
+    ValueError
+        Unknown axis, a missing signal, or a metrology signal that does not
+        move (no regression possible) — the message names the experiment.
+    """
+    if axis not in _AXES:
+        raise ValueError(f"axis must be 'h' or 'v', got {axis!r}")
+    name = str(ds.attrs.get("experiment", "recording"))
+    vp_name, vn_name = _AXES[axis]
+    for var in (vp_name, vn_name):
+        if var not in ds:
+            raise ValueError(f"{name}: variable '{var}' is needed for the 4QD calibration")
+    rec = trim_recording(ds, t0_s=trim_s)
+    x = beam_factor * metrology_gain_rad_per_v * np.asarray(rec[vn_name].values, dtype=float)
+    y = np.asarray(rec[vp_name].values, dtype=float)
+    sxx = float(np.sum((x - x.mean()) ** 2))
+    if sxx <= 0.0 or np.ptp(x) < 10 * np.finfo(float).eps * max(1.0, float(np.abs(x).max())):
+        raise ValueError(f"{name}: '{vn_name}' does not move; the Newport must be swept to "
+                         "calibrate the 4QD")
+    design = np.column_stack([np.ones_like(x), x])
+    (b, a), *_ = np.linalg.lstsq(design, y, rcond=None)
+    resid = y - (a * x + b)
+    n = x.size
+    s2 = float(resid @ resid) / max(n - 2, 1)
+    syy = float(np.sum((y - y.mean()) ** 2))
+    return QdCalibration(
+        axis=axis, gain_v_per_rad=float(a), offset_v=float(b),
+        gain_std_v_per_rad=float(np.sqrt(s2 / sxx)),
+        r_squared=float(1.0 - float(resid @ resid) / syy) if syy > 0 else float("nan"),
+        residual_rms_v=float(np.sqrt(np.mean(resid**2))), n_samples=int(n),
+        beam_angle_range_rad=float(np.ptp(x)), trim_s=float(trim_s),
+        metrology_gain_rad_per_v=float(metrology_gain_rad_per_v),
+        beam_factor=float(beam_factor), experiment=name)
+
+
+@dataclass(frozen=True)
+class CurrentAmplifierGain:
+    """Current-amplifier gain of one axis (seed 2.2, Figs. 12–14).
+
+    Attributes
+    ----------
+    axis : {"h", "v"}
+    gain_a_per_v : float
+        Mean of ``|Ga Zc Gi| / |Ga Zc|`` over the band [A/V].
+    gain_std_a_per_v : float
+        Standard error of that mean (spread over the band's bins / sqrt(n)).
+    theoretical_a_per_v : float
+        ``1/(R + Rc)`` from the nominal components [A/V].
+    band_hz : tuple of float
+        Averaging band [Hz] (seed: 20–200 Hz).
+    frequency_hz, gi_response_a_per_v : tuple of float
+        The per-bin estimate over the band (the seed's ``Gi_resp``).
+    experiment : str
+    """
+
+    axis: str
+    gain_a_per_v: float
+    gain_std_a_per_v: float
+    theoretical_a_per_v: float
+    band_hz: tuple[float, float]
+    frequency_hz: tuple[float, ...]
+    gi_response_a_per_v: tuple[float, ...]
+    experiment: str
+
+    @property
+    def ratio_to_theoretical(self) -> float:
+        """Identified over theoretical gain."""
+        return self.gain_a_per_v / self.theoretical_a_per_v
+
+    def to_json(self) -> dict[str, Any]:
+        """Scalars only (the per-bin curve is left out); units in the keys."""
+        out = {k: v for k, v in asdict(self).items()
+               if k not in ("frequency_hz", "gi_response_a_per_v")}
+        out["ratio_to_theoretical"] = self.ratio_to_theoretical
+        return out
+
+
+def known_ga_zc(p: BenchParams, *, axis: str, f_hz: np.ndarray) -> np.ndarray:
+    """``|Ga(j2πf)·Zc(j2πf)|`` [V/A] with ``Zc = Rc + Lc·s`` (seed 2.2b), shape (F,)."""
+    w = 2 * np.pi * np.asarray(f_hz, dtype=float)
+    ga = p.voltage_amplifier.gain / (1 + 1j * w / (2 * np.pi * p.voltage_amplifier.cutoff_hz))
+    zc = p.sercalo.r_coil_ohm[axis] + 1j * w * p.sercalo.l_coil_h[axis]
+    return np.abs(ga * zc)
+
+
+def calibrate_current_amplifier(ds: xr.Dataset, *, axis: str, nominal: BenchParams,
+                                trim_s: float = 1.0,
+                                band_hz: tuple[float, float] = (20.0, 200.0),
+                                window_s: float = 1.0) -> CurrentAmplifierGain:
+    """Identify ``Gi`` of ``axis`` from ``data_uch``/``data_ucv`` (``Uc → Vc``).
+
+    Parameters
+    ----------
+    ds : xarray.Dataset
+        Recording with ``Uch, Vch`` (h) or ``Ucv, Vcv`` (v) [V].
+    axis : {"h", "v"}
+    nominal : BenchParams
+        Known ``Ga`` (gain, cut-off) and ``Zc`` (``Rc``, ``Lc``), and the
+        resistor ``R`` for the theoretical gain.
+    trim_s : float
+        Seconds removed at the start (the Sercalo is off during the first one).
+    band_hz : (float, float)
+        Averaging band [Hz], open interval as the seed's ``f>20 & f<200``.
+    window_s : float
+        Hann window length [s] (seed: ``hanning(ceil(1*fs))``).
+    """
+    if axis not in _CURRENT:
+        raise ValueError(f"axis must be 'h' or 'v', got {axis!r}")
+    name = str(ds.attrs.get("experiment", "recording"))
+    u_name, v_name = _CURRENT[axis]
+    for var in (u_name, v_name):
+        if var not in ds:
+            raise ValueError(f"{name}: variable '{var}' is needed for the current amplifier")
+    rec = trim_recording(ds, t0_s=trim_s)
+    fs = float(rec.attrs["fs_hz"])
+    est = spectral_matrix(rec[u_name].values, rec[v_name].values, input_names=[u_name],
+                          output_names=[v_name], window=hanning(int(np.ceil(window_s * fs))),
+                          fs_hz=fs)
+    f = est.frequency_hz
+    sel = (f > band_hz[0]) & (f < band_hz[1])
+    if not sel.any():
+        raise ValueError(f"{name}: no frequency bin in {band_hz} Hz")
+    gi = np.abs(est.frf.values[sel, 0, 0]) / known_ga_zc(nominal, axis=axis, f_hz=f[sel])
+    r_total = nominal.current_amplifier.r_ohm[axis] + nominal.sercalo.r_coil_ohm[axis]
+    return CurrentAmplifierGain(
+        axis=axis, gain_a_per_v=float(np.mean(gi)),
+        gain_std_a_per_v=float(np.std(gi, ddof=1) / np.sqrt(gi.size)) if gi.size > 1 else 0.0,
+        theoretical_a_per_v=float(1.0 / r_total), band_hz=(float(band_hz[0]), float(band_hz[1])),
+        frequency_hz=tuple(float(x) for x in f[sel]),
+        gi_response_a_per_v=tuple(float(x) for x in gi), experiment=name)

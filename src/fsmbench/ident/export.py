@@ -1,0 +1,88 @@
+"""MATLAB-loadable outputs of the identification: ``frf.mat`` and ``plant.mat``.
+
+``frf.mat`` holds the frequency vector ``f`` [Hz] (a column) and, for each
+measured pair, ``tf_<input>_<output>`` (complex FRF, column) and
+``coh_<input>_<output>`` (coherence, column) — the seed's variable names, so a
+MATLAB user can lay them over their own ``tfestimate``/``mscohere`` results.
+
+``plant.mat`` holds one struct per block (``Gi, Zc, Ga, Gc, Gn, Gd``) and one
+for the full system (``sys``), each with fields ``A, B, C, D`` (double
+matrices), ``InputName``, ``OutputName``, ``StateName`` (cell arrays of
+char) and ``InputDelay`` [s] (column, one per input); in MATLAB
+``ss(s.A, s.B, s.C, s.D, 'InputName', s.InputName, ...)`` rebuilds it.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+import control as ct
+import numpy as np
+
+from fsmbench.bench.blocks import PlantModel
+from fsmbench.ident.frf import FrequencyResponse
+from fsmbench.io.matfile import save_mat
+
+__all__ = ["frf_variables", "plant_variables", "ss_struct", "write_frf_mat", "write_plant_mat"]
+
+
+def frf_variables(responses: Mapping[str, FrequencyResponse]) -> dict[str, Any]:
+    """The seed's variables for every (input, output) pair of ``responses``.
+
+    All responses must share one frequency grid (same window and fs).
+    """
+    out: dict[str, Any] = {}
+    f_ref: np.ndarray | None = None
+    for key, resp in responses.items():
+        f = resp.frequency_hz
+        if f_ref is None:
+            f_ref = f
+            out["f"] = f.reshape(-1, 1)
+        elif f.shape != f_ref.shape or not np.allclose(f, f_ref, rtol=0, atol=1e-9):
+            raise ValueError(f"frequency grid of '{key}' differs from the first response's")
+        for inp in resp.input_names:
+            for outp in resp.output_names:
+                h = resp.frf.sel(input=inp, output=outp).values
+                c = resp.coherence.sel(input=inp, output=outp).values
+                out[f"tf_{inp}_{outp}"] = np.asarray(h, dtype=complex).reshape(-1, 1)
+                out[f"coh_{inp}_{outp}"] = np.asarray(c, dtype=float).reshape(-1, 1)
+    return out
+
+
+def ss_struct(sys: ct.StateSpace, *, input_delay_s: Mapping[str, float] | None = None
+              ) -> dict[str, Any]:
+    """A MATLAB struct (dict) describing a continuous state-space model."""
+    delays = input_delay_s or {}
+    return {
+        "A": np.atleast_2d(np.asarray(sys.A, dtype=float)).reshape(sys.nstates, sys.nstates),
+        "B": np.asarray(sys.B, dtype=float).reshape(sys.nstates, sys.ninputs),
+        "C": np.asarray(sys.C, dtype=float).reshape(sys.noutputs, sys.nstates),
+        "D": np.asarray(sys.D, dtype=float).reshape(sys.noutputs, sys.ninputs),
+        "InputName": [str(x) for x in sys.input_labels],
+        "OutputName": [str(x) for x in sys.output_labels],
+        "StateName": [str(x) for x in sys.state_labels] if sys.nstates else [],
+        "InputDelay": np.array([float(delays.get(str(x), 0.0)) for x in sys.input_labels],
+                               dtype=float).reshape(-1, 1),
+        "Ts": 0.0 if not sys.dt else float(sys.dt),
+    }
+
+
+def plant_variables(plant: PlantModel) -> dict[str, Any]:
+    """``sys`` and every block of ``plant`` as structs, plus its provenance."""
+    out: dict[str, Any] = {"sys": ss_struct(plant.sys, input_delay_s=plant.input_delay_s)}
+    for name, block in plant.blocks.items():
+        out[name] = ss_struct(block)
+    out["source"] = plant.source
+    return out
+
+
+def write_frf_mat(path: str | Path, responses: Mapping[str, FrequencyResponse]) -> Path:
+    """Write ``frf.mat`` (MATLAB v5) atomically."""
+    return save_mat(path, frf_variables(responses))
+
+
+def write_plant_mat(path: str | Path, plant: PlantModel) -> Path:
+    """Write ``plant.mat`` (MATLAB v5) atomically."""
+    return save_mat(path, plant_variables(plant))
