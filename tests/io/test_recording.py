@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import os
-import time
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -328,20 +327,16 @@ def test_find_experiments_needs_a_folder(tmp_path: Path) -> None:
         find_experiments(tmp_path / "missing")
 
 
-# --------------------------------------------------------------------------- speed
+# --------------------------------------------------------------------------- size
 @pytest.mark.parametrize("fmt", FORMATS)
-def test_large_recording_is_fast(tmp_path: Path, fmt: str) -> None:
-    """1,010,000 samples x 12 variables: no per-sample Python loop anywhere."""
+def test_large_recording_round_trip(tmp_path: Path, fmt: str) -> None:
+    """1,010,000 samples x 12 variables (a seed huddle test) survive a round trip.
+
+    How fast that is, against scipy.io, is measured in benchmarks/bench_io.py.
+    """
     rng = np.random.default_rng(0)
     n, lsb = 1_010_000, 20.0 / 2**16
     signals = {name: np.round(rng.standard_normal(n) * 3000) * lsb for name in SIGNALS}
     ds = make_recording(signals, fs_hz=1e4, experiment="data_rep_h")
-    start = time.perf_counter()
     path = write_recording(ds, tmp_path / "data_rep_h.mat", format=fmt)  # type: ignore[arg-type]
-    written = time.perf_counter()
-    back = read_recording(path)
-    done = time.perf_counter()
-    _assert_same_samples(ds, back)
-    # generous bounds (shared CI machines); a per-sample loop would take minutes
-    assert written - start < 8.0
-    assert done - written < 4.0
+    _assert_same_samples(ds, read_recording(path))
