@@ -2,6 +2,7 @@
 
     fsmbench params   [--params FILE] [--out DIR] [--json]
     fsmbench simulate OUT [--duration S] [--seed N] [--params FILE] [--format F]
+    fsmbench identify DATA --out OUT [--params FILE]
     fsmbench study    [--data DIR] --out OUT [--seed N] [--duration S] [--params FILE]
 
 Every command writes only under its output folder, never into a data folder.
@@ -72,6 +73,32 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_identify(args: argparse.Namespace) -> int:
+    from fsmbench.ident.compare import compare_with_truth
+    from fsmbench.ident.pipeline import identify, write_identification
+    from fsmbench.study import check_out_dir, load_recordings
+
+    data, out = Path(args.data), Path(args.out)
+    check_out_dir(out, data)
+    if not data.is_dir():
+        raise FileNotFoundError(f"data folder {data} does not exist")
+    say = _progress()
+    bench = _bench(args)
+    recordings, skipped = load_recordings(data, progress=say)
+    for name, why in skipped.items():
+        say(f"skipped {name}: {why}")
+    result = identify(recordings, bench=bench, source=str(data), progress=say)
+    for step, why in result.skipped.items():
+        say(f"step {step} skipped: {why}")
+    for path in write_identification(result, out):
+        print(path)
+    truth_path = data / "twin_truth.json"
+    reference = (json.loads(truth_path.read_text()) if truth_path.is_file() else None)
+    for row in compare_with_truth(result.to_json(), reference=reference, bench=bench):
+        print(row, file=sys.stderr)
+    return 0
+
+
 def _cmd_study(args: argparse.Namespace) -> int:
     from fsmbench.study import run_study
 
@@ -113,6 +140,13 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--experiments", metavar="NAME", nargs="+", default=None,
                    help="only these experiments (e.g. data_uch data_ucv)")
     p.set_defaults(func=_cmd_simulate)
+
+    p = sub.add_parser("identify", help="seed section 2: 4QD, amplifiers, Sercalo, Newport, "
+                                         "the full plant")
+    common(p)
+    p.add_argument("data", metavar="DATA", help="folder of recordings (.mat, .h5, .nxs)")
+    p.add_argument("--out", metavar="DIR", required=True, help="output folder")
+    p.set_defaults(func=_cmd_identify)
 
     p = sub.add_parser("study", help="the whole study; the twin when no --data is given")
     common(p)

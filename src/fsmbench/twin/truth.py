@@ -21,27 +21,27 @@ import numpy as np
 
 from fsmbench import __version__
 from fsmbench.bench.blocks import input_delays_s, physical_plant
-from fsmbench.bench.params import Bench
+from fsmbench.bench.params import Bench, BenchParams
 from fsmbench.twin.experiments import ExperimentSpec
 
-__all__ = ["twin_truth"]
+__all__ = ["model_values", "twin_truth"]
 
 
 def _dc(sys: Any, out: int, inp: int) -> float:
     return float(np.real(sys.dcgain()[out, inp]))
 
 
-def twin_truth(bench: Bench, *, seed: int, experiments: Sequence[ExperimentSpec],
-               realized: Mapping[str, Mapping[str, float]],
-               controller_name: str | None) -> dict[str, Any]:
-    """The truth of a twin run as a JSON-ready dict (SI units, Hz)."""
-    p = bench.true
-    plant = physical_plant(p, source="physical (true)")
+def model_values(p: BenchParams) -> dict[str, Any]:
+    """The contracted keys computed from one parameter set (nominal or true).
+
+    ``fs_hz``, ``qd_gain_v_per_rad``, ``current_amp_gain_a_per_v``,
+    ``sercalo.{h,v}.{resonance_hz, damping_ratio, dc_gain_v_per_a}``,
+    ``newport_gain_v_per_v``, ``delay_s`` — what an identification reports.
+    """
+    plant = physical_plant(p, source="physical")
     gc, gn = plant.blocks["Gc"], plant.blocks["Gn"]
     gi = p.current_amp_gain_a_per_v()
     delays = input_delays_s(p)
-    lsb = p.converter.lsb_v
-    env = p.environment
     return {
         "fs_hz": p.converter.fs_hz,
         "qd_gain_v_per_rad": {"h": p.quad_diode.gain_v_per_rad.h,
@@ -55,6 +55,20 @@ def twin_truth(bench: Bench, *, seed: int, experiments: Sequence[ExperimentSpec]
         },
         "newport_gain_v_per_v": {"h": _dc(gn, 0, 0), "v": _dc(gn, 1, 1)},
         "delay_s": {"sercalo": delays["Uch"], "newport": delays["Unh"]},
+    }
+
+
+def twin_truth(bench: Bench, *, seed: int, experiments: Sequence[ExperimentSpec],
+               realized: Mapping[str, Mapping[str, float]],
+               controller_name: str | None) -> dict[str, Any]:
+    """The truth of a twin run as a JSON-ready dict (SI units, Hz)."""
+    p = bench.true
+    plant = physical_plant(p, source="physical (true)")
+    gc, gn = plant.blocks["Gc"], plant.blocks["Gn"]
+    lsb = p.converter.lsb_v
+    env = p.environment
+    return {
+        **model_values(p),
         "noise_rms": {
             "qd_noise_v": {"h": p.quad_diode.noise_rms_v.h, "v": p.quad_diode.noise_rms_v.v},
             "newport_angle_noise_rad": p.newport.angle_noise_rms_rad,

@@ -1,0 +1,354 @@
+"""The seed's section 2 in one call: recordings → identified plant.
+
+:func:`identify` runs each step on the experiments present and records, for
+each step it could not run, why:
+
+=====================  ==========================================  ==============
+step                   needs                                       seed
+=====================  ==========================================  ==============
+4QD gains              ``data_cal_pd_h``, ``data_cal_pd_v``        2.1
+current amplifier      ``data_uch``, ``data_ucv`` (``Vch``, ``Vcv``)  2.2
+Sercalo                ``data_uch``, ``data_ucv`` + current amp    2.3
+Newport                ``data_unh``, ``data_unv``                  2.4
+full system            all of the above (nominal blocks stand in)  2.5
+=====================  ==========================================  ==============
+
+:meth:`Identification.to_json` has the keys of ``twin_truth.json``
+(``qd_gain_v_per_rad``, ``current_amp_gain_a_per_v``,
+``sercalo.{h,v}.{resonance_hz, damping_ratio, dc_gain_v_per_a}``,
+``newport_gain_v_per_v``, ``delay_s``) plus a ``diagnostics`` tree.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import control as ct
+import numpy as np
+import xarray as xr
+
+from fsmbench import __version__
+from fsmbench.bench.blocks import (
+    PlantModel,
+    assemble_plant,
+    coil_impedance,
+    current_amplifier,
+    newport,
+    quad_diode,
+    sercalo,
+    voltage_amplifier,
+)
+from fsmbench.bench.params import Bench
+from fsmbench.ident.calibration import (
+    CurrentAmplifierGain,
+    QdCalibration,
+    calibrate_current_amplifier,
+    calibrate_qd,
+)
+from fsmbench.ident.export import write_frf_mat, write_plant_mat
+from fsmbench.ident.modes import ModeRefinement, refine_modes
+from fsmbench.ident.sercalo import (
+    NewportIdentification,
+    SercaloFitOptions,
+    SercaloIdentification,
+    experiment_frf,
+    fit_sercalo,
+    identify_newport,
+    refit_with_poles,
+)
+from fsmbench.ident.validate import PathValidation, validate_sercalo
+from fsmbench.io.atomic import atomic_write_text
+
+__all__ = [
+    "SEED_TRIMS_S",
+    "Identification",
+    "IdentifyOptions",
+    "identify",
+    "write_identification",
+]
+
+# The seed's t0 for each experiment (2.1: 1 s, 2.3: 1 s, 2.4: 3 s and 1.5 s).
+SEED_TRIMS_S = {"data_cal_pd_h": 1.0, "data_cal_pd_v": 1.0, "data_uch": 1.0, "data_ucv": 1.0,
+                "data_unh": 3.0, "data_unv": 1.5}
+
+Progress = Callable[[str], None]
+
+
+@dataclass(frozen=True)
+class IdentifyOptions:
+    """Options of :func:`identify`.
+
+    Attributes
+    ----------
+    window_s : float
+        Hann window of every Welch estimate [s] (seed: 1 s).
+    trims_s : mapping
+        Seconds removed at the start of each experiment (seed's values).
+    sercalo : SercaloFitOptions
+        Weights and order of the rational fit.
+    newport_band_hz, current_amp_band_hz : (float, float)
+        Averaging bands [Hz] (seed: 10–100 Hz and 20–200 Hz).
+    refine_modes : bool
+        Re-estimate each Sercalo mode's frequency and damping from the time
+        records (:mod:`fsmbench.ident.modes`), which the 1 s window smears.
+    """
+
+    window_s: float = 1.0
+    trims_s: Mapping[str, float] = field(default_factory=lambda: dict(SEED_TRIMS_S))
+    sercalo: SercaloFitOptions = field(default_factory=SercaloFitOptions)
+    newport_band_hz: tuple[float, float] = (10.0, 100.0)
+    current_amp_band_hz: tuple[float, float] = (20.0, 200.0)
+    refine_modes: bool = True
+
+    def to_json(self) -> dict[str, Any]:
+        """Plain values."""
+        return {"window_s": self.window_s, "trims_s": dict(self.trims_s),
+                "sercalo": dict(self.sercalo.__dict__),
+                "newport_band_hz": list(self.newport_band_hz),
+                "current_amp_band_hz": list(self.current_amp_band_hz),
+                "refine_modes": self.refine_modes}
+
+
+@dataclass(frozen=True, eq=False)
+class Identification:
+    """Everything section 2 identified, with what it skipped.
+
+    Attributes
+    ----------
+    qd : dict axis -> QdCalibration
+    current_amp : dict axis -> CurrentAmplifierGain
+    sercalo : SercaloIdentification or None
+    modes : ModeRefinement or None
+        Refined modal parameters (None when not run).
+    validation : tuple of PathValidation
+        Time-domain check of the fitted Sercalo model.
+    newport : NewportIdentification or None
+    plant : PlantModel or None
+        The assembled system (2.5); blocks not identified are nominal, see
+        ``plant_blocks``.
+    plant_blocks : dict block -> "identified" | "nominal"
+    skipped : dict step -> reason
+    options : IdentifyOptions
+    source : str
+    """
+
+    qd: dict[str, QdCalibration]
+    current_amp: dict[str, CurrentAmplifierGain]
+    sercalo: SercaloIdentification | None
+    modes: ModeRefinement | None
+    validation: tuple[PathValidation, ...]
+    newport: NewportIdentification | None
+    plant: PlantModel | None
+    plant_blocks: dict[str, str]
+    skipped: dict[str, str]
+    options: IdentifyOptions
+    source: str
+
+    def sercalo_modes(self) -> dict[str, dict[str, float]]:
+        """Resonance and damping per axis: refined when available, else from the fit."""
+        out: dict[str, dict[str, float]] = {}
+        if self.modes is not None:
+            for axis, est in self.modes.by_axis().items():
+                out[axis] = {"resonance_hz": est.resonance_hz,
+                             "damping_ratio": est.damping_ratio,
+                             "resonance_hz_std": est.resonance_hz_std,
+                             "damping_ratio_std": est.damping_ratio_std}
+            return out
+        if self.sercalo is not None:
+            modes = self.sercalo.fit.modes()
+            res = self.sercalo.resonances_hz
+            for axis, inp in (("h", "Uch"), ("v", "Ucv")):
+                if inp in res and modes:
+                    fr = res[inp]
+                    m = modes[int(np.argmin([abs(x.resonance_hz - fr) for x in modes]))]
+                    out[axis] = {"resonance_hz": m.resonance_hz,
+                                 "damping_ratio": m.damping_ratio,
+                                 "resonance_hz_std": m.resonance_hz_std,
+                                 "damping_ratio_std": m.damping_ratio_std}
+        return out
+
+    def to_json(self) -> dict[str, Any]:
+        """``twin_truth.json``'s keys for what was identified, plus diagnostics."""
+        out: dict[str, Any] = {"fsmbench_version": __version__, "source": self.source}
+        if self.qd:
+            out["qd_gain_v_per_rad"] = {a: c.gain_v_per_rad for a, c in self.qd.items()}
+        if self.current_amp:
+            out["current_amp_gain_a_per_v"] = {a: g.gain_a_per_v
+                                               for a, g in self.current_amp.items()}
+        if self.sercalo is not None:
+            dc = self.sercalo.dc_gain_v_per_a()
+            modes = self.sercalo_modes()
+            out["sercalo"] = {a: {"resonance_hz": modes[a]["resonance_hz"],
+                                  "damping_ratio": modes[a]["damping_ratio"],
+                                  "dc_gain_v_per_a": dc[a]} for a in modes}
+        if self.newport is not None:
+            out["newport_gain_v_per_v"] = dict(self.newport.gain_v_per_v)
+        delays = {}
+        if self.sercalo is not None:
+            delays["sercalo"] = self.sercalo.delay_s
+        if self.newport is not None:
+            delays["newport"] = self.newport.delay_s
+        if delays:
+            out["delay_s"] = delays
+        out["diagnostics"] = {
+            "qd": {a: c.to_json() for a, c in self.qd.items()},
+            "current_amp": {a: g.to_json() for a, g in self.current_amp.items()},
+            "sercalo": None if self.sercalo is None else self.sercalo.summary(),
+            "sercalo_modes": self.sercalo_modes(),
+            "mode_refinement": None if self.modes is None else self.modes.to_json(),
+            "validation": [v.to_json() for v in self.validation],
+            "newport": None if self.newport is None else self.newport.summary(),
+            "plant_blocks": self.plant_blocks,
+            "skipped": self.skipped,
+            "options": self.options.to_json(),
+        }
+        return out
+
+
+def _gd_block(qd: Mapping[str, QdCalibration]) -> ct.StateSpace:
+    return ct.ss([], [], [], np.diag([qd["h"].gain_v_per_rad, qd["v"].gain_v_per_rad]),
+                 inputs=["Rh", "Rv"], outputs=["Vph", "Vpv"], name="Gd")
+
+
+def _gi_block(gi: Mapping[str, CurrentAmplifierGain]) -> ct.StateSpace:
+    return ct.ss([], [], [], np.diag([gi["h"].gain_a_per_v, gi["v"].gain_a_per_v]),
+                 inputs=["Uch", "Ucv"], outputs=["Ich", "Icv"], name="Gi")
+
+
+def identify(recordings: Mapping[str, xr.Dataset], *, bench: Bench,
+             options: IdentifyOptions | None = None, source: str = "",
+             progress: Progress | None = None) -> Identification:
+    """Run the seed's section 2 on the recordings present.
+
+    Parameters
+    ----------
+    recordings : mapping of experiment name to Dataset
+        As read by :func:`fsmbench.io.read_recording` (or simulated).
+    bench : Bench
+        Its nominal parameters supply what the seed takes as known (``Ga``,
+        ``Zc``, the Newport metrology gain) and stand in for blocks that
+        cannot be identified from the data present.
+    options : IdentifyOptions, optional
+    source : str
+        Where the recordings come from (for the report and JSON).
+    progress : callable, optional
+        Receives one message per step.
+    """
+    opts = options or IdentifyOptions()
+    say = progress or (lambda _msg: None)
+    nom = bench.nominal
+    skipped: dict[str, str] = {}
+
+    def missing(*names: str) -> list[str]:
+        return [n for n in names if n not in recordings]
+
+    qd: dict[str, QdCalibration] = {}
+    if not (gone := missing("data_cal_pd_h", "data_cal_pd_v")):
+        say("2.1 calibrating the 4QD against the Newport metrology")
+        for axis in "hv":
+            qd[axis] = calibrate_qd(recordings[f"data_cal_pd_{axis}"], axis=axis,
+                                    metrology_gain_rad_per_v=nom.newport.metrology_gain_rad_per_v,
+                                    trim_s=opts.trims_s.get(f"data_cal_pd_{axis}", 1.0))
+    else:
+        skipped["qd"] = f"missing {', '.join(gone)}"
+
+    gi: dict[str, CurrentAmplifierGain] = {}
+    sercalo_id: SercaloIdentification | None = None
+    modes: ModeRefinement | None = None
+    validation: tuple[PathValidation, ...] = ()
+    if not (gone := missing("data_uch", "data_ucv")):
+        say("2.2 identifying the current amplifiers")
+        for axis, exp in (("h", "data_uch"), ("v", "data_ucv")):
+            gi[axis] = calibrate_current_amplifier(
+                recordings[exp], axis=axis, nominal=nom, trim_s=opts.trims_s.get(exp, 1.0),
+                band_hz=opts.current_amp_band_hz, window_s=opts.window_s)
+        say("2.3 Sercalo: FRF matrix, delay, vector fitting")
+        frf = experiment_frf(recordings, columns=[("data_uch", "Uch"), ("data_ucv", "Ucv")],
+                             trims_s=opts.trims_s, window_s=opts.window_s)
+        sercalo_id = fit_sercalo(frf, gi_a_per_v={a: g.gain_a_per_v for a, g in gi.items()},
+                                 options=opts.sercalo)
+        if opts.refine_modes:
+            say("2.3 Sercalo: refining the modes on the time records")
+            modes = refine_modes(recordings, sercalo=sercalo_id, trims_s=opts.trims_s)
+            sercalo_id = refit_with_poles(sercalo_id, poles=modes.poles_by_input())
+        else:
+            skipped["mode_refinement"] = "disabled by option"
+        validation = validate_sercalo(recordings, sercalo=sercalo_id, trims_s=opts.trims_s)
+    else:
+        skipped["current_amp"] = skipped["sercalo"] = f"missing {', '.join(gone)}"
+
+    newport_id: NewportIdentification | None = None
+    if not (gone := missing("data_unh", "data_unv")):
+        say("2.4 Newport: FRF matrix, delay and gains")
+        nfrf = experiment_frf(recordings, columns=[("data_unh", "Unh"), ("data_unv", "Unv")],
+                              trims_s=opts.trims_s, window_s=opts.window_s)
+        newport_id = identify_newport(nfrf, band_hz=opts.newport_band_hz)
+    else:
+        skipped["newport"] = f"missing {', '.join(gone)}"
+
+    say("2.5 assembling the identified system")
+    blocks = {
+        "Gi": ("identified", _gi_block(gi)) if gi else ("nominal", current_amplifier(nom)),
+        "Zc": ("nominal", coil_impedance(nom)),
+        "Ga": ("nominal", voltage_amplifier(nom)),
+        "Gc": (("identified", sercalo_id.gc) if sercalo_id is not None
+               else ("nominal", sercalo(nom))),
+        "Gn": (("identified", newport_id.gn) if newport_id is not None
+               else ("nominal", newport(nom))),
+        "Gd": ("identified", _gd_block(qd)) if qd else ("nominal", quad_diode(nom)),
+    }
+    delays_nominal = {"Uch": 1.5 / nom.converter.fs_hz, "Ucv": 1.5 / nom.converter.fs_hz,
+                      "Unh": 5e-4, "Unv": 5e-4}
+    delays = dict(delays_nominal)
+    if sercalo_id is not None:
+        delays.update(Uch=sercalo_id.delay_s, Ucv=sercalo_id.delay_s)
+    if newport_id is not None:
+        delays.update(Unh=newport_id.delay_s, Unv=newport_id.delay_s)
+    plant = assemble_plant(gi=blocks["Gi"][1], zc=blocks["Zc"][1], ga=blocks["Ga"][1],
+                           gc=blocks["Gc"][1], gn=blocks["Gn"][1], gd=blocks["Gd"][1],
+                           input_delay_s=delays, source=f"identified ({source})")
+    return Identification(qd=qd, current_amp=gi, sercalo=sercalo_id, modes=modes,
+                          validation=validation, newport=newport_id, plant=plant,
+                          plant_blocks={k: v[0] for k, v in blocks.items()}, skipped=skipped,
+                          options=opts, source=source)
+
+
+def write_identification(result: Identification, out_dir: str | Path) -> list[Path]:
+    """Write ``identification.json``, ``plant.mat`` and ``frf.mat`` into ``out_dir``.
+
+    Every file is written atomically. ``frf.mat`` holds the measured FRF
+    matrices present (Sercalo and/or Newport); it is not written when none is.
+    """
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    paths = [atomic_write_text(out / "identification.json",
+                               json.dumps(_plain(result.to_json()), indent=2, sort_keys=True)
+                               + "\n")]
+    if result.plant is not None:
+        paths.append(write_plant_mat(out / "plant.mat", result.plant))
+    frfs = {name: part.frf for name, part in (("sercalo", result.sercalo),
+                                                ("newport", result.newport)) if part is not None}
+    if frfs:
+        paths.append(write_frf_mat(out / "frf.mat", frfs))
+    return paths
+
+
+def _plain(value: Any) -> Any:
+    """JSON-safe copy: numpy scalars to floats, NaN/inf to None, tuples to lists."""
+    if isinstance(value, Mapping):
+        return {str(k): _plain(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_plain(v) for v in value]
+    if isinstance(value, np.ndarray):
+        return _plain(value.tolist())
+    if isinstance(value, (np.floating, float)):
+        return float(value) if np.isfinite(value) else None
+    if isinstance(value, np.integer):
+        return int(value)
+    if isinstance(value, complex):
+        return {"re": value.real, "im": value.imag}
+    return value

@@ -1,0 +1,448 @@
+"""Seed 2.3 and 2.4: the FRF matrices of the Sercalo and the Newport, their
+delays, the weighted rational fit of the Sercalo and the Newport gains.
+
+Sercalo (2.3)
+    ``data_uch`` and ``data_ucv`` (first second removed, Sercalo off) give the
+    2×2 H1 matrix ``Uc → Vp`` with the seed's ``hanning(ceil(fs))`` window.
+    The delay of each diagonal path is estimated from its phase
+    (:mod:`fsmbench.ident.delay`) instead of the seed's hard-coded ``Ts``;
+    their weighted mean is removed from both columns. The weights are the
+    seed's (coherence, 10 within ±10 % of each column's resonance, 0 above
+    1 kHz; :func:`seed_weights`), divided by ``|H|`` so that the fit
+    minimises *relative* error whatever the element's scale (the cross terms
+    are 30× below the diagonal). Vector fitting uses common poles for the
+    whole matrix, one pair per resonance (the seed's 410 Hz and 250 Hz
+    starting poles), and converges instead of running 5 iterations.
+    ``Gc = fit · Gi⁻¹`` with ``Gi`` from 2.2.
+
+Newport (2.4)
+    ``data_unh`` (3 s removed) and ``data_unv`` (1.5 s removed) give the 2×2
+    matrix ``Un → Vp``; its delay is estimated the same way (the seed assumes
+    0.5 ms). The seed's ``Gn = mean(abs(H(10–100 Hz)))`` drops the sign; here
+    the gain keeps the sign of the delay-free response's real part.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import control as ct
+import numpy as np
+import xarray as xr
+
+from fsmbench.ident.calibration import trim_recording
+from fsmbench.ident.delay import DelayEstimate, estimate_delay, remove_delay
+from fsmbench.ident.frf import FrequencyResponse, combine_columns, spectral_matrix
+from fsmbench.ident.vectfit import VectorFit, VectorFitOptions, vector_fit
+from fsmbench.ident.welch import hanning
+
+__all__ = [
+    "NewportIdentification",
+    "SercaloFitOptions",
+    "SercaloIdentification",
+    "combined_delay",
+    "detect_resonances",
+    "experiment_frf",
+    "fit_sercalo",
+    "identify_newport",
+    "refit_with_poles",
+    "seed_weights",
+]
+
+OUTPUTS = ("Vph", "Vpv")
+
+
+def experiment_frf(recordings: Mapping[str, xr.Dataset], *, columns: Sequence[tuple[str, str]],
+                   trims_s: Mapping[str, float], window_s: float = 1.0) -> FrequencyResponse:
+    """FRF matrix ``inputs → (Vph, Vpv)`` from single-input experiments.
+
+    Parameters
+    ----------
+    recordings : mapping of experiment name to Dataset
+    columns : sequence of (experiment, input signal)
+        E.g. ``[("data_uch", "Uch"), ("data_ucv", "Ucv")]``, one column each.
+    trims_s : mapping of experiment name to seconds
+        Start of each record removed first (the seed's ``t0``).
+    window_s : float
+        Hann window length [s] (seed: 1 s).
+    """
+    parts = []
+    for experiment, signal in columns:
+        if experiment not in recordings:
+            raise ValueError(f"{experiment} is needed for the {signal} column and is missing")
+        ds = trim_recording(recordings[experiment], t0_s=trims_s.get(experiment, 0.0))
+        for var in (signal, *OUTPUTS):
+            if var not in ds:
+                raise ValueError(f"{experiment}: variable '{var}' is needed and is missing")
+        fs = float(ds.attrs["fs_hz"])
+        parts.append(spectral_matrix(
+            ds[signal].values, np.column_stack([ds[o].values for o in OUTPUTS]),
+            input_names=[signal], output_names=list(OUTPUTS),
+            window=hanning(int(np.ceil(window_s * fs))), fs_hz=fs))
+    return combine_columns(parts)
+
+
+def combined_delay(estimates: Sequence[DelayEstimate]) -> tuple[float, float]:
+    """Inverse-variance mean of several delay estimates and its standard error [s]."""
+    d = np.array([e.delay_s for e in estimates])
+    s = np.array([max(e.std_s, 1e-12) for e in estimates])
+    w = 1.0 / s**2
+    return float(np.sum(w * d) / np.sum(w)), float(1.0 / np.sqrt(np.sum(w)))
+
+
+def detect_resonances(frf: FrequencyResponse, *, f_min_hz: float = 20.0,
+                      f_max_hz: float = 1000.0) -> dict[str, float]:
+    """Frequency [Hz] of the largest magnitude peak of each column's diagonal element.
+
+    The seed's ``freqs_res_uh = 410``, ``freqs_res_uv = 250`` (read off Fig. 18).
+    """
+    f = frf.frequency_hz
+    band = (f >= f_min_hz) & (f <= f_max_hz)
+    out = {}
+    for j, inp in enumerate(frf.input_names):
+        diag = frf.output_names[min(j, len(frf.output_names) - 1)]
+        mag = np.abs(frf.frf.sel(output=diag, input=inp).values)
+        out[inp] = float(f[band][np.argmax(mag[band])])
+    return out
+
+
+def seed_weights(frf: FrequencyResponse, *, resonances_hz: Mapping[str, float],
+                 alpha: float = 0.1, boost: float = 10.0,
+                 f_max_hz: float = 1000.0) -> xr.DataArray:
+    """The seed's fit weights (2.3e, Fig. 20), dims ``(frequency, output, input)``.
+
+    Coherence; ``boost`` where ``(1-alpha) f_r < f < (1+alpha) f_r`` for the
+    column's resonance ``f_r``; 0 above ``f_max_hz``. The DC bin gets 0 too
+    (a Welch estimate has no information there).
+    """
+    w = frf.coherence.copy(deep=True).fillna(0.0)
+    f = frf.frequency_hz
+    for inp, fr in resonances_hz.items():
+        near = (f > (1 - alpha) * fr) & (f < (1 + alpha) * fr)
+        w.loc[{"input": inp}] = xr.where(xr.DataArray(near, dims="frequency"), boost,
+                                         w.sel(input=inp))
+    w = w.where(xr.DataArray((f <= f_max_hz) & (f > 0), dims="frequency"), 0.0)
+    return w
+
+
+@dataclass(frozen=True)
+class SercaloFitOptions:
+    """Options of :func:`fit_sercalo`.
+
+    Attributes
+    ----------
+    alpha, boost, f_max_hz : float
+        The seed's weights (:func:`seed_weights`).
+    min_coherence : float
+        Coherence threshold of the delay band.
+    delay_s : float, optional
+        Impose the delay instead of estimating it [s].
+    n_poles : int, optional
+        Model order; default two per detected resonance (one pair each).
+    """
+
+    alpha: float = 0.1
+    boost: float = 10.0
+    f_max_hz: float = 1000.0
+    min_coherence: float = 0.9
+    delay_s: float | None = None
+    n_poles: int | None = None
+
+
+@dataclass(frozen=True, eq=False)
+class SercaloIdentification:
+    """What 2.3 identifies.
+
+    Attributes
+    ----------
+    frf : FrequencyResponse
+        Measured ``Uc → Vp`` matrix (delay included).
+    delays : tuple of DelayEstimate
+        Per diagonal path.
+    delay_s, delay_std_s : float
+        Common delay removed before the fit [s].
+    resonances_hz : dict
+        Detected peak per input (the starting poles).
+    weights : xarray.DataArray
+        Seed weights used (before the ``1/|H|`` normalisation).
+    fit : VectorFit
+        Rational fit of the delay-free ``Uc → Vp`` matrix.
+    gi_a_per_v : dict
+        Current-amplifier gains used to form ``Gc``.
+    gc : control.StateSpace
+        ``Ich, Icv → Vpch, Vpcv`` [V/A].
+    fit_error : dict
+        Per element ``"Vph/Uch"``: rms relative magnitude error of the fit
+        over 10 Hz–1 kHz where coherence > 0.9.
+    options : SercaloFitOptions
+    """
+
+    frf: FrequencyResponse
+    delays: tuple[DelayEstimate, ...]
+    delay_s: float
+    delay_std_s: float
+    resonances_hz: dict[str, float]
+    weights: xr.DataArray
+    fit: VectorFit
+    gi_a_per_v: dict[str, float]
+    gc: ct.StateSpace
+    fit_error: dict[str, float]
+    options: SercaloFitOptions = field(default_factory=SercaloFitOptions)
+
+    def dc_gain_v_per_a(self) -> dict[str, float]:
+        """``Gc(0)`` diagonal: Ich→Vph (h), Icv→Vpv (v) [V/A]."""
+        g = np.real(np.asarray(self.gc.dcgain()))
+        return {"h": float(g[0, 0]), "v": float(g[1, 1])}
+
+    def summary(self) -> dict[str, Any]:
+        """JSON-ready diagnostics."""
+        return {
+            "delay_s": self.delay_s, "delay_std_s": self.delay_std_s,
+            "delays": [d.summary() for d in self.delays],
+            "resonances_detected_hz": self.resonances_hz,
+            "fit": {"n_poles": self.fit.n_poles, "iterations": self.fit.iterations,
+                    "converged": self.fit.converged,
+                    "rms_error_weighted": np.asarray(self.fit.rms_error).tolist(),
+                    "modes": [m.__dict__ for m in self.fit.modes()]},
+            "fit_error_rms_relative": self.fit_error,
+            "dc_gain_v_per_a": self.dc_gain_v_per_a(),
+            "options": self.options.__dict__,
+        }
+
+
+def relative_fit_error(frf: FrequencyResponse, model: np.ndarray, *,
+                       band_hz: tuple[float, float] = (10.0, 1000.0),
+                       min_coherence: float = 0.9) -> dict[str, float]:
+    """Rms of ``|model|/|H| - 1`` per element over the band where coherence > threshold.
+
+    ``model`` has shape (F, p, m) on ``frf``'s grid. Elements with no such
+    bin get NaN.
+    """
+    f = frf.frequency_hz
+    out = {}
+    for i, o in enumerate(frf.output_names):
+        for j, inp in enumerate(frf.input_names):
+            h = frf.frf.sel(output=o, input=inp).values
+            c = frf.coherence.sel(output=o, input=inp).values
+            sel = (f >= band_hz[0]) & (f <= band_hz[1]) & (c > min_coherence)
+            err = np.abs(model[sel, i, j]) / np.abs(h[sel]) - 1
+            out[f"{o}/{inp}"] = float(np.sqrt(np.mean(err**2))) if sel.any() else float("nan")
+    return out
+
+
+def fit_sercalo(frf: FrequencyResponse, *, gi_a_per_v: Mapping[str, float],
+                options: SercaloFitOptions | None = None) -> SercaloIdentification:
+    """Delay, weights, rational fit and ``Gc`` from the ``Uc → Vp`` matrix (seed 2.3).
+
+    Parameters
+    ----------
+    frf : FrequencyResponse
+        Inputs ``Uch, Ucv``, outputs ``Vph, Vpv`` (:func:`experiment_frf`).
+    gi_a_per_v : mapping {"h", "v"} -> float
+        Current-amplifier gains [A/V] (2.2).
+    options : SercaloFitOptions, optional
+    """
+    opts = options or SercaloFitOptions()
+    inputs, outputs = frf.input_names, frf.output_names
+    if len(inputs) != 2 or len(outputs) != 2:
+        raise ValueError(f"the Sercalo fit needs a 2x2 matrix, got {outputs} x {inputs}")
+    delays = tuple(estimate_delay(frf, output_name=outputs[j], input_name=inputs[j],
+                                  min_coherence=opts.min_coherence)
+                   for j in range(2))
+    if opts.delay_s is None:
+        delay, delay_std = combined_delay(delays)
+    else:
+        delay, delay_std = float(opts.delay_s), 0.0
+    clean = remove_delay(frf, delay)
+    resonances = detect_resonances(clean, f_max_hz=opts.f_max_hz)
+    weights = seed_weights(clean, resonances_hz=resonances, alpha=opts.alpha, boost=opts.boost,
+                           f_max_hz=opts.f_max_hz)
+    f = clean.frequency_hz
+    h = clean.frf.values
+    keep = f > 0  # vector fitting works on s = j2πf; the DC bin carries no weight anyway
+    mag = np.abs(h[keep])
+    w = weights.values[keep] / np.where(mag > 0, mag, np.inf)
+    n_poles = opts.n_poles or 2 * len(set(np.round(list(resonances.values()), 0)))
+    fit = vector_fit(f[keep], h[keep], weights=w, input_names=list(inputs),
+                     output_names=list(outputs),
+                     options=VectorFitOptions(n_poles=n_poles, asymptote="d"))
+    fitted = fit.to_statespace()
+    gi = np.array([gi_a_per_v["h"], gi_a_per_v["v"]], dtype=float)
+    gc = ct.ss(fitted.A, np.asarray(fitted.B) / gi[None, :], fitted.C,
+               np.asarray(fitted.D) / gi[None, :], inputs=["Ich", "Icv"],
+               outputs=["Vpch", "Vpcv"], name="Gc")
+    model = np.zeros_like(h)
+    model[keep] = fit.response(f[keep])
+    model[~keep] = np.nan
+    err = relative_fit_error(clean, model)
+    return SercaloIdentification(frf=frf, delays=delays, delay_s=delay, delay_std_s=delay_std,
+                                 resonances_hz=resonances, weights=weights, fit=fit,
+                                 gi_a_per_v={"h": float(gi[0]), "v": float(gi[1])}, gc=gc,
+                                 fit_error=err, options=opts)
+
+
+@dataclass(frozen=True, eq=False)
+class NewportIdentification:
+    """What 2.4 identifies.
+
+    Attributes
+    ----------
+    frf : FrequencyResponse
+        Measured ``Un → Vp`` matrix (delay included).
+    delays : tuple of DelayEstimate
+    delay_s, delay_std_s : float
+        Common delay [s].
+    gain_v_per_v : dict {"h", "v"}
+        Signed low-frequency gain Unh→Vph and Unv→Vpv [V/V].
+    band_hz : tuple
+        Averaging band [Hz] (seed: 10–100 Hz).
+    gn : control.StateSpace
+        Static diagonal ``Unh, Unv → Vpnh, Vpnv``, as the seed's ``Gn``.
+    """
+
+    frf: FrequencyResponse
+    delays: tuple[DelayEstimate, ...]
+    delay_s: float
+    delay_std_s: float
+    gain_v_per_v: dict[str, float]
+    band_hz: tuple[float, float]
+    gn: ct.StateSpace
+
+    def summary(self) -> dict[str, Any]:
+        """JSON-ready diagnostics."""
+        return {"delay_s": self.delay_s, "delay_std_s": self.delay_std_s,
+                "delays": [d.summary() for d in self.delays],
+                "gain_v_per_v": self.gain_v_per_v, "band_hz": list(self.band_hz)}
+
+
+def identify_newport(frf: FrequencyResponse, *, band_hz: tuple[float, float] = (10.0, 100.0),
+                     min_coherence: float = 0.9) -> NewportIdentification:
+    """Delay and signed gains of the Newport paths (seed 2.4) from the ``Un → Vp`` matrix."""
+    inputs, outputs = frf.input_names, frf.output_names
+    if len(inputs) != 2 or len(outputs) != 2:
+        raise ValueError(f"the Newport identification needs a 2x2 matrix, got {outputs} x "
+                         f"{inputs}")
+    delays = tuple(estimate_delay(frf, output_name=outputs[j], input_name=inputs[j],
+                                  min_coherence=min_coherence) for j in range(2))
+    delay, delay_std = combined_delay(delays)
+    clean = remove_delay(frf, delay)
+    f = clean.frequency_hz
+    sel = (f > band_hz[0]) & (f < band_hz[1])
+    gains = {}
+    for axis, j in (("h", 0), ("v", 1)):
+        h = clean.frf.sel(output=outputs[j], input=inputs[j]).values[sel]
+        gains[axis] = float(np.sign(np.mean(h.real)) * np.mean(np.abs(h)))
+    gn = ct.ss([], [], [], np.diag([gains["h"], gains["v"]]), inputs=["Unh", "Unv"],
+               outputs=["Vpnh", "Vpnv"], name="Gn")
+    return NewportIdentification(frf=frf, delays=delays, delay_s=delay, delay_std_s=delay_std,
+                                 gain_v_per_v=gains, band_hz=(float(band_hz[0]),
+                                                              float(band_hz[1])), gn=gn)
+
+
+def _fit_inputs(sid: SercaloIdentification) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    clean = remove_delay(sid.frf, sid.delay_s)
+    f = clean.frequency_hz
+    keep = f > 0
+    h = clean.frf.values[keep]
+    mag = np.abs(h)
+    w = sid.weights.values[keep] / np.where(mag > 0, mag, np.inf)
+    return f[keep], h, w
+
+
+def refit_with_poles(sid: SercaloIdentification, *, poles: Mapping[str, complex]
+                     ) -> SercaloIdentification:
+    """Replace the fitted modes' poles and re-solve residues and ``D`` by linear least squares.
+
+    Parameters
+    ----------
+    sid : SercaloIdentification
+    poles : mapping input name -> complex pole [rad/s]
+        Upper-half-plane pole replacing the fitted pole nearest to it (its
+        conjugate follows), e.g. from the leakage-free modal estimates.
+
+    Returns
+    -------
+    SercaloIdentification
+        Same weights and data; ``fit`` with the new poles (their covariance
+        entries set to NaN: they come from another estimator), ``gc`` and
+        ``fit_error`` recomputed.
+    """
+    fit = sid.fit
+    new_poles = np.array(fit.poles, dtype=complex)
+    cov = np.array(fit.pole_covariance, dtype=float)
+    for target in poles.values():
+        upper = [k for k in range(new_poles.size) if new_poles[k].imag > 0]
+        k = min(upper, key=lambda i: abs(new_poles[i] - target))
+        j = int(np.flatnonzero(np.isclose(new_poles, np.conj(new_poles[k])))[0])
+        new_poles[k], new_poles[j] = complex(target), complex(np.conj(target))
+        cov[[k, j], :] = np.nan
+        cov[:, [k, j]] = np.nan
+    f, h, w = _fit_inputs(sid)
+    # The Welch estimate is smeared within about the window's main lobe
+    # (±2 bins of 1/window_s) of a resonance: the sharper, correct poles
+    # cannot and should not match it there, so those bins get no weight.
+    lobe_hz = 3.0 * sid.frf.fs_hz / sid.frf.window_length
+    w = w.copy()
+    for target in poles.values():
+        w[np.abs(f - abs(target) / (2 * np.pi)) < lobe_hz] = 0.0
+    s = 2j * np.pi * f
+    cols = []
+    done: set[int] = set()
+    for k, a in enumerate(new_poles):
+        if k in done:
+            continue
+        if abs(a.imag) > 0:
+            j = int(np.flatnonzero(np.isclose(new_poles, np.conj(a)))[0])
+            done.update({k, j})
+            cols.append(1 / (s - a) + 1 / (s - np.conj(a)))
+            cols.append(1j / (s - a) - 1j / (s - np.conj(a)))
+        else:
+            done.add(k)
+            cols.append(1 / (s - a))
+    cols.append(np.ones_like(s))  # D
+    basis = np.column_stack(cols)
+    p, m = h.shape[1], h.shape[2]
+    residues = np.zeros((new_poles.size, p, m), dtype=complex)
+    d = np.zeros((p, m))
+    for i in range(p):
+        for jj in range(m):
+            ww = w[:, i, jj]
+            a_mat = basis * ww[:, None]
+            rhs = h[:, i, jj] * ww
+            x, *_ = np.linalg.lstsq(np.vstack([a_mat.real, a_mat.imag]),
+                                    np.concatenate([rhs.real, rhs.imag]), rcond=None)
+            col = 0
+            done.clear()
+            for k, a in enumerate(new_poles):
+                if k in done:
+                    continue
+                if abs(a.imag) > 0:
+                    j = int(np.flatnonzero(np.isclose(new_poles, np.conj(a)))[0])
+                    done.update({k, j})
+                    residues[k, i, jj] = x[col] + 1j * x[col + 1]
+                    residues[j, i, jj] = x[col] - 1j * x[col + 1]
+                    col += 2
+                else:
+                    done.add(k)
+                    residues[k, i, jj] = x[col]
+                    col += 1
+            d[i, jj] = x[col]
+    model = np.einsum("nf,npm->fpm", 1 / (s[None, :] - new_poles[:, None]), residues) + d
+    num = np.sqrt(np.sum(np.abs(w * (model - h)) ** 2, axis=0))
+    den = np.sqrt(np.sum(np.abs(w * h) ** 2, axis=0))
+    new_fit = dataclasses.replace(fit, poles=new_poles, residues=residues, d=d,
+                                  e=np.zeros_like(d), pole_covariance=cov,
+                                  rms_error=num / np.where(den > 0, den, 1.0))
+    fitted = new_fit.to_statespace()
+    gi = np.array([sid.gi_a_per_v["h"], sid.gi_a_per_v["v"]])
+    gc = ct.ss(fitted.A, np.asarray(fitted.B) / gi[None, :], fitted.C,
+               np.asarray(fitted.D) / gi[None, :], inputs=["Ich", "Icv"],
+               outputs=["Vpch", "Vpcv"], name="Gc")
+    full = np.full(sid.frf.frf.shape, np.nan, dtype=complex)
+    full[sid.frf.frequency_hz > 0] = model
+    clean = remove_delay(sid.frf, sid.delay_s)
+    return dataclasses.replace(sid, fit=new_fit, gc=gc,
+                               fit_error=relative_fit_error(clean, full))
