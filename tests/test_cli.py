@@ -62,3 +62,25 @@ def test_bad_params_file_names_the_problem(tmp_path: Path,
     assert main(["params", "--params", str(bad)]) == 2
     err = capsys.readouterr().err
     assert "bench.toml" in err and "fs_hz" in err
+
+
+def test_identify_writes_its_outputs_and_compares_with_the_truth(
+        ident_twin, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    from fsmbench.twin import write_twin
+
+    data = tmp_path / "data"
+    data.mkdir()
+    write_twin(ident_twin, data)
+    out = tmp_path / "out"
+    assert main(["identify", str(data), "--out", str(out)]) == 0
+    captured = capsys.readouterr()
+    assert sorted(p.name for p in out.iterdir()) == ["frf.mat", "identification.json",
+                                                     "plant.mat"]
+    assert "MISSED" not in captured.err
+    assert "sercalo.h.damping_ratio" in captured.err and " ok" in captured.err
+
+
+def test_identify_refuses_to_write_into_the_data(tmp_path: Path,
+                                                 capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["identify", str(tmp_path), "--out", str(tmp_path / "out")]) == 2
+    assert "inside the data folder" in capsys.readouterr().err

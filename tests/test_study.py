@@ -47,6 +47,11 @@ def test_study_on_a_partial_folder_says_what_it_skipped(data_dir: Path, tmp_path
     assert "no data_rep_h.mat" in result.skipped_experiments["data_rep_h"]
     report = Path(result.report).read_text()
     assert "skipped: " in report and "data_unh" in report
+    # Identification ran on what is there (2.2, 2.3) and says what it skipped.
+    stage = next(s for s in result.stages if s.name == "identify")
+    assert stage.ran and "newport: missing data_unh, data_unv" in stage.reason
+    assert (tmp_path / "out" / "identification.json").is_file()
+    assert "4. Identification" in report
     summary = json.loads((tmp_path / "out" / "study.json").read_text())
     assert summary["experiments"] == list(result.experiments)
 
@@ -70,3 +75,5 @@ def test_study_on_the_twin_writes_its_data_and_report(tmp_path: Path) -> None:
     assert (tmp_path / "twin-data" / "twin_truth.json").is_file()
     assert Path(result.report).stat().st_size > 100_000  # figures are embedded
     assert any("simulating" in m for m in messages)  # progress is shown
+    ident = json.loads((tmp_path / "identification.json").read_text())
+    assert set(ident["sercalo"]) == {"h", "v"}

@@ -19,12 +19,14 @@ import xarray as xr
 
 from fsmbench import __version__
 from fsmbench.bench.params import Bench, default_bench
+from fsmbench.ident.pipeline import identify, write_identification
 from fsmbench.io.atomic import atomic_write_text
 from fsmbench.io.errors import RecordingError
 from fsmbench.io.recording import find_experiments, read_recording
 from fsmbench.io.signals import EXPERIMENTS
 from fsmbench.report.bench_section import bench_section, parameters_section, recordings_section
 from fsmbench.report.html import Section, write_report
+from fsmbench.report.ident_section import identification_section
 from fsmbench.twin.simulate import simulate_bench, write_twin
 
 __all__ = ["StageStatus", "StudyResult", "check_out_dir", "load_recordings", "run_study"]
@@ -150,6 +152,25 @@ def run_study(*, out_dir: str | Path, data_dir: str | Path | None = None,
     t0 = time.perf_counter()
     sections.append(recordings_section(recordings, bench=bench, skipped=skipped, source=source))
     stages.append(StageStatus("report: experiments", True, seconds=time.perf_counter() - t0))
+
+    truth_path = data / "twin_truth.json"
+    truth = json.loads(truth_path.read_text()) if truth_path.is_file() else None
+    t0 = time.perf_counter()
+    ident_needs = ("data_cal_pd_h", "data_cal_pd_v", "data_uch", "data_ucv", "data_unh",
+                   "data_unv")
+    if any(n in recordings for n in ident_needs):
+        say("identification (seed section 2)")
+        ident = identify(recordings, bench=bench, source=source, progress=say)
+        written = write_identification(ident, out)
+        sections.append(identification_section(ident, recordings=recordings, bench=bench,
+                                                truth=truth))
+        stages.append(StageStatus(
+            "identify", True, outputs=tuple(str(p) for p in written),
+            reason="; ".join(f"{k}: {v}" for k, v in ident.skipped.items()),
+            seconds=time.perf_counter() - t0))
+    else:
+        stages.append(StageStatus("identify", False,
+                                  reason="none of " + ", ".join(ident_needs) + " present"))
 
     report_path = out / "report.html"
     meta = (f"fsmbench {__version__}; source: {source}.",

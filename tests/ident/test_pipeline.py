@@ -1,0 +1,99 @@
+"""Seed section 2 end to end on the twin: the issue's accuracy targets."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+import scipy.io
+
+from fsmbench.bench.params import Bench
+from fsmbench.ident.compare import TARGETS, comparison_rows
+from fsmbench.ident.pipeline import Identification, identify, write_identification
+from fsmbench.twin import TwinRun
+
+
+@pytest.fixture(scope="module")
+def identified(ident_twin: TwinRun, bench: Bench) -> Identification:
+    return identify(ident_twin.recordings, bench=bench, source="twin")
+
+
+def test_every_target_is_met_against_the_truth(identified: Identification,
+                                               ident_twin: TwinRun, bench: Bench) -> None:
+    rows = comparison_rows(identified.to_json(), reference=ident_twin.truth, bench=bench)
+    assert {r.key for r in rows} == set(TARGETS)  # every contracted key was identified
+    missed = [str(r) for r in rows if not r.within_target]
+    assert not missed, "\n".join(missed)
+
+
+def test_damping_bias_of_the_plain_fit_is_removed(identified: Identification,
+                                                  ident_twin: TwinRun) -> None:
+    assert identified.modes is not None
+    for axis in "hv":
+        truth = ident_twin.truth["sercalo"][axis]["damping_ratio"]
+        plain = identified.modes.initial[axis][1]  # vector fit on the 1 s Welch estimate
+        refined = identified.sercalo_modes()[axis]["damping_ratio"]
+        # Measured on the twin: the 1 s window inflates damping 1.4x (h), 2.2x (v).
+        assert plain / truth - 1 > 0.25
+        assert abs(refined / truth - 1) < 0.05
+
+
+def test_fit_matches_the_measured_frf(identified: Identification) -> None:
+    assert identified.sercalo is not None
+    # Issue target: < 5 % rms relative magnitude error over 10 Hz–1 kHz, coherence > 0.9.
+    for path, err in identified.sercalo.fit_error.items():
+        assert err < 0.05, path
+
+
+def test_time_domain_validation(identified: Identification) -> None:
+    vaf = {(v.input, v.output): v.vaf for v in identified.validation}
+    # Direct paths: the 4QD noise (~1 mV) over ~0.1 V of response bounds VAF near 1.
+    assert vaf[("Uch", "Vph")] > 0.999 and vaf[("Ucv", "Vpv")] > 0.999
+    # Cross paths carry a few mV over the same noise: coherence ~0.9, VAF about the same.
+    assert vaf[("Uch", "Vpv")] > 0.8 and vaf[("Ucv", "Vph")] > 0.8
+
+
+def test_identified_plant_has_the_physical_models_shape(identified: Identification,
+                                                        true_plant) -> None:
+    plant = identified.plant
+    assert plant is not None
+    assert list(plant.sys.input_labels) == list(true_plant.sys.input_labels)
+    assert list(plant.sys.output_labels) == list(true_plant.sys.output_labels)
+    f = np.array([10.0, 100.0, 300.0])
+    ours = plant.frequency_response(f).sel(output="Rh", input="Uch").values
+    ref = true_plant.frequency_response(f).sel(output="Rh", input="Uch").values
+    # Beam angle per volt away from the resonances: the gains above within ~1 %.
+    np.testing.assert_allclose(np.abs(ours), np.abs(ref), rtol=0.02)
+
+
+def test_outputs_have_the_truth_schema_and_load_in_matlab_form(identified: Identification,
+                                                               ident_twin: TwinRun,
+                                                               tmp_path: Path) -> None:
+    paths = write_identification(identified, tmp_path)
+    assert [p.name for p in paths] == ["identification.json", "plant.mat", "frf.mat"]
+    data = json.loads((tmp_path / "identification.json").read_text())
+    for key in ("qd_gain_v_per_rad", "current_amp_gain_a_per_v", "sercalo",
+                "newport_gain_v_per_v", "delay_s"):
+        assert set(data[key]) == set(ident_twin.truth[key]), key
+    assert set(data["sercalo"]["h"]) == set(ident_twin.truth["sercalo"]["h"])
+    frf = scipy.io.loadmat(tmp_path / "frf.mat")
+    for inp, out in (("Uch", "Vph"), ("Ucv", "Vpv"), ("Unh", "Vph"), ("Unv", "Vpv")):
+        assert frf[f"tf_{inp}_{out}"].shape == frf["f"].shape == (8193, 1)
+        assert frf[f"coh_{inp}_{out}"].shape == (8193, 1)
+    plant = scipy.io.loadmat(tmp_path / "plant.mat", simplify_cells=True)
+    assert set(plant) >= {"sys", "Gi", "Zc", "Ga", "Gc", "Gn", "Gd"}
+    assert list(plant["sys"]["InputName"]) == ["Uch", "Ucv", "Unh", "Unv"]
+
+
+def test_partial_data_runs_what_it_can(ident_twin: TwinRun, bench: Bench) -> None:
+    only_cal = {k: v for k, v in ident_twin.recordings.items() if k.startswith("data_cal")}
+    result = identify(only_cal, bench=bench)
+    assert set(result.qd) == {"h", "v"}
+    assert result.sercalo is None and result.newport is None
+    assert "missing data_uch, data_ucv" in result.skipped["sercalo"]
+    assert result.plant_blocks == {"Gi": "nominal", "Zc": "nominal", "Ga": "nominal",
+                                   "Gc": "nominal", "Gn": "nominal", "Gd": "identified"}
+    out = result.to_json()
+    assert "sercalo" not in out and "qd_gain_v_per_rad" in out
