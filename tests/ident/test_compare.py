@@ -5,7 +5,7 @@ from __future__ import annotations
 import pytest
 
 from fsmbench.bench.params import Bench
-from fsmbench.ident.compare import comparison_rows, compare_with_truth
+from fsmbench.ident.compare import compare_with_truth, comparison_rows
 from fsmbench.twin.truth import model_values
 
 
