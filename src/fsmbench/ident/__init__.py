@@ -1,5 +1,15 @@
-"""Identification: spectral estimates (MATLAB semantics) and FRF matrices."""
+"""Identification (seed section 2): spectral estimates with MATLAB semantics,
+calibrations, delays, vector fitting, modal estimation and the pipeline that
+turns recordings into an identified plant."""
 
+from fsmbench.ident.calibration import (
+    CurrentAmplifierGain,
+    QdCalibration,
+    calibrate_current_amplifier,
+    calibrate_qd,
+)
+from fsmbench.ident.delay import DelayEstimate, estimate_delay, remove_delay
+from fsmbench.ident.modal import ModalEstimate, ModeEstimate, estimate_modes
 from fsmbench.ident.spectral import (
     FrequencyResponse,
     SpectrumResult,
@@ -17,21 +27,36 @@ from fsmbench.ident.spectral import (
     spectral_matrix,
     tfestimate,
 )
+from fsmbench.ident.vectfit import Mode, VectorFit, VectorFitOptions, vector_fit
 
 __all__ = [
+    "CurrentAmplifierGain",
+    "DelayEstimate",
     "FrequencyResponse",
+    "ModalEstimate",
+    "Mode",
+    "ModeEstimate",
+    "QdCalibration",
     "SpectrumResult",
+    "VectorFit",
+    "VectorFitOptions",
     "WelchOptions",
+    "calibrate_current_amplifier",
+    "calibrate_qd",
     "combine_columns",
     "cpsd",
     "default_nfft",
     "default_noverlap",
     "effective_averages",
+    "estimate_delay",
+    "estimate_modes",
     "hamming",
     "hann",
     "hanning",
     "mscohere",
     "pwelch",
+    "remove_delay",
     "spectral_matrix",
     "tfestimate",
+    "vector_fit",
 ]
