@@ -75,8 +75,9 @@ def test_tail_model_beats_a_constant_slope_continuation() -> None:
     est = estimate_delay_from_response(GRID_HZ, g, band_hz=band)
     # 1e-5 s: tail expansion truncated at 1/f^2, band top only 2.4 f0 (measured 6 µs)
     assert est.delay_s == pytest.approx(1.5e-4, abs=1e-5)
-    sel = (GRID_HZ >= band[0]) & (GRID_HZ <= band[1])
-    u = np.log(GRID_HZ[sel])
+    f = GRID_HZ
+    sel = (f >= band[0]) & (f <= band[1])
+    u = np.log(f[sel])
     top = u > u[-1] - np.log(1.6)
     local = np.polyfit(u[top], np.log(np.abs(g[sel][top])), 1)[0]
     crude = estimate_delay_from_response(GRID_HZ, g, band_hz=band, high_frequency_slope=local)
@@ -183,7 +184,7 @@ def twin_delays(ident_twin: TwinRun) -> dict[str, DelayEstimate]:
     out = {}
     for name, inp, outp, t0, _ in TWIN_PATHS:
         ds = ident_twin.recordings[name]
-        ds = ds.isel(t=slice(int(round(t0 * ds.attrs["fs_hz"])), None))
+        ds = ds.isel(t=slice(round(t0 * ds.attrs["fs_hz"]), None))
         fr = spectral_matrix(ds[inp].values, ds[outp].values, input_names=[inp],
                              output_names=[outp], window=hanning(int(ds.attrs["fs_hz"])),
                              fs_hz=ds.attrs["fs_hz"])

@@ -8,8 +8,10 @@ The seed's Welch estimate uses a 1 s Hann window: its spectral window has a
 ~2 Hz main lobe (in time, the impulse response is multiplied by the window's
 autocorrelation, which is gone after 1 s), so the H1 estimate shows a mode
 wider and lower than it is. Fitting a second-order model to it
-(:func:`fit_frf_modes`, "the plain approach") finds the frequency to 0.01 % but
-the damping ~1.8x (h) and ~3x (v) too high on the twin (``tests/ident/test_modal.py``).
+(:func:`fit_frf_modes`, "the plain approach") finds the frequency to 0.02 % but
+the damping 95 % (h) and 234 % (v) too high on the twin (``tests/ident/test_modal.py``);
+the estimator below is within 0.002 % of the twin's damping, and its standard
+errors (~3e-5 relative) describe its actual errors.
 
 The estimator (:func:`estimate_modes`)
 -------------------------------------
@@ -21,8 +23,8 @@ N-point DFTs of a record obey *exactly*::
 
     Y(k) = B(q_k)/A(q_k) U(k) + I(q_k)/A(q_k),    q_k = exp(-j 2 pi k / N)
 
-with ``I`` a polynomial of degree ``deg A - 1`` carrying the initial and final
-states. In a band around the modes the model is, per output::
+with ``I`` a polynomial of degree ``max(deg A, deg B) - 1`` carrying the initial
+and final states. In a band around the modes the model is, per output::
 
     Y(k) = sum_i [ (b1 q + b2 q^2) U(k) + (c0 + c1 q) ] / A_i(q)  +  P(x_k) U(k) + Q(x_k)
 
@@ -31,7 +33,8 @@ states. In a band around the modes the model is, per output::
 sampled LTI system: poles map as ``z = e^{sT}``); ``b``, ``c`` real (one set per
 mode, input and output); ``P``, ``Q`` complex polynomials of degree
 ``background_order`` in the normalised band frequency ``x`` absorbing the
-out-of-band modes and their transients. Only ``(f0, xi)`` per mode are
+out-of-band modes and their transients (and the FIR part ``B mod A`` of a
+delayed mode, exact to ~1e-12 over a 2 % band). Only ``(f0, xi)`` per mode are
 nonlinear; the rest is eliminated by linear least squares (variable
 projection) and ``(f0, ln xi)`` optimised with :func:`scipy.optimize.least_squares`
 from a coarse grid around the initial guess.
@@ -65,6 +68,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import warnings
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -238,22 +242,31 @@ def _check_initial(initial: Sequence[tuple[float, float]]) -> list[tuple[float, 
     return guesses
 
 
-def _default_band(guesses: Sequence[tuple[float, float]],
-                  relative_half_width: float) -> tuple[float, float]:
-    if not 0.0 < relative_half_width < 1.0:
-        raise ValueError(f"relative_half_width must be in (0, 1), got {relative_half_width!r}")
-    lo = min(f * (1.0 - relative_half_width) for f, _ in guesses)
-    hi = max(f * (1.0 + relative_half_width) for f, _ in guesses)
+def _band(guesses: Sequence[tuple[float, float]], band_hz: tuple[float, float] | None,
+          relative_half_width: float) -> tuple[float, float]:
+    """The given band, or ``f (1 -/+ relative_half_width)`` around the guesses; checked."""
+    if band_hz is None:
+        if not 0.0 < relative_half_width < 1.0:
+            raise ValueError(
+                f"relative_half_width must be in (0, 1), got {relative_half_width!r}")
+        lo = min(f * (1.0 - relative_half_width) for f, _ in guesses)
+        hi = max(f * (1.0 + relative_half_width) for f, _ in guesses)
+    else:
+        lo, hi = float(band_hz[0]), float(band_hz[1])
+    outside = [f for f, _ in guesses if not lo < f < hi]
+    if outside:
+        raise ValueError(f"initial frequencies {outside} Hz lie outside the band ({lo}, {hi}) Hz")
     return lo, hi
 
 
 # --------------------------------------------------------------------------- engine
 @dataclass(frozen=True)
 class _Problem:
-    """Separable least squares ``min || W (Y - [V(theta) F] C) ||`` over theta (2 per mode).
+    """Separable least squares ``min || (Y - [V(theta) F] C) W ||`` over theta (2 per mode).
 
-    ``y`` is (2K, R) stacked real/imag targets, ``w`` (R,) weights, ``fixed`` the
-    theta-independent columns and ``variable(f0, xi)`` the columns of one mode.
+    ``y`` is (2K, R): R targets (outputs or paths) stacked real over imaginary
+    parts, sharing one design; ``fixed`` holds the theta-independent columns,
+    ``variable(f0, xi)`` the columns of one mode. ``W`` (per target) is set by :func:`_solve`.
     """
 
     y: NDArray[np.float64]
@@ -276,12 +289,12 @@ class _Problem:
         coef, *_ = np.linalg.lstsq(v, y_perp, rcond=None)
         return np.asarray(y_perp - v @ coef)
 
-    def coefficients(self, theta: NDArray[np.float64]) -> NDArray[np.float64]:
-        """All linear coefficients (variable columns first), shape (n_cols, R)."""
-        v = np.column_stack([self.variable(theta[2 * i], theta[2 * i + 1])
-                             for i in range(self.n_modes)])
-        coef, *_ = np.linalg.lstsq(np.column_stack([v, self.fixed]), self.y, rcond=None)
-        return np.asarray(coef)
+    def linear_fit(self, theta: NDArray[np.float64]) -> tuple[NDArray[np.float64], ...]:
+        """Linear coefficients (variable columns first), shape (n_cols, R), and residual (2K, R)."""
+        design = np.column_stack([*(self.variable(theta[2 * i], theta[2 * i + 1])
+                                    for i in range(self.n_modes)), self.fixed])
+        coef, *_ = np.linalg.lstsq(design, self.y, rcond=None)
+        return np.asarray(coef), np.asarray(self.y - design @ coef)
 
 
 def _solve(problem: _Problem, guesses: list[tuple[float, float]], band: tuple[float, float],
@@ -326,6 +339,8 @@ def _solve(problem: _Problem, guesses: list[tuple[float, float]], band: tuple[fl
     x_scale = np.array([v for i in range(problem.n_modes)
                         for v in (theta[2 * i] * theta[2 * i + 1], 0.1)])
     n_lin = problem.fixed.shape[1] + problem.variable(*guesses[0]).shape[1] * problem.n_modes
+    span = upper - lower
+    theta = to_theta(np.clip(to_x(theta), lower + 1e-9 * span, upper - 1e-9 * span))
     nfev, success = 0, True
     for _ in range(2):  # second pass: outputs weighted by their residual noise level
         sol = least_squares(lambda x: flat(to_theta(x)), to_x(theta),
@@ -355,12 +370,17 @@ def _solve(problem: _Problem, guesses: list[tuple[float, float]], band: tuple[fl
 
 
 def _modes_from(theta: NDArray[np.float64], cov: NDArray[np.float64],
-                guesses: list[tuple[float, float]],
+                guesses: list[tuple[float, float]], band: tuple[float, float],
                 peak: Callable[[int, float, float], tuple[tuple[str, str, float], ...]],
                 ) -> tuple[ModeEstimate, ...]:
     modes = []
     for i, (f_init, xi_init) in enumerate(guesses):
         f0, xi = float(theta[2 * i]), float(theta[2 * i + 1])
+        if min(f0 - band[0], band[1] - f0) < 4.0 * xi * f0:  # within 2 half-power bandwidths
+            warnings.warn(
+                f"mode {i} ended at {f0:.6g} Hz (damping {xi:.3g}), at the edge of the band "
+                f"{band} Hz: the band probably misses the mode; give a better initial "
+                "frequency or a wider band_hz", RuntimeWarning, stacklevel=3)
         c = cov[2 * i:2 * i + 2, 2 * i:2 * i + 2]
         sd = np.sqrt(np.clip(np.diag(c), 0.0, None))
         corr = float(c[0, 1] / (sd[0] * sd[1])) if sd[0] > 0 and sd[1] > 0 else 0.0
@@ -422,8 +442,14 @@ def estimate_modes(
     Raises
     ------
     ValueError
-        Bad shapes, names or guesses; a band outside ``(0, fs/2)`` or with too
-        few bins for the number of parameters.
+        Bad shapes, names or guesses; a guess outside the band; a band outside
+        ``(0, fs/2)`` or with too few bins for the number of parameters.
+
+    Warns
+    -----
+    RuntimeWarning
+        A fitted mode lies within two half-power bandwidths of the band's edge
+        (the band probably misses the mode).
     """
     u = _as_matrix(inputs, "inputs")
     y = _as_matrix(outputs, "outputs")
@@ -433,8 +459,7 @@ def estimate_modes(
     out_names = _names(output_names, y.shape[1], "output_names")
     guesses = _check_initial(initial)
     fs = float(fs_hz)
-    band = _default_band(guesses, relative_half_width) if band_hz is None else (
-        float(band_hz[0]), float(band_hz[1]))
+    band = _band(guesses, band_hz, relative_half_width)
     if not 0.0 < band[0] < band[1] < fs / 2.0:
         raise ValueError(f"band_hz must satisfy 0 < lo < hi < fs/2, got {band}")
     if background_order < 0:
@@ -465,9 +490,7 @@ def estimate_modes(
                               for o in range(y.shape[1])])
     problem = _Problem(y=target, fixed=fixed, variable=variable, n_modes=len(guesses))
     theta, cov, _, nfev, ok = _solve(problem, guesses, band, search_fraction)
-    coef = problem.coefficients(theta)
-    res = target - np.column_stack([*(variable(theta[2 * i], theta[2 * i + 1])
-                                      for i in range(len(guesses))), fixed]) @ coef
+    coef, res = problem.linear_fit(theta)
     per_mode = variable(*guesses[0]).shape[1]
 
     def peak(i: int, f0: float, xi: float) -> tuple[tuple[str, str, float], ...]:
@@ -487,7 +510,7 @@ def estimate_modes(
     rel = [(name, float(np.linalg.norm(res[:, o]) / np.linalg.norm(target[:, o])))
            for o, name in enumerate(out_names)]
     return ModalEstimate(
-        modes=_modes_from(theta, cov, guesses, peak), method="fd-output-error",
+        modes=_modes_from(theta, cov, guesses, band, peak), method="fd-output-error",
         band_hz=band, n_frequencies=int(f.size), frequency_resolution_hz=fs / n,
         input_names=in_names, output_names=out_names, background_order=background_order,
         noise_level=tuple(psd), relative_residual=tuple(rel), n_function_evaluations=nfev,
@@ -540,8 +563,9 @@ def fit_frf_modes(
         raise ValueError(f"frequency_hz {f_all.shape} and frf {h_all.shape} differ in shape")
     guesses = _check_initial(initial)
     fs = float(fs_hz)
-    band = _default_band(guesses, relative_half_width) if band_hz is None else (
-        float(band_hz[0]), float(band_hz[1]))
+    band = _band(guesses, band_hz, relative_half_width)
+    if not 0.0 < band[0] < band[1] <= fs / 2.0:
+        raise ValueError(f"band_hz must satisfy 0 < lo < hi <= fs/2, got {band}")
     sel = (f_all >= band[0]) & (f_all <= band[1]) & np.isfinite(h_all)
     f, h = f_all[sel], h_all[sel]
     q = np.exp(-2j * np.pi * f / fs)
@@ -558,9 +582,7 @@ def fit_frf_modes(
     target = np.concatenate([h.real, h.imag])[:, None]
     problem = _Problem(y=target, fixed=fixed, variable=variable, n_modes=len(guesses))
     theta, cov, _, nfev, ok = _solve(problem, guesses, band, search_fraction)
-    coef = problem.coefficients(theta)
-    res = target - np.column_stack([*(variable(theta[2 * i], theta[2 * i + 1])
-                                      for i in range(len(guesses))), fixed]) @ coef
+    coef, res = problem.linear_fit(theta)
 
     def peak(i: int, f0: float, xi: float) -> tuple[tuple[str, str, float], ...]:
         q0 = np.exp(-2j * np.pi * f0 / fs)
@@ -571,7 +593,7 @@ def fit_frf_modes(
     rms = float(np.sqrt(np.sum(res**2) / max(f.size, 1)))
     rel = float(np.linalg.norm(res) / np.linalg.norm(target))
     return ModalEstimate(
-        modes=_modes_from(theta, cov, guesses, peak), method="frf-fit", band_hz=band,
+        modes=_modes_from(theta, cov, guesses, band, peak), method="frf-fit", band_hz=band,
         n_frequencies=int(f.size),
         frequency_resolution_hz=float(np.median(np.diff(f))) if f.size > 1 else float("nan"),
         input_names=(input_name,), output_names=(output_name,),
