@@ -25,8 +25,11 @@ log-magnitude is continued by the asymptotic expansion every rational function
 has, ``ln|G| = a + n u + c e^{-2 (u - u_edge)} + O(e^{-4u})`` above the band (``|G|^2``
 is rational in ``w^2``, so the corrections go in powers of ``1/w^2``) and the
 mirror image below it, with ``n`` an integer (minus the relative degree above,
-the low-frequency order below). ``a``, ``c`` (and ``n``, rounded, unless given) are
-fitted to the top and bottom ``tail_ratio`` (default a factor 1.6) of the band.
+the low-frequency order below). ``a`` and ``c`` are fitted to the top and bottom
+``tail_ratio`` (default a factor 1.6) of the band, and ``n``, unless given, is the
+integer near the local slope that fits best. That region must be clear of
+resonances; give ``high_frequency_slope`` when the relative degree is known
+(-2 for both mirrors' paths): the choice of ``n`` is the fragile step.
 A constant-slope continuation instead (the textbook truncation) confuses the
 slow approach of a mode's roll-off to -40 dB/decade with extra phase lag: on
 the twin's noise-free Sercalo FRF over 10-1000 Hz it gives 73 µs instead of 150 µs.
@@ -90,7 +93,7 @@ _CHUNK = 256  # evaluation points per block of the kernel matrix (memory bound)
 _OUTLIER_MADS = 5.0  # residuals beyond 5 robust standard deviations are excluded
 _HANN_ENBW_BINS = 1.5  # equivalent noise bandwidth of a Hann window, in 1/L bins
 
-T = TypeVar("T", xr.DataArray, FrequencyResponse)
+_Frf = TypeVar("_Frf", xr.DataArray, FrequencyResponse)
 
 
 @dataclass(frozen=True)
@@ -487,9 +490,7 @@ def estimate_delay(
 
 
 # --------------------------------------------------------------------------- removal
-def remove_delay(
-    frf: T, delay_s: float | Mapping[str, float]
-) -> T:
+def remove_delay(frf: _Frf, delay_s: float | Mapping[str, float]) -> _Frf:
     """Multiply a frequency response by ``exp(+j 2 pi f tau)``, undoing a delay ``tau``.
 
     The seed's ``tf_Uch_Vph./G_delay_resp`` with ``G_delay = exp(-s Ts)``.

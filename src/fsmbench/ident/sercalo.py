@@ -53,6 +53,10 @@ __all__ = [
 ]
 
 OUTPUTS = ("Vph", "Vpv")
+# Both mirrors are second-order mechanical systems: above their modes the
+# magnitude falls as f^-2. Given to the delay estimator, it removes its most
+# fragile automatic choice (the slope it continues the magnitude with).
+MIRROR_HIGH_FREQUENCY_SLOPE = -2.0
 
 
 def experiment_frf(recordings: Mapping[str, xr.Dataset], *, columns: Sequence[tuple[str, str]],
@@ -250,7 +254,8 @@ def fit_sercalo(frf: FrequencyResponse, *, gi_a_per_v: Mapping[str, float],
     if len(inputs) != 2 or len(outputs) != 2:
         raise ValueError(f"the Sercalo fit needs a 2x2 matrix, got {outputs} x {inputs}")
     delays = tuple(estimate_delay(frf, output_name=outputs[j], input_name=inputs[j],
-                                  min_coherence=opts.min_coherence)
+                                  min_coherence=opts.min_coherence,
+                                  high_frequency_slope=MIRROR_HIGH_FREQUENCY_SLOPE)
                    for j in range(2))
     if opts.delay_s is None:
         delay, delay_std = combined_delay(delays)
@@ -326,7 +331,9 @@ def identify_newport(frf: FrequencyResponse, *, band_hz: tuple[float, float] = (
         raise ValueError(f"the Newport identification needs a 2x2 matrix, got {outputs} x "
                          f"{inputs}")
     delays = tuple(estimate_delay(frf, output_name=outputs[j], input_name=inputs[j],
-                                  min_coherence=min_coherence) for j in range(2))
+                                  min_coherence=min_coherence,
+                                  high_frequency_slope=MIRROR_HIGH_FREQUENCY_SLOPE)
+                   for j in range(2))
     delay, delay_std = combined_delay(delays)
     clean = remove_delay(frf, delay)
     f = clean.frequency_hz
