@@ -90,6 +90,8 @@ def _cmd_identify(args: argparse.Namespace) -> int:
     result = identify(recordings, bench=bench, source=str(data), progress=say)
     for step, why in result.skipped.items():
         say(f"step {step} skipped: {why}")
+    for warning in result.warnings:
+        print(f"fsmbench identify: warning: {warning}", file=sys.stderr)
     for path in write_identification(result, out):
         print(path)
     truth_path = data / "twin_truth.json"

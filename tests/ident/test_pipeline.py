@@ -97,3 +97,42 @@ def test_partial_data_runs_what_it_can(ident_twin: TwinRun, bench: Bench) -> Non
                                    "Gc": "nominal", "Gn": "nominal", "Gd": "identified"}
     out = result.to_json()
     assert "sercalo" not in out and "qd_gain_v_per_rad" in out
+
+
+def _with(ident_twin: TwinRun, name: str, **changes) -> dict:
+    recs = dict(ident_twin.recordings)
+    ds = recs[name].copy(deep=True)
+    for var, fn in changes.items():
+        ds[var] = (ds[var].dims, fn(ds[var].values))
+    recs[name] = ds
+    return recs
+
+
+def test_record_shorter_than_the_window_is_reported(ident_twin: TwinRun, bench: Bench) -> None:
+    recs = dict(ident_twin.recordings)
+    recs["data_unv"] = recs["data_unv"].isel(t=slice(0, 20000))  # 2 s: 0.5 s after the trim
+    result = identify(recs, bench=bench)
+    assert result.newport is None
+    msg = result.skipped["newport"]
+    assert "data_unh, data_unv" in msg and "too short" in msg and "samples" in msg
+
+
+def test_excitation_with_no_power_is_reported(ident_twin: TwinRun, bench: Bench) -> None:
+    result = identify(_with(ident_twin, "data_ucv", Ucv=lambda v: 0 * v), bench=bench)
+    assert result.sercalo is None
+    assert "Ucv" in result.skipped["current_amp"] and "no power" in result.skipped["current_amp"]
+
+
+def test_low_coherence_is_flagged_not_returned_as_good(ident_twin: TwinRun,
+                                                       bench: Bench) -> None:
+    rng = np.random.default_rng(5)
+    # The vertical 4QD sees only noise: nothing to fit on Ucv -> Vpv.
+    recs = _with(ident_twin, "data_ucv", Vpv=lambda v: 0.1 * rng.standard_normal(v.size))
+    result = identify(recs, bench=bench)
+    problems = " ".join(result.warnings) + " ".join(result.skipped.values())
+    assert "Vpv" in problems or "coherence" in problems
+    assert not (result.sercalo is not None and not result.warnings)
+
+
+def test_good_data_has_no_warning(identified: Identification) -> None:
+    assert identified.warnings == ()

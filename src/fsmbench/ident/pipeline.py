@@ -68,6 +68,7 @@ __all__ = [
     "Identification",
     "IdentifyOptions",
     "identify",
+    "quality_warnings",
     "write_identification",
 ]
 
@@ -132,8 +133,12 @@ class Identification:
         ``plant_blocks``.
     plant_blocks : dict block -> "identified" | "nominal"
     skipped : dict step -> reason
+        Steps not run (missing data) or failed (the error message).
     options : IdentifyOptions
     source : str
+    warnings : tuple of str
+        Why the results should not be trusted (bad fit, low coherence, no
+        convergence); empty when all quality checks pass.
     """
 
     qd: dict[str, QdCalibration]
@@ -147,6 +152,7 @@ class Identification:
     skipped: dict[str, str]
     options: IdentifyOptions
     source: str
+    warnings: tuple[str, ...] = ()
 
     def sercalo_modes(self) -> dict[str, dict[str, float]]:
         """Resonance and damping per axis: refined when available, else from the fit."""
@@ -204,6 +210,7 @@ class Identification:
             "newport": None if self.newport is None else self.newport.summary(),
             "plant_blocks": self.plant_blocks,
             "skipped": self.skipped,
+            "warnings": list(self.warnings),
             "options": self.options.to_json(),
         }
         return out
@@ -249,10 +256,15 @@ def identify(recordings: Mapping[str, xr.Dataset], *, bench: Bench,
     qd: dict[str, QdCalibration] = {}
     if not (gone := missing("data_cal_pd_h", "data_cal_pd_v")):
         say("2.1 calibrating the 4QD against the Newport metrology")
-        for axis in "hv":
-            qd[axis] = calibrate_qd(recordings[f"data_cal_pd_{axis}"], axis=axis,
-                                    metrology_gain_rad_per_v=nom.newport.metrology_gain_rad_per_v,
-                                    trim_s=opts.trims_s.get(f"data_cal_pd_{axis}", 1.0))
+        try:
+            for axis in "hv":
+                qd[axis] = calibrate_qd(
+                    recordings[f"data_cal_pd_{axis}"], axis=axis,
+                    metrology_gain_rad_per_v=nom.newport.metrology_gain_rad_per_v,
+                    trim_s=opts.trims_s.get(f"data_cal_pd_{axis}", 1.0))
+        except ValueError as exc:
+            qd = {}
+            skipped["qd"] = f"failed: {exc}"
     else:
         skipped["qd"] = f"missing {', '.join(gone)}"
 
@@ -262,33 +274,50 @@ def identify(recordings: Mapping[str, xr.Dataset], *, bench: Bench,
     validation: tuple[PathValidation, ...] = ()
     if not (gone := missing("data_uch", "data_ucv")):
         say("2.2 identifying the current amplifiers")
-        for axis, exp in (("h", "data_uch"), ("v", "data_ucv")):
-            gi[axis] = calibrate_current_amplifier(
-                recordings[exp], axis=axis, nominal=nom, trim_s=opts.trims_s.get(exp, 1.0),
-                band_hz=opts.current_amp_band_hz, window_s=opts.window_s)
-        say("2.3 Sercalo: FRF matrix, delay, vector fitting")
-        frf = experiment_frf(recordings, columns=[("data_uch", "Uch"), ("data_ucv", "Ucv")],
-                             trims_s=opts.trims_s, window_s=opts.window_s)
-        sercalo_id = fit_sercalo(frf, gi_a_per_v={a: g.gain_a_per_v for a, g in gi.items()},
-                                 options=opts.sercalo)
-        if opts.refine_modes:
-            say("2.3 Sercalo: refining the modes on the time records")
-            modes = refine_modes(recordings, sercalo=sercalo_id, trims_s=opts.trims_s)
-            sercalo_id = refit_with_poles(sercalo_id, poles=modes.poles_by_input())
-        else:
-            skipped["mode_refinement"] = "disabled by option"
-        validation = validate_sercalo(recordings, sercalo=sercalo_id, trims_s=opts.trims_s)
+        try:
+            for axis, exp in (("h", "data_uch"), ("v", "data_ucv")):
+                gi[axis] = calibrate_current_amplifier(
+                    recordings[exp], axis=axis, nominal=nom, trim_s=opts.trims_s.get(exp, 1.0),
+                    band_hz=opts.current_amp_band_hz, window_s=opts.window_s)
+        except ValueError as exc:
+            gi = {}
+            skipped["current_amp"] = f"failed: {exc}"
+            skipped["sercalo"] = "needs the current-amplifier gains (2.2), which failed"
     else:
         skipped["current_amp"] = skipped["sercalo"] = f"missing {', '.join(gone)}"
+    if gi:
+        say("2.3 Sercalo: FRF matrix, delay, vector fitting")
+        try:
+            frf = experiment_frf(recordings, columns=[("data_uch", "Uch"), ("data_ucv", "Ucv")],
+                                 trims_s=opts.trims_s, window_s=opts.window_s)
+            sercalo_id = fit_sercalo(frf, gi_a_per_v={a: g.gain_a_per_v for a, g in gi.items()},
+                                     options=opts.sercalo)
+            if opts.refine_modes:
+                say("2.3 Sercalo: refining the modes on the time records")
+                modes = refine_modes(recordings, sercalo=sercalo_id, trims_s=opts.trims_s)
+                sercalo_id = refit_with_poles(sercalo_id, poles=modes.poles_by_input())
+            else:
+                skipped["mode_refinement"] = "disabled by option"
+            validation = validate_sercalo(recordings, sercalo=sercalo_id, trims_s=opts.trims_s)
+        except ValueError as exc:
+            sercalo_id, modes, validation = None, None, ()
+            skipped["sercalo"] = f"failed (data_uch, data_ucv): {exc}"
 
     newport_id: NewportIdentification | None = None
     if not (gone := missing("data_unh", "data_unv")):
         say("2.4 Newport: FRF matrix, delay and gains")
-        nfrf = experiment_frf(recordings, columns=[("data_unh", "Unh"), ("data_unv", "Unv")],
-                              trims_s=opts.trims_s, window_s=opts.window_s)
-        newport_id = identify_newport(nfrf, band_hz=opts.newport_band_hz)
+        try:
+            nfrf = experiment_frf(recordings, columns=[("data_unh", "Unh"), ("data_unv", "Unv")],
+                                  trims_s=opts.trims_s, window_s=opts.window_s)
+            newport_id = identify_newport(nfrf, band_hz=opts.newport_band_hz)
+        except ValueError as exc:
+            skipped["newport"] = f"failed (data_unh, data_unv): {exc}"
     else:
         skipped["newport"] = f"missing {', '.join(gone)}"
+
+    warnings = quality_warnings(sercalo=sercalo_id, modes=modes, validation=validation)
+    for w in warnings:
+        say(f"warning: {w}")
 
     say("2.5 assembling the identified system")
     blocks = {
@@ -314,7 +343,44 @@ def identify(recordings: Mapping[str, xr.Dataset], *, bench: Bench,
     return Identification(qd=qd, current_amp=gi, sercalo=sercalo_id, modes=modes,
                           validation=validation, newport=newport_id, plant=plant,
                           plant_blocks={k: v[0] for k, v in blocks.items()}, skipped=skipped,
-                          options=opts, source=source)
+                          options=opts, source=source, warnings=warnings)
+
+
+# Quality limits: the identification issue's 5 % fit target on direct paths;
+# a direct path whose model explains < 90 % of the recorded variance, or a
+# modal fit that did not converge, is not a model to design a controller on.
+MAX_DIRECT_FIT_ERROR = 0.05
+MIN_DIRECT_VAF = 0.9
+
+
+def quality_warnings(*, sercalo: SercaloIdentification | None, modes: ModeRefinement | None,
+                     validation: tuple[PathValidation, ...]) -> tuple[str, ...]:
+    """Why a Sercalo model should not be trusted, one sentence each (empty when good)."""
+    out: list[str] = []
+    if sercalo is None:
+        return ()
+    if not sercalo.fit.converged:
+        out.append(f"vector fitting did not converge in {sercalo.fit.iterations} iterations; "
+                   "the poles may be wrong — check the weights and the excitation")
+    for path in ("Vph/Uch", "Vpv/Ucv"):
+        err = sercalo.fit_error.get(path, float("nan"))
+        if not np.isfinite(err):
+            out.append(f"{path}: no bin with coherence > 0.9 between 10 Hz and 1 kHz; the "
+                       "excitation is too weak for this path — raise its level or lengthen "
+                       "the record")
+        elif err > MAX_DIRECT_FIT_ERROR:
+            out.append(f"{path}: the fit misses the measured FRF by {err:.1%} rms "
+                       f"(limit {MAX_DIRECT_FIT_ERROR:.0%}); more poles or other weights needed")
+    for v in validation:
+        if v.output[-1] == v.input[-1] and v.vaf < MIN_DIRECT_VAF:
+            out.append(f"{v.experiment}: the model explains {v.vaf:.1%} of {v.output}'s "
+                       f"variance (limit {MIN_DIRECT_VAF:.0%})")
+    if modes is not None:
+        for axis, est in modes.estimates.items():
+            if not est.converged:
+                out.append(f"modal estimate of axis {axis} did not converge; its damping is "
+                           "unreliable")
+    return tuple(out)
 
 
 def write_identification(result: Identification, out_dir: str | Path) -> list[Path]:

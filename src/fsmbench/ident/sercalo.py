@@ -89,6 +89,22 @@ def experiment_frf(recordings: Mapping[str, xr.Dataset], *, columns: Sequence[tu
     return combine_columns(parts)
 
 
+def _path_delays(frf: FrequencyResponse, *, min_coherence: float) -> tuple[DelayEstimate, ...]:
+    """Delay of each direct path; low coherence becomes advice, not just a failure."""
+    out = []
+    for j in range(2):
+        out_name, in_name = frf.output_names[j], frf.input_names[j]
+        try:
+            out.append(estimate_delay(frf, output_name=out_name, input_name=in_name,
+                                      min_coherence=min_coherence,
+                                      high_frequency_slope=MIRROR_HIGH_FREQUENCY_SLOPE))
+        except ValueError as exc:
+            raise ValueError(f"{exc}. The coherence of {in_name} -> {out_name} is too low to "
+                             "identify this path: raise the excitation level, lengthen the "
+                             "record, or check that the sensor sees the beam") from exc
+    return tuple(out)
+
+
 def combined_delay(estimates: Sequence[DelayEstimate]) -> tuple[float, float]:
     """Inverse-variance mean of several delay estimates and its standard error [s]."""
     d = np.array([e.delay_s for e in estimates])
@@ -253,10 +269,7 @@ def fit_sercalo(frf: FrequencyResponse, *, gi_a_per_v: Mapping[str, float],
     inputs, outputs = frf.input_names, frf.output_names
     if len(inputs) != 2 or len(outputs) != 2:
         raise ValueError(f"the Sercalo fit needs a 2x2 matrix, got {outputs} x {inputs}")
-    delays = tuple(estimate_delay(frf, output_name=outputs[j], input_name=inputs[j],
-                                  min_coherence=opts.min_coherence,
-                                  high_frequency_slope=MIRROR_HIGH_FREQUENCY_SLOPE)
-                   for j in range(2))
+    delays = _path_delays(frf, min_coherence=opts.min_coherence)
     if opts.delay_s is None:
         delay, delay_std = combined_delay(delays)
     else:
@@ -330,10 +343,7 @@ def identify_newport(frf: FrequencyResponse, *, band_hz: tuple[float, float] = (
     if len(inputs) != 2 or len(outputs) != 2:
         raise ValueError(f"the Newport identification needs a 2x2 matrix, got {outputs} x "
                          f"{inputs}")
-    delays = tuple(estimate_delay(frf, output_name=outputs[j], input_name=inputs[j],
-                                  min_coherence=min_coherence,
-                                  high_frequency_slope=MIRROR_HIGH_FREQUENCY_SLOPE)
-                   for j in range(2))
+    delays = _path_delays(frf, min_coherence=min_coherence)
     delay, delay_std = combined_delay(delays)
     clean = remove_delay(frf, delay)
     f = clean.frequency_hz

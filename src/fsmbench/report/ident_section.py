@@ -64,6 +64,12 @@ def identification_section(result: Identification, *, recordings: Mapping[str, x
         "delay estimated from the phase (2.3), the Newport gains and delay (2.4), and the "
         "blocks are assembled with the seed's connect (2.5).",
     ]
+    if result.warnings:
+        paragraphs.append("Quality warnings — do not trust the affected results: "
+                          + " ".join(result.warnings))
+    else:
+        paragraphs.append("Quality checks passed: fit converged, direct paths within 5 % rms "
+                          "and explaining > 90 % of the recorded variance, modal fits converged.")
     if result.skipped:
         paragraphs.append("Skipped: " + "; ".join(f"{k} ({v})" for k, v in result.skipped.items())
                           + ".")
