@@ -2,12 +2,13 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 import control as ct
-import numpy as np
 import pytest
 
-from fsmbench.bench.blocks import PlantModel
-from fsmbench.bench.params import Bench
+from fsmbench.bench.blocks import PlantModel, replace_params
+from fsmbench.bench.params import Bench, PerAxis
 from fsmbench.control.seed import seed_decentralised_controller
 from fsmbench.twin.verify import predict_tracking, verify_on_twin
 
@@ -24,12 +25,14 @@ def test_seed_controller_on_the_twin_matches_the_prediction(bench: Bench,
 def test_prediction_terms_scale_as_their_sources(bench: Bench, true_plant: PlantModel) -> None:
     k = seed_decentralised_controller()
     _, parts = predict_tracking(true_plant, k, bench=bench, n_freq=4000)
-    # Each white source enters linearly: the 4QD noise term over the ADC term is
-    # the ratio of their rms, 0.9 mV over q/sqrt(12) = 88 µV for axis h.
-    lsb = bench.nominal.converter.lsb_v
-    expected = bench.true.quad_diode.noise_rms_v.h / (lsb / np.sqrt(12))
-    assert parts["h"]["qd_noise"] / parts["h"]["adc_quantisation"] == pytest.approx(expected,
-                                                                                     rel=1e-9)
+    q = bench.true.quad_diode.noise_rms_v
+    louder = dataclasses.replace(bench, true=replace_params(
+        bench.true, quad_diode={"noise_rms_v": PerAxis(h=3 * q.h, v=3 * q.v)}))
+    _, parts3 = predict_tracking(true_plant, k, bench=louder, n_freq=4000)
+    # Each white source enters linearly: 3x the 4QD noise, 3x its term, nothing else moves.
+    for axis in "hv":
+        assert parts3[axis]["qd_noise"] == pytest.approx(3 * parts[axis]["qd_noise"], rel=1e-12)
+        assert parts3[axis]["newport_sine"] == parts[axis]["newport_sine"]
 
 
 def test_a_destabilising_controller_is_refused(bench: Bench, true_plant: PlantModel) -> None:
