@@ -66,26 +66,32 @@ def main() -> None:
     u[:, 0] = 0.02 * rng.standard_normal(n)
     u[:, 2] = 0.1 * rng.standard_normal(n)
     zeros = np.zeros((n, n_adc))
-    run_loop(plant, u_ext=u[:10], adc_noise=zeros[:10], adc=ideal, dac=ideal, n_adc=n_adc)
+    for spec in (False, True):  # compile (or load) both loops before timing
+        run_loop(plant, u_ext=u[:10], adc_noise=zeros[:10], adc=ideal, dac=ideal, n_adc=n_adc,
+                 specialise=spec)
+    t_gen = median_time(lambda: run_loop(plant, u_ext=u, adc_noise=zeros, adc=ideal, dac=ideal,
+                                         n_adc=n_adc), args.repeats)
     t_ours = median_time(lambda: run_loop(plant, u_ext=u, adc_noise=zeros, adc=ideal, dac=ideal,
-                                          n_adc=n_adc), args.repeats)
+                                          n_adc=n_adc, specialise=True), args.repeats)
     sys_d = ct.ss(plant.a, plant.b, plant.c, np.zeros((plant.c.shape[0], 4)), plant.ts_s)
     tgrid = np.arange(n) * plant.ts_s
     t_fr = median_time(lambda: ct.forced_response(sys_d, T=tgrid, U=u.T), max(1, args.repeats // 2))
     t_dlsim = median_time(lambda: sig.dlsim((plant.a, plant.b, plant.c,
                                              np.zeros((plant.c.shape[0], 4)), plant.ts_s), u),
                           max(1, args.repeats // 2))
-    ours = run_loop(plant, u_ext=u, adc_noise=zeros, adc=ideal, dac=ideal, n_adc=n_adc)
+    ours = run_loop(plant, u_ext=u, adc_noise=zeros, adc=ideal, dac=ideal, n_adc=n_adc,
+                    specialise=True)
     ref = np.asarray(ct.forced_response(sys_d, T=tgrid, U=u.T).outputs).T
     err = np.max(np.abs(ours.adc - ref[:, :n_adc])) / np.max(np.abs(ref[:, :n_adc]))
     print(f"1. linear open loop, {n} samples, {plant.a.shape[0]} states")
-    per_sample_ns = t_ours / n * 1e9
-    print(f"   fsmbench run_loop           {t_ours * 1e3:9.1f} ms"
-          f"  ({per_sample_ns:6.0f} ns/sample)")
+    print(f"   fsmbench run_loop, this plant {t_ours * 1e3:7.1f} ms"
+          f"  ({t_ours / n * 1e9:6.0f} ns/sample, unrolled: twin.codegen)")
+    print(f"   fsmbench run_loop, generic    {t_gen * 1e3:7.1f} ms"
+          f"  ({t_gen / n * 1e9:6.0f} ns/sample)")
     print(f"   control.forced_response     {t_fr * 1e3:9.1f} ms"
-          f"  -> fsmbench {t_fr / t_ours:6.0f}x faster")
+          f"  -> fsmbench {t_fr / t_ours:6.0f}x faster (generic {t_fr / t_gen:.0f}x)")
     print(f"   scipy.signal.dlsim          {t_dlsim * 1e3:9.1f} ms"
-          f"  -> fsmbench {t_dlsim / t_ours:6.0f}x faster")
+          f"  -> fsmbench {t_dlsim / t_ours:6.0f}x faster (generic {t_dlsim / t_gen:.0f}x)")
     print(f"   max relative difference vs forced_response: {err:.1e}")
 
     # 2. closed loop with quantisation
@@ -94,7 +100,8 @@ def main() -> None:
                                ts_s=plant.ts_s)
     noise = 1e-3 * rng.standard_normal((n, n_adc))
     t_cl = median_time(lambda: run_loop(plant, u_ext=u, adc_noise=noise, adc=conv, dac=conv,
-                                        controller=ctrl, n_adc=n_adc), args.repeats)
+                                        controller=ctrl, n_adc=n_adc, specialise=True),
+                       args.repeats)
     n_py = 5_000
     t_py = median_time(lambda: run_loop_python(plant, u_ext=u[:n_py], adc_noise=noise[:n_py],
                                                adc=conv, dac=conv, controller=ctrl,

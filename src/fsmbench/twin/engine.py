@@ -141,10 +141,12 @@ def _loop_body(ab_row: np.ndarray, ab_col: np.ndarray, ab_val: np.ndarray,
     e = np.zeros(ni)
     for k in range(n_steps):
         # Plant outputs and ADC.
+        # <outputs> (fsmbench.twin.codegen replaces this block for one plant)
         for i in range(ny):
             y[i] = 0.0
         for q in range(n_c):
             y[c_row[q]] += c_val[q] * zu[c_col[q]]
+        # </outputs>
         for i in range(n_adc):
             out_adc[k, i] = _quantise_scalar(y[i] + adc_noise[k, i], adc_lsb, adc_lo, adc_hi)
         for i in range(n_adc, ny):
@@ -175,10 +177,12 @@ def _loop_body(ab_row: np.ndarray, ab_col: np.ndarray, ab_val: np.ndarray,
             zu[nz + i] = _quantise_scalar(zu[nz + i], dac_lsb, dac_lo, dac_hi)
             out_dac[k, i] = zu[nz + i]
         # Plant update.
+        # <update> (fsmbench.twin.codegen replaces this block for one plant)
         for i in range(nz):
             z_next[i] = 0.0
         for q in range(n_ab):
             z_next[ab_row[q]] += ab_val[q] * zu[ab_col[q]]
+        # </update>
         for i in range(nz):
             zu[i] = z_next[i]
 
@@ -244,7 +248,7 @@ def _prepare(plant: DiscretePlant, *, u_ext: np.ndarray, adc_noise: np.ndarray,
 
 def run_loop(plant: DiscretePlant, *, u_ext: np.ndarray, adc_noise: np.ndarray, adc: Quantiser,
              dac: Quantiser, controller: DiscreteController | None = None, n_adc: int,
-             z0: np.ndarray | None = None) -> LoopResult:
+             z0: np.ndarray | None = None, specialise: bool = False) -> LoopResult:
     """Run the compiled loop.
 
     Parameters
@@ -261,10 +265,20 @@ def run_loop(plant: DiscretePlant, *, u_ext: np.ndarray, adc_noise: np.ndarray, 
     n_adc : int
     z0 : array (nz,), optional
         Initial plant state (default zero).
+    specialise : bool
+        Compile a loop for this plant with its products unrolled
+        (:mod:`fsmbench.twin.codegen`): ~5x faster per sample, bit-identical,
+        one compilation per plant (cached on disk). Worth it for long runs
+        of one plant (the twin); the generic loop suits one-off plants.
     """
     args = _prepare(plant, u_ext=u_ext, adc_noise=adc_noise, adc=adc, dac=dac,
                     controller=controller, n_adc=n_adc, z0=z0)
-    _loop_body(*args)
+    if specialise:
+        from fsmbench.twin.codegen import specialised_kernel  # builds on this module
+
+        specialised_kernel(plant)(*args)
+    else:
+        _loop_body(*args)
     return LoopResult(adc=args[-3], dac=args[-2], internal=args[-1])
 
 

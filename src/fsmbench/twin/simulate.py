@@ -131,7 +131,7 @@ def simulate_experiment(bench: Bench, spec: ExperimentSpec, *, seed: int,
     u_ext = _excitation(spec, n, fs, seed)
     loop = run_loop(plant, u_ext=u_ext, adc_noise=adc_noise, adc=conv, dac=conv,
                     controller=controller if spec.closed_loop else None,
-                    n_adc=len(ADC_CHANNELS))
+                    n_adc=len(ADC_CHANNELS), specialise=True)
     internal = {name: loop.internal[:, i] for i, name in enumerate(INTERNAL_SIGNALS)}
     theta_c = np.column_stack([internal["theta_ch"], internal["theta_cv"]])
     theta_n = np.column_stack([internal["theta_nh"], internal["theta_nv"]]) + n_theta
