@@ -3,6 +3,8 @@
     fsmbench params   [--params FILE] [--out DIR] [--json]
     fsmbench simulate OUT [--duration S] [--seed N] [--params FILE] [--format F]
     fsmbench identify DATA --out OUT [--params FILE]
+    fsmbench budget   DATA --out OUT [--params FILE]
+    fsmbench design   DATA --out OUT [--params FILE] [--seed N]
     fsmbench study    [--data DIR] --out OUT [--seed N] [--duration S] [--params FILE]
 
 Every command writes only under its output folder, never into a data folder.
@@ -76,12 +78,9 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
 def _cmd_identify(args: argparse.Namespace) -> int:
     from fsmbench.ident.compare import compare_with_truth
     from fsmbench.ident.pipeline import identify, write_identification
-    from fsmbench.study import check_out_dir, load_recordings
+    from fsmbench.study import load_recordings
 
-    data, out = Path(args.data), Path(args.out)
-    check_out_dir(out, data)
-    if not data.is_dir():
-        raise FileNotFoundError(f"data folder {data} does not exist")
+    data, out = _data_and_out(args)
     say = _progress()
     bench = _bench(args)
     recordings, skipped = load_recordings(data, progress=say)
@@ -98,6 +97,69 @@ def _cmd_identify(args: argparse.Namespace) -> int:
     reference = (json.loads(truth_path.read_text()) if truth_path.is_file() else None)
     for row in compare_with_truth(result.to_json(), reference=reference, bench=bench):
         print(row, file=sys.stderr)
+    return 0
+
+
+def _data_and_out(args: argparse.Namespace) -> tuple[Path, Path]:
+    from fsmbench.study import check_out_dir
+
+    data, out = Path(args.data), Path(args.out)
+    check_out_dir(out, data)
+    if not data.is_dir():
+        raise FileNotFoundError(f"data folder {data} does not exist")
+    out.mkdir(parents=True, exist_ok=True)
+    return data, out
+
+
+def _cmd_budget(args: argparse.Namespace) -> int:
+    from fsmbench.stages import budget_stage, choose_plant
+    from fsmbench.study import load_recordings
+
+    data, out = _data_and_out(args)
+    say = _progress()
+    bench = _bench(args)
+    recordings, skipped = load_recordings(data, progress=say)
+    for name, why in skipped.items():
+        say(f"skipped {name}: {why}")
+    plant = choose_plant(recordings, bench=bench, progress=say)
+    say(f"plant: {plant.source}")
+    say("noise and error budget, huddle tests, repeatability (seed sections 3, 4, 11)")
+    result, paths = budget_stage(recordings, bench=bench, out_dir=out, plant=plant)
+    for path in paths:
+        print(path)
+    summary = result.to_json()
+    print(f"total {1e9 * float(summary['total_rms_m']):.3g} nm rms; limiting source: "
+          f"{result.limiting}", file=sys.stderr)
+    for part, why in summary.get("skipped", {}).items():
+        print(f"skipped {part}: {why}", file=sys.stderr)
+    return 0
+
+
+def _cmd_design(args: argparse.Namespace) -> int:
+    from fsmbench.stages import choose_plant, design_stage
+    from fsmbench.study import load_recordings
+
+    data, out = _data_and_out(args)
+    say = _progress()
+    bench = _bench(args)
+    recordings, _skipped = load_recordings(data, progress=say)
+    plant = choose_plant(recordings, bench=bench, progress=say)
+    say(f"plant: {plant.source}")
+    stage, paths = design_stage(bench=bench, out_dir=out, plant=plant, seed=args.seed,
+                                progress=say)
+    for path in paths:
+        print(path)
+    p = stage.payload
+    for name in ("seed_controller", "fsmbench_controller", "newport_controller"):
+        loop = p[name]
+        axes = "; ".join(f"{a}: GM {loop[a]['gain_margin_db']} dB, PM {loop[a]['phase_margin_deg']}"
+                         f" deg, fc {loop[a]['crossover_hz']} Hz" for a in ("h", "v"))
+        print(f"{name}: meets objective {loop['meets_objective']}; {axes}", file=sys.stderr)
+    twin = p["closed_loop_twin"]
+    print("fsmbench controller on the twin: tracking error "
+          + ", ".join(f"{a} {1e6 * v:.3g} µrad rms (predicted "
+                      f"{1e6 * twin['predicted_rms_rad'][a]:.3g})"
+                      for a, v in twin["tracking_error_rms_rad"].items()), file=sys.stderr)
     return 0
 
 
@@ -149,6 +211,22 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("data", metavar="DATA", help="folder of recordings (.mat, .h5, .nxs)")
     p.add_argument("--out", metavar="DIR", required=True, help="output folder")
     p.set_defaults(func=_cmd_identify)
+
+    p = sub.add_parser("budget", help="seed sections 3, 4, 11: huddle tests, error budget, "
+                                       "repeatability")
+    common(p)
+    p.add_argument("data", metavar="DATA", help="folder of recordings (.mat, .h5, .nxs)")
+    p.add_argument("--out", metavar="DIR", required=True, help="output folder")
+    p.set_defaults(func=_cmd_budget)
+
+    p = sub.add_parser("design", help="seed sections 5-10: plant analysis, controllers, "
+                                       "verification on the twin, export")
+    common(p)
+    p.add_argument("data", metavar="DATA", help="folder of recordings (.mat, .h5, .nxs)")
+    p.add_argument("--out", metavar="DIR", required=True, help="output folder")
+    p.add_argument("--seed", metavar="N", type=int, default=0,
+                   help="twin seed of the closed-loop verification (default 0)")
+    p.set_defaults(func=_cmd_design)
 
     p = sub.add_parser("study", help="the whole study; the twin when no --data is given")
     common(p)

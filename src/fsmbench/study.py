@@ -1,9 +1,10 @@
 """``fsmbench study``: the whole seed study on recorded data or on the twin.
 
 Stages run left to right (docs/architecture.md): recordings (simulated by
-the twin when no data folder is given) → report. Each later stage
-(identification, budget, design) adds its outputs and a report section; a
-stage whose experiments are missing is skipped and the report says why.
+the twin when no data folder is given) → identification → budget → design
+(:mod:`fsmbench.stages`) → report. Each stage adds its outputs and a report
+section; a stage or part whose experiments are missing is skipped and the
+report says why.
 """
 
 from __future__ import annotations
@@ -19,14 +20,22 @@ import xarray as xr
 
 from fsmbench import __version__
 from fsmbench.bench.params import Bench, default_bench
-from fsmbench.ident.pipeline import identify, write_identification
 from fsmbench.io.atomic import atomic_write_text
 from fsmbench.io.errors import RecordingError
 from fsmbench.io.recording import find_experiments, read_recording
 from fsmbench.io.signals import EXPERIMENTS
 from fsmbench.report.bench_section import bench_section, parameters_section, recordings_section
+from fsmbench.report.budget_section import budget_section
+from fsmbench.report.design_section import design_section
 from fsmbench.report.html import Section, write_report
 from fsmbench.report.ident_section import identification_section
+from fsmbench.stages import (
+    IDENT_EXPERIMENTS,
+    budget_stage,
+    choose_plant,
+    design_stage,
+    identify_stage,
+)
 from fsmbench.twin.simulate import simulate_bench, write_twin
 
 __all__ = ["StageStatus", "StudyResult", "check_out_dir", "load_recordings", "run_study"]
@@ -156,12 +165,11 @@ def run_study(*, out_dir: str | Path, data_dir: str | Path | None = None,
     truth_path = data / "twin_truth.json"
     truth = json.loads(truth_path.read_text()) if truth_path.is_file() else None
     t0 = time.perf_counter()
-    ident_needs = ("data_cal_pd_h", "data_cal_pd_v", "data_uch", "data_ucv", "data_unh",
-                   "data_unv")
-    if any(n in recordings for n in ident_needs):
+    ident = None
+    if any(n in recordings for n in IDENT_EXPERIMENTS):
         say("identification (seed section 2)")
-        ident = identify(recordings, bench=bench, source=source, progress=say)
-        written = write_identification(ident, out)
+        ident, written = identify_stage(recordings, bench=bench, out_dir=out, source=source,
+                                        progress=say)
         sections.append(identification_section(ident, recordings=recordings, bench=bench,
                                                 truth=truth))
         stages.append(StageStatus(
@@ -170,7 +178,24 @@ def run_study(*, out_dir: str | Path, data_dir: str | Path | None = None,
             seconds=time.perf_counter() - t0))
     else:
         stages.append(StageStatus("identify", False,
-                                  reason="none of " + ", ".join(ident_needs) + " present"))
+                                  reason="none of " + ", ".join(IDENT_EXPERIMENTS) + " present"))
+    plant = choose_plant(recordings, bench=bench, identification=ident, progress=say)
+    say(f"plant for the budget and the design: {plant.source}")
+
+    t0 = time.perf_counter()
+    say("noise and error budget, huddle tests, repeatability (seed sections 3, 4, 11)")
+    budget, written = budget_stage(recordings, bench=bench, out_dir=out, plant=plant)
+    sections.append(budget_section(budget, recordings=recordings, plant_source=plant.source))
+    stages.append(StageStatus("budget", True, outputs=tuple(str(p) for p in written),
+                              reason="; ".join(f"{k}: {v}" for k, v in budget.skipped.items()),
+                              seconds=time.perf_counter() - t0))
+
+    t0 = time.perf_counter()
+    design, written = design_stage(bench=bench, out_dir=out, plant=plant, seed=seed,
+                                   progress=say)
+    sections.append(design_section(design, plant_source=plant.source))
+    stages.append(StageStatus("design", True, outputs=tuple(str(p) for p in written),
+                              seconds=time.perf_counter() - t0))
 
     report_path = out / "report.html"
     meta = (f"fsmbench {__version__}; source: {source}.",

@@ -1,0 +1,527 @@
+"""Huddle tests (seed 3): noise of the 4QD and of the Attocube in the five configurations.
+
+Processing as the seed's 3.2–3.5: samples with ``t < t0`` (1 s) are removed,
+the first ``tend·fs`` (100 s) kept; the mean is removed (the seed removes it
+from ``Va`` only; removing it from ``Vph``, ``Vpv`` changes nothing but the
+0 Hz and first Welch bins); ``Va`` is low-passed at 50 Hz
+(:func:`~fsmbench.budget.spectra.first_order_lowpass`); PSDs with
+``pwelch(x, hanning(ceil(1*fs)), [], [], fs)``.
+
+The seed's conclusion (3.6) is a comparison of configurations (Table 3). It
+is computed here as rms ratios in stated bands of ``Va``:
+
+* ``drift``: the rms of the 1 s means (content below ~0.5 Hz);
+* ``3–50 Hz`` and ``50 Hz–fs/2``: the Welch PSD summed over the band (from
+  3 Hz: the 1 s Hann window's main lobe is ±2 Hz wide);
+* ``total``: the time-domain rms.
+
+A ratio is called significant when ``|ln ratio| > 2·√(σ₁² + σ₂²)``, σ the
+relative standard deviation of each rms. σ comes from the spectrum's shape:
+``σ_power² = ΣP²/(ΣP)²`` over independent spectral values (a Hann-tapered
+periodogram of the 1 s means; for Welch bands, bins per equivalent noise
+bandwidth and the Welch averages), ``σ_rms = σ_power/2``. For drifts with
+correlation times near the record length this is approximate (a few degrees
+of freedom); the sentence reports the ratios either way.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, fields
+
+import control as ct
+import numpy as np
+import xarray as xr
+from numba import njit
+from numpy.typing import NDArray
+
+from fsmbench.bench.blocks import newport_beam_matrix
+from fsmbench.bench.params import BenchParams
+from fsmbench.budget.spectra import cumulative_power, first_order_lowpass, seed_welch
+from fsmbench.control.seed import tustin
+from fsmbench.ident import hanning
+
+__all__ = [
+    "HUDDLE_CONFIGS",
+    "BandRms",
+    "ConfigComparison",
+    "DacNoiseEstimate",
+    "HuddleAnalysis",
+    "HuddleRecord",
+    "QdNoiseEstimate",
+    "analyse_huddle",
+    "analyse_huddle_record",
+    "estimate_dac_noise",
+    "estimate_qd_noise",
+    "huddle_number",
+    "trim_huddle",
+]
+
+FloatArray = NDArray[np.float64]
+
+#: Seed Table 3: test number → (closed loop, compensation unit, aluminium shielding).
+HUDDLE_CONFIGS: dict[int, tuple[bool, bool, bool]] = {
+    1: (False, False, False), 2: (False, True, False), 3: (True, True, False),
+    4: (False, True, True), 5: (True, True, True),
+}
+_NAME = re.compile(r"^data_huddle_test_(\d+)$")
+# Welch bands start at 3 Hz: the 1 s Hann window's main lobe spans ±2 Hz, so the
+# bins below carry the drift's leakage.
+_BANDS_HZ = ((3.0, 50.0), (50.0, math.inf))
+
+
+def huddle_number(name: str) -> int:
+    """Test number of ``data_huddle_test_<n>`` (1–5, seed Table 3); ValueError otherwise."""
+    m = _NAME.match(name)
+    if m is None or int(m.group(1)) not in HUDDLE_CONFIGS:
+        raise ValueError(f"{name!r} is not a huddle test of seed Table 3 (data_huddle_test_1..5)")
+    return int(m.group(1))
+
+
+def trim_huddle(ds: xr.Dataset, *, name: str, t0_s: float = 1.0,
+                duration_s: float = 100.0) -> dict[str, FloatArray]:
+    """The seed's 3.2 trimming: drop ``t < t0``, restart t at 0, keep ``tend·fs`` samples.
+
+    Returns ``t`` [s], ``Vph``, ``Vpv`` [V] and ``Va`` [m] (not mean-removed),
+    each shape (N,). ValueError (naming ``name``) if a signal is missing or
+    fewer than two seconds remain (two of the seed's 1 s Welch windows).
+    """
+    missing = [v for v in ("Vph", "Vpv", "Va") if v not in ds]
+    if missing:
+        raise ValueError(f"{name}: missing {missing} (seed 3.1 loads t, Vph, Vpv, Va)")
+    fs = float(ds.attrs["fs_hz"])
+    t = np.asarray(ds["t"].values, dtype=float)
+    keep = t >= t0_s
+    n = min(int(keep.sum()), round(duration_s * fs))
+    if n < 2 * math.ceil(fs):
+        raise ValueError(f"{name}: {n / fs:.3g} s left after removing t < {t0_s:g} s; the "
+                         f"huddle analysis needs at least 2 s (two 1 s Welch windows)")
+    out = {"t": t[keep][:n] - t[keep][0]}
+    for v in ("Vph", "Vpv", "Va"):
+        out[v] = np.asarray(ds[v].values, dtype=float)[keep][:n]
+    return out
+
+
+@dataclass(frozen=True)
+class BandRms:
+    """rms of a band [signal unit] and its relative standard deviation (estimate)."""
+
+    band: str
+    f_lo_hz: float
+    f_hi_hz: float
+    rms: float
+    rel_std: float
+
+
+def _welch_band(f: FloatArray, psd: FloatArray, lo: float, hi: float, *, enbw_hz: float,
+                averages: float) -> tuple[float, float]:
+    sel = (f >= lo) & (f < hi) if math.isfinite(hi) else f >= lo
+    p = psd[sel]
+    df = float(f[1] - f[0])
+    power = float(p.sum() * df)
+    if power <= 0:
+        return 0.0, math.inf
+    n_ind = max(1.0, (p.sum() ** 2 / float((p**2).sum())) * df / enbw_hz)
+    return math.sqrt(power), 0.5 / math.sqrt(n_ind * averages)
+
+
+def _drift(x: FloatArray, fs: float) -> tuple[float, float]:
+    per = round(fs)
+    nb = x.size // per
+    m = x[: nb * per].reshape(nb, per).mean(axis=1)
+    m = m - m.mean()
+    # Independent spectral values of the 1 s means: a Hann-tapered periodogram (the
+    # plain one leaks a red drift across all bins, which then look independent),
+    # its shape-weighted bin count divided by the taper's ENBW of 1.5 bins.
+    p = np.abs(np.fft.rfft(m * np.hanning(nb))[1:]) ** 2
+    if nb < 2 or p.sum() <= 0:
+        return 0.0, math.inf
+    n_ind = max(1.0, p.sum() ** 2 / float((p**2).sum()) / 1.5)
+    return float(np.sqrt(np.mean(m**2))), 0.5 / math.sqrt(n_ind)
+
+
+@dataclass(frozen=True)
+class HuddleRecord:
+    """One huddle test after the seed's processing.
+
+    ``f_hz`` (F,) and the one-sided PSDs ``psd_va_m2_per_hz``,
+    ``psd_vph_v2_per_hz``, ``psd_vpv_v2_per_hz`` (F,) of the mean-removed
+    signals; ``bands``: Va rms per band (drift, 3–50 Hz, 50 Hz–fs/2, total).
+    """
+
+    name: str
+    number: int
+    closed_loop: bool
+    compensation_unit: bool
+    shielding: bool
+    fs_hz: float
+    duration_s: float
+    va_rms_m: float
+    va_lpf_rms_m: float
+    vph_rms_v: float
+    vpv_rms_v: float
+    f_hz: FloatArray
+    psd_va_m2_per_hz: FloatArray
+    psd_vph_v2_per_hz: FloatArray
+    psd_vpv_v2_per_hz: FloatArray
+    welch_averages: float
+    bands: tuple[BandRms, ...]
+
+    def cumulative_rms(self, signal: str) -> FloatArray:
+        """Cumulative rms from 0 Hz of ``"Va"`` [m], ``"Vph"`` or ``"Vpv"`` [V], shape (F,)."""
+        psd = {"Va": self.psd_va_m2_per_hz, "Vph": self.psd_vph_v2_per_hz,
+               "Vpv": self.psd_vpv_v2_per_hz}[signal]
+        return np.sqrt(cumulative_power(self.f_hz, psd))
+
+    def band(self, name: str) -> BandRms:
+        """The band called ``name``."""
+        for b in self.bands:
+            if b.band == name:
+                return b
+        raise KeyError(f"no band {name!r}; bands are {[b.band for b in self.bands]}")
+
+    def to_json(self) -> dict[str, object]:
+        """Scalars and bands (the spectra stay in memory for the figures)."""
+        out: dict[str, object] = {f.name: getattr(self, f.name) for f in fields(self)
+                                  if not f.name.startswith("psd") and f.name not in
+                                  ("f_hz", "bands")}
+        out["bands"] = {b.band: {"f_lo_hz": b.f_lo_hz, "f_hi_hz": b.f_hi_hz, "rms": b.rms,
+                                 "rel_std": b.rel_std} for b in self.bands}
+        return out
+
+
+def analyse_huddle_record(ds: xr.Dataset, *, name: str | None = None, t0_s: float = 1.0,
+                          duration_s: float = 100.0, lpf_hz: float = 50.0) -> HuddleRecord:
+    """Seed 3.2–3.5 on one record: trim, remove means, low-pass Va, Welch PSDs, band rms.
+
+    Parameters
+    ----------
+    ds : xarray.Dataset
+        ``Vph``, ``Vpv`` [V] and ``Va`` [m] on ``t`` [s], attribute ``fs_hz``.
+    name : str, optional
+        ``data_huddle_test_<n>`` (default: the ``experiment`` attribute).
+    t0_s, duration_s : float
+        The seed's trim: drop ``t < t0``, keep ``duration`` [s].
+    lpf_hz : float
+        Corner of the low pass applied to Va [Hz] (seed 3.3: 50 Hz).
+
+    Raises
+    ------
+    ValueError
+        Naming the record: not a Table 3 huddle test, a signal missing, < 2 s left.
+    """
+    name = str(ds.attrs.get("experiment", "")) if name is None else name
+    number = huddle_number(name)
+    closed, comp, alu = HUDDLE_CONFIGS[number]
+    fs = float(ds.attrs["fs_hz"])
+    sig = trim_huddle(ds, name=name, t0_s=t0_s, duration_s=duration_s)
+    va, vph, vpv = (sig[k] - sig[k].mean() for k in ("Va", "Vph", "Vpv"))
+    vaf = first_order_lowpass(va, cutoff_hz=lpf_hz, fs_hz=fs)
+    s_va = seed_welch(va, fs_hz=fs, name=f"{name}.Va")
+    s_ph = seed_welch(vph, fs_hz=fs, name=f"{name}.Vph")
+    s_pv = seed_welch(vpv, fs_hz=fs, name=f"{name}.Vpv")
+    f = np.asarray(s_va.f_hz)
+    psd_va = np.asarray(s_va.values, dtype=float)
+    w = hanning(s_va.window_length)
+    enbw = fs * float((w**2).sum()) / float(w.sum()) ** 2
+    bands = []
+    rms, rel = _drift(va, fs)
+    bands.append(BandRms("drift", 0.0, 0.5, rms, rel))
+    for lo, hi in _BANDS_HZ:
+        hi_eff = min(hi, fs / 2.0)
+        r, s = _welch_band(f, psd_va, lo, hi, enbw_hz=enbw, averages=s_va.effective_averages)
+        bands.append(BandRms(f"{lo:g}–{hi_eff:g} Hz", lo, hi_eff, r, s))
+    total_var = sum(b.rms**2 for b in bands)
+    total_rel = (math.sqrt(sum((b.rms**2 * 2 * b.rel_std) ** 2 for b in bands if
+                               math.isfinite(b.rel_std))) / (2 * total_var)
+                 if total_var > 0 else math.inf)
+    bands.append(BandRms("total", 0.0, fs / 2.0, float(np.sqrt(np.mean(va**2))), total_rel))
+    return HuddleRecord(
+        name=name, number=number, closed_loop=closed, compensation_unit=comp, shielding=alu,
+        fs_hz=fs, duration_s=va.size / fs, va_rms_m=float(np.sqrt(np.mean(va**2))),
+        va_lpf_rms_m=float(np.sqrt(np.mean((vaf - vaf.mean()) ** 2))),
+        vph_rms_v=float(np.sqrt(np.mean(vph**2))), vpv_rms_v=float(np.sqrt(np.mean(vpv**2))),
+        f_hz=f, psd_va_m2_per_hz=psd_va,
+        psd_vph_v2_per_hz=np.asarray(s_ph.values, dtype=float),
+        psd_vpv_v2_per_hz=np.asarray(s_pv.values, dtype=float),
+        welch_averages=float(s_va.effective_averages), bands=tuple(bands))
+
+
+@dataclass(frozen=True)
+class QdNoiseEstimate:
+    """4QD electronic noise from the open-loop huddle tests.
+
+    ``psd_v2_per_hz`` (F, 2): mean Vph, Vpv PSD of the tests minus the ADC
+    quantisation (``q²/(6 fs)`` one-sided) and the beam motion of the
+    Newport's angle noise (``Gd² · Mn² · 2σθ²/fs``), floored at 0.
+    """
+
+    tests: tuple[str, ...]
+    f_hz: FloatArray
+    psd_v2_per_hz: FloatArray
+    raw_rms_v: tuple[float, float]
+    rms_v: tuple[float, float]
+    adc_rms_v: float
+    newport_rms_v: tuple[float, float]
+
+    def to_json(self) -> dict[str, object]:
+        """Scalars, SI units."""
+        return {"tests": list(self.tests), "raw_rms_v": list(self.raw_rms_v),
+                "rms_v": list(self.rms_v), "adc_rms_v": self.adc_rms_v,
+                "newport_rms_v": list(self.newport_rms_v)}
+
+
+def estimate_qd_noise(records: Sequence[HuddleRecord], *,
+                      params: BenchParams) -> QdNoiseEstimate | None:
+    """Average the open-loop tests' 4QD PSDs and remove the known contributions (None if none)."""
+    ol = [r for r in records if not r.closed_loop]
+    if not ol:
+        return None
+    f = ol[0].f_hz
+    if any(r.f_hz.shape != f.shape or not np.allclose(r.f_hz, f) for r in ol):
+        raise ValueError("open-loop huddle tests have different Welch grids (sampling rates)")
+    raw = np.stack([np.mean([r.psd_vph_v2_per_hz for r in ol], axis=0),
+                    np.mean([r.psd_vpv_v2_per_hz for r in ol], axis=0)], axis=1)
+    conv = params.converter
+    fs = conv.fs_hz
+    adc = conv.lsb_v**2 / (6.0 * fs)
+    gd = params.quad_diode.gain_v_per_rad.as_array()
+    mn = newport_beam_matrix(params)
+    sig2 = params.newport.angle_noise_rms_rad**2
+    newport = gd**2 * (mn**2).sum(axis=1) * 2.0 * sig2 / fs  # (2,) one-sided, white
+    psd = np.maximum(raw - adc - newport[None, :], 0.0)
+    df = float(f[1] - f[0])
+
+    def rms(p: FloatArray) -> tuple[float, float]:
+        v = np.sqrt(p.sum(axis=0) * df)
+        return (float(v[0]), float(v[1]))
+
+    nrms = np.sqrt(newport * fs / 2.0)
+    return QdNoiseEstimate(tests=tuple(r.name for r in ol), f_hz=f, psd_v2_per_hz=psd,
+                           raw_rms_v=rms(raw), rms_v=rms(psd), adc_rms_v=math.sqrt(adc * fs / 2),
+                           newport_rms_v=(float(nrms[0]), float(nrms[1])))
+
+
+@dataclass(frozen=True)
+class DacNoiseEstimate:
+    """Quantisation error of the Sercalo DAC measured in the closed-loop huddle tests.
+
+    The unquantised command ``u = −K·Vp/Gd`` is rebuilt by running the
+    controller on the recorded 4QD signals (from rest at the record's start,
+    as the loop did); ``e = Uc − u`` is the DAC's error (|e| ≤ q/2 when the
+    controller is the one that ran). ``psd_v2_per_hz`` (F, 2) one-sided;
+    ``white_ratio`` (h, v): its mean over ``band_hz`` divided by ``q²/(6 fs)``.
+    """
+
+    tests: tuple[str, ...]
+    f_hz: FloatArray
+    psd_v2_per_hz: FloatArray
+    rms_v: tuple[float, float]
+    command_rms_v: tuple[float, float]
+    max_abs_error_lsb: float
+    band_hz: tuple[float, float]
+    white_ratio: tuple[float, float]
+
+    def to_json(self) -> dict[str, object]:
+        """Scalars, SI units."""
+        return {"tests": list(self.tests), "rms_v": list(self.rms_v),
+                "command_rms_v": list(self.command_rms_v),
+                "max_abs_error_lsb": self.max_abs_error_lsb, "band_hz": list(self.band_hz),
+                "white_ratio": list(self.white_ratio)}
+
+
+@njit(cache=True)
+def _state_space_run(a: FloatArray, b: FloatArray, c: FloatArray, d: FloatArray,
+                     u: FloatArray) -> FloatArray:  # pragma: no cover - compiled
+    y = np.empty((u.shape[0], c.shape[0]))
+    x = np.zeros(a.shape[0])
+    for k in range(u.shape[0]):
+        y[k] = c @ x + d @ u[k]
+        x = a @ x + b @ u[k]
+    return y
+
+
+def _run_controller(k: ct.StateSpace, r: FloatArray) -> FloatArray:
+    """``K`` (discrete) applied to ``r`` (2, N) from rest; returns (2, N).
+
+    The recursion runs compiled (numba): K holds a double integrator, so its
+    polynomial or pole-zero forms are too ill-conditioned for a filter
+    cascade, and a Python loop takes seconds per 10⁶ samples.
+    """
+    a, b, c, d = (np.ascontiguousarray(x, dtype=float) for x in (k.A, k.B, k.C, k.D))
+    return np.asarray(_state_space_run(a, b, c, d, np.ascontiguousarray(r.T))).T
+
+
+def estimate_dac_noise(recordings: Mapping[str, xr.Dataset], *, controller: ct.StateSpace,
+                       params: BenchParams, t0_s: float = 1.0, duration_s: float = 100.0,
+                       band_hz: tuple[float, float] = (350.0, 450.0),
+                       ) -> tuple[DacNoiseEstimate | None, dict[str, str]]:
+    """Measure the Sercalo DAC's quantisation error in the closed-loop huddle tests.
+
+    Parameters
+    ----------
+    recordings : mapping
+        Records; the closed-loop huddle tests holding ``Uch, Ucv`` are used.
+    controller : control.StateSpace
+        ``K: Rh, Rv → Uch, Ucv`` as it ran (discrete at ``1/fs``, or continuous:
+        then Tustin at ``1/fs`` as the seed's 9.3), closed as ``U = −K R``.
+    params : BenchParams
+        4QD gains the real-time code divides by (nominal), converter.
+    band_hz : (float, float)
+        Band of the white-noise comparison [Hz] (default: around the modes).
+
+    Returns
+    -------
+    (DacNoiseEstimate or None, dict)
+        The estimate (None if no record qualifies) and the records left out, with why.
+    """
+    conv = params.converter
+    fs, q = conv.fs_hz, conv.lsb_v
+    kd = controller if controller.dt else tustin(controller, ts_s=conv.ts_s)
+    if not np.isclose(float(kd.dt), 1.0 / fs):
+        raise ValueError(f"controller sampled at {kd.dt} s, records at {1.0 / fs} s")
+    gd = params.quad_diode.gain_v_per_rad.as_array()
+    used, psds, cmd, skipped, worst = [], [], [], {}, 0.0
+    for name in sorted(recordings):
+        m = _NAME.match(name)
+        if m is None or not HUDDLE_CONFIGS.get(int(m.group(1)), (False,))[0]:
+            continue
+        ds = recordings[name]
+        if "Uch" not in ds or "Ucv" not in ds:
+            skipped[name] = "no Uch, Ucv recorded"
+            continue
+        r = np.stack([np.asarray(ds["Vph"].values) / gd[0], np.asarray(ds["Vpv"].values) / gd[1]])
+        u = -_run_controller(kd, r)
+        t = np.asarray(ds["t"].values)
+        keep = np.flatnonzero(t >= t0_s)[: round(duration_s * fs)]
+        e = np.stack([np.asarray(ds["Uch"].values), np.asarray(ds["Ucv"].values)])[:, keep]
+        e = e - u[:, keep]
+        worst_here = float(np.max(np.abs(e)) / q)
+        if worst_here > 0.75:  # rounding gives ≤ 0.5 LSB; more means another controller ran
+            skipped[name] = (f"recorded Uc is not the quantised output of the controller "
+                             f"(max |Uc − u| = {worst_here:.2f} LSB)")
+            continue
+        worst = max(worst, worst_here)
+        used.append(name)
+        spectra = [seed_welch(e[i], fs_hz=fs, name=f"{name}.Uc error") for i in (0, 1)]
+        f = np.asarray(spectra[0].f_hz)
+        psds.append([np.asarray(sp.values, dtype=float) for sp in spectra])
+        cmd.append(np.sqrt(np.mean((u[:, keep] - u[:, keep].mean(axis=1, keepdims=True)) ** 2,
+                                   axis=1)))
+    if not used:
+        return None, skipped
+    psd = np.mean(np.asarray(psds), axis=0).T  # (F, 2)
+    df = float(f[1] - f[0])
+    rms = np.sqrt(psd.sum(axis=0) * df)
+    sel = (f >= band_hz[0]) & (f < band_hz[1])
+    ratio = psd[sel].mean(axis=0) / (q**2 / (6.0 * fs))
+    c = np.mean(cmd, axis=0)
+    return DacNoiseEstimate(
+        tests=tuple(used), f_hz=f, psd_v2_per_hz=psd, rms_v=(float(rms[0]), float(rms[1])),
+        command_rms_v=(float(c[0]), float(c[1])), max_abs_error_lsb=worst, band_hz=band_hz,
+        white_ratio=(float(ratio[0]), float(ratio[1]))), skipped
+
+
+@dataclass(frozen=True)
+class ConfigComparison:
+    """Ratio of Va rms per band between two configurations (numerator / denominator)."""
+
+    effect: str
+    numerator: str
+    denominator: str
+    ratios: Mapping[str, float]
+    significant: Mapping[str, bool]
+    sentence: str
+
+    def to_json(self) -> dict[str, object]:
+        """Plain values."""
+        return {"effect": self.effect, "numerator": self.numerator,
+                "denominator": self.denominator, "ratios": dict(self.ratios),
+                "significant": dict(self.significant), "sentence": self.sentence}
+
+
+# (effect, numerator test, denominator test): what changes between them (seed Table 3).
+_COMPARISONS = (("compensation unit", 2, 1), ("aluminium shielding in open loop", 4, 2),
+                ("aluminium shielding in closed loop", 5, 3), ("closed loop", 3, 2))
+
+
+def _compare(effect: str, a: HuddleRecord, b: HuddleRecord) -> ConfigComparison:
+    ratios, sig = {}, {}
+    parts = []
+    for ba in a.bands:
+        bb = b.band(ba.band)
+        r = ba.rms / bb.rms if bb.rms > 0 else math.inf
+        spread = 2.0 * math.hypot(ba.rel_std, bb.rel_std)
+        ratios[ba.band] = r
+        sig[ba.band] = bool(r > 0 and math.isfinite(r) and abs(math.log(r)) > spread)
+        parts.append(f"{ba.band} ×{r:.2f}" + (" (significant)" if sig[ba.band] else ""))
+    changes = [f"{'reduces' if ratios[k] < 1 else 'increases'} the {k} rms "
+               f"{max(ratios[k], 1 / ratios[k]):.1f}-fold" for k in ratios
+               if sig[k] and k != "total"]
+    verdict = ("has no significant effect on Va in any band" if not changes
+               else "; ".join(changes))
+    sentence = (f"{effect[0].upper()}{effect[1:]} (test {a.number} / test {b.number}): Va rms "
+                + ", ".join(parts) + f". The {effect} {verdict}.")
+    return ConfigComparison(effect, a.name, b.name, ratios, sig, sentence)
+
+
+@dataclass(frozen=True)
+class HuddleAnalysis:
+    """All huddle tests present, the configuration comparisons and the 4QD noise."""
+
+    records: Mapping[int, HuddleRecord]
+    comparisons: tuple[ConfigComparison, ...]
+    qd_noise: QdNoiseEstimate | None
+    conclusion: str
+
+    def to_json(self) -> dict[str, object]:
+        """``records`` keyed by test number (as strings), comparisons, conclusion."""
+        return {"records": {str(k): r.to_json() for k, r in self.records.items()},
+                "comparisons": [c.to_json() for c in self.comparisons],
+                "qd_noise": None if self.qd_noise is None else self.qd_noise.to_json(),
+                "conclusion": self.conclusion}
+
+
+def analyse_huddle(recordings: Mapping[str, xr.Dataset], *, params: BenchParams,
+                   t0_s: float = 1.0, duration_s: float = 100.0,
+                   lpf_hz: float = 50.0) -> HuddleAnalysis:
+    """Seed section 3 on every ``data_huddle_test_<n>`` in ``recordings``.
+
+    Parameters
+    ----------
+    recordings : mapping of str to xarray.Dataset
+        Records by experiment name; names other than ``data_huddle_test_<n>`` are ignored.
+    params : BenchParams
+        ADC, 4QD gains and Newport angle noise (subtracted from the 4QD spectra).
+    t0_s, duration_s, lpf_hz : float
+        As :func:`analyse_huddle_record`.
+
+    Raises
+    ------
+    ValueError
+        If no huddle test is present, or (naming it) if one is unusable.
+    """
+    names = sorted((n for n in recordings if _NAME.match(n)), key=huddle_number)
+    if not names:
+        raise ValueError("no huddle test (data_huddle_test_1..5) in the recordings")
+    records = {huddle_number(n): analyse_huddle_record(recordings[n], name=n, t0_s=t0_s,
+                                                       duration_s=duration_s, lpf_hz=lpf_hz)
+               for n in names}
+    comps = tuple(_compare(effect, records[a], records[b]) for effect, a, b in _COMPARISONS
+                  if a in records and b in records)
+    if comps:
+        conclusion = " ".join(c.sentence for c in comps)
+        ecu = next((c for c in comps if c.effect == "compensation unit"), None)
+        if ecu is not None:
+            agree = not (ecu.significant["drift"] or ecu.significant["total"])
+            conclusion += (" The seed (3.6) found no significant effect of the compensation "
+                           "unit on the stability of the measurement; on the drift and the "
+                           f"total rms these records {'agree' if agree else 'disagree'}.")
+    else:
+        conclusion = ("No pair of configurations differing by one element is present; "
+                      "no comparison is possible.")
+    return HuddleAnalysis(records=records, comparisons=comps,
+                          qd_noise=estimate_qd_noise(list(records.values()), params=params),
+                          conclusion=conclusion)

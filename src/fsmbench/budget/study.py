@@ -1,0 +1,248 @@
+"""Seed sections 3, 4 and 11 on whatever recordings are present: :func:`budget_study`.
+
+What always runs (it needs no data): the geometry of 4.1–4.2, the noise
+closed forms of 1.6/4.5, the air and frame terms of 4.3–4.4 and the error
+budget of the operating configuration (closed loop, compensation unit,
+aluminium shielding: the repeatability measurement's). What the recordings
+add: the huddle analysis (3) and from it the measured 4QD noise (open-loop
+tests) and the Sercalo DAC's quantisation error (closed-loop tests), which
+replace the nominal/white models in the budget; the budget's prediction for
+every huddle configuration present; the repeatability analysis (11) and its
+comparison with the huddle noise (Fig. 50). Everything left out is listed in
+``skipped`` with the reason.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass
+
+import control as ct
+import numpy as np
+import xarray as xr
+
+from fsmbench.bench.blocks import PlantModel, physical_plant
+from fsmbench.bench.params import Bench
+from fsmbench.budget.environment import AirBudget, FrameBudget, air_budget, frame_budget
+from fsmbench.budget.huddle import (
+    HUDDLE_CONFIGS,
+    DacNoiseEstimate,
+    HuddleAnalysis,
+    analyse_huddle,
+    estimate_dac_noise,
+    trim_huddle,
+)
+from fsmbench.budget.optics import GeometryBudget, geometry_budget
+from fsmbench.budget.quantisation import NoiseSources, noise_sources
+from fsmbench.budget.repeatability import RepeatabilityRecord, analyse_repeatability
+from fsmbench.budget.table import AngleSources, ErrorBudget, angle_sources, budget_table
+from fsmbench.control.seed import seed_decentralised_controller, tustin
+
+__all__ = ["BudgetResult", "NonRepeatability", "budget_study", "json_safe"]
+
+_HUDDLE = tuple(f"data_huddle_test_{i}" for i in HUDDLE_CONFIGS)
+_REP = {"data_rep_h": "h", "data_rep_v": "v"}
+
+
+def json_safe(obj: object) -> object:
+    """Recursively: numpy scalars to Python, non-finite floats to None, tuples to lists."""
+    if isinstance(obj, dict):
+        return {str(k): json_safe(v) for k, v in obj.items()}
+    if isinstance(obj, list | tuple):
+        return [json_safe(v) for v in obj]
+    if isinstance(obj, np.generic):
+        obj = obj.item()
+    if isinstance(obj, float) and not math.isfinite(obj):
+        return None
+    return obj
+
+
+@dataclass(frozen=True)
+class NonRepeatability:
+    """Fig. 50 in numbers, one direction [m]: what the non-repeatability is made of.
+
+    ``va_nonrep_rms_m``: measured (seed's estimate); ``va_nonrep_unbiased_m``:
+    corrected for the periods' own mean; ``tracking_nonrep_rms_m``: the
+    non-repeatable part of the distance-error equivalent of the 4QD tracking
+    error; ``huddle_va_rms_m``: the huddle test of ``huddle_test`` (the same
+    configuration when present); ``predicted_rms_m``: the budget over the
+    record's length.
+    """
+
+    direction: str
+    va_nonrep_rms_m: float
+    va_nonrep_unbiased_m: float
+    tracking_nonrep_rms_m: float
+    huddle_test: str | None
+    huddle_va_rms_m: float | None
+    predicted_rms_m: float
+
+    def to_json(self) -> dict[str, object]:
+        """Plain values."""
+        return dict(self.__dict__)
+
+
+@dataclass(frozen=True)
+class BudgetResult:
+    """Everything :func:`budget_study` computed; ``to_json()`` for the study's JSON."""
+
+    plant_source: str
+    controller: str
+    noise: NoiseSources
+    geometry: GeometryBudget
+    air: AirBudget
+    frame: FrameBudget
+    budget: ErrorBudget
+    huddle: HuddleAnalysis | None
+    dac_noise: DacNoiseEstimate | None
+    predicted_huddle_va_rms_m: Mapping[int, float]
+    repeatability: Mapping[str, RepeatabilityRecord]
+    nonrep: Mapping[str, NonRepeatability]
+    skipped: Mapping[str, str]
+
+    @property
+    def total_rms_m(self) -> float:
+        """RSS of every source of the operating configuration [m]."""
+        return self.budget.total_rms_m
+
+    @property
+    def limiting(self) -> str:
+        """The largest source."""
+        return self.budget.limiting
+
+    def to_json(self) -> dict[str, object]:
+        """JSON-ready dict, SI units in the keys (non-finite values as null)."""
+        huddle: dict[str, object] = {}
+        if self.huddle is not None:
+            for n, rec in self.huddle.records.items():
+                d = rec.to_json()
+                d["predicted_va_rms_m"] = self.predicted_huddle_va_rms_m.get(n)
+                huddle[str(n)] = d
+        out = {
+            "params": "nominal", "plant": self.plant_source, "controller": self.controller,
+            "noise": self.noise.to_json(), "geometry": self.geometry.to_json(),
+            "air": self.air.to_json(), "frame": self.frame.to_json(),
+            "budget": self.budget.to_json(),
+            "sources": [r.to_json() for r in self.budget.rows],
+            "total_rms_m": self.total_rms_m, "total_bias_m": self.budget.total_bias_m,
+            "limiting": self.limiting, "huddle": huddle,
+            "huddle_comparison": None if self.huddle is None else {
+                "comparisons": [c.to_json() for c in self.huddle.comparisons],
+                "conclusion": self.huddle.conclusion,
+                "qd_noise": None if self.huddle.qd_noise is None
+                else self.huddle.qd_noise.to_json()},
+            "dac_noise": None if self.dac_noise is None else self.dac_noise.to_json(),
+            "repeatability": {k: r.to_json() for k, r in self.repeatability.items()},
+            "nonrep_contributions": {k: v.to_json() for k, v in self.nonrep.items()},
+            "skipped": dict(self.skipped),
+        }
+        return json_safe(out)  # type: ignore[return-value]
+
+
+def _valid_huddles(recordings: Mapping[str, xr.Dataset],
+                   skipped: dict[str, str]) -> dict[str, xr.Dataset]:
+    valid = {}
+    for name in _HUDDLE:
+        if name not in recordings:
+            skipped[name] = "not in the recordings (seed 3)"
+            continue
+        try:
+            trim_huddle(recordings[name], name=name)
+        except ValueError as exc:
+            skipped[name] = str(exc)
+            continue
+        valid[name] = recordings[name]
+    return valid
+
+
+def budget_study(recordings: Mapping[str, xr.Dataset], *, bench: Bench,
+                 plant: PlantModel | None = None, controller: ct.StateSpace | None = None,
+                 window_s: float = 100.0, df_hz: float = 0.1) -> BudgetResult:
+    """Seed sections 3, 4 and 11 on the recordings present.
+
+    Parameters
+    ----------
+    recordings : mapping of str to xarray.Dataset
+        Records by experiment name (``data_huddle_test_1..5``, ``data_rep_h``,
+        ``data_rep_v``; others are ignored).
+    bench : Bench
+        ``bench.nominal`` supplies every model number (what is known without
+        the twin's truth).
+    plant : PlantModel, optional
+        Plant with outputs ``Rh, Rv`` (e.g. the identified one); default
+        ``physical_plant(bench.nominal)``.
+    controller : control.StateSpace, optional
+        Loop controller ``Rh, Rv → Uch, Ucv`` (``U = −K R``); default the seed's
+        9.2 controller discretised as its 9.3 (Tustin at ``1/fs``).
+    window_s : float
+        Record length of the budget's rms [s] (the huddle tests' 100 s).
+    df_hz : float
+        Frequency step of the propagation grid [Hz].
+    """
+    params = bench.nominal
+    plant = physical_plant(params, source="physical (nominal)") if plant is None else plant
+    if controller is None:
+        controller = tustin(seed_decentralised_controller(), ts_s=params.converter.ts_s)
+        controller_name = "seed 9.2 K, Tustin at 1/fs (9.3)"
+    else:
+        controller_name = str(controller.name or "given controller")
+    skipped: dict[str, str] = {}
+    valid = _valid_huddles(recordings, skipped)
+    huddle = analyse_huddle(valid, params=params) if valid else None
+    qd = None if huddle is None else huddle.qd_noise
+    if qd is None:
+        skipped["4QD noise from huddle data"] = ("no open-loop huddle test (1, 2, 4): the "
+                                                 "nominal white noise is used")
+    dac, dac_skipped = estimate_dac_noise(valid, controller=controller, params=params)
+    skipped.update({f"{k} (DAC noise)": v for k, v in dac_skipped.items()})
+    if dac is None:
+        skipped["Sercalo DAC noise from huddle data"] = (
+            "no usable closed-loop huddle test (3, 5) with Uch, Ucv: the white q²/(12 fs) "
+            "model is used")
+    cache: dict[bool, AngleSources] = {}
+
+    def angles(closed: bool) -> AngleSources:
+        if closed not in cache:
+            cache[closed] = angle_sources(params, plant=plant, controller=controller,
+                                          closed_loop=closed, qd_noise=qd, dac_noise=dac,
+                                          df_hz=df_hz)
+        return cache[closed]
+
+    budget = budget_table(params, angles(True), window_s=window_s)
+    predicted: dict[int, float] = {}
+    if huddle is not None:
+        for n, rec in huddle.records.items():
+            closed, comp, alu = HUDDLE_CONFIGS[n]
+            predicted[n] = budget_table(params, angles(closed), compensation_unit=comp,
+                                        shielding=alu, window_s=rec.duration_s).total_rms_m
+    reps: dict[str, RepeatabilityRecord] = {}
+    for name, direction in _REP.items():
+        if name not in recordings:
+            skipped[name] = "not in the recordings (seed 11)"
+            continue
+        try:
+            reps[direction] = analyse_repeatability(recordings[name], params=params, name=name)
+        except ValueError as exc:
+            skipped[name] = str(exc)
+    nonrep: dict[str, NonRepeatability] = {}
+    ref = None
+    if huddle is not None:
+        ref = huddle.records.get(5) or huddle.records[max(huddle.records)]
+    for d, r in reps.items():
+        pred = budget_table(params, angles(True), window_s=r.n_periods * r.period_s)
+        nonrep[d] = NonRepeatability(
+            direction=d, va_nonrep_rms_m=r.nonrep_rms_m,
+            va_nonrep_unbiased_m=r.nonrep_rms_unbiased_m,
+            tracking_nonrep_rms_m=r.tracking_distance_nonrep_rms_m,
+            huddle_test=None if ref is None else ref.name,
+            huddle_va_rms_m=None if ref is None else ref.va_rms_m,
+            predicted_rms_m=pred.total_rms_m)
+    return BudgetResult(
+        plant_source=plant.source, controller=controller_name,
+        noise=noise_sources(params, plant=plant,
+                            qd_noise_v=None if qd is None else qd.rms_v),
+        geometry=geometry_budget(params), air=air_budget(params, window_s=window_s),
+        frame=frame_budget(params, window_s=window_s), budget=budget, huddle=huddle,
+        dac_noise=dac, predicted_huddle_va_rms_m=predicted, repeatability=reps,
+        nonrep=nonrep, skipped=skipped)

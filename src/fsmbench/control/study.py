@@ -1,0 +1,286 @@
+"""The control study of the seed (sections 5 to 10) in one call.
+
+:func:`design_study` runs, on one plant (physical or identified):
+
+1. the plant analysis (5.1 coprime factors, 6 scaling and the 6.1 objective,
+   7.2 RGA and singular values, 7.3 static gain);
+2. the seed's decentralised controller of 9.2, verified;
+3. fsmbench's own controller, designed on the plant with its delay and
+   verified, then checked over the perturbed set (resonance ±5 %, damping
+   ×0.5 and ×2); the seed's controller goes through the same set;
+4. the Newport alignment loop of 10.2 on the Newport path ``Un -> R``;
+5. integral force feedback of 8.2;
+6. the Newport command to beam angle transfer with each Sercalo loop closed
+   (Fig. 42).
+
+:meth:`DesignResult.write` saves ``controllers.mat`` and ``controllers_sos.json``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import control as ct
+import numpy as np
+
+from fsmbench.bench.blocks import PlantModel
+from fsmbench.bench.params import Bench
+from fsmbench.control.analysis import (
+    ControlObjective,
+    PlantAnalysis,
+    analyse_plant,
+    control_objective,
+)
+from fsmbench.control.design import (
+    DesignOptions,
+    FsmDesign,
+    Robustness,
+    design_controller,
+    robustness,
+)
+from fsmbench.control.export import write_controllers_mat, write_sos_json
+from fsmbench.control.freq import evaluate_ss, plain_json
+from fsmbench.control.iff import IffAnalysis, iff_analysis
+from fsmbench.control.loops import LoopAnalysis, LoopOptions, analyse_loop, newport_to_beam
+from fsmbench.control.seed import iff_controller, newport_controller, seed_decentralised_controller
+
+__all__ = [
+    "CONTROLLERS_MAT",
+    "CONTROLLERS_SOS_JSON",
+    "DesignResult",
+    "NewportToBeam",
+    "StudyOptions",
+    "design_study",
+]
+
+CONTROLLERS_MAT = "controllers.mat"
+CONTROLLERS_SOS_JSON = "controllers_sos.json"
+
+_DESCRIPTIONS = {
+    "seed_controller": "seed 9.2 decentralised controller (restored Kh, Kv); Rh,Rv -> Uch,Ucv",
+    "fsmbench_controller": "fsmbench loop-shaped controller; Rh,Rv -> Uch,Ucv",
+    "newport_controller": "seed 10.2 Newport alignment controller; Rh,Rv -> Unh,Unv",
+    "iff_controller": "seed 8.2 integral force feedback Kppf; Vch,Vcv -> Uch,Ucv, ADDED "
+                      "to the command (u = +Kppf y); unstable on this bench, kept for reference",
+}
+
+
+@dataclass(frozen=True)
+class StudyOptions:
+    """Options of :func:`design_study`.
+
+    Attributes
+    ----------
+    design : DesignOptions
+        Requirements and robust set of the fsmbench controller.
+    loop : LoopOptions
+        Verification settings (Padé order, Tustin sample time, grids).
+    newport_crossover_hz : float
+        Crossover of the Newport loop (seed 10.2: 10 Hz).
+    newport_lead_ratio : float
+        Lead ratio ``h`` of the Newport loop (seed: 2).
+    with_seed_robustness : bool
+        Also run the seed's controller over the perturbed set.
+    """
+
+    design: DesignOptions = field(default_factory=DesignOptions)
+    loop: LoopOptions = field(default_factory=LoopOptions)
+    newport_crossover_hz: float = 10.0
+    newport_lead_ratio: float = 2.0
+    with_seed_robustness: bool = True
+
+    def to_json(self) -> dict[str, Any]:
+        """Plain numbers."""
+        return plain_json({"design": self.design.to_json(), "loop": self.loop.__dict__,
+                           "newport_crossover_hz": self.newport_crossover_hz,
+                           "newport_lead_ratio": self.newport_lead_ratio,
+                           "with_seed_robustness": self.with_seed_robustness})
+
+
+@dataclass(frozen=True, eq=False)
+class NewportToBeam:
+    """Newport command to beam angle, open and with each Sercalo loop closed (Fig. 42).
+
+    Attributes
+    ----------
+    f_hz : array, shape (n,)
+    open_loop : array, complex, shape (n, 2, 2)
+        ``Unh, Unv -> Rh, Rv`` [rad/V].
+    closed : dict name -> array, complex, shape (n, 2, 2)
+        ``S Gn`` with the named Sercalo controller.
+    """
+
+    f_hz: np.ndarray
+    open_loop: np.ndarray
+    closed: dict[str, np.ndarray]
+
+    def attenuation_at(self, f_hz: float, name: str) -> tuple[float, float]:
+        """``|closed/open|`` of the diagonal paths (h, v) at ``f_hz`` (interpolated in log)."""
+        out = []
+        for i in range(2):
+            ratio = np.abs(self.closed[name][:, i, i]) / np.abs(self.open_loop[:, i, i])
+            out.append(float(np.exp(np.interp(np.log(f_hz), np.log(self.f_hz), np.log(ratio)))))
+        return out[0], out[1]
+
+
+@dataclass(frozen=True, eq=False)
+class DesignResult:
+    """Everything :func:`design_study` computed.
+
+    Attributes
+    ----------
+    plant_source : str
+    objective : ControlObjective
+    plant : PlantAnalysis
+    seed : LoopAnalysis
+        The seed's controller of 9.2 on the plant.
+    fsmbench : LoopAnalysis
+        fsmbench's controller on the plant it was designed on.
+    design : FsmDesign
+    newport : LoopAnalysis
+        The Newport loop of 10.2.
+    iff : IffAnalysis
+    robustness : Robustness
+        fsmbench's controller over the perturbed set.
+    seed_robustness : Robustness or None
+    newport_to_beam : NewportToBeam
+    controllers : dict name -> control.StateSpace
+        ``seed_controller``, ``fsmbench_controller``, ``newport_controller``,
+        ``iff_controller`` (continuous).
+    options : StudyOptions
+    """
+
+    plant_source: str
+    objective: ControlObjective
+    plant: PlantAnalysis
+    seed: LoopAnalysis
+    fsmbench: LoopAnalysis
+    design: FsmDesign
+    newport: LoopAnalysis
+    iff: IffAnalysis
+    robustness: Robustness
+    seed_robustness: Robustness | None
+    newport_to_beam: NewportToBeam
+    controllers: dict[str, ct.StateSpace]
+    options: StudyOptions
+
+    @property
+    def loops(self) -> dict[str, LoopAnalysis]:
+        """The three verified loops by JSON key."""
+        return {"seed_controller": self.seed, "fsmbench_controller": self.fsmbench,
+                "newport_controller": self.newport}
+
+    def to_json(self) -> dict[str, Any]:
+        """The study as plain numbers (NaN and inf as None).
+
+        Keys: ``objective``, ``plant_analysis``, ``seed_controller``,
+        ``fsmbench_controller`` (with ``design``), ``newport_controller``, each
+        with ``{h,v}.{stable, gain_margin_db, phase_margin_deg, modulus_margin,
+        crossover_hz, sensitivity_at_1hz}`` and ``meets_objective``; ``iff``;
+        ``robustness`` (fsmbench's controller) and ``seed_robustness``;
+        ``newport_to_beam``; ``options``.
+        """
+        f0 = self.objective.frequency_hz
+        fsm = {**self.fsmbench.to_json(), "design": self.design.to_json()}
+        n2b = {name: dict(zip(("h", "v"), self.newport_to_beam.attenuation_at(f0, name),
+                              strict=True))
+               for name in self.newport_to_beam.closed}
+        return plain_json({
+            "plant_source": self.plant_source,
+            "objective": self.objective.to_json(),
+            "plant_analysis": self.plant.to_json(),
+            "seed_controller": self.seed.to_json(),
+            "fsmbench_controller": fsm,
+            "newport_controller": self.newport.to_json(),
+            "iff": self.iff.to_json(),
+            "robustness": self.robustness.to_json(),
+            "seed_robustness": (None if self.seed_robustness is None
+                                else self.seed_robustness.to_json()),
+            "newport_to_beam": {"attenuation_at_1hz": n2b},
+            "options": self.options.to_json(),
+        })
+
+    def write(self, out_dir: str | Path) -> list[Path]:
+        """Write ``controllers.mat`` and ``controllers_sos.json`` into ``out_dir`` (atomically).
+
+        The SOS file holds the three feedback controllers (the IFF controller,
+        unstable on this bench, is only in the MAT-file).
+        """
+        out = Path(out_dir)
+        out.mkdir(parents=True, exist_ok=True)
+        ts = self.options.loop.ts_s
+        mat = write_controllers_mat(out / CONTROLLERS_MAT, self.controllers, ts_s=ts,
+                                    descriptions=_DESCRIPTIONS)
+        sos = write_sos_json(out / CONTROLLERS_SOS_JSON,
+                             {k: v for k, v in self.controllers.items() if k != "iff_controller"},
+                             ts_s=ts, descriptions=_DESCRIPTIONS)
+        return [mat, sos]
+
+
+def _gd_scaling(plant: PlantModel) -> tuple[list[float], list[float]]:
+    """Output scales ``1/|Gd|`` [rad/V] and unit input scales: ``b(G, K)`` in 5.1's units."""
+    gd = np.abs(np.diag(np.asarray(plant.blocks["Gd"].D, dtype=float)))
+    return [float(1.0 / x) for x in gd], [1.0, 1.0]
+
+
+def design_study(plant: PlantModel, *, bench: Bench,
+                 options: StudyOptions | None = None) -> DesignResult:
+    """Analyse ``plant``, verify the seed's controllers, design and verify fsmbench's.
+
+    Parameters
+    ----------
+    plant : PlantModel
+        Physical (``physical_plant(bench.true)``) or identified
+        (``identify(...).plant``); its input delays are part of every loop.
+    bench : Bench
+        ``bench.nominal`` supplies Table 5 and the 6.1 objective.
+    options : StudyOptions, optional
+
+    Returns
+    -------
+    DesignResult
+    """
+    opts = options or StudyOptions()
+    objective: ControlObjective = control_objective(bench.nominal)
+    plant_an = analyse_plant(plant, params=bench.nominal)
+    scaling = _gd_scaling(plant)
+
+    k_seed = seed_decentralised_controller()
+    seed = analyse_loop(plant, k_seed, objective=objective, name="seed_controller",
+                        scaling=scaling, options=opts.loop)
+    design = design_controller(plant, objective=objective, options=opts.design)
+    fsm = analyse_loop(plant, design.controller, objective=objective,
+                       name="fsmbench_controller", scaling=scaling, options=opts.loop)
+
+    gn0 = np.real(evaluate_ss(plant.subsystem(outputs=["Rh", "Rv"], inputs=["Unh", "Unv"]),
+                              np.zeros(1))[0])
+    k_newport = newport_controller(gn0_rad_per_v=(float(gn0[0, 0]), float(gn0[1, 1])),
+                                   crossover_hz=opts.newport_crossover_hz,
+                                   lead_ratio=opts.newport_lead_ratio)
+    newport = analyse_loop(plant, k_newport, objective=objective, name="newport_controller",
+                           scaling=scaling, options=opts.loop)
+    iff = iff_analysis(plant, pade_order=opts.loop.pade_order)
+
+    rob_opts = dataclasses.replace(opts.loop, per_decade=60)
+    rob = robustness(plant, design.controller, objective=objective,
+                     frequency_scales=opts.design.frequency_scales,
+                     damping_scales=opts.design.damping_scales, options=rob_opts)
+    seed_rob = (robustness(plant, k_seed, objective=objective,
+                           frequency_scales=opts.design.frequency_scales,
+                           damping_scales=opts.design.damping_scales, options=rob_opts)
+                if opts.with_seed_robustness else None)
+
+    f = np.logspace(-1, np.log10(5e3), 800)
+    n2b = NewportToBeam(f_hz=f, open_loop=newport_to_beam(plant, None, f),
+                        closed={"seed_controller": newport_to_beam(plant, k_seed, f),
+                                "fsmbench_controller": newport_to_beam(plant, design.controller,
+                                                                       f)})
+    controllers = {"seed_controller": k_seed, "fsmbench_controller": design.controller,
+                   "newport_controller": k_newport, "iff_controller": iff_controller()}
+    return DesignResult(plant_source=plant.source, objective=objective, plant=plant_an,
+                        seed=seed, fsmbench=fsm, design=design, newport=newport, iff=iff,
+                        robustness=rob, seed_robustness=seed_rob, newport_to_beam=n2b,
+                        controllers=controllers, options=opts)

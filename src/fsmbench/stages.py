@@ -1,0 +1,134 @@
+"""The study's later stages, shared by their sub-commands and ``fsmbench study``.
+
+Each stage is a function of the recordings (and the bench) that writes its
+files atomically into an output folder and returns its result:
+
+``identify_stage``  seed section 2 → ``identification.json``, ``plant.mat``, ``frf.mat``
+``budget_stage``    sections 3, 4, 11 → ``budget.json``
+``design_stage``    sections 5–10 → ``design.json``, ``controllers.mat``,
+                    ``controllers_sos.json``; fsmbench's controller is then run on the
+                    twin (the repeatability experiment, 10 kHz, quantisation and noise)
+
+The plant a stage uses is the identified one when the identification
+experiments are present, the nominal physical model otherwise; the result
+says which.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import xarray as xr
+
+from fsmbench.bench.blocks import PlantModel, physical_plant
+from fsmbench.bench.params import Bench
+from fsmbench.ident.pipeline import Identification, identify, write_identification
+from fsmbench.io.atomic import atomic_write_text
+
+__all__ = [
+    "IDENT_EXPERIMENTS",
+    "DesignStage",
+    "PlantChoice",
+    "budget_stage",
+    "choose_plant",
+    "design_stage",
+    "identify_stage",
+]
+
+Progress = Callable[[str], None]
+
+IDENT_EXPERIMENTS = ("data_cal_pd_h", "data_cal_pd_v", "data_uch", "data_ucv", "data_unh",
+                     "data_unv")
+
+
+def _quiet(_msg: str) -> None:
+    return None
+
+
+@dataclass(frozen=True, eq=False)
+class PlantChoice:
+    """The plant a stage works on and where it comes from."""
+
+    plant: PlantModel
+    source: str
+    identification: Identification | None
+
+
+def identify_stage(recordings: Mapping[str, xr.Dataset], *, bench: Bench, out_dir: Path,
+                   source: str, progress: Progress | None = None
+                   ) -> tuple[Identification, list[Path]]:
+    """Run seed section 2 and write its files."""
+    result = identify(recordings, bench=bench, source=source, progress=progress)
+    return result, write_identification(result, out_dir)
+
+
+def choose_plant(recordings: Mapping[str, xr.Dataset], *, bench: Bench,
+                 identification: Identification | None = None,
+                 progress: Progress | None = None) -> PlantChoice:
+    """The identified plant if the Sercalo could be identified, else the nominal model."""
+    say = progress or _quiet
+    ident = identification
+    if ident is None and all(n in recordings for n in ("data_uch", "data_ucv")):
+        say("identifying the plant first (seed section 2)")
+        ident = identify(recordings, bench=bench, progress=say)
+    if ident is not None and ident.plant is not None and ident.sercalo is not None \
+            and not ident.warnings:
+        return PlantChoice(ident.plant, "identified (" + ", ".join(
+            f"{k}: {v}" for k, v in ident.plant_blocks.items()) + ")", ident)
+    why = ("the identification raised warnings" if ident is not None and ident.warnings
+           else "data_uch/data_ucv missing")
+    return PlantChoice(physical_plant(bench.nominal, source="physical (nominal)"),
+                       f"nominal physical model ({why})", ident)
+
+
+def _write_json(path: Path, payload: Mapping[str, Any]) -> Path:
+    return atomic_write_text(path, json.dumps(payload, indent=2, sort_keys=True,
+                                              allow_nan=False) + "\n")
+
+
+def budget_stage(recordings: Mapping[str, xr.Dataset], *, bench: Bench, out_dir: Path,
+                 plant: PlantChoice) -> tuple[Any, list[Path]]:
+    """Seed sections 3, 4, 11: ``budget.json``."""
+    from fsmbench.budget.study import budget_study
+
+    result = budget_study(recordings, bench=bench, plant=plant.plant)
+    payload = {**result.to_json(), "plant_source": plant.source}
+    return result, [_write_json(out_dir / "budget.json", payload)]
+
+
+@dataclass(frozen=True, eq=False)
+class DesignStage:
+    """The design study and the twin's verdict on fsmbench's controller."""
+
+    result: Any
+    twin_check: Any
+    payload: dict[str, Any]
+
+
+def design_stage(*, bench: Bench, out_dir: Path, plant: PlantChoice, seed: int = 0,
+                 progress: Progress | None = None) -> tuple[DesignStage, list[Path]]:
+    """Seed sections 5–10 and the closed-loop proof on the twin."""
+    from fsmbench.control.study import design_study
+    from fsmbench.twin.verify import verify_on_twin
+
+    say = progress or _quiet
+    say("designing and verifying the controllers (seed sections 5–10)")
+    result = design_study(plant.plant, bench=bench)
+    paths = result.write(out_dir)
+    say("running fsmbench's controller on the twin (repeatability experiment)")
+    check = verify_on_twin(result.controllers["fsmbench_controller"], bench=bench,
+                           plant=plant.plant, name="fsmbench controller", seed=seed)
+    payload = {**result.to_json(), "plant_source": plant.source,
+               "closed_loop_twin": {
+                   "tracking_error_rms_rad": check.measured_rms_rad,
+                   "predicted_rms_rad": check.predicted_rms_rad,
+                   "measured_over_predicted": check.ratio,
+                   "predicted_parts_rad": check.predicted_parts_rad,
+                   "duration_s": check.duration_s, "settle_s": check.settle_s,
+                   "seed": check.seed}}
+    paths.insert(0, _write_json(out_dir / "design.json", payload))
+    return DesignStage(result=result, twin_check=check, payload=payload), paths
