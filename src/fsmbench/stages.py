@@ -28,6 +28,7 @@ from fsmbench.bench.blocks import PlantModel, physical_plant
 from fsmbench.bench.params import Bench
 from fsmbench.ident.pipeline import Identification, identify, write_identification
 from fsmbench.io.atomic import atomic_write_text
+from fsmbench.jsonutil import plain_json
 
 __all__ = [
     "IDENT_EXPERIMENTS",
@@ -86,7 +87,7 @@ def choose_plant(recordings: Mapping[str, xr.Dataset], *, bench: Bench,
 
 
 def _write_json(path: Path, payload: Mapping[str, Any]) -> Path:
-    return atomic_write_text(path, json.dumps(payload, indent=2, sort_keys=True,
+    return atomic_write_text(path, json.dumps(plain_json(payload), indent=2, sort_keys=True,
                                               allow_nan=False) + "\n")
 
 

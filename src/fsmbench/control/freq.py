@@ -20,7 +20,7 @@ Conventions
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -29,6 +29,7 @@ import numpy as np
 from scipy import optimize
 
 from fsmbench.bench.blocks import PlantModel
+from fsmbench.jsonutil import plain_json
 
 __all__ = [
     "Margins",
@@ -45,21 +46,6 @@ __all__ = [
 ResponseFn = Callable[[np.ndarray], np.ndarray]
 
 
-def plain_json(value: Any) -> Any:
-    """JSON-safe copy: numpy scalars to Python numbers, NaN and ±inf to None, tuples to lists."""
-    if isinstance(value, Mapping):
-        return {str(k): plain_json(v) for k, v in value.items()}
-    if isinstance(value, list | tuple):
-        return [plain_json(v) for v in value]
-    if isinstance(value, np.ndarray):
-        return plain_json(value.tolist())
-    if isinstance(value, bool | np.bool_):
-        return bool(value)
-    if isinstance(value, np.integer):
-        return int(value)
-    if isinstance(value, float | np.floating):
-        return float(value) if math.isfinite(value) else None
-    return value
 
 
 def evaluate_ss(sys: ct.StateSpace, s: np.ndarray) -> np.ndarray:

@@ -62,6 +62,7 @@ from fsmbench.ident.sercalo import (
 )
 from fsmbench.ident.validate import PathValidation, validate_sercalo
 from fsmbench.io.atomic import atomic_write_text
+from fsmbench.jsonutil import plain_json
 
 __all__ = [
     "SEED_TRIMS_S",
@@ -392,7 +393,7 @@ def write_identification(result: Identification, out_dir: str | Path) -> list[Pa
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     paths = [atomic_write_text(out / "identification.json",
-                               json.dumps(_plain(result.to_json()), indent=2, sort_keys=True)
+                               json.dumps(plain_json(result.to_json()), indent=2, sort_keys=True)
                                + "\n")]
     if result.plant is not None:
         paths.append(write_plant_mat(out / "plant.mat", result.plant))
@@ -402,19 +403,3 @@ def write_identification(result: Identification, out_dir: str | Path) -> list[Pa
         paths.append(write_frf_mat(out / "frf.mat", frfs))
     return paths
 
-
-def _plain(value: Any) -> Any:
-    """JSON-safe copy: numpy scalars to floats, NaN/inf to None, tuples to lists."""
-    if isinstance(value, Mapping):
-        return {str(k): _plain(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [_plain(v) for v in value]
-    if isinstance(value, np.ndarray):
-        return _plain(value.tolist())
-    if isinstance(value, (np.floating, float)):
-        return float(value) if np.isfinite(value) else None
-    if isinstance(value, np.integer):
-        return int(value)
-    if isinstance(value, complex):
-        return {"re": value.real, "im": value.imag}
-    return value
