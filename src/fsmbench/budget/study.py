@@ -14,12 +14,10 @@ comparison with the huddle noise (Fig. 50). Everything left out is listed in
 
 from __future__ import annotations
 
-import math
 from collections.abc import Mapping
 from dataclasses import dataclass
 
 import control as ct
-import numpy as np
 import xarray as xr
 
 from fsmbench.bench.blocks import PlantModel, physical_plant
@@ -38,24 +36,13 @@ from fsmbench.budget.quantisation import NoiseSources, noise_sources
 from fsmbench.budget.repeatability import RepeatabilityRecord, analyse_repeatability
 from fsmbench.budget.table import AngleSources, ErrorBudget, angle_sources, budget_table
 from fsmbench.control.seed import seed_decentralised_controller, tustin
+from fsmbench.jsonutil import plain_json
 
-__all__ = ["BudgetResult", "NonRepeatability", "budget_study", "json_safe"]
+__all__ = ["BudgetResult", "NonRepeatability", "budget_study"]
 
 _HUDDLE = tuple(f"data_huddle_test_{i}" for i in HUDDLE_CONFIGS)
 _REP = {"data_rep_h": "h", "data_rep_v": "v"}
 
-
-def json_safe(obj: object) -> object:
-    """Recursively: numpy scalars to Python, non-finite floats to None, tuples to lists."""
-    if isinstance(obj, dict):
-        return {str(k): json_safe(v) for k, v in obj.items()}
-    if isinstance(obj, list | tuple):
-        return [json_safe(v) for v in obj]
-    if isinstance(obj, np.generic):
-        obj = obj.item()
-    if isinstance(obj, float) and not math.isfinite(obj):
-        return None
-    return obj
 
 
 @dataclass(frozen=True)
@@ -137,7 +124,7 @@ class BudgetResult:
             "nonrep_contributions": {k: v.to_json() for k, v in self.nonrep.items()},
             "skipped": dict(self.skipped),
         }
-        return json_safe(out)  # type: ignore[return-value]
+        return plain_json(out)
 
 
 def _valid_huddles(recordings: Mapping[str, xr.Dataset],

@@ -1,5 +1,10 @@
-"""Plant analysis, controllers (the seed's and fsmbench's), discretisation and export."""
+"""Plant analysis, controllers (the seed's and fsmbench's), discretisation and export.
 
+Entry point: :func:`design_study` (seed sections 5–10 on a plant model) and
+:func:`design_figures`; the seed's controllers are in :mod:`fsmbench.control.seed`.
+"""
+
+from fsmbench.control.figures import design_figures
 from fsmbench.control.realize import zpk_cascade
 from fsmbench.control.seed import (
     iff_controller,
@@ -7,8 +12,13 @@ from fsmbench.control.seed import (
     seed_decentralised_controller,
     tustin,
 )
+from fsmbench.control.study import DesignResult, StudyOptions, design_study
 
 __all__ = [
+    "DesignResult",
+    "StudyOptions",
+    "design_figures",
+    "design_study",
     "iff_controller",
     "newport_controller",
     "seed_decentralised_controller",
