@@ -5,6 +5,7 @@ from __future__ import annotations
 from collections.abc import Mapping
 from typing import Any
 
+import matplotlib
 import xarray as xr
 
 from fsmbench.report.html import Section, Table, figure_from_matplotlib
@@ -56,9 +57,12 @@ def budget_section(result: Any, *, recordings: Mapping[str, xr.Dataset],
     if result.skipped:
         paragraphs.append("Skipped: " + "; ".join(f"{k} ({v})"
                                                    for k, v in result.skipped.items()) + ".")
-    figures = tuple(figure_from_matplotlib(f.figure, title=f.title, caption=f.caption,
-                                           seed_ref=f.seed_ref)
-                    for f in budget_figures(result, recordings))
+    # The figures exist together until each is rendered and closed; the
+    # context only silences matplotlib's "more than 20 figures" warning here.
+    with matplotlib.rc_context({"figure.max_open_warning": 0}):
+        figures = tuple(figure_from_matplotlib(f.figure, title=f.title, caption=f.caption,
+                                               seed_ref=f.seed_ref)
+                        for f in budget_figures(result, recordings))
     return Section(title="5. Noise, error budget, huddle tests and repeatability",
                    anchor="budget", paragraphs=tuple(paragraphs), tables=tuple(tables),
                    figures=figures)

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 from typing import Any
 
+import matplotlib
+
 from fsmbench.report.html import Section, Table, figure_from_matplotlib
 
 __all__ = ["design_section"]
@@ -77,9 +79,10 @@ def design_section(stage: Any, *, plant_source: str) -> Section:
         "1e-4 s (Kd), with signal names; controllers_sos.json the second-order sections for a "
         "real-time target.",
     )
-    figures = tuple(
-        figure_from_matplotlib(fig, title=_TITLES.get(key, key.replace("_", " ")),
-                               seed_ref=_SEED_REFS.get(key, ""), caption="")
-        for key, fig in design_figures(stage.result).items())
+    with matplotlib.rc_context({"figure.max_open_warning": 0}):  # rendered, then closed
+        figures = tuple(
+            figure_from_matplotlib(fig, title=_TITLES.get(key, key.replace("_", " ")),
+                                   seed_ref=_SEED_REFS.get(key, ""), caption="")
+            for key, fig in design_figures(stage.result).items())
     return Section(title="6. Control: analysis, controllers, verification", anchor="control",
                    paragraphs=paragraphs, tables=tuple(tables), figures=figures)
