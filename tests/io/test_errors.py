@@ -113,7 +113,7 @@ def test_cell_is_not_a_signal(
         cell[0, 0], cell[0, 1] = "a", "b"
         path = write_raw(fmt, tmp_path / "rec.mat", _signals(Vph=cell))
     else:
-        from fsmbench.io.matfile import save_mat  # a v7.3 cell needs references
+        from fsmbench.io.matwrite import save_mat  # a v7.3 cell needs references
 
         path = save_mat(tmp_path / "rec.mat", _signals(Vph=["a", "b"]), version="7.3")
     with pytest.raises(RecordingError, match=rf"^{path}: variable 'Vph' holds a cell array of "

@@ -1,4 +1,4 @@
-"""fsmbench.io.matfile: MAT v4/v5/v7.3 detection, reading and writing."""
+"""fsmbench.io.matfile (detection, reading) and fsmbench.io.matwrite (writing): MAT v4/v5/v7.3."""
 
 from __future__ import annotations
 
@@ -13,16 +13,10 @@ import numpy as np
 import pytest
 import scipy.io
 
-from fsmbench.io import matfile
+from fsmbench.io import matwrite
 from fsmbench.io.errors import RecordingError
-from fsmbench.io.matfile import (
-    HDF5_SIGNATURE,
-    detect_format,
-    load_mat,
-    mat5_header,
-    mat73_header,
-    save_mat,
-)
+from fsmbench.io.matfile import HDF5_SIGNATURE, detect_format, load_mat
+from fsmbench.io.matwrite import mat5_header, mat73_header, save_mat
 
 VERSIONS = ["5", "7.3"]
 
@@ -354,7 +348,7 @@ def _fail_after_first(monkeypatch: pytest.MonkeyPatch, target: Any, attr: str,
 @pytest.mark.parametrize("exc", [OSError("disk full"), KeyboardInterrupt()])
 @pytest.mark.parametrize(
     ("version", "target", "attr"),
-    [("5", matfile.zlib, "compress"), ("7.3", matfile._H5Writer, "_numeric")],
+    [("5", matwrite.zlib, "compress"), ("7.3", matwrite._H5Writer, "_numeric")],
 )
 def test_interrupted_write_leaves_nothing(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch, version: str, target: Any, attr: str,
@@ -375,9 +369,9 @@ def test_failed_overwrite_keeps_the_old_file(
     path = save_mat(tmp_path / "x.mat", {"a": np.arange(3.0)}, version=version)  # type: ignore[arg-type]
     before = snapshot(path)
     if version == "5":
-        monkeypatch.setattr(matfile.zlib, "compress", _raise(zlib.error("boom")))
+        monkeypatch.setattr(matwrite.zlib, "compress", _raise(zlib.error("boom")))
     else:
-        monkeypatch.setattr(matfile._H5Writer, "_numeric", _raise(OSError("boom")))
+        monkeypatch.setattr(matwrite._H5Writer, "_numeric", _raise(OSError("boom")))
     with pytest.raises((zlib.error, OSError)):
         save_mat(path, {"a": np.arange(5.0), "b": np.arange(4.0)}, version=version)  # type: ignore[arg-type]
     assert snapshot(path) == before

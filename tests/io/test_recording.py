@@ -12,7 +12,7 @@ import pytest
 import scipy.io
 import xarray as xr
 
-from fsmbench.io import matfile, nexus
+from fsmbench.io import matfile, matwrite, nexus
 from fsmbench.io.errors import RecordingError
 from fsmbench.io.recording import (
     find_experiments,
@@ -259,8 +259,8 @@ def test_reading_never_touches_the_input(
 @pytest.mark.parametrize("exc", [OSError("disk full"), KeyboardInterrupt()])
 @pytest.mark.parametrize(
     ("fmt", "target", "attr"),
-    [("mat5", matfile.zlib, "compress"),
-     ("mat73", matfile._H5Writer, "_numeric"),
+    [("mat5", matwrite.zlib, "compress"),
+     ("mat73", matwrite._H5Writer, "_numeric"),
      ("nexus", nexus.h5py.Group, "create_dataset")],
 )
 def test_interrupted_write_leaves_no_file(

@@ -29,7 +29,7 @@ from scipy.linalg import eigvals
 from fsmbench import __version__
 from fsmbench.control.seed import SEED_TS_S, tustin
 from fsmbench.io.atomic import atomic_write_text
-from fsmbench.io.matfile import save_mat
+from fsmbench.io.matwrite import save_mat
 
 __all__ = [
     "SOS_FORMAT",

@@ -23,7 +23,7 @@ import numpy as np
 
 from fsmbench.bench.blocks import PlantModel
 from fsmbench.ident.frf import FrequencyResponse
-from fsmbench.io.matfile import save_mat
+from fsmbench.io.matwrite import save_mat
 
 __all__ = ["frf_variables", "plant_variables", "ss_struct", "write_frf_mat", "write_plant_mat"]
 

@@ -9,15 +9,8 @@ is atomic (:mod:`fsmbench.io.atomic`); every bad input raises a
 
 from fsmbench.io.atomic import atomic_path, atomic_write_bytes, atomic_write_text
 from fsmbench.io.errors import RecordingError, SaturationWarning
-from fsmbench.io.matfile import (
-    FileFormat,
-    MatVersion,
-    detect_format,
-    load_mat,
-    mat5_header,
-    mat73_header,
-    save_mat,
-)
+from fsmbench.io.matfile import FileFormat, detect_format, load_mat
+from fsmbench.io.matwrite import MatVersion, mat5_header, mat73_header, save_mat
 from fsmbench.io.nexus import is_nexus, read_nexus, write_nexus
 from fsmbench.io.recording import (
     RecordingFormat,

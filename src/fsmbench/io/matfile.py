@@ -15,7 +15,7 @@ tagged with a ``MATLAB_class`` attribute; a column vector of N samples is
 therefore stored as ``(1, N)``. :func:`load_mat` undoes that and returns
 arrays in MATLAB's shape, the same for every version.
 
-Values returned by :func:`load_mat` (and accepted by :func:`save_mat`):
+Values returned by :func:`load_mat` (and accepted by :func:`fsmbench.io.matwrite.save_mat`):
 
 ==================  ==========================================================
 MATLAB              Python
@@ -34,14 +34,8 @@ On writing, a 1-D array becomes an N×1 column (``oned_as="column"``), a
 
 from __future__ import annotations
 
-import concurrent.futures
-import io
 import os
-import re
-import time
 import warnings
-import zlib
-from collections.abc import Mapping
 from pathlib import Path
 from typing import Any, Final, Literal
 
@@ -51,49 +45,27 @@ import scipy.io
 import scipy.sparse
 from scipy.io import matlab as _matlab
 
-from fsmbench.io.atomic import atomic_path
 from fsmbench.io.errors import RecordingError
 
 __all__ = [
     "HDF5_SIGNATURE",
     "FileFormat",
-    "MatVersion",
     "detect_format",
     "load_mat",
-    "mat5_header",
-    "mat73_header",
-    "save_mat",
 ]
 
 #: What :func:`detect_format` can report.
 FileFormat = Literal["mat4", "mat5", "mat73", "hdf5"]
-#: MAT-file versions :func:`save_mat` writes ("5" is MATLAB's ``-v7`` layout).
-MatVersion = Literal["5", "7.3"]
 
 #: The 8 bytes that open an HDF5 superblock (HDF5 File Format Specification).
 HDF5_SIGNATURE: Final = b"\x89HDF\r\n\x1a\n"
-_USERBLOCK: Final = 512
 _MAT73_TEXT: Final = b"MATLAB 7.3 MAT-file"
-# zlib level for v5 variables: level 1 compresses 16-bit ADC data almost as
-# well as the default level 6 (0.42 vs 0.37 of the size) at 5x the speed.
-_ZLIB_LEVEL: Final = 1
-_MI_COMPRESSED: Final = 15  # MAT v5 data type of a compressed element
-_NAME_RE: Final = re.compile(r"[A-Za-z][A-Za-z0-9_]{0,62}")  # MATLAB's namelengthmax = 63
 
-# MATLAB_class of each numpy dtype kind/size MATLAB can hold (complex: same class).
-_CLASS_OF: Final[dict[str, str]] = {
-    "f8": "double", "f4": "single", "c16": "double", "c8": "single",
-    "i1": "int8", "u1": "uint8", "i2": "int16", "u2": "uint16",
-    "i4": "int32", "u4": "uint32", "i8": "int64", "u8": "uint64", "b1": "logical",
-}
 _DTYPE_OF: Final[dict[str, str]] = {
     "double": "f8", "single": "f4", "int8": "i1", "uint8": "u1", "int16": "i2",
     "uint16": "u2", "int32": "i4", "uint32": "u4", "int64": "i8", "uint64": "u8",
     "logical": "?", "char": "u2",
 }
-_DAYS: Final = ("Mon", "Tue", "Wed", "Thu", "Fri", "Sat", "Sun")
-_MONTHS: Final = ("Jan", "Feb", "Mar", "Apr", "May", "Jun",
-                  "Jul", "Aug", "Sep", "Oct", "Nov", "Dec")
 
 
 # --------------------------------------------------------------------------- format
@@ -431,335 +403,3 @@ def _group_from_h5(g: h5py.Group, f: h5py.File, where: str) -> Any:
         return [{k: _from_h5(f[refs[k][i]], f, f"{where}({i + 1}).{k}") for k in fields}
                 for i in range(n)]
     return {k: _from_h5(m, f, f"{where}.{k}") for k, m in zip(fields, members, strict=True)}
-
-
-# --------------------------------------------------------------------------- writing
-def mat73_header(*, platform: str | None = None, created: float | None = None) -> bytes:
-    """The 128-byte MAT-file header MATLAB writes in a v7.3 file's userblock.
-
-    Parameters
-    ----------
-    platform : str, optional
-        Text after ``Platform:``; defaults to ``"fsmbench <version>"``.
-    created : float, optional
-        Creation time, in s since the epoch, written as UTC (a fixed value
-        gives byte-identical files); defaults to now, in local time as MATLAB
-        writes it.
-
-    Returns
-    -------
-    bytes
-        128 bytes: the text padded with spaces to 116 bytes, 8 bytes of
-        subsystem offset (zeros), version 0x0200 and the endian indicator
-        ``IM``.
-
-    Notes
-    -----
-    Layout followed: the MAT-File Format document (128-byte header: text
-    0..115, subsys offset 116..123, version 124..125, endian 126..127) as
-    hdf5storage documents it for v7.3 ("Storage Format: MATLAB File Header",
-    https://pythonhosted.org/hdf5storage/storage_format.html — "a 116 byte
-    string (spaces pad the end) followed by ... 00000000 00000000 0002494D"),
-    and matio's/hdf5-pure's ``mat/userblock.rs`` (bytes 124..127 =
-    ``00 02 'I' 'M'``, zeros to 512, HDF5 superblock at 512).
-    """
-    text = (f"MATLAB 7.3 MAT-file, Platform: {_platform(platform)}, "
-            f"Created on: {_stamp(created)} HDF5 schema 1.00 .")
-    raw = text.encode("ascii", "replace")[:116]
-    return raw.ljust(116, b" ") + b"\x00" * 8 + b"\x00\x02" + b"IM"
-
-
-def mat5_header(*, platform: str | None = None, created: float | None = None) -> bytes:
-    """The 128-byte header of a MATLAB v5/v7 MAT-file (little-endian).
-
-    Same text and ``created`` convention as :func:`mat73_header`; bytes
-    116..123 are the subsystem offset (zeros), 124..125 the version 0x0100
-    and 126..127 the endian indicator ``IM``, as the MAT-File Format
-    document specifies and ``scipy.io.savemat`` writes.
-    """
-    text = f"MATLAB 5.0 MAT-file, Platform: {_platform(platform)}, Created on: {_stamp(created)}"
-    raw = text.encode("ascii", "replace")[:116]
-    return raw.ljust(116, b" ") + b"\x00" * 8 + b"\x00\x01" + b"IM"
-
-
-def _platform(platform: str | None) -> str:
-    from fsmbench import __version__
-
-    return platform if platform is not None else f"fsmbench {__version__}"
-
-
-def _stamp(created: float | None) -> str:
-    now = time.localtime() if created is None else time.gmtime(created)
-    # English names by hand: strftime's %a/%b follow the locale.
-    return (f"{_DAYS[now.tm_wday]} {_MONTHS[now.tm_mon - 1]} {now.tm_mday:02d} "
-            f"{now.tm_hour:02d}:{now.tm_min:02d}:{now.tm_sec:02d} {now.tm_year}")
-
-
-
-
-def save_mat(
-    path: str | os.PathLike[str],
-    variables: Mapping[str, Any],
-    *,
-    version: MatVersion = "5",
-    compress: bool | None = None,
-    created: float | None = None,
-) -> Path:
-    """Write variables to a MAT-file, atomically.
-
-    Parameters
-    ----------
-    path : str or os.PathLike
-        Destination; its folder must exist. Written through a temporary file
-        and renamed, so it is either complete or untouched.
-    variables : mapping of str to value
-        Names must be MATLAB identifiers (letter first, at most 63
-        characters). Values: numeric/logical/complex arrays or scalars
-        (1-D arrays become N×1 columns), ``str``, lists/tuples (1×N cell
-        arrays, e.g. of signal names), mappings (structs, nested allowed);
-        v5 also takes ``scipy.sparse`` matrices.
-    version : {"5", "7.3"}, default "5"
-        ``"5"`` is MATLAB's default ``-v7`` layout (scipy.io.savemat encodes
-        each variable); ``"7.3"`` is the HDF5 layout MATLAB writes with
-        ``-v7.3``.
-    compress : bool, optional
-        Compress the data. Default: yes for v5, no for v7.3 (v7.3 is chosen
-        for large files, where HDF5's single-threaded deflate dominates).
-    created : float, optional
-        Creation time for the header [s since the epoch]; default now. A
-        fixed value makes the file a pure function of the variables.
-
-    Returns
-    -------
-    Path
-        The destination.
-    """
-    dest = Path(path)
-    for name in variables:
-        _check_name(name, dest)
-    if version == "5":
-        _save_v5(dest, variables, compress=True if compress is None else compress,
-                 header=mat5_header(created=created))
-    elif version == "7.3":
-        _save_v73(dest, variables, compress=False if compress is None else compress,
-                  header=mat73_header(created=created))
-    else:
-        raise ValueError(f"{dest}: unknown MAT-file version {version!r}; use '5' or '7.3'")
-    return dest
-
-
-def _check_name(name: str, dest: Path) -> None:
-    if not isinstance(name, str) or not _NAME_RE.fullmatch(name):
-        raise ValueError(
-            f"{dest}: {name!r} is not a valid MATLAB variable or field name "
-            "(a letter, then letters, digits or '_', at most 63 characters)"
-        )
-
-
-def _to_scipy(value: Any, where: str, dest: Path) -> Any:
-    """Convert a value to what scipy.io.savemat writes as the intended class."""
-    if isinstance(value, Mapping):
-        for k in value:
-            _check_name(k, dest)
-        return {k: _to_scipy(v, f"{where}.{k}", dest) for k, v in value.items()}
-    if isinstance(value, str) or scipy.sparse.issparse(value):
-        return value
-    if isinstance(value, (list, tuple)):
-        cell = np.empty((1, len(value)), dtype=object)  # 1×N cell, as MATLAB's {a, b}
-        for i, v in enumerate(value):
-            cell[0, i] = _to_scipy(v, f"{where}{{{i + 1}}}", dest)
-        return cell
-    arr = _as_array(value, where, dest)
-    if arr.dtype.kind in "US":
-        return str(arr.item()) if arr.ndim == 0 else _to_scipy(arr.tolist(), where, dest)
-    if arr.dtype == object:
-        out = np.empty(arr.shape, dtype=object)
-        for idx, v in np.ndenumerate(arr):
-            out[idx] = _to_scipy(v, where, dest)
-        return out
-    if f"{arr.dtype.kind}{arr.dtype.itemsize}" not in _CLASS_OF:
-        raise TypeError(f"{dest}: variable '{where}': cannot store {type(value).__name__} "
-                        f"(dtype {arr.dtype}) in a MAT-file")
-    return arr
-
-
-def _as_array(value: Any, where: str, dest: Path) -> np.ndarray:
-    """``np.asarray(value)``, refusing objects numpy can only wrap (None, sets, ...)."""
-    arr = np.asarray(value)
-    if arr.dtype == object and arr.ndim == 0:
-        raise TypeError(f"{dest}: variable '{where}': cannot store "
-                        f"{type(value).__name__} in a MAT-file")
-    return arr
-
-
-def _worth_compressing(data: bytes) -> bool:
-    """Whether zlib shrinks ``data`` by 10 % or more, judged on a 256 KiB sample.
-
-    Noise-like float64 signals barely compress (~0.96 of their size) yet cost
-    as much time as any other; they are stored plain (a v5 file may mix plain
-    and compressed variables), 16-bit ADC data (~0.42) and ``t`` (~0.3) are not.
-    """
-    size = 1 << 18
-    if len(data) <= 2 * size:
-        return True
-    start = (len(data) // 2) & ~7
-    sample = data[start:start + size]
-    return len(zlib.compress(sample, _ZLIB_LEVEL)) < 0.9 * len(sample)
-
-
-def _v5_element(name: str, value: Any, compress: bool) -> bytes:
-    """The data element of one variable, as savemat encodes it."""
-    buf = io.BytesIO()
-    scipy.io.savemat(buf, {name: value}, format="5", oned_as="column",
-                     do_compression=False, long_field_names=True)
-    raw = buf.getvalue()
-    element = raw[128:]
-    if compress and _worth_compressing(element):
-        # Same framing as savemat(do_compression=True): an miCOMPRESSED tag
-        # around the zlib stream of the miMATRIX element, no padding.
-        packed = zlib.compress(element, _ZLIB_LEVEL)
-        element = np.array([_MI_COMPRESSED, len(packed)], dtype=np.uint32).tobytes() + packed
-    return element
-
-
-def _save_v5(dest: Path, variables: Mapping[str, Any], *, compress: bool,
-             header: bytes) -> None:
-    items = [(k, _to_scipy(v, k, dest)) for k, v in variables.items()]
-    workers = max(1, min(len(items), os.cpu_count() or 1))
-    # Variables are encoded and zlib-compressed in threads (zlib releases the
-    # GIL): savemat's own compression is single-threaded and ~5x slower.
-    pool = concurrent.futures.ThreadPoolExecutor(max_workers=workers)
-    try:
-        with atomic_path(dest) as tmp, open(tmp, "wb") as fh:
-            fh.write(header)
-            for element in pool.map(lambda kv: _v5_element(kv[0], kv[1], compress), items):
-                fh.write(element)
-    finally:
-        # on failure (Ctrl-C included) drop the variables not started yet
-        pool.shutdown(wait=True, cancel_futures=True)
-
-
-class _H5Writer:
-    """Writes Python values into an HDF5 file the way MATLAB lays out v7.3."""
-
-    def __init__(self, f: h5py.File, dest: Path, *, compress: bool) -> None:
-        self.f = f
-        self.dest = dest
-        self.compress = compress
-        self._refs: h5py.Group | None = None
-        self._count = 0
-
-    def _ref_name(self) -> str:
-        # MATLAB names the members of "#refs#" a, b, ..., z, ba, bb, ...
-        n, name = self._count, ""
-        self._count += 1
-        while True:
-            n, r = divmod(n, 26)
-            name = chr(ord("a") + r) + name
-            if n == 0:
-                return name
-
-    def write(self, group: h5py.Group, name: str, value: Any, where: str) -> Any:
-        if isinstance(value, Mapping):
-            return self._struct(group, name, value, where)
-        if isinstance(value, str):
-            return self._char(group, name, value)
-        if isinstance(value, (list, tuple)):
-            cell = np.empty((1, len(value)), dtype=object)
-            for i, v in enumerate(value):
-                cell[0, i] = v
-            return self._cell(group, name, cell, where)
-        if scipy.sparse.issparse(value):
-            raise TypeError(f"{self.dest}: variable '{where}': sparse matrices need version '5'")
-        arr = _as_array(value, where, self.dest)
-        if arr.dtype.kind in "US":
-            if arr.ndim == 0:
-                return self._char(group, name, str(arr.item()))
-            return self.write(group, name, arr.tolist(), where)
-        if arr.ndim == 1:
-            arr = arr.reshape(-1, 1)  # oned_as="column", as for v5
-        if arr.dtype == object:
-            return self._cell(group, name, np.atleast_2d(arr), where)
-        key = f"{arr.dtype.kind}{arr.dtype.itemsize}"
-        if key not in _CLASS_OF:
-            raise TypeError(f"{self.dest}: variable '{where}': cannot store "
-                            f"{type(value).__name__} (dtype {arr.dtype}) in a MAT-file")
-        return self._numeric(group, name, np.atleast_2d(arr), _CLASS_OF[key])
-
-    def _empty(self, group: h5py.Group, name: str, shape: tuple[int, ...], cls: str) -> Any:
-        ds = group.create_dataset(name, data=np.array(shape, dtype=np.uint64),
-                                   track_times=False)
-        ds.attrs["MATLAB_class"] = np.bytes_(cls)
-        ds.attrs["MATLAB_empty"] = np.uint8(1)
-        return ds
-
-    def _numeric(self, group: h5py.Group, name: str, arr: np.ndarray, cls: str) -> Any:
-        if arr.size == 0:
-            return self._empty(group, name, arr.shape, cls)
-        data = arr.T  # MATLAB is column-major: HDF5 dims are MATLAB's reversed
-        if arr.dtype.kind == "c":
-            part = arr.real.dtype
-            cdata = np.empty(data.shape, dtype=np.dtype([("real", part), ("imag", part)]))
-            cdata["real"], cdata["imag"] = data.real, data.imag
-            data = cdata
-        elif arr.dtype.kind == "b":
-            data = data.astype(np.uint8)
-        opts: dict[str, Any] = {}
-        if self.compress and data.size > 1:
-            opts = {"compression": "gzip", "compression_opts": 1, "chunks": True}
-        ds = group.create_dataset(name, data=np.ascontiguousarray(data), track_times=False,
-                                   **opts)
-        ds.attrs["MATLAB_class"] = np.bytes_(cls)
-        if cls == "logical":
-            ds.attrs["MATLAB_int_decode"] = np.int32(1)
-        return ds
-
-    def _char(self, group: h5py.Group, name: str, text: str) -> Any:
-        # MATLAB char data are UTF-16 code units; a 1×L row is stored (L, 1).
-        codes = np.frombuffer(text.encode("utf-16-le"), dtype="<u2")
-        if codes.size == 0:
-            return self._empty(group, name, (0, 0), "char")
-        ds = group.create_dataset(name, data=codes.reshape(-1, 1), track_times=False)
-        ds.attrs["MATLAB_class"] = np.bytes_("char")
-        ds.attrs["MATLAB_int_decode"] = np.int32(2)
-        return ds
-
-    def _cell(self, group: h5py.Group, name: str, cell: np.ndarray, where: str) -> Any:
-        if cell.size == 0:
-            return self._empty(group, name, cell.shape, "cell")
-        if self._refs is None:
-            self._refs = self.f.require_group("#refs#")
-        data = cell.T
-        refs = np.empty(data.shape, dtype=h5py.ref_dtype)
-        for idx, elem in np.ndenumerate(data):
-            obj = self.write(self._refs, self._ref_name(), elem, f"{where}{{{idx}}}")
-            refs[idx] = obj.ref
-        ds = group.create_dataset(name, data=refs, track_times=False)
-        ds.attrs["MATLAB_class"] = np.bytes_("cell")
-        return ds
-
-    def _struct(self, group: h5py.Group, name: str, value: Mapping[str, Any], where: str) -> Any:
-        g = group.create_group(name)
-        g.attrs["MATLAB_class"] = np.bytes_("struct")
-        if value:
-            # MATLAB_fields: one variable-length array of 1-byte chars per field.
-            names = np.empty(len(value), dtype=object)
-            for i, k in enumerate(value):
-                _check_name(k, self.dest)
-                names[i] = np.frombuffer(k.encode("ascii"), dtype="S1")
-            g.attrs.create("MATLAB_fields", names, dtype=h5py.vlen_dtype(np.dtype("S1")))
-        for k, v in value.items():
-            self.write(g, k, v, f"{where}.{k}")
-        return g
-
-
-def _save_v73(dest: Path, variables: Mapping[str, Any], *, compress: bool,
-              header: bytes) -> None:
-    with atomic_path(dest) as tmp:
-        # userblock_size=512: MATLAB's header lives there, the HDF5 superblock at 512.
-        with h5py.File(tmp, "w", userblock_size=_USERBLOCK, libver="earliest") as f:
-            writer = _H5Writer(f, dest, compress=compress)
-            for name, value in variables.items():
-                writer.write(f, name, value, name)
-        with open(tmp, "r+b") as fh:
-            fh.write(header.ljust(_USERBLOCK, b"\x00"))

@@ -28,7 +28,8 @@ import scipy.sparse
 import xarray as xr
 
 from fsmbench.io.errors import RecordingError, SaturationWarning
-from fsmbench.io.matfile import detect_format, load_mat, save_mat
+from fsmbench.io.matfile import detect_format, load_mat
+from fsmbench.io.matwrite import save_mat
 from fsmbench.io.signals import ADC_SIGNALS, EXPERIMENTS, SIGNALS, TIME
 
 __all__ = [
