@@ -59,6 +59,7 @@ __all__ = [
     "sercalo_angles",
     "sercalo_beam_matrix",
     "ss_frequency_response",
+    "ss_response",
     "voltage_amplifier",
 ]
 
@@ -226,20 +227,25 @@ def input_delays_s(p: BenchParams) -> dict[str, float]:
             "Unv": dac + p.newport.internal_delay_s}
 
 
-def ss_frequency_response(sys: ct.StateSpace, f_hz: np.ndarray) -> np.ndarray:
-    """Complex response ``C (sI - A)^-1 B + D`` at ``s = j 2 pi f``, shape (nf, p, m).
+def ss_response(sys: ct.StateSpace, s: np.ndarray) -> np.ndarray:
+    """``C (sI - A)^-1 B + D`` at complex ``s`` [rad/s] (or ``z`` for a discrete
+    system), shape (n, p, m); ``s`` must not hit a pole of ``sys``.
 
-    One batched solve over all frequencies instead of a Python loop.
+    One batched solve over all points instead of a Python loop.
     """
-    f = np.asarray(f_hz, dtype=float).ravel()
+    s = np.asarray(s, dtype=complex).ravel()
     a, b, c, d = (np.asarray(x, dtype=float) for x in (sys.A, sys.B, sys.C, sys.D))
     n = a.shape[0]
     if n == 0:
-        return np.broadcast_to(d, (f.size, *d.shape)).astype(complex)
-    s = 2j * np.pi * f
+        return np.broadcast_to(d, (s.size, *d.shape)).astype(complex)
     lhs = s[:, None, None] * np.eye(n)[None] - a[None]
-    x = np.linalg.solve(lhs, np.broadcast_to(b, (f.size, *b.shape)).astype(complex))
+    x = np.linalg.solve(lhs, np.broadcast_to(b, (s.size, *b.shape)).astype(complex))
     return np.einsum("pn,fnm->fpm", c, x) + d[None]
+
+
+def ss_frequency_response(sys: ct.StateSpace, f_hz: np.ndarray) -> np.ndarray:
+    """Continuous response at ``s = j 2 pi f``, ``f_hz`` [Hz], shape (nf, p, m)."""
+    return ss_response(sys, 2j * np.pi * np.asarray(f_hz, dtype=float).ravel())
 
 
 @dataclass(frozen=True)

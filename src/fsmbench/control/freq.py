@@ -29,6 +29,7 @@ import numpy as np
 from scipy import optimize
 
 from fsmbench.bench.blocks import PlantModel
+from fsmbench.bench.blocks import ss_response as evaluate_ss
 from fsmbench.jsonutil import plain_json
 
 __all__ = [
@@ -48,18 +49,6 @@ ResponseFn = Callable[[np.ndarray], np.ndarray]
 
 
 
-def evaluate_ss(sys: ct.StateSpace, s: np.ndarray) -> np.ndarray:
-    """``C (sI - A)^-1 B + D`` at complex ``s`` [rad/s], shape (n, p, m).
-
-    One batched solve for all points; ``s`` must not hit a pole of ``sys``.
-    """
-    s = np.asarray(s, dtype=complex).ravel()
-    a, b, c, d = (np.asarray(x, dtype=float) for x in (sys.A, sys.B, sys.C, sys.D))
-    if a.shape[0] == 0:
-        return np.broadcast_to(d, (s.size, *d.shape)).astype(complex)
-    lhs = s[:, None, None] * np.eye(a.shape[0])[None] - a[None]
-    x = np.linalg.solve(lhs, np.broadcast_to(b, (s.size, *b.shape)).astype(complex))
-    return np.einsum("pn,fnm->fpm", c, x) + d[None]
 
 
 def plant_response(plant: PlantModel, s: np.ndarray, *, outputs: Sequence[str],

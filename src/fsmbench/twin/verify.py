@@ -29,7 +29,7 @@ from typing import Any
 import control as ct
 import numpy as np
 
-from fsmbench.bench.blocks import PlantModel
+from fsmbench.bench.blocks import PlantModel, ss_frequency_response
 from fsmbench.bench.params import Bench
 from fsmbench.twin.controller import feedback_controller
 from fsmbench.twin.experiments import REP_AMPLITUDE_V, REP_FREQ_HZ
@@ -70,9 +70,13 @@ class TrackingCheck:
         return asdict(self)
 
 
-def _k_response(k: ct.StateSpace, f_hz: np.ndarray) -> np.ndarray:
-    resp = np.asarray(k.frequency_response(2 * np.pi * f_hz).complex)
-    return np.moveaxis(resp.reshape(k.noutputs, k.ninputs, f_hz.size), -1, 0)
+def _loop(plant: PlantModel, k: ct.StateSpace, f_hz: np.ndarray
+          ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``S = (I + G K)^-1``, ``G = ∂R/∂Uc`` and ``Gn = ∂R/∂Un`` at ``f_hz``, each (F, 2, 2)."""
+    g = plant.frequency_response(f_hz, outputs=["Rh", "Rv"], inputs=["Uch", "Ucv"]).values
+    gn = plant.frequency_response(f_hz, outputs=["Rh", "Rv"], inputs=["Unh", "Unv"]).values
+    s = np.linalg.inv(np.eye(2)[None] + g @ ss_frequency_response(k, f_hz))
+    return s, g, gn
 
 
 def predict_tracking(plant: PlantModel, k: ct.StateSpace, *, bench: Bench,
@@ -96,11 +100,7 @@ def predict_tracking(plant: PlantModel, k: ct.StateSpace, *, bench: Bench,
     fs = p_nom.converter.fs_hz
     f = np.linspace(fs / 2 / n_freq, fs / 2, n_freq)
     df = f[1] - f[0]
-    g = plant.frequency_response(f, outputs=["Rh", "Rv"], inputs=["Uch", "Ucv"]).values
-    gn = plant.frequency_response(f, outputs=["Rh", "Rv"], inputs=["Unh", "Unv"]).values
-    kk = _k_response(k, f)
-    eye = np.eye(2)[None]
-    s = np.linalg.inv(eye + g @ kk)
+    s, g, _ = _loop(plant, k, f)
     gd = np.abs(p_nom.quad_diode.gain_v_per_rad.as_array())
     lsb = p_nom.converter.lsb_v
     white = 1.0 / (fs / 2)  # one-sided PSD of unit-variance white noise
@@ -122,10 +122,7 @@ def predict_tracking(plant: PlantModel, k: ct.StateSpace, *, bench: Bench,
         "newport_angle_noise": integral(s, psd_beam),
         "dac_quantisation": integral(s @ g, psd_dac),
     }
-    f1 = np.array([REP_FREQ_HZ])
-    s1 = np.linalg.inv(np.eye(2) + plant.frequency_response(
-        f1, outputs=["Rh", "Rv"], inputs=["Uch", "Ucv"]).values[0] @ _k_response(k, f1)[0])
-    gn1 = plant.frequency_response(f1, outputs=["Rh", "Rv"], inputs=["Unh", "Unv"]).values[0]
+    s1, _, gn1 = (x[0] for x in _loop(plant, k, np.array([REP_FREQ_HZ])))
     total: dict[str, float] = {}
     out_parts: dict[str, dict[str, float]] = {}
     for i, (axis, _exp, _un, _vp) in enumerate(_AXES):
@@ -134,7 +131,6 @@ def predict_tracking(plant: PlantModel, k: ct.StateSpace, *, bench: Bench,
         terms["newport_sine"] = float(sine)
         out_parts[axis] = terms
         total[axis] = float(np.sqrt(sum(t**2 for t in terms.values())))
-    del gn
     return total, out_parts
 
 
