@@ -10,7 +10,9 @@ from __future__ import annotations
 import hashlib
 
 import numpy as np
-from scipy.signal import lfilter, lfilter_zi
+from scipy.signal import lfilter
+
+from fsmbench.filters import first_order_lowpass
 
 __all__ = ["first_order_lag", "gauss_markov", "source_rng", "white_noise"]
 
@@ -71,7 +73,5 @@ def first_order_lag(x: np.ndarray, *, tau_s: float, fs_hz: float) -> np.ndarray:
 
     Step-invariant discretisation: ``y[k+1] = a y[k] + (1 - a) x[k]``, ``y[0] = x[0]``.
     """
-    a = float(np.exp(-1.0 / (fs_hz * tau_s)))
-    b_coef, a_coef = [0.0, 1.0 - a], [1.0, -a]
-    y, _ = lfilter(b_coef, a_coef, x, zi=lfilter_zi(b_coef, a_coef) * x[0])
-    return np.asarray(y)
+    return first_order_lowpass(x, cutoff_hz=1.0 / (2.0 * np.pi * tau_s), fs_hz=fs_hz,
+                               initial="steady")
