@@ -18,7 +18,9 @@ import json
 import sys
 import time
 from collections.abc import Callable, Sequence
+from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 from fsmbench import __version__
 from fsmbench.bench.params import Bench, ParamsError, load_bench, param_rows, save_bench
@@ -75,78 +77,78 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
     return 0
 
 
-def _cmd_identify(args: argparse.Namespace) -> int:
-    from fsmbench.ident.compare import compare_with_truth
-    from fsmbench.ident.pipeline import identify, write_identification
-    from fsmbench.study import load_recordings
+@dataclass(frozen=True)
+class _StageInput:
+    """What every stage command starts from: folders, bench, progress, recordings."""
 
-    data, out = _data_and_out(args)
-    say = _progress()
-    bench = _bench(args)
-    recordings, skipped = load_recordings(data, progress=say)
-    for name, why in skipped.items():
-        say(f"skipped {name}: {why}")
-    result = identify(recordings, bench=bench, source=str(data), progress=say)
-    for step, why in result.skipped.items():
-        say(f"step {step} skipped: {why}")
-    for warning in result.warnings:
-        print(f"fsmbench identify: warning: {warning}", file=sys.stderr)
-    for path in write_identification(result, out):
-        print(path)
-    truth_path = data / "twin_truth.json"
-    reference = (json.loads(truth_path.read_text()) if truth_path.is_file() else None)
-    for row in compare_with_truth(result.to_json(), reference=reference, bench=bench):
-        print(row, file=sys.stderr)
-    return 0
+    data: Path
+    out: Path
+    bench: Bench
+    say: Callable[[str], None]
+    recordings: dict[str, Any]
 
 
-def _data_and_out(args: argparse.Namespace) -> tuple[Path, Path]:
-    from fsmbench.study import check_out_dir
+def _stage_input(args: argparse.Namespace) -> _StageInput:
+    """Check the folders (never write into the data), read every experiment present."""
+    from fsmbench.study import check_out_dir, load_recordings
 
     data, out = Path(args.data), Path(args.out)
     check_out_dir(out, data)
     if not data.is_dir():
         raise FileNotFoundError(f"data folder {data} does not exist")
     out.mkdir(parents=True, exist_ok=True)
-    return data, out
+    say = _progress()
+    recordings, skipped = load_recordings(data, progress=say)
+    for name, why in skipped.items():
+        say(f"skipped {name}: {why}")
+    return _StageInput(data=data, out=out, bench=_bench(args), say=say, recordings=recordings)
+
+
+def _cmd_identify(args: argparse.Namespace) -> int:
+    from fsmbench.ident.compare import compare_with_truth
+    from fsmbench.stages import identify_stage
+
+    inp = _stage_input(args)
+    result, paths = identify_stage(inp.recordings, bench=inp.bench, out_dir=inp.out,
+                                   source=str(inp.data), progress=inp.say)
+    for step, why in result.skipped.items():
+        inp.say(f"step {step} skipped: {why}")
+    for warning in result.warnings:
+        print(f"fsmbench identify: warning: {warning}", file=sys.stderr)
+    for path in paths:
+        print(path)
+    truth_path = inp.data / "twin_truth.json"
+    reference = json.loads(truth_path.read_text()) if truth_path.is_file() else None
+    for row in compare_with_truth(result.to_json(), reference=reference, bench=inp.bench):
+        print(row, file=sys.stderr)
+    return 0
 
 
 def _cmd_budget(args: argparse.Namespace) -> int:
     from fsmbench.stages import budget_stage, choose_plant
-    from fsmbench.study import load_recordings
 
-    data, out = _data_and_out(args)
-    say = _progress()
-    bench = _bench(args)
-    recordings, skipped = load_recordings(data, progress=say)
-    for name, why in skipped.items():
-        say(f"skipped {name}: {why}")
-    plant = choose_plant(recordings, bench=bench, progress=say)
-    say(f"plant: {plant.source}")
-    say("noise and error budget, huddle tests, repeatability (seed sections 3, 4, 11)")
-    result, paths = budget_stage(recordings, bench=bench, out_dir=out, plant=plant)
+    inp = _stage_input(args)
+    plant = choose_plant(inp.recordings, bench=inp.bench, progress=inp.say)
+    inp.say(f"plant: {plant.source}")
+    inp.say("noise and error budget, huddle tests, repeatability (seed sections 3, 4, 11)")
+    result, paths = budget_stage(inp.recordings, bench=inp.bench, out_dir=inp.out, plant=plant)
     for path in paths:
         print(path)
-    summary = result.to_json()
-    print(f"total {1e9 * float(summary['total_rms_m']):.3g} nm rms; limiting source: "
-          f"{result.limiting}", file=sys.stderr)
-    for part, why in summary.get("skipped", {}).items():
+    print(f"total {1e9 * result.total_rms_m:.3g} nm rms; limiting source: {result.limiting}",
+          file=sys.stderr)
+    for part, why in result.skipped.items():
         print(f"skipped {part}: {why}", file=sys.stderr)
     return 0
 
 
 def _cmd_design(args: argparse.Namespace) -> int:
     from fsmbench.stages import choose_plant, design_stage
-    from fsmbench.study import load_recordings
 
-    data, out = _data_and_out(args)
-    say = _progress()
-    bench = _bench(args)
-    recordings, _skipped = load_recordings(data, progress=say)
-    plant = choose_plant(recordings, bench=bench, progress=say)
-    say(f"plant: {plant.source}")
-    stage, paths = design_stage(bench=bench, out_dir=out, plant=plant, seed=args.seed,
-                                progress=say)
+    inp = _stage_input(args)
+    plant = choose_plant(inp.recordings, bench=inp.bench, progress=inp.say)
+    inp.say(f"plant: {plant.source}")
+    stage, paths = design_stage(bench=inp.bench, out_dir=inp.out, plant=plant, seed=args.seed,
+                                progress=inp.say)
     for path in paths:
         print(path)
     p = stage.payload
@@ -205,28 +207,23 @@ def _parser() -> argparse.ArgumentParser:
                    help="only these experiments (e.g. data_uch data_ucv)")
     p.set_defaults(func=_cmd_simulate)
 
-    p = sub.add_parser("identify", help="seed section 2: 4QD, amplifiers, Sercalo, Newport, "
-                                         "the full plant")
-    common(p)
-    p.add_argument("data", metavar="DATA", help="folder of recordings (.mat, .h5, .nxs)")
-    p.add_argument("--out", metavar="DIR", required=True, help="output folder")
-    p.set_defaults(func=_cmd_identify)
-
-    p = sub.add_parser("budget", help="seed sections 3, 4, 11: huddle tests, error budget, "
-                                       "repeatability")
-    common(p)
-    p.add_argument("data", metavar="DATA", help="folder of recordings (.mat, .h5, .nxs)")
-    p.add_argument("--out", metavar="DIR", required=True, help="output folder")
-    p.set_defaults(func=_cmd_budget)
-
-    p = sub.add_parser("design", help="seed sections 5-10: plant analysis, controllers, "
-                                       "verification on the twin, export")
-    common(p)
-    p.add_argument("data", metavar="DATA", help="folder of recordings (.mat, .h5, .nxs)")
-    p.add_argument("--out", metavar="DIR", required=True, help="output folder")
-    p.add_argument("--seed", metavar="N", type=int, default=0,
-                   help="twin seed of the closed-loop verification (default 0)")
-    p.set_defaults(func=_cmd_design)
+    stage_commands = (
+        ("identify", "seed section 2: 4QD, amplifiers, Sercalo, Newport, the full plant",
+         _cmd_identify),
+        ("budget", "seed sections 3, 4, 11: huddle tests, error budget, repeatability",
+         _cmd_budget),
+        ("design", "seed sections 5-10: plant analysis, controllers, verification on the "
+                   "twin, export", _cmd_design),
+    )
+    for name, text, func in stage_commands:
+        p = sub.add_parser(name, help=text)
+        common(p)
+        p.add_argument("data", metavar="DATA", help="folder of recordings (.mat, .h5, .nxs)")
+        p.add_argument("--out", metavar="DIR", required=True, help="output folder")
+        if name == "design":
+            p.add_argument("--seed", metavar="N", type=int, default=0,
+                           help="twin seed of the closed-loop verification (default 0)")
+        p.set_defaults(func=func)
 
     p = sub.add_parser("study", help="the whole study; the twin when no --data is given")
     common(p)
