@@ -11,10 +11,7 @@ validation) on the same variables. Prints medians and ratios.
 from __future__ import annotations
 
 import argparse
-import statistics
 import tempfile
-import time
-from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -22,15 +19,7 @@ import scipy.io
 
 from fsmbench.io.recording import make_recording, read_recording, write_recording
 from fsmbench.io.signals import SIGNALS
-
-
-def median_time(fn: Callable[[], object], repeats: int) -> float:
-    times = []
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        fn()
-        times.append(time.perf_counter() - t0)
-    return statistics.median(times)
+from timing import timed_runs
 
 
 def main() -> None:
@@ -46,11 +35,11 @@ def main() -> None:
     with tempfile.TemporaryDirectory() as tmp:
         ours = Path(tmp) / "ours.mat"
         peer = Path(tmp) / "peer.mat"
-        t_w = median_time(lambda: write_recording(ds, ours), args.repeats)
-        t_pw = median_time(lambda: scipy.io.savemat(peer, plain, do_compression=True),
-                           args.repeats)
-        t_r = median_time(lambda: read_recording(ours), args.repeats)
-        t_pr = median_time(lambda: scipy.io.loadmat(peer), args.repeats)
+        t_w = timed_runs(lambda: write_recording(ds, ours), args.repeats, warm_up=False)[0]
+        t_pw = timed_runs(lambda: scipy.io.savemat(peer, plain, do_compression=True),
+                           args.repeats, warm_up=False)[0]
+        t_r = timed_runs(lambda: read_recording(ours), args.repeats, warm_up=False)[0]
+        t_pr = timed_runs(lambda: scipy.io.loadmat(peer), args.repeats, warm_up=False)[0]
         size, psize = ours.stat().st_size, peer.stat().st_size
     print(f"{n} samples x {len(signals) + 1} variables (MAT v5, compressed)")
     print(f"write  fsmbench {t_w * 1e3:8.1f} ms   scipy.io.savemat {t_pw * 1e3:8.1f} ms"

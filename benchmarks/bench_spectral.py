@@ -20,15 +20,13 @@ from __future__ import annotations
 
 import argparse
 import os
-import statistics
-import time
-from collections.abc import Callable
 
 import numpy as np
 import scipy
 import scipy.signal as ss
 
 from fsmbench.ident import FrequencyResponse, combine_columns, hanning, spectral_matrix
+from timing import timed_runs
 
 FS_HZ = 1e4
 DURATION_S = 31.0
@@ -82,15 +80,6 @@ def run_scipy(
     return tf, coh
 
 
-def median_time(fn: Callable[[], object], repeats: int) -> tuple[float, list[float]]:
-    fn()  # warm-up: FFT plan caches, imports
-    times = []
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        fn()
-        times.append(time.perf_counter() - t0)
-    return statistics.median(times), times
-
 
 def max_relative_difference(a: np.ndarray, b: np.ndarray) -> float:
     scale = np.maximum(np.abs(b), np.finfo(float).tiny)
@@ -110,8 +99,8 @@ def main() -> None:
     print(f"2 experiments x {DURATION_S:g} s at {FS_HZ:g} Hz, window hanning({win.size}), "
           f"{repeats} timed runs each\n")
 
-    t_ours, runs_ours = median_time(lambda: run_fsmbench(data, win), repeats)
-    t_scipy, runs_scipy = median_time(lambda: run_scipy(data, win), repeats)
+    t_ours, runs_ours = timed_runs(lambda: run_fsmbench(data, win), repeats)
+    t_scipy, runs_scipy = timed_runs(lambda: run_scipy(data, win), repeats)
 
     g = run_fsmbench(data, win)
     tf, coh = run_scipy(data, win)

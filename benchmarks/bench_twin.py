@@ -23,8 +23,6 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 os.environ.setdefault("MKL_NUM_THREADS", "1")
 
 import argparse
-import statistics
-import time
 from collections.abc import Callable
 
 import control as ct
@@ -36,15 +34,12 @@ from fsmbench.control.seed import seed_decentralised_controller
 from fsmbench.twin.controller import feedback_controller
 from fsmbench.twin.engine import Quantiser, run_loop, run_loop_python
 from fsmbench.twin.plant import ADC_CHANNELS, twin_discrete
+from timing import timed_runs
 
 
 def median_time(fn: Callable[[], object], repeats: int) -> float:
-    times = []
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        fn()
-        times.append(time.perf_counter() - t0)
-    return statistics.median(times)
+    """Median time [s]; this script warms up explicitly where it matters."""
+    return timed_runs(fn, repeats, warm_up=False)[0]
 
 
 def main() -> None:

@@ -34,15 +34,13 @@ from __future__ import annotations
 import argparse
 import logging
 import os
-import statistics
-import time
 import warnings
-from collections.abc import Callable
 
 import numpy as np
 import scipy
 
 from fsmbench.ident.vectfit import VectorFit, VectorFitOptions, vector_fit
+from timing import timed_runs
 
 F_HZ = np.arange(1.0, 5001.0)  # the seed's 1 Hz Welch grid, 1 Hz .. 5 kHz
 ZETA = 1e-3
@@ -120,15 +118,6 @@ def modes_of(poles: np.ndarray) -> str:
     return ", ".join(f"{abs(p) / 2 / np.pi:.4f} Hz / zeta {-p.real / abs(p):.4e}" for p in pairs)
 
 
-def median_time(fn: Callable[[], object], repeats: int) -> tuple[float, list[float]]:
-    fn()  # warm-up: imports, caches
-    times = []
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        fn()
-        times.append(time.perf_counter() - t0)
-    return statistics.median(times), times
-
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
@@ -151,17 +140,17 @@ def main() -> None:
           f"5 poles + D, {repeats} timed runs each\n")
 
     rows = []
-    t, runs = median_time(lambda: run_fsmbench(h), repeats)
+    t, runs = timed_runs(lambda: run_fsmbench(h), repeats)
     fit = run_fsmbench(h)
     rows.append(("(a) fsmbench vector_fit", t, runs, errors(fit.response(F_HZ), h, h0),
                  modes_of(fit.poles)))
     ones = np.ones(F_HZ.size)
-    t, runs = median_time(lambda: run_fsmbench(h, ones), repeats)
+    t, runs = timed_runs(lambda: run_fsmbench(h, ones), repeats)
     fit_u = run_fsmbench(h, ones)
     rows.append(("(a') fsmbench, uniform weights", t, runs,
                  errors(fit_u.response(F_HZ), h, h0), modes_of(fit_u.poles)))
     for spacing in ("lin", "log"):
-        t, runs = median_time(lambda s=spacing: run_skrf(h, s), repeats)  # type: ignore[misc]
+        t, runs = timed_runs(lambda s=spacing: run_skrf(h, s), repeats)  # type: ignore[misc]
         vf = run_skrf(h, spacing)
         rows.append((f"(b) scikit-rf VectorFitting ({spacing})", t, runs,
                      errors(skrf_response(vf), h, h0), modes_of(vf.poles)))  # type: ignore[attr-defined]
