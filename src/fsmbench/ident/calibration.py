@@ -37,6 +37,7 @@ __all__ = [
     "calibrate_current_amplifier",
     "calibrate_qd",
     "known_ga_zc",
+    "require_signals",
     "trim_recording",
 ]
 
@@ -55,6 +56,15 @@ def trim_recording(ds: xr.Dataset, *, t0_s: float) -> xr.Dataset:
         raise ValueError(f"{ds.attrs.get('experiment', 'recording')}: nothing left after "
                          f"removing t < {t0_s:g} s (record ends at {t[-1]:g} s)")
     return ds.isel(t=np.flatnonzero(keep))
+
+
+def require_signals(ds: xr.Dataset, names: tuple[str, ...], *, purpose: str) -> str:
+    """The recording's experiment name; ``ValueError`` naming it and the first missing signal."""
+    experiment = str(ds.attrs.get("experiment", "recording"))
+    for var in names:
+        if var not in ds:
+            raise ValueError(f"{experiment}: variable '{var}' is needed for {purpose}")
+    return experiment
 
 
 @dataclass(frozen=True)
@@ -130,11 +140,8 @@ def calibrate_qd(ds: xr.Dataset, *, axis: str, metrology_gain_rad_per_v: float,
     """
     if axis not in _AXES:
         raise ValueError(f"axis must be 'h' or 'v', got {axis!r}")
-    name = str(ds.attrs.get("experiment", "recording"))
     vp_name, vn_name = _AXES[axis]
-    for var in (vp_name, vn_name):
-        if var not in ds:
-            raise ValueError(f"{name}: variable '{var}' is needed for the 4QD calibration")
+    name = require_signals(ds, (vp_name, vn_name), purpose="the 4QD calibration")
     rec = trim_recording(ds, t0_s=trim_s)
     x = beam_factor * metrology_gain_rad_per_v * np.asarray(rec[vn_name].values, dtype=float)
     y = np.asarray(rec[vp_name].values, dtype=float)
@@ -231,11 +238,8 @@ def calibrate_current_amplifier(ds: xr.Dataset, *, axis: str, nominal: BenchPara
     """
     if axis not in _CURRENT:
         raise ValueError(f"axis must be 'h' or 'v', got {axis!r}")
-    name = str(ds.attrs.get("experiment", "recording"))
     u_name, v_name = _CURRENT[axis]
-    for var in (u_name, v_name):
-        if var not in ds:
-            raise ValueError(f"{name}: variable '{var}' is needed for the current amplifier")
+    name = require_signals(ds, (u_name, v_name), purpose="the current amplifier")
     rec = trim_recording(ds, t0_s=trim_s)
     fs = float(rec.attrs["fs_hz"])
     est = spectral_matrix(rec[u_name].values, rec[v_name].values, input_names=[u_name],

@@ -33,7 +33,7 @@ import control as ct
 import numpy as np
 import xarray as xr
 
-from fsmbench.ident.calibration import trim_recording
+from fsmbench.ident.calibration import require_signals, trim_recording
 from fsmbench.ident.delay import DelayEstimate, estimate_delay, remove_delay
 from fsmbench.ident.frf import FrequencyResponse, combine_columns, spectral_matrix
 from fsmbench.ident.vectfit import VectorFit, VectorFitOptions, vector_fit
@@ -77,10 +77,9 @@ def experiment_frf(recordings: Mapping[str, xr.Dataset], *, columns: Sequence[tu
     for experiment, signal in columns:
         if experiment not in recordings:
             raise ValueError(f"{experiment} is needed for the {signal} column and is missing")
+        require_signals(recordings[experiment], (signal, *OUTPUTS),
+                        purpose=f"the {signal} column of the FRF matrix")
         ds = trim_recording(recordings[experiment], t0_s=trims_s.get(experiment, 0.0))
-        for var in (signal, *OUTPUTS):
-            if var not in ds:
-                raise ValueError(f"{experiment}: variable '{var}' is needed and is missing")
         fs = float(ds.attrs["fs_hz"])
         parts.append(spectral_matrix(
             ds[signal].values, np.column_stack([ds[o].values for o in OUTPUTS]),
