@@ -37,6 +37,7 @@ from fsmbench.bench.blocks import (
     assemble_plant,
     coil_impedance,
     current_amplifier,
+    input_delays_s,
     newport,
     quad_diode,
     sercalo,
@@ -331,9 +332,7 @@ def identify(recordings: Mapping[str, xr.Dataset], *, bench: Bench,
                else ("nominal", newport(nom))),
         "Gd": ("identified", _gd_block(qd)) if qd else ("nominal", quad_diode(nom)),
     }
-    delays_nominal = {"Uch": 1.5 / nom.converter.fs_hz, "Ucv": 1.5 / nom.converter.fs_hz,
-                      "Unh": 5e-4, "Unv": 5e-4}
-    delays = dict(delays_nominal)
+    delays = dict(input_delays_s(nom))  # the model's, replaced by each identified one
     if sercalo_id is not None:
         delays.update(Uch=sercalo_id.delay_s, Ucv=sercalo_id.delay_s)
     if newport_id is not None:
