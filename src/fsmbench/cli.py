@@ -90,7 +90,8 @@ class _StageInput:
 
 def _stage_input(args: argparse.Namespace) -> _StageInput:
     """Check the folders (never write into the data), read every experiment present."""
-    from fsmbench.study import check_out_dir, load_recordings
+    from fsmbench.io.folder import load_recordings
+    from fsmbench.io.outdir import check_out_dir
 
     data, out = Path(args.data), Path(args.out)
     check_out_dir(out, data)
@@ -98,8 +99,9 @@ def _stage_input(args: argparse.Namespace) -> _StageInput:
         raise FileNotFoundError(f"data folder {data} does not exist")
     out.mkdir(parents=True, exist_ok=True)
     say = _progress()
-    recordings, skipped = load_recordings(data, progress=say)
-    for name, why in skipped.items():
+    loaded = load_recordings(data, progress=say)
+    recordings = loaded.recordings
+    for name, why in loaded.skipped.items():
         say(f"skipped {name}: {why}")
     return _StageInput(data=data, out=out, bench=_bench(args), say=say, recordings=recordings)
 

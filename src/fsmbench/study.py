@@ -16,14 +16,11 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
-import xarray as xr
-
 from fsmbench import __version__
 from fsmbench.bench.params import Bench, default_bench
 from fsmbench.io.atomic import atomic_write_text
-from fsmbench.io.errors import RecordingError
-from fsmbench.io.recording import find_experiments, read_recording
-from fsmbench.io.signals import EXPERIMENTS
+from fsmbench.io.folder import load_recordings
+from fsmbench.io.outdir import check_out_dir
 from fsmbench.report.bench_section import bench_section, parameters_section, recordings_section
 from fsmbench.report.budget_section import budget_section
 from fsmbench.report.design_section import design_section
@@ -38,7 +35,7 @@ from fsmbench.stages import (
 )
 from fsmbench.twin.simulate import simulate_bench, write_twin
 
-__all__ = ["StageStatus", "StudyResult", "check_out_dir", "load_recordings", "run_study"]
+__all__ = ["StageStatus", "StudyResult", "run_study"]
 
 Progress = Callable[[str], None]
 
@@ -69,39 +66,6 @@ class StudyResult:
     def to_json(self) -> dict[str, Any]:
         """JSON-ready dict."""
         return asdict(self)
-
-
-def check_out_dir(out_dir: Path, data_dir: Path | None) -> None:
-    """Refuse to write into the data folder (inputs are never touched)."""
-    if data_dir is None:
-        return
-    out, data = out_dir.resolve(), data_dir.resolve()
-    if out == data or data in out.parents:
-        raise ValueError(f"--out {out_dir} is inside the data folder {data_dir}; "
-                         "fsmbench never writes into the data folder, choose another --out")
-
-
-def load_recordings(data_dir: Path, *, progress: Progress | None = None
-                    ) -> tuple[dict[str, xr.Dataset], dict[str, str]]:
-    """Read every seed experiment present in ``data_dir``.
-
-    Returns the recordings and, for each experiment not used, why (missing
-    file, or the validation error naming file, variable and problem).
-    """
-    found = find_experiments(data_dir)
-    recordings: dict[str, xr.Dataset] = {}
-    skipped: dict[str, str] = {}
-    for name in EXPERIMENTS:
-        if name not in found:
-            skipped[name] = f"no {name}.mat (or .h5/.nxs) in {data_dir}"
-            continue
-        if progress is not None:
-            progress(f"reading {found[name].name}")
-        try:
-            recordings[name] = read_recording(found[name], experiment=name)
-        except RecordingError as exc:
-            skipped[name] = str(exc)
-    return recordings, skipped
 
 
 def run_study(*, out_dir: str | Path, data_dir: str | Path | None = None,
@@ -149,7 +113,8 @@ def run_study(*, out_dir: str | Path, data_dir: str | Path | None = None,
         source = f"recorded data in {data}"
 
     t0 = time.perf_counter()
-    recordings, skipped = load_recordings(data, progress=say)
+    loaded = load_recordings(data, progress=say)
+    recordings, skipped = loaded.recordings, loaded.skipped
     stages.append(StageStatus("recordings", bool(recordings),
                               reason="" if recordings else "no experiment found",
                               outputs=tuple(recordings), seconds=time.perf_counter() - t0))
