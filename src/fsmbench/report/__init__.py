@@ -1,5 +1,7 @@
-"""Figures and the self-contained HTML report."""
+"""The report: figures as data, drawn interactively in one self-contained HTML file."""
 
-from fsmbench.report.html import Figure, Section, Table, figure_from_matplotlib, write_report
+from fsmbench.report.figure import Bars, Figure, Label, Line, Panel, Rule
+from fsmbench.report.html import Note, Section, Table, write_report
 
-__all__ = ["Figure", "Section", "Table", "figure_from_matplotlib", "write_report"]
+__all__ = ["Bars", "Figure", "Label", "Line", "Note", "Panel", "Rule", "Section", "Table",
+           "write_report"]

@@ -1,52 +1,42 @@
-"""A self-contained HTML report: sections, tables and figures embedded as PNG.
+"""The self-contained HTML report: a verdict, then sections of text, tables and figures.
 
-The file opens offline: no scripts, no external style sheets or images.
-Text is escaped; figures are base64 ``data:`` URIs.
+A :class:`Section` is a sequence of blocks in reading order: paragraphs
+(``str``), :class:`Table`, :class:`~fsmbench.report.figure.Figure` and
+:class:`Note` (why a result differs from the seed or looks odd). Figures are
+drawn in the browser by plotly.js, embedded once; each figure's data sits in
+its own ``<script type="application/json">`` and is plotted when it nears the
+screen, the rest in idle time, so the first screen is up at once. The file
+opens offline: nothing is loaded from elsewhere. Text is escaped.
 """
 
 from __future__ import annotations
 
-import base64
 import html
-import io
-from collections.abc import Sequence
+import json
+from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-
-from matplotlib.figure import Figure as MplFigure
+from typing import Any
 
 from fsmbench.io.atomic import atomic_write_text
+from fsmbench.report.figure import Figure
+from fsmbench.report.interactive import figure_json, plotly_js
 
-__all__ = ["Figure", "Section", "Table", "figure_from_matplotlib", "render_report", "write_report"]
-
-
-@dataclass(frozen=True)
-class Figure:
-    """An embedded figure.
-
-    Attributes
-    ----------
-    title : str
-    caption : str
-    png_base64 : str
-        PNG image, base64-encoded.
-    seed_ref : str
-        The seed's figure this corresponds to (e.g. ``"Fig. 8"``), or "".
-    """
-
-    title: str
-    caption: str
-    png_base64: str
-    seed_ref: str = ""
+__all__ = ["Block", "Note", "Section", "Table", "iter_figures", "render_report", "write_report"]
 
 
 @dataclass(frozen=True)
 class Table:
-    """A table of text cells; ``header`` and every row have the same length."""
+    """A table of text cells; ``header`` and every row have the same length.
+
+    Cells are words and numbers with their units in the header
+    (``"4QD gain, h [V/rad]"``), never code keys.
+    """
 
     caption: str
     header: tuple[str, ...]
     rows: tuple[tuple[str, ...], ...]
+    note: str = ""
 
     def __post_init__(self) -> None:
         for row in self.rows:
@@ -56,43 +46,106 @@ class Table:
 
 
 @dataclass(frozen=True)
+class Note:
+    """An explanation next to a result: why it differs from the seed or looks odd.
+
+    ``ref`` names the source (``"errata E25"``), shown with the text.
+    """
+
+    text: str
+    ref: str = ""
+
+
+Block = str | Table | Figure | Note
+
+
+@dataclass(frozen=True, eq=False)
 class Section:
-    """A report section: paragraphs, then tables, then figures, then subsections."""
+    """A report section: blocks in reading order, then subsections."""
 
     title: str
-    paragraphs: tuple[str, ...] = ()
-    tables: tuple[Table, ...] = ()
-    figures: tuple[Figure, ...] = ()
+    blocks: tuple[Block, ...] = ()
     subsections: tuple[Section, ...] = field(default=())
     anchor: str = ""
 
 
-def figure_from_matplotlib(fig: MplFigure, *, title: str, caption: str, seed_ref: str = "",
-                           dpi: int = 110) -> Figure:
-    """Render a matplotlib figure to an embeddable :class:`Figure` and close it."""
-    import matplotlib.pyplot as plt
-
-    buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=dpi, bbox_inches="tight")
-    plt.close(fig)
-    return Figure(title=title, caption=caption,
-                  png_base64=base64.b64encode(buf.getvalue()).decode("ascii"), seed_ref=seed_ref)
+def iter_figures(sections: Sequence[Section]) -> Iterator[Figure]:
+    """Every figure of the report, in reading order."""
+    for sec in sections:
+        for block in sec.blocks:
+            if isinstance(block, Figure):
+                yield block
+        yield from iter_figures(sec.subsections)
 
 
 _STYLE = """
-body { font-family: -apple-system, "Segoe UI", Helvetica, Arial, sans-serif; max-width: 1100px;
-       margin: 2em auto; padding: 0 1em; color: #222; line-height: 1.45; }
-h1 { border-bottom: 2px solid #345; padding-bottom: .3em; }
-h2 { border-bottom: 1px solid #ccc; margin-top: 2em; }
-table { border-collapse: collapse; margin: 1em 0; font-size: 0.9em; }
+body { font-family: -apple-system, "Segoe UI", Helvetica, Arial, sans-serif; max-width: 1180px;
+       margin: 1.2em auto; padding: 0 1em; color: #222; line-height: 1.45; }
+h1 { font-size: 1.6em; margin: 0.2em 0; }
+h2 { border-bottom: 1px solid #ccc; margin-top: 2.2em; }
+h3 { margin-top: 1.6em; }
+table { border-collapse: collapse; margin: 0.8em 0; font-size: 0.9em; }
 th, td { border: 1px solid #bbb; padding: 3px 8px; text-align: left; vertical-align: top; }
 th { background: #eef2f6; }
-figure { margin: 1.5em 0; }
-figure img { max-width: 100%; border: 1px solid #ddd; }
-figcaption { font-size: 0.9em; color: #444; }
+thead { display: table-header-group; }
+tr { page-break-inside: avoid; }
 caption { caption-side: top; text-align: left; font-weight: bold; padding-bottom: .3em; }
-nav ul { columns: 2; }
-.meta { color: #666; font-size: 0.9em; }
+figure { margin: 1.2em 0 1.8em 0; page-break-inside: avoid; }
+.fsm-plot { width: 100%; border: 1px solid #e2e2e2; }
+.fsm-plot.pending::before { content: "drawing…"; color: #999; display: block; padding: 1em; }
+figcaption { font-size: 0.9em; color: #333; margin-top: .4em; }
+.note { border-left: 4px solid #d9a400; background: #fff8e1; padding: .4em .8em; margin: .6em 0;
+        font-size: 0.92em; }
+.meta { color: #666; font-size: 0.85em; }
+.verdict { border: 2px solid #345; border-radius: 6px; padding: .6em 1em; margin: .6em 0 1em 0; }
+.verdict h2 { margin-top: .2em; border: none; }
+.verdict table { width: 100%; }
+.pass { color: #1b7e1b; font-weight: bold; }
+.fail { color: #b00020; font-weight: bold; }
+.info { color: #555; font-weight: bold; }
+.skips li { margin: .15em 0; }
+nav ol { columns: 2; font-size: .92em; }
+@media print { nav, .modebar-container { display: none !important; }
+               body { max-width: none; } h2 { page-break-before: auto; } }
+"""
+
+# Lazy drawing: plots near the screen first, the rest one per idle slot; the
+# page records its progress in window.fsmbenchFigures (read by the tests).
+_SCRIPT = """
+(function () {
+  var plots = Array.prototype.slice.call(document.querySelectorAll('div.fsm-plot'));
+  var state = window.fsmbenchFigures = {total: plots.length, rendered: 0, failed: 0};
+  var config = {responsive: true, displaylogo: false, scrollZoom: false,
+                toImageButtonOptions: {format: 'svg'}};
+  var pending = new Set(plots);
+  function draw(div) {
+    if (!pending.has(div)) { return Promise.resolve(); }
+    pending.delete(div);
+    var spec;
+    try { spec = JSON.parse(document.getElementById(div.dataset.spec).textContent); }
+    catch (e) { return Promise.resolve(fail(div, e)); }
+    return Plotly.newPlot(div, spec.data, spec.layout, config).then(function () {
+      div.classList.remove('pending'); div.dataset.rendered = '1'; state.rendered += 1;
+    }, function (e) { fail(div, e); });
+  }
+  function fail(div, e) {
+    state.failed += 1; div.classList.remove('pending');
+    div.textContent = 'This figure could not be drawn: ' + e;
+    console.error('fsmbench figure ' + div.id + ': ' + e);
+  }
+  var seen = new IntersectionObserver(function (entries) {
+    entries.forEach(function (e) {
+      if (e.isIntersecting) { seen.unobserve(e.target); draw(e.target); }
+    });
+  }, {rootMargin: '600px 0px'});
+  plots.forEach(function (d) { seen.observe(d); });
+  function idle() {
+    var next = pending.values().next();
+    if (next.done) { return; }
+    draw(next.value).then(function () { setTimeout(idle, 0); });
+  }
+  window.addEventListener('load', function () { setTimeout(idle, 200); });
+})();
 """
 
 
@@ -100,49 +153,104 @@ def _slug(text: str) -> str:
     return "".join(c.lower() if c.isalnum() else "-" for c in text).strip("-")
 
 
-def _render_section(sec: Section, level: int, out: list[str]) -> None:
+def _script_json(payload: Any) -> str:
+    """JSON safe inside a <script> element."""
+    return json.dumps(payload, separators=(",", ":"), allow_nan=False).replace("</", "<\\/")
+
+
+def _table(tab: Table, out: list[str]) -> None:
+    out.append("<table>")
+    out.append(f"<caption>{html.escape(tab.caption)}</caption>")
+    out.append("<thead><tr>" + "".join(f"<th>{html.escape(h)}</th>" for h in tab.header)
+               + "</tr></thead><tbody>")
+    for row in tab.rows:
+        out.append("<tr>" + "".join(f"<td>{html.escape(c)}</td>" for c in row) + "</tr>")
+    out.append("</tbody></table>")
+    if tab.note:
+        out.append(f'<div class="note">{html.escape(tab.note)}</div>')
+
+
+def _figure(fig: Figure, number: int, out: list[str]) -> None:
+    spec = figure_json(fig)
+    ref = f" (seed {fig.seed_ref})" if fig.seed_ref else ""
+    out.append(f'<figure id="fig-{fig.key}">')
+    out.append(f'<div class="fsm-plot pending" id="plot-{fig.key}" data-spec="spec-{fig.key}" '
+               f'style="height:{spec["layout"]["height"]}px"></div>')
+    out.append(f'<script type="application/json" id="spec-{fig.key}">{_script_json(spec)}'
+               "</script>")
+    out.append(f"<figcaption><b>Figure {number}. {html.escape(fig.title)}</b>"
+               f"{html.escape(ref)}. {html.escape(fig.caption)}</figcaption>")
+    if fig.note:
+        out.append(f'<div class="note">{html.escape(fig.note)}</div>')
+    out.append("</figure>")
+
+
+def _section(sec: Section, level: int, out: list[str], counter: list[int]) -> None:
     anchor = sec.anchor or _slug(sec.title)
     out.append(f'<h{level} id="{html.escape(anchor)}">{html.escape(sec.title)}</h{level}>')
-    for para in sec.paragraphs:
-        out.append(f"<p>{html.escape(para)}</p>")
-    for tab in sec.tables:
-        out.append("<table>")
-        out.append(f"<caption>{html.escape(tab.caption)}</caption>")
-        out.append("<tr>" + "".join(f"<th>{html.escape(h)}</th>" for h in tab.header) + "</tr>")
-        for row in tab.rows:
-            out.append("<tr>" + "".join(f"<td>{html.escape(c)}</td>" for c in row) + "</tr>")
-        out.append("</table>")
-    for fig in sec.figures:
-        ref = f" (seed {fig.seed_ref})" if fig.seed_ref else ""
-        out.append("<figure>")
-        out.append(f'<img alt="{html.escape(fig.title)}" '
-                   f'src="data:image/png;base64,{fig.png_base64}">')
-        out.append(f"<figcaption><b>{html.escape(fig.title)}</b>{html.escape(ref)}. "
-                   f"{html.escape(fig.caption)}</figcaption>")
-        out.append("</figure>")
+    for block in sec.blocks:
+        if isinstance(block, str):
+            out.append(f"<p>{html.escape(block)}</p>")
+        elif isinstance(block, Table):
+            _table(block, out)
+        elif isinstance(block, Note):
+            ref = f" ({block.ref})" if block.ref else ""
+            out.append(f'<div class="note">{html.escape(block.text)}{html.escape(ref)}</div>')
+        else:
+            counter[0] += 1
+            _figure(block, counter[0], out)
     for sub in sec.subsections:
-        _render_section(sub, min(level + 1, 6), out)
+        _section(sub, min(level + 1, 6), out, counter)
 
 
-def render_report(*, title: str, sections: Sequence[Section], meta: Sequence[str] = ()) -> str:
-    """The whole report as one HTML string."""
+def render_report(*, title: str, sections: Sequence[Section], verdict_html: str = "",
+                  summary: Mapping[str, Any] | None = None, meta: Sequence[str] = ()) -> str:
+    """The whole report as one HTML string.
+
+    Parameters
+    ----------
+    title : str
+    sections : sequence of Section
+    verdict_html : str
+        The verdict block (trusted HTML built by :mod:`fsmbench.report.summary`),
+        shown first.
+    summary : mapping, optional
+        Embedded as ``<script type="application/json" id="fsmbench-summary">``.
+    meta : sequence of str
+        Lines under the title (source, version).
+    """
+    keys = [f.key for f in iter_figures(sections)]
+    dup = sorted({k for k in keys if keys.count(k) > 1})
+    if dup:
+        raise ValueError(f"figure keys used twice: {', '.join(dup)}")
     out = ["<!DOCTYPE html>", '<html lang="en">', "<head>", '<meta charset="utf-8">',
-           f"<title>{html.escape(title)}</title>", f"<style>{_STYLE}</style>", "</head>", "<body>",
-           f"<h1>{html.escape(title)}</h1>"]
+           '<meta name="viewport" content="width=device-width, initial-scale=1">',
+           f"<title>{html.escape(title)}</title>", f"<style>{_STYLE}</style>", "</head>",
+           "<body>", f"<h1>{html.escape(title)}</h1>"]
     for line in meta:
         out.append(f'<p class="meta">{html.escape(line)}</p>')
-    out.append("<nav><ul>")
+    if summary is not None:
+        out.append(f'<script type="application/json" id="fsmbench-summary">'
+                   f"{_script_json(summary)}</script>")
+    out.append(verdict_html)
+    out.append('<nav><b>Contents</b><ol>')
     for sec in sections:
         out.append(f'<li><a href="#{html.escape(sec.anchor or _slug(sec.title))}">'
                    f"{html.escape(sec.title)}</a></li>")
-    out.append("</ul></nav>")
+    out.append("</ol></nav>")
+    counter = [0]
     for sec in sections:
-        _render_section(sec, 2, out)
+        _section(sec, 2, out, counter)
+    if counter[0]:
+        out.append(f"<script>{plotly_js()}</script>")
+        out.append(f"<script>{_SCRIPT}</script>")
     out.extend(["</body>", "</html>"])
     return "\n".join(out) + "\n"
 
 
 def write_report(path: str | Path, *, title: str, sections: Sequence[Section],
+                 verdict_html: str = "", summary: Mapping[str, Any] | None = None,
                  meta: Sequence[str] = ()) -> Path:
     """Render and write the report atomically; returns its path."""
-    return atomic_write_text(Path(path), render_report(title=title, sections=sections, meta=meta))
+    return atomic_write_text(Path(path), render_report(
+        title=title, sections=sections, verdict_html=verdict_html, summary=summary, meta=meta))
