@@ -3,29 +3,69 @@
     fsmbench params   [--params FILE] [--out DIR] [--json]
     fsmbench simulate OUT [--duration S] [--seed N] [--params FILE] [--format F]
     fsmbench identify DATA --out OUT [--params FILE]
-    fsmbench budget   DATA --out OUT [--params FILE]
-    fsmbench design   DATA --out OUT [--params FILE] [--seed N]
+    fsmbench budget   DATA --out OUT [--params FILE] [--identification DIR]
+    fsmbench design   DATA --out OUT [--params FILE] [--seed N] [--identification DIR]
     fsmbench study    [--data DIR] --out OUT [--seed N] [--duration S] [--params FILE]
+                      [--figures png,pdf]
 
-Every command writes only under its output folder, never into a data folder.
-Errors print one line naming the file and the problem and exit with status 2.
+Every writing command also takes ``--timestamp`` (wall-clock time in MAT-file
+headers and ``run.json``; default none, so the same inputs and seed give
+byte-identical files).
+
+Every command writes only under its output folder, never into a data folder,
+and writes it as one transaction (:func:`fsmbench.io.outdir.output_transaction`):
+after an error, Ctrl-C or SIGTERM the folder holds the complete previous run or
+the complete new one, with its manifest ``run.json``.
+
+Exit status: 0 success; 2 an error the user can fix (data, parameters, output
+folder, disk), printed as one line ``fsmbench <cmd>: error: <file>: <problem>``;
+130 interrupted by Ctrl-C (SIGINT); 143 terminated by SIGTERM (128 + 15, what a
+shell reports for a process killed by SIGTERM); 1 a bug in fsmbench (traceback,
+then a request to report it).
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
+import math
+import signal
 import sys
+import threading
 import time
-from collections.abc import Callable, Sequence
+import traceback
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from types import FrameType
+from typing import Any, NoReturn
 
 from fsmbench import __version__
 from fsmbench.bench.params import Bench, ParamsError, load_bench, param_rows, save_bench
 
-__all__ = ["main"]
+__all__ = ["EXIT_BUG", "EXIT_SIGINT", "EXIT_SIGTERM", "EXIT_USER_ERROR", "main"]
+
+EXIT_USER_ERROR = 2
+EXIT_SIGINT = 130
+EXIT_SIGTERM = 143
+EXIT_BUG = 1
+
+# Bytes a record-second of twin data takes on disk, measured on `fsmbench simulate`
+# (seed 0, the seed's lengths, 737.5 s of records in all): 76.65 MB as compressed
+# MATLAB v5, 313.6 MB of raw float64 (what v7.3 and NeXus store uncompressed).
+_TWIN_BYTES_PER_S = {"mat5": 76.65e6 / 737.5, "mat73": 313.6e6 / 737.5,
+                     "nexus": 313.6e6 / 737.5}
+# What the stages write besides the twin's records, measured on the twin study:
+# report.html 7.7 MB, frf.mat 1.5 MB, the JSON files and small MAT-files < 0.2 MB.
+_STUDY_BYTES = 10e6
+_IDENT_BYTES = 2e6
+_SMALL_BYTES = 1e6
+_FIGURE_BYTES = 10e6  # per static format of --figures (57 figures, ~0.15 MB each)
+
+
+class Terminated(BaseException):
+    """SIGTERM arrived; raised from the signal handler so every cleanup runs."""
 
 
 def _progress() -> Callable[[str], None]:
@@ -38,12 +78,68 @@ def _progress() -> Callable[[str], None]:
 
 
 def _bench(args: argparse.Namespace) -> Bench:
-    return load_bench(args.params)
+    path = args.params
+    if path is not None and Path(path).is_dir():
+        raise ParamsError(f"{path}: is a folder; --params needs a TOML file (e.g. one written "
+                          "by fsmbench params --out DIR)")
+    try:
+        return load_bench(path)
+    except UnicodeDecodeError as exc:
+        raise ParamsError(f"{path}: is not UTF-8 text ({exc.reason} at byte {exc.start}); "
+                          "--params needs a TOML file") from None
+
+
+# ------------------------------------------------------------------ output transaction
+
+
+class _Current:
+    """The run folder being written, to map staging paths in messages."""
+
+    run: Any = None
+
+
+def _out_arguments(argv: Sequence[str], out: str | None) -> list[str]:
+    """The command line with the output folder written ``.`` (run.json's own folder)."""
+    if out is None:
+        return list(argv)
+    result = []
+    for arg in argv:
+        if arg == out:
+            result.append(".")
+        elif arg.startswith("--out=") and arg[len("--out="):] == out:
+            result.append("--out=.")
+        else:
+            result.append(arg)
+    return result
+
+
+@contextlib.contextmanager
+def _run_folder(args: argparse.Namespace, out: str, *, data: str | Path | None,
+                need_bytes: float) -> Iterator[Any]:
+    from fsmbench.io.matwrite import wall_clock_headers
+    from fsmbench.io.outdir import output_transaction
+
+    def warn(msg: str) -> None:
+        print(f"fsmbench {args.command}: warning: {msg}", file=sys.stderr)
+
+    with output_transaction(out, command=args.command,
+                            arguments=_out_arguments(args.argv, out), data_dir=data,
+                            need_bytes=int(need_bytes), timestamp=args.timestamp,
+                            warn=warn) as run, wall_clock_headers(args.timestamp):
+        _Current.run = run  # kept after an error too: main maps paths in its message
+        yield run
+
+
+# ------------------------------------------------------------------ commands
 
 
 def _cmd_params(args: argparse.Namespace) -> int:
     bench = _bench(args)
     rows = param_rows(bench)
+    written = None
+    if args.out is not None:
+        with _run_folder(args, args.out, data=None, need_bytes=_SMALL_BYTES) as run:
+            written = run.final_path(save_bench(bench, run.staging / "bench.toml"))
     if args.json:
         print(json.dumps([r.__dict__ for r in rows], indent=2))
     else:
@@ -51,12 +147,19 @@ def _cmd_params(args: argparse.Namespace) -> int:
         print(f"{'parameter':<{width}}  {'nominal':<26} {'true (twin)':<26} {'unit':<9} source")
         for r in rows:
             print(f"{r.key:<{width}}  {r.nominal:<26} {r.true:<26} {r.unit:<9} {r.source}")
-    if args.out is not None:
-        out = Path(args.out)
-        out.mkdir(parents=True, exist_ok=True)
-        path = save_bench(bench, out / "bench.toml")
-        print(f"wrote {path}", file=sys.stderr)
+    if written is not None:
+        print(f"wrote {written}", file=sys.stderr)
     return 0
+
+
+def _twin_bytes(args: argparse.Namespace, fmt: str) -> float:
+    from fsmbench.twin.experiments import seed_experiments
+
+    specs = seed_experiments()
+    if getattr(args, "experiments", None):
+        specs = tuple(s for s in specs if s.name in set(args.experiments))
+    seconds = sum(args.duration if args.duration is not None else s.duration_s for s in specs)
+    return seconds * _TWIN_BYTES_PER_S[fmt]
 
 
 def _cmd_simulate(args: argparse.Namespace) -> int:
@@ -65,14 +168,16 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
     out = args.out_pos or args.out
     if out is None:
         raise ValueError("simulate needs an output folder: fsmbench simulate OUT")
-    say = _progress()
     bench = _bench(args)
-    run = simulate_bench(bench, seed=args.seed, duration_s=args.duration,
-                         experiments=args.experiments, progress=say)
-    say(f"writing {len(run.recordings)} records to {out}")
-    paths = write_twin(run, out, format=args.format)
+    with _run_folder(args, out, data=None,
+                     need_bytes=_twin_bytes(args, args.format) + _SMALL_BYTES) as run:
+        say = _progress()
+        sim = simulate_bench(bench, seed=args.seed, duration_s=args.duration,
+                             experiments=args.experiments, progress=say)
+        say(f"writing {len(sim.recordings)} records to {out}")
+        paths = write_twin(sim, run.staging, format=args.format)
     for p in paths:
-        print(p)
+        print(run.final_path(p))
     say("done")
     return 0
 
@@ -82,60 +187,95 @@ class _StageInput:
     """What every stage command starts from: folders, bench, progress, recordings."""
 
     data: Path
-    out: Path
     bench: Bench
     say: Callable[[str], None]
     recordings: dict[str, Any]
 
 
-def _stage_input(args: argparse.Namespace) -> _StageInput:
-    """Check the folders (never write into the data), read every experiment present."""
-    from fsmbench.io.folder import load_recordings
-    from fsmbench.io.outdir import check_out_dir
-
-    data, out = Path(args.data), Path(args.out)
-    check_out_dir(out, data)
+def _check_data(data: Path) -> None:
+    if not data.exists():
+        raise FileNotFoundError(2, "data folder does not exist", str(data))
     if not data.is_dir():
-        raise FileNotFoundError(f"data folder {data} does not exist")
-    out.mkdir(parents=True, exist_ok=True)
+        raise NotADirectoryError(20, "is a file; DATA must be a folder of recordings",
+                                 str(data))
+
+
+def _stage_input(args: argparse.Namespace) -> _StageInput:
+    """Read the bench and every experiment present (the folders are checked first)."""
+    from fsmbench.io.folder import load_recordings
+
+    data = Path(args.data)
     say = _progress()
     loaded = load_recordings(data, progress=say)
-    recordings = loaded.recordings
     for name, why in loaded.skipped.items():
         say(f"skipped {name}: {why}")
-    return _StageInput(data=data, out=out, bench=_bench(args), say=say, recordings=recordings)
+    return _StageInput(data=data, bench=_bench(args), say=say,
+                       recordings=dict(loaded.recordings))
+
+
+def _stage_folder(args: argparse.Namespace, need_bytes: float) -> Any:
+    from fsmbench.io.outdir import check_out_dir
+
+    data = Path(args.data)
+    check_out_dir(Path(args.out), data)
+    _check_data(data)
+    _bench(args)  # a bad --params fails before anything is computed or written
+    return _run_folder(args, args.out, data=data, need_bytes=need_bytes)
 
 
 def _cmd_identify(args: argparse.Namespace) -> int:
     from fsmbench.ident.compare import compare_with_truth
+    from fsmbench.io.truth import read_twin_truth
     from fsmbench.stages import identify_stage
 
-    inp = _stage_input(args)
-    result, paths = identify_stage(inp.recordings, bench=inp.bench, out_dir=inp.out,
-                                   source=str(inp.data), progress=inp.say)
+    with _stage_folder(args, _IDENT_BYTES) as run:
+        reference = read_twin_truth(Path(args.data))
+        inp = _stage_input(args)
+        result, paths = identify_stage(inp.recordings, bench=inp.bench, out_dir=run.staging,
+                                       source=str(inp.data), progress=inp.say)
     for step, why in result.skipped.items():
         inp.say(f"step {step} skipped: {why}")
     for warning in result.warnings:
         print(f"fsmbench identify: warning: {warning}", file=sys.stderr)
     for path in paths:
-        print(path)
-    truth_path = inp.data / "twin_truth.json"
-    reference = json.loads(truth_path.read_text()) if truth_path.is_file() else None
+        print(run.final_path(path))
     for row in compare_with_truth(result.to_json(), reference=reference, bench=inp.bench):
         print(row, file=sys.stderr)
     return 0
 
 
-def _cmd_budget(args: argparse.Namespace) -> int:
-    from fsmbench.stages import budget_stage, choose_plant
+def _plant(args: argparse.Namespace, inp: _StageInput) -> Any:
+    from fsmbench.stages import choose_plant
 
-    inp = _stage_input(args)
-    plant = choose_plant(inp.recordings, bench=inp.bench, progress=inp.say)
+    if args.identification is not None:
+        from fsmbench.ident.load import load_identified_plant
+
+        plant = load_identified_plant(args.identification)
+    else:
+        plant = choose_plant(inp.recordings, bench=inp.bench, progress=inp.say)
     inp.say(f"plant: {plant.source}")
-    inp.say("noise and error budget, huddle tests, repeatability (seed sections 3, 4, 11)")
-    result, paths = budget_stage(inp.recordings, bench=inp.bench, out_dir=inp.out, plant=plant)
+    return plant
+
+
+def _check_identification(args: argparse.Namespace) -> None:
+    if args.identification is not None:
+        from fsmbench.ident.load import load_identified_plant
+
+        load_identified_plant(args.identification)  # bad files: one line, before any work
+
+
+def _cmd_budget(args: argparse.Namespace) -> int:
+    from fsmbench.stages import budget_stage
+
+    _check_identification(args)
+    with _stage_folder(args, _SMALL_BYTES) as run:
+        inp = _stage_input(args)
+        plant = _plant(args, inp)
+        inp.say("noise and error budget, huddle tests, repeatability (seed sections 3, 4, 11)")
+        result, paths = budget_stage(inp.recordings, bench=inp.bench, out_dir=run.staging,
+                                     plant=plant)
     for path in paths:
-        print(path)
+        print(run.final_path(path))
     print(f"total {1e9 * result.total_rms_m:.3g} nm rms; limiting source: {result.limiting}",
           file=sys.stderr)
     for part, why in result.skipped.items():
@@ -143,26 +283,53 @@ def _cmd_budget(args: argparse.Namespace) -> int:
     return 0
 
 
-def _cmd_design(args: argparse.Namespace) -> int:
-    from fsmbench.stages import choose_plant, design_stage
+_CONTROLLER_NAMES = {"seed_controller": "seed controller (9.2)",
+                     "fsmbench_controller": "fsmbench controller",
+                     "newport_controller": "Newport controller"}
 
-    inp = _stage_input(args)
-    plant = choose_plant(inp.recordings, bench=inp.bench, progress=inp.say)
-    inp.say(f"plant: {plant.source}")
-    stage, paths = design_stage(bench=inp.bench, out_dir=inp.out, plant=plant, seed=args.seed,
-                                progress=inp.say)
+
+def _num(value: Any, fmt: str, unit: str = "") -> str:
+    """A rounded value with its unit; "none" when absent, "∞" when infinite."""
+    if value is None:
+        return "none"
+    x = float(value)
+    if math.isinf(x):
+        return "∞" if x > 0 else "-∞"
+    return f"{x:{fmt}}{unit}"
+
+
+def _loop_line(name: str, loop: dict[str, Any], bound: float | None) -> str:
+    """One controller's margins, rounded, with units, and its verdict on objective 6.1."""
+    axes = "; ".join(
+        f"{a}: GM {_num(loop[a].get('gain_margin_db'), '.1f', ' dB')}, "
+        f"PM {_num(loop[a].get('phase_margin_deg'), '.1f', '°')}, "
+        f"crossover {_num(loop[a].get('crossover_hz'), '.1f', ' Hz')}, "
+        f"|S(1 Hz)| {_num(loop[a].get('sensitivity_at_1hz'), '.1e')}" for a in ("h", "v"))
+    limit = f" (|S(1 Hz)| <= {bound:.0e})" if bound is not None else ""
+    meets = "yes" if loop.get("meets_objective") else "no"
+    return f"{_CONTROLLER_NAMES.get(name, name)}: meets 6.1{limit}: {meets}; {axes}"
+
+
+def _cmd_design(args: argparse.Namespace) -> int:
+    from fsmbench.stages import design_stage
+
+    _check_identification(args)
+    with _stage_folder(args, _SMALL_BYTES) as run:
+        inp = _stage_input(args)
+        plant = _plant(args, inp)
+        stage, paths = design_stage(bench=inp.bench, out_dir=run.staging, plant=plant,
+                                    seed=args.seed, progress=inp.say)
     for path in paths:
-        print(path)
+        print(run.final_path(path))
     p = stage.payload
-    for name in ("seed_controller", "fsmbench_controller", "newport_controller"):
-        loop = p[name]
-        axes = "; ".join(f"{a}: GM {loop[a]['gain_margin_db']} dB, PM {loop[a]['phase_margin_deg']}"
-                         f" deg, fc {loop[a]['crossover_hz']} Hz" for a in ("h", "v"))
-        print(f"{name}: meets objective {loop['meets_objective']}; {axes}", file=sys.stderr)
+    bound = p.get("objective", {}).get("sensitivity_bound_at_1hz")
+    for name in _CONTROLLER_NAMES:
+        if name in p:
+            print(_loop_line(name, p[name], bound), file=sys.stderr)
     twin = p["closed_loop_twin"]
     print("fsmbench controller on the twin: tracking error "
           + ", ".join(f"{a} {1e6 * v:.3g} µrad rms (predicted "
-                      f"{1e6 * twin['predicted_rms_rad'][a]:.3g})"
+                      f"{1e6 * twin['predicted_rms_rad'][a]:.3g} µrad)"
                       for a, v in twin["tracking_error_rms_rad"].items()), file=sys.stderr)
     return 0
 
@@ -170,25 +337,72 @@ def _cmd_design(args: argparse.Namespace) -> int:
 def _cmd_study(args: argparse.Namespace) -> int:
     from fsmbench.study import run_study
 
+    data = None if args.data is None else Path(args.data)
+    if data is not None:
+        from fsmbench.io.outdir import check_out_dir
+
+        check_out_dir(Path(args.out), data)
+        _check_data(data)
+    bench = _bench(args)
+    need = _STUDY_BYTES + _FIGURE_BYTES * len(args.figures)
+    if data is None:
+        need += _twin_bytes(args, "mat5")
     say = _progress()
-    result = run_study(out_dir=args.out, data_dir=args.data, bench=_bench(args), seed=args.seed,
-                       duration_s=args.duration, progress=say)
-    print(result.report)
+    with _run_folder(args, args.out, data=data, need_bytes=need) as run:
+        result = run_study(out_dir=run.staging, data_dir=data, bench=bench, seed=args.seed,
+                           duration_s=args.duration, progress=say, figures=args.figures)
+    print(run.final_path(result.report))
     for name, why in result.skipped_experiments.items():
         print(f"skipped {name}: {why}", file=sys.stderr)
     return 0
 
 
+# ------------------------------------------------------------------ arguments
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse with errors as one line ``fsmbench <cmd>: error: ...`` and status 2."""
+
+    def error(self, message: str) -> NoReturn:
+        self.exit(EXIT_USER_ERROR, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
+
+
+def _seconds(text: str) -> float:
+    """A finite, positive duration [s] (``inf``, ``nan``, ``0``, ``-1`` rejected)."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number of seconds") from None
+    if not math.isfinite(value) or value <= 0:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a finite positive number of seconds")
+    return value
+
+
+def _figure_formats(text: str) -> tuple[str, ...]:
+    """``png,pdf`` → ("png", "pdf"); ``none`` or empty → ()."""
+    items = [x.strip().lower() for x in text.split(",") if x.strip()]
+    if items == ["none"]:
+        return ()
+    bad = [x for x in items if x not in ("png", "pdf")]
+    if bad:
+        raise argparse.ArgumentTypeError(f"unknown figure format(s) {', '.join(bad)}; "
+                                         "use png, pdf or png,pdf")
+    return tuple(dict.fromkeys(items))
+
+
 def _parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    parser = _Parser(
         prog="fsmbench",
         description="Fast-steering-mirror bench: digital twin, identification, budget, control.")
     parser.add_argument("--version", action="version", version=f"fsmbench {__version__}")
-    sub = parser.add_subparsers(dest="command", required=True)
+    sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
 
     def common(p: argparse.ArgumentParser) -> None:
         p.add_argument("--params", metavar="FILE", default=None,
                        help="bench parameters (TOML); default: the packaged Sercalo bench")
+        p.add_argument("--timestamp", action="store_true",
+                       help="write the wall-clock time into MAT-file headers and run.json "
+                            "(default: none, so that outputs are byte-identical)")
 
     p = sub.add_parser("params", help="print the bench parameters with units and sources")
     common(p)
@@ -200,7 +414,7 @@ def _parser() -> argparse.ArgumentParser:
     common(p)
     p.add_argument("out_pos", metavar="OUT", nargs="?", default=None, help="output folder")
     p.add_argument("--out", metavar="DIR", default=None, help="output folder (same as OUT)")
-    p.add_argument("--duration", metavar="S", type=float, default=None,
+    p.add_argument("--duration", metavar="S", type=_seconds, default=None,
                    help="length of every record [s] (default: the seed's, 100 s huddle tests)")
     p.add_argument("--seed", metavar="N", type=int, default=0, help="random seed (default 0)")
     p.add_argument("--format", choices=("mat5", "mat73", "nexus"), default="mat5",
@@ -225,6 +439,11 @@ def _parser() -> argparse.ArgumentParser:
         if name == "design":
             p.add_argument("--seed", metavar="N", type=int, default=0,
                            help="twin seed of the closed-loop verification (default 0)")
+        if name in ("budget", "design"):
+            p.add_argument("--identification", metavar="DIR", default=None,
+                           help="reuse the identification in DIR (the output of fsmbench "
+                                "identify or study: identification.json and plant.mat) "
+                                "instead of identifying the plant again")
         p.set_defaults(func=func)
 
     p = sub.add_parser("study", help="the whole study; the twin when no --data is given")
@@ -232,26 +451,112 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--data", metavar="DIR", default=None, help="folder of recordings (.mat)")
     p.add_argument("--out", metavar="DIR", required=True, help="output folder")
     p.add_argument("--seed", metavar="N", type=int, default=0, help="twin seed (default 0)")
-    p.add_argument("--duration", metavar="S", type=float, default=None,
+    p.add_argument("--duration", metavar="S", type=_seconds, default=None,
                    help="twin record length [s] (default: the seed's)")
+    p.add_argument("--figures", metavar="FORMATS", type=_figure_formats, default=(),
+                   help="also write every figure as png and/or pdf into OUT/figures "
+                        "(comma list: png, pdf, png,pdf; default none)")
     p.set_defaults(func=_cmd_study)
     return parser
 
 
+# ------------------------------------------------------------------ the exception boundary
+
+
+def _describe(exc: BaseException) -> str:
+    """``<file>: <problem>`` for an error the user can fix."""
+    if isinstance(exc, OSError) and not isinstance(exc, _own_errors()):
+        problem = exc.strerror or (exc.args[0] if exc.args else type(exc).__name__)
+        if exc.filename is not None and exc.filename2 is not None:
+            return f"{exc.filename} -> {exc.filename2}: {problem}"
+        if exc.filename is not None:
+            return f"{exc.filename}: {problem}"
+        return str(problem)
+    return str(exc)
+
+
+def _own_errors() -> tuple[type[BaseException], ...]:
+    from fsmbench.io.errors import RecordingError
+    from fsmbench.io.outdir import OutputError
+
+    return (ParamsError, RecordingError, OutputError)
+
+
+def _raised_by_fsmbench(exc: BaseException) -> bool:
+    """True when the innermost frame of the traceback is fsmbench's own code.
+
+    A ``ValueError`` fsmbench raises on purpose (a duration too short, an
+    unknown experiment) is a verdict for the user; one raised deep inside
+    numpy or scipy is a bug to report.
+    """
+    tb = exc.__traceback__
+    if tb is None:
+        return True
+    while tb.tb_next is not None:
+        tb = tb.tb_next
+    package = str(Path(__file__).resolve().parent)
+    return str(Path(tb.tb_frame.f_code.co_filename).resolve()).startswith(package)
+
+
+def _user_error(exc: BaseException) -> bool:
+    if isinstance(exc, (*_own_errors(), OSError)):
+        return True
+    return isinstance(exc, ValueError) and _raised_by_fsmbench(exc)
+
+
+@contextlib.contextmanager
+def _sigterm_raises() -> Iterator[None]:
+    """SIGTERM raises :class:`Terminated`, so staging folders and temporary files go."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+
+    def handler(_signum: int, _frame: FrameType | None) -> None:
+        raise Terminated
+
+    saved = signal.signal(signal.SIGTERM, handler)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, saved)
+
+
+def _mapped(text: str) -> str:
+    run = _Current.run
+    return text if run is None else run.final_text(text)
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``fsmbench`` console script; returns the exit status."""
-    args = _parser().parse_args(argv)
-    from fsmbench.io.errors import RecordingError
-
+    argv = list(sys.argv[1:] if argv is None else argv)
     try:
-        return int(args.func(args))
-    except (ParamsError, RecordingError, ValueError, FileNotFoundError) as exc:
-        print(f"fsmbench {args.command}: error: {exc}", file=sys.stderr)
-        return 2
+        args = _parser().parse_args(argv)
+    except SystemExit as exc:  # --help, --version, or a bad argument (one line printed)
+        return exc.code if isinstance(exc.code, int) else EXIT_USER_ERROR
+    args.argv = argv
+    _Current.run = None
+    out = getattr(args, "out", None) or getattr(args, "out_pos", None) or "the output folder"
+    prefix = f"fsmbench {args.command}: error:"
+    untouched = f"{out} was left as it was (no partial output)"
+    try:
+        with _sigterm_raises():
+            return int(args.func(args))
     except KeyboardInterrupt:
-        print(f"fsmbench {args.command}: interrupted; no partial file was left behind",
-              file=sys.stderr)
-        return 130
+        print(f"{prefix} {out}: interrupted (Ctrl-C); {untouched}", file=sys.stderr)
+        return EXIT_SIGINT
+    except Terminated:
+        print(f"{prefix} {out}: terminated (SIGTERM); {untouched}", file=sys.stderr)
+        return EXIT_SIGTERM
+    except Exception as exc:
+        if not _user_error(exc):
+            traceback.print_exc()
+            print(f"fsmbench {args.command}: internal error ({type(exc).__name__}), a bug in "
+                  f"fsmbench {__version__}; please report it with the command line and the "
+                  "traceback above", file=sys.stderr)
+            return EXIT_BUG
+        text = _mapped(_describe(exc))
+        print(f"{prefix} {' '.join(text.split())}", file=sys.stderr)
+        return EXIT_USER_ERROR
 
 
 if __name__ == "__main__":  # pragma: no cover

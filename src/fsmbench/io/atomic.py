@@ -33,7 +33,9 @@ def atomic_path(destination: str | Path, *, suffix: str | None = None) -> Iterat
     Notes
     -----
     On any exception, ``KeyboardInterrupt`` included, the temporary file is
-    removed and ``destination`` is left as it was.
+    removed and ``destination`` is left as it was. An ``OSError`` that names
+    no file (a failed write, e.g. a full disk) is raised again naming
+    ``destination``.
     """
     dest = Path(destination)
     if not dest.parent.is_dir():
@@ -51,6 +53,13 @@ def atomic_path(destination: str | Path, *, suffix: str | None = None) -> Iterat
         # mkstemp creates 0600; give the file the mode a plain open() would.
         os.chmod(tmp, 0o666 & ~_umask())
         os.replace(tmp, dest)
+    except OSError as exc:
+        with contextlib.suppress(FileNotFoundError):
+            tmp.unlink()
+        if exc.filename is None:
+            # A failed write (full disk: errno 28) names no file; name the destination.
+            raise OSError(exc.errno, exc.strerror or str(exc), str(dest)) from exc
+        raise
     except BaseException:
         with contextlib.suppress(FileNotFoundError):
             tmp.unlink()

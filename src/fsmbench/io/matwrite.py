@@ -9,12 +9,13 @@ Every file is written atomically (:mod:`fsmbench.io.atomic`).
 from __future__ import annotations
 
 import concurrent.futures
+import contextlib
 import io
 import os
 import re
 import time
 import zlib
-from collections.abc import Mapping
+from collections.abc import Iterator, Mapping
 from pathlib import Path
 from typing import Any, Final, Literal
 
@@ -25,7 +26,33 @@ import scipy.sparse
 
 from fsmbench.io.atomic import atomic_path
 
-__all__ = ["MatVersion", "mat5_header", "mat73_header", "save_mat"]
+__all__ = ["FIXED_CREATED_S", "MatVersion", "mat5_header", "mat73_header", "save_mat",
+           "wall_clock_headers"]
+
+#: Creation time headers carry unless asked otherwise [s since the epoch]: the
+#: epoch itself, so that the same variables give a byte-identical file.
+FIXED_CREATED_S: Final = 0.0
+# Whether headers without an explicit ``created`` carry the wall clock; one
+# process-wide switch (``--timestamp``), read by every writer thread.
+_wall_clock = [False]
+
+
+@contextlib.contextmanager
+def wall_clock_headers(enabled: bool = True) -> Iterator[None]:
+    """Within the block, headers without an explicit ``created`` carry the wall clock.
+
+    Parameters
+    ----------
+    enabled : bool
+        True: the current local time (as MATLAB writes it); False: the fixed
+        :data:`FIXED_CREATED_S` (the default outside any block).
+    """
+    saved = _wall_clock[0]
+    _wall_clock[0] = enabled
+    try:
+        yield
+    finally:
+        _wall_clock[0] = saved
 
 #: MAT-file versions :func:`save_mat` writes ("5" is MATLAB's ``-v7`` layout).
 MatVersion = Literal["5", "7.3"]
@@ -56,9 +83,9 @@ def mat73_header(*, platform: str | None = None, created: float | None = None) -
     platform : str, optional
         Text after ``Platform:``; defaults to ``"fsmbench <version>"``.
     created : float, optional
-        Creation time, in s since the epoch, written as UTC (a fixed value
-        gives byte-identical files); defaults to now, in local time as MATLAB
-        writes it.
+        Creation time, in s since the epoch, written as UTC. Default: the
+        fixed :data:`FIXED_CREATED_S` (byte-identical files), or now in local
+        time as MATLAB writes it inside :func:`wall_clock_headers`.
 
     Returns
     -------
@@ -103,7 +130,10 @@ def _platform(platform: str | None) -> str:
 
 
 def _stamp(created: float | None) -> str:
-    now = time.localtime() if created is None else time.gmtime(created)
+    if created is None:
+        now = time.localtime() if _wall_clock[0] else time.gmtime(FIXED_CREATED_S)
+    else:
+        now = time.gmtime(created)
     # English names by hand: strftime's %a/%b follow the locale.
     return (f"{_DAYS[now.tm_wday]} {_MONTHS[now.tm_mon - 1]} {now.tm_mday:02d} "
             f"{now.tm_hour:02d}:{now.tm_min:02d}:{now.tm_sec:02d} {now.tm_year}")
@@ -140,8 +170,9 @@ def save_mat(
         Compress the data. Default: yes for v5, no for v7.3 (v7.3 is chosen
         for large files, where HDF5's single-threaded deflate dominates).
     created : float, optional
-        Creation time for the header [s since the epoch]; default now. A
-        fixed value makes the file a pure function of the variables.
+        Creation time for the header [s since the epoch]. Default: the fixed
+        :data:`FIXED_CREATED_S`, so that the file is a pure function of the
+        variables; the wall clock inside :func:`wall_clock_headers`.
 
     Returns
     -------

@@ -1,17 +1,382 @@
-"""Output folders: where a command may write."""
+"""Output folders: where a command may write, and a run as one transaction.
+
+A command never writes into ``--out`` directly. :func:`output_transaction`
+first checks ``--out`` (:func:`preflight`: creatable, writable, replaceable,
+enough free space, not a user's unrelated folder, not holding or inside the
+data), then yields a fresh hidden staging folder beside it (same parent, so
+the final swap is a rename on one filesystem). When the command succeeds the
+staging folder gets a manifest ``run.json`` and replaces ``--out`` in one
+rename; the previous run is removed afterwards. On any error, Ctrl-C or
+SIGTERM the staging folder is removed and ``--out`` is left as it was. So
+``--out`` always holds either the complete previous run or the complete new
+one.
+
+``run.json`` lists every file of the run (relative path, sha256, size), the
+command and the fsmbench version; a wall-clock time only when asked.
+"""
 
 from __future__ import annotations
 
+import contextlib
+import ctypes
+import errno
+import hashlib
+import json
+import os
+import shutil
+import signal
+import tempfile
+import threading
+import time
+from collections.abc import Iterator, Sequence
+from dataclasses import dataclass
 from pathlib import Path
+from types import FrameType
+from typing import Any, Final
 
-__all__ = ["check_out_dir"]
+__all__ = [
+    "MANIFEST",
+    "OutputError",
+    "RunFolder",
+    "check_out_dir",
+    "output_transaction",
+    "preflight",
+    "read_manifest",
+]
+
+#: Name of the manifest every run writes into its output folder.
+MANIFEST: Final = "run.json"
+_FORMAT: Final = "fsmbench-run"
+_STAGING_TAG: Final = ".fsmbench-new-"
+_OLD_TAG: Final = ".fsmbench-old-"
+_RENAME_EXCHANGE: Final = 2  # linux/fs.h
+
+
+class OutputError(ValueError):
+    """The output folder cannot be used; ``str()`` is ``"<file>: <problem>"``.
+
+    Parameters
+    ----------
+    file : str or os.PathLike
+        The folder or file concerned.
+    problem : str
+        What is wrong and what to do.
+    """
+
+    def __init__(self, file: str | os.PathLike[str], problem: str) -> None:
+        super().__init__(os.fspath(file), problem)
+        self.file = os.fspath(file)
+        self.problem = problem
+
+    def __str__(self) -> str:
+        return f"{self.file}: {self.problem}"
 
 
 def check_out_dir(out_dir: Path, data_dir: Path | None) -> None:
-    """Refuse to write into the data folder (inputs are never touched)."""
+    """Refuse an output folder inside the data folder, or one holding it.
+
+    Inputs are never touched: writing inside the data folder would mix
+    outputs with recordings, and replacing a folder that holds the data
+    (the swap of :func:`output_transaction`) would delete them.
+    """
     if data_dir is None:
         return
-    out, data = out_dir.resolve(), data_dir.resolve()
+    out, data = Path(out_dir).resolve(), Path(data_dir).resolve()
     if out == data or data in out.parents:
-        raise ValueError(f"--out {out_dir} is inside the data folder {data_dir}; "
-                         "fsmbench never writes into the data folder, choose another --out")
+        raise OutputError(out_dir, f"--out is inside the data folder {data_dir}; fsmbench "
+                                   "never writes into the data folder, choose another --out")
+    if out in data.parents:
+        raise OutputError(out_dir, f"--out contains the data folder {data_dir}; a run replaces "
+                                   "its output folder as a whole, choose another --out")
+
+
+def read_manifest(folder: Path) -> dict[str, Any] | None:
+    """The ``run.json`` of a previous fsmbench run in ``folder``, or None."""
+    path = Path(folder) / MANIFEST
+    try:
+        payload = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return None
+    if not isinstance(payload, dict) or payload.get("format") != _FORMAT:
+        return None
+    return payload
+
+
+def _human_bytes(n: float) -> str:
+    for unit in ("B", "kB", "MB", "GB"):
+        if abs(n) < 1000 or unit == "GB":
+            return f"{n:.0f} {unit}" if unit == "B" else f"{n:.1f} {unit}"
+        n /= 1000
+    return f"{n:.1f} GB"  # pragma: no cover - loop always returns
+
+
+def _first_existing(path: Path) -> Path:
+    p = path
+    while not os.path.lexists(p) and p != p.parent:
+        p = p.parent
+    return p
+
+
+def preflight(out_dir: str | Path, *, data_dir: str | Path | None = None,
+              need_bytes: int = 0) -> Path:
+    """Check that ``out_dir`` can take a run, before any computation.
+
+    Parameters
+    ----------
+    out_dir : str or Path
+        The ``--out`` folder; it may not exist yet (its parents are created).
+    data_dir : str or Path, optional
+        The data folder, which ``out_dir`` must neither be inside nor contain.
+    need_bytes : int
+        Estimate of what the run writes [bytes]; the filesystem must have at
+        least that much free.
+
+    Returns
+    -------
+    Path
+        ``out_dir`` made absolute (symbolic links resolved).
+
+    Raises
+    ------
+    OutputError
+        With the folder and the problem: a file in the way, a non-empty folder
+        that is not a previous fsmbench run (its files are never deleted),
+        too little free space.
+    OSError
+        The parent folders cannot be created (read-only, no permission).
+    """
+    out = Path(out_dir).resolve()
+    check_out_dir(out, None if data_dir is None else Path(data_dir))
+    blocker = _first_existing(out)
+    if blocker != out and not blocker.is_dir():
+        raise OutputError(blocker, f"is a file, not a folder, so --out {out_dir} cannot be "
+                                   "created under it; choose another --out")
+    if out.exists() and not out.is_dir():
+        raise OutputError(out, "exists and is a file, not a folder; choose another --out")
+    if out.is_dir():
+        _check_replaceable(out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    free = shutil.disk_usage(out.parent).free
+    if free < need_bytes:
+        raise OutputError(out.parent, f"only {_human_bytes(free)} free on this filesystem but "
+                                      f"the run writes about {_human_bytes(need_bytes)}; free "
+                                      "some space or choose another --out")
+    return out
+
+
+def _check_replaceable(out: Path) -> None:
+    entries = sorted(p.name for p in out.iterdir())
+    if not entries:
+        return
+    manifest = read_manifest(out)
+    if manifest is None:
+        raise OutputError(out, f"is not empty ({len(entries)} entries, e.g. {entries[0]}) and "
+                               f"holds no fsmbench run ({MANIFEST}); a run replaces its output "
+                               "folder as a whole, so choose a new or empty --out")
+    listed = {f["path"] for f in manifest.get("files", []) if isinstance(f, dict)}
+    for path in sorted(out.rglob("*")):
+        rel = path.relative_to(out).as_posix()
+        if path.is_file() and rel != MANIFEST and rel not in listed:
+            raise OutputError(path, f"is not part of the fsmbench run in {out} (not listed in "
+                                    f"its {MANIFEST}); move it away or choose another --out, "
+                                    "fsmbench never deletes files it did not write")
+
+
+@dataclass(frozen=True)
+class RunFolder:
+    """The folder a command writes into, and where its files end up.
+
+    Attributes
+    ----------
+    final : Path
+        The ``--out`` folder (absolute).
+    staging : Path
+        The hidden folder beside ``final`` the command writes into.
+    """
+
+    final: Path
+    staging: Path
+
+    def final_path(self, path: str | Path) -> Path:
+        """Where ``path`` (inside ``staging``) will be once the run is complete."""
+        p = Path(path)
+        try:
+            return self.final / p.relative_to(self.staging)
+        except ValueError:
+            return p
+
+    def final_text(self, text: str) -> str:
+        """``text`` with the staging folder's path replaced by the final one."""
+        return text.replace(str(self.staging), str(self.final))
+
+
+def _sha256(path: Path) -> str:
+    h = hashlib.sha256()
+    with open(path, "rb") as fh:
+        for block in iter(lambda: fh.read(1 << 20), b""):
+            h.update(block)
+    return h.hexdigest()
+
+
+def _write_manifest(staging: Path, *, command: str, arguments: Sequence[str],
+                    not_reproducible: Sequence[str], timestamp: bool) -> None:
+    from fsmbench import __version__
+    from fsmbench.io.atomic import atomic_write_text
+
+    files = [{"path": p.relative_to(staging).as_posix(), "sha256": _sha256(p),
+              "size_bytes": p.stat().st_size}
+             for p in sorted(staging.rglob("*")) if p.is_file()]
+    present = {f["path"] for f in files}
+    payload: dict[str, Any] = {
+        "format": _FORMAT, "format_version": 1, "fsmbench_version": __version__,
+        "command": command, "arguments": list(arguments),
+        "files": files,
+        "not_reproducible": [n for n in not_reproducible if n in present],
+    }
+    if timestamp:
+        payload["created_utc"] = time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())
+    atomic_write_text(staging / MANIFEST, json.dumps(payload, indent=2, sort_keys=True) + "\n")
+
+
+@contextlib.contextmanager
+def _signals_deferred() -> Iterator[None]:
+    """Hold SIGINT and SIGTERM until the block ends (then deliver them)."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    pending: list[int] = []
+
+    def hold(signum: int, _frame: FrameType | None) -> None:
+        pending.append(signum)
+
+    saved = {int(sig): signal.signal(sig, hold) for sig in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        yield
+    finally:
+        for signum, handler in saved.items():
+            signal.signal(signum, handler)
+        for signum in dict.fromkeys(pending):
+            handler = saved[signum]
+            if callable(handler):
+                handler(signum, None)
+            elif handler == signal.SIG_DFL:
+                signal.raise_signal(signum)
+
+
+def _exchange(a: Path, b: Path) -> bool:
+    """Swap two paths in one step (Linux renameat2); False when not supported."""
+    try:
+        libc = ctypes.CDLL(None, use_errno=True)
+        fn = libc.renameat2
+    except (OSError, AttributeError):
+        return False
+    at_fdcwd = -100
+    rc = fn(at_fdcwd, os.fsencode(a), at_fdcwd, os.fsencode(b), _RENAME_EXCHANGE)
+    if rc == 0:
+        return True
+    err = ctypes.get_errno()
+    if err in (errno.EINVAL, errno.ENOSYS, errno.ENOTSUP):
+        return False
+    raise OSError(err, os.strerror(err), str(b))
+
+
+def _mode_for_new_folder() -> int:
+    mask = os.umask(0o022)  # os.umask can only be read by setting it; restored at once
+    os.umask(mask)
+    return 0o777 & ~mask
+
+
+def _swap_in(staging: Path, out: Path) -> Path | None:
+    """Put ``staging`` at ``out``; return where the previous run now is (or None)."""
+    os.chmod(staging, _mode_for_new_folder())
+    if not out.exists():
+        os.rename(staging, out)
+        return None
+    if _exchange(staging, out):
+        return staging  # the old run now sits at the staging path
+    old = Path(tempfile.mkdtemp(prefix=f".{out.name}{_OLD_TAG}", dir=out.parent))
+    os.rmdir(old)
+    os.rename(out, old)
+    try:
+        os.rename(staging, out)
+    except BaseException:
+        os.rename(old, out)
+        raise
+    return old
+
+
+def _probe_replace(out: Path) -> None:
+    """Fail now, not after the computation, if ``out`` cannot be moved (immutable)."""
+    if not out.exists():
+        return
+    probe = Path(tempfile.mkdtemp(prefix=f".{out.name}{_OLD_TAG}", dir=out.parent))
+    os.rmdir(probe)
+    with _signals_deferred():
+        try:
+            os.rename(out, probe)
+        except OSError as exc:
+            raise OutputError(out, f"cannot be replaced ({exc.strerror}); check its permissions "
+                                   "and attributes (lsattr) or choose another --out") from exc
+        os.rename(probe, out)
+
+
+@contextlib.contextmanager
+def output_transaction(out_dir: str | Path, *, command: str, arguments: Sequence[str] = (),
+                       data_dir: str | Path | None = None, need_bytes: int = 0,
+                       timestamp: bool = False,
+                       not_reproducible: Sequence[str] = ("timings.json",),
+                       warn: Any = None) -> Iterator[RunFolder]:
+    """Run a command's writes as one transaction on ``out_dir``.
+
+    Parameters
+    ----------
+    out_dir : str or Path
+        The ``--out`` folder: absent, empty, or a previous fsmbench run.
+    command : str
+        Sub-command name, recorded in ``run.json``.
+    arguments : sequence of str
+        The command line, recorded in ``run.json`` (pass the output folder as
+        ``"."`` so that the manifest does not depend on where the run lives).
+    data_dir : str or Path, optional
+        The data folder (never inside ``out_dir``, nor containing it).
+    need_bytes : int
+        Estimate of the run's size [bytes], checked against the free space.
+    timestamp : bool
+        Record the wall-clock time in ``run.json`` (default: no time, so the
+        same inputs give the same manifest).
+    not_reproducible : sequence of str
+        Files (relative paths) that legitimately differ between identical
+        runs, such as ``timings.json``; listed as such in ``run.json``.
+    warn : callable, optional
+        Receives a one-line message if the previous run cannot be removed
+        after the swap (the new run is in place regardless).
+
+    Yields
+    ------
+    RunFolder
+        ``staging`` to write into, ``final`` and a mapping between them.
+    """
+    out = preflight(out_dir, data_dir=data_dir, need_bytes=need_bytes)
+    try:
+        staging = Path(tempfile.mkdtemp(prefix=f".{out.name}{_STAGING_TAG}", dir=out.parent))
+    except OSError as exc:
+        raise OutputError(out.parent, f"cannot write the output folder here ({exc.strerror}); "
+                                      "choose another --out") from exc
+    try:
+        _probe_replace(out)
+        yield RunFolder(final=out, staging=staging)
+        with _signals_deferred():
+            _write_manifest(staging, command=command, arguments=arguments,
+                            not_reproducible=not_reproducible, timestamp=timestamp)
+            old = _swap_in(staging, out)
+            if old is not None:
+                try:
+                    shutil.rmtree(old)
+                except OSError as exc:
+                    if warn is not None:
+                        warn(f"{old}: the previous run could not be removed ({exc.strerror}); "
+                             "delete it by hand")
+    except BaseException:
+        with _signals_deferred():
+            shutil.rmtree(staging, ignore_errors=True)
+        raise

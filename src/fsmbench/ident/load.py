@@ -1,0 +1,173 @@
+"""Reuse a previous identification: read ``plant.mat`` back into a plant.
+
+``fsmbench budget`` and ``fsmbench design`` take ``--identification DIR``, a
+folder written by ``fsmbench identify`` or ``fsmbench study`` holding
+``identification.json`` and ``plant.mat`` (layout:
+:mod:`fsmbench.ident.export`), instead of identifying the plant again.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Mapping
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import control as ct
+import numpy as np
+import scipy.io
+
+from fsmbench.bench.blocks import PLANT_INPUTS, PLANT_OUTPUTS, PlantModel
+from fsmbench.io.errors import RecordingError
+
+if TYPE_CHECKING:
+    from fsmbench.stages import PlantChoice
+
+__all__ = ["BLOCK_NAMES", "load_identified_plant", "read_plant_mat"]
+
+#: The blocks ``plant.mat`` holds besides the full system ``sys``.
+BLOCK_NAMES = ("Gi", "Zc", "Ga", "Gc", "Gn", "Gd")
+_FIELDS = ("A", "B", "C", "D", "InputName", "OutputName", "StateName", "InputDelay")
+
+
+def _names(value: Any) -> list[str]:
+    # loadmat(simplify_cells=True) turns a 1-element cell into its string.
+    if isinstance(value, str):
+        return [value]
+    return [str(x) for x in np.atleast_1d(np.asarray(value, dtype=object)).ravel()]
+
+
+def _matrix(value: Any, shape: tuple[int, int], where: str, path: Path) -> np.ndarray:
+    arr = np.asarray(value, dtype=float)
+    if arr.size != shape[0] * shape[1]:
+        raise RecordingError(path, f"has {arr.size} values, expected {shape[0]}x{shape[1]}",
+                             variable=where)
+    if not np.all(np.isfinite(arr)):
+        raise RecordingError(path, "holds NaN or Inf values", variable=where)
+    return arr.reshape(shape)
+
+
+def _ss(struct: Any, name: str, path: Path) -> tuple[ct.StateSpace, dict[str, float]]:
+    if not isinstance(struct, Mapping):
+        raise RecordingError(path, "is not a struct", variable=name)
+    missing = [f for f in _FIELDS if f not in struct]
+    if missing:
+        raise RecordingError(path, f"lacks the field(s) {', '.join(missing)}", variable=name)
+    if float(np.asarray(struct.get("Ts", 0.0), dtype=float)) != 0.0:
+        raise RecordingError(path, "is a discrete model (Ts != 0); a continuous one is expected",
+                             variable=name)
+    ins, outs = _names(struct["InputName"]), _names(struct["OutputName"])
+    states = _names(struct["StateName"])
+    n, m, p = len(states), len(ins), len(outs)
+    a = _matrix(struct["A"], (n, n), f"{name}.A", path)
+    b = _matrix(struct["B"], (n, m), f"{name}.B", path)
+    c = _matrix(struct["C"], (p, n), f"{name}.C", path)
+    d = _matrix(struct["D"], (p, m), f"{name}.D", path)
+    delay = np.asarray(struct["InputDelay"], dtype=float).ravel()
+    if delay.size != m or not np.all(np.isfinite(delay)) or np.any(delay < 0):
+        raise RecordingError(path, f"must hold {m} finite delays >= 0 [s]",
+                             variable=f"{name}.InputDelay")
+    kwargs: dict[str, Any] = {"inputs": ins, "outputs": outs, "name": name}
+    if n:
+        kwargs["states"] = states
+    return ct.ss(a, b, c, d, **kwargs), dict(zip(ins, delay.tolist(), strict=True))
+
+
+def read_plant_mat(path: str | Path) -> PlantModel:
+    """Read a ``plant.mat`` written by :func:`fsmbench.ident.export.write_plant_mat`.
+
+    Parameters
+    ----------
+    path : str or Path
+        The MAT-file.
+
+    Returns
+    -------
+    PlantModel
+        Blocks ``Gi, Zc, Ga, Gc, Gn, Gd``, the full system ``sys`` (inputs
+        :data:`~fsmbench.bench.blocks.PLANT_INPUTS`, outputs
+        :data:`~fsmbench.bench.blocks.PLANT_OUTPUTS`), its input delays [s]
+        and the recorded ``source``.
+
+    Raises
+    ------
+    RecordingError
+        The file is missing, unreadable, or a struct is missing or malformed
+        (the variable is named).
+    """
+    p = Path(path)
+    if not p.is_file():
+        raise RecordingError(p, "does not exist" if not p.exists() else "is not a file")
+    try:
+        data = scipy.io.loadmat(p, simplify_cells=True)
+    except (OSError, ValueError, TypeError, NotImplementedError) as exc:
+        raise RecordingError(p, f"is not a readable MAT-file ({exc})") from exc
+    missing = [k for k in ("sys", *BLOCK_NAMES) if k not in data]
+    if missing:
+        raise RecordingError(p, f"lacks the variable(s) {', '.join(missing)}; it is not a "
+                                "plant.mat written by fsmbench identify")
+    sys, delays = _ss(data["sys"], "sys", p)
+    if tuple(sys.input_labels) != PLANT_INPUTS or tuple(sys.output_labels) != PLANT_OUTPUTS:
+        raise RecordingError(p, f"has inputs {list(sys.input_labels)} and outputs "
+                                f"{list(sys.output_labels)}; expected {list(PLANT_INPUTS)} "
+                                f"and {list(PLANT_OUTPUTS)}", variable="sys")
+    blocks = {name: _ss(data[name], name, p)[0] for name in BLOCK_NAMES}
+    source = data.get("source")
+    return PlantModel(blocks=blocks, sys=sys, input_delay_s=delays,
+                      source=source if isinstance(source, str) else "identified")
+
+
+def load_identified_plant(folder: str | Path) -> PlantChoice:
+    """The plant of a previous ``identify`` or ``study`` run in ``folder``.
+
+    Parameters
+    ----------
+    folder : str or Path
+        Output folder holding ``identification.json`` and ``plant.mat``.
+
+    Returns
+    -------
+    fsmbench.stages.PlantChoice
+        The plant, its source ``"identified (from FOLDER/identification.json)"``
+        and no in-memory identification.
+
+    Raises
+    ------
+    RecordingError
+        A file is missing or malformed, or the identification does not
+        describe a trustworthy identified plant (the Sercalo was not
+        identified, or the identification raised warnings): then the reason
+        is named and the command should run without ``--identification``.
+    """
+    from fsmbench.stages import PlantChoice
+
+    d = Path(folder)
+    if not d.is_dir():
+        raise RecordingError(d, "--identification must be a folder written by fsmbench identify "
+                                "or study; " + ("it does not exist" if not d.exists()
+                                                else "it is a file"))
+    ident_path = d / "identification.json"
+    if not ident_path.is_file():
+        raise RecordingError(ident_path, "does not exist; --identification must be a folder "
+                                         "written by fsmbench identify or study")
+    try:
+        ident = json.loads(ident_path.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError) as exc:
+        raise RecordingError(ident_path, f"cannot be read ({exc})") from exc
+    except json.JSONDecodeError as exc:
+        raise RecordingError(ident_path, f"is not valid JSON: {exc.msg} at line {exc.lineno}, "
+                                         f"column {exc.colno}") from exc
+    if not isinstance(ident, dict):
+        raise RecordingError(ident_path, "is not a JSON object")
+    diagnostics = ident.get("diagnostics") or {}
+    warnings = diagnostics.get("warnings") if isinstance(diagnostics, dict) else None
+    if "sercalo" not in ident:
+        raise RecordingError(ident_path, "has no identified Sercalo (data_uch/data_ucv were "
+                                         "missing or failed); run without --identification "
+                                         "to use the nominal model")
+    if warnings:
+        raise RecordingError(ident_path, f"the identification raised warnings ({warnings[0]}); "
+                                         "its plant is not trusted, run without "
+                                         "--identification")
+    plant = read_plant_mat(d / "plant.mat")
+    return PlantChoice(plant, source=f"identified (from {ident_path})", identification=None)
