@@ -31,7 +31,7 @@ def test_simulate_writes_the_requested_records(tmp_path: Path,
     assert main(["simulate", str(tmp_path), "--duration", "3", "--seed", "2",
                  "--experiments", "data_uch", "data_cal_pd_h"]) == 0
     names = sorted(p.name for p in tmp_path.iterdir())
-    assert names == ["data_cal_pd_h.mat", "data_uch.mat", "twin_truth.json"]
+    assert names == ["data_cal_pd_h.mat", "data_uch.mat", "run.json", "twin_truth.json"]
     data = scipy.io.loadmat(tmp_path / "data_uch.mat")
     assert data["Uch"].shape == (30000, 1)
     assert json.loads((tmp_path / "twin_truth.json").read_text())["seed"] == 2
@@ -75,7 +75,7 @@ def test_identify_writes_its_outputs_and_compares_with_the_truth(
     assert main(["identify", str(data), "--out", str(out)]) == 0
     captured = capsys.readouterr()
     assert sorted(p.name for p in out.iterdir()) == ["frf.mat", "identification.json",
-                                                     "plant.mat"]
+                                                     "plant.mat", "run.json"]
     assert "MISSED" not in captured.err
     assert "sercalo.h.damping_ratio" in captured.err and " ok" in captured.err
 
@@ -102,9 +102,9 @@ def test_budget_and_design_commands(short_twin, tmp_path: Path,
     assert json.loads((tmp_path / "b" / "budget.json").read_text())["total_rms_m"] > 0
     assert main(["design", str(data), "--out", str(tmp_path / "d")]) == 0
     err = capsys.readouterr().err
-    assert "fsmbench_controller: meets objective True" in err
+    assert "fsmbench controller: meets 6.1 (|S(1 Hz)| <= 2e-04): yes; h: GM " in err
     assert sorted(p.name for p in (tmp_path / "d").iterdir()) == [
-        "controllers.mat", "controllers_sos.json", "design.json"]
+        "controllers.mat", "controllers_sos.json", "design.json", "run.json"]
     controllers = scipy.io.loadmat(tmp_path / "d" / "controllers.mat", simplify_cells=True)
     k = controllers["fsmbench_controller"]
     assert list(k["K"]["InputName"]) == ["Rh", "Rv"] and k["Kd"]["Ts"] == pytest.approx(1e-4)
