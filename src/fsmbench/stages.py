@@ -70,7 +70,13 @@ def identify_stage(recordings: Mapping[str, xr.Dataset], *, bench: Bench, out_di
 def choose_plant(recordings: Mapping[str, xr.Dataset], *, bench: Bench,
                  identification: Identification | None = None,
                  progress: Progress | None = None) -> PlantChoice:
-    """The identified plant if the Sercalo could be identified, else the nominal model."""
+    """The identified plant if the Sercalo could be identified, else the nominal model.
+
+    ``source`` says which and why: the missing experiments, or the failed
+    check or step of the identification (never "missing" when the file was
+    there). Blocks that fell back to nominal inside an identified plant are
+    named with their reason too.
+    """
     say = progress or _quiet
     ident = identification
     if ident is None and all(n in recordings for n in ("data_uch", "data_ucv")):
@@ -78,12 +84,32 @@ def choose_plant(recordings: Mapping[str, xr.Dataset], *, bench: Bench,
         ident = identify(recordings, bench=bench, progress=say)
     if ident is not None and ident.plant is not None and ident.sercalo is not None \
             and not ident.warnings:
-        return PlantChoice(ident.plant, "identified (" + ", ".join(
-            f"{k}: {v}" for k, v in ident.plant_blocks.items()) + ")", ident)
-    why = ("the identification raised warnings" if ident is not None and ident.warnings
-           else "data_uch/data_ucv missing")
+        parts = []
+        for block, how in ident.plant_blocks.items():
+            step = _BLOCK_STEP.get(block)
+            why = ident.skipped.get(step, "") if step else ""
+            parts.append(f"{block}: {how}" + (f" — {why}" if how == "nominal" and why else ""))
+        return PlantChoice(ident.plant, "identified (" + ", ".join(parts) + ")", ident)
     return PlantChoice(physical_plant(bench.nominal, source="physical (nominal)"),
-                       f"nominal physical model ({why})", ident)
+                       f"nominal physical model ({_why_nominal(recordings, ident)})", ident)
+
+
+# The identification step whose failure leaves each plant block nominal.
+_BLOCK_STEP = {"Gi": "current_amp", "Gc": "sercalo", "Gn": "newport", "Gd": "qd"}
+
+
+def _why_nominal(recordings: Mapping[str, xr.Dataset], ident: Identification | None) -> str:
+    gone = [n for n in ("data_uch", "data_ucv") if n not in recordings]
+    if gone:
+        return f"{' and '.join(gone)} missing"
+    if ident is None:
+        return "the Sercalo was not identified"
+    if ident.warnings:
+        return "the identification raised warnings: " + "; ".join(ident.warnings)
+    for step in ("current_amp", "sercalo"):
+        if step in ident.skipped:
+            return f"Sercalo identification: {ident.skipped[step]}"
+    return "the Sercalo was not identified"
 
 
 def _write_json(path: Path, payload: Mapping[str, Any]) -> Path:
@@ -98,6 +124,8 @@ def budget_stage(recordings: Mapping[str, xr.Dataset], *, bench: Bench, out_dir:
 
     result = budget_study(recordings, bench=bench, plant=plant.plant)
     payload = {**result.to_json(), "plant_source": plant.source}
+    if plant.identification is not None:  # the plant's own verdicts travel with it
+        payload["plant_checks"] = [c.to_json() for c in plant.identification.checks]
     return result, [_write_json(out_dir / "budget.json", payload)]
 
 

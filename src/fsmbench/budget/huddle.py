@@ -452,11 +452,14 @@ def _compare(effect: str, a: HuddleRecord, b: HuddleRecord) -> ConfigComparison:
     parts = []
     for ba in a.bands:
         bb = b.band(ba.band)
-        r = ba.rms / bb.rms if bb.rms > 0 else math.inf
+        # A zero or non-finite rms is no measurement: no ratio, never a finding.
+        comparable = all(math.isfinite(x) and x > 0 for x in (ba.rms, bb.rms))
+        r = ba.rms / bb.rms if comparable else math.nan
         spread = 2.0 * math.hypot(ba.rel_std, bb.rel_std)
         ratios[ba.band] = r
-        sig[ba.band] = bool(r > 0 and math.isfinite(r) and abs(math.log(r)) > spread)
-        parts.append(f"{ba.band} ×{r:.2f}" + (" (significant)" if sig[ba.band] else ""))
+        sig[ba.band] = bool(comparable and abs(math.log(r)) > spread)
+        parts.append((f"{ba.band} ×{r:.2f}" if comparable else f"{ba.band} not comparable "
+                      "(zero or non-finite rms)") + (" (significant)" if sig[ba.band] else ""))
     changes = [f"{'reduces' if ratios[k] < 1 else 'increases'} the {k} rms "
                f"{max(ratios[k], 1 / ratios[k]):.1f}-fold" for k in ratios
                if sig[k] and k != "total"]

@@ -14,8 +14,9 @@ comparison with the huddle noise (Fig. 50). Everything left out is listed in
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import control as ct
 import xarray as xr
@@ -35,7 +36,9 @@ from fsmbench.budget.optics import GeometryBudget, geometry_budget
 from fsmbench.budget.quantisation import NoiseSources, noise_sources
 from fsmbench.budget.repeatability import RepeatabilityRecord, analyse_repeatability
 from fsmbench.budget.table import AngleSources, ErrorBudget, angle_sources, budget_table
+from fsmbench.checks import Check, Notice, first_failure
 from fsmbench.control.seed import seed_decentralised_controller, tustin
+from fsmbench.io.folder import check_recording
 from fsmbench.jsonutil import plain_json
 
 __all__ = ["BudgetResult", "NonRepeatability", "budget_study"]
@@ -72,7 +75,13 @@ class NonRepeatability:
 
 @dataclass(frozen=True)
 class BudgetResult:
-    """Everything :func:`budget_study` computed; ``to_json()`` for the study's JSON."""
+    """Everything :func:`budget_study` computed; ``to_json()`` for the study's JSON.
+
+    ``checks`` are the plausibility checks of the huddle and repeatability
+    records (:func:`fsmbench.io.folder.check_recording`): a record failing one
+    is left out, and ``skipped`` names the check. ``notices``: saturation and
+    numerical warnings met while computing.
+    """
 
     plant_source: str
     controller: str
@@ -87,6 +96,8 @@ class BudgetResult:
     repeatability: Mapping[str, RepeatabilityRecord]
     nonrep: Mapping[str, NonRepeatability]
     skipped: Mapping[str, str]
+    checks: tuple[Check, ...] = ()
+    notices: tuple[Notice, ...] = ()
 
     @property
     def total_rms_m(self) -> float:
@@ -123,14 +134,39 @@ class BudgetResult:
             "repeatability": {k: r.to_json() for k, r in self.repeatability.items()},
             "nonrep_contributions": {k: v.to_json() for k, v in self.nonrep.items()},
             "skipped": dict(self.skipped),
+            "checks": [c.to_json() for c in self.checks],
+            "notices": [n.to_json() for n in self.notices],
         }
         return plain_json(out)
+
+
+def _plausible(recordings: Mapping[str, xr.Dataset], *, bench: Bench,
+               skipped: dict[str, str], checks: list[Check],
+               notices: list[Notice]) -> dict[str, xr.Dataset]:
+    """The huddle and repeatability records that pass their plausibility checks."""
+    conv = bench.nominal.converter
+    passed = {}
+    for name in (*_HUDDLE, *_REP):
+        if name not in recordings:
+            continue
+        found, notes = check_recording(recordings[name], name=name, fs_hz=conv.fs_hz,
+                                       adc_range_v=conv.range_v, adc_bits=conv.bits)
+        checks.extend(found)
+        notices.extend(notes)
+        if (bad := first_failure(found)) is not None:
+            skipped[name] = (f"check {bad.name} failed: {bad.sentence()}; the record is left "
+                             "out of the analysis and of every comparison")
+            continue
+        passed[name] = recordings[name]
+    return passed
 
 
 def _valid_huddles(recordings: Mapping[str, xr.Dataset],
                    skipped: dict[str, str]) -> dict[str, xr.Dataset]:
     valid = {}
     for name in _HUDDLE:
+        if name in skipped:
+            continue
         if name not in recordings:
             skipped[name] = "not in the recordings (seed 3)"
             continue
@@ -167,6 +203,18 @@ def budget_study(recordings: Mapping[str, xr.Dataset], *, bench: Bench,
     df_hz : float
         Frequency step of the propagation grid [Hz].
     """
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        result = _budget_study(recordings, bench=bench, plant=plant, controller=controller,
+                               window_s=window_s, df_hz=df_hz)
+    numeric = tuple(Notice("numeric", "budget", f"{w.category.__name__}: {w.message}")
+                    for w in caught)
+    return replace(result, notices=result.notices + numeric) if numeric else result
+
+
+def _budget_study(recordings: Mapping[str, xr.Dataset], *, bench: Bench,
+                  plant: PlantModel | None, controller: ct.StateSpace | None,
+                  window_s: float, df_hz: float) -> BudgetResult:
     params = bench.nominal
     plant = physical_plant(params, source="physical (nominal)") if plant is None else plant
     if controller is None:
@@ -175,7 +223,11 @@ def budget_study(recordings: Mapping[str, xr.Dataset], *, bench: Bench,
     else:
         controller_name = str(controller.name or "given controller")
     skipped: dict[str, str] = {}
-    valid = _valid_huddles(recordings, skipped)
+    checks: list[Check] = []
+    notices: list[Notice] = []
+    usable = _plausible(recordings, bench=bench, skipped=skipped, checks=checks,
+                        notices=notices)
+    valid = _valid_huddles(usable, skipped)
     huddle = analyse_huddle(valid, params=params) if valid else None
     qd = None if huddle is None else huddle.qd_noise
     if qd is None:
@@ -205,11 +257,13 @@ def budget_study(recordings: Mapping[str, xr.Dataset], *, bench: Bench,
                                         shielding=alu, window_s=rec.duration_s).total_rms_m
     reps: dict[str, RepeatabilityRecord] = {}
     for name, direction in _REP.items():
-        if name not in recordings:
+        if name in skipped:
+            continue
+        if name not in usable:
             skipped[name] = "not in the recordings (seed 11)"
             continue
         try:
-            reps[direction] = analyse_repeatability(recordings[name], params=params, name=name)
+            reps[direction] = analyse_repeatability(usable[name], params=params, name=name)
         except ValueError as exc:
             skipped[name] = str(exc)
     nonrep: dict[str, NonRepeatability] = {}
@@ -232,4 +286,4 @@ def budget_study(recordings: Mapping[str, xr.Dataset], *, bench: Bench,
         geometry=geometry_budget(params), air=air_budget(params, window_s=window_s),
         frame=frame_budget(params, window_s=window_s), budget=budget, huddle=huddle,
         dac_noise=dac, predicted_huddle_va_rms_m=predicted, repeatability=reps,
-        nonrep=nonrep, skipped=skipped)
+        nonrep=nonrep, skipped=skipped, checks=tuple(checks), notices=tuple(notices))

@@ -28,15 +28,21 @@ import numpy as np
 import xarray as xr
 
 from fsmbench.bench.params import BenchParams
+from fsmbench.checks import Check
 from fsmbench.ident.frf import spectral_matrix
 from fsmbench.ident.welch import hanning
 
 __all__ = [
+    "MAX_CALIBRATION_RESIDUAL",
+    "MAX_GAIN_FACTOR",
+    "MIN_CALIBRATION_R2",
     "CurrentAmplifierGain",
     "QdCalibration",
     "calibrate_current_amplifier",
     "calibrate_qd",
+    "current_amp_checks",
     "known_ga_zc",
+    "qd_checks",
     "require_signals",
     "trim_recording",
 ]
@@ -257,3 +263,74 @@ def calibrate_current_amplifier(ds: xr.Dataset, *, axis: str, nominal: BenchPara
         theoretical_a_per_v=float(1.0 / r_total), band_hz=(float(band_hz[0]), float(band_hz[1])),
         frequency_hz=tuple(float(x) for x in f[sel]),
         gi_response_a_per_v=tuple(float(x) for x in gi), experiment=name)
+
+
+# A working 4QD channel swept over the Newport's ±10 mrad is linear to well under
+# 1 % (twin: r² = 0.99998, seed Fig. 10 a straight line); below 0.9 more than a
+# tenth of its variance is not the beam angle: a dead, swapped or saturated channel.
+MIN_CALIBRATION_R2 = 0.9
+# The residual rms against the fitted swing: the 4QD's noise (~1 mV) against a
+# swing of ~0.7 V is 0.1 %; 5 % means a curved response (spot near a quadrant's
+# edge) or a channel that does not see the beam.
+MAX_CALIBRATION_RESIDUAL = 0.05
+# Identified gains against the nominal: the 4QD's gain scales with the spot's
+# power and size, which realignment changes by tens of % (the seed's two axes
+# differ by 17 %); the seed measured the current amplifier at 0.64 and 0.68 of
+# 1/(R + Rc) (its buffer's resistance is not in that formula). A factor of 2,
+# or a sign flip, is a wrong channel, wiring or unit, not the bench.
+MAX_GAIN_FACTOR = 2.0
+
+
+def _factor_check(name: str, value: float, nominal: float, subject: str, what: str) -> Check:
+    ratio = value / nominal if nominal else float("nan")
+    ok = bool(np.isfinite(ratio) and 1 / MAX_GAIN_FACTOR <= ratio <= MAX_GAIN_FACTOR)
+    return Check(name, ok, float(ratio), f"{1 / MAX_GAIN_FACTOR:g} to {MAX_GAIN_FACTOR:g} "
+                 f"times the nominal {nominal:.4g}", subject,
+                 "" if ok else f"the identified {what} is {value:.4g}, not within a factor "
+                 f"{MAX_GAIN_FACTOR:g} (same sign) of the nominal {nominal:.4g}: check the "
+                 "channel, its wiring and its unit")
+
+
+def qd_checks(cal: QdCalibration, *, nominal_v_per_rad: float) -> list[Check]:
+    """Plausibility of one 4QD calibration: r², residual and gain against the nominal.
+
+    Parameters
+    ----------
+    cal : QdCalibration
+        The fit of one axis.
+    nominal_v_per_rad : float
+        The bench's nominal 4QD gain of that axis [V/rad], signed.
+
+    Returns
+    -------
+    list of Check
+        ``calibration_r2`` (≥ 0.9), ``calibration_residual`` (residual rms
+        ≤ 5 % of the fitted swing ``|a|·range``) and ``qd_gain_vs_nominal``
+        (ratio 0.5–2).
+    """
+    vp = _AXES[cal.axis][0]
+    subject = f"{cal.experiment}: {vp}"
+    r2_ok = bool(np.isfinite(cal.r_squared) and cal.r_squared >= MIN_CALIBRATION_R2)
+    swing = abs(cal.gain_v_per_rad) * cal.beam_angle_range_rad
+    rel = cal.residual_rms_v / swing if swing > 0 else float("inf")
+    res_ok = bool(rel <= MAX_CALIBRATION_RESIDUAL)
+    return [
+        Check("calibration_r2", r2_ok, cal.r_squared, f"≥ {MIN_CALIBRATION_R2:g}", subject,
+              "" if r2_ok else f"{vp} does not follow the Newport's sweep (r² = "
+              f"{cal.r_squared:.2g}): the 4QD channel is dead, swapped or saturated; the "
+              "nominal 4QD gain is used"),
+        Check("calibration_residual", res_ok, float(rel), f"≤ {MAX_CALIBRATION_RESIDUAL:g} of "
+              "the fitted swing (residual rms / (|gain| × beam-angle range))", subject,
+              "" if res_ok else f"the residual ({1e3 * cal.residual_rms_v:.3g} mV rms) is large "
+              f"against the fitted swing ({1e3 * swing:.3g} mV): the response is not a line"),
+        _factor_check("qd_gain_vs_nominal", cal.gain_v_per_rad, nominal_v_per_rad, subject,
+                      "4QD gain [V/rad]"),
+    ]
+
+
+def current_amp_checks(gain: CurrentAmplifierGain) -> list[Check]:
+    """``current_amp_gain_vs_theoretical``: the identified Gi within a factor 2 of 1/(R + Rc)."""
+    u_name, v_name = _CURRENT[gain.axis]
+    return [_factor_check("current_amp_gain_vs_theoretical", gain.gain_a_per_v,
+                          gain.theoretical_a_per_v, f"{gain.experiment}: {u_name} → {v_name}",
+                          "current-amplifier gain [A/V]")]

@@ -22,8 +22,9 @@ full system            all of the above (nominal blocks stand in)  2.5
 from __future__ import annotations
 
 import json
+import warnings as pywarnings
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -44,11 +45,14 @@ from fsmbench.bench.blocks import (
     voltage_amplifier,
 )
 from fsmbench.bench.params import Bench
+from fsmbench.checks import Check, Notice, first_failure
 from fsmbench.ident.calibration import (
     CurrentAmplifierGain,
     QdCalibration,
     calibrate_current_amplifier,
     calibrate_qd,
+    current_amp_checks,
+    qd_checks,
 )
 from fsmbench.ident.export import write_frf_mat, write_plant_mat
 from fsmbench.ident.modes import ModeRefinement, refine_modes
@@ -63,6 +67,7 @@ from fsmbench.ident.sercalo import (
 )
 from fsmbench.ident.validate import PathValidation, validate_sercalo
 from fsmbench.io.atomic import atomic_write_text
+from fsmbench.io.folder import check_recording
 from fsmbench.jsonutil import plain_json
 
 __all__ = [
@@ -141,6 +146,12 @@ class Identification:
     warnings : tuple of str
         Why the results should not be trusted (bad fit, low coherence, no
         convergence); empty when all quality checks pass.
+    checks : tuple of Check
+        Plausibility checks of the recordings used and of the calibrations;
+        a failed one made its step fall back to the nominal block, and
+        ``skipped`` names it.
+    notices : tuple of Notice
+        Non-fatal findings (saturation, numerical warnings while computing).
     """
 
     qd: dict[str, QdCalibration]
@@ -155,6 +166,8 @@ class Identification:
     options: IdentifyOptions
     source: str
     warnings: tuple[str, ...] = ()
+    checks: tuple[Check, ...] = ()
+    notices: tuple[Notice, ...] = ()
 
     def sercalo_modes(self) -> dict[str, dict[str, float]]:
         """Resonance and damping per axis: refined when available, else from the fit."""
@@ -202,6 +215,8 @@ class Identification:
             delays["newport"] = self.newport.delay_s
         if delays:
             out["delay_s"] = delays
+        out["checks"] = [c.to_json() for c in self.checks]
+        out["notices"] = [n.to_json() for n in self.notices]
         out["diagnostics"] = {
             "qd": {a: c.to_json() for a, c in self.qd.items()},
             "current_amp": {a: g.to_json() for a, g in self.current_amp.items()},
@@ -247,16 +262,48 @@ def identify(recordings: Mapping[str, xr.Dataset], *, bench: Bench,
     progress : callable, optional
         Receives one message per step.
     """
-    opts = options or IdentifyOptions()
-    say = progress or (lambda _msg: None)
+    with pywarnings.catch_warnings(record=True) as caught:
+        pywarnings.simplefilter("always")
+        result = _identify(recordings, bench=bench, opts=options or IdentifyOptions(),
+                           source=source, say=progress or (lambda _msg: None))
+    numeric = [Notice("numeric", "identification", f"{w.category.__name__}: {w.message}")
+               for w in caught]
+    return replace(result, notices=result.notices + tuple(numeric)) if numeric else result
+
+
+def _failure_reason(check: Check, fallback: str) -> str:
+    return f"check {check.name} failed: {check.sentence()}; {fallback}"
+
+
+def _identify(recordings: Mapping[str, xr.Dataset], *, bench: Bench, opts: IdentifyOptions,
+              source: str, say: Progress) -> Identification:
     nom = bench.nominal
+    conv = nom.converter
     skipped: dict[str, str] = {}
+    checks: list[Check] = []
+    notices: list[Notice] = []
+    seen: dict[str, list[Check]] = {}
 
     def missing(*names: str) -> list[str]:
         return [n for n in names if n not in recordings]
 
+    def data_failure(*names: str) -> Check | None:
+        """The first failed plausibility check of the named recordings (each checked once)."""
+        for n in names:
+            if n not in seen:
+                found, notes = check_recording(recordings[n], name=n, fs_hz=conv.fs_hz,
+                                               adc_range_v=conv.range_v, adc_bits=conv.bits)
+                seen[n] = found
+                checks.extend(found)
+                notices.extend(notes)
+        return first_failure(c for n in names for c in seen[n])
+
     qd: dict[str, QdCalibration] = {}
-    if not (gone := missing("data_cal_pd_h", "data_cal_pd_v")):
+    if gone := missing("data_cal_pd_h", "data_cal_pd_v"):
+        skipped["qd"] = f"missing {', '.join(gone)}"
+    elif bad := data_failure("data_cal_pd_h", "data_cal_pd_v"):
+        skipped["qd"] = _failure_reason(bad, "the nominal 4QD gain is used")
+    else:
         say("2.1 calibrating the 4QD against the Newport metrology")
         try:
             for axis in "hv":
@@ -264,29 +311,41 @@ def identify(recordings: Mapping[str, xr.Dataset], *, bench: Bench,
                     recordings[f"data_cal_pd_{axis}"], axis=axis,
                     metrology_gain_rad_per_v=nom.newport.metrology_gain_rad_per_v,
                     trim_s=opts.trims_s.get(f"data_cal_pd_{axis}", 1.0))
+                checks.extend(qd_checks(qd[axis], nominal_v_per_rad=getattr(
+                    nom.quad_diode.gain_v_per_rad, axis)))
         except ValueError as exc:
             qd = {}
             skipped["qd"] = f"failed: {exc}"
-    else:
-        skipped["qd"] = f"missing {', '.join(gone)}"
+        if qd and (bad := first_failure(c for c in checks if c.name in _QD_CHECKS)):
+            qd = {}
+            skipped["qd"] = _failure_reason(bad, "the nominal 4QD gain is used")
 
     gi: dict[str, CurrentAmplifierGain] = {}
     sercalo_id: SercaloIdentification | None = None
     modes: ModeRefinement | None = None
     validation: tuple[PathValidation, ...] = ()
-    if not (gone := missing("data_uch", "data_ucv")):
+    if gone := missing("data_uch", "data_ucv"):
+        skipped["current_amp"] = skipped["sercalo"] = f"missing {', '.join(gone)}"
+    elif bad := data_failure("data_uch", "data_ucv"):
+        skipped["current_amp"] = skipped["sercalo"] = _failure_reason(
+            bad, "the nominal current amplifier and Sercalo are used")
+    else:
         say("2.2 identifying the current amplifiers")
         try:
             for axis, exp in (("h", "data_uch"), ("v", "data_ucv")):
                 gi[axis] = calibrate_current_amplifier(
                     recordings[exp], axis=axis, nominal=nom, trim_s=opts.trims_s.get(exp, 1.0),
                     band_hz=opts.current_amp_band_hz, window_s=opts.window_s)
+                checks.extend(current_amp_checks(gi[axis]))
         except ValueError as exc:
             gi = {}
             skipped["current_amp"] = f"failed: {exc}"
             skipped["sercalo"] = "needs the current-amplifier gains (2.2), which failed"
-    else:
-        skipped["current_amp"] = skipped["sercalo"] = f"missing {', '.join(gone)}"
+        if gi and (bad := first_failure(c for c in checks
+                                        if c.name == "current_amp_gain_vs_theoretical")):
+            gi = {}
+            skipped["current_amp"] = _failure_reason(bad, "the nominal current amplifier is used")
+            skipped["sercalo"] = f"needs the current-amplifier gains (2.2): {bad.name} failed"
     if gi:
         say("2.3 Sercalo: FRF matrix, delay, vector fitting")
         try:
@@ -306,7 +365,10 @@ def identify(recordings: Mapping[str, xr.Dataset], *, bench: Bench,
             skipped["sercalo"] = f"failed (data_uch, data_ucv): {exc}"
 
     newport_id: NewportIdentification | None = None
-    if not (gone := missing("data_unh", "data_unv")):
+    if not (gone := missing("data_unh", "data_unv")) and (
+            bad := data_failure("data_unh", "data_unv")):
+        skipped["newport"] = _failure_reason(bad, "the nominal Newport is used")
+    elif not gone:
         say("2.4 Newport: FRF matrix, delay and gains")
         try:
             nfrf = experiment_frf(recordings, columns=[("data_unh", "Unh"), ("data_unv", "Unv")],
@@ -343,7 +405,11 @@ def identify(recordings: Mapping[str, xr.Dataset], *, bench: Bench,
     return Identification(qd=qd, current_amp=gi, sercalo=sercalo_id, modes=modes,
                           validation=validation, newport=newport_id, plant=plant,
                           plant_blocks={k: v[0] for k, v in blocks.items()}, skipped=skipped,
-                          options=opts, source=source, warnings=warnings)
+                          options=opts, source=source, warnings=warnings,
+                          checks=tuple(checks), notices=tuple(notices))
+
+
+_QD_CHECKS = ("calibration_r2", "calibration_residual", "qd_gain_vs_nominal")
 
 
 # Quality limits: the identification issue's 5 % fit target on direct paths;

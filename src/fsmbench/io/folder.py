@@ -1,28 +1,69 @@
-"""A folder of recordings in the seed's layout, read as one set.
+"""A folder of recordings in the seed's layout, read as one set, and its plausibility checks.
 
 :func:`load_recordings` reads every seed experiment a folder holds and says,
 for every experiment it does not use, why; what a user should know about the
 files it did use (saturation, dropped variables …) comes back as
 :class:`~fsmbench.checks.Notice` records and plausibility verdicts as
-:class:`~fsmbench.checks.Check` records, never as Python warnings.
+:class:`~fsmbench.checks.Check` records, never as Python warnings. A folder
+with no usable recording is a :class:`~fsmbench.io.errors.RecordingError`
+saying what was looked for, what was found and which file names nearly match.
+
+:func:`check_recording` is the plausibility test of one recording against
+what the bench can produce; the stages run it too, so that a recording that
+fails it is skipped *with the check's name as the reason*:
+
+``sampling_rate``     rate from ``t`` within 1 % of the bench's (``t`` in seconds)
+``integer_samples``   no signal stored as integers (raw converter counts)
+``converter_range``   ADC/DAC signals within the converter's ±range/2
+``signal_varies``     measured signals and the excitation are not constant
+``va_in_metres``      the Attocube distance varies by ≤ 1 mm rms (it is in m, not nm)
 """
 
 from __future__ import annotations
 
+import difflib
+import math
+import os
+import re
 import warnings
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, Final
 
+import numpy as np
 import xarray as xr
 
 from fsmbench.checks import Check, Notice
 from fsmbench.io.errors import RecordingError, SaturationWarning
 from fsmbench.io.recording import find_experiments, read_recording
-from fsmbench.io.signals import EXPERIMENTS
+from fsmbench.io.signals import ADC_SIGNALS, DAC_SIGNALS, EXPERIMENTS, SIGNALS, TIME
 
-__all__ = ["RecordingSet", "load_recordings"]
+__all__ = [
+    "EXCITATION",
+    "MAX_VA_RMS_M",
+    "RATE_TOLERANCE",
+    "RecordingSet",
+    "check_recording",
+    "folder_hints",
+    "load_recordings",
+]
+
+#: Relative tolerance of the sampling-rate check: a clock off by more than 1 %
+#: is another rate (or ``t`` in another unit), not a crystal's ppm error.
+RATE_TOLERANCE: Final = 0.01
+#: Largest plausible rms of the Attocube distance variation [m]. The bench's Va
+#: moves by nm (huddle) to µm (repeatability steps); 1 mm rms is 1000× the
+#: largest motion the bench makes, so a larger value is not metres (nm saved?).
+MAX_VA_RMS_M: Final = 1e-3
+#: The signal each experiment drives (or sweeps): it must not be constant.
+EXCITATION: Final[dict[str, str]] = {
+    "data_cal_pd_h": "Vnh", "data_cal_pd_v": "Vnv", "data_uch": "Uch", "data_ucv": "Ucv",
+    "data_unh": "Unh", "data_unv": "Unv", "data_rep_h": "Unh", "data_rep_v": "Unv",
+}
+_SUFFIXES: Final = (".mat", ".h5", ".nxs")
+_COPY_TAIL = re.compile(r"(\s*\(\d+\)|\s*-\s*copy(\s*\d+)?|\s+copy|_copy|\s*\[\d+\])$",
+                        re.IGNORECASE)
 
 
 @dataclass(frozen=True, eq=False)
@@ -33,14 +74,15 @@ class RecordingSet:
     ----------
     folder : str
     recordings : dict of str to xarray.Dataset
-        Experiment name to recording, in the seed's order.
+        Experiment name to recording, in the seed's order (also those that
+        fail a check: the stage that needs them skips them, naming the check).
     skipped : dict of str to str
-        Experiment name to the reason it is not used (missing file, or the
-        problem naming file, variable and problem).
+        Experiment name to the reason it is not used (missing file, with
+        near-miss hints, or the problem naming file, variable and problem).
     notices : tuple of Notice
-        Non-fatal findings (saturation, dropped variables …).
+        Non-fatal findings (saturation, dropped variables, data types, rates).
     checks : tuple of Check
-        Plausibility checks run on the recordings.
+        Plausibility checks run on the recordings (see :func:`check_recording`).
     """
 
     folder: str
@@ -57,40 +99,299 @@ class RecordingSet:
                 "checks": [c.to_json() for c in self.checks]}
 
 
-def _notice_of(w: warnings.WarningMessage, name: str) -> Notice:
+# --------------------------------------------------------------------------- checks
+def _label(ds: xr.Dataset, name: str | None) -> str:
+    source = str(ds.attrs.get("source", "") or "")
+    return os.path.basename(source) if source else (name or str(ds.attrs.get("experiment",
+                                                                              "recording")))
+
+
+def _rate_check(ds: xr.Dataset, label: str, fs_hz: float) -> Check:
+    fs = float(ds.attrs.get("fs_hz", math.nan))
+    ratio = fs / fs_hz
+    ok = math.isfinite(ratio) and abs(ratio - 1.0) <= RATE_TOLERANCE
+    advice = ""
+    if not ok:
+        if abs(ratio * 1e3 - 1.0) <= RATE_TOLERANCE:
+            advice = ("t looks like milliseconds (the rate reads 1000× too low): save t in "
+                      "seconds (t = t/1000)")
+        elif abs(ratio * 1e-3 - 1.0) <= RATE_TOLERANCE:
+            advice = "t looks like kiloseconds (1000× too high): save t in seconds"
+        elif abs(ratio * 1e6 - 1.0) <= RATE_TOLERANCE:
+            advice = "t looks like microseconds: save t in seconds (t = t*1e-6)"
+        else:
+            advice = (f"the bench runs at {fs_hz:g} Hz; record at that rate, or set "
+                      f"converter.fs_hz = {fs:g} in the bench parameters if the bench did "
+                      "run at this rate")
+    return Check("sampling_rate", ok, fs, f"within {100 * RATE_TOLERANCE:g} % of the bench's "
+                 f"{fs_hz:g} Hz", f"{label}: t", advice)
+
+
+def _stored_dtype(var: xr.DataArray) -> np.dtype[Any]:
+    return np.dtype(var.attrs.get("stored_dtype", var.dtype))
+
+
+def _finite_rms(x: np.ndarray) -> tuple[float, float]:
+    """(max |x − mean|, rms of x − mean) without overflow for huge values."""
+    with np.errstate(all="ignore"):
+        scale = float(np.max(np.abs(x))) if x.size else 0.0
+        if not math.isfinite(scale) or scale == 0.0:
+            return scale, scale
+        y = x / scale
+        y = y - y.mean()
+        return scale * float(np.max(np.abs(y))), scale * float(np.sqrt(np.mean(y * y)))
+
+
+def check_recording(ds: xr.Dataset, *, name: str | None = None, fs_hz: float | None = None,
+                    adc_range_v: float = 20.0, adc_bits: int = 16
+                    ) -> tuple[list[Check], list[Notice]]:
+    """Plausibility checks of one recording against what the bench can produce.
+
+    Parameters
+    ----------
+    ds : xarray.Dataset
+        A recording (:func:`~fsmbench.io.recording.read_recording`), N samples.
+    name : str, optional
+        Experiment name; default the ``experiment`` attribute.
+    fs_hz : float, optional
+        The bench's sampling rate [Hz]; None accepts any rate (no rate check).
+    adc_range_v : float
+        Full span of the ADC and DAC [V] (±10 V: 20 V).
+    adc_bits : int
+        Converter resolution [bit].
+
+    Returns
+    -------
+    (list of Check, list of Notice)
+        Checks in the order of the module docstring (only those that apply),
+        and notices: saturation at the ADC rails, single-precision ``t``.
+    """
+    exp = name or str(ds.attrs.get("experiment", ""))
+    label = _label(ds, exp)
+    checks: list[Check] = []
+    notices: list[Notice] = []
+    if fs_hz is not None:
+        checks.append(_rate_check(ds, label, float(fs_hz)))
+    lsb = adc_range_v / 2**adc_bits
+    required = set(EXPERIMENTS[exp].required) if exp in EXPERIMENTS else set(ds.data_vars)
+    t_type = _stored_dtype(ds[TIME])
+    if t_type.kind in "iu":
+        checks.append(Check("integer_samples", False, str(t_type), "floating point, in s",
+                            f"{label}: t", f"t holds {t_type} integers (sample numbers?); "
+                            "t must be the time in seconds: t = double(k)/fs"))
+    elif t_type.itemsize < 8:
+        notices.append(Notice("data_type", f"{label}: t", f"t is stored in single precision "
+                              f"({t_type}); it was uniform enough here, but longer records "
+                              "will not be: save t in double precision"))
+    for var in ds.data_vars:
+        v = str(var)
+        if v not in SIGNALS:
+            continue
+        subject = f"{label}: {v}"
+        stored = _stored_dtype(ds[v])
+        converter = v in ADC_SIGNALS or v in DAC_SIGNALS
+        if stored.kind in "iu":
+            fix = (f"convert before saving: {v} = double({v}) * {adc_range_v:g}/2^{adc_bits} "
+                   f"(1 count = {1e3 * lsb:.3g} mV)" if converter
+                   else f"{v} must be in {SIGNALS[v].units}, as double")
+            checks.append(Check("integer_samples", False, str(stored),
+                                f"floating point, in {SIGNALS[v].units}", subject,
+                                f"{v} holds {stored} integers: raw converter counts, not "
+                                f"{'volts' if converter else SIGNALS[v].units}; {fix}"))
+            continue
+        x = np.asarray(ds[v].values, dtype=np.float64)
+        with np.errstate(all="ignore"):
+            peak = float(np.max(np.abs(x))) if x.size else 0.0
+        if converter:
+            # Half a span plus 1 LSB: readings rounded to the converter's codes never exceed it.
+            limit = adc_range_v / 2 + lsb
+            ok = peak <= limit
+            checks.append(Check("converter_range", ok, peak, f"≤ {limit:.6g} V (the converter's "
+                                f"±{adc_range_v / 2:g} V)", subject,
+                                "" if ok else f"{v} exceeds what the converter can deliver: "
+                                "it is not in volts (counts, mV?) or not this bench's signal"))
+            rail = adc_range_v / 2 - 1.5 * lsb  # as SaturationWarning: both rails, nothing inside
+            if ok and v in ADC_SIGNALS and (count := int(np.count_nonzero(np.abs(x) >= rail))):
+                notices.append(Notice("saturation", subject, str(SaturationWarning(
+                    label, v, count, x.size, rail))))
+        spread, rms = _finite_rms(x)
+        measured = v in ADC_SIGNALS or v == "Va"
+        if v in required and (measured or EXCITATION.get(exp) == v):
+            ok = spread > 0.0
+            unit = SIGNALS[v].units
+            if ok:
+                why = ""
+            elif EXCITATION.get(exp) == v:
+                why = (f"{v} is zero throughout: no power in the excitation" if peak == 0
+                       else f"{v} is constant at {x[0]:.6g} {unit}: no power in the excitation")
+                why += "; record it with the excitation on"
+            else:
+                why = (f"{v} is {'zero' if peak == 0 else f'constant at {x[0]:.6g} {unit}'} "
+                       "throughout: the channel is dead or not connected")
+            checks.append(Check("signal_varies", ok, spread, f"> 0 {unit} peak-to-peak",
+                                subject, why))
+        if v == "Va":
+            ok = rms <= MAX_VA_RMS_M
+            hint = ("it looks like nanometres: save Va in metres (Va = Va*1e-9)"
+                    if 1e-1 < rms < 1e6 else "Va is not a distance in metres")
+            checks.append(Check("va_in_metres", ok, rms, f"≤ {MAX_VA_RMS_M:g} m rms (the bench "
+                                "moves by nm to µm)", subject, "" if ok else hint))
+    return checks, notices
+
+
+# --------------------------------------------------------------------------- folder
+def _norm_stem(path: Path) -> str:
+    """Lower-case stem without extensions and copy marks: ``DATA_UCH (1).MAT`` → ``data_uch``."""
+    stem = path.name[: -len(path.suffix)] if path.suffix else path.name
+    for suffix in _SUFFIXES:
+        if stem.lower().endswith(suffix):
+            stem = stem[: -len(suffix)]
+    stem = _COPY_TAIL.sub("", stem.strip()).strip()
+    return stem.lower().replace(" ", "_").replace("-", "_")
+
+
+def folder_hints(folder: str | os.PathLike[str],
+                 names: Iterable[str] = tuple(EXPERIMENTS)) -> dict[str, str]:
+    """For each experiment absent from ``folder``, the file that nearly matches and the fix.
+
+    Parameters
+    ----------
+    folder : str or os.PathLike
+        The data folder (read, not recursed).
+    names : iterable of str
+        Experiment names to look for.
+
+    Returns
+    -------
+    dict of str to str
+        Experiment name to a sentence such as ``"found DATA_UCH.mat: rename it
+        data_uch.mat (file names are case-sensitive)"``; only for the
+        experiments with a near miss.
+    """
+    root = Path(folder)
+    files = sorted(p for p in root.iterdir() if p.is_file()) if root.is_dir() else []
+    wanted = list(names)
+    hints: dict[str, str] = {}
+    for p in files:
+        if p.name in {f"{n}{s}" for n in wanted for s in _SUFFIXES}:
+            continue
+        stem = _norm_stem(p)
+        exp = stem if stem in wanted else next(iter(difflib.get_close_matches(
+            stem, wanted, n=1, cutoff=0.9)), None)
+        if exp is None or exp in hints or any((root / f"{exp}{s}").is_file()
+                                              for s in _SUFFIXES):
+            continue
+        suffix = p.suffix.lower()
+        if suffix not in _SUFFIXES:
+            hints[exp] = (f"found {p.name}, a {p.suffix or 'suffix-less'} file: the study reads "
+                          f"MAT-files (MATLAB: save('{exp}.mat', ...)) or NeXus (.h5, .nxs)")
+            continue
+        if stem != exp:
+            why = "a similar name; the study reads only the exact name"
+        elif p.suffix != suffix:
+            why = "the extension must be lower case"
+        elif p.stem.lower() == exp:
+            why = "file names are case-sensitive"
+        else:
+            why = "a copy's name; the study reads only the exact name"
+        hints[exp] = f"found {p.name}: rename it {exp}{suffix} ({why})"
+    return hints
+
+
+def _notice_of(w: warnings.WarningMessage, label: str) -> Notice | None:
     if isinstance(w.message, SaturationWarning):
-        return Notice("saturation", f"{name}", str(w.message))
-    return Notice("other", name, str(w.message))
+        return None  # check_recording reports saturation itself
+    text = str(w.message)
+    if issubclass(w.category, RuntimeWarning):
+        return Notice("numeric", label, f"numerical problem while reading: {text}")
+    if " left out" in text:
+        return Notice("dropped_variable", label, text.split(": ", 1)[-1])
+    return Notice("other", label, text)
 
 
-def load_recordings(data_dir: Path, *, progress: Callable[[str], None] | None = None
+def _mixed_rates(recordings: dict[str, xr.Dataset], found: dict[str, Path]) -> list[Notice]:
+    rates: dict[float, list[str]] = {}
+    for name, ds in recordings.items():
+        rates.setdefault(float(ds.attrs["fs_hz"]), []).append(found[name].name)
+    if len(rates) < 2:
+        return []
+    text = "; ".join(f"{fs:g} Hz: {', '.join(files)}" for fs, files in rates.items())
+    return [Notice("rate", "", f"the recordings have different sampling rates ({text})")]
+
+
+def load_recordings(data_dir: Path, *, fs_hz: float | None = None, adc_range_v: float = 20.0,
+                    adc_bits: int = 16, progress: Callable[[str], None] | None = None
                     ) -> RecordingSet:
-    """Read every seed experiment present in ``data_dir``.
+    """Read every seed experiment present in ``data_dir`` and check it.
 
     Parameters
     ----------
     data_dir : Path
         Folder of recordings (``data_uch.mat`` …; ``.h5``/``.nxs`` too).
+    fs_hz : float, optional
+        The bench's sampling rate [Hz] (``bench.nominal.converter.fs_hz``);
+        each recording's rate must be within 1 % of it (check
+        ``sampling_rate``). None accepts any rate.
+    adc_range_v, adc_bits : float, int
+        Converter span [V] and resolution [bit] (range and saturation).
     progress : callable, optional
         Receives one message per file read.
+
+    Raises
+    ------
+    RecordingError
+        No recording could be read: the message lists what was looked for,
+        what the folder holds and the near-miss names.
+    NotADirectoryError
+        ``data_dir`` is not a folder.
     """
     found = find_experiments(data_dir)
+    hints = folder_hints(data_dir)
     recordings: dict[str, xr.Dataset] = {}
     skipped: dict[str, str] = {}
     notices: list[Notice] = []
+    checks: list[Check] = []
     for name in EXPERIMENTS:
         if name not in found:
-            skipped[name] = f"no {name}.mat (or .h5/.nxs) in {data_dir}"
+            skipped[name] = f"no {name}.mat (or .h5/.nxs) in {data_dir}" + (
+                f"; {hints[name]}" if name in hints else "")
             continue
         if progress is not None:
             progress(f"reading {found[name].name}")
         try:
             with warnings.catch_warnings(record=True) as caught:
                 warnings.simplefilter("always")
-                recordings[name] = read_recording(found[name], experiment=name)
+                ds = read_recording(found[name], experiment=name, adc_range_v=adc_range_v,
+                                    adc_bits=adc_bits)
+                found_checks, found_notices = check_recording(
+                    ds, name=name, fs_hz=fs_hz, adc_range_v=adc_range_v, adc_bits=adc_bits)
         except RecordingError as exc:
             skipped[name] = str(exc)
             continue
-        notices += [_notice_of(w, name) for w in caught]
+        recordings[name] = ds
+        checks += found_checks
+        notices += [n for w in caught if (n := _notice_of(w, found[name].name)) is not None]
+        notices += found_notices
+    if not recordings:
+        raise RecordingError(data_dir, _empty_problem(Path(data_dir), found, skipped, hints))
+    if fs_hz is None:
+        notices += _mixed_rates(recordings, found)
+    else:
+        notices += [Notice("rate", c.subject, c.sentence()) for c in checks
+                    if c.name == "sampling_rate" and not c.passed]
     return RecordingSet(folder=str(data_dir), recordings=recordings, skipped=skipped,
-                        notices=tuple(notices))
+                        notices=tuple(notices), checks=tuple(checks))
+
+
+def _empty_problem(root: Path, found: dict[str, Path], skipped: dict[str, str],
+                   hints: dict[str, str]) -> str:
+    names = sorted(p.name for p in root.iterdir()) if root.is_dir() else []
+    shown = ", ".join(names[:12]) + (f" … ({len(names)} entries)" if len(names) > 12 else "")
+    if found:
+        bad = "; ".join(skipped[n] for n in found)
+        return f"no recording in this folder can be used: {bad}"
+    looked = (f"looked for the seed's recordings ({', '.join(list(EXPERIMENTS)[:2])} … "
+              f"{list(EXPERIMENTS)[-1]}, {len(EXPERIMENTS)} names, as .mat, .h5 or .nxs)")
+    near = "; ".join(hints.values())
+    return (f"holds none of them: {looked}; found {shown or 'nothing (empty folder)'}"
+            + (f"; did you mean: {near}" if near else ""))

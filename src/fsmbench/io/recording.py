@@ -460,9 +460,29 @@ def read_recording(
     fs = _fs_from_time(t) if n >= 2 and np.isfinite(t[[0, -1]]).all() and t[-1] > t[0] \
         else float("nan")
     ds = _assemble(vectors, fs_hz=fs, experiment=experiment, source=os.path.abspath(p))
-    _validate(ds, origin=origin, require=req, adc_range_v=adc_range_v, adc_bits=adc_bits,
-              saturation=True, stacklevel=3)
+    for name in vectors:  # what the file held, for the data-type checks (integer counts …)
+        stored = np.asarray(raw[name]).dtype
+        if stored != np.float64:
+            ds[name].attrs["stored_dtype"] = str(stored)
+    try:
+        _validate(ds, origin=origin, require=req, adc_range_v=adc_range_v, adc_bits=adc_bits,
+                  saturation=True, stacklevel=3)
+    except RecordingError as exc:
+        stored = np.asarray(raw[TIME]).dtype
+        if exc.variable == TIME and stored.kind == "f" and stored.itemsize < 8:
+            raise RecordingError(origin, exc.problem + "; " + _single_precision(t, stored),
+                                 variable=TIME) from None
+        raise
     return ds
+
+
+def _single_precision(t: np.ndarray, stored: np.dtype[Any]) -> str:
+    """Why a single-precision ``t`` is not uniform, and the fix."""
+    top = float(np.max(np.abs(t)))
+    spacing = float(np.spacing(np.asarray(top, dtype=stored)))
+    return (f"t is stored in single precision ({stored}), whose values near {top:.4g} s are "
+            f"{spacing:.3g} s apart, so the steps cannot be uniform; save t in double "
+            "precision, rebuilt from the sample numbers (MATLAB: t = (0:N-1)'/fs)")
 
 
 def write_recording(
