@@ -67,7 +67,7 @@ def kernel_source(plant: DiscretePlant) -> str:
               "import numpy as np\n"
               "from numba import njit\n\n"
               "from fsmbench.twin.engine import _quantise_scalar\n\n\n"
-              '@njit(cache=True, error_model="numpy")\n')
+              '@njit(cache=True, nogil=True, error_model="numpy")\n')
     return header + body
 
 

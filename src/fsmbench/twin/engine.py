@@ -97,7 +97,7 @@ class LoopResult:
     internal: np.ndarray
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy")
 def _quantise_scalar(x: float, lsb: float, lo: float, hi: float) -> float:
     if lsb <= 0.0:
         return x
@@ -109,7 +109,7 @@ def _quantise_scalar(x: float, lsb: float, lo: float, hi: float) -> float:
     return code * lsb
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy")
 def _loop_body(ab_row: np.ndarray, ab_col: np.ndarray, ab_val: np.ndarray,
                c_row: np.ndarray, c_col: np.ndarray, c_val: np.ndarray, n_adc: int,
                adc_noise: np.ndarray, adc_lsb: float, adc_lo: float, adc_hi: float,
