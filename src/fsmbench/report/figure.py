@@ -16,7 +16,7 @@ per pixel column (:func:`envelope`), which keeps every extreme.
 from __future__ import annotations
 
 from collections.abc import Iterator, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Literal
 
 import numpy as np
@@ -229,7 +229,6 @@ class Figure:
     share_x: bool = False
     height_px: int | None = None
     note: str = ""
-    extra: dict[str, str] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         if not self.key or not all(c.islower() or c.isdigit() or c == "_" for c in self.key):
