@@ -1,13 +1,23 @@
 """Controllers for MATLAB and for a real-time target (seed 9.3, 10.3).
 
 * :func:`write_controllers_mat`: ``controllers.mat`` with one struct per
-  controller, each holding the continuous ``K`` and the Tustin ``Kd`` as
+  controller, each holding the continuous ``K`` and the discrete ``Kd`` as
   structs of state-space matrices (``A, B, C, D, InputName, OutputName, Ts``),
-  as the seed's ``save('mat/K_diag.mat', 'K', 'Kd')`` keeps them. In MATLAB:
-  ``s = load('controllers.mat'); K = ss(s.fsmbench_controller.K.A, ...)``.
+  as the seed's ``save('mat/K_diag.mat', 'K', 'Kd')`` keeps them, plus an
+  ``fsmbench`` struct saying how ``Kd`` was made and the 4QD gain.
+  ``fsmbench_load.m`` (shipped with the package) turns them into ``ss``.
 * :func:`sos_document` / :func:`write_sos_json`: each diagonal channel as
-  second-order sections of the Tustin-discretised transfer function, the
-  form an IIR filter on the real-time target runs, with the sample time.
+  discrete second-order sections, the form an IIR filter on the real-time
+  target runs, with the signals, their units, the scaling from the measured
+  4QD voltage to the controller's input and the response the sections must
+  reproduce at a few frequencies.
+
+Discretisation (:data:`DISCRETISATIONS`): by default ``"tustin_prewarp"``:
+each continuous section (:func:`fsmbench.control.realize.sections_from_zpk`)
+is discretised by Tustin prewarped at its own notch (or resonance) frequency,
+so every notch stays exactly in place; plain Tustin (the seed's
+``c2d(K, 1e-4, 'tustin')``) moves the seed's 411.5 Hz notch to 409.3 Hz
+(errata E26). ``"tustin"`` gives the seed's version.
 
 Sign: every controller here is closed as ``u = -K y`` (the seed's
 ``connect(sys, -K, ...)``); a target computes the sections' output and
@@ -18,6 +28,7 @@ from __future__ import annotations
 
 import json
 from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -27,12 +38,28 @@ from scipy import signal
 from scipy.linalg import eigvals
 
 from fsmbench import __version__
+from fsmbench.control.realize import (
+    DiscreteSection,
+    Section,
+    section_response,
+    sections_from_zpk,
+    tustin_cascade,
+    tustin_section,
+    warped_frequency_rad_s,
+)
 from fsmbench.control.seed import SEED_TS_S, tustin
 from fsmbench.io.atomic import atomic_write_text
 from fsmbench.io.matwrite import save_mat
 
 __all__ = [
+    "DEFAULT_DISCRETISATION",
+    "DISCRETISATIONS",
     "SOS_FORMAT",
+    "SOS_FORMAT_VERSION",
+    "InputScaling",
+    "channel_sections",
+    "discretise",
+    "discretise_channel",
     "siso_zpk",
     "sos_document",
     "sos_response",
@@ -42,7 +69,80 @@ __all__ = [
     "write_sos_json",
 ]
 
-SOS_FORMAT = "fsmbench-sos/1"
+SOS_FORMAT = "fsmbench.controllers_sos"
+SOS_FORMAT_VERSION = 2
+
+DEFAULT_DISCRETISATION = "tustin_prewarp"
+#: Discretisation methods and what the documents say about them.
+DISCRETISATIONS: dict[str, str] = {
+    "tustin_prewarp": "Tustin (bilinear) per second-order section, each prewarped at its own "
+                      "notch frequency (lightly damped complex zero pair, damping ratio < 0.2) "
+                      "or else resonance frequency (lightly damped complex pole pair), so the "
+                      "section's discrete response equals its continuous one exactly there and "
+                      "every notch stays in place; other sections: plain Tustin",
+    "tustin": "Tustin (bilinear), no prewarping (the seed's c2d(K, Ts, 'tustin')); "
+              "notches move down in frequency (errata E26)",
+}
+
+AXES = ("h", "v")
+# What a real-time target reads, per controller input: the 4QD output.
+_MEASURED = {"Rh": "Vph", "Rv": "Vpv"}
+_SIGNALS: dict[str, tuple[str, str]] = {
+    "Rh": ("rad", "beam angle, horizontal"),
+    "Rv": ("rad", "beam angle, vertical"),
+    "Vph": ("V", "4QD output, horizontal"),
+    "Vpv": ("V", "4QD output, vertical"),
+    "Uch": ("V", "Sercalo command (DAC output), horizontal"),
+    "Ucv": ("V", "Sercalo command (DAC output), vertical"),
+    "Unh": ("V", "Newport command (DAC output), horizontal"),
+    "Unv": ("V", "Newport command (DAC output), vertical"),
+    "Vch": ("V", "Sercalo force-sensor voltage, horizontal"),
+    "Vcv": ("V", "Sercalo force-sensor voltage, vertical"),
+}
+_CHECK_F_HZ = (1.0, 10.0, 100.0, 1000.0)  # response stated at these, plus each prewarp frequency
+
+
+@dataclass(frozen=True)
+class InputScaling:
+    """From the measured 4QD voltage to the controllers' input, ``R = Vp / Gd``.
+
+    Attributes
+    ----------
+    qd_gain_v_per_rad : tuple of 2 floats
+        Diagonal of ``Gd`` (h, v) [V/rad], sign included, of the plant the
+        controllers were designed on.
+    plant_source : str
+        That plant, e.g. ``"identified (...)"`` or ``"physical (nominal)"``.
+    """
+
+    qd_gain_v_per_rad: tuple[float, float]
+    plant_source: str
+
+    @property
+    def plant_kind(self) -> str:
+        """``"identified"``, ``"nominal"`` or the plant source itself."""
+        src = self.plant_source.lower()
+        if src.startswith("identified"):
+            return "identified"
+        return "nominal" if "nominal" in src else self.plant_source
+
+    def to_json(self) -> dict[str, Any]:
+        """Gains, their inverse and where they come from, h/v as ``{"h": …, "v": …}``."""
+        gd = dict(zip(AXES, (float(x) for x in self.qd_gain_v_per_rad), strict=True))
+        return {
+            "rule": "R [rad] = Vp [V] / Gd [V/rad]: multiply the measured 4QD output by "
+                    "input_scale_rad_per_v before the first section",
+            "qd_gain_v_per_rad": gd,
+            "input_scale_rad_per_v": {a: 1.0 / g for a, g in gd.items()},
+            "qd_gain_from": self.plant_kind,
+            "plant_source": self.plant_source,
+        }
+
+
+def _check_method(method: str) -> None:
+    if method not in DISCRETISATIONS:
+        raise ValueError(f"unknown discretisation {method!r}; use one of "
+                         + ", ".join(repr(m) for m in DISCRETISATIONS))
 
 
 def state_space_struct(sys: ct.StateSpace, *, description: str = "") -> dict[str, Any]:
@@ -52,44 +152,17 @@ def state_space_struct(sys: ct.StateSpace, *, description: str = "") -> dict[str
     """
     dt = sys.dt
     ts = 0.0 if dt in (None, 0) or dt is True else float(dt)
+    n = sys.nstates
     return {
-        "A": np.atleast_2d(np.asarray(sys.A, dtype=float)),
-        "B": np.atleast_2d(np.asarray(sys.B, dtype=float)),
-        "C": np.atleast_2d(np.asarray(sys.C, dtype=float)),
-        "D": np.atleast_2d(np.asarray(sys.D, dtype=float)),
+        "A": np.asarray(sys.A, dtype=float).reshape(n, n),
+        "B": np.asarray(sys.B, dtype=float).reshape(n, sys.ninputs),
+        "C": np.asarray(sys.C, dtype=float).reshape(sys.noutputs, n),
+        "D": np.asarray(sys.D, dtype=float).reshape(sys.noutputs, sys.ninputs),
         "InputName": [str(x) for x in sys.input_labels],
         "OutputName": [str(x) for x in sys.output_labels],
         "Ts": ts,
         "Description": description,
     }
-
-
-def write_controllers_mat(path: str | Path, controllers: Mapping[str, ct.StateSpace], *,
-                          ts_s: float = SEED_TS_S,
-                          descriptions: Mapping[str, str] | None = None) -> Path:
-    """Write ``controllers.mat``: per controller a struct ``{K, Kd}``, plus ``fsmbench`` meta.
-
-    Parameters
-    ----------
-    path : str or Path
-        Destination (written atomically).
-    controllers : mapping of name to control.StateSpace
-        Continuous controllers; names must be MATLAB identifiers.
-    ts_s : float
-        Tustin sample time of ``Kd`` [s].
-    descriptions : mapping of name to str, optional
-    """
-    desc = dict(descriptions or {})
-    variables: dict[str, Any] = {}
-    for name, k in controllers.items():
-        text = desc.get(name, "")
-        variables[name] = {"K": state_space_struct(k, description=text),
-                           "Kd": state_space_struct(tustin(k, ts_s=ts_s), description=text)}
-    variables["fsmbench"] = {"version": __version__, "Ts": float(ts_s),
-                             "discretisation": "tustin (bilinear), no prewarping",
-                             "feedback": "u = -K y",
-                             "controllers": list(controllers)}
-    return save_mat(path, variables)
 
 
 def siso_zpk(sys: ct.StateSpace, *, output: int = 0,
@@ -148,52 +221,214 @@ def _structural_states(a: np.ndarray, b: np.ndarray, c: np.ndarray) -> list[int]
     return [int(i) for i in np.nonzero(reach & observe)[0]]
 
 
+def channel_sections(sys: ct.StateSpace, *, output: int = 0, input: int = 0) -> list[Section]:
+    """Continuous first- and second-order sections of one channel (gain in the first).
+
+    A static or zero channel gives one section without roots.
+    """
+    z, p, k = siso_zpk(sys, output=output, input=input)
+    sections = sections_from_zpk(z, p, k) if len(p) else []
+    return sections or [Section(zeros=(), poles=(), gain=k)]
+
+
+def discretise_channel(sys: ct.StateSpace, *, ts_s: float = SEED_TS_S, output: int = 0,
+                       input: int = 0,
+                       method: str = DEFAULT_DISCRETISATION) -> list[DiscreteSection]:
+    """Discrete sections of one channel of a continuous model.
+
+    Parameters
+    ----------
+    sys : control.StateSpace
+        Continuous model.
+    ts_s : float
+        Sample time [s].
+    output, input : int
+        Channel.
+    method : {"tustin_prewarp", "tustin"}
+        See :data:`DISCRETISATIONS`.
+    """
+    _check_method(method)
+    return [tustin_section(sec, ts_s=ts_s, prewarp=method == "tustin_prewarp")
+            for sec in channel_sections(sys, output=output, input=input)]
+
+
 def tustin_sos(sys: ct.StateSpace, *, ts_s: float = SEED_TS_S, output: int = 0,
-               input: int = 0) -> np.ndarray:
-    """Second-order sections ``[b0, b1, b2, 1, a1, a2]`` of one Tustin-discretised channel.
+               input: int = 0, method: str = DEFAULT_DISCRETISATION) -> np.ndarray:
+    """Second-order sections ``[b0, b1, b2, 1, a1, a2]`` of one discretised channel.
 
     Returns
     -------
     array, shape (n_sections, 6)
         In ``z^-1``; the overall gain sits in the first section (scipy's convention).
     """
-    z, p, k = siso_zpk(sys, output=output, input=input)
-    zd, pd, kd = signal.bilinear_zpk(z, p, k, fs=1.0 / ts_s)
-    return np.asarray(signal.zpk2sos(zd, pd, kd, pairing="nearest"), dtype=float)
+    secs = discretise_channel(sys, ts_s=ts_s, output=output, input=input, method=method)
+    return np.array([s.sos for s in secs], dtype=float)
 
 
-def sos_document(controllers: Mapping[str, ct.StateSpace], *, ts_s: float = SEED_TS_S,
+def discretise(k: ct.StateSpace, *, ts_s: float = SEED_TS_S,
+               method: str = DEFAULT_DISCRETISATION) -> ct.StateSpace:
+    """Discrete controller with ``k``'s signal names (``dt = ts_s``).
+
+    ``"tustin"`` discretises the whole model (:func:`fsmbench.control.seed.tustin`);
+    ``"tustin_prewarp"`` cascades each diagonal channel's prewarped sections
+    (off-diagonal channels must be zero).
+    """
+    _check_method(method)
+    if method == "tustin":
+        return tustin(k, ts_s=ts_s)
+    _check_diagonal(k, str(k.name))
+    parts = [tustin_cascade(channel_sections(k, output=i, input=i), ts_s=ts_s, prewarp=True)
+             for i in range(k.ninputs)]
+    kd = ct.append(*parts) if len(parts) > 1 else parts[0]
+    return ct.ss(kd.A, kd.B, kd.C, kd.D, ts_s, inputs=list(k.input_labels),
+                 outputs=list(k.output_labels), name=f"{k.name}d" if k.name else None)
+
+
+def write_controllers_mat(path: str | Path, controllers: Mapping[str, ct.StateSpace], *,
+                          ts_s: float = SEED_TS_S, method: str = DEFAULT_DISCRETISATION,
+                          descriptions: Mapping[str, str] | None = None,
+                          scaling: InputScaling | None = None) -> Path:
+    """Write ``controllers.mat``: per controller a struct ``{K, Kd}``, plus ``fsmbench`` meta.
+
+    Parameters
+    ----------
+    path : str or Path
+        Destination (written atomically).
+    controllers : mapping of name to control.StateSpace
+        Continuous controllers; names must be MATLAB identifiers.
+    ts_s : float
+        Sample time of ``Kd`` [s].
+    method : {"tustin_prewarp", "tustin"}
+        Discretisation of ``Kd`` (:data:`DISCRETISATIONS`).
+    descriptions : mapping of name to str, optional
+    scaling : InputScaling, optional
+        The 4QD gain, recorded in the meta struct.
+    """
+    _check_method(method)
+    desc = dict(descriptions or {})
+    variables: dict[str, Any] = {}
+    for name, k in controllers.items():
+        text = desc.get(name, "")
+        variables[name] = {"K": state_space_struct(k, description=text),
+                           "Kd": state_space_struct(discretise(k, ts_s=ts_s, method=method),
+                                                    description=text)}
+    meta: dict[str, Any] = {"version": __version__, "Ts": float(ts_s),
+                            "discretisation": method,
+                            "discretisation_text": DISCRETISATIONS[method],
+                            "feedback": "u = -K y", "controllers": list(controllers)}
+    if scaling is not None:
+        meta["qd_gain_v_per_rad"] = {a: float(g) for a, g in
+                                     zip(AXES, scaling.qd_gain_v_per_rad, strict=True)}
+        meta["plant_source"] = scaling.plant_source
+    variables["fsmbench"] = meta
+    return save_mat(path, variables)
+
+
+def _signal(name: str) -> dict[str, str]:
+    unit, words = _SIGNALS.get(name, ("", name))
+    return {"name": name, "unit": unit, "description": words}
+
+
+def _complex_lists(h: np.ndarray) -> dict[str, list[float]]:
+    return {"real": [float(x) for x in h.real], "imag": [float(x) for x in h.imag]}
+
+
+def _channel_entry(k: ct.StateSpace, i: int, *, ts_s: float, method: str,
+                   scaling: InputScaling) -> dict[str, Any]:
+    inp, outp = str(k.input_labels[i]), str(k.output_labels[i])
+    if inp not in _MEASURED:
+        raise ValueError(f"controller input {inp!r} is not a beam angle (Rh, Rv); the SOS "
+                         "document scales from the 4QD output")
+    secs = discretise_channel(k, ts_s=ts_s, output=i, input=i, method=method)
+    warps = [s.prewarp_rad_s for s in secs]
+    nyq = 0.5 / ts_s
+    f = np.array(sorted({*(x for x in _CHECK_F_HZ if x < nyq),
+                         *(w / (2 * np.pi) for w in warps if w is not None)}))
+    w = 2 * np.pi * f
+    # Stated discrete response from the continuous sections at their warped frequencies
+    # (H_d(exp(j w Ts)) = H_c(j w')): independent of the coefficients it describes.
+    hd = np.ones(len(f), dtype=complex)
+    for s in secs:
+        hd = hd * section_response(s.continuous,
+                                   1j * warped_frequency_rad_s(w, ts_s=ts_s,
+                                                               prewarp_rad_s=s.prewarp_rad_s))
+    a, b, c, d = (np.asarray(x, dtype=float) for x in (k.A, k.B, k.C, k.D))
+    n = a.shape[0]
+    hc = np.array([(c[i] @ np.linalg.solve(1j * x * np.eye(n) - a, b[:, i]) if n else 0.0)
+                   + d[i, i] for x in w])
+    scale = 1.0 / float(scaling.qd_gain_v_per_rad[i])
+    return {
+        "measured_signal": _signal(_MEASURED[inp]),
+        "input_signal": _signal(inp),
+        "input_scale_rad_per_v": scale,
+        "output_signal": _signal(outp),
+        "steps": f"x = {scale:.9g} rad/V * {_MEASURED[inp]}; y = sections(x) in order; "
+                 f"{outp} = -y (u = -K y)",
+        "n_sections": len(secs),
+        "sos": [list(s.sos) for s in secs],
+        "prewarp_frequency_hz": [None if x is None else x / (2 * np.pi) for x in warps],
+        "response_v_per_rad": {"f_hz": [float(x) for x in f],
+                               "discrete": _complex_lists(hd),
+                               "continuous": _complex_lists(hc)},
+    }
+
+
+def sos_document(controllers: Mapping[str, ct.StateSpace], *, scaling: InputScaling,
+                 ts_s: float = SEED_TS_S, method: str = DEFAULT_DISCRETISATION,
                  descriptions: Mapping[str, str] | None = None) -> dict[str, Any]:
     """JSON-ready SOS description of the diagonal channels of each controller.
 
-    Off-diagonal channels must be zero (the controllers here are decentralised).
+    Parameters
+    ----------
+    controllers : mapping of name to control.StateSpace
+        Continuous, ``Rh, Rv`` [rad] to two commands [V], off-diagonal channels zero.
+    scaling : InputScaling
+        The 4QD gain of the plant they were designed on.
+    ts_s : float
+        Sample time [s].
+    method : {"tustin_prewarp", "tustin"}
+        See :data:`DISCRETISATIONS`.
+    descriptions : mapping of name to str, optional
+
+    Returns
+    -------
+    dict
+        ``format``, ``format_version``, ``discretisation``, ``input_scaling`` and
+        per controller and axis (``h``, ``v``) the signals, ``sos``,
+        ``prewarp_frequency_hz`` and ``response_v_per_rad`` (the sections'
+        response and the continuous controller's at a few frequencies).
     """
+    _check_method(method)
     desc = dict(descriptions or {})
     out: dict[str, Any] = {
-        "format": SOS_FORMAT, "fsmbench_version": __version__, "sample_time_s": float(ts_s),
-        "discretisation": "tustin (bilinear), no prewarping",
+        "format": SOS_FORMAT, "format_version": SOS_FORMAT_VERSION,
+        "fsmbench_version": __version__, "sample_time_s": float(ts_s),
+        "discretisation": {"method": method, "description": DISCRETISATIONS[method]},
         "section_layout": ["b0", "b1", "b2", "a0", "a1", "a2"],
         "difference_equation": "a0 y[k] = b0 x[k] + b1 x[k-1] + b2 x[k-2] - a1 y[k-1] - a2 y[k-2]",
         "feedback": "u = -K y: apply the negative of the cascade's output to the command",
+        "input_scaling": scaling.to_json(),
         "controllers": {},
     }
     for name, k in controllers.items():
         _check_diagonal(k, name)
-        chans = []
-        for i, (inp, outp) in enumerate(zip(k.input_labels, k.output_labels, strict=True)):
-            sos = tustin_sos(k, ts_s=ts_s, output=i, input=i)
-            chans.append({"input": str(inp), "output": str(outp), "n_sections": len(sos),
-                          "sos": [[float(x) for x in row] for row in sos]})
-        out["controllers"][name] = {"description": desc.get(name, ""), "channels": chans}
+        if k.ninputs != len(AXES):
+            raise ValueError(f"controller {name!r} has {k.ninputs} inputs; expected h and v")
+        entry: dict[str, Any] = {"description": desc.get(name, "")}
+        for i, axis in enumerate(AXES):
+            entry[axis] = _channel_entry(k, i, ts_s=ts_s, method=method, scaling=scaling)
+        out["controllers"][name] = entry
     return out
 
 
 def write_sos_json(path: str | Path, controllers: Mapping[str, ct.StateSpace], *,
-                   ts_s: float = SEED_TS_S,
+                   scaling: InputScaling, ts_s: float = SEED_TS_S,
+                   method: str = DEFAULT_DISCRETISATION,
                    descriptions: Mapping[str, str] | None = None) -> Path:
     """Write :func:`sos_document` as JSON, atomically."""
-    doc = sos_document(controllers, ts_s=ts_s, descriptions=descriptions)
-    return atomic_write_text(path, json.dumps(doc, indent=1) + "\n")
+    doc = sos_document(controllers, scaling=scaling, ts_s=ts_s, method=method,
+                       descriptions=descriptions)
+    return atomic_write_text(path, json.dumps(doc, indent=1, allow_nan=False) + "\n")
 
 
 def _check_diagonal(k: ct.StateSpace, name: str) -> None:

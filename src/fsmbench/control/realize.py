@@ -6,6 +6,13 @@ with poles near 1e4 rad/s); rounding in those coefficients moves lightly
 damped notches. Here a model is split into first- and second-order sections,
 each realised with states scaled to its natural frequency, and the sections
 are cascaded: the A matrix is block lower-triangular with O(w) entries.
+
+The same sections are what a real-time target runs: :func:`tustin_section`
+discretises one section by Tustin, by default prewarped at the section's own
+notch (or resonance) frequency so that the discrete response there equals the
+continuous one exactly (plain Tustin moves the seed's 411.5 Hz notch to
+409.3 Hz, errata E26); :func:`tustin_cascade` does the same on the sections'
+scaled state-space realisations.
 """
 
 from __future__ import annotations
@@ -15,8 +22,21 @@ from dataclasses import dataclass
 
 import control as ct
 import numpy as np
+from scipy import signal
 
-__all__ = ["Section", "pair_roots", "sections_from_zpk", "zpk_cascade"]
+__all__ = [
+    "DiscreteSection",
+    "Section",
+    "pair_roots",
+    "section_prewarp_rad_s",
+    "section_response",
+    "sections_from_zpk",
+    "tustin_cascade",
+    "tustin_rate_hz",
+    "tustin_section",
+    "warped_frequency_rad_s",
+    "zpk_cascade",
+]
 
 
 @dataclass(frozen=True)
@@ -131,3 +151,135 @@ def zpk_cascade(zeros: Sequence[complex], poles: Sequence[complex], gain: float,
     for sec in sections:
         sys = ct.series(sys, _section_ss(sec))
     return ct.ss(sys.A, sys.B, sys.C, sys.D, inputs=[input_name], outputs=[output_name])
+
+
+# ----------------------------------------------------------------------------- discrete sections
+
+
+@dataclass(frozen=True)
+class DiscreteSection:
+    """One section discretised by Tustin, optionally prewarped.
+
+    Attributes
+    ----------
+    sos : tuple of 6 floats
+        ``(b0, b1, b2, 1, a1, a2)`` in powers of ``z^-1`` (scipy's layout).
+    prewarp_rad_s : float or None
+        Frequency at which the discrete response equals the continuous one
+        exactly [rad/s]; None for plain Tustin.
+    continuous : Section
+        The section it came from.
+    """
+
+    sos: tuple[float, ...]
+    prewarp_rad_s: float | None
+    continuous: Section
+
+
+def section_prewarp_rad_s(sec: Section, *, ts_s: float,
+                          damping_max: float = 0.2) -> float | None:
+    """Frequency a section is prewarped at [rad/s], or None for plain Tustin.
+
+    The natural frequency ``|z|`` of a lightly damped complex zero pair (a
+    notch) if the section has one, else ``|p|`` of a lightly damped complex
+    pole pair (a resonance), else None: a well-damped or real root has no
+    sharp feature to pin, and prewarping would only rescale the section's
+    frequency axis by ``(pi f0 ts)^2 / 3`` away from ``f0``. Lightly damped:
+    damping ratio below ``damping_max`` (0.2, as the notch report of
+    :mod:`fsmbench.control.loops`). Frequencies at or above Nyquist
+    (``pi / ts_s``) cannot be prewarped: None.
+    """
+    for roots in (sec.zeros, sec.poles):
+        light = [r for r in roots if r.imag > 0.0 and -r.real < damping_max * abs(r)]
+        if light:
+            w0 = float(abs(light[0]))
+            return w0 if w0 * ts_s / 2.0 < np.pi / 2.0 else None
+    return None
+
+
+def tustin_rate_hz(*, ts_s: float, prewarp_rad_s: float | None) -> float:
+    """The ``fs`` of ``s = 2 fs (z - 1)/(z + 1)``: ``1/ts_s``, or ``w0 / (2 tan(w0 ts_s / 2))``."""
+    if prewarp_rad_s is None:
+        return 1.0 / ts_s
+    return prewarp_rad_s / (2.0 * np.tan(prewarp_rad_s * ts_s / 2.0))
+
+
+def warped_frequency_rad_s(omega_rad_s: np.ndarray, *, ts_s: float,
+                           prewarp_rad_s: float | None) -> np.ndarray:
+    """Continuous frequency [rad/s] whose response the discrete section gives at ``omega``.
+
+    ``H_d(exp(j w ts)) = H_c(j w')`` with ``w' = 2 fs tan(w ts / 2)`` and ``fs``
+    from :func:`tustin_rate_hz`; ``w' = w`` at the prewarp frequency.
+    Shape as ``omega_rad_s``.
+    """
+    fs = tustin_rate_hz(ts_s=ts_s, prewarp_rad_s=prewarp_rad_s)
+    return 2.0 * fs * np.tan(np.asarray(omega_rad_s, dtype=float) * ts_s / 2.0)
+
+
+def tustin_section(sec: Section, *, ts_s: float, prewarp: bool = True) -> DiscreteSection:
+    """Discretise one section by Tustin, prewarped per :func:`section_prewarp_rad_s`.
+
+    Parameters
+    ----------
+    sec : Section
+        Continuous section, roots [rad/s].
+    ts_s : float
+        Sample time [s].
+    prewarp : bool
+        False for plain Tustin.
+    """
+    w0 = section_prewarp_rad_s(sec, ts_s=ts_s) if prewarp else None
+    fs = tustin_rate_hz(ts_s=ts_s, prewarp_rad_s=w0)
+    zd, pd, kd = signal.bilinear_zpk(np.asarray(sec.zeros, dtype=complex),
+                                     np.asarray(sec.poles, dtype=complex), sec.gain, fs=fs)
+    b = np.real(kd * np.poly(zd)) if len(zd) else np.array([kd], dtype=float)
+    a = np.real(np.poly(pd)) if len(pd) else np.array([1.0])
+    row = np.zeros(6)
+    row[:len(b)] = b
+    row[3:3 + len(a)] = a
+    return DiscreteSection(sos=tuple(float(x) for x in row), prewarp_rad_s=w0, continuous=sec)
+
+
+def section_response(sec: Section, s: np.ndarray) -> np.ndarray:
+    """``gain prod(s - z) / prod(s - p)`` at complex ``s``, shape as ``s``."""
+    s = np.asarray(s, dtype=complex)
+    num = np.prod([s - z for z in sec.zeros], axis=0) if sec.zeros else np.ones_like(s)
+    den = np.prod([s - p for p in sec.poles], axis=0) if sec.poles else np.ones_like(s)
+    return sec.gain * num / den
+
+
+def tustin_cascade(sections: Sequence[Section], *, ts_s: float, prewarp: bool = True,
+                   input_name: str = "u", output_name: str = "y") -> ct.StateSpace:
+    """Discrete state-space cascade of sections, each discretised like :func:`tustin_section`.
+
+    Each section's scaled continuous realisation (as in :func:`zpk_cascade`)
+    goes through the bilinear map at its own rate (:func:`tustin_rate_hz`),
+    so the states stay as well scaled as the continuous cascade's; the
+    response equals the cascade of :func:`tustin_section` rows.
+
+    Parameters
+    ----------
+    sections : sequence of Section
+        Continuous sections [rad/s].
+    ts_s : float
+        Sample time [s].
+    prewarp : bool
+        False for plain Tustin.
+    input_name, output_name : str
+        Signal names of the result.
+    """
+    sys = ct.ss([], [], [], [[1.0]], ts_s)
+    for sec in sections:
+        cont = _section_ss(sec)
+        if cont.nstates == 0:
+            part = ct.ss([], [], [], np.asarray(cont.D, dtype=float), ts_s)
+        else:
+            w0 = section_prewarp_rad_s(sec, ts_s=ts_s) if prewarp else None
+            dt_eff = 1.0 / tustin_rate_hz(ts_s=ts_s, prewarp_rad_s=w0)
+            a, b, c, d, _ = signal.cont2discrete(
+                (np.asarray(cont.A, dtype=float), np.asarray(cont.B, dtype=float),
+                 np.asarray(cont.C, dtype=float), np.asarray(cont.D, dtype=float)),
+                dt_eff, method="bilinear")
+            part = ct.ss(a, b, c, d, ts_s)
+        sys = ct.series(sys, part)
+    return ct.ss(sys.A, sys.B, sys.C, sys.D, ts_s, inputs=[input_name], outputs=[output_name])

@@ -13,13 +13,15 @@
 6. the Newport command to beam angle transfer with each Sercalo loop closed
    (Fig. 42).
 
-:meth:`DesignResult.write` saves ``controllers.mat`` and ``controllers_sos.json``.
+:meth:`DesignResult.write` saves ``controllers.mat``, ``controllers_sos.json`` and
+``fsmbench_load.m`` (MATLAB/Octave: ``[G, K, Kd] = fsmbench_load(OUT)``).
 """
 
 from __future__ import annotations
 
 import dataclasses
 from dataclasses import dataclass, field
+from importlib import resources
 from pathlib import Path
 from typing import Any
 
@@ -41,15 +43,22 @@ from fsmbench.control.design import (
     design_controller,
     robustness,
 )
-from fsmbench.control.export import write_controllers_mat, write_sos_json
+from fsmbench.control.export import (
+    DEFAULT_DISCRETISATION,
+    InputScaling,
+    write_controllers_mat,
+    write_sos_json,
+)
 from fsmbench.control.freq import evaluate_ss, plain_json
 from fsmbench.control.iff import IffAnalysis, iff_analysis
 from fsmbench.control.loops import LoopAnalysis, LoopOptions, analyse_loop, newport_to_beam
 from fsmbench.control.seed import iff_controller, newport_controller, seed_decentralised_controller
+from fsmbench.io.atomic import atomic_write_text
 
 __all__ = [
     "CONTROLLERS_MAT",
     "CONTROLLERS_SOS_JSON",
+    "MATLAB_LOADER",
     "DesignResult",
     "NewportToBeam",
     "StudyOptions",
@@ -58,6 +67,7 @@ __all__ = [
 
 CONTROLLERS_MAT = "controllers.mat"
 CONTROLLERS_SOS_JSON = "controllers_sos.json"
+MATLAB_LOADER = "fsmbench_load.m"
 
 _DESCRIPTIONS = {
     "seed_controller": "seed 9.2 decentralised controller (restored Kh, Kv); Rh,Rv -> Uch,Ucv",
@@ -151,6 +161,9 @@ class DesignResult:
         ``seed_controller``, ``fsmbench_controller``, ``newport_controller``,
         ``iff_controller`` (continuous).
     options : StudyOptions
+    qd_gain_v_per_rad : tuple of 2 floats
+        4QD gain ``Gd`` (h, v) of ``plant`` [V/rad]: a target reading the 4QD
+        voltage divides by it to get the controllers' input ``R``.
     """
 
     plant_source: str
@@ -166,6 +179,7 @@ class DesignResult:
     newport_to_beam: NewportToBeam
     controllers: dict[str, ct.StateSpace]
     options: StudyOptions
+    qd_gain_v_per_rad: tuple[float, float]
 
     @property
     def loops(self) -> dict[str, LoopAnalysis]:
@@ -203,21 +217,50 @@ class DesignResult:
             "options": self.options.to_json(),
         })
 
-    def write(self, out_dir: str | Path) -> list[Path]:
-        """Write ``controllers.mat`` and ``controllers_sos.json`` into ``out_dir`` (atomically).
+    def write(self, out_dir: str | Path, *,
+              method: str = DEFAULT_DISCRETISATION) -> list[Path]:
+        """Write ``controllers.mat``, ``controllers_sos.json`` and ``fsmbench_load.m``.
 
+        Parameters
+        ----------
+        out_dir : str or Path
+            Folder (created if missing); every file is written atomically.
+        method : {"tustin_prewarp", "tustin"}
+            Discretisation of ``Kd`` and of the sections
+            (:data:`fsmbench.control.export.DISCRETISATIONS`): by default Tustin
+            prewarped at each section's notch, ``"tustin"`` for the seed's plain Tustin.
+
+        Returns
+        -------
+        list of Path
+            The three files, in that order.
+
+        Notes
+        -----
         The SOS file holds the three feedback controllers (the IFF controller,
-        unstable on this bench, is only in the MAT-file).
+        unstable on this bench, is only in the MAT-file). ``fsmbench_load.m``
+        turns ``plant.mat`` (written by the identification into the same
+        folder in ``fsmbench study``) and ``controllers.mat`` into ``ss`` objects.
         """
         out = Path(out_dir)
         out.mkdir(parents=True, exist_ok=True)
         ts = self.options.loop.ts_s
+        scaling = InputScaling(qd_gain_v_per_rad=self.qd_gain_v_per_rad,
+                               plant_source=self.plant_source)
         mat = write_controllers_mat(out / CONTROLLERS_MAT, self.controllers, ts_s=ts,
-                                    descriptions=_DESCRIPTIONS)
+                                    method=method, descriptions=_DESCRIPTIONS, scaling=scaling)
         sos = write_sos_json(out / CONTROLLERS_SOS_JSON,
                              {k: v for k, v in self.controllers.items() if k != "iff_controller"},
-                             ts_s=ts, descriptions=_DESCRIPTIONS)
-        return [mat, sos]
+                             scaling=scaling, ts_s=ts, method=method, descriptions=_DESCRIPTIONS)
+        loader = resources.files("fsmbench").joinpath("matlab", MATLAB_LOADER).read_text(
+            encoding="utf-8")
+        return [mat, sos, atomic_write_text(out / MATLAB_LOADER, loader)]
+
+
+def _qd_gain(plant: PlantModel) -> tuple[float, float]:
+    """Diagonal of ``Gd`` (h, v) [V/rad], sign included."""
+    gd = np.diag(np.asarray(plant.blocks["Gd"].D, dtype=float))
+    return float(gd[0]), float(gd[1])
 
 
 def _gd_scaling(plant: PlantModel) -> tuple[list[float], list[float]]:
@@ -283,4 +326,5 @@ def design_study(plant: PlantModel, *, bench: Bench,
     return DesignResult(plant_source=plant.source, objective=objective, plant=plant_an,
                         seed=seed, fsmbench=fsm, design=design, newport=newport, iff=iff,
                         robustness=rob, seed_robustness=seed_rob, newport_to_beam=n2b,
-                        controllers=controllers, options=opts)
+                        controllers=controllers, options=opts,
+                        qd_gain_v_per_rad=_qd_gain(plant))
