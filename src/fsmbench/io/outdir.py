@@ -140,8 +140,9 @@ def preflight(out_dir: str | Path, *, data_dir: str | Path | None = None,
     ------
     OutputError
         With the folder and the problem: a file in the way, a non-empty folder
-        that is not a previous fsmbench run (its files are never deleted),
-        too little free space.
+        that is not a previous fsmbench run (its files are never deleted), a
+        folder that cannot be written (read-only, immutable), too little free
+        space.
     OSError
         The parent folders cannot be created (read-only, no permission).
     """
@@ -156,6 +157,11 @@ def preflight(out_dir: str | Path, *, data_dir: str | Path | None = None,
     if out.is_dir():
         _check_replaceable(out)
     out.parent.mkdir(parents=True, exist_ok=True)
+    try:  # writable? (root ignores permission bits: only trying tells)
+        os.rmdir(tempfile.mkdtemp(prefix=f".{out.name}{_STAGING_TAG}", dir=out.parent))
+    except OSError as exc:
+        raise OutputError(out.parent, f"cannot write the output folder here ({exc.strerror}); "
+                                      "choose another --out") from exc
     free = shutil.disk_usage(out.parent).free
     if free < need_bytes:
         raise OutputError(out.parent, f"only {_human_bytes(free)} free on this filesystem but "
