@@ -227,7 +227,7 @@ def channel_sections(sys: ct.StateSpace, *, output: int = 0, input: int = 0) -> 
     A static or zero channel gives one section without roots.
     """
     z, p, k = siso_zpk(sys, output=output, input=input)
-    sections = sections_from_zpk(z, p, k) if len(p) else []
+    sections = sections_from_zpk(list(z), list(p), k) if len(p) else []
     return sections or [Section(zeros=(), poles=(), gain=k)]
 
 

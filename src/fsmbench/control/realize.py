@@ -270,10 +270,10 @@ def tustin_cascade(sections: Sequence[Section], *, ts_s: float, prewarp: bool = 
     """
     sys = ct.ss([], [], [], [[1.0]], ts_s)
     for sec in sections:
-        cont = _section_ss(sec)
-        if cont.nstates == 0:
-            part = ct.ss([], [], [], np.asarray(cont.D, dtype=float), ts_s)
+        if not sec.poles:  # static (proper sections without poles have no zeros)
+            part = ct.ss([], [], [], [[sec.gain]], ts_s)
         else:
+            cont = _section_ss(sec)
             w0 = section_prewarp_rad_s(sec, ts_s=ts_s) if prewarp else None
             dt_eff = 1.0 / tustin_rate_hz(ts_s=ts_s, prewarp_rad_s=w0)
             a, b, c, d, _ = signal.cont2discrete(
