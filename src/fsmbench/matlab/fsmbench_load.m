@@ -49,7 +49,8 @@ function [G, K, Kd, info] = fsmbench_load(outdir, varargin)
 %     [G, K, Kd] = fsmbench_load('out');
 %     bode(K.seed_controller(1, 1), Kd.seed_controller(1, 1))
 %
-%   Written by fsmbench next to its outputs; see docs/results.md.
+%   Written by fsmbench next to its outputs; the same controllers as
+%   second-order sections for a real-time target are in controllers_sos.json.
 
   if nargin < 1
     outdir = '.';
