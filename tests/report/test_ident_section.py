@@ -1,30 +1,171 @@
-"""The report's identification section."""
+"""Chapter 2: identification of the system dynamics, on the twin and on recorded data."""
 
 from __future__ import annotations
 
+import dataclasses
+
+import numpy as np
+import pytest
+
 from fsmbench.bench.params import Bench
-from fsmbench.ident.pipeline import identify
-from fsmbench.report.ident_section import identification_section
+from fsmbench.ident.compare import TARGETS, comparison_rows
+from fsmbench.ident.pipeline import Identification, identify
+from fsmbench.report.figure import Bars, Figure
+from fsmbench.report.html import Note, Section, Table, iter_figures, render_report
+from fsmbench.report.ident_section import identification_section, quantity
 from fsmbench.twin import TwinRun
 
+PASSED = "passed its quality checks"
 
-def test_section_has_the_seed_figures_and_the_truth_table(ident_twin: TwinRun,
-                                                          bench: Bench) -> None:
-    result = identify(ident_twin.recordings, bench=bench)
+
+@pytest.fixture(scope="module")
+def result(ident_twin: TwinRun, bench: Bench) -> Identification:
+    return identify(ident_twin.recordings, bench=bench)
+
+
+def _text(sec: Section) -> str:
+    out = [sec.title]
+    for block in sec.blocks:
+        if isinstance(block, str):
+            out.append(block)
+        elif isinstance(block, Note):
+            out += [block.text, block.ref]
+        elif isinstance(block, Table):
+            out += [block.caption, block.note, *block.header, *(c for r in block.rows for c in r)]
+        elif isinstance(block, Figure):
+            out += [block.title, block.caption, block.note]
+            for p in block.panels:
+                out += [p.title, p.x_label, p.y_label, *(t.name for t in p.traces)]
+    out += [_text(sub) for sub in sec.subsections]
+    return "\n".join(out)
+
+
+def _tables(sec: Section) -> list[Table]:
+    own = [b for b in sec.blocks if isinstance(b, Table)]
+    return own + [t for sub in sec.subsections for t in _tables(sub)]
+
+
+def _figures_sound(sec: Section) -> list[Figure]:
+    """Unique keys; every trace non-empty and finite somewhere; units on every axis."""
+    figs = list(iter_figures([sec]))
+    keys = [f.key for f in figs]
+    assert len(keys) == len(set(keys)), keys
+    for fig in figs:
+        for panel in fig.panels:
+            for label in (panel.x_label, panel.y_label):
+                assert "[" in label and label.endswith("]"), (fig.key, label)
+            assert panel.traces, fig.key
+            for trace in panel.traces:
+                values = trace.values if isinstance(trace, Bars) else trace.y
+                assert values.size > 0 and np.isfinite(values).any(), (fig.key, trace.name)
+    return figs
+
+
+def test_twin_section_has_every_seed_figure_and_the_truth_table(
+        result: Identification, ident_twin: TwinRun, bench: Bench) -> None:
     sec = identification_section(result, recordings=ident_twin.recordings, bench=bench,
-                                 truth=ident_twin.truth)
-    refs = " ".join(f.seed_ref for f in sec.figures)
-    for fig in ("10", "12–14", "17", "18", "19", "20", "25", "26", "28"):
-        assert fig in refs, fig
-    table = sec.tables[0]
-    assert table.header[2] == "true value (twin)"
-    assert all(row[-1] == "yes" for row in table.rows)
+                                 truth=ident_twin.truth, skipped={})
+    figs = _figures_sound(sec)
+    assert [f.seed_ref for f in figs] == [
+        "Fig. 8", "Fig. 9", "Fig. 10", "Fig. 15", "Fig. 16", "Figs. 12–14", "Fig. 17",
+        "Figs. 18, 19, 21, 22", "Fig. 20", "Fig. 23", "Fig. 24", "Fig. 25", "Figs. 26, 27",
+        "Fig. 28"]
+    assert [s.title[:3] for s in sec.subsections] == ["2.1", "2.2", "2.3", "2.4", "2.5"]
+    table = _tables(sec)[0]
+    assert table.header == ("quantity", "identified", "true value (twin)", "difference",
+                            "accuracy target", "within target")
+    rows = comparison_rows(result.to_json(), reference=ident_twin.truth, bench=bench)
+    assert len(table.rows) == len(rows) == len(TARGETS)
+    for cells, row in zip(table.rows, rows, strict=True):
+        name, _unit, scale = quantity(row.key)
+        assert cells[0] == name
+        assert float(cells[1]) == pytest.approx(row.identified * scale, rel=1e-5)  # 6 digits
+        assert cells[-1] == "yes"
+    by_name = {r[0]: r for r in table.rows}
+    assert by_name["Delay of the Sercalo path [ms]"][4] == "±0.1 ms"  # one sample at 10 kHz
+    assert by_name["4QD gain, h [V/rad]"][4] == "±1 %"
+    text = _text(sec)
+    assert PASSED in text and "identification issue" not in text
+    assert "errata E21" in text
 
 
-def test_without_truth_the_reference_is_nominal(ident_twin: TwinRun, bench: Bench) -> None:
+def test_every_target_key_reads_in_words_with_a_unit() -> None:
+    for key in TARGETS:
+        name, _unit, _scale = quantity(key)
+        assert "_" not in name and "." not in name.split("[")[0], name
+        assert name.endswith("]") and "[" in name, name
+    assert quantity("qd_gain_v_per_rad.h") == ("4QD gain, h [V/rad]", "V/rad", 1.0)
+    assert quantity("current_amp_gain_a_per_v.v")[0] == "Current-amplifier gain, v [mA/V]"
+
+
+def test_recorded_data_are_compared_with_nominal_values(
+        result: Identification, ident_twin: TwinRun, bench: Bench) -> None:
+    sec = identification_section(result, recordings=ident_twin.recordings, bench=bench,
+                                 truth=None, skipped={})
+    table = _tables(sec)[0]
+    assert table.header == ("quantity", "identified", "nominal value", "difference")
+    text = _text(sec).lower()
+    assert "twin" not in text and "true value" not in text
+    # The nominal 4QD gain of the seed's Table 2: −31.0 V/rad.
+    assert {r[0]: r[2] for r in table.rows}["4QD gain, h [V/rad]"] == "-31"
+
+
+def test_skipped_sercalo_fit_is_said_and_no_quality_claim(
+        result: Identification, ident_twin: TwinRun, bench: Bench) -> None:
+    reason = "failed (data_uch, data_ucv): vector fitting found no stable pole"
+    broken = dataclasses.replace(result, sercalo=None, modes=None, validation=(),
+                                 skipped={"sercalo": reason}, warnings=(),
+                                 plant_blocks={**result.plant_blocks, "Gc": "nominal"})
+    sec = identification_section(broken, recordings=ident_twin.recordings, bench=bench,
+                                 truth=None, skipped={})
+    text = _text(sec)
+    assert PASSED not in text and "converged" not in text
+    assert reason in text
+    keys = {f.key for f in _figures_sound(sec)}
+    assert not any(k.startswith(("fig17", "fig18", "fig20")) for k in keys)
+    assert "fig15_uch_time" in keys  # the records that exist are still shown
+    blocks = {r[0]: r[1] for r in _tables(sec.subsections[4])[0].rows}
+    assert blocks["Gc, Sercalo"].startswith("nominal")
+    assert blocks["Gi, current amplifier"] == "identified (2.2)"
+
+
+def test_warnings_replace_the_quality_claim(result: Identification, ident_twin: TwinRun,
+                                            bench: Bench) -> None:
+    warned = dataclasses.replace(result, warnings=("Vph/Uch: the fit misses by 7.0 %",))
+    text = _text(identification_section(warned, recordings=ident_twin.recordings,
+                                        bench=bench, truth=None, skipped={}))
+    assert PASSED not in text and "the fit misses by 7.0 %" in text
+
+
+def test_missing_records_are_explained(ident_twin: TwinRun, bench: Bench) -> None:
     cal = {k: v for k, v in ident_twin.recordings.items() if k.startswith("data_cal")}
-    result = identify(cal, bench=bench)
-    sec = identification_section(result, recordings=cal, bench=bench, truth=None)
-    assert sec.tables[0].header[2] == "nominal value"
-    assert [r[0] for r in sec.tables[0].rows] == ["qd_gain_v_per_rad.h", "qd_gain_v_per_rad.v"]
-    assert any("Skipped" in p for p in sec.paragraphs)
+    res = identify(cal, bench=bench)
+    sec = identification_section(res, recordings=cal, bench=bench, truth=None,
+                                 skipped={"data_uch": "no data_uch.mat in the folder"})
+    text = _text(sec)
+    assert ("Missing recordings: data_uch (not loaded: no data_uch.mat in the folder); "
+            "data_ucv (not in the data).") in text
+    assert [r[0] for r in _tables(sec)[0].rows] == ["4QD gain, h [V/rad]", "4QD gain, v [V/rad]"]
+    assert PASSED not in text
+    assert {f.key for f in _figures_sound(sec)} == {"fig8_cal_pd_h_time", "fig9_cal_pd_v_time",
+                                                   "fig10_qd_regression"}
+
+
+def test_without_identification_the_records_are_still_shown(ident_twin: TwinRun,
+                                                            bench: Bench) -> None:
+    recs = {k: ident_twin.recordings[k] for k in ("data_unh", "data_unv")}
+    sec = identification_section(None, recordings=recs, bench=bench, truth=None,
+                                 skipped={"data_uch": "file is truncated"})
+    text = _text(sec)
+    assert "The identification did not run" in text and "file is truncated" in text
+    assert PASSED not in text
+    assert {f.key for f in _figures_sound(sec)} == {"fig23_unh_time", "fig24_unv_time"}
+    assert "nominal model" in text
+
+
+def test_section_renders_with_unique_figure_keys(result: Identification, ident_twin: TwinRun,
+                                                 bench: Bench) -> None:
+    sec = identification_section(result, recordings=ident_twin.recordings, bench=bench,
+                                 truth=ident_twin.truth, skipped={})
+    html = render_report(title="t", sections=[sec])
+    assert html.count('class="fsm-plot pending"') == len(list(iter_figures([sec])))

@@ -1,4 +1,4 @@
-"""Report sections of the foundation: the bench, its parameters, its recordings."""
+"""Chapter 1 (the bench and its recordings) and Appendix A (bench parameters)."""
 
 from __future__ import annotations
 
@@ -9,103 +9,153 @@ import xarray as xr
 
 from fsmbench.bench.blocks import physical_plant
 from fsmbench.bench.params import Bench, param_rows
-from fsmbench.report.html import Section, Table, figure_from_matplotlib
-from fsmbench.report.plots import experiment_figure, huddle_figure
+from fsmbench.io.signals import EXPERIMENTS, SIGNALS
+from fsmbench.report.html import Note, Section, Table
 
-__all__ = ["bench_section", "parameters_section", "recordings_section"]
+__all__ = ["bench_section", "parameters_appendix", "recordings_table"]
 
-# Seed figure numbers of the time plots, and the seed's trim of each record (t0).
-SEED_TIME_FIGURES = {
-    "data_cal_pd_h": ("Fig. 8", 1.0), "data_cal_pd_v": ("Fig. 9", 1.0),
-    "data_uch": ("Fig. 15", 1.0), "data_ucv": ("Fig. 16", 1.0),
-    "data_unh": ("Fig. 23", 3.0), "data_unv": ("Fig. 24", 1.5),
-    **{f"data_huddle_test_{i}": ("Fig. 29-30", 1.0) for i in range(1, 6)},
-    "data_rep_h": ("Fig. 44", 0.0), "data_rep_v": ("Fig. 44", 0.0),
+# Parameter groups (first part of a parameter's key) in words.
+_GROUPS = {
+    "datasheet.sercalo": "Sercalo datasheet", "datasheet.newport": "Newport datasheet",
+    "converter": "ADC and DAC", "sercalo": "Sercalo", "current_amplifier": "current amplifier",
+    "voltage_amplifier": "voltage amplifier", "newport": "Newport", "quad_diode": "4QD",
+    "attocube": "Attocube", "geometry": "geometry", "environment": "environment",
+    "scaling": "scaling (seed 6)",
 }
 
 
-def bench_section(bench: Bench) -> Section:
-    """What the bench is, with its key numbers computed from the parameters."""
-    nom, true = bench.nominal, bench.true
+def _group(key: str) -> str:
+    parts = key.split(".")
+    head = ".".join(parts[:2]) if parts[0] == "datasheet" else parts[0]
+    words = _GROUPS.get(head, head.replace("_", " "))
+    return words[0].upper() + words[1:]
+
+
+def bench_section(bench: Bench, *, recordings: Mapping[str, xr.Dataset],
+                  skipped: Mapping[str, str], source: str, is_twin: bool) -> Section:
+    """"1. The bench and its recordings": the bench in words with its key numbers, the records.
+
+    Parameters
+    ----------
+    bench : Bench
+        Nominal parameters give every number quoted; the true ones are
+        quoted only when ``is_twin``.
+    recordings : mapping experiment -> Dataset
+        The records loaded (coordinate ``t`` [s], attribute ``fs_hz`` [Hz]).
+    skipped : mapping experiment -> reason
+        Experiments not loaded, with the reason in words.
+    source : str
+        Where the records come from (folder, or the twin).
+    is_twin : bool
+        The records were simulated by the digital twin.
+    """
+    nom = bench.nominal
     plant = physical_plant(nom)
     g_uc = plant.dc_gain(output="Rh", input="Uch")
     g_un = plant.dc_gain(output="Rh", input="Unh")
     conv = nom.converter
-    paragraphs = (
+    ser = nom.sercalo
+    gi = nom.current_amp_gain_a_per_v()
+    qd = nom.quad_diode.gain_v_per_rad
+    blocks: list[str | Table | Note] = [
         "The bench stabilises a laser beam with a Sercalo voice-coil mirror (the actuator) "
-        "while a Newport FSM-300 tilts the beam to emulate sample motion. A four-quadrant "
-        "photodiode (4QD) measures the beam angle, and an Attocube interferometer measures "
-        "the beam path, which the stabilisation must not disturb. A real-time target samples "
-        f"everything at {conv.fs_hz:g} Hz with {conv.bits}-bit converters over "
-        f"±{conv.range_v / 2:g} V (one step = {conv.lsb_v * 1e6:.1f} µV).",
-        "Signal chain (seed Fig. 1): the DAC voltage Uc drives a current amplifier "
-        f"(Gi = 1/(R + Rc + Lc s), nominal {nom.current_amp_gain_a_per_v().h * 1e3:.2f} mA/V). "
-        "The coil current tilts the Sercalo (a "
-        f"{nom.sercalo.resonance_hz.h:g} Hz / {nom.sercalo.resonance_hz.v:g} Hz "
-        "mass-spring-damper per axis). The beam reflects twice on the Sercalo and once on the "
-        "Newport, and the 4QD converts the beam angle to volts (Gd). The voltage across the "
+        "while a Newport FSM-300 mirror tilts the beam to emulate the motion of a sample. A "
+        "four-quadrant photodiode (4QD) measures the beam angle, and an Attocube "
+        "interferometer measures the length of the beam path, which the stabilisation must "
+        "not disturb. A real-time target samples every signal at "
+        f"{conv.fs_hz:g} Hz with {conv.bits}-bit converters over ±{conv.range_v / 2:g} V: one "
+        f"step is {conv.lsb_v * 1e6:.1f} µV, and rounding adds white noise of "
+        f"{conv.quantisation_psd_v2_per_hz:.3g} V²/Hz (seed 1.6).",
+        "Signal chain (seed Figs. 1 and 2): the DAC voltage Uc drives a current amplifier, "
+        f"Gi = 1/(R + Rc + Lc·s), nominally {gi.h * 1e3:.2f} mA/V (h) and {gi.v * 1e3:.2f} "
+        "mA/V (v). The coil current tilts the Sercalo, a mass-spring-damper per axis with "
+        f"resonances at {ser.resonance_hz.h:g} Hz (h) and {ser.resonance_hz.v:g} Hz (v) and "
+        f"damping ratios {ser.damping_ratio.h:.2g} and {ser.damping_ratio.v:.2g} derived from "
+        "its datasheet. The beam reflects twice on the Sercalo and once on the Newport, whose "
+        f"metrology reads {nom.newport.metrology_gain_rad_per_v * 1e3:.2f} mrad of mirror "
+        "angle per volt. The 4QD converts the beam angle to volts (Gd, nominally "
+        f"{qd.h:g} V/rad (h) and {qd.v:g} V/rad (v), seed Table 2). The voltage across the "
         f"coil is amplified {nom.voltage_amplifier.gain:g} times (Ga, "
         f"{nom.voltage_amplifier.cutoff_hz:g} Hz low pass).",
-        f"Nominal static gains: {g_uc * 1e3:.2f} mrad of beam angle per volt on Uch, "
-        f"{g_un * 1e3:.2f} mrad per volt on Unh. Pure delays: "
-        f"{plant.input_delay_s['Uch'] * 1e3:.2f} ms on the Sercalo path and "
+        f"Nominal static gains: {g_uc * 1e3:.2f} mrad of beam angle per volt on the Sercalo's "
+        f"horizontal command and {g_un * 1e3:.2f} mrad per volt on the Newport's. Pure delays: "
+        f"{plant.input_delay_s['Uch'] * 1e3:.2f} ms on the Sercalo path (one sample of "
+        "computation and half a sample of hold) and "
         f"{plant.input_delay_s['Unh'] * 1e3:.2f} ms on the Newport path.",
-        "The digital twin simulates the 'true' parameters, which differ from the nominal ones "
-        "as the real bench did (for example its current-amplifier gain, "
-        f"{true.current_amp_gain_a_per_v().h * 1e3:.2f} mA/V, seed 2.2).",
-    )
-    return Section(title="1. The bench", paragraphs=paragraphs, anchor="bench")
+        Note("The seed's 1.2 derives a damping ratio of 0.33 % from the datasheet with "
+             "two slips (28.4 mA/deg is a current per angle, and 282.9 deg/V is not in its "
+             "Table 1); the datasheet itself gives the ratios above.", ref="errata E1–E3"),
+    ]
+    if is_twin:
+        true = bench.true
+        blocks.append(
+            "The records below were simulated by the digital twin. It runs the 'true' "
+            "parameters, which differ from the nominal ones as the real bench did: for "
+            f"example its current-amplifier gain is {true.current_amp_gain_a_per_v().h * 1e3:.2f}"
+            " mA/V (h) where the components give "
+            f"{gi.h * 1e3:.2f} mA/V (seed 2.2), and its Sercalo resonates at "
+            f"{true.sercalo.resonance_hz.h:g} Hz and {true.sercalo.resonance_hz.v:g} Hz. "
+            "Appendix A lists both sets.")
+    blocks.append(Table(
+        caption="Signals of the recordings (seed section 2)",
+        header=("signal", "what it is", "unit"),
+        rows=tuple((s.name, s.long_name.replace(" - ", ", "), s.units)
+                   for s in SIGNALS.values())))
+    blocks.append(recordings_table(recordings, skipped=skipped, source=source))
+    return Section(title="1. The bench and its recordings", blocks=tuple(blocks), anchor="bench")
 
 
-def parameters_section(bench: Bench) -> Section:
-    """Every parameter with its nominal and true value, unit and source."""
-    rows = tuple((r.key, r.nominal, r.true, r.unit, r.source, r.doc) for r in param_rows(bench))
-    table = Table(caption="Bench parameters (datasheet rows have no true value)",
-                  header=("parameter", "nominal", "true (twin)", "unit", "source", "meaning"),
-                  rows=rows)
-    return Section(title="2. Parameters", tables=(table,), anchor="parameters",
-                   paragraphs=("Nominal: what is known before identification (datasheets, "
-                               "measured components, the seed's Table 2). True: what the "
-                               "digital twin simulates. docs/model.md derives each value.",))
+def _duration_s(ds: xr.Dataset) -> float:
+    t = np.asarray(ds["t"].values, dtype=float)
+    return float(t[-1] - t[0] + 1.0 / float(ds.attrs["fs_hz"]))
 
 
-def _record_row(name: str, ds: xr.Dataset) -> tuple[str, ...]:
-    t = np.asarray(ds["t"].values)
-    signals = ", ".join(str(v) for v in ds.data_vars)
-    return (name, f"{t[-1] - t[0] + 1 / float(ds.attrs['fs_hz']):.2f}",
-            f"{float(ds.attrs['fs_hz']):g}", str(ds.sizes["t"]), signals)
+def recordings_table(recordings: Mapping[str, xr.Dataset], *, skipped: Mapping[str, str],
+                     source: str) -> Table:
+    """One row per experiment: what it is, length [s], sampling rate [Hz], samples, signals.
+
+    Experiments not loaded get a row saying why. Known experiments come in
+    the seed's order, others after them.
+    """
+    names = [n for n in EXPERIMENTS if n in recordings or n in skipped]
+    names += [n for n in (*recordings, *skipped) if n not in names]
+    rows = []
+    for name in names:
+        info = EXPERIMENTS.get(name)
+        what = f"{info.description} (seed {info.section})" if info else ""
+        if name in recordings:
+            ds = recordings[name]
+            signals = ", ".join(str(v) for v in ds.data_vars)
+            rows.append((name, what, f"{_duration_s(ds):.2f}", f"{float(ds.attrs['fs_hz']):g}",
+                         str(ds.sizes["t"]), signals))
+        else:
+            rows.append((name, what, "–", "–", "–", f"not loaded: {skipped[name]}"))
+    return Table(caption=f"Recordings ({source})",
+                 header=("experiment", "what was done", "length [s]", "sampling rate [Hz]",
+                         "samples", "signals"),
+                 rows=tuple(rows))
 
 
-def recordings_section(recordings: Mapping[str, xr.Dataset], *, bench: Bench,
-                       skipped: Mapping[str, str], source: str) -> Section:
-    """Time-domain plots of every experiment, as the seed shows them."""
-    gn0 = bench.nominal.newport.metrology_gain_rad_per_v
-    rows = tuple(_record_row(n, ds) for n, ds in recordings.items())
-    rows += tuple((n, "-", "-", "-", f"skipped: {why}") for n, why in skipped.items())
-    table = Table(caption=f"Recordings ({source})",
-                  header=("experiment", "length [s]", "fs [Hz]", "samples", "signals"), rows=rows)
-    figures = []
-    for name, ds in recordings.items():
-        if name.startswith("data_huddle_test"):
-            continue
-        ref, trim = SEED_TIME_FIGURES.get(name, ("", 0.0))
-        fig = experiment_figure(ds, gn0_rad_per_v=gn0, trim_s=trim)
-        figures.append(figure_from_matplotlib(
-            fig, title=f"{name}: time signals", seed_ref=ref,
-            caption=(f"{ds.attrs.get('description', '')} Grey: the part the seed's processing "
-                     "removes." if trim else str(ds.attrs.get("description", "")))))
-    huddles = {n: ds for n, ds in recordings.items() if n.startswith("data_huddle_test")}
-    if huddles:
-        figures.append(figure_from_matplotlib(
-            huddle_figure(huddles), title="Huddle tests: Attocube", seed_ref="Fig. 29",
-            caption="Va after the seed's trimming (t >= 1 s, 100 s kept), mean removed."))
-        for name, ds in huddles.items():
-            figures.append(figure_from_matplotlib(
-                experiment_figure(ds, gn0_rad_per_v=gn0, trim_s=1.0),
-                title=f"{name}: time signals", seed_ref="Fig. 30",
-                caption=str(ds.attrs.get("description", ""))))
-    return Section(title="3. Experiments", tables=(table,), figures=tuple(figures),
-                   anchor="experiments",
-                   paragraphs=("Every record as recorded: commands (DAC), measurements (ADC) "
-                               "and the Attocube distance. Long records are drawn as min/max "
-                               "envelopes, so every extreme is visible.",))
+def parameters_appendix(bench: Bench, *, is_twin: bool) -> Section:
+    """"Appendix A. Bench parameters": every parameter with its value, unit and source.
+
+    Parameters
+    ----------
+    bench : Bench
+    is_twin : bool
+        Add the twin's true values (only when the records are the twin's).
+    """
+    rows = []
+    for r in param_rows(bench):
+        unit = "–" if r.unit == "1" else r.unit
+        values = (r.nominal, r.true or "–") if is_twin else (r.nominal,)
+        rows.append((_group(r.key), r.doc, *values, unit, r.source, r.key))
+    header = ("block", "parameter", "nominal", *(("true (twin)",) if is_twin else ()), "unit",
+              "source", "name in the bench file")
+    text = ("Nominal: what is known before identification (datasheets, measured components, "
+            "the seed's Table 2). docs/model.md derives each value. Values with h and v are "
+            "per axis.")
+    if is_twin:
+        text += (" True: what the digital twin simulates; datasheet rows have no true value.")
+    return Section(title="Appendix A. Bench parameters", anchor="parameters", blocks=(
+        text, Table(caption="Bench parameters", header=header, rows=tuple(rows))))

@@ -1,0 +1,295 @@
+"""Figures of the identification as data (seed Figs. 10, 12–14, 17–22, 25–28).
+
+Each function turns an identification result into a
+:class:`~fsmbench.report.figure.Figure`; nothing is drawn here. FRF matrices
+are small multiples, one panel per element (magnitude over phase), coloured
+by the input's axis (h blue, v orange); fitted models are dashed black.
+Every frequency line of a Welch estimate is kept.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+
+import numpy as np
+import xarray as xr
+
+from fsmbench.bench.params import BenchParams
+from fsmbench.ident.calibration import (
+    CurrentAmplifierGain,
+    QdCalibration,
+    known_ga_zc,
+    trim_recording,
+)
+from fsmbench.ident.delay import remove_delay
+from fsmbench.ident.frf import FrequencyResponse, spectral_matrix
+from fsmbench.ident.sercalo import NewportIdentification, SercaloIdentification
+from fsmbench.ident.welch import hanning
+from fsmbench.report.figure import H_COLOR, V_COLOR, Figure, Line, Panel
+
+__all__ = [
+    "amplifier_frfs",
+    "axis_color",
+    "coherence_figure",
+    "current_amplifier_figure",
+    "frf_matrix_figure",
+    "newport_delay_figure",
+    "newport_model",
+    "qd_regression_figure",
+    "sercalo_model",
+    "weights_figure",
+]
+
+_QD_SIGNALS = {"h": ("Vph", "Vnh"), "v": ("Vpv", "Vnv")}
+_AMP_SIGNALS = {"h": ("data_uch", "Uch", "Vch"), "v": ("data_ucv", "Ucv", "Vcv")}
+_AXIS_WORD = {"h": "horizontal", "v": "vertical"}
+_MODEL_COLOR = "#000000"
+# Scatter points drawn per axis in the regression plot: enough to show the
+# cloud's width, few enough to stay light (the fit uses every sample).
+_SCATTER_POINTS = 3000
+
+
+def axis_color(signal: str) -> str:
+    """H_COLOR for a horizontal signal (name ends in ``h``), V_COLOR for a vertical one."""
+    return H_COLOR if signal.endswith("h") else V_COLOR
+
+
+def qd_regression_figure(qd: Mapping[str, QdCalibration],
+                         recordings: Mapping[str, xr.Dataset]) -> Figure:
+    """Fig. 10: 4QD voltage against beam angle with the fitted line, one panel per axis.
+
+    Parameters
+    ----------
+    qd : mapping axis -> QdCalibration
+        The fits of 2.1.
+    recordings : mapping
+        Holds ``data_cal_pd_h``/``_v`` (``Vph``/``Vpv`` and ``Vnh``/``Vnv`` [V]).
+    """
+    panels = []
+    for axis, cal in qd.items():
+        vp, vn = _QD_SIGNALS[axis]
+        ds = trim_recording(recordings[cal.experiment], t0_s=cal.trim_s)
+        x = cal.beam_factor * cal.metrology_gain_rad_per_v * np.asarray(ds[vn].values, float)
+        y = np.asarray(ds[vp].values, dtype=float)
+        step = max(1, x.size // _SCATTER_POINTS)
+        xx = np.array([x.min(), x.max()])
+        panels.append(Panel(
+            traces=(Line(1e6 * x[::step], y[::step], name=f"measured {vp}", color=axis_color(vp),
+                         markers=True, opacity=0.35),
+                    Line(1e6 * xx, cal.gain_v_per_rad * xx + cal.offset_v,
+                         name="fitted line", color=_MODEL_COLOR, dash="dash", width=1.2,
+                         group="fit")),
+            x_label="Beam angle 2·gn0·" + vn + " [µrad]", y_label=f"4QD output {vp} [V]",
+            title=(f"{_AXIS_WORD[axis].capitalize()}: {cal.gain_v_per_rad:.2f} V/rad, "
+                   f"R² = {cal.r_squared:.5f}")))
+    return Figure(key="fig10_qd_regression", title="4QD calibration: linear regression",
+                  caption=("4QD voltage against the beam angle (twice the Newport mirror angle "
+                           "read by its metrology), after the first second is removed; "
+                           f"about {_SCATTER_POINTS} samples per axis drawn, every sample "
+                           "fitted."),
+                  panels=tuple(panels), seed_ref="Fig. 10", columns=len(panels))
+
+
+def amplifier_frfs(recordings: Mapping[str, xr.Dataset], *, trims_s: Mapping[str, float],
+                   window_s: float) -> dict[str, FrequencyResponse]:
+    """``Uc → Vc`` Welch estimate of each axis, as 2.2 computes it.
+
+    Parameters
+    ----------
+    recordings : mapping
+        Holds ``data_uch`` and/or ``data_ucv``.
+    trims_s : mapping experiment -> s
+        Seconds removed at the start.
+    window_s : float
+        Hann window length [s].
+    """
+    out = {}
+    for axis, (exp, u, v) in _AMP_SIGNALS.items():
+        if exp not in recordings:
+            continue
+        ds = trim_recording(recordings[exp], t0_s=trims_s.get(exp, 1.0))
+        fs = float(ds.attrs["fs_hz"])
+        out[axis] = spectral_matrix(ds[u].values, ds[v].values, input_names=[u], output_names=[v],
+                                    window=hanning(int(np.ceil(window_s * fs))), fs_hz=fs)
+    return out
+
+
+def current_amplifier_figure(gi: Mapping[str, CurrentAmplifierGain],
+                             measured: Mapping[str, FrequencyResponse],
+                             nominal: BenchParams) -> Figure:
+    """Figs. 12–14: ``|Vc/Uc|`` measured against ``Ga·Zc·Gi``; ``Gi`` over the averaging band.
+
+    Top row: the measured magnitude with ``Ga·Zc·Gi`` for the theoretical
+    ``Gi = 1/(R + Rc)`` (dashed) and the identified ``Gi`` (black). Bottom
+    row: the per-bin estimate ``|Ga Zc Gi| / |Ga Zc|`` over the band with
+    its mean, the identified gain.
+    """
+    top, bottom = [], []
+    for axis, g in gi.items():
+        _exp, u, v = _AMP_SIGNALS[axis]
+        color = axis_color(u)
+        est = measured[axis]
+        f = est.frequency_hz[1:]
+        h = np.abs(est.frf.values[1:, 0, 0])
+        gazc = known_ga_zc(nominal, axis=axis, f_hz=f)
+        top.append(Panel(
+            traces=(Line(f, h, name=f"measured {u} → {v}", color=color, width=1.0),
+                    Line(f, gazc * g.theoretical_a_per_v,
+                         name="Ga·Zc·Gi, theoretical Gi = 1/(R + Rc)", color="#7f7f7f",
+                         dash="dash", group="theory"),
+                    Line(f, gazc * g.gain_a_per_v, name="Ga·Zc·Gi, identified Gi",
+                         color=_MODEL_COLOR, width=1.0, group="identified")),
+            x_label="Frequency [Hz]", y_label=f"|{v}/{u}| [V/V]", x_log=True, y_log=True,
+            title=(f"{_AXIS_WORD[axis].capitalize()}: Gi = {1e3 * g.gain_a_per_v:.3f} mA/V "
+                   f"identified, {1e3 * g.theoretical_a_per_v:.2f} mA/V theoretical"),
+            height=2.0))
+        fb = np.asarray(g.frequency_hz)
+        bottom.append(Panel(
+            traces=(Line(fb, 1e3 * np.asarray(g.gi_response_a_per_v), name=f"|Ga Zc Gi| / |Ga Zc|"
+                         f", {_AXIS_WORD[axis]}", color=color, markers=True),
+                    Line(np.array([fb.min(), fb.max()]), np.full(2, 1e3 * g.gain_a_per_v),
+                         name="mean over the band (identified Gi)", color=_MODEL_COLOR,
+                         group="identified_mean")),
+            x_label="Frequency [Hz]", y_label="Current-amplifier gain Gi [mA/V]", x_log=True))
+    return Figure(key="fig12_14_current_amplifier",
+                  title="Current amplifier: measured and modelled Uc → Vc",
+                  caption=("Welch estimate of Uc → Vc (1 s Hann window) against Ga·Zc·Gi with Ga "
+                           "(1000, 1 kHz low pass) and Zc = Rc + Lc·s taken as known; below, Gi "
+                           "per frequency bin over the averaging band and its mean."),
+                  panels=tuple(top + bottom), seed_ref="Figs. 12–14", columns=len(top))
+
+
+def _element_panels(frf: FrequencyResponse, values: xr.DataArray, *, y_label: str,
+                    name: str, y_log: bool = False) -> tuple[Panel, ...]:
+    f = frf.frequency_hz
+    sel = f > 0
+    panels = []
+    for out in frf.output_names:
+        for inp in frf.input_names:
+            panels.append(Panel(
+                traces=(Line(f[sel], values.sel(output=out, input=inp).values[sel],
+                             name=f"{name}, from {inp}", color=axis_color(inp), width=1.0),),
+                x_label="Frequency [Hz]", y_label=y_label, x_log=True, y_log=y_log,
+                title=f"{inp} → {out}"))
+    return tuple(panels)
+
+
+def coherence_figure(frf: FrequencyResponse, *, key: str, title: str, caption: str,
+                     seed_ref: str) -> Figure:
+    """Figs. 17, 25: coherence of every element of an FRF matrix, one panel each."""
+    return Figure(key=key, title=title, caption=caption, seed_ref=seed_ref,
+                  panels=_element_panels(frf, frf.coherence, y_label="Coherence [–]",
+                                         name="coherence"),
+                  columns=len(frf.input_names), share_x=True)
+
+
+def weights_figure(sercalo: SercaloIdentification) -> Figure:
+    """Fig. 20: the seed's fit weights of each element of the Sercalo FRF matrix."""
+    return Figure(key="fig20_fit_weights", title="Sercalo: weights of the rational fit",
+                  caption=("The seed's weights: the coherence, 10 within ±10 % of the column's "
+                           "resonance, 0 above 1 kHz; the fit divides them by |H| so that it "
+                           "minimises the relative error."),
+                  panels=_element_panels(sercalo.frf, sercalo.weights, y_label="Weight [–]",
+                                         name="weight"),
+                  seed_ref="Fig. 20", columns=len(sercalo.frf.input_names), share_x=True)
+
+
+def frf_matrix_figure(frf: FrequencyResponse, *, delay_s: float, model: np.ndarray | None,
+                      key: str, title: str, caption: str, seed_ref: str,
+                      model_name: str = "fitted model") -> Figure:
+    """Figs. 18/19/21/22, 26/27: magnitude and phase of each element, the model over it.
+
+    Parameters
+    ----------
+    frf : FrequencyResponse
+        Measured matrix (delay included), F frequencies.
+    delay_s : float
+        Delay removed from the measurement before drawing [s], as the seed
+        removes it before fitting.
+    model : numpy.ndarray, shape (F, outputs, inputs), optional
+        Delay-free model on ``frf``'s grid [V/V]; NaN where there is none.
+    key, title, caption, seed_ref, model_name : str
+
+    Each element gets a magnitude panel over a phase panel (wrapped to
+    ±180°); the matrix keeps the seed's layout (rows: outputs, columns:
+    inputs).
+    """
+    clean = remove_delay(frf, delay_s)
+    f = clean.frequency_hz
+    sel = f > 0
+    n_in = len(frf.input_names)
+    mags: list[Panel] = []
+    phases: list[Panel] = []
+    for i, out in enumerate(frf.output_names):
+        for j, inp in enumerate(frf.input_names):
+            h = clean.frf.sel(output=out, input=inp).values[sel]
+            color = axis_color(inp)
+            label = f"measured, from {inp}"
+            mag_tr = [Line(f[sel], np.abs(h), name=label, color=color, width=1.0)]
+            ph_tr = [Line(f[sel], np.degrees(np.angle(h)), name=label, color=color, width=1.0)]
+            if model is not None and np.isfinite(model[sel, i, j]).any():
+                m = model[sel, i, j]
+                mag_tr.append(Line(f[sel], np.abs(m), name=model_name, color=_MODEL_COLOR,
+                                   dash="dash", width=1.2, group="model"))
+                ph_tr.append(Line(f[sel], np.degrees(np.angle(m)), name=model_name,
+                                  color=_MODEL_COLOR, dash="dash", width=1.2, group="model"))
+            mags.append(Panel(traces=tuple(mag_tr), x_label="Frequency [Hz]",
+                              y_label=f"|{out}/{inp}| [V/V]", x_log=True, y_log=True,
+                              title=f"{inp} → {out}", height=2.0))
+            phases.append(Panel(traces=tuple(ph_tr), x_label="Frequency [Hz]",
+                                y_label="Phase [deg]", x_log=True))
+    # Rows: magnitude of output 1, its phase, magnitude of output 2, its phase.
+    panels: list[Panel] = []
+    for r in range(len(frf.output_names)):
+        panels += mags[r * n_in:(r + 1) * n_in] + phases[r * n_in:(r + 1) * n_in]
+    return Figure(key=key, title=title, caption=caption, panels=tuple(panels),
+                  seed_ref=seed_ref, columns=n_in, share_x=True)
+
+
+def sercalo_model(sercalo: SercaloIdentification) -> np.ndarray:
+    """The fitted delay-free ``Uc → Vp`` model on the measured grid, shape (F, 2, 2).
+
+    NaN at 0 Hz, where the fit is not evaluated.
+    """
+    f = sercalo.frf.frequency_hz
+    model = np.full(sercalo.frf.frf.shape, np.nan, dtype=complex)
+    model[f > 0] = sercalo.fit.response(f[f > 0])
+    return model
+
+
+def newport_model(newport: NewportIdentification) -> np.ndarray:
+    """The seed's Newport model on the grid: the signed gains over their band, shape (F, 2, 2).
+
+    NaN off the diagonal (the seed's ``Gn`` is diagonal) and outside the
+    averaging band, so the figure shows where the gain was taken.
+    """
+    f = newport.frf.frequency_hz
+    model = np.full(newport.frf.frf.shape, np.nan, dtype=complex)
+    band = (f >= newport.band_hz[0]) & (f <= newport.band_hz[1])
+    model[band, 0, 0] = newport.gain_v_per_v["h"]
+    model[band, 1, 1] = newport.gain_v_per_v["v"]
+    return model
+
+
+def newport_delay_figure(newport: NewportIdentification, *, f_max_hz: float = 2000.0) -> Figure:
+    """Fig. 28: unwrapped phase of the Newport's direct paths with and without the delay."""
+    f = newport.frf.frequency_hz
+    sel = (f > 0) & (f <= f_max_hz)
+    clean = remove_delay(newport.frf, newport.delay_s)
+    panels = []
+    ms = 1e3 * newport.delay_s
+    for out, inp in zip(newport.frf.output_names, newport.frf.input_names, strict=True):
+        raw = np.unwrap(np.angle(newport.frf.frf.sel(output=out, input=inp).values[sel]))
+        fixed = np.unwrap(np.angle(clean.frf.sel(output=out, input=inp).values[sel]))
+        panels.append(Panel(
+            traces=(Line(f[sel], np.degrees(raw), name=f"measured, from {inp}",
+                         color=axis_color(inp), width=1.0),
+                    Line(f[sel], np.degrees(fixed), name=f"delay {ms:.3f} ms removed",
+                         color=_MODEL_COLOR, width=1.0, group="clean")),
+            x_label="Frequency [Hz]", y_label="Phase, unwrapped [deg]", x_log=True,
+            title=f"{inp} → {out}"))
+    return Figure(key="fig28_newport_delay", title="Newport: phase with and without the delay",
+                  caption=(f"Unwrapped phase of the direct paths up to {f_max_hz:g} Hz, before "
+                           f"and after removing the delay estimated from the phase ({ms:.3f} ms; "
+                           "the seed assumes 0.5 ms)."),
+                  panels=tuple(panels), seed_ref="Fig. 28", columns=len(panels))
