@@ -16,6 +16,7 @@ from typing import TYPE_CHECKING, Any
 import control as ct
 import numpy as np
 import scipy.io
+from scipy.io.matlab import MatReadError
 
 from fsmbench.bench.blocks import PLANT_INPUTS, PLANT_OUTPUTS, PlantModel
 from fsmbench.io.errors import RecordingError
@@ -100,7 +101,7 @@ def read_plant_mat(path: str | Path) -> PlantModel:
         raise RecordingError(p, "does not exist" if not p.exists() else "is not a file")
     try:
         data = scipy.io.loadmat(p, simplify_cells=True)
-    except (OSError, ValueError, TypeError, NotImplementedError) as exc:
+    except (OSError, ValueError, TypeError, NotImplementedError, MatReadError) as exc:
         raise RecordingError(p, f"is not a readable MAT-file ({exc})") from exc
     missing = [k for k in ("sys", *BLOCK_NAMES) if k not in data]
     if missing:

@@ -53,7 +53,10 @@ def read_twin_truth(path: str | Path) -> dict[str, Any] | None:
     try:
         payload = json.loads(text)
     except json.JSONDecodeError as exc:
-        end = " (the file is truncated)" if exc.pos >= len(text.rstrip()) else ""
+        # Truncated: the error is at the end, or a string runs to the end of the file.
+        cut = exc.pos >= len(text.rstrip()) or (exc.msg.startswith("Unterminated string")
+                                               and '"' not in text[exc.pos + 1:])
+        end = " (the file is truncated)" if cut else ""
         raise RecordingError(p, f"is not valid JSON: {exc.msg} at line {exc.lineno}, column "
                                 f"{exc.colno}{end}; restore it from `fsmbench simulate` or "
                                 "delete it (it is optional)") from exc
