@@ -24,6 +24,7 @@ from __future__ import annotations
 import argparse
 import base64
 import json
+import os
 import statistics
 import tempfile
 from collections.abc import Callable
@@ -305,8 +306,8 @@ _PLOTLY_CHECK_JS = """() => {
   const gd = document.getElementById('fig0');
   const tr = gd._fullData[0];
   const sum = (a) => Array.from(a).reduce((s, v) => s + v, 0);
-  return {version: Plotly.version, n_drawn: document.querySelectorAll('.fsm-fig .main-svg,'
-          + ' .plotly-graph-div .main-svg').length, x_type: tr.x.constructor.name,
+  return {version: Plotly.version, n_drawn: document.querySelectorAll('.js-plotly-plot').length,
+          x_type: tr.x.constructor.name,
           n: tr.x.length, x_sum: sum(tr.x), y_sum: sum(tr.y),
           y_range: gd._fullLayout.yaxis.range};
 }"""
@@ -408,6 +409,8 @@ def main() -> None:
         browser.close()
 
     report(results, figs)
+    # the machine may be shared: say how busy it was (times scale with it)
+    print(f"load average (1, 5, 15 min) at the end: {os.getloadavg()}, {os.cpu_count()} CPUs")
 
 
 def _check_typed_arrays(check: dict[str, object], figs: tuple[Figure, ...]) -> str:
