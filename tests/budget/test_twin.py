@@ -13,7 +13,6 @@ from fsmbench.bench.blocks import physical_plant, replace_params
 from fsmbench.bench.params import default_bench
 from fsmbench.budget import (
     analyse_repeatability,
-    budget_figures,
     budget_study,
     first_order_lowpass,
 )
@@ -180,27 +179,3 @@ def test_study_skips_what_is_missing(run, bench):
     assert "Unh is zero throughout" in res.skipped["data_rep_h"]
     assert res.total_rms_m > 0  # the budget itself needs no recording
     json.dumps(res.to_json(), allow_nan=False)
-    figs = budget_figures(res, recs)  # geometry and budget figures only
-    assert [f.seed_ref for f in figs] == ["Fig. 34", "Fig. 35", "4.5", "4.5c"]
-    import matplotlib.pyplot as plt
-
-    for f in figs:
-        plt.close(f.figure)
-
-
-def test_figures(result, run):
-    figs = budget_figures(result, run.recordings)
-    refs = [f.seed_ref for f in figs]
-    for ref in ("Fig. 29", "Fig. 30", "Fig. 31", "Fig. 32", "Fig. 34", "Fig. 35", "Fig. 44",
-                "Fig. 45", "Fig. 46", "Fig. 47", "Fig. 48", "Fig. 49", "Fig. 50", "Fig. 51",
-                "Fig. 52"):
-        assert ref in refs
-    import matplotlib.pyplot as plt
-
-    for f in figs:
-        assert f.title and f.caption is not None
-        for ax in f.figure.axes:
-            assert ax.get_ylabel(), (f.seed_ref, ax.get_title())
-            # Shared x axes label the bottom panel only.
-            assert ax.get_xlabel() or any(o.get_xlabel() for o in f.figure.axes), f.seed_ref
-        plt.close(f.figure)

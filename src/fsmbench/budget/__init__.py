@@ -1,7 +1,8 @@
 """Noise, error budget, huddle tests and repeatability (seed sections 3, 4 and 11).
 
-Entry point: :func:`budget_study` (everything on the recordings present) and
-:func:`budget_figures` (the seed's Figs. 29–32, 34–35, 44–52 and the budget's).
+Entry point: :func:`budget_study` (everything on the recordings present). The
+numerics draw nothing: the report's figures are built in
+:mod:`fsmbench.report.budget_figures` and :mod:`fsmbench.report.repeatability_figures`.
 """
 
 from fsmbench.budget.environment import (
@@ -11,7 +12,6 @@ from fsmbench.budget.environment import (
     frame_budget,
     ou_window_factor,
 )
-from fsmbench.budget.figures import BudgetFigure, budget_figures
 from fsmbench.budget.huddle import (
     HUDDLE_CONFIGS,
     ConfigComparison,
@@ -50,7 +50,6 @@ from fsmbench.budget.table import BudgetRow, ErrorBudget, error_budget
 __all__ = [
     "HUDDLE_CONFIGS",
     "AirBudget",
-    "BudgetFigure",
     "BudgetResult",
     "BudgetRow",
     "ConfigComparison",
@@ -73,7 +72,6 @@ __all__ = [
     "analyse_huddle",
     "analyse_huddle_record",
     "analyse_repeatability",
-    "budget_figures",
     "budget_grid",
     "budget_study",
     "cumulative_power",

@@ -1,0 +1,124 @@
+"""Report section 3: the huddle tests (seed section 3)."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+
+import xarray as xr
+
+from fsmbench.budget.huddle import HUDDLE_CONFIGS
+from fsmbench.budget.study import BudgetResult
+from fsmbench.report.budget_figures import (
+    huddle_attocube_asd_figure,
+    huddle_attocube_time_figure,
+    huddle_config_words,
+    huddle_qd_asd_figure,
+    huddle_qd_time_figure,
+)
+from fsmbench.report.html import Block, Note, Section, Table
+
+__all__ = ["huddle_section"]
+
+NM = 1e9
+MV = 1e3
+_NAMES = tuple(f"data_huddle_test_{n}" for n in sorted(HUDDLE_CONFIGS))
+
+
+def _config_table(present: set[int]) -> Table:
+    rows = []
+    for n, (closed, comp, alu) in sorted(HUDDLE_CONFIGS.items()):
+        rows.append((str(n), "closed loop" if closed else "open loop", "on" if comp else "off",
+                     "yes" if alu else "no", "yes" if n in present else "no"))
+    return Table(caption="Table 3: configurations of the huddle tests",
+                 header=("test", "loop", "compensation unit", "aluminium shielding",
+                         "recorded here"),
+                 rows=tuple(rows))
+
+
+def _missing_paragraph(result: BudgetResult) -> str:
+    why = [f"{n}.mat ({result.skipped[n]})" for n in _NAMES if n in result.skipped]
+    listed = "; ".join(why) if why else ", ".join(f"{n}.mat" for n in _NAMES)
+    return ("No huddle test could be analysed, so this section has no figure: " + listed
+            + ". The error budget (section 4) then uses the nominal white 4QD noise and the "
+              "white DAC quantisation model.")
+
+
+def huddle_section(result: BudgetResult, *, recordings: Mapping[str, xr.Dataset]) -> Section:
+    """Seed section 3: configurations, time plots, spectra, the table and the conclusion.
+
+    Parameters
+    ----------
+    result : BudgetResult
+        From :func:`fsmbench.budget.study.budget_study`.
+    recordings : mapping of str to xarray.Dataset
+        The same recordings (the time plots are drawn from them).
+    """
+    h = result.huddle
+    intro = ("The huddle tests measure the noise of the 4QD and of the Attocube "
+             "interferometer while nothing is commanded: the Newport is at rest and, in closed "
+             "loop, the Sercalo holds the beam on the 4QD. Five configurations (Table 3) vary "
+             "the loop, the Attocube's environmental compensation unit and an aluminium "
+             "shielding of the beam path.")
+    if h is None:
+        return Section(title="3. Huddle test", anchor="huddle",
+                       blocks=(intro, _config_table(set()), _missing_paragraph(result)))
+    recs = [h.records[n] for n in sorted(h.records)]
+    fs = recs[0].fs_hz
+    blocks: list[Block] = [intro, _config_table(set(h.records))]
+    missing = [n for n in _NAMES if n in result.skipped]
+    if missing:
+        blocks.append("Not analysed: " + "; ".join(f"{n} ({result.skipped[n]})"
+                                                   for n in missing) + ".")
+    blocks.append(Note("The seed analyses tests 1 to 4 only (test 5 is commented out in its "
+                       "3.1); here every test present is analysed the same way.",
+                       ref="seed 3.1"))
+    blocks += [
+        f"Processing as the seed's 3.2–3.3: samples before t = 1 s are dropped, at most "
+        f"100 s are kept ({recs[0].duration_s:g} s here, at {fs:g} Hz), the mean is removed, "
+        "and Va is low-passed by a first-order filter at 50 Hz. Figure 29 shows Va of each "
+        "test on its own scale; Figure 30 the 4QD signals, horizontal and vertical apart.",
+        huddle_attocube_time_figure(h, recordings),
+        huddle_qd_time_figure(h, recordings),
+        "Spectra (seed 3.5): Welch estimates with a 1 s Hann window. The cumulative rms from "
+        "0 Hz shows which band makes the rms.",
+        huddle_attocube_asd_figure(h),
+        huddle_qd_asd_figure(h),
+    ]
+    if any(r.closed_loop for r in recs):
+        blocks.append(Note(
+            "In closed loop the 9.2 controller notches the Sercalo modes, so the DAC's rounding "
+            "of the command drives them: the peak near 411 Hz in the 4QD spectra of the "
+            "closed-loop tests. The same rounding, as mirror piston, is the largest source of "
+            "the error budget (4.5).", ref="errata E30"))
+    rows = []
+    for r in recs:
+        pred = result.predicted_huddle_va_rms_m.get(r.number)
+        rows.append((str(r.number), huddle_config_words(r), f"{r.va_rms_m * NM:.3g}",
+                     f"{r.va_lpf_rms_m * NM:.3g}", f"{r.vph_rms_v * MV:.3g}",
+                     f"{r.vpv_rms_v * MV:.3g}", "-" if pred is None else f"{pred * NM:.3g}"))
+    blocks.append(Table(
+        caption="Huddle tests: rms after the seed's processing (mean removed)",
+        header=("test", "configuration", "Va rms [nm]", "Va rms, 50 Hz low pass [nm]",
+                "Vph rms [mV]", "Vpv rms [mV]", "Va rms predicted by the budget [nm]"),
+        rows=tuple(rows),
+        note="Predicted: the error budget of section 4 for the test's configuration and "
+             "length."))
+    if h.comparisons:
+        bands = list(h.comparisons[0].ratios)
+        blocks.append(Table(
+            caption="Effect of one configuration change on the rms of Va (ratio of rms; * "
+                    "significant at two standard deviations)",
+            header=("change", "tests compared", *(f"ratio, {b}" for b in bands)),
+            rows=tuple((c.effect, f"{c.numerator.rsplit('_', 1)[-1]} / "
+                                  f"{c.denominator.rsplit('_', 1)[-1]}",
+                        *(f"{c.ratios[b]:.2f}{' *' if c.significant.get(b) else ''}"
+                          for b in bands)) for c in h.comparisons)))
+    blocks.append("Conclusion (seed 3.6). " + h.conclusion)
+    if h.qd_noise is not None:
+        q = h.qd_noise
+        blocks.append(
+            f"The open-loop tests ({', '.join(n.rsplit('_', 1)[-1] for n in q.tests)}) give "
+            f"the 4QD's own noise for the budget: {q.rms_v[0] * MV:.3g} mV rms on Vph and "
+            f"{q.rms_v[1] * MV:.3g} mV on Vpv once the ADC quantisation "
+            f"({q.adc_rms_v * MV:.3g} mV) and the Newport's angle noise are taken out.")
+    return Section(title="3. Huddle test", anchor="huddle", blocks=tuple(blocks))
