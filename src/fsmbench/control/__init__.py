@@ -1,10 +1,10 @@
 """Plant analysis, controllers (the seed's and fsmbench's), discretisation and export.
 
-Entry point: :func:`design_study` (seed sections 5–10 on a plant model) and
-:func:`design_figures`; the seed's controllers are in :mod:`fsmbench.control.seed`.
+Entry point: :func:`design_study` (seed sections 5–10 on a plant model); the
+seed's controllers are in :mod:`fsmbench.control.seed`. The report's figures
+of these results are built in :mod:`fsmbench.report.control_figures`.
 """
 
-from fsmbench.control.figures import design_figures
 from fsmbench.control.realize import zpk_cascade
 from fsmbench.control.seed import (
     iff_controller,
@@ -17,7 +17,6 @@ from fsmbench.control.study import DesignResult, StudyOptions, design_study
 __all__ = [
     "DesignResult",
     "StudyOptions",
-    "design_figures",
     "design_study",
     "iff_controller",
     "newport_controller",

@@ -1,0 +1,233 @@
+"""The control chapters (seed sections 5–10) as report sections: order, words, units, figures."""
+
+from __future__ import annotations
+
+import ast
+import hashlib
+import re
+import subprocess
+import sys
+from collections.abc import Iterator
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from fsmbench.bench.blocks import PlantModel
+from fsmbench.bench.params import Bench
+from fsmbench.control.study import DesignResult, design_study
+from fsmbench.report.control_sections import control_sections
+from fsmbench.report.figure import Figure, Line
+from fsmbench.report.html import Note, Section, Table, iter_figures, render_report
+from fsmbench.stages import DesignStage
+from fsmbench.twin.verify import verify_on_twin
+
+TITLES = ["5. Plant uncertainty", "6. Plant scaling and control objective",
+          "7. Plant analysis", "8. Active damping", "9. Decentralised control of the Sercalo",
+          "10. Newport control"]
+CODE_KEY = re.compile(r"_controller|_hz|_db")
+UNIT = re.compile(r"\[[^\[\]]+\]")
+SRC = Path(__file__).resolve().parents[2] / "src" / "fsmbench"
+
+
+@pytest.fixture(scope="session")
+def stage(nominal_plant: PlantModel, bench: Bench) -> DesignStage:
+    """The design stage's objects on the nominal plant, built once (about 25 s with the twin).
+
+    Built from its two parts rather than by ``stages.design_stage``, which
+    also writes the controller files this module does not read.
+    """
+    result = design_study(nominal_plant, bench=bench)
+    # 6 s of twin (2 s settling) instead of the stage's 12 s: the table's wording and
+    # consistency are under test here, not the twin's statistics (tests/twin).
+    check = verify_on_twin(result.controllers["fsmbench_controller"], bench=bench,
+                           plant=nominal_plant, name="fsmbench controller", seed=0,
+                           duration_s=6.0)
+    return DesignStage(result=result, twin_check=check, payload=result.to_json())
+
+
+@pytest.fixture(scope="session")
+def sections(stage: DesignStage) -> list[Section]:
+    return control_sections(stage, plant_source="physical model, nominal parameters")
+
+
+def _texts(sections: list[Section]) -> Iterator[str]:
+    """Every string a reader sees."""
+    for sec in sections:
+        yield sec.title
+        for b in sec.blocks:
+            if isinstance(b, str):
+                yield b
+            elif isinstance(b, Table):
+                yield b.caption
+                yield b.note
+                yield from b.header
+                for row in b.rows:
+                    yield from row
+            elif isinstance(b, Note):
+                yield b.text
+                yield b.ref
+            else:
+                yield from (b.title, b.caption, b.note)
+                for p in b.panels:
+                    yield from (p.title, p.x_label, p.y_label)
+                    yield from (t.name for t in p.traces)
+                    yield from (r.name for r in p.rules)
+        yield from _texts(list(sec.subsections))
+
+
+def _digest(line: Line) -> str:
+    return hashlib.sha1(line.x.tobytes() + line.y.tobytes()).hexdigest()
+
+
+# Reference curves every plot of their kind carries; not results.
+REFERENCES = {"|L| = 1", "critical point −1"}
+
+
+def test_six_sections_in_the_seeds_order(sections: list[Section]) -> None:
+    assert [s.title for s in sections] == TITLES
+    assert all(s.blocks for s in sections)
+
+
+def test_figure_keys_unique_and_seed_figures_present(sections: list[Section]) -> None:
+    figs = list(iter_figures(sections))
+    keys = [f.key for f in figs]
+    assert len(keys) == len(set(keys))
+    refs = {f.seed_ref: f.key for f in figs if f.seed_ref}
+    assert refs == {"Fig. 41": "fig41_seed_loop_gain", "Fig. 42": "fig42_newport_to_beam",
+                    "Fig. 43": "fig43_newport_loop_gain"}
+    render_report(title="control", sections=sections)  # the renderer accepts every block
+
+
+def test_no_result_curve_in_two_figures(sections: list[Section]) -> None:
+    seen: dict[str, str] = {}
+    for fig in iter_figures(sections):
+        mine = {_digest(t) for p in fig.panels for t in p.traces
+                if isinstance(t, Line) and t.name not in REFERENCES
+                and t.x.size > 2}  # a marker (the 6.1 bound), not a curve
+        for d in mine:
+            assert d not in seen, f"{fig.key} repeats a curve of {seen.get(d)}"
+            seen[d] = fig.key
+
+
+def test_every_axis_label_has_a_unit(sections: list[Section]) -> None:
+    for fig in iter_figures(sections):
+        for p in fig.panels:
+            for label in (p.x_label, p.y_label):
+                assert UNIT.search(label), f"{fig.key}: axis label '{label}' has no unit"
+
+
+def test_no_code_keys_in_any_text(sections: list[Section]) -> None:
+    texts = [t for t in _texts(sections) if t]
+    assert len(texts) > 200  # the walk reached every block
+    bad = [t for t in texts if CODE_KEY.search(t)]
+    assert not bad, bad
+
+
+def test_only_nyquist_panels_fix_a_window(sections: list[Section]) -> None:
+    fixed = []
+    for fig in iter_figures(sections):
+        for p in fig.panels:
+            if p.x_range is not None or p.y_range is not None:
+                fixed.append(fig.key)
+                assert p.equal_aspect
+                assert p.x_range is not None and p.y_range is not None
+                # the window is centred on the critical point −1
+                assert np.mean(p.x_range) == pytest.approx(-1.0)
+                assert np.mean(p.y_range) == pytest.approx(0.0, abs=1e-12)
+    assert sorted(set(fixed)) == ["fsmbench_controller_nyquist", "seed_controller_nyquist"]
+
+
+def test_iff_section_explains_e25(sections: list[Section], stage: DesignStage) -> None:
+    iff = sections[3]
+    notes = [b for b in iff.blocks if isinstance(b, Note)]
+    assert any(n.ref == "errata E25" and "unobservable" in n.text for n in notes)
+    figs = [b for b in iff.blocks if isinstance(b, Figure)]
+    assert [f.key for f in figs] == ["iff_uc_to_vp"]
+    # the note sits before the figure it explains, and the figure carries its own
+    idx = next(i for i, b in enumerate(iff.blocks) if isinstance(b, Note))
+    assert iff.blocks.index(figs[0]) == idx + 1
+    assert not stage.result.iff.loop_stable and "E25" in figs[0].note
+    text = " ".join(b for b in iff.blocks if isinstance(b, str))
+    assert "UNSTABLE" in text
+
+
+def _table(sec: Section, start: str) -> Table:
+    return next(b for b in sec.blocks if isinstance(b, Table) and b.caption.startswith(start))
+
+
+def test_margins_tables_give_the_objective_verdict(sections: list[Section],
+                                                  stage: DesignStage) -> None:
+    res: DesignResult = stage.result
+    sec9 = sections[4]
+    for who, lp in (("the seed's controller", res.seed), ("fsmbench's controller",
+                                                           res.fsmbench)):
+        tab = _table(sec9, f"Margins of {who}")
+        assert tab.header == ("quantity", "h", "v")
+        rows = {r[0]: r[1:] for r in tab.rows}
+        verdict = next(v for k, v in rows.items() if k.startswith("meets the objective of 6.1"))
+        assert verdict == tuple("yes" if lp.axes[a].meets_objective else "no" for a in "hv")
+        pm = rows["phase margin [deg]"]
+        assert [float(x) for x in pm] == pytest.approx(
+            [lp.axes[a].margins.phase_margin_deg for a in "hv"], abs=0.051)  # printed to 0.1°
+    text = " ".join(b for b in sec9.blocks if isinstance(b, str))
+    assert "the seed's controller does NOT meet it" in text  # E27 on this plant
+    assert "fsmbench's controller meets it" in text
+    # every erratum of the control chapters is cited next to its result
+    cited = " ".join([b.ref for s in sections for b in s.blocks if isinstance(b, Note)]
+                     + [f.note for f in iter_figures(sections)])
+    assert all(f"E{n}" in cited for n in range(22, 28))
+
+
+def test_robustness_small_multiples_mark_the_unstable_cases(sections: list[Section],
+                                                           stage: DesignStage) -> None:
+    res: DesignResult = stage.result
+    figs = {f.key: f for f in iter_figures(sections)}
+    for key, rob in (("seed_controller_robustness", res.seed_robustness),
+                     ("fsmbench_controller_robustness", res.robustness)):
+        assert rob is not None
+        fig = figs[key]
+        assert len(fig.panels) == 6 and fig.columns == 3  # h and v × three resonance factors
+        curves = [t for p in fig.panels for t in p.traces]
+        assert len(curves) == 2 * len(rob.loops)
+        n_unstable = sum(not (lp.stable and lp.nyquist.stable) for lp in rob.loops)
+        assert sum("UNSTABLE" in t.name for t in curves) == 2 * n_unstable
+    assert res.seed_robustness is not None
+    assert not res.seed_robustness.all_stable  # the seed's notch is not robust (E27)
+    text = " ".join(b for b in sections[4].blocks if isinstance(b, str))
+    assert "perturbed plants are unstable with the seed's controller" in text
+
+
+def test_twin_table_matches_the_check(sections: list[Section], stage: DesignStage) -> None:
+    tab = _table(sections[4], "fsmbench's controller on the twin")
+    chk = stage.twin_check
+    for row, axis in zip(tab.rows, "hv", strict=True):
+        assert float(row[1]) == pytest.approx(1e6 * chk.measured_rms_rad[axis], abs=0.006)
+        assert float(row[2]) == pytest.approx(1e6 * chk.predicted_rms_rad[axis], abs=0.006)
+        # the ratio printed is measured over predicted (to the 3 decimals printed)
+        assert float(row[3]) == pytest.approx(float(row[1]) / float(row[2]), abs=2e-3)
+
+
+def _imports_matplotlib(path: Path) -> bool:
+    for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+        names = ([a.name for a in node.names] if isinstance(node, ast.Import)
+                 else [node.module or ""] if isinstance(node, ast.ImportFrom) else [])
+        if any(n.split(".")[0] == "matplotlib" for n in names):
+            return True
+    return False
+
+
+def test_control_numerics_do_not_draw() -> None:
+    files = [*sorted((SRC / "control").glob("*.py")), SRC / "report" / "control_figures.py",
+             SRC / "report" / "control_sections.py"]
+    assert not [f.name for f in files if _imports_matplotlib(f)]
+    # python-control itself imports matplotlib.pyplot; fsmbench must add nothing to it
+    # (no backend switch, no figure module).
+    code = ("import sys, control\n"
+            "before = {m for m in sys.modules if m.startswith('matplotlib')}\n"
+            "import fsmbench.control, fsmbench.report.control_sections\n"
+            "after = {m for m in sys.modules if m.startswith('matplotlib')}\n"
+            "print(sorted(after - before))\n")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         check=True)
+    assert out.stdout.strip() == "[]"
