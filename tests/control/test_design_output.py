@@ -153,3 +153,21 @@ def test_octave_loads_the_design_output(design: DesignResult, true_plant: PlantM
             # evaluation, 5.6e-10 at 1 Hz; fsmbench's has two (measured 1.9e-9).
             np.testing.assert_allclose(kd[:, j, j], sos_response(sos, F_HZ), rtol=1e-8)
             assert np.all(kd[:, j, 1 - j] == 0)  # decentralised
+
+
+@pytest.mark.skipif(OCTAVE is None, reason="GNU Octave is not installed (Debian: apt-get install "
+                    "-y --no-install-recommends octave octave-control)")
+def test_octave_says_what_is_missing(out_dir: Path, tmp_path: Path) -> None:
+    """A design folder without plant.mat (``fsmbench design`` alone): G empty, said so;
+    PadeOrder 0 leaves the delays out and says so."""
+    shutil.copy(out_dir / CONTROLLERS_MAT, tmp_path / CONTROLLERS_MAT)
+    script = (f"[G, K] = fsmbench_load('{tmp_path}'); assert(isempty(G)); "
+              "assert(isfield(K, 'fsmbench_controller')); "
+              f"[G2, K2, Kd2, info] = fsmbench_load('{tmp_path}', 'PlantDir', '{out_dir}', "
+              "'PadeOrder', 0); assert(size(G2.sys.a, 1) == 12); disp(numel(info.notes))")
+    run = subprocess.run([str(OCTAVE), "--no-gui", "--no-window-system", "--quiet",
+                          "--eval", script], capture_output=True, text=True, timeout=300,
+                         cwd=out_dir, check=False)  # where fsmbench_load.m was written
+    assert run.returncode == 0, run.stdout + run.stderr
+    assert f"no plant.mat in {tmp_path}: G is empty" in run.stdout
+    assert "PadeOrder is 0: G.sys has NO input delays" in run.stdout
