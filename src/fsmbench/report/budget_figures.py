@@ -120,6 +120,11 @@ def _records(h: HuddleAnalysis) -> list[HuddleRecord]:
     return [h.records[n] for n in sorted(h.records)]
 
 
+def _source_color(j: int) -> str:
+    # Blue and orange mean h and v in this report: sources take the rest of the palette.
+    return PALETTE[2 + j % (len(PALETTE) - 2)]
+
+
 def _test_color(rec: HuddleRecord) -> str:
     # Blue and orange mean h and v in this report: the tests take the rest of the palette.
     return PALETTE[2 + (rec.number - 1) % (len(PALETTE) - 2)]
@@ -290,7 +295,7 @@ def angle_asd_figure(b: ErrorBudget) -> Figure:
             lines = []
             for j, (name, s) in enumerate(b.sources.items()):
                 psd = np.real(s.angle_psd[:, i, i])
-                kw = {"name": name, "color": PALETTE[j % len(PALETTE)], "group": name,
+                kw = {"name": name, "color": _source_color(j), "group": name,
                       "width": 1.0}
                 lines.append(asd_line(s.f_hz, psd, scale=UM, **kw) if kind == "asd"
                              else cumulative_line(s.f_hz, psd, scale=UM, **kw))
@@ -342,7 +347,7 @@ def distance_cumulative_figure(b: ErrorBudget) -> Figure:
         together = name == "all angle sources together"
         x, y = log_envelope(f, cum * NM)
         lines.append(Line(x, y, name=name, width=2.0 if together else 1.2,
-                          color="#000000" if together else PALETTE[j % len(PALETTE)],
+                          color="#000000" if together else _source_color(j),
                           dash="dash" if together else "solid", group=name))
     window = "" if b.window_s is None else f" over a {b.window_s:g} s record, mean removed"
     return Figure(

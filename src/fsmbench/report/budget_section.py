@@ -197,7 +197,7 @@ def _noise(result: BudgetResult) -> Section:
         f"angle noise, {n.newport_angle_noise_rms_rad * UM:g} µrad rms "
         f"({n.newport_beam_angle_rms_rad * UM:g} µrad of beam); the 4QD's electronic noise; "
         f"and in closed loop the Sercalo's DAC. 4QD noise: {origin.get('qd', '-')}; Sercalo "
-        f"DAC: {origin.get('sercalo_dac', '-')}.".replace("data_huddle_test_", "test "),
+        f"DAC: {origin.get('sercalo_dac', '-')}.".replace("data_huddle_test_", ""),
         f"One step on Vph is {n.qd_lsb_angle_rad[0] * UM:.3g} µrad of beam angle (h), "
         f"{n.qd_lsb_angle_rad[1] * UM:.3g} µrad (v) (seed: {n.seed_qd_lsb_angle_rad * UM:.2g}); "
         f"1 mV is {n.qd_angle_per_volt_rad_per_v[0] * 1e-3 * UM:.3g} µrad (h) "

@@ -61,7 +61,7 @@ def huddle_section(result: BudgetResult, *, recordings: Mapping[str, xr.Dataset]
              "shielding of the beam path.")
     if h is None:
         return Section(title="3. Huddle test", anchor="huddle",
-                       blocks=(intro, _config_table(set()), _missing_paragraph(result)))
+                       blocks=(intro, _missing_paragraph(result)))
     recs = [h.records[n] for n in sorted(h.records)]
     fs = recs[0].fs_hz
     blocks: list[Block] = [intro, _config_table(set(h.records))]

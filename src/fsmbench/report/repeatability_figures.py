@@ -250,12 +250,14 @@ def nonrep_part_figure(reps: Mapping[str, RepeatabilityRecord]) -> Figure:
 
 def nonrep_contributions_figure(reps: Mapping[str, RepeatabilityRecord],
                                 nonrep: Mapping[str, NonRepeatability],
-                                recordings: Mapping[str, xr.Dataset]) -> Figure:
+                                recordings: Mapping[str, xr.Dataset], *,
+                                huddle_configs: Mapping[str, str] | None = None) -> Figure:
     """Seed Fig. 50: non-repeatable Va and the tracking error's share; the huddle-test noise.
 
     One panel per record (Va's non-repeatable part, and on top the tracking
-    error's), then one panel with Va of the huddle test of the same
-    configuration over the longest record's length.
+    error's), then one panel with Va of the huddle test the study compares
+    with (``nonrep[d].huddle_test``) over the longest record's length.
+    ``huddle_configs`` maps that test's name to its configuration in words.
     """
     panels = []
     longest = 0
@@ -282,15 +284,16 @@ def nonrep_contributions_figure(reps: Mapping[str, RepeatabilityRecord],
         n = min(longest, sig["Va"].size)
         hv = sig["Va"][:n] - sig["Va"][:n].mean()
         number = name.rsplit("_", 1)[-1]
+        config = (huddle_configs or {}).get(name, "")
+        what = f" ({config})" if config else ""
         panels.append(Panel(
             (Line(sig["t"][:n], hv * NM, name=f"Va in huddle test {number} (nothing moves)",
                   color=PALETTE[0], group="huddle", decimate=True, width=1.0),),
             "Time [s]", "Distance [nm]",
-            title=f"Huddle test {number}, same configuration, nothing moves: "
+            title=f"Huddle test {number}{what}, nothing moves: "
                   f"{float(np.sqrt(np.mean(hv**2))) * NM:.3g} nm rms over "
                   f"{n / float(recordings[name].attrs['fs_hz']):g} s"))
-        caption += (f"; last panel: Va in huddle test {number} (closed loop, compensation unit, "
-                    "shielding) over the same length")
+        caption += f"; last panel: Va in huddle test {number}{what} over the same length"
     return Figure(
         key="fig50_nonrepeatable_contributions", title="Where the non-repeatability comes from",
         caption=caption + ".", panels=tuple(panels), seed_ref="Fig. 50", share_x=True)

@@ -8,6 +8,7 @@ import xarray as xr
 
 from fsmbench.budget.repeatability import SEED_11
 from fsmbench.budget.study import BudgetResult
+from fsmbench.report.budget_figures import huddle_config_words
 from fsmbench.report.html import Block, Note, Section, Table
 from fsmbench.report.repeatability_figures import (
     direction_words,
@@ -94,8 +95,9 @@ def repeatability_section(result: BudgetResult, *,
     )
     s5: list[Block] = [
         "Where it comes from (seed 11.5): the non-repeatable part of Va against the "
-        "non-repeatable part of the tracking error's distance equivalent and the noise of the "
-        "huddle test in the same configuration, where nothing moves."]
+        "non-repeatable part of the tracking error's distance equivalent and the noise of a "
+        "huddle test, where nothing moves (test 5 when present, the same configuration; "
+        "otherwise the highest-numbered test analysed)."]
     for d, nr in result.nonrep.items():
         huddle = ("" if nr.huddle_va_rms_m is None or nr.huddle_test is None else
                   f", huddle test {nr.huddle_test.rsplit('_', 1)[-1]}: "
@@ -103,7 +105,10 @@ def repeatability_section(result: BudgetResult, *,
         s5.append(f"{direction_words(reps[d])}: Va {nr.va_nonrep_rms_m * NM:.3g} nm rms, "
                   f"tracking error {nr.tracking_nonrep_rms_m * NM:.3g} nm{huddle}; the error "
                   f"budget predicts {nr.predicted_rms_m * NM:.3g} nm over the record's length.")
-    s5.append(nonrep_contributions_figure(reps, result.nonrep, recordings))
+    configs = ({} if result.huddle is None else
+               {r.name: huddle_config_words(r) for r in result.huddle.records.values()})
+    s5.append(nonrep_contributions_figure(reps, result.nonrep, recordings,
+                                          huddle_configs=configs))
     s5.append(Note("The tracking error's share is an order of magnitude below the measured "
                    "non-repeatability even as an upper bound (it includes the 4QD's noise): "
                    "it does not limit, contrary to the seed's Important 10.", ref="errata E33"))
