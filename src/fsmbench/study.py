@@ -2,30 +2,38 @@
 
 Stages run left to right (docs/architecture.md): recordings (simulated by
 the twin when no data folder is given) → identification → budget → design
-(:mod:`fsmbench.stages`) → report. Each stage adds its outputs and a report
-section; a stage or part whose experiments are missing is skipped and the
-report says why.
+(:mod:`fsmbench.stages`) → summary and report. A stage or part whose
+experiments are missing or fail their checks is skipped or falls back, and
+the summary at the top of the report says so.
+
+Outputs (all atomic): ``report.html``, ``summary.json`` (the verdict),
+``study.json`` (what ran; paths relative to the output folder, so the file
+is the same wherever the folder goes), ``timings.json`` (wall time per
+stage: the one output that differs between two identical runs), plus each
+stage's files and, with ``figures``, ``figures/<key>.png|pdf``.
 """
 
 from __future__ import annotations
 
 import json
 import time
-from collections.abc import Callable
-from dataclasses import asdict, dataclass, field
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
 from fsmbench import __version__
 from fsmbench.bench.params import Bench, default_bench
+from fsmbench.ident.compare import comparison_rows
+from fsmbench.ident.pipeline import Identification
 from fsmbench.io.atomic import atomic_write_text
-from fsmbench.io.folder import load_recordings
+from fsmbench.io.folder import RecordingSet, load_recordings
 from fsmbench.io.outdir import check_out_dir
-from fsmbench.report.bench_section import bench_section, parameters_section, recordings_section
-from fsmbench.report.budget_section import budget_section
-from fsmbench.report.design_section import design_section
-from fsmbench.report.html import Section, write_report
-from fsmbench.report.ident_section import identification_section
+from fsmbench.io.signals import EXPERIMENTS
+from fsmbench.io.truth import read_twin_truth
+from fsmbench.jsonutil import plain_json
+from fsmbench.report.html import Section, iter_figures, write_report
+from fsmbench.report.summary import Specification, Summary, build_summary, verdict_html
 from fsmbench.stages import (
     IDENT_EXPERIMENTS,
     budget_stage,
@@ -33,27 +41,32 @@ from fsmbench.stages import (
     design_stage,
     identify_stage,
 )
-from fsmbench.twin.simulate import simulate_bench, write_twin
 
-__all__ = ["StageStatus", "StudyResult", "run_study"]
+__all__ = ["FIGURE_FORMATS", "StageStatus", "StudyResult", "run_study"]
 
 Progress = Callable[[str], None]
+FIGURE_FORMATS = ("png", "pdf")
+STUDY_FORMAT = ("fsmbench.study", 1)
+
+# Each chapter's anchor: the summary links to them.
+_ANCHORS = ("bench", "identification", "huddle-test", "error-budget", "plant-uncertainty",
+            "plant-scaling", "plant-analysis", "active-damping", "decentralised-control",
+            "newport-control", "non-repeatability", "parameters")
 
 
 @dataclass(frozen=True)
 class StageStatus:
-    """What one stage did: ran or skipped (with the reason), its outputs, its time."""
+    """What one stage did: ran or skipped (with the reason), its outputs (relative paths)."""
 
     name: str
     ran: bool
     reason: str = ""
     outputs: tuple[str, ...] = ()
-    seconds: float = 0.0
 
 
 @dataclass(frozen=True)
 class StudyResult:
-    """Outcome of a study: where everything went, and what was skipped."""
+    """Outcome of a study: where everything went, what was skipped, the verdict."""
 
     out_dir: str
     data_dir: str
@@ -62,16 +75,86 @@ class StudyResult:
     stages: tuple[StageStatus, ...]
     experiments: tuple[str, ...]
     skipped_experiments: dict[str, str] = field(default_factory=dict)
+    summary: Summary | None = None
+    timings_s: dict[str, float] = field(default_factory=dict)
+    figures: tuple[str, ...] = ()
+    sections: tuple[Section, ...] = field(default=(), repr=False, compare=False)
 
     def to_json(self) -> dict[str, Any]:
-        """JSON-ready dict."""
-        return asdict(self)
+        """``study.json``: what ran, relative paths, no timings (they are in timings.json)."""
+        out = Path(self.out_dir)
+
+        def rel(p: str) -> str:
+            path = Path(p)
+            return str(path.relative_to(out)) if path.is_relative_to(out) else str(path)
+
+        return {
+            "format": STUDY_FORMAT[0], "format_version": STUDY_FORMAT[1],
+            "fsmbench_version": __version__, "source": self.source,
+            "data_dir": rel(self.data_dir), "report": rel(self.report),
+            "stages": [{**asdict(s), "outputs": [rel(o) for o in s.outputs]}
+                       for s in self.stages],
+            "experiments": list(self.experiments),
+            "skipped_experiments": dict(self.skipped_experiments),
+            "figures": [rel(f) for f in self.figures],
+            "meets_specifications": None if self.summary is None
+            else self.summary.meets_specifications,
+        }
+
+
+def _identification_headline(ident: Identification, truth: Mapping[str, Any] | None,
+                             bench: Bench) -> str:
+    """One line: the main identified values, and how they compare with the twin's truth."""
+    js = ident.to_json()
+    parts = []
+    qd = js.get("qd_gain_v_per_rad") or {}
+    if qd.get("h") is not None and qd.get("v") is not None:
+        parts.append(f"4QD gain {qd['h']:.4g} / {qd['v']:.4g} V/rad")
+    modes = ident.sercalo_modes() if ident.sercalo is not None else {}
+    if modes:
+        parts.append("Sercalo modes " + " / ".join(f"{m['resonance_hz']:.1f} Hz"
+                                                    for m in modes.values()))
+    if truth is not None:
+        rows = comparison_rows(js, reference=truth, bench=bench)
+        within = sum(1 for r in rows if r.within_target)
+        parts.append(f"{within} of {len(rows)} values within their targets against the twin's "
+                     "truth")
+    return "; ".join(parts) or "ran"
+
+
+def _sections(*, bench: Bench, loaded: RecordingSet, source: str, is_twin: bool,
+              ident: Identification | None, truth: Mapping[str, Any] | None,
+              budget: Any, design: Any, plant_source: str) -> list[Section]:
+    """Every chapter in the seed's order (1–11), then the parameters appendix."""
+    from fsmbench.report.bench_section import bench_section, parameters_appendix
+    from fsmbench.report.budget_section import budget_section
+    from fsmbench.report.control_sections import control_sections
+    from fsmbench.report.huddle_section import huddle_section
+    from fsmbench.report.ident_section import identification_section
+    from fsmbench.report.repeatability_section import repeatability_section
+
+    rec = loaded.recordings
+    sections = [
+        bench_section(bench, recordings=rec, skipped=loaded.skipped, source=source,
+                      is_twin=is_twin),
+        identification_section(ident, recordings=rec, bench=bench, truth=truth,
+                               skipped=loaded.skipped),
+        huddle_section(budget, recordings=rec),
+        budget_section(budget, plant_source=plant_source),
+        *control_sections(design, plant_source=plant_source),
+        repeatability_section(budget, recordings=rec),
+        parameters_appendix(bench, is_twin=is_twin),
+    ]
+    if len(sections) != len(_ANCHORS):
+        raise RuntimeError(f"the report has {len(sections)} chapters, expected {len(_ANCHORS)}")
+    return [replace(s, anchor=a) for s, a in zip(sections, _ANCHORS, strict=True)]
 
 
 def run_study(*, out_dir: str | Path, data_dir: str | Path | None = None,
               bench: Bench | None = None, seed: int = 0, duration_s: float | None = None,
-              progress: Progress | None = None) -> StudyResult:
-    """Run the study and write ``report.html`` (and ``study.json``) into ``out_dir``.
+              progress: Progress | None = None, figures: Sequence[str] = (),
+              spec: Specification | None = None) -> StudyResult:
+    """Run the study and write its report and results into ``out_dir``.
 
     Parameters
     ----------
@@ -85,12 +168,20 @@ def run_study(*, out_dir: str | Path, data_dir: str | Path | None = None,
     seed : int
         Twin seed.
     duration_s : float, optional
-        Twin record length (default: the seed's lengths).
+        Twin record length in s (default: the seed's lengths).
     progress : callable, optional
         Receives progress messages.
+    figures : sequence of {"png", "pdf"}
+        Also write every figure to ``out_dir/figures`` in these formats.
+    spec : Specification, optional
+        The requirements of the verdict (default: the seed's, 5 nm distance error).
     """
     say = progress or (lambda _msg: None)
     bench = default_bench() if bench is None else bench
+    spec = Specification() if spec is None else spec
+    bad = [f for f in figures if f not in FIGURE_FORMATS]
+    if bad:
+        raise ValueError(f"--figures {','.join(bad)}: unknown format; use png and/or pdf")
     out = Path(out_dir)
     data = None if data_dir is None else Path(data_dir)
     check_out_dir(out, data)
@@ -98,79 +189,108 @@ def run_study(*, out_dir: str | Path, data_dir: str | Path | None = None,
         raise FileNotFoundError(f"data folder {data} does not exist")
     out.mkdir(parents=True, exist_ok=True)
     stages: list[StageStatus] = []
+    timings: dict[str, float] = {}
+    clock = time.perf_counter()
 
+    def lap(name: str) -> None:
+        nonlocal clock
+        now = time.perf_counter()
+        timings[name] = round(now - clock, 3)
+        clock = now
+
+    is_twin = data is None
     if data is None:
-        t0 = time.perf_counter()
+        from fsmbench.twin.simulate import simulate_bench, write_twin
+
         say("simulating the bench with the digital twin")
         run = simulate_bench(bench, seed=seed, duration_s=duration_s, progress=say)
         data = out / "twin-data"
         say(f"writing the twin's records to {data}")
         written = write_twin(run, data)
-        stages.append(StageStatus("simulate", True, outputs=tuple(str(p) for p in written),
-                                  seconds=time.perf_counter() - t0))
+        stages.append(StageStatus("simulate", True, outputs=tuple(str(p) for p in written)))
         source = f"digital twin, seed {seed}"
+        lap("simulate")
     else:
         source = f"recorded data in {data}"
 
-    t0 = time.perf_counter()
-    loaded = load_recordings(data, progress=say)
-    recordings, skipped = loaded.recordings, loaded.skipped
+    loaded = load_recordings(data, progress=say, fs_hz=bench.nominal.converter.fs_hz)
+    recordings = loaded.recordings
     stages.append(StageStatus("recordings", bool(recordings),
                               reason="" if recordings else "no experiment found",
-                              outputs=tuple(recordings), seconds=time.perf_counter() - t0))
-    for name, why in skipped.items():
+                              outputs=tuple(recordings)))
+    for name, why in loaded.skipped.items():
         say(f"skipped {name}: {why}")
+    truth = read_twin_truth(data / "twin_truth.json")
+    lap("recordings")
 
-    sections: list[Section] = [bench_section(bench), parameters_section(bench)]
-    say("drawing the time-domain figures")
-    t0 = time.perf_counter()
-    sections.append(recordings_section(recordings, bench=bench, skipped=skipped, source=source))
-    stages.append(StageStatus("report: experiments", True, seconds=time.perf_counter() - t0))
-
-    truth_path = data / "twin_truth.json"
-    truth = json.loads(truth_path.read_text()) if truth_path.is_file() else None
-    t0 = time.perf_counter()
     ident = None
     if any(n in recordings for n in IDENT_EXPERIMENTS):
         say("identification (seed section 2)")
         ident, written = identify_stage(recordings, bench=bench, out_dir=out, source=source,
                                         progress=say)
-        sections.append(identification_section(ident, recordings=recordings, bench=bench,
-                                                truth=truth))
         stages.append(StageStatus(
             "identify", True, outputs=tuple(str(p) for p in written),
-            reason="; ".join(f"{k}: {v}" for k, v in ident.skipped.items()),
-            seconds=time.perf_counter() - t0))
+            reason="; ".join(f"{k}: {v}" for k, v in ident.skipped.items())))
     else:
         stages.append(StageStatus("identify", False,
                                   reason="none of " + ", ".join(IDENT_EXPERIMENTS) + " present"))
     plant = choose_plant(recordings, bench=bench, identification=ident, progress=say)
     say(f"plant for the budget and the design: {plant.source}")
+    lap("identify")
 
-    t0 = time.perf_counter()
     say("noise and error budget, huddle tests, repeatability (seed sections 3, 4, 11)")
     budget, written = budget_stage(recordings, bench=bench, out_dir=out, plant=plant)
-    sections.append(budget_section(budget, recordings=recordings, plant_source=plant.source))
     stages.append(StageStatus("budget", True, outputs=tuple(str(p) for p in written),
-                              reason="; ".join(f"{k}: {v}" for k, v in budget.skipped.items()),
-                              seconds=time.perf_counter() - t0))
+                              reason="; ".join(f"{k}: {v}" for k, v in budget.skipped.items())))
+    lap("budget")
 
-    t0 = time.perf_counter()
     design, written = design_stage(bench=bench, out_dir=out, plant=plant, seed=seed,
                                    progress=say)
-    sections.append(design_section(design, plant_source=plant.source))
-    stages.append(StageStatus("design", True, outputs=tuple(str(p) for p in written),
-                              seconds=time.perf_counter() - t0))
+    stages.append(StageStatus("design", True, outputs=tuple(str(p) for p in written)))
+    lap("design")
 
-    report_path = out / "report.html"
-    meta = (f"fsmbench {__version__}; source: {source}.",
-            "Stages: " + "; ".join(f"{s.name} ({'ran' if s.ran else 'skipped: ' + s.reason})"
-                                   for s in stages) + ".")
-    write_report(report_path, title="Sercalo test bench study (fsmbench)", sections=sections,
-                 meta=meta)
+    say("writing the report")
+    checks = [*loaded.checks, *(ident.checks if ident is not None else ())]
+    notices = [*loaded.notices, *(ident.notices if ident is not None else ())]
+    summary = build_summary(
+        source=source, is_twin=is_twin, spec=spec, skipped=loaded.skipped,
+        n_experiments=len(EXPERIMENTS), n_read=len(recordings), checks=checks, notices=notices,
+        identification=None if ident is None else {
+            "ran": True, "warnings": list(ident.warnings), "skipped": dict(ident.skipped)},
+        identification_headline="" if ident is None else _identification_headline(
+            ident, truth, bench),
+        plant_source=plant.source, plant_identified=plant.identification is not None
+        and plant.source.startswith("identified"),
+        budget=budget, design=design.payload)
+    sections = _sections(bench=bench, loaded=loaded, source=source, is_twin=is_twin,
+                         ident=ident, truth=truth, budget=budget, design=design,
+                         plant_source=plant.source)
+    summary_json = summary.to_json()
+    report_path = write_report(
+        out / "report.html", title="Sercalo test bench study", sections=sections,
+        verdict_html=verdict_html(summary), summary=summary_json,
+        meta=(f"fsmbench {__version__}. Data: {source}. Chapters follow the seed study "
+              "(ESRF, Sercalo test bench, 2020).",))
+    atomic_write_text(out / "summary.json",
+                      json.dumps(summary_json, indent=2, allow_nan=False) + "\n")
+    lap("report")
+    exported: list[Path] = []
+    if figures:
+        from fsmbench.report.static import export_figures
+
+        say(f"writing every figure as {', '.join(figures)} to {out / 'figures'}")
+        exported = export_figures(iter_figures(sections), out / "figures", formats=figures)
+        lap("figures")
     say(f"report written to {report_path}")
     result = StudyResult(out_dir=str(out), data_dir=str(data), source=source,
                          report=str(report_path), stages=tuple(stages),
-                         experiments=tuple(recordings), skipped_experiments=dict(skipped))
-    atomic_write_text(out / "study.json", json.dumps(result.to_json(), indent=2) + "\n")
+                         experiments=tuple(recordings),
+                         skipped_experiments=dict(loaded.skipped), summary=summary,
+                         timings_s=timings, figures=tuple(str(p) for p in exported),
+                         sections=tuple(sections))
+    atomic_write_text(out / "study.json", json.dumps(plain_json(result.to_json()), indent=2)
+                      + "\n")
+    atomic_write_text(out / "timings.json", json.dumps(
+        {"format": "fsmbench.timings", "format_version": 1, "seconds": timings}, indent=2)
+        + "\n")
     return result

@@ -124,6 +124,11 @@ _SCRIPT = """
     var spec;
     try { spec = JSON.parse(document.getElementById(div.dataset.spec).textContent); }
     catch (e) { return Promise.resolve(fail(div, e)); }
+    spec.data.forEach(function (trace) {
+      ['x', 'y'].forEach(function (k) {
+        if (trace[k] && trace[k].ref !== undefined) { trace[k] = spec.arrays[trace[k].ref]; }
+      });
+    });
     return Plotly.newPlot(div, spec.data, spec.layout, config).then(function () {
       div.classList.remove('pending'); div.dataset.rendered = '1'; state.rendered += 1;
     }, function (e) { fail(div, e); });

@@ -80,15 +80,31 @@ def _hover(panel: Panel) -> str:
             f"{panel.y_label}: %{{y:.4g}}<extra></extra>")
 
 
+class _Arrays:
+    """The figure's arrays, each stored once: traces on one frequency grid share it."""
+
+    def __init__(self) -> None:
+        self.table: list[dict[str, str]] = []
+        self._index: dict[str, int] = {}
+
+    def ref(self, values: np.ndarray) -> dict[str, int]:
+        encoded = typed_array(values)
+        key = encoded["dtype"] + encoded["bdata"]
+        if key not in self._index:
+            self._index[key] = len(self.table)
+            self.table.append(encoded)
+        return {"ref": self._index[key]}
+
+
 def _line_trace(line: Line, panel: Panel, refs: tuple[str, str], color: str,
-                show: bool) -> dict[str, Any]:
+                show: bool, arrays: _Arrays) -> dict[str, Any]:
     x, y = (envelope(line.x, line.y) if line.decimate else (line.x, line.y))
     if panel.y_log:  # a log axis cannot show values ≤ 0: leave a gap, not a clipped point
         y = np.where(y > 0, y, np.nan)
     if panel.x_log:
         x = np.where(x > 0, x, np.nan)
     trace: dict[str, Any] = {
-        "type": "scatter", "x": typed_array(x), "y": typed_array(y),
+        "type": "scatter", "x": arrays.ref(x), "y": arrays.ref(y),
         "xaxis": refs[0], "yaxis": refs[1], "name": line.name or " ",
         "mode": "markers" if line.markers else "lines",
         "hovertemplate": _hover(panel), "showlegend": show and line.legend and bool(line.name),
@@ -103,9 +119,10 @@ def _line_trace(line: Line, panel: Panel, refs: tuple[str, str], color: str,
     return trace
 
 
-def _bars_trace(bars: Bars, refs: tuple[str, str], color: str, show: bool) -> dict[str, Any]:
+def _bars_trace(bars: Bars, refs: tuple[str, str], color: str, show: bool,
+                arrays: _Arrays) -> dict[str, Any]:
     trace: dict[str, Any] = {
-        "type": "bar", "x": list(bars.categories), "y": typed_array(bars.values),
+        "type": "bar", "x": list(bars.categories), "y": arrays.ref(bars.values),
         "xaxis": refs[0], "yaxis": refs[1], "name": bars.name or " ",
         "marker": {"color": color}, "showlegend": show and bars.legend and bool(bars.name),
     }
@@ -132,7 +149,13 @@ def _axis(label: str, *, log: bool, fixed: tuple[float, float] | None,
 
 
 def figure_json(fig: Figure) -> dict[str, Any]:
-    """The plotly.js ``{"data": [...], "layout": {...}}`` of a figure."""
+    """The plotly.js figure: ``{"data": [...], "layout": {...}, "arrays": [...]}``.
+
+    Every array is stored once in ``arrays`` (typed-array JSON) and traces
+    refer to it as ``{"ref": i}``; the page swaps the references in before
+    plotting (traces on one frequency grid share it: a third of a Bode
+    figure's size).
+    """
     height = fig.default_height_px()
     data: list[dict[str, Any]] = []
     layout: dict[str, Any] = {
@@ -146,6 +169,7 @@ def figure_json(fig: Figure) -> dict[str, Any]:
     }
     if len(fig.panels) > 1 or fig.panels[0].title:
         layout["margin"]["t"] = 50
+    arrays = _Arrays()
     shown: set[str] = set()
     color_of: dict[str, str] = {}
     n_rows = fig.n_rows
@@ -175,8 +199,9 @@ def figure_json(fig: Figure) -> dict[str, Any]:
                 color = color_of.setdefault(key, PALETTE[len(color_of) % len(PALETTE)])
             show = key not in shown
             shown.add(key)
-            data.append(_line_trace(trace, panel, refs, color, show) if isinstance(trace, Line)
-                        else _bars_trace(trace, refs, color, show))
+            data.append(_line_trace(trace, panel, refs, color, show, arrays)
+                        if isinstance(trace, Line)
+                        else _bars_trace(trace, refs, color, show, arrays))
         for rule in panel.rules:
             horizontal = rule.axis == "y"
             layout["shapes"].append({
@@ -209,4 +234,4 @@ def figure_json(fig: Figure) -> dict[str, Any]:
                 "text": f"<b>{panel.title}</b>", "showarrow": False, "x": (xd[0] + xd[1]) / 2,
                 "xref": "paper", "y": yd[1], "yref": "paper", "yanchor": "bottom",
                 "xanchor": "center", "font": {"size": 12}})
-    return {"data": data, "layout": layout}
+    return {"data": data, "layout": layout, "arrays": arrays.table}
