@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from fsmbench.bench.params import Bench
+from fsmbench.checks import Check, Notice
 from fsmbench.ident.compare import TARGETS, comparison_rows
 from fsmbench.ident.pipeline import Identification, identify
 from fsmbench.report.figure import Bars, Figure
@@ -135,6 +136,18 @@ def test_warnings_replace_the_quality_claim(result: Identification, ident_twin: 
     text = _text(identification_section(warned, recordings=ident_twin.recordings,
                                         bench=bench, truth=None, skipped={}))
     assert PASSED not in text and "the fit misses by 7.0 %" in text
+
+
+def test_failed_checks_and_notices_are_said(result: Identification, ident_twin: TwinRun,
+                                           bench: Bench) -> None:
+    bad = Check("calibration_r2", False, 0.5, "≥ 0.9", "data_cal_pd_h: Vph",
+                "Vph does not follow the Newport's sweep")
+    note = Notice("saturation", "data_uch: Vch", "2 samples at the ADC rail")
+    text = _text(identification_section(
+        dataclasses.replace(result, checks=(bad,), notices=(note,)),
+        recordings=ident_twin.recordings, bench=bench, truth=None, skipped={}))
+    assert "data_cal_pd_h: Vph: Vph does not follow the Newport's sweep." in text
+    assert "data_uch: Vch: 2 samples at the ADC rail." in text
 
 
 def test_missing_records_are_explained(ident_twin: TwinRun, bench: Bench) -> None:

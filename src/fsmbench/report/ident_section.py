@@ -145,7 +145,7 @@ def _not_run(step: str, experiments: Sequence[str], *, result: Identification | 
     if result is not None and step not in result.skipped:
         return None
     reason = result.skipped[step] if result is not None else "the identification did not run"
-    text = f"Not identified: {_STEP[step]} was skipped ({reason})."
+    text = f"Not identified: {_STEP[step]} gave no result. Reason: {reason}."
     gone = [f"{e} (not loaded: {skipped[e]})" if e in skipped else f"{e} (not in the data)"
             for e in experiments if e not in recordings]
     if gone:
@@ -170,7 +170,8 @@ def _qd(result: Identification | None, *, recordings: Mapping[str, xr.Dataset], 
     if why or result is None:
         blocks.append(why or "")
     else:
-        blocks.append(qd_regression_figure(result.qd, recordings))
+        if all(c.experiment in recordings for c in result.qd.values()):
+            blocks.append(qd_regression_figure(result.qd, recordings))
         blocks.append(Table(
             caption="4QD gains from the linear regression (seed Table 2)",
             header=("axis", "gain [V/rad]", "± [V/rad]", "sensitivity [µrad/mV]",
@@ -185,7 +186,7 @@ def _qd(result: Identification | None, *, recordings: Mapping[str, xr.Dataset], 
                            "the slope is in V/rad (its Table 2), and its inverse is the "
                            "sensitivity in µrad/mV (1/36.3 V/rad is 27.5 µrad/mV, not 27.6).",
                            ref="errata E6, E7"))
-    return Section(title="2.1 Calibration of the 4-quadrant diode", blocks=tuple(blocks))
+    return Section(title="2.1 Calibration of the 4-quadrant diode (4QD)", blocks=tuple(blocks))
 
 
 def _current_amp(result: Identification | None, *, recordings: Mapping[str, xr.Dataset],
@@ -206,7 +207,9 @@ def _current_amp(result: Identification | None, *, recordings: Mapping[str, xr.D
     else:
         frfs = amplifier_frfs(recordings, trims_s=result.options.trims_s,
                               window_s=result.options.window_s)
-        blocks.append(current_amplifier_figure(result.current_amp, frfs, bench.nominal))
+        drawn = {a: g for a, g in result.current_amp.items() if a in frfs}
+        if drawn:
+            blocks.append(current_amplifier_figure(drawn, frfs, bench.nominal))
         blocks.append(Table(
             caption="Current-amplifier gains",
             header=("axis", "identified Gi [mA/V]", "± [mA/V]", "1/(R + Rc) [mA/V]",
@@ -221,7 +224,7 @@ def _current_amp(result: Identification | None, *, recordings: Mapping[str, xr.D
                            "code estimates on the whole record; fsmbench removes the first "
                            "second, when the Sercalo is off, as in 2.1 and 2.3.",
                            ref="errata E13"))
-    return Section(title="2.2 Current amplifier, coil impedance and voltage amplifier",
+    return Section(title="2.2 Sercalo impedance, current amplifier and voltage amplifier",
                    blocks=tuple(blocks))
 
 
@@ -279,7 +282,7 @@ def _sercalo(result: Identification | None, *, recordings: Mapping[str, xr.Datas
     if why or result is None or result.sercalo is None:
         blocks.append(why or "Not identified: the Sercalo identification did not run. The "
                       "study uses the nominal block instead.")
-        return Section(title="2.3 Sercalo", blocks=tuple(blocks))
+        return Section(title="2.3 Sercalo dynamics", blocks=tuple(blocks))
     s = result.sercalo
     blocks.append(coherence_figure(
         s.frf, key="fig17_sercalo_coherence", title="Sercalo: coherence of Uc → Vp",
@@ -319,7 +322,7 @@ def _sercalo(result: Identification | None, *, recordings: Mapping[str, xr.Datas
                    for k, v in s.fit_error.items()),
         note=(f"Limits for the direct paths: error ≤ {100 * MAX_DIRECT_FIT_ERROR:g} %, "
               f"variance accounted for ≥ {100 * MIN_DIRECT_VAF:g} %.")))
-    return Section(title="2.3 Sercalo", blocks=tuple(blocks))
+    return Section(title="2.3 Sercalo dynamics", blocks=tuple(blocks))
 
 
 def _newport(result: Identification | None, *, recordings: Mapping[str, xr.Dataset],
@@ -337,7 +340,7 @@ def _newport(result: Identification | None, *, recordings: Mapping[str, xr.Datas
     if why or result is None or result.newport is None:
         blocks.append(why or "Not identified: the Newport identification did not run. The "
                       "study uses the nominal block instead.")
-        return Section(title="2.4 Newport", blocks=tuple(blocks))
+        return Section(title="2.4 Newport dynamics", blocks=tuple(blocks))
     n = result.newport
     blocks.append(coherence_figure(
         n.frf, key="fig25_newport_coherence", title="Newport: coherence of Un → Vp",
@@ -361,7 +364,7 @@ def _newport(result: Identification | None, *, recordings: Mapping[str, xr.Datas
                        "the path Unh → Vph is negative, and fsmbench keeps the sign. The "
                        "seed's assumed 0.5 ms delay is confirmed by the phase.",
                        ref="errata E19, E20"))
-    return Section(title="2.4 Newport", blocks=tuple(blocks))
+    return Section(title="2.4 Newport dynamics", blocks=tuple(blocks))
 
 
 def _system(result: Identification | None) -> Section:
@@ -408,14 +411,17 @@ def _status(result: Identification | None, *, recordings: Mapping[str, xr.Datase
         return [text + " The study uses the nominal model; the recordings that exist are "
                 "shown below."]
     out: list[Block] = []
-    steps = [f"{_STEP.get(k, k)} ({v})" for k, v in result.skipped.items()]
+    steps = [f"{_STEP.get(k, k)} — {v}" for k, v in result.skipped.items()]
     if steps:
         out.append("Skipped: " + "; ".join(steps) + ".")
-    failed = [c for c in getattr(result, "checks", ()) if not c.passed]
+    failed = [c for c in result.checks if not c.passed]
     if failed:
-        out.append(Note("Plausibility checks that failed: " + " ".join(
+        out.append(Note("Plausibility checks of the data that failed: " + " ".join(
             f"{c.subject}: {c.advice}." if c.advice else f"{c.subject}: {c.limit} not met."
             for c in failed)))
+    if result.notices:
+        out.append(Note("To know about the data: " + " ".join(
+            f"{n.subject}: {n.message}." for n in result.notices)))
     if result.warnings:
         out.append(Note("Quality warnings, do not trust the affected results: "
                         + "; ".join(result.warnings) + "."))
