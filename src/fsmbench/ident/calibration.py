@@ -317,8 +317,8 @@ def qd_checks(cal: QdCalibration, *, nominal_v_per_rad: float) -> list[Check]:
     return [
         Check("calibration_r2", r2_ok, cal.r_squared, f"≥ {MIN_CALIBRATION_R2:g}", subject,
               "" if r2_ok else f"{vp} does not follow the Newport's sweep (r² = "
-              f"{cal.r_squared:.2g}): the 4QD channel is dead, swapped or saturated; the "
-              "nominal 4QD gain is used"),
+              f"{cal.r_squared:.2g}): the 4QD channel is dead, swapped or saturated; check "
+              "its cable and amplifier and that the Newport swept this axis"),
         Check("calibration_residual", res_ok, float(rel), f"≤ {MAX_CALIBRATION_RESIDUAL:g} of "
               "the fitted swing (residual rms / (|gain| × beam-angle range))", subject,
               "" if res_ok else f"the residual ({1e3 * cal.residual_rms_v:.3g} mV rms) is large "
