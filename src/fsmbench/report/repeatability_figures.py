@@ -154,12 +154,10 @@ def tracking_vs_distance_figure(reps: Mapping[str, RepeatabilityRecord]) -> Figu
     return Figure(
         key="fig47_tracking_vs_distance_asd",
         title="Tracking error as distance against the measured distance",
-        caption="Welch estimates (1 s Hann window). The two laws are in terms of the 4QD's "
-                "beam angle, noise included: an upper bound of the geometric term.",
-        panels=tuple(panels), seed_ref="Fig. 47", columns=len(panels),
-        note="The seed's L·α²/2 (L = 0.1 m) is one tilted leg; the traced path gives "
-             "(6H + 4L)/16·α² = 0.031·α² (errata E17). The tracking error stays well below Va: "
-             "not the limiting factor the seed's Important 10 states (errata E33).")
+        caption="Welch estimates (1 s Hann window). The two laws (the seed's and the traced "
+                "one, errata E17) are in terms of the 4QD's beam angle, noise included: an "
+                "upper bound of the geometric term.",
+        panels=tuple(panels), seed_ref="Fig. 47", columns=len(panels))
 
 
 def _range_lines(tp: np.ndarray, periods: np.ndarray, *, name: str) -> tuple[Line, Line]:
