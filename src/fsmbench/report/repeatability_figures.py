@@ -163,8 +163,10 @@ def tracking_vs_distance_figure(reps: Mapping[str, RepeatabilityRecord]) -> Figu
 def _range_lines(tp: np.ndarray, periods: np.ndarray, *, name: str) -> tuple[Line, Line]:
     """Minimum and maximum over periods at each instant (grey), one legend entry."""
     lo, hi = periods.min(axis=0), periods.max(axis=0)
-    return (Line(tp, lo * NM, name=name, color=_PERIOD_COLOR, width=1.0, group="range"),
-            Line(tp, hi * NM, name=name, color=_PERIOD_COLOR, width=1.0, group="range"))
+    return (Line(tp, lo * NM, name=name, color=_PERIOD_COLOR, width=1.0, group="range",
+                 decimate=True),
+            Line(tp, hi * NM, name=name, color=_PERIOD_COLOR, width=1.0, group="range",
+                 decimate=True))
 
 
 def _rms_rules(rms: float | None) -> tuple[Rule, ...]:
