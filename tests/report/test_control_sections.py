@@ -190,8 +190,12 @@ def test_robustness_small_multiples_mark_the_unstable_cases(sections: list[Secti
         assert len(fig.panels) == 6 and fig.columns == 3  # h and v × three resonance factors
         curves = [t for p in fig.panels for t in p.traces]
         assert len(curves) == 2 * len(rob.loops)
+        marked = [(p.title, "UNSTABLE" in t.name) for p in fig.panels for t in p.traces]
         n_unstable = sum(not (lp.stable and lp.nyquist.stable) for lp in rob.loops)
-        assert sum("UNSTABLE" in t.name for t in curves) == 2 * n_unstable
+        # each unstable case is marked on the axis whose loop alone is unstable
+        expected = sum(not lp.axes[a].stable for lp in rob.loops for a in "hv")
+        assert sum(m for _, m in marked) == expected
+        assert (expected == 0) == (n_unstable == 0)
     assert res.seed_robustness is not None
     assert not res.seed_robustness.all_stable  # the seed's notch is not robust (E27)
     text = " ".join(b for b in sections[4].blocks if isinstance(b, str))

@@ -32,6 +32,7 @@ __all__ = [
     "robustness_figure",
     "scaled_plant_figure",
     "sensitivity_figure",
+    "unstable_on_axis",
 ]
 
 AXIS_WORDS = {"h": "horizontal (h)", "v": "vertical (v)"}
@@ -188,6 +189,18 @@ def perturbation_factors(rob: Robustness, *, frequency_scales: Sequence[float],
     return pairs
 
 
+def unstable_on_axis(lp: LoopAnalysis, axis: str) -> bool:
+    """Whether ``axis`` is to blame for an unstable closed loop.
+
+    The axis whose loop alone is unstable; if the MIMO loop is unstable while
+    each axis alone is stable (coupling), both axes.
+    """
+    if lp.stable and lp.nyquist.stable:
+        return False
+    alone = [a for a in AXES if not lp.axes[a].stable]
+    return axis in alone or not alone
+
+
 def robustness_figure(rob: Robustness, *, factors: Sequence[tuple[float, float]],
                       band_hz: tuple[float, float], key: str, title: str, caption: str,
                       note: str = "") -> Figure:
@@ -195,7 +208,8 @@ def robustness_figure(rob: Robustness, *, factors: Sequence[tuple[float, float]]
 
     One column per resonance factor, one row per axis; the damping factors
     are distinct curves. A case whose closed loop is unstable is drawn thick
-    in red and named so in the legend.
+    in red and named so in the legend, in the row of the axis that causes it
+    (:func:`unstable_on_axis`).
 
     Parameters
     ----------
@@ -217,7 +231,7 @@ def robustness_figure(rob: Robustness, *, factors: Sequence[tuple[float, float]]
             for (f_s, d_s), lp in zip(factors, rob.loops, strict=True):
                 if f_s != fs:
                     continue
-                stable = lp.stable and lp.nyquist.stable
+                stable = not unstable_on_axis(lp, axis)
                 name = f"damping ×{d_s:g}"
                 if not stable:
                     name = f"resonance ×{f_s:g}, damping ×{d_s:g}: closed loop UNSTABLE"
