@@ -12,7 +12,6 @@ import numpy as np
 import pytest
 
 import fsmbench.budget
-from fsmbench.bench.params import default_bench
 from fsmbench.budget.study import BudgetResult, budget_study
 from fsmbench.report.budget_figures import distance_cumulative_m, log_envelope
 from fsmbench.report.budget_section import budget_section
@@ -35,11 +34,6 @@ EXPECTED_KEYS = {
     "fig47_tracking_vs_distance_asd", "fig48_49_repeatability_periods",
     "fig50_nonrepeatable_contributions", "fig52_lowpass_nonrepeatable",
 }
-
-
-@pytest.fixture(scope="module")
-def bench():
-    return default_bench()
 
 
 @pytest.fixture(scope="module")

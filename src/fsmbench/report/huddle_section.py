@@ -36,11 +36,18 @@ def _config_table(present: set[int]) -> Table:
 
 
 def _missing_paragraph(result: BudgetResult) -> str:
-    why = [f"{n}.mat ({result.skipped[n]})" for n in _NAMES if n in result.skipped]
-    listed = "; ".join(why) if why else ", ".join(f"{n}.mat" for n in _NAMES)
-    return ("No huddle test could be analysed, so this section has no figure: " + listed
-            + ". The error budget (section 4) then uses the nominal white 4QD noise and the "
-              "white DAC quantisation model.")
+    absent = [f"{n}.mat" for n in _NAMES
+              if result.skipped.get(n, "not in the recordings").startswith("not in the recordings")]
+    bad = [f"{n}.mat ({result.skipped[n]})" for n in _NAMES if n in result.skipped
+           and not result.skipped[n].startswith("not in the recordings")]
+    parts = []
+    if absent:
+        parts.append("missing from the recordings: " + ", ".join(absent))
+    if bad:
+        parts.append("not usable: " + "; ".join(bad))
+    return ("No huddle test could be analysed, so this section has no figure; "
+            + "; ".join(parts) + ". The error budget (section 4) then uses the nominal white "
+            "4QD noise and the white DAC quantisation model.")
 
 
 def huddle_section(result: BudgetResult, *, recordings: Mapping[str, xr.Dataset]) -> Section:
@@ -56,7 +63,7 @@ def huddle_section(result: BudgetResult, *, recordings: Mapping[str, xr.Dataset]
     h = result.huddle
     intro = ("The huddle tests measure the noise of the 4QD and of the Attocube "
              "interferometer while nothing is commanded: the Newport is at rest and, in closed "
-             "loop, the Sercalo holds the beam on the 4QD. Five configurations (Table 3) vary "
+             "loop, the Sercalo holds the beam on the 4QD. Five configurations (seed Table 3) vary "
              "the loop, the Attocube's environmental compensation unit and an aluminium "
              "shielding of the beam path.")
     if h is None:
