@@ -154,6 +154,18 @@ def test_data_uch_fault_is_the_reason_for_the_nominal_plant(
     assert check in choice.source and words in choice.source
 
 
+def test_noisy_vph_gives_the_identification_failure_not_missing(
+        twin: TwinRun, bench: Bench, tmp_path: Path) -> None:
+    rng = np.random.default_rng(1)
+    noisy = _edit(Vph=lambda v: 0.5 * rng.standard_normal(v.size))  # within ±10 V: passes
+    data = write_folder(tmp_path / "data", twin, ["data_uch", "data_ucv"], {"data_uch": noisy})
+    loaded = load_quietly(data, fs_hz=FS_HZ)
+    assert failed(loaded.checks) == []  # plausible samples; the identification finds out
+    choice = choose_plant(loaded.recordings, bench=bench)
+    assert choice.source.startswith("nominal physical model (Sercalo identification: failed")
+    assert "coherence" in choice.source and "missing" not in choice.source
+
+
 def test_t_in_ms_reads_as_10_hz_and_says_so(twin: TwinRun, tmp_path: Path) -> None:
     data = write_folder(tmp_path / "data", twin, ["data_huddle_test_1"],
                         {"data_huddle_test_1": _edit(t=lambda t: 1e3 * t)})
@@ -228,6 +240,20 @@ def test_mixed_rates_name_the_files(twin: TwinRun, bench: Bench, tmp_path: Path)
     assert [c.subject for c in failed(loaded.checks)] == ["data_huddle_test_2.mat: t"]
     result = budget_quietly(loaded.recordings, bench)
     assert "sampling_rate" in result.skipped["data_huddle_test_2"]
+
+
+def test_mixed_rates_in_the_identification_name_the_file(twin: TwinRun, bench: Bench,
+                                                          tmp_path: Path) -> None:
+    fast = variables(twin.recordings["data_unh"])
+    fast = {k: np.repeat(v, 2) for k, v in fast.items() if k != "t"}
+    fast["t"] = np.arange(fast["Vph"].size) / (2 * FS_HZ)
+    data = write_folder(tmp_path / "data", twin, ["data_unv"])
+    save_mat(data / "data_unh.mat", fast, created=0.0)
+    ident = identify(load_quietly(data, fs_hz=FS_HZ).recordings, bench=bench)
+    # Before: "response 1 has fs_hz=10000.0 but response 0 has 20000.0" (no file named).
+    why = ident.skipped["newport"]
+    assert why.startswith("check sampling_rate failed: data_unh.mat: t")
+    assert ident.newport is None and ident.plant_blocks["Gn"] == "nominal"
 
 
 @pytest.mark.parametrize("signal", ["Vph", "Va"])
