@@ -10,8 +10,10 @@ files atomically into an output folder and returns its result:
                     twin (the repeatability experiment, 10 kHz, quantisation and noise)
 
 The plant a stage uses is the identified one when the identification
-experiments are present, the nominal physical model otherwise; the result
-says which.
+experiments are present and pass their checks, the nominal physical model
+otherwise; the result says which and why (the missing files, or the failed
+check or step by name). ``identification.json`` and ``budget.json`` carry
+``checks`` and ``notices`` lists.
 """
 
 from __future__ import annotations

@@ -13,6 +13,14 @@ Newport                ``data_unh``, ``data_unv``                  2.4
 full system            all of the above (nominal blocks stand in)  2.5
 =====================  ==========================================  ==============
 
+Before a step runs, its recordings pass the plausibility checks of
+:func:`fsmbench.io.folder.check_recording` against the bench (rate, data
+type, converter range, signals that move); after the 4QD calibration, its r²,
+residual and gain against the nominal are checked
+(:func:`fsmbench.ident.calibration.qd_checks`). A failed check makes the step
+fall back to the nominal block, and ``skipped`` gives the check's name and
+sentence as the reason; every check is in ``checks``.
+
 :meth:`Identification.to_json` has the keys of ``twin_truth.json``
 (``qd_gain_v_per_rad``, ``current_amp_gain_a_per_v``,
 ``sercalo.{h,v}.{resonance_hz, damping_ratio, dc_gain_v_per_a}``,
