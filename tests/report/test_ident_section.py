@@ -11,7 +11,7 @@ from fsmbench.bench.params import Bench
 from fsmbench.checks import Check, Notice
 from fsmbench.ident.compare import TARGETS, comparison_rows
 from fsmbench.ident.pipeline import Identification, identify
-from fsmbench.report.figure import Bars, Figure
+from fsmbench.report.figure import Bars, Figure, Line
 from fsmbench.report.html import Note, Section, Table, iter_figures, render_report
 from fsmbench.report.ident_section import identification_section, quantity
 from fsmbench.twin import TwinRun
@@ -182,3 +182,50 @@ def test_section_renders_with_unique_figure_keys(result: Identification, ident_t
                                  truth=ident_twin.truth, skipped={})
     html = render_report(title="t", sections=[sec])
     assert html.count('class="fsm-plot pending"') == len(list(iter_figures([sec])))
+
+
+def _figure(sec: Section, key: str) -> Figure:
+    (fig,) = [f for f in iter_figures([sec]) if f.key == key]
+    return fig
+
+
+def test_regression_points_are_the_calibration_data(result: Identification,
+                                                    ident_twin: TwinRun, bench: Bench) -> None:
+    sec = identification_section(result, recordings=ident_twin.recordings, bench=bench,
+                                 truth=None, skipped={})
+    fig = _figure(sec, "fig10_qd_regression")
+    for panel, cal in zip(fig.panels, result.qd.values(), strict=True):
+        points = panel.traces[0]
+        assert isinstance(points, Line) and points.markers
+        slope, offset = np.polyfit(1e-6 * points.x, points.y, 1)
+        # 3000 of 100 000 samples of a line with R² > 0.9999: the slope of the subset agrees
+        # with the fit of all samples to well under 0.1 %.
+        assert slope == pytest.approx(cal.gain_v_per_rad, rel=1e-3)
+        # The intercept of the subset: ~1 mV residual rms / sqrt(3000) ≈ 2e-5 V of scatter.
+        assert offset == pytest.approx(cal.offset_v, abs=1e-4)
+
+
+def test_frf_figure_shows_the_measured_magnitude_and_the_model(
+        result: Identification, ident_twin: TwinRun, bench: Bench) -> None:
+    sec = identification_section(result, recordings=ident_twin.recordings, bench=bench,
+                                 truth=None, skipped={})
+    s = result.sercalo
+    assert s is not None
+    fig = _figure(sec, "fig18_22_sercalo_frf")
+    assert len(fig.panels) == 8 and fig.columns == 2  # 2x2 matrix, magnitude over phase
+    mag = fig.panels[0]  # Uch -> Vph
+    measured, model = mag.traces
+    assert isinstance(measured, Line) and isinstance(model, Line)
+    raw = np.abs(s.frf.frf.sel(output="Vph", input="Uch").values[1:])
+    # Removing a delay only turns the phase: the magnitude drawn is the measured one.
+    np.testing.assert_allclose(measured.y, raw, rtol=1e-12)
+    assert model.dash == "dash" and np.isfinite(model.y).all()
+    n = result.newport
+    assert n is not None
+    nfig = _figure(sec, "fig26_27_newport_frf")
+    gain_line = nfig.panels[0].traces[1]
+    assert isinstance(gain_line, Line)
+    finite = gain_line.y[np.isfinite(gain_line.y)]
+    assert np.all(finite == abs(n.gain_v_per_v["h"]))
+    band = gain_line.x[np.isfinite(gain_line.y)]
+    assert band.min() >= n.band_hz[0] and band.max() <= n.band_hz[1]
