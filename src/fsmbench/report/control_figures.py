@@ -11,8 +11,10 @@ from __future__ import annotations
 from collections.abc import Sequence
 from itertools import product
 
+import control as ct
 import numpy as np
 
+from fsmbench.bench.blocks import ss_frequency_response
 from fsmbench.control.analysis import PlantAnalysis
 from fsmbench.control.design import Robustness
 from fsmbench.control.iff import IffAnalysis
@@ -22,7 +24,10 @@ from fsmbench.report.figure import H_COLOR, PALETTE, V_COLOR, Figure, Line, Pane
 
 __all__ = [
     "AXIS_WORDS",
+    "FSM_COLOR",
+    "SEED_COLOR",
     "bode_phase_deg",
+    "controllers_figure",
     "iff_figure",
     "loop_gain_figure",
     "newport_to_beam_figure",
@@ -38,8 +43,8 @@ __all__ = [
 AXIS_WORDS = {"h": "horizontal (h)", "v": "vertical (v)"}
 _AXIS_COLOR = {"h": H_COLOR, "v": V_COLOR}
 # Colours of the controllers where h and v sit in separate panels.
-_SEED_COLOR = PALETTE[2]
-_FSM_COLOR = PALETTE[4]
+SEED_COLOR = PALETTE[2]
+FSM_COLOR = PALETTE[4]
 _UNSTABLE_COLOR = PALETTE[3]
 # Nyquist window: ±1.5 around −1 shows the unit circle's left half, the
 # modulus-margin circle and every crossing of the negative real axis that matters.
@@ -108,6 +113,29 @@ def loop_gain_figure(lp: LoopAnalysis, *, key: str, title: str, caption: str,
                             rules=(Rule(-180.0, name="−180°", dash="dash"),)))
     return Figure(key=key, title=title, caption=caption, seed_ref=seed_ref, note=note,
                   panels=(mags[0], mags[1], phases[0], phases[1]), columns=2, share_x=True)
+
+
+def controllers_figure(controllers: Sequence[tuple[str, ct.StateSpace, str]], *,
+                       f_hz: np.ndarray, key: str, title: str, caption: str) -> Figure:
+    """``|K_ii|`` of each controller (``Rh, Rv → Uch, Ucv``), one panel per axis.
+
+    Parameters
+    ----------
+    controllers : sequence of (str, control.StateSpace, str)
+        Legend text in words, the continuous controller, its colour.
+    f_hz : numpy.ndarray, shape (n,)
+        Frequencies [Hz].
+    key, title, caption : str
+    """
+    resp = [(name, ss_frequency_response(k, f_hz), color) for name, k, color in controllers]
+    panels = tuple(
+        Panel(traces=tuple(Line(f_hz, np.abs(r[:, i, i]), name=name, color=color)
+                           for name, r, color in resp),
+              x_label=FREQ, y_label=f"|K{axis}| [V/rad]", x_log=True, y_log=True,
+              title=f"Controller, {AXIS_WORDS[axis]}")
+        for i, axis in enumerate(AXES))
+    return Figure(key=key, title=title, caption=caption, panels=panels, columns=2,
+                  height_px=440)
 
 
 def _circle(center: complex, radius: float, n: int = 361) -> tuple[np.ndarray, np.ndarray]:
@@ -251,8 +279,8 @@ def robustness_figure(rob: Robustness, *, factors: Sequence[tuple[float, float]]
 def newport_to_beam_figure(n2b: NewportToBeam, *, key: str, title: str, caption: str,
                            seed_ref: str = "") -> Figure:
     """``|Un_i → R_i|`` open loop and with each Sercalo controller closed (seed Fig. 42)."""
-    words = {"seed_controller": ("with the seed's controller", _SEED_COLOR),
-             "fsmbench_controller": ("with fsmbench's controller", _FSM_COLOR)}
+    words = {"seed_controller": ("with the seed's controller", SEED_COLOR),
+             "fsmbench_controller": ("with fsmbench's controller", FSM_COLOR)}
     panels = []
     for i, axis in enumerate(AXES):
         traces = [Line(n2b.f_hz, np.abs(n2b.open_loop[:, i, i]), name="Sercalo loop open",

@@ -19,6 +19,9 @@ from fsmbench.control.loops import AXES, LoopAnalysis
 from fsmbench.control.study import DesignResult
 from fsmbench.report.control_figures import (
     AXIS_WORDS,
+    FSM_COLOR,
+    SEED_COLOR,
+    controllers_figure,
     iff_figure,
     loop_gain_figure,
     newport_to_beam_figure,
@@ -454,6 +457,15 @@ def _section9(res: DesignResult, check: Any) -> Section:
         "the nine perturbed plants, each candidate also checked stable by a Nyquist count.",
         Table(caption="fsmbench's controller: the loop shape of each axis",
               header=("quantity", "h", "v"), rows=shape_rows),
+        controllers_figure(
+            (("the seed's controller", res.controllers["seed_controller"], SEED_COLOR),
+             ("fsmbench's controller", res.controllers["fsmbench_controller"], FSM_COLOR)),
+            f_hz=np.union1d(seed.f_hz, fsm.f_hz), key="controllers_compared",
+            title="The two controllers",
+            caption=("Magnitude of each axis' controller, beam angle to Sercalo command. The "
+                     "seed's controller inverts the resonance with a notch; fsmbench's has "
+                     "more gain at low frequency (the objective of 6.1) and rolls off smoothly "
+                     "instead, leaving the resonance in the loop.")),
         *_controller_blocks(fsm, who="fsmbench's controller", prefix="fsmbench_controller",
                             seed_ref="", bode_key="fsmbench_controller_loop_gain"),
         *_robustness_blocks(res.robustness, res, who="fsmbench's controller",
