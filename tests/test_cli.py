@@ -86,28 +86,7 @@ def test_identify_refuses_to_write_into_the_data(tmp_path: Path,
     assert "inside the data folder" in capsys.readouterr().err
 
 
-def test_budget_and_design_commands(short_twin, tmp_path: Path,
-                                    capsys: pytest.CaptureFixture[str]) -> None:
-    from fsmbench.twin import TwinRun, write_twin
-
-    data = tmp_path / "data"
-    data.mkdir()
-    subset = {k: v for k, v in short_twin.recordings.items()
-              if k.startswith(("data_huddle", "data_rep"))}
-    write_twin(TwinRun(recordings=subset, truth=short_twin.truth, seed=short_twin.seed,
-                       experiments=short_twin.experiments), data)
-    assert main(["budget", str(data), "--out", str(tmp_path / "b")]) == 0
-    err = capsys.readouterr().err
-    assert "limiting source" in err and "nominal physical model" in err
-    assert json.loads((tmp_path / "b" / "budget.json").read_text())["total_rms_m"] > 0
-    assert main(["design", str(data), "--out", str(tmp_path / "d")]) == 0
-    err = capsys.readouterr().err
-    assert "fsmbench controller: meets 6.1 (|S(1 Hz)| <= 2e-04): yes; h: GM " in err
-    assert sorted(p.name for p in (tmp_path / "d").iterdir()) == [
-        "controllers.mat", "controllers_sos.json", "design.json", "run.json"]
-    controllers = scipy.io.loadmat(tmp_path / "d" / "controllers.mat", simplify_cells=True)
-    k = controllers["fsmbench_controller"]
-    assert list(k["K"]["InputName"]) == ["Rh", "Rv"] and k["Kd"]["Ts"] == pytest.approx(1e-4)
+# budget and design: tests/faults/test_cli_reproducible.py (run twice, byte-identical).
 
 
 @pytest.mark.parametrize("command", ["budget", "design", "identify"])

@@ -142,6 +142,17 @@ def stage_data(short_twin: TwinRun, tmp_path_factory: pytest.TempPathFactory) ->
     return data
 
 
+@pytest.fixture(scope="session")
+def huddle_data(short_twin: TwinRun, tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """Only the huddle tests and repeatability records (no identification experiments)."""
+    data = tmp_path_factory.mktemp("huddle-data")
+    subset = {k: v for k, v in short_twin.recordings.items()
+              if k.startswith(("data_huddle", "data_rep"))}
+    write_twin(TwinRun(recordings=subset, truth=short_twin.truth, seed=short_twin.seed,
+                       experiments=short_twin.experiments), data)
+    return data
+
+
 @pytest.fixture
 def data_copy(stage_data: Path, tmp_path: Path) -> Path:
     """A private copy of :func:`stage_data` a test may damage."""
