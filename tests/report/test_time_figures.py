@@ -22,7 +22,7 @@ def _line(panel: Panel) -> Line:
 @pytest.mark.parametrize("name", sorted(SEED_TIME_FIGURES))
 def test_one_panel_per_signal_with_units_and_axis_colours(ident_twin: TwinRun, name: str) -> None:
     ds = ident_twin.recordings[name]
-    key, ref = SEED_TIME_FIGURES[name]
+    key, ref, _title = SEED_TIME_FIGURES[name]
     fig = experiment_figure(ds, key=key, title=name, caption="c", seed_ref=ref,
                             gn0_rad_per_v=GN0, trim_s=1.0)
     drawn = [p.traces[0].name for p in fig.panels]

@@ -133,15 +133,14 @@ def current_amplifier_figure(gi: Mapping[str, CurrentAmplifierGain],
         h = np.abs(est.frf.values[1:, 0, 0])
         gazc = known_ga_zc(nominal, axis=axis, f_hz=f)
         top.append(Panel(
-            traces=(Line(f, h, name=f"measured {u} → {v}", color=color, width=1.0),
+            traces=(Line(f, h, name=f"measured {u} → {v}", color=color, width=2.5),
                     Line(f, gazc * g.theoretical_a_per_v,
                          name="Ga·Zc·Gi, theoretical Gi = 1/(R + Rc)", color="#7f7f7f",
                          dash="dash", group="theory"),
                     Line(f, gazc * g.gain_a_per_v, name="Ga·Zc·Gi, identified Gi",
                          color=_MODEL_COLOR, width=1.0, group="identified")),
             x_label="Frequency [Hz]", y_label=f"|{v}/{u}| [V/V]", x_log=True, y_log=True,
-            title=(f"{_AXIS_WORD[axis].capitalize()}: Gi = {1e3 * g.gain_a_per_v:.3f} mA/V "
-                   f"identified, {1e3 * g.theoretical_a_per_v:.2f} mA/V theoretical"),
+            title=f"{_AXIS_WORD[axis].capitalize()}: Gi = {1e3 * g.gain_a_per_v:.3f} mA/V",
             height=2.0))
         fb = np.asarray(g.frequency_hz)
         bottom.append(Panel(

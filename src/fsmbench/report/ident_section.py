@@ -127,13 +127,13 @@ def _time_figure(name: str, recordings: Mapping[str, xr.Dataset], *, bench: Benc
                  trims: Mapping[str, float]) -> list[Figure]:
     if name not in recordings:
         return []
-    key, ref = SEED_TIME_FIGURES[name]
+    key, ref, title = SEED_TIME_FIGURES[name]
     trim = float(trims.get(name, 0.0))
     info = EXPERIMENTS[name]
-    caption = f"{info.description}. The whole record as recorded."
+    caption = f"Record {name}. {info.description}; the whole record."
     if trim > 0:
         caption += f" Grey: the first {trim:g} s, which the seed's processing removes."
-    return [experiment_figure(recordings[name], key=key, title=f"Recording {name}",
+    return [experiment_figure(recordings[name], key=key, title=title,
                               caption=caption, seed_ref=ref,
                               gn0_rad_per_v=bench.nominal.newport.metrology_gain_rad_per_v,
                               trim_s=trim)]

@@ -81,14 +81,20 @@ def signal_panels(gn0_rad_per_v: float) -> tuple[SignalPanel, ...]:
 
 
 # The seed's time-domain figures of the identification experiments:
-# experiment -> (figure key, seed figure).
-SEED_TIME_FIGURES: dict[str, tuple[str, str]] = {
-    "data_cal_pd_h": ("fig8_cal_pd_h_time", "Fig. 8"),
-    "data_cal_pd_v": ("fig9_cal_pd_v_time", "Fig. 9"),
-    "data_uch": ("fig15_uch_time", "Fig. 15"),
-    "data_ucv": ("fig16_ucv_time", "Fig. 16"),
-    "data_unh": ("fig23_unh_time", "Fig. 23"),
-    "data_unv": ("fig24_unv_time", "Fig. 24"),
+# experiment -> (figure key, seed figure, title in words).
+SEED_TIME_FIGURES: dict[str, tuple[str, str, str]] = {
+    "data_cal_pd_h": ("fig8_cal_pd_h_time", "Fig. 8",
+                      "4QD calibration, horizontal: the recorded signals"),
+    "data_cal_pd_v": ("fig9_cal_pd_v_time", "Fig. 9",
+                      "4QD calibration, vertical: the recorded signals"),
+    "data_uch": ("fig15_uch_time", "Fig. 15",
+                 "Noise on the Sercalo's horizontal command: the recorded signals"),
+    "data_ucv": ("fig16_ucv_time", "Fig. 16",
+                 "Noise on the Sercalo's vertical command: the recorded signals"),
+    "data_unh": ("fig23_unh_time", "Fig. 23",
+                 "Noise on the Newport's horizontal command: the recorded signals"),
+    "data_unv": ("fig24_unv_time", "Fig. 24",
+                 "Noise on the Newport's vertical command: the recorded signals"),
 }
 
 
