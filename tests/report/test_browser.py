@@ -141,3 +141,36 @@ def test_a_broken_file_is_named_in_the_first_screen(browser: Any,
     page.wait_all_drawn()
     assert page.errors == []
     page.page.close()
+
+
+def test_rules_and_labels_sit_at_their_values_on_log_axes(browser: Any, tmp_path: Path) -> None:
+    # plotly.js takes shapes in data units but annotations in decades on a log axis: a
+    # rule at 100 must be drawn at 10², its label beside it, the axis not stretched.
+    import numpy as np
+
+    from fsmbench.report.figure import Figure, Label, Line, Panel, Rule
+    from fsmbench.report.html import Section, render_report
+
+    f = np.logspace(0, 3, 50)
+    fig = Figure(key="log_rules", title="t", caption="", panels=(Panel(
+        traces=(Line(f, f, name="y = x"),), x_label="x [1]", y_label="y [1]", x_log=True,
+        y_log=True, rules=(Rule(100.0, name="y = 100"),), labels=(Label(30.0, 30.0, "here"),)),))
+    path = tmp_path / "log.html"
+    path.write_text(render_report(title="t", sections=[Section(title="s", blocks=(fig,))]))
+    page = Page(browser, path)
+    page.wait_all_drawn()
+    got = page.page.evaluate("""() => {
+        const div = document.getElementById('plot-log_rules');
+        const ya = div._fullLayout.yaxis, xa = div._fullLayout.xaxis;
+        const d = div.querySelector('.shapelayer path').getAttribute('d');
+        const y = parseFloat(d.split(',')[1]);
+        const ann = div._fullLayout.annotations.find(a => a.text === 'here');
+        return {range: ya.range, shape_y: y, expect_y: ya._offset + ya.l2p(2),
+                ann_x: ann.x, ann_y: ann.y, xrange: xa.range};
+    }""")
+    assert got["range"][1] < 3.2 and got["xrange"][1] < 3.2  # nothing stretched to 10^100
+    assert abs(got["shape_y"] - got["expect_y"]) < 1.0  # one pixel: rounding of the path
+    assert got["ann_x"] == pytest.approx(np.log10(30.0)) and got["ann_y"] == pytest.approx(
+        np.log10(30.0))
+    assert page.errors == []
+    page.page.close()

@@ -75,6 +75,11 @@ def _domains(fig: Figure, height_px: int) -> Iterator[tuple[int, tuple[float, fl
         top = bottom - gap
 
 
+def _coord(value: float, *, log: bool) -> float:
+    """A data coordinate as plotly.js wants it for an annotation (decades on a log axis)."""
+    return float(np.log10(value)) if log and value > 0 else float(value)
+
+
 def _hover(panel: Panel) -> str:
     return (f"%{{fullData.name}}<br>{panel.x_label}: %{{x:.5g}}<br>"
             f"{panel.y_label}: %{{y:.4g}}<extra></extra>")
@@ -204,12 +209,16 @@ def figure_json(fig: Figure) -> dict[str, Any]:
                         else _bars_trace(trace, refs, color, show, arrays))
         for rule in panel.rules:
             horizontal = rule.axis == "y"
+            # On a log axis plotly.js (v3+) takes shapes in data units but annotations in
+            # decades (checked in Chromium: tests/report/test_browser.py).
+            at = rule.value
+            at_text = _coord(rule.value, log=panel.y_log if horizontal else panel.x_log)
             layout["shapes"].append({
                 "type": "line", "layer": "below",
                 "xref": f"{refs[0]} domain" if horizontal else refs[0],
                 "yref": refs[1] if horizontal else f"{refs[1]} domain",
-                "x0": 0 if horizontal else rule.value, "x1": 1 if horizontal else rule.value,
-                "y0": rule.value if horizontal else 0, "y1": rule.value if horizontal else 1,
+                "x0": 0 if horizontal else at, "x1": 1 if horizontal else at,
+                "y0": at if horizontal else 0, "y1": at if horizontal else 1,
                 "line": {"color": rule.color, "width": 1, "dash": _DASH[rule.dash]}})
             if rule.name:
                 layout["annotations"].append({
@@ -217,8 +226,8 @@ def figure_json(fig: Figure) -> dict[str, Any]:
                                                                      "color": rule.color},
                     "xref": f"{refs[0]} domain" if horizontal else refs[0],
                     "yref": refs[1] if horizontal else f"{refs[1]} domain",
-                    "x": 1 if horizontal else rule.value, "xanchor": "right",
-                    "y": rule.value if horizontal else 1, "yanchor": "bottom"})
+                    "x": 1 if horizontal else at_text, "xanchor": "right",
+                    "y": at_text if horizontal else 1, "yanchor": "bottom"})
         if panel.shade is not None:
             layout["shapes"].append({
                 "type": "rect", "layer": "below", "xref": refs[0], "yref": f"{refs[1]} domain",
@@ -226,7 +235,8 @@ def figure_json(fig: Figure) -> dict[str, Any]:
                 "fillcolor": "#dddddd", "opacity": 0.6, "line": {"width": 0}})
         for lab in panel.labels:
             layout["annotations"].append({
-                "text": lab.text, "x": lab.x, "y": lab.y, "xref": refs[0], "yref": refs[1],
+                "text": lab.text, "x": _coord(lab.x, log=panel.x_log),
+                "y": _coord(lab.y, log=panel.y_log), "xref": refs[0], "yref": refs[1],
                 "showarrow": False, "xanchor": "left", "yanchor": "bottom",
                 "font": {"size": 10}})
         if panel.title:
