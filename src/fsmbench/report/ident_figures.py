@@ -74,12 +74,12 @@ def qd_regression_figure(qd: Mapping[str, QdCalibration],
         step = max(1, x.size // _SCATTER_POINTS)
         xx = np.array([x.min(), x.max()])
         panels.append(Panel(
-            traces=(Line(1e6 * x[::step], y[::step], name=f"measured {vp}", color=axis_color(vp),
+            traces=(Line(1e3 * x[::step], y[::step], name=f"measured {vp}", color=axis_color(vp),
                          markers=True, opacity=0.35),
-                    Line(1e6 * xx, cal.gain_v_per_rad * xx + cal.offset_v,
+                    Line(1e3 * xx, cal.gain_v_per_rad * xx + cal.offset_v,
                          name="fitted line", color=_MODEL_COLOR, dash="dash", width=1.2,
                          group="fit")),
-            x_label="Beam angle 2·gn0·" + vn + " [µrad]", y_label=f"4QD output {vp} [V]",
+            x_label="Beam angle 2·gn0·" + vn + " [mrad]", y_label=f"4QD output {vp} [V]",
             title=(f"{_AXIS_WORD[axis].capitalize()}: {cal.gain_v_per_rad:.2f} V/rad, "
                    f"R² = {cal.r_squared:.5f}")))
     return Figure(key="fig10_qd_regression", title="4QD calibration: linear regression",
