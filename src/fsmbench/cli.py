@@ -117,10 +117,18 @@ def _out_arguments(argv: Sequence[str], out: str | None) -> list[str]:
 def _run_folder(args: argparse.Namespace, out: str, *, data: str | Path | None,
                 need_bytes: float) -> Iterator[Any]:
     from fsmbench.io.matwrite import wall_clock_headers
-    from fsmbench.io.outdir import output_transaction
+    from fsmbench.io.outdir import OutputError, output_transaction
 
     def warn(msg: str) -> None:
         print(f"fsmbench {args.command}: warning: {msg}", file=sys.stderr)
+
+    final = Path(out).resolve()
+    for option, value in (("--params", args.params),
+                          ("--identification", getattr(args, "identification", None))):
+        if value is not None and (Path(value).resolve() == final
+                                  or final in Path(value).resolve().parents):
+            raise OutputError(value, f"{option} is inside --out {out}, which this run replaces "
+                                     "as a whole; copy it elsewhere or choose another --out")
 
     with output_transaction(out, command=args.command,
                             arguments=_out_arguments(args.argv, out), data_dir=data,

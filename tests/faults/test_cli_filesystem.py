@@ -268,3 +268,22 @@ def test_sigterm_handler_is_restored(kit: SimpleNamespace, run_cli: Callable[...
     before = signal.getsignal(signal.SIGTERM)
     assert run_cli("params").status == 0
     assert signal.getsignal(signal.SIGTERM) == before
+
+
+def test_inputs_inside_out_are_refused(kit: SimpleNamespace, old_run: Path,
+                                       run_cli: Callable[..., Any]) -> None:
+    before = kit.hashes(old_run)
+    r = run_cli("params", "--params", old_run / "bench.toml", "--out", old_run)
+    kit.assert_one_line_verdict(r, "params", str(old_run / "bench.toml"),
+                                "--params is inside --out")
+    assert kit.hashes(old_run) == before
+
+
+def test_out_is_the_current_folder(kit: SimpleNamespace, old_run: Path,
+                                   run_cli: Callable[..., Any],
+                                   monkeypatch: pytest.MonkeyPatch) -> None:
+    before = kit.hashes(old_run)
+    monkeypatch.chdir(old_run)
+    r = run_cli("params", "--out", ".")
+    kit.assert_one_line_verdict(r, "params", str(old_run), "is the current folder")
+    assert kit.hashes(old_run) == before

@@ -148,6 +148,11 @@ def preflight(out_dir: str | Path, *, data_dir: str | Path | None = None,
     """
     out = Path(out_dir).resolve()
     check_out_dir(out, None if data_dir is None else Path(data_dir))
+    cwd = Path.cwd().resolve()
+    if cwd == out or out in cwd.parents:
+        raise OutputError(out, "is the current folder or holds it; a run replaces its output "
+                               "folder as a whole, so run fsmbench from another folder or "
+                               "choose another --out")
     blocker = _first_existing(out)
     if blocker != out and not blocker.is_dir():
         raise OutputError(blocker, f"is a file, not a folder, so --out {out_dir} cannot be "
