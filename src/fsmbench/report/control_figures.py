@@ -104,7 +104,7 @@ def loop_gain_figure(lp: LoopAnalysis, *, key: str, title: str, caption: str,
                                        color=_AXIS_COLOR[axis]),),
                           x_label=FREQ, y_label=f"|L{axis}| [1]", x_log=True, y_log=True,
                           title=f"Loop gain, {AXIS_WORDS[axis]}",
-                          rules=(Rule(1.0, dash="dash"),), height=2.0))
+                          rules=(Rule(1.0, name="|L| = 1", dash="dash"),), height=2.0))
         phases.append(Panel(traces=(Line(lp.f_hz, bode_phase_deg(li, f_hz=lp.f_hz,
                                                                  anchor_hz=m.crossover_hz),
                                          name=legend, color=_AXIS_COLOR[axis],

@@ -549,7 +549,7 @@ def _section10(res: DesignResult) -> Section:
         loop_gain_figure(
             newport, key="fig43_newport_loop_gain", seed_ref="Fig. 43",
             title="Loop gains of the Newport alignment loop",
-            caption=(f"Bode plot of L = Gn Kn on each axis with the seed's Newport controller "
+            caption=(f"Bode plot of L = Gn Kn on each axis with the seed's Newport controller"
                      f"; plant: {newport.plant_source}, the Newport's 0.5 ms delay "
                      f"exact; phase unwrapped and placed in (−360°, 0] at the crossover.")),
         _stability(newport),
