@@ -46,7 +46,7 @@ def test_design_stage_writes_the_contracted_keys(ident_twin: TwinRun, bench: Ben
     plant = choose_plant(ident_twin.recordings, bench=bench)
     _stage, paths = design_stage(bench=bench, out_dir=tmp_path, plant=plant)
     assert sorted(p.name for p in paths) == ["controllers.mat", "controllers_sos.json",
-                                             "design.json"]
+                                             "design.json", "fsmbench_load.m"]
     data = json.loads((tmp_path / "design.json").read_text())
     for key in DESIGN_KEYS:
         assert isinstance(_get(data, key), float), key

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 import scipy.io
 
-from fsmbench.study import run_study
+from fsmbench.study import StudyResult, run_study
 from fsmbench.twin import TwinRun, write_twin
 
 
@@ -27,6 +27,7 @@ def data_dir(short_twin: TwinRun, tmp_path: Path) -> Path:
                   truth=short_twin.truth, seed=short_twin.seed,
                   experiments=short_twin.experiments)
     write_twin(sub, folder)
+    (folder / "twin_truth.json").unlink()  # recorded data have no truth beside them
     return folder
 
 
@@ -46,14 +47,16 @@ def test_study_on_a_partial_folder_says_what_it_skipped(data_dir: Path, tmp_path
     assert "NaN" in result.skipped_experiments["data_unh"]
     assert "no data_rep_h.mat" in result.skipped_experiments["data_rep_h"]
     report = Path(result.report).read_text()
-    assert "skipped: " in report and "data_unh" in report
+    verdict = report[report.index('id="verdict"'):report.index("</section>")]
+    assert "data_unh.mat" in verdict and "NaN" in verdict  # named in the first screen
     # Identification ran on what is there (2.2, 2.3) and says what it skipped.
     stage = next(s for s in result.stages if s.name == "identify")
     assert stage.ran and "newport: missing data_unh, data_unv" in stage.reason
     assert (tmp_path / "out" / "identification.json").is_file()
-    assert "4. Identification" in report
-    summary = json.loads((tmp_path / "out" / "study.json").read_text())
-    assert summary["experiments"] == list(result.experiments)
+    assert "2. Identification of the system dynamics" in report
+    assert "true value (twin)" not in report  # recorded data: no twin wording
+    study = json.loads((tmp_path / "out" / "study.json").read_text())
+    assert study["experiments"] == list(result.experiments)
 
 
 def test_study_refuses_to_write_into_the_data_folder(data_dir: Path) -> None:
@@ -68,12 +71,12 @@ def test_missing_data_folder_is_named(tmp_path: Path) -> None:
         run_study(out_dir=tmp_path / "out", data_dir=tmp_path / "nowhere")
 
 
-def test_study_on_the_twin_writes_its_data_and_report(tmp_path: Path) -> None:
-    messages: list[str] = []
-    result = run_study(out_dir=tmp_path, duration_s=5.0, progress=messages.append)
-    assert len(result.experiments) == 13 and not result.skipped_experiments
-    assert (tmp_path / "twin-data" / "twin_truth.json").is_file()
-    assert Path(result.report).stat().st_size > 100_000  # figures are embedded
-    assert any("simulating" in m for m in messages)  # progress is shown
-    ident = json.loads((tmp_path / "identification.json").read_text())
+def test_study_on_the_twin_writes_its_data_and_report(twin_study: StudyResult) -> None:
+    out = Path(twin_study.out_dir)
+    assert len(twin_study.experiments) == 13 and not twin_study.skipped_experiments
+    assert (out / "twin-data" / "twin_truth.json").is_file()
+    report = Path(twin_study.report).read_text()
+    assert "true value (twin)" in report  # the twin's truth is beside its data
+    assert report.count("<script>") == 2  # plotly.js once, the drawing script once
+    ident = json.loads((out / "identification.json").read_text())
     assert set(ident["sercalo"]) == {"h", "v"}

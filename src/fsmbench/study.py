@@ -213,11 +213,11 @@ def run_study(*, out_dir: str | Path, data_dir: str | Path | None = None,
     else:
         source = f"recorded data in {data}"
 
-    loaded = load_recordings(data, progress=say, fs_hz=bench.nominal.converter.fs_hz)
+    conv = bench.nominal.converter
+    loaded = load_recordings(data, progress=say, fs_hz=conv.fs_hz, adc_range_v=conv.range_v,
+                             adc_bits=conv.bits)
     recordings = loaded.recordings
-    stages.append(StageStatus("recordings", bool(recordings),
-                              reason="" if recordings else "no experiment found",
-                              outputs=tuple(recordings)))
+    stages.append(StageStatus("recordings", True, outputs=tuple(recordings)))
     for name, why in loaded.skipped.items():
         say(f"skipped {name}: {why}")
     truth = read_twin_truth(data / "twin_truth.json")
@@ -250,8 +250,12 @@ def run_study(*, out_dir: str | Path, data_dir: str | Path | None = None,
     lap("design")
 
     say("writing the report")
-    checks = [*loaded.checks, *(ident.checks if ident is not None else ())]
-    notices = [*loaded.notices, *(ident.notices if ident is not None else ())]
+    # A check can be run by several stages on the same record: list each verdict once.
+    checks = list(dict.fromkeys([*loaded.checks, *(ident.checks if ident is not None else ()),
+                                 *budget.checks]))
+    notices = list(dict.fromkeys([*loaded.notices,
+                                  *(ident.notices if ident is not None else ()),
+                                  *budget.notices]))
     summary = build_summary(
         source=source, is_twin=is_twin, spec=spec, skipped=loaded.skipped,
         n_experiments=len(EXPERIMENTS), n_read=len(recordings), checks=checks, notices=notices,

@@ -1,36 +1,66 @@
-"""The self-contained HTML report."""
+"""The self-contained HTML report: blocks in reading order, escaped, nothing from elsewhere."""
 
 from __future__ import annotations
 
-import base64
+import json
 import re
 from pathlib import Path
 
-import matplotlib.pyplot as plt
+import numpy as np
 import pytest
 
-from fsmbench.report.html import Section, Table, figure_from_matplotlib, render_report, write_report
+from fsmbench.report.figure import Figure, Line, Panel
+from fsmbench.report.html import Note, Section, Table, iter_figures, render_report, write_report
 
 
-def _figure() -> Section:
-    fig, ax = plt.subplots()
-    ax.plot([0, 1], [0, 1])
-    ax.set_xlabel("Time [s]")
-    embedded = figure_from_matplotlib(fig, title="A <figure>", caption="x & y", seed_ref="Fig. 8")
-    return Section(title="Results & <more>", paragraphs=("a < b",),
-                   tables=(Table(caption="t", header=("k", "v"), rows=(("<k>", "1"),)),),
-                   figures=(embedded,), subsections=(Section(title="Sub"),))
+def _figure(key: str = "fig8_test") -> Figure:
+    return Figure(key=key, title="A <figure>", caption="x & y", seed_ref="Fig. 8",
+                  panels=(Panel(traces=(Line(np.arange(3.0), np.arange(3.0), name="a</script>"),),
+                                x_label="Time [s]", y_label="Vph [V]"),))
 
 
-def test_report_is_self_contained_and_escaped(tmp_path: Path) -> None:
-    path = write_report(tmp_path / "r.html", title="T & T", sections=[_figure()], meta=("m",))
+def _section() -> Section:
+    return Section(title="Results & <more>", blocks=(
+        "a < b", Table(caption="t", header=("k", "v"), rows=(("<k>", "1"),)), _figure(),
+        Note("odd & explained", ref="errata E1"), "after the figure"),
+        subsections=(Section(title="Sub", blocks=(_figure("fig9_sub"),)),))
+
+
+def test_report_is_self_contained_escaped_and_in_reading_order(tmp_path: Path) -> None:
+    path = write_report(tmp_path / "r.html", title="T & T", sections=[_section()],
+                        summary={"verdict": "</script><b>"})
     text = path.read_text()
-    assert "<script" not in text and "http://" not in text and "https://" not in text
+    assert "http://" not in text.replace("http://www.w3.org", "")  # plotly.js names SVG's
+    assert "src=" not in re.sub(r"<script>.*?</script>", "", text, flags=re.S)  # no loads
     assert "a &lt; b" in text and "&lt;k&gt;" in text and "Results &amp; &lt;more&gt;" in text
-    (png,) = re.findall(r"data:image/png;base64,([A-Za-z0-9+/=]+)", text)
-    assert base64.b64decode(png).startswith(b"\x89PNG\r\n\x1a\n")  # a real PNG
-    assert '<a href="#results----more">' in text  # navigation to the section
-    assert "<h3" in text and "(seed Fig. 8)" in text
+    # Blocks keep their order: paragraph, table, figure, note, paragraph.
+    order = [text.index(s) for s in ("a &lt; b", "<caption>t</caption>", 'id="fig-fig8_test"',
+                                     "odd &amp; explained (errata E1)", "after the figure")]
+    assert order == sorted(order)
+    assert "<h3" in text and "(seed Fig. 8)" in text and "Figure 2. A &lt;figure&gt;" in text
+    # JSON inside <script> cannot close it early: "</" is escaped, and it parses back.
+    for payload in re.findall(r'<script type="application/json" id="[^"]+">(.*?)</script>', text,
+                              flags=re.S):
+        assert "</" not in payload
+        json.loads(payload)
+    assert text.count("<thead>") == 1  # header rows repeat across printed pages
+
+
+def test_plotly_is_embedded_once_and_only_with_figures() -> None:
+    with_figs = render_report(title="T", sections=[_section()])
+    assert with_figs.count("plotly.js v") == 1
+    assert "plotly.js" not in render_report(title="T", sections=[Section(title="S",
+                                                                         blocks=("p",))])
+
+
+def test_figure_keys_must_be_unique() -> None:
+    sec = Section(title="S", blocks=(_figure("same"), _figure("same")))
+    with pytest.raises(ValueError, match="figure keys used twice: same"):
+        render_report(title="T", sections=[sec])
+
+
+def test_iter_figures_walks_subsections_in_order() -> None:
+    assert [f.key for f in iter_figures([_section()])] == ["fig8_test", "fig9_sub"]
 
 
 def test_table_rows_must_match_the_header() -> None:
@@ -39,5 +69,5 @@ def test_table_rows_must_match_the_header() -> None:
 
 
 def test_render_is_a_pure_function() -> None:
-    sec = Section(title="S", paragraphs=("p",))
+    sec = _section()
     assert render_report(title="T", sections=[sec]) == render_report(title="T", sections=[sec])
