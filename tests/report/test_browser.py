@@ -42,6 +42,8 @@ class Page:
     def __init__(self, browser: Any, path: Path) -> None:
         self.page = browser.new_page(viewport={"width": 1280, "height": 1000})
         self.errors: list[str] = []
+        self.requests: list[str] = []
+        self.page.on("request", lambda r: self.requests.append(r.url))
         self.page.on("console",
                      lambda m: self.errors.append(m.text) if m.type == "error" else None)
         self.page.on("pageerror", lambda e: self.errors.append(str(e)))
@@ -82,6 +84,9 @@ def test_every_figure_is_drawn_without_a_console_error(twin_page: Page) -> None:
     }""")
     assert empty == []
     assert twin_page.errors == []
+    # Self-contained: the page asked for nothing but itself (and inline data).
+    assert {u for u in twin_page.requests if not u.startswith("data:")} == {
+        Path(twin_page.page.url[len("file://"):]).as_uri()}
 
 
 def test_the_verdict_is_in_the_first_screen(twin_page: Page, twin_study: StudyResult) -> None:
