@@ -285,7 +285,7 @@ def run_study(*, out_dir: str | Path, data_dir: str | Path | None = None,
         say(f"writing every figure as {', '.join(figures)} to {out / 'figures'}")
         exported = export_figures(iter_figures(sections), out / "figures", formats=figures)
         lap("figures")
-    say(f"report written to {report_path}")
+    say("report written")
     result = StudyResult(out_dir=str(out), data_dir=str(data), source=source,
                          report=str(report_path), stages=tuple(stages),
                          experiments=tuple(recordings),

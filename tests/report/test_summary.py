@@ -53,7 +53,7 @@ def test_a_bench_within_every_limit_passes() -> None:
     assert s.verdict.startswith("The bench meets its specifications")
     assert all(r.passed for r in s.requirements)
     # The limiting source is the largest row, with its share of the variance (0.8² = 64 %).
-    assert s.limiting.startswith("DAC quantisation") and "mirror piston" in s.limiting
+    assert s.limiting.startswith("DAC quantisation, 1.8 nm")
     budget = next(r for r in s.requirements if r.name == "distance_error_budget")
     assert "64%" in budget.explanation
 

@@ -25,6 +25,8 @@ _DASH = {"solid": "solid", "dash": "dash", "dot": "dot", "dashdot": "dashdot"}
 # Gaps between panels, as fractions of the figure.
 _H_GAP = 0.08
 _V_GAP_PX = 62
+# Plotting width of a one-column figure in the report's page (1180 px less margins).
+_PAGE_PX = 1050
 
 
 @cache
@@ -102,8 +104,9 @@ class _Arrays:
 
 
 def _line_trace(line: Line, panel: Panel, refs: tuple[str, str], color: str,
-                show: bool, arrays: _Arrays) -> dict[str, Any]:
-    x, y = (envelope(line.x, line.y) if line.decimate else (line.x, line.y))
+                show: bool, arrays: _Arrays, width_px: int) -> dict[str, Any]:
+    # A long record is drawn as its min/max per pixel column: every extreme, no more.
+    x, y = (envelope(line.x, line.y, columns=width_px) if line.decimate else (line.x, line.y))
     if panel.y_log:  # a log axis cannot show values ≤ 0: leave a gap, not a clipped point
         y = np.where(y > 0, y, np.nan)
     if panel.x_log:
@@ -204,7 +207,8 @@ def figure_json(fig: Figure) -> dict[str, Any]:
                 color = color_of.setdefault(key, PALETTE[len(color_of) % len(PALETTE)])
             show = key not in shown
             shown.add(key)
-            data.append(_line_trace(trace, panel, refs, color, show, arrays)
+            data.append(_line_trace(trace, panel, refs, color, show, arrays,
+                                    max(200, round(_PAGE_PX * (xd[1] - xd[0]))))
                         if isinstance(trace, Line)
                         else _bars_trace(trace, refs, color, show, arrays))
         for rule in panel.rules:

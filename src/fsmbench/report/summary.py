@@ -116,6 +116,15 @@ class Summary:
         return result
 
 
+# How a budget row reaches the distance, in words (budget.table's mechanism keys).
+_MECHANISM_WORDS = {
+    "linear": "adds to the measured distance directly",
+    "piston (4.2) + geometric (4.1)": ("moves the beam angle, which the distance sees through "
+                                        "mirror piston (4.2) and the path geometry (4.1)"),
+    "geometric (4.1)": "enters through the path geometry (4.1), quadratically",
+}
+
+
 def _pair(values: Mapping[str, float], spec: str, scale: float = 1.0) -> str:
     return " / ".join(format(values[a] * scale, spec) for a in ("h", "v") if a in values)
 
@@ -240,19 +249,20 @@ def build_summary(*, source: str, is_twin: bool, spec: Specification,
         total = float(b.total_rms_m)
         limit = spec.distance_error_max_m
         top = max(b.rows, key=lambda r: r.rms_m)
+        how = _MECHANISM_WORDS.get(top.mechanism, top.mechanism)
         reqs.append(Requirement(
             name="distance_error_budget",
             description="Attocube distance error, every source combined (rms)",
             value=f"{total * 1e9:.3g} nm", limit=f"≤ {limit * 1e9:g} nm",
             passed=total <= limit,
             explanation=(f"Limiting source: {top.name} ({top.rms_m * 1e9:.3g} nm, "
-                         f"{(top.rms_m / total) ** 2:.0%} of the variance), {top.mechanism}."),
+                         f"{(top.rms_m / total) ** 2:.0%} of the variance); it {how}."),
             link="#error-budget"))
         stages.append(StageLine("budget", "ran" if not budget.skipped else "partial",
                                 f"distance error {total * 1e9:.3g} nm rms; limiting source "
                                 f"{top.name}", "#error-budget"))
-        limiting = (f"{top.name}: {top.rms_m * 1e9:.3g} nm of the {total * 1e9:.3g} nm total "
-                    f"({top.mechanism})")
+        limiting = (f"{top.name}, {top.rms_m * 1e9:.3g} nm of the {total * 1e9:.3g} nm total: "
+                    f"it {how}.")
     else:
         stages.append(StageLine("budget", "skipped", "not run", "#error-budget"))
         limiting = "unknown: the budget did not run"
