@@ -287,3 +287,14 @@ def test_out_is_the_current_folder(kit: SimpleNamespace, old_run: Path,
     r = run_cli("params", "--out", ".")
     kit.assert_one_line_verdict(r, "params", str(old_run), "is the current folder")
     assert kit.hashes(old_run) == before
+
+
+def test_swap_without_renameat2(kit: SimpleNamespace, old_run: Path,
+                                run_cli: Callable[..., Any],
+                                monkeypatch: pytest.MonkeyPatch) -> None:
+    # Filesystems or kernels without RENAME_EXCHANGE: two renames, signals held between.
+    monkeypatch.setattr("fsmbench.io.outdir._exchange", lambda _a, _b: False)
+    r = run_cli("simulate", old_run, *SIM)
+    assert r.status == 0, r.err
+    assert sorted(kit.hashes(old_run)) == ["data_cal_pd_h.mat", "run.json", "twin_truth.json"]
+    assert kit.leftovers(old_run.parent) == []
