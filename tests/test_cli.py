@@ -94,3 +94,14 @@ def test_stage_commands_refuse_a_missing_folder(command: str, tmp_path: Path,
                                                 capsys: pytest.CaptureFixture[str]) -> None:
     assert main([command, str(tmp_path / "nope"), "--out", str(tmp_path / "out")]) == 2
     assert "nope" in capsys.readouterr().err
+
+
+def test_the_distance_target_is_read_in_nanometres_and_checked() -> None:
+    from fsmbench.cli import _parser
+
+    args = _parser().parse_args(["study", "--out", "x", "--distance-target", "2.5"])
+    assert args.distance_target_m == pytest.approx(2.5e-9)
+    assert _parser().parse_args(["study", "--out", "x"]).distance_target_m == 5e-9
+    for bad in ("-1", "0", "inf", "nan", "five"):
+        with pytest.raises(SystemExit):
+            _parser().parse_args(["study", "--out", "x", "--distance-target", bad])

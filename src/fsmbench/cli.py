@@ -343,6 +343,7 @@ def _cmd_design(args: argparse.Namespace) -> int:
 
 
 def _cmd_study(args: argparse.Namespace) -> int:
+    from fsmbench.report.summary import Specification
     from fsmbench.study import run_study
 
     data = None if args.data is None else Path(args.data)
@@ -358,7 +359,8 @@ def _cmd_study(args: argparse.Namespace) -> int:
     say = _progress()
     with _run_folder(args, args.out, data=data, need_bytes=need) as run:
         result = run_study(out_dir=run.staging, data_dir=data, bench=bench, seed=args.seed,
-                           duration_s=args.duration, progress=say, figures=args.figures)
+                           duration_s=args.duration, progress=say, figures=args.figures,
+                           spec=Specification(distance_error_max_m=args.distance_target_m))
     print(run.final_path(result.report))
     for name, why in result.skipped_experiments.items():
         print(f"skipped {name}: {why}", file=sys.stderr)
@@ -384,6 +386,17 @@ def _seconds(text: str) -> float:
     if not math.isfinite(value) or value <= 0:
         raise argparse.ArgumentTypeError(f"{text!r} is not a finite positive number of seconds")
     return value
+
+
+def _nanometres(text: str) -> float:
+    """A finite, positive distance [nm], returned in m."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number of nanometres") from None
+    if not math.isfinite(value) or value <= 0:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a finite positive number of nm")
+    return value * 1e-9
 
 
 def _figure_formats(text: str) -> tuple[str, ...]:
@@ -464,6 +477,9 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--figures", metavar="FORMATS", type=_figure_formats, default=(),
                    help="also write every figure as png and/or pdf into OUT/figures "
                         "(comma list: png, pdf, png,pdf; default none)")
+    p.add_argument("--distance-target", metavar="NM", type=_nanometres, default=5e-9,
+                   dest="distance_target_m",
+                   help="largest acceptable Attocube distance error, rms [nm] (default 5)")
     p.set_defaults(func=_cmd_study)
     return parser
 
