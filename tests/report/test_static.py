@@ -95,7 +95,7 @@ def test_export_writes_png_and_pdf(specs: list[Figure], drawn: list[tuple[Figure
                                    tmp_path: Path) -> None:
     size_in = {spec.key: mfig.get_size_inches() for spec, mfig in drawn}
     out = tmp_path / "figures"
-    paths = export_figures(specs, out, formats=("png", "pdf"))
+    paths = export_figures(specs, out, formats=("png", "pdf"), workers=1)
     assert paths == [out / f"{s.key}.{fmt}" for s in specs for fmt in ("png", "pdf")]
     assert sorted(p.name for p in out.iterdir()) == sorted(p.name for p in paths)  # no .part
     for path in paths:
@@ -116,11 +116,20 @@ def test_export_writes_png_and_pdf(specs: list[Figure], drawn: list[tuple[Figure
 
 
 def test_export_is_reproducible_and_replaces(specs: list[Figure], tmp_path: Path) -> None:
-    first = export_figures(specs[2:3], tmp_path, formats=["pdf"])[0].read_bytes()
+    first = export_figures(specs[2:3], tmp_path, formats=["pdf"], workers=1)[0].read_bytes()
     (tmp_path / "fig40_nyquist.png").write_bytes(b"old")
-    paths = export_figures(specs[2:3], tmp_path, formats=["pdf", "png"])
+    paths = export_figures(specs[2:3], tmp_path, formats=["pdf", "png"], workers=1)
     assert paths[0].read_bytes() == first
     assert paths[1].read_bytes().startswith(b"\x89PNG")
+
+
+def test_worker_processes_write_the_same_files(specs: list[Figure], tmp_path: Path) -> None:
+    some = specs[1:3]  # a decimated record and a fixed-range figure
+    here = export_figures(some, tmp_path / "one", formats=("png", "pdf"), workers=1)
+    pool = export_figures(some, tmp_path / "two", formats=("png", "pdf"), workers=2)
+    assert [p.name for p in here] == [p.name for p in pool]
+    for a, b in zip(here, pool, strict=True):  # records decimated before sending: same drawing
+        assert a.read_bytes() == b.read_bytes(), a.name
 
 
 def _plotted(spec: Figure, i: int, axis: str) -> np.ndarray:
@@ -209,9 +218,9 @@ def test_bad_input_is_refused(specs: list[Figure], tmp_path: Path) -> None:
     bad = Figure("bad_range", "t", "c", (Panel((Line([1.0, 10.0], [1.0, 2.0]),), "x [Hz]",
                                                 "y [-]", x_log=True, x_range=(0.0, 10.0)),))
     with pytest.raises(ValueError, match=r"figure bad_range, panel 1: x range .* positive"):
-        export_figures([specs[2], bad], tmp_path, formats=["png"])
-    assert sorted(p.name for p in tmp_path.iterdir()) == ["fig40_nyquist.pdf",
-                                                          "fig40_nyquist.png"]
+        export_figures([specs[2], bad], tmp_path, formats=["png"], workers=1)
+    # Nothing for the refused calls, nothing for the bad figure.
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["fig40_nyquist.png"]
 
 
 def test_importing_the_report_does_not_import_matplotlib() -> None:
