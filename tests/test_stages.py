@@ -21,7 +21,7 @@ LOOP_KEYS = ["stable", "gain_margin_db", "phase_margin_deg", "modulus_margin", "
 BUDGET_KEYS = ["noise.adc_psd_v2_per_hz", "noise.dac_psd_v2_per_hz",
                "noise.newport_dac_angle_psd_rad2_per_hz", "noise.newport_dac_angle_rms_rad",
                "noise.newport_beam_angle_psd_rad2_per_hz", "noise.sercalo_dac_lsb_beam_angle_rad",
-               "geometry.path_error_m_per_rad2", "total_rms_m",
+               "geometry.path_error_m_per_rad2", "budget.total_rms_m",
                "repeatability.h.nonrep_rms_m", "repeatability.v.nonrep_rms_lpf_m",
                "huddle.1.va_rms_m", "huddle.3.vph_rms_v", "huddle.5.vpv_rms_v"]
 
@@ -48,6 +48,7 @@ def test_design_stage_writes_the_contracted_keys(ident_twin: TwinRun, bench: Ben
     assert sorted(p.name for p in paths) == ["controllers.mat", "controllers_sos.json",
                                              "design.json", "fsmbench_load.m"]
     data = json.loads((tmp_path / "design.json").read_text())
+    assert (data["format"], data["format_version"]) == ("fsmbench.design", 1)
     for key in DESIGN_KEYS:
         assert isinstance(_get(data, key), float), key
     for name in ("seed_controller", "fsmbench_controller", "newport_controller"):
@@ -78,5 +79,9 @@ def test_budget_stage_writes_the_contracted_keys(short_twin: TwinRun, bench: Ben
     for key in BUDGET_KEYS:
         value = _get(data, key)
         assert isinstance(value, float) and value >= 0, key
-    assert {"name", "rms_m"} <= set(data["sources"][0])
-    assert data["total_rms_m"] == pytest.approx(result.total_rms_m)
+    assert (data["format"], data["format_version"]) == ("fsmbench.budget", 2)
+    assert {"id", "name", "rms_m"} <= set(data["budget"]["rows"][0])
+    assert data["budget"]["total_rms_m"] == pytest.approx(result.total_rms_m)
+    # One total, one table: nothing of the budget block repeated at the top.
+    assert not {"sources", "total_rms_m", "total_bias_m", "limiting", "plant"} & set(data)
+    assert data["plant_source"] == plant.source

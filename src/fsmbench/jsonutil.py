@@ -1,14 +1,20 @@
-"""One JSON convention for every result: plain Python numbers, NaN and ±inf as null."""
+"""One JSON convention for every result: plain Python numbers, NaN and ±inf as null.
+
+Every JSON file fsmbench writes starts with ``format`` (``"fsmbench.<name>"``)
+and ``format_version`` (an int, bumped when a key is renamed, moved or changes
+shape); ``docs/results.md`` describes each. A pair of values for the two axes
+is always ``{"h": …, "v": …}`` (:func:`hv`), never a 2-element list.
+"""
 
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from typing import Any
 
 import numpy as np
 
-__all__ = ["plain_json"]
+__all__ = ["hv", "plain_json", "stamped"]
 
 
 def plain_json(value: Any) -> Any:
@@ -29,3 +35,40 @@ def plain_json(value: Any) -> Any:
     if isinstance(value, complex | np.complexfloating):
         return {"re": plain_json(value.real), "im": plain_json(value.imag)}
     return value
+
+
+def hv(pair: Sequence[Any] | np.ndarray) -> dict[str, Any]:
+    """An (h, v) pair as ``{"h": pair[0], "v": pair[1]}``.
+
+    Parameters
+    ----------
+    pair : sequence or array, shape (2,)
+        The horizontal then the vertical axis's value.
+
+    Raises
+    ------
+    ValueError
+        ``pair`` does not hold exactly two values.
+    """
+    if len(pair) != 2:
+        raise ValueError(f"an (h, v) pair needs 2 values, got {len(pair)}")
+    return {"h": pair[0], "v": pair[1]}
+
+
+def stamped(payload: Mapping[str, Any], *, format: str, version: int) -> dict[str, Any]:
+    """``payload`` with ``format`` and ``format_version`` first (they win over its own keys).
+
+    Parameters
+    ----------
+    payload : mapping
+        The file's content.
+    format : str
+        ``"fsmbench.<name>"``, as documented in ``docs/results.md``.
+    version : int
+        The format's version, ≥ 1.
+    """
+    if not format.startswith("fsmbench.") or version < 1:
+        raise ValueError(f"format must be 'fsmbench.<name>' with a version >= 1, "
+                         f"got {format!r} v{version}")
+    rest = {k: v for k, v in payload.items() if k not in ("format", "format_version")}
+    return {"format": format, "format_version": int(version), **rest}

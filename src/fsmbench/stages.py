@@ -13,7 +13,8 @@ The plant a stage uses is the identified one when the identification
 experiments are present and pass their checks, the nominal physical model
 otherwise; the result says which and why (the missing files, or the failed
 check or step by name). ``identification.json`` and ``budget.json`` carry
-``checks`` and ``notices`` lists.
+``checks`` and ``notices`` lists. Every file's format name and version are
+its first keys (``docs/results.md``).
 """
 
 from __future__ import annotations
@@ -30,9 +31,11 @@ from fsmbench.bench.blocks import PlantModel, physical_plant
 from fsmbench.bench.params import Bench
 from fsmbench.ident.pipeline import Identification, identify, write_identification
 from fsmbench.io.atomic import atomic_write_text
-from fsmbench.jsonutil import plain_json
+from fsmbench.jsonutil import plain_json, stamped
 
 __all__ = [
+    "BUDGET_FORMAT",
+    "DESIGN_FORMAT",
     "IDENT_EXPERIMENTS",
     "DesignStage",
     "PlantChoice",
@@ -46,6 +49,13 @@ Progress = Callable[[str], None]
 
 IDENT_EXPERIMENTS = ("data_cal_pd_h", "data_cal_pd_v", "data_uch", "data_ucv", "data_unh",
                      "data_unv")
+
+
+#: ``budget.json``'s format and version (2: no duplicated total/rows/limiting at the top,
+#: ids for keys, (h, v) pairs as ``{"h", "v"}``, huddle bands as a list).
+BUDGET_FORMAT = ("fsmbench.budget", 2)
+#: ``design.json``'s format and version.
+DESIGN_FORMAT = ("fsmbench.design", 1)
 
 
 def _quiet(_msg: str) -> None:
@@ -125,10 +135,14 @@ def budget_stage(recordings: Mapping[str, xr.Dataset], *, bench: Bench, out_dir:
     from fsmbench.budget.study import budget_study
 
     result = budget_study(recordings, bench=bench, plant=plant.plant)
+    # The stage's plant source (which blocks were identified, or why nominal) replaces the
+    # plant model's own shorter one.
     payload = {**result.to_json(), "plant_source": plant.source}
     if plant.identification is not None:  # the plant's own verdicts travel with it
         payload["plant_checks"] = [c.to_json() for c in plant.identification.checks]
-    return result, [_write_json(out_dir / "budget.json", payload)]
+    name, version = BUDGET_FORMAT
+    return result, [_write_json(out_dir / "budget.json",
+                                stamped(payload, format=name, version=version))]
 
 
 @dataclass(frozen=True, eq=False)
@@ -161,5 +175,7 @@ def design_stage(*, bench: Bench, out_dir: Path, plant: PlantChoice, seed: int =
                    "predicted_parts_rad": check.predicted_parts_rad,
                    "duration_s": check.duration_s, "settle_s": check.settle_s,
                    "seed": check.seed}}
-    paths.insert(0, _write_json(out_dir / "design.json", payload))
+    name, version = DESIGN_FORMAT
+    paths.insert(0, _write_json(out_dir / "design.json",
+                                stamped(payload, format=name, version=version)))
     return DesignStage(result=result, twin_check=check, payload=payload), paths

@@ -54,7 +54,7 @@ def test_qd_noise_recovered_from_the_open_loop_tests(run, result):
     qd = result.huddle.qd_noise
     assert qd.tests == ("data_huddle_test_1", "data_huddle_test_2", "data_huddle_test_4")
     for i, axis in enumerate("hv"):
-        truth = np.mean([run.truth["realized"][n][f"qd_noise_v.{axis}"] for n in qd.tests])
+        truth = np.mean([run.truth["realized"][n]["qd_noise_v"][axis] for n in qd.tests])
         # Vph minus ADC and Newport (nominal 3 µrad vs the twin's 2.5): within 10 % (it is ~1 %).
         assert qd.rms_v[i] == pytest.approx(truth, rel=0.10), axis
         assert result.noise.qd_noise_v[i] == qd.rms_v[i]  # the budget uses the measured noise
@@ -160,9 +160,27 @@ def test_study_json(result):
                 "sercalo_dac_lsb_beam_angle_rad"):
         assert isinstance(noise[key], float), key
     assert j["geometry"]["path_error_m_per_rad2"] == pytest.approx(1.0)
-    assert {"name", "rms_m"} <= set(j["sources"][0])
-    assert j["total_rms_m"] == pytest.approx(  # RSS of the rows by construction
-        math.sqrt(sum(s["rms_m"] ** 2 for s in j["sources"])), rel=1e-12)
+    rows = j["budget"]["rows"]
+    assert {"id", "name", "rms_m"} <= set(rows[0])
+    assert j["budget"]["total_rms_m"] == pytest.approx(  # RSS of the rows by construction
+        math.sqrt(sum(s["rms_m"] ** 2 for s in rows)), rel=1e-12)
+    assert j["budget"]["limiting_id"] in {r["id"] for r in rows}
+    assert len({r["id"] for r in rows}) == len(rows)  # ids are unique keys
+    # (h, v) pairs are {"h", "v"}, the same numbers as the result's tuples.
+    assert j["noise"]["qd_gain_v_per_rad"] == {"h": result.noise.qd_gain_v_per_rad[0],
+                                               "v": result.noise.qd_gain_v_per_rad[1]}
+    assert j["dac_noise"]["white_ratio"]["v"] == result.dac_noise.white_ratio[1]
+    assert j["repeatability"]["h"]["tracking_rms_rad"]["v"] == \
+        result.repeatability["h"].tracking_rms_rad[1]
+    src = j["budget"]["angle_sources"]["qd_electronic_noise"]
+    assert src["name"] == "4QD electronic noise"
+    qd_source = result.budget.sources["4QD electronic noise"]
+    assert src["angle_rms_rad"] == dict(zip("hv", qd_source.angle_rms_rad, strict=True))
+    bands = {b["id"]: b for b in j["huddle"]["1"]["bands"]}
+    assert bands["band_3_50_hz"]["low_hz"] == 3.0 and bands["band_3_50_hz"]["high_hz"] == 50.0
+    assert bands["total"]["va_rms_m"] == result.huddle.records[1].band("total").rms
+    comp = j["huddle_comparison"]["comparisons"][0]
+    assert [b["id"] for b in comp["bands"]] == [b["id"] for b in j["huddle"]["1"]["bands"]]
     for d in ("h", "v"):
         assert {"nonrep_rms_m", "nonrep_rms_lpf_m"} <= set(j["repeatability"][d])
     for n in "12345":

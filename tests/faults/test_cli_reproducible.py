@@ -78,7 +78,8 @@ def test_budget(kit: SimpleNamespace, run_cli: Callable[..., Any], tmp_path: Pat
                                                             "--out", out))
     assert sorted(files) == ["budget.json", "run.json"]
     assert "limiting source" in r.err and "nominal physical model" in r.err
-    assert json.loads((tmp_path / "a" / "run" / "budget.json").read_text())["total_rms_m"] > 0
+    assert json.loads((tmp_path / "a" / "run" / "budget.json").read_text()
+                      )["budget"]["total_rms_m"] > 0
 
 
 def test_design(kit: SimpleNamespace, run_cli: Callable[..., Any], tmp_path: Path,

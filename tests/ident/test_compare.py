@@ -6,6 +6,7 @@ import pytest
 
 from fsmbench.bench.params import Bench
 from fsmbench.ident.compare import compare_with_truth, comparison_rows
+from fsmbench.jsonutil import stamped
 from fsmbench.twin.truth import model_values
 
 
@@ -33,3 +34,14 @@ def test_against_nominal_has_no_verdict(bench: Bench) -> None:
 def test_missing_keys_are_left_out(bench: Bench) -> None:
     lines = compare_with_truth({"qd_gain_v_per_rad": {"h": -31.0}}, reference=None, bench=bench)
     assert len(lines) == 2 and lines[1].startswith("qd_gain_v_per_rad.h")
+
+
+def test_format_stamps_are_not_compared(bench: Bench) -> None:
+    """The files' ``format`` keys differ (identification vs twin_truth): no row, same rows."""
+    truth, ident = model_values(bench.true), model_values(bench.nominal)
+    plain = comparison_rows(ident, reference=truth, bench=bench)
+    rows = comparison_rows(stamped(ident, format="fsmbench.identification", version=2),
+                           reference=stamped(truth, format="fsmbench.twin_truth", version=2),
+                           bench=bench)
+    assert rows == plain and len(rows) == 14  # 6 (h, v) pairs + 2 delays
+    assert not any(r.key.startswith("format") for r in rows)

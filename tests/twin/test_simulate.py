@@ -96,7 +96,8 @@ def test_truth_has_the_contracted_keys_and_derived_values(short_twin: TwinRun,
     # The realised noise of each record is the injected rms to sampling error
     # (5 s = 5e4 samples: relative std of a std estimate 1/sqrt(2N) = 0.3 %).
     for name, realized in truth["realized"].items():
-        assert realized["qd_noise_v.h"] == pytest.approx(p.quad_diode.noise_rms_v.h, rel=0.02), name
+        assert realized["qd_noise_v"]["h"] == pytest.approx(p.quad_diode.noise_rms_v.h,
+                                                            rel=0.02), name
 
 
 def test_too_short_duration_is_refused_with_the_experiments_named() -> None:

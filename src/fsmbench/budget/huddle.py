@@ -42,6 +42,7 @@ from fsmbench.bench.params import BenchParams
 from fsmbench.budget.spectra import cumulative_power, first_order_lowpass, seed_welch
 from fsmbench.control.seed import tustin
 from fsmbench.ident import hanning
+from fsmbench.jsonutil import hv
 
 __all__ = [
     "HUDDLE_CONFIGS",
@@ -53,6 +54,7 @@ __all__ = [
     "QdNoiseEstimate",
     "analyse_huddle",
     "analyse_huddle_record",
+    "band_id",
     "estimate_dac_noise",
     "estimate_qd_noise",
     "huddle_number",
@@ -70,6 +72,15 @@ _NAME = re.compile(r"^data_huddle_test_(\d+)$")
 # Welch bands start at 3 Hz: the 1 s Hann window's main lobe spans ±2 Hz, so the
 # bins below carry the drift's leakage.
 _BANDS_HZ = ((3.0, 50.0), (50.0, math.inf))
+
+
+def band_id(name: str) -> str:
+    """A band's JSON id: ``"drift"``, ``"total"``, ``"3–50 Hz"`` → ``"band_3_50_hz"``.
+
+    Decimal points become ``p`` (``"0.5–3 Hz"`` → ``"band_0p5_3_hz"``).
+    """
+    slug = re.sub(r"[^0-9a-z]+", "_", name.lower().replace(".", "p")).strip("_")
+    return f"band_{slug}" if slug[:1].isdigit() else slug
 
 
 def huddle_number(name: str) -> int:
@@ -187,8 +198,9 @@ class HuddleRecord:
         out: dict[str, object] = {f.name: getattr(self, f.name) for f in fields(self)
                                   if not f.name.startswith("psd") and f.name not in
                                   ("f_hz", "bands")}
-        out["bands"] = {b.band: {"f_lo_hz": b.f_lo_hz, "f_hi_hz": b.f_hi_hz, "rms": b.rms,
-                                 "rel_std": b.rel_std} for b in self.bands}
+        out["bands"] = [{"id": band_id(b.band), "name": b.band, "low_hz": b.f_lo_hz,
+                         "high_hz": b.f_hi_hz, "va_rms_m": b.rms, "rel_std": b.rel_std}
+                        for b in self.bands]
         return out
 
 
@@ -268,9 +280,9 @@ class QdNoiseEstimate:
 
     def to_json(self) -> dict[str, object]:
         """Scalars, SI units."""
-        return {"tests": list(self.tests), "raw_rms_v": list(self.raw_rms_v),
-                "rms_v": list(self.rms_v), "adc_rms_v": self.adc_rms_v,
-                "newport_rms_v": list(self.newport_rms_v)}
+        return {"tests": list(self.tests), "raw_rms_v": hv(self.raw_rms_v),
+                "rms_v": hv(self.rms_v), "adc_rms_v": self.adc_rms_v,
+                "newport_rms_v": hv(self.newport_rms_v)}
 
 
 def estimate_qd_noise(records: Sequence[HuddleRecord], *,
@@ -326,10 +338,10 @@ class DacNoiseEstimate:
 
     def to_json(self) -> dict[str, object]:
         """Scalars, SI units."""
-        return {"tests": list(self.tests), "rms_v": list(self.rms_v),
-                "command_rms_v": list(self.command_rms_v),
+        return {"tests": list(self.tests), "rms_v": hv(self.rms_v),
+                "command_rms_v": hv(self.command_rms_v),
                 "max_abs_error_lsb": self.max_abs_error_lsb, "band_hz": list(self.band_hz),
-                "white_ratio": list(self.white_ratio)}
+                "white_ratio": hv(self.white_ratio)}
 
 
 @njit(cache=True)
@@ -436,10 +448,12 @@ class ConfigComparison:
     sentence: str
 
     def to_json(self) -> dict[str, object]:
-        """Plain values."""
+        """Plain values; ``bands``: one entry per band, ids of :func:`band_id`."""
         return {"effect": self.effect, "numerator": self.numerator,
-                "denominator": self.denominator, "ratios": dict(self.ratios),
-                "significant": dict(self.significant), "sentence": self.sentence}
+                "denominator": self.denominator,
+                "bands": [{"id": band_id(b), "name": b, "ratio": r,
+                           "significant": self.significant[b]} for b, r in self.ratios.items()],
+                "sentence": self.sentence}
 
 
 # (effect, numerator test, denominator test): what changes between them (seed Table 3).

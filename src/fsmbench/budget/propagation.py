@@ -48,6 +48,7 @@ from fsmbench.bench.blocks import (
 )
 from fsmbench.bench.geometry import small_angle_law
 from fsmbench.bench.params import BenchParams
+from fsmbench.jsonutil import hv
 
 __all__ = [
     "SOURCE_KINDS",
@@ -312,7 +313,7 @@ class PropagatedSource:
     def to_json(self) -> dict[str, object]:
         """Scalars only (the spectra stay in memory for the figures)."""
         return {"name": self.name, "kind": self.kind, "description": self.description,
-                "seed_section": self.seed_section, "angle_rms_rad": list(self.angle_rms_rad),
+                "seed_section": self.seed_section, "angle_rms_rad": hv(self.angle_rms_rad),
                 "perpendicular_rms_m": self.perpendicular_rms_m,
                 "geometric_mean_m": self.quadratic.mean_m,
                 "geometric_std_m": self.quadratic.std_m}

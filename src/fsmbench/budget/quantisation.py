@@ -30,6 +30,7 @@ from scipy.integrate import cumulative_trapezoid
 
 from fsmbench.bench.blocks import PlantModel, physical_plant
 from fsmbench.bench.params import BenchParams
+from fsmbench.jsonutil import hv
 
 __all__ = ["SEED_4_5", "NoiseSources", "noise_sources"]
 
@@ -93,11 +94,11 @@ class NoiseSources:
     seed_method_sercalo_dac_distance_rms_m: float
 
     def to_json(self) -> dict[str, object]:
-        """Plain floats and lists; ``seed`` holds the seed's printed numbers."""
+        """Plain floats, (h, v) pairs as ``{"h", "v"}``; ``seed``: the seed's printed numbers."""
         out: dict[str, object] = {}
         for f in fields(self):
             v = getattr(self, f.name)
-            out[f.name] = list(v) if isinstance(v, tuple) else v
+            out[f.name] = hv(v) if isinstance(v, tuple) else v  # every tuple field is (h, v)
         out["seed"] = dict(SEED_4_5)
         return out
 

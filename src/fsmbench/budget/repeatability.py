@@ -40,6 +40,7 @@ from fsmbench.bench.blocks import rotation
 from fsmbench.bench.params import BenchParams
 from fsmbench.budget.propagation import distance_coefficients
 from fsmbench.budget.spectra import first_order_lowpass, seed_welch
+from fsmbench.jsonutil import hv
 
 __all__ = [
     "SEED_11",
@@ -164,13 +165,14 @@ class RepeatabilityRecord:
     psd_va_m2_per_hz: FloatArray
 
     def to_json(self) -> dict[str, object]:
-        """Scalars only; the seed's numbers for this direction under ``seed``."""
+        """Scalars, (h, v) pairs as ``{"h", "v"}``; the seed's numbers for this direction
+        under ``seed``."""
         out: dict[str, object] = {}
         for f in fields(self):
             v = getattr(self, f.name)
             if isinstance(v, np.ndarray):
                 continue
-            out[f.name] = list(v) if isinstance(v, tuple) else v
+            out[f.name] = hv(v) if isinstance(v, tuple) else v  # every tuple field is (h, v)
         out["seed"] = {k[2:]: v for k, v in SEED_11.items() if k.startswith(f"{self.direction}_")}
         return out
 

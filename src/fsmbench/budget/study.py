@@ -110,7 +110,10 @@ class BudgetResult:
         return self.budget.limiting
 
     def to_json(self) -> dict[str, object]:
-        """JSON-ready dict, SI units in the keys (non-finite values as null)."""
+        """JSON-ready dict, SI units in the keys (non-finite values as null).
+
+        The total, the rows and the limiting source are in ``budget`` only.
+        """
         huddle: dict[str, object] = {}
         if self.huddle is not None:
             for n, rec in self.huddle.records.items():
@@ -118,13 +121,11 @@ class BudgetResult:
                 d["predicted_va_rms_m"] = self.predicted_huddle_va_rms_m.get(n)
                 huddle[str(n)] = d
         out = {
-            "params": "nominal", "plant": self.plant_source, "controller": self.controller,
+            "params": "nominal", "plant_source": self.plant_source,
+            "controller": self.controller,
             "noise": self.noise.to_json(), "geometry": self.geometry.to_json(),
             "air": self.air.to_json(), "frame": self.frame.to_json(),
-            "budget": self.budget.to_json(),
-            "sources": [r.to_json() for r in self.budget.rows],
-            "total_rms_m": self.total_rms_m, "total_bias_m": self.budget.total_bias_m,
-            "limiting": self.limiting, "huddle": huddle,
+            "budget": self.budget.to_json(), "huddle": huddle,
             "huddle_comparison": None if self.huddle is None else {
                 "comparisons": [c.to_json() for c in self.huddle.comparisons],
                 "conclusion": self.huddle.conclusion,

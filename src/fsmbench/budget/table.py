@@ -22,6 +22,7 @@ huddle tests and the repeatability measurement see): spectra are weighted by
 from __future__ import annotations
 
 import math
+import re
 from collections.abc import Mapping
 from dataclasses import dataclass, fields
 
@@ -46,6 +47,7 @@ from fsmbench.budget.quantisation import SEED_4_5
 from fsmbench.budget.spectra import window_weight
 
 __all__ = [
+    "SOURCE_IDS",
     "AngleSources",
     "BudgetRow",
     "ErrorBudget",
@@ -53,9 +55,32 @@ __all__ = [
     "budget_table",
     "error_budget",
     "noise_inputs",
+    "source_id",
 ]
 
 FloatArray = NDArray[np.float64]
+
+#: Stable JSON id of each row and angle source; the display name may change, the id not.
+SOURCE_IDS: dict[str, str] = {
+    "ADC quantisation (4QD channels)": "qd_adc_quantisation",
+    "4QD electronic noise": "qd_electronic_noise",
+    "Sercalo DAC quantisation": "sercalo_dac_quantisation",
+    "Newport DAC quantisation": "newport_dac_quantisation",
+    "Newport angle noise": "newport_angle_noise",
+    "geometric cross terms between angle sources": "geometric_cross_terms",
+    "air refractive index": "air_refractive_index",
+    "metrology frame expansion": "frame_expansion",
+    "Attocube noise": "attocube_noise",
+    "Attocube resolution": "attocube_resolution",
+}
+
+
+def source_id(name: str) -> str:
+    """The JSON id of a budget source (:data:`SOURCE_IDS`; else its name in snake case)."""
+    known = SOURCE_IDS.get(name)
+    if known is not None:
+        return known
+    return re.sub(r"[^0-9a-z]+", "_", name.lower()).strip("_")
 
 
 @dataclass(frozen=True)
@@ -76,8 +101,8 @@ class BudgetRow:
     seed_note: str
 
     def to_json(self) -> dict[str, object]:
-        """Plain values."""
-        return {f.name: getattr(self, f.name) for f in fields(self)}
+        """Plain values and the row's stable ``id`` (:func:`source_id`)."""
+        return {"id": source_id(self.name), **{f.name: getattr(self, f.name) for f in fields(self)}}
 
 
 @dataclass(frozen=True)
@@ -111,13 +136,18 @@ class ErrorBudget:
         return ", ".join(parts)
 
     def to_json(self) -> dict[str, object]:
-        """Rows, total and limiting source; per-source angle and distance scalars."""
+        """Rows, total and limiting source; per-source angle and distance scalars.
+
+        ``angle_sources`` and ``limiting_id`` use the ids of :func:`source_id`; the
+        display name is each entry's ``name`` (and ``limiting``).
+        """
         return {"configuration": self.configuration, "closed_loop": self.closed_loop,
                 "compensation_unit": self.compensation_unit, "shielding": self.shielding,
                 "window_s": self.window_s, "spectra_origin": dict(self.spectra_origin),
                 "rows": [r.to_json() for r in self.rows], "total_rms_m": self.total_rms_m,
                 "total_bias_m": self.total_bias_m, "limiting": self.limiting,
-                "angle_sources": {k: s.to_json() for k, s in self.sources.items()},
+                "limiting_id": source_id(self.limiting),
+                "angle_sources": {source_id(k): s.to_json() for k, s in self.sources.items()},
                 "geometric_all": {"mean_m": self.geometric_all.mean_m,
                                   "std_m": self.geometric_all.std_m}}
 

@@ -70,7 +70,9 @@ def comparison_rows(identified: Mapping[str, Any], *, reference: Mapping[str, An
     """Rows for every target key present in ``identified``.
 
     ``reference`` is a ``twin_truth.json`` dict; without it the nominal model
-    of ``bench`` is the reference.
+    of ``bench`` is the reference. Only the keys of :data:`TARGETS` are
+    compared: ``format``, ``format_version`` and every other key of either
+    file are ignored.
     """
     kind = "true" if reference is not None else "nominal"
     ref = reference if reference is not None else model_values(bench.nominal)

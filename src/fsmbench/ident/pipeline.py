@@ -24,7 +24,8 @@ sentence as the reason; every check is in ``checks``.
 :meth:`Identification.to_json` has the keys of ``twin_truth.json``
 (``qd_gain_v_per_rad``, ``current_amp_gain_a_per_v``,
 ``sercalo.{h,v}.{resonance_hz, damping_ratio, dc_gain_v_per_a}``,
-``newport_gain_v_per_v``, ``delay_s``) plus a ``diagnostics`` tree.
+``newport_gain_v_per_v``, ``delay_s``) plus a ``diagnostics`` tree;
+:func:`write_identification` puts ``format`` and ``format_version`` first.
 """
 
 from __future__ import annotations
@@ -76,9 +77,10 @@ from fsmbench.ident.sercalo import (
 from fsmbench.ident.validate import PathValidation, validate_sercalo
 from fsmbench.io.atomic import atomic_write_text
 from fsmbench.io.folder import check_recording
-from fsmbench.jsonutil import plain_json
+from fsmbench.jsonutil import plain_json, stamped
 
 __all__ = [
+    "IDENTIFICATION_FORMAT",
     "SEED_TRIMS_S",
     "Identification",
     "IdentifyOptions",
@@ -92,6 +94,10 @@ SEED_TRIMS_S = {"data_cal_pd_h": 1.0, "data_cal_pd_v": 1.0, "data_uch": 1.0, "da
                 "data_unh": 3.0, "data_unv": 1.5}
 
 Progress = Callable[[str], None]
+
+#: ``identification.json``'s format and version (docs/results.md); 2: the keys of
+#: ``diagnostics.sercalo.fit_error_rms_relative`` are ``Uch_to_Vph``, not ``Vph/Uch``.
+IDENTIFICATION_FORMAT = ("fsmbench.identification", 2)
 
 
 @dataclass(frozen=True)
@@ -228,7 +234,7 @@ class Identification:
         out["diagnostics"] = {
             "qd": {a: c.to_json() for a, c in self.qd.items()},
             "current_amp": {a: g.to_json() for a, g in self.current_amp.items()},
-            "sercalo": None if self.sercalo is None else self.sercalo.summary(),
+            "sercalo": None if self.sercalo is None else _path_keys(self.sercalo.summary()),
             "sercalo_modes": self.sercalo_modes(),
             "mode_refinement": None if self.modes is None else self.modes.to_json(),
             "validation": [v.to_json() for v in self.validation],
@@ -239,6 +245,19 @@ class Identification:
             "options": self.options.to_json(),
         }
         return out
+
+
+def _path_keys(summary: dict[str, Any]) -> dict[str, Any]:
+    """``fit_error_rms_relative`` keyed ``Uch_to_Vph`` (input ``_to_`` output), not ``Vph/Uch``:
+    JSON keys are ids, without punctuation."""
+    errors = summary.get("fit_error_rms_relative")
+    if not isinstance(errors, Mapping):
+        return summary
+    renamed = {}
+    for key, value in errors.items():
+        out, slash, inp = str(key).partition("/")
+        renamed[f"{inp}_to_{out}" if slash else str(key)] = value
+    return {**summary, "fit_error_rms_relative": renamed}
 
 
 def _gd_block(qd: Mapping[str, QdCalibration]) -> ct.StateSpace:
@@ -465,9 +484,10 @@ def write_identification(result: Identification, out_dir: str | Path) -> list[Pa
     """
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
+    name, version = IDENTIFICATION_FORMAT
+    payload = stamped(result.to_json(), format=name, version=version)
     paths = [atomic_write_text(out / "identification.json",
-                               json.dumps(plain_json(result.to_json()), indent=2, sort_keys=True)
-                               + "\n")]
+                               json.dumps(plain_json(payload), indent=2, sort_keys=True) + "\n")]
     if result.plant is not None:
         paths.append(write_plant_mat(out / "plant.mat", result.plant))
     frfs = {name: part.frf for name, part in (("sercalo", result.sercalo),

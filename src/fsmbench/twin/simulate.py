@@ -26,6 +26,7 @@ from fsmbench.control.seed import seed_decentralised_controller
 from fsmbench.io.atomic import atomic_write_text
 from fsmbench.io.recording import RecordingFormat, make_recording, write_recording
 from fsmbench.io.signals import EXPERIMENTS
+from fsmbench.jsonutil import stamped
 from fsmbench.twin.attocube import attocube_distance
 from fsmbench.twin.controller import closed_loop_spectral_radius, feedback_controller
 from fsmbench.twin.discretize import DiscretePlant
@@ -33,7 +34,7 @@ from fsmbench.twin.engine import DiscreteController, Quantiser, run_loop
 from fsmbench.twin.experiments import ExperimentSpec, seed_experiments, with_duration
 from fsmbench.twin.noise import source_rng, white_noise
 from fsmbench.twin.plant import ADC_CHANNELS, DAC_CHANNELS, INTERNAL_SIGNALS, twin_discrete
-from fsmbench.twin.truth import twin_truth
+from fsmbench.twin.truth import TRUTH_FORMAT, twin_truth
 
 __all__ = [
     "ExperimentResult",
@@ -236,7 +237,9 @@ def write_twin(run: TwinRun, out_dir: str | Path, *,
                format: RecordingFormat = "mat5") -> list[Path]:
     """Write every record as ``<name>.mat`` (or ``.h5`` for NeXus) and ``twin_truth.json``.
 
-    Each file is written atomically; returns the paths written.
+    ``twin_truth.json`` is ``run.truth`` with its ``format`` and ``format_version``
+    (:data:`fsmbench.twin.truth.TRUTH_FORMAT`). Each file is written atomically;
+    returns the paths written.
     """
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
@@ -247,6 +250,8 @@ def write_twin(run: TwinRun, out_dir: str | Path, *,
         write_recording(ds, path, format=format, created=TWIN_CREATED_S)
         paths.append(path)
     truth_path = out / "twin_truth.json"
-    atomic_write_text(truth_path, json.dumps(run.truth, indent=2, sort_keys=True) + "\n")
+    name, version = TRUTH_FORMAT
+    atomic_write_text(truth_path, json.dumps(stamped(run.truth, format=name, version=version),
+                                             indent=2, sort_keys=True) + "\n")
     paths.append(truth_path)
     return paths

@@ -4,11 +4,14 @@ The keys are shared with ``identification.json`` so that a result can be
 compared with the truth key by key:
 
 ``fs_hz``, ``qd_gain_v_per_rad.{h,v}``, ``current_amp_gain_a_per_v.{h,v}``,
-``sercalo.{h,v}.{resonance_hz, damping_ratio, dc_gain_v_per_a}`` (Ich->Vph,
-Icv->Vpv), ``newport_gain_v_per_v.{h,v}`` (Unh->Vph, Unv->Vpv at low
+``sercalo.{h,v}.{resonance_hz, damping_ratio, dc_gain_v_per_a}`` (Ich → Vph,
+Icv → Vpv), ``newport_gain_v_per_v.{h,v}`` (Unh → Vph, Unv → Vpv at low
 frequency, signed), ``delay_s.{sercalo, newport}``; then ``noise_rms`` (every
 injected noise, stationary values), ``realized`` (the same, measured on each
-record) and descriptive extras.
+record; per-axis values as ``{"h", "v"}``), ``cross_coupling_dc_gain``
+(``Ich_to_Vpv_v_per_a`` …: input ``_to_`` output) and descriptive extras.
+:func:`fsmbench.twin.simulate.write_twin` puts ``format`` and ``format_version``
+(:data:`TRUTH_FORMAT`) first.
 """
 
 from __future__ import annotations
@@ -24,7 +27,24 @@ from fsmbench.bench.blocks import input_delays_s, physical_plant
 from fsmbench.bench.params import Bench, BenchParams
 from fsmbench.twin.experiments import ExperimentSpec
 
-__all__ = ["model_values", "twin_truth"]
+__all__ = ["TRUTH_FORMAT", "model_values", "twin_truth"]
+
+#: ``twin_truth.json``'s format and version (2: ``cross_coupling_dc_gain`` keys
+#: ``<input>_to_<output>_<unit>`` instead of ``<input>-><output>_<unit>``; ``realized``
+#: per-axis values as ``{"h", "v"}`` instead of flat ``"<name>.h"`` keys).
+TRUTH_FORMAT = ("fsmbench.twin_truth", 2)
+
+
+def _nest_axes(values: Mapping[str, float]) -> dict[str, Any]:
+    """``{"x.h": a, "x.v": b, "y": c}`` → ``{"x": {"h": a, "v": b}, "y": c}``."""
+    out: dict[str, Any] = {}
+    for key, value in values.items():
+        stem, dot, axis = key.rpartition(".")
+        if dot and axis in ("h", "v"):
+            out.setdefault(stem, {})[axis] = value
+        else:
+            out[key] = value
+    return out
 
 
 def _dc(sys: Any, out: int, inp: int) -> float:
@@ -85,10 +105,10 @@ def twin_truth(bench: Bench, *, seed: int, experiments: Sequence[ExperimentSpec]
             "ecu_pressure_error_pa": env.ecu_pressure_error_pa,
             "ecu_humidity_error_pct": env.ecu_humidity_error_pct,
         },
-        "realized": {name: dict(values) for name, values in realized.items()},
+        "realized": {name: _nest_axes(values) for name, values in realized.items()},
         "cross_coupling_dc_gain": {
-            "Ich->Vpv_v_per_a": _dc(gc, 1, 0), "Icv->Vph_v_per_a": _dc(gc, 0, 1),
-            "Unh->Vpv_v_per_v": _dc(gn, 1, 0), "Unv->Vph_v_per_v": _dc(gn, 0, 1),
+            "Ich_to_Vpv_v_per_a": _dc(gc, 1, 0), "Icv_to_Vph_v_per_a": _dc(gc, 0, 1),
+            "Unh_to_Vpv_v_per_v": _dc(gn, 1, 0), "Unv_to_Vph_v_per_v": _dc(gn, 0, 1),
         },
         "delay_components_s": {
             "dac_transport": p.converter.dac_delay_samples * p.converter.ts_s,
