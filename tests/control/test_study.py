@@ -12,6 +12,7 @@ from fsmbench.bench.params import Bench
 from fsmbench.control.study import (
     CONTROLLERS_MAT,
     CONTROLLERS_SOS_JSON,
+    MATLAB_LOADER,
     DesignResult,
     design_study,
 )
@@ -57,7 +58,7 @@ def test_study_findings(study: DesignResult) -> None:
 
 def test_write(study: DesignResult, tmp_path: Path) -> None:
     paths = study.write(tmp_path)
-    assert [p.name for p in paths] == [CONTROLLERS_MAT, CONTROLLERS_SOS_JSON]
+    assert [p.name for p in paths] == [CONTROLLERS_MAT, CONTROLLERS_SOS_JSON, MATLAB_LOADER]
     m = load_mat(tmp_path / CONTROLLERS_MAT)
     assert {"seed_controller", "fsmbench_controller", "newport_controller",
             "iff_controller"} <= set(m)
