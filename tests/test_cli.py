@@ -35,6 +35,10 @@ def test_simulate_writes_the_requested_records(tmp_path: Path,
     data = scipy.io.loadmat(tmp_path / "data_uch.mat")
     assert data["Uch"].shape == (30000, 1)
     assert json.loads((tmp_path / "twin_truth.json").read_text())["seed"] == 2
+    manifest = json.loads((tmp_path / "run.json").read_text())
+    assert (manifest["format"], manifest["format_version"]) == ("fsmbench.run", 1)
+    assert sorted(f["path"] for f in manifest["files"]) == [
+        "data_cal_pd_h.mat", "data_uch.mat", "twin_truth.json"]
 
 
 @pytest.mark.parametrize(("argv", "message"), [

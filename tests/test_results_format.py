@@ -185,5 +185,5 @@ def test_helpers_refuse_what_is_not_a_pair_or_a_format() -> None:
         hv([1.0, 2.0, 3.0])
     assert list(stamped({"a": 1, "format": "x"}, format="fsmbench.x", version=3)) == [
         "format", "format_version", "a"]
-    with pytest.raises(ValueError, match="fsmbench-run"):
-        stamped({}, format="fsmbench-run", version=1)
+    with pytest.raises(ValueError, match="fsmbench-output"):
+        stamped({}, format="fsmbench-output", version=1)

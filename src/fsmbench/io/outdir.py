@@ -46,7 +46,7 @@ __all__ = [
 
 #: Name of the manifest every run writes into its output folder.
 MANIFEST: Final = "run.json"
-_FORMAT: Final = "fsmbench-run"
+_FORMAT: Final = "fsmbench.run"
 _STAGING_TAG: Final = ".fsmbench-new-"
 _OLD_TAG: Final = ".fsmbench-old-"
 _RENAME_EXCHANGE: Final = 2  # linux/fs.h
