@@ -99,6 +99,12 @@ class StudyResult:
             "figures": [rel(f) for f in self.figures],
             "meets_specifications": None if self.summary is None
             else self.summary.meets_specifications,
+            # What a user must know about the data, as in summary.json: failed
+            # plausibility checks and notices (saturation, dropped variables …).
+            "failed_checks": [] if self.summary is None
+            else [c.to_json() for c in self.summary.failed_checks],
+            "notices": [] if self.summary is None
+            else [n.to_json() for n in self.summary.notices],
         }
 
 

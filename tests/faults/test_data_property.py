@@ -22,7 +22,7 @@ from typing import Any
 
 import numpy as np
 import pytest
-from hypothesis import event, given, settings
+from hypothesis import HealthCheck, event, given, settings
 from hypothesis import strategies as st
 
 from fsmbench.bench.params import Bench
@@ -167,3 +167,49 @@ def test_malformed_recordings_give_a_verdict_or_a_bounded_result(
         assert 1 / MAX_GAIN_FACTOR <= ratio <= MAX_GAIN_FACTOR
     json.dumps(plain_json(ident.to_json()), allow_nan=False)
     _check_budget(budget, bad)
+
+
+@settings(max_examples=3, derandomize=True, database=None,
+          # One example is a whole study (design and its twin check ~15 s on 2 cores).
+          deadline=timedelta(seconds=240),
+          # capsys is read out at the start of every example, so sharing it is safe.
+          suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(data=st.data())
+def test_the_whole_study_on_malformed_recordings_gives_a_verdict(
+        template: tuple[Path, dict[str, dict[str, np.ndarray]]],
+        data: st.DataObject, capsys: pytest.CaptureFixture[str]) -> None:
+    from fsmbench.cli import main
+
+    folder_in, arrays = template
+    name = data.draw(st.sampled_from(NAMES), label="record")
+    values: dict[str, Any] = {k: v.copy() for k, v in arrays[name].items()}
+    rng = np.random.default_rng(data.draw(st.integers(0, 2**16), label="rng"))
+    signal = data.draw(st.sampled_from(sorted(values)), label="signal")
+    kind, x = data.draw(MUTATIONS, label="mutation")
+    _mutate(values, signal, kind, x, rng)
+    with tempfile.TemporaryDirectory() as tmp:
+        folder, out = Path(tmp) / "data", Path(tmp) / "out"
+        shutil.copytree(folder_in, folder)
+        save_mat(folder / f"{name}.mat", values, created=0.0)
+        capsys.readouterr()
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")
+            status = main(["study", "--data", str(folder), "--out", str(out)])
+        err = capsys.readouterr().err
+        assert "Traceback" not in err
+        if status == 2:  # a verdict in one line naming the problem
+            lines = [ln for ln in err.splitlines() if "error:" in ln]
+            assert len(lines) == 1 and "fsmbench study: error:" in lines[0]
+            assert not out.exists()
+            return
+        assert status == 0
+        summary = json.loads((out / "summary.json").read_text())
+        budget = json.loads((out / "budget.json").read_text())
+        total = budget["budget"]["total_rms_m"]
+        # The Attocube plausibility bound: no number of this bench comes near 1 mm.
+        assert math.isfinite(total) and 0 < total <= MAX_VA_RMS_M
+        assert summary["meets_specifications"] in (True, False)
+        # A broken record is named in the first screen when a check or the loader refused it.
+        refused = [c["subject"] for c in summary["failed_checks"]] + list(summary["skipped"])
+        if signal != "t" and kind in ("scale", "int16") and x in (0.0, 1e300):
+            assert any(name in r for r in refused)
