@@ -210,15 +210,23 @@ def _check_data(data: Path) -> None:
 
 def _stage_input(args: argparse.Namespace) -> _StageInput:
     """Read the bench and every experiment present (the folders are checked first)."""
+    from fsmbench.checks import failed
     from fsmbench.io.folder import load_recordings
 
     data = Path(args.data)
     say = _progress()
-    loaded = load_recordings(data, progress=say)
+    bench = _bench(args)
+    conv = bench.nominal.converter
+    loaded = load_recordings(data, progress=say, fs_hz=conv.fs_hz, adc_range_v=conv.range_v,
+                             adc_bits=conv.bits)
     for name, why in loaded.skipped.items():
         say(f"skipped {name}: {why}")
-    return _StageInput(data=data, bench=_bench(args), say=say,
-                       recordings=dict(loaded.recordings))
+    # What the user must know about the files, once each, one line each.
+    for check in failed(loaded.checks):
+        say(f"check failed: {check.sentence()}")
+    for notice in loaded.notices:
+        say(f"note: {notice.sentence()}")
+    return _StageInput(data=data, bench=bench, say=say, recordings=dict(loaded.recordings))
 
 
 def _stage_folder(args: argparse.Namespace, need_bytes: float) -> Any:
@@ -362,8 +370,15 @@ def _cmd_study(args: argparse.Namespace) -> int:
                            duration_s=args.duration, progress=say, figures=args.figures,
                            spec=Specification(distance_error_max_m=args.distance_target_m))
     print(run.final_path(result.report))
+    # Once each, one line each: what was not used, what failed a check, what to know.
     for name, why in result.skipped_experiments.items():
         print(f"skipped {name}: {why}", file=sys.stderr)
+    if result.summary is not None:
+        for check in result.summary.failed_checks:
+            print(f"check failed: {check.sentence()}", file=sys.stderr)
+        for notice in result.summary.notices:
+            print(f"note: {notice.sentence()}", file=sys.stderr)
+        print(f"verdict: {result.summary.verdict}", file=sys.stderr)
     return 0
 
 

@@ -224,8 +224,6 @@ def run_study(*, out_dir: str | Path, data_dir: str | Path | None = None,
                              adc_bits=conv.bits)
     recordings = loaded.recordings
     stages.append(StageStatus("recordings", True, outputs=tuple(recordings)))
-    for name, why in loaded.skipped.items():
-        say(f"skipped {name}: {why}")
     truth = read_twin_truth(data / "twin_truth.json")
     lap("recordings")
 

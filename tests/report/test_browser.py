@@ -73,10 +73,8 @@ def test_every_figure_is_drawn_without_a_console_error(twin_page: Page) -> None:
     empty = twin_page.page.evaluate("""() => {
         const bad = [];
         for (const div of document.querySelectorAll('div.fsm-plot')) {
-            const traces = (div.data || []).filter(t => {
-                const n = (t.y && t.y.length !== undefined) ? t.y.length : 0;
-                return n > 0;
-            });
+            // _length: the points plotly.js decoded from the typed arrays.
+            const traces = (div._fullData || []).filter(t => (t._length || 0) > 0);
             const drawn = div.querySelectorAll('.main-svg').length > 0;
             if (!drawn || traces.length === 0) bad.push(div.id);
         }
@@ -109,11 +107,14 @@ def test_the_embedded_summary_is_summary_json(twin_page: Page, twin_study: Study
 def test_zooming_a_bode_plot_changes_its_frequency_range(twin_page: Page) -> None:
     twin_page.wait_all_drawn()
     page = twin_page.page
-    plot_id = page.evaluate("""() => {
+    plot_id = page.evaluate(r"""() => {
         for (const div of document.querySelectorAll('div.fsm-plot')) {
             const l = div._fullLayout;
-            if (l && l.xaxis && l.xaxis.type === 'log' && l.yaxis.type === 'log'
-                && l.yaxis2 && l.yaxis2.type === 'linear') return div.id;
+            if (!(l && l.xaxis && l.xaxis.type === 'log' && l.yaxis.type === 'log')) continue;
+            // A Bode plot: log magnitude with a linear phase panel below.
+            const phase = Object.keys(l).filter(k => /^yaxis\d+$/.test(k))
+                .some(k => l[k].type === 'linear' && /Phase/.test(l[k].title.text));
+            if (phase) return div.id;
         }
         return null;
     }""")
