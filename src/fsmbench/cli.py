@@ -392,26 +392,25 @@ class _Parser(argparse.ArgumentParser):
         self.exit(EXIT_USER_ERROR, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
 
 
-def _seconds(text: str) -> float:
-    """A finite, positive duration [s] (``inf``, ``nan``, ``0``, ``-1`` rejected)."""
+def _positive(text: str, unit: str) -> float:
+    """A finite, positive number (``inf``, ``nan``, ``0``, ``-1`` rejected)."""
     try:
         value = float(text)
     except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not a number of seconds") from None
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number of {unit}") from None
     if not math.isfinite(value) or value <= 0:
-        raise argparse.ArgumentTypeError(f"{text!r} is not a finite positive number of seconds")
+        raise argparse.ArgumentTypeError(f"{text!r} is not a finite positive number of {unit}")
     return value
 
 
+def _seconds(text: str) -> float:
+    """A duration [s]."""
+    return _positive(text, "seconds")
+
+
 def _nanometres(text: str) -> float:
-    """A finite, positive distance [nm], returned in m."""
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not a number of nanometres") from None
-    if not math.isfinite(value) or value <= 0:
-        raise argparse.ArgumentTypeError(f"{text!r} is not a finite positive number of nm")
-    return value * 1e-9
+    """A distance given in nm, returned in m."""
+    return _positive(text, "nm") * 1e-9
 
 
 def _figure_formats(text: str) -> tuple[str, ...]:

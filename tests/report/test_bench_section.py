@@ -6,20 +6,8 @@ import re
 
 from fsmbench.bench.params import Bench, param_rows
 from fsmbench.report.bench_section import bench_section, parameters_appendix
-from fsmbench.report.html import Note, Section, Table
+from fsmbench.report.html import Section, Table, visible_text
 from fsmbench.twin import TwinRun
-
-
-def _text(sec: Section) -> str:
-    out = [sec.title]
-    for block in sec.blocks:
-        if isinstance(block, str):
-            out.append(block)
-        elif isinstance(block, Note):
-            out += [block.text, block.ref]
-        elif isinstance(block, Table):
-            out += [block.caption, block.note, *block.header, *(c for r in block.rows for c in r)]
-    return "\n".join(out)
 
 
 def _table(sec: Section, caption_start: str) -> Table:
@@ -32,7 +20,7 @@ def test_bench_text_quotes_numbers_derived_from_the_parameters(bench: Bench,
                                                               ident_twin: TwinRun) -> None:
     sec = bench_section(bench, recordings=ident_twin.recordings, skipped={}, source="twin",
                         is_twin=True)
-    text = _text(sec)
+    text = _joined(sec)
     # Gi = 1/(R + Rc) with R = 41 Ω and Rc = 9.3 Ω / 8.3 Ω (seed 2.2): 19.88 and 20.28 mA/V.
     assert "19.88 mA/V (h) and 20.28 mA/V (v)" in text
     # One 16-bit step over ±10 V: 20/2^16 = 305.2 µV; q²/(12 fs) = 7.76e-13 V²/Hz (seed 1.6).
@@ -66,7 +54,7 @@ def test_recorded_data_get_no_twin_wording(bench: Bench, ident_twin: TwinRun) ->
     sec = bench_section(bench, recordings=ident_twin.recordings, skipped={}, source="/data",
                         is_twin=False)
     app = parameters_appendix(bench, is_twin=False)
-    for text in (_text(sec), _text(app)):
+    for text in (_joined(sec), _joined(app)):
         assert "twin" not in text.lower() and "true" not in text.lower()
 
 
@@ -86,3 +74,7 @@ def test_parameter_appendix_has_every_parameter_in_words(bench: Bench) -> None:
     # Units everywhere; dimensionless as a dash, not "1".
     assert all(re.fullmatch(r"\S.*", r[recorded.header.index("unit")]) for r in recorded.rows)
     assert "1" not in {r[recorded.header.index("unit")] for r in recorded.rows}
+
+
+def _joined(sec: Section) -> str:
+    return "\n".join(visible_text([sec]))

@@ -7,7 +7,6 @@ import hashlib
 import re
 import subprocess
 import sys
-from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
@@ -18,7 +17,7 @@ from fsmbench.bench.params import Bench
 from fsmbench.control.study import DesignResult, design_study
 from fsmbench.report.control_sections import control_sections
 from fsmbench.report.figure import Figure, Line
-from fsmbench.report.html import Note, Section, Table, iter_figures, render_report
+from fsmbench.report.html import Note, Section, Table, iter_figures, render_report, visible_text
 from fsmbench.stages import DesignStage
 from fsmbench.twin.verify import verify_on_twin
 
@@ -49,31 +48,6 @@ def stage(nominal_plant: PlantModel, bench: Bench) -> DesignStage:
 @pytest.fixture(scope="session")
 def sections(stage: DesignStage) -> list[Section]:
     return control_sections(stage, plant_source="physical model, nominal parameters")
-
-
-def _texts(sections: list[Section]) -> Iterator[str]:
-    """Every string a reader sees."""
-    for sec in sections:
-        yield sec.title
-        for b in sec.blocks:
-            if isinstance(b, str):
-                yield b
-            elif isinstance(b, Table):
-                yield b.caption
-                yield b.note
-                yield from b.header
-                for row in b.rows:
-                    yield from row
-            elif isinstance(b, Note):
-                yield b.text
-                yield b.ref
-            else:
-                yield from (b.title, b.caption, b.note)
-                for p in b.panels:
-                    yield from (p.title, p.x_label, p.y_label)
-                    yield from (t.name for t in p.traces)
-                    yield from (r.name for r in p.rules)
-        yield from _texts(list(sec.subsections))
 
 
 def _digest(line: Line) -> str:
@@ -118,7 +92,7 @@ def test_every_axis_label_has_a_unit(sections: list[Section]) -> None:
 
 
 def test_no_code_keys_in_any_text(sections: list[Section]) -> None:
-    texts = [t for t in _texts(sections) if t]
+    texts = [t for t in visible_text(sections) if t]
     assert len(texts) > 200  # the walk reached every block
     bad = [t for t in texts if CODE_KEY.search(t)]
     assert not bad, bad

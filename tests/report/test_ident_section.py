@@ -12,7 +12,7 @@ from fsmbench.checks import Check, Notice
 from fsmbench.ident.compare import TARGETS, comparison_rows
 from fsmbench.ident.pipeline import Identification, identify
 from fsmbench.report.figure import Bars, Figure, Line
-from fsmbench.report.html import Note, Section, Table, iter_figures, render_report
+from fsmbench.report.html import Section, Table, iter_figures, render_report, visible_text
 from fsmbench.report.ident_section import identification_section, quantity
 from fsmbench.twin import TwinRun
 
@@ -22,23 +22,6 @@ PASSED = "passed its quality checks"
 @pytest.fixture(scope="module")
 def result(ident_twin: TwinRun, bench: Bench) -> Identification:
     return identify(ident_twin.recordings, bench=bench)
-
-
-def _text(sec: Section) -> str:
-    out = [sec.title]
-    for block in sec.blocks:
-        if isinstance(block, str):
-            out.append(block)
-        elif isinstance(block, Note):
-            out += [block.text, block.ref]
-        elif isinstance(block, Table):
-            out += [block.caption, block.note, *block.header, *(c for r in block.rows for c in r)]
-        elif isinstance(block, Figure):
-            out += [block.title, block.caption, block.note]
-            for p in block.panels:
-                out += [p.title, p.x_label, p.y_label, *(t.name for t in p.traces)]
-    out += [_text(sub) for sub in sec.subsections]
-    return "\n".join(out)
 
 
 def _tables(sec: Section) -> list[Table]:
@@ -85,7 +68,7 @@ def test_twin_section_has_every_seed_figure_and_the_truth_table(
     by_name = {r[0]: r for r in table.rows}
     assert by_name["Delay of the Sercalo path [ms]"][4] == "±0.1 ms"  # one sample at 10 kHz
     assert by_name["4QD gain, h [V/rad]"][4] == "±1 %"
-    text = _text(sec)
+    text = _joined(sec)
     assert PASSED in text and "identification issue" not in text
     assert "errata E21" in text
 
@@ -105,7 +88,7 @@ def test_recorded_data_are_compared_with_nominal_values(
                                  truth=None, skipped={})
     table = _tables(sec)[0]
     assert table.header == ("quantity", "identified", "nominal value", "difference")
-    text = _text(sec).lower()
+    text = _joined(sec).lower()
     assert "twin" not in text and "true value" not in text
     # The nominal 4QD gain of the seed's Table 2: −31.0 V/rad.
     assert {r[0]: r[2] for r in table.rows}["4QD gain, h [V/rad]"] == "-31"
@@ -119,7 +102,7 @@ def test_skipped_sercalo_fit_is_said_and_no_quality_claim(
                                  plant_blocks={**result.plant_blocks, "Gc": "nominal"})
     sec = identification_section(broken, recordings=ident_twin.recordings, bench=bench,
                                  truth=None, skipped={})
-    text = _text(sec)
+    text = _joined(sec)
     assert PASSED not in text and "converged" not in text
     assert reason in text
     keys = {f.key for f in _figures_sound(sec)}
@@ -133,7 +116,7 @@ def test_skipped_sercalo_fit_is_said_and_no_quality_claim(
 def test_warnings_replace_the_quality_claim(result: Identification, ident_twin: TwinRun,
                                             bench: Bench) -> None:
     warned = dataclasses.replace(result, warnings=("Vph/Uch: the fit misses by 7.0 %",))
-    text = _text(identification_section(warned, recordings=ident_twin.recordings,
+    text = _joined(identification_section(warned, recordings=ident_twin.recordings,
                                         bench=bench, truth=None, skipped={}))
     assert PASSED not in text and "the fit misses by 7.0 %" in text
 
@@ -143,7 +126,7 @@ def test_failed_checks_and_notices_are_said(result: Identification, ident_twin: 
     bad = Check("calibration_r2", False, 0.5, "≥ 0.9", "data_cal_pd_h: Vph",
                 "Vph does not follow the Newport's sweep")
     note = Notice("saturation", "data_uch: Vch", "2 samples at the ADC rail")
-    text = _text(identification_section(
+    text = _joined(identification_section(
         dataclasses.replace(result, checks=(bad,), notices=(note,)),
         recordings=ident_twin.recordings, bench=bench, truth=None, skipped={}))
     assert "data_cal_pd_h: Vph: Vph does not follow the Newport's sweep." in text
@@ -155,7 +138,7 @@ def test_missing_records_are_explained(ident_twin: TwinRun, bench: Bench) -> Non
     res = identify(cal, bench=bench)
     sec = identification_section(res, recordings=cal, bench=bench, truth=None,
                                  skipped={"data_uch": "no data_uch.mat in the folder"})
-    text = _text(sec)
+    text = _joined(sec)
     assert ("Missing recordings: data_uch (not loaded: no data_uch.mat in the folder); "
             "data_ucv (not in the data).") in text
     assert [r[0] for r in _tables(sec)[0].rows] == ["4QD gain, h [V/rad]", "4QD gain, v [V/rad]"]
@@ -169,7 +152,7 @@ def test_without_identification_the_records_are_still_shown(ident_twin: TwinRun,
     recs = {k: ident_twin.recordings[k] for k in ("data_unh", "data_unv")}
     sec = identification_section(None, recordings=recs, bench=bench, truth=None,
                                  skipped={"data_uch": "file is truncated"})
-    text = _text(sec)
+    text = _joined(sec)
     assert "The identification did not run" in text and "file is truncated" in text
     assert PASSED not in text
     assert {f.key for f in _figures_sound(sec)} == {"fig23_unh_time", "fig24_unv_time"}
@@ -229,3 +212,7 @@ def test_frf_figure_shows_the_measured_magnitude_and_the_model(
     assert np.all(finite == abs(n.gain_v_per_v["h"]))
     band = gain_line.x[np.isfinite(gain_line.y)]
     assert band.min() >= n.band_hz[0] and band.max() <= n.band_hz[1]
+
+
+def _joined(sec: Section) -> str:
+    return "\n".join(visible_text([sec]))

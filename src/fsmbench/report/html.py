@@ -22,7 +22,8 @@ from fsmbench.io.atomic import atomic_write_text
 from fsmbench.report.figure import Figure
 from fsmbench.report.interactive import figure_json, plotly_js
 
-__all__ = ["Block", "Note", "Section", "Table", "iter_figures", "render_report", "write_report"]
+__all__ = ["Block", "Note", "Section", "Table", "iter_figures", "render_report", "visible_text",
+           "write_report"]
 
 
 @dataclass(frozen=True)
@@ -76,6 +77,30 @@ def iter_figures(sections: Sequence[Section]) -> Iterator[Figure]:
             if isinstance(block, Figure):
                 yield block
         yield from iter_figures(sec.subsections)
+
+
+def visible_text(sections: Sequence[Section]) -> Iterator[str]:
+    """Every string a reader sees, in reading order: titles, paragraphs, table cells, notes,
+    figure titles, captions, axis labels, legend names and labels (for checks of wording)."""
+    for sec in sections:
+        yield sec.title
+        for block in sec.blocks:
+            if isinstance(block, str):
+                yield block
+            elif isinstance(block, Table):
+                yield from (block.caption, block.note, *block.header)
+                for row in block.rows:
+                    yield from row
+            elif isinstance(block, Note):
+                yield from (block.text, block.ref)
+            else:
+                yield from (block.title, block.caption, block.note)
+                for p in block.panels:
+                    yield from (p.title, p.x_label, p.y_label)
+                    yield from (t.name for t in p.traces)
+                    yield from (r.name for r in p.rules)
+                    yield from (lab.text for lab in p.labels)
+        yield from visible_text(sec.subsections)
 
 
 _STYLE = """
