@@ -93,6 +93,7 @@ class Summary:
     findings: tuple[str, ...] = ()
     fallbacks: tuple[str, ...] = ()
     skipped: Mapping[str, str] = field(default_factory=dict)
+    parts_skipped: Mapping[str, str] = field(default_factory=dict)
     failed_checks: tuple[Check, ...] = ()
     notices: tuple[Notice, ...] = ()
     specification: Specification = field(default_factory=Specification)
@@ -107,7 +108,7 @@ class Summary:
             "requirements": [asdict(r) for r in self.requirements],
             "stages": [asdict(s) for s in self.stages],
             "findings": list(self.findings), "fallbacks": list(self.fallbacks),
-            "skipped": dict(self.skipped),
+            "skipped": dict(self.skipped), "parts_skipped": dict(self.parts_skipped),
             "failed_checks": [c.to_json() for c in self.failed_checks],
             "notices": [n.to_json() for n in self.notices],
             "specification": asdict(self.specification),
@@ -191,6 +192,7 @@ def _twin_requirement(design: Mapping[str, Any]) -> Requirement | None:
 
 def build_summary(*, source: str, is_twin: bool, spec: Specification,
                   skipped: Mapping[str, str], n_experiments: int, n_read: int,
+                  parts_skipped: Mapping[str, str] | None = None,
                   checks: Sequence[Check] = (), notices: Sequence[Notice] = (),
                   identification: Mapping[str, Any] | None,
                   identification_headline: str = "",
@@ -206,6 +208,9 @@ def build_summary(*, source: str, is_twin: bool, spec: Specification,
     spec : Specification
     skipped : mapping
         Experiment → why it was not used.
+    parts_skipped : mapping, optional
+        ``"<stage>: <part>"`` → why a stage left out a part of its work on a record
+        it had (a huddle test too short to analyse …).
     n_experiments, n_read : int
         Experiments the study knows, experiments read.
     checks, notices : sequences
@@ -301,6 +306,7 @@ def build_summary(*, source: str, is_twin: bool, spec: Specification,
     return Summary(source=source, is_twin=is_twin, meets_specifications=meets, verdict=verdict,
                    limiting=limiting, requirements=tuple(reqs), stages=tuple(stages),
                    findings=tuple(findings), fallbacks=tuple(fallbacks), skipped=dict(skipped),
+                   parts_skipped=dict(parts_skipped or {}),
                    failed_checks=failed_checks, notices=tuple(notices), specification=spec)
 
 
@@ -330,6 +336,7 @@ def verdict_html(summary: Summary) -> str:
         out.append(f"<p>{e(finding)}</p>")
     problems = [*summary.fallbacks,
                 *(f"{name}: {why}" for name, why in summary.skipped.items()),
+                *(f"{part}: {why}" for part, why in summary.parts_skipped.items()),
                 *(c.sentence() for c in summary.failed_checks),
                 *(n.sentence() for n in summary.notices)]
     if problems:
