@@ -402,7 +402,8 @@ def _discrete_table(res: DesignResult) -> Table:
                          f"{100 * d.max_relative_error:.3g}"))
     ts = res.options.loop.ts_s
     return Table(
-        caption=f"Continuous controller K against its Tustin discretisation Kd at {1e3 * ts:g} ms",
+        caption=(f"Continuous controller K against its plain Tustin discretisation at "
+                 f"{1e3 * ts:g} ms (the seed's c2d)"),
         header=("controller", "axis", "gain margin with K [dB]", "gain margin with Kd [dB]",
                 "phase margin with K [deg]", "phase margin with Kd [deg]",
                 "largest |Kd − K| / |K| below 1 kHz [%]"),
@@ -475,16 +476,18 @@ def _section9(res: DesignResult, check: Any) -> Section:
         *_robustness_blocks(res.robustness, res, who="fsmbench's controller",
                             key="fsmbench_controller_robustness",
                             title="fsmbench's controller over the perturbed plants"),
-        "Both controllers are implemented at 10 kHz (9.3): fsmbench discretises them by Tustin "
-        "at the seed's sample time and compares the margins of the sampled loop with the "
-        "continuous ones.",
+        "Both controllers are implemented at 10 kHz (9.3). The table compares the margins of the "
+        "loop sampled with the seed's plain Tustin c2d with the continuous ones; the Kd that "
+        "fsmbench exports (controllers.mat, controllers_sos.json) is instead Tustin prewarped "
+        "at each notch, section by section.",
         _discrete_table(res),
     ]
     if shift:
         blocks.append(Note(f"Without prewarping Tustin moves the seed's notches ({shift}); at "
                            f"the h notch that is about two notch half-bandwidths, which is the "
                            f"large relative difference above. Prewarping at the notch keeps it "
-                           f"in place.", ref="errata E26"))
+                           f"in place: the exported Kd has its notches at the continuous "
+                           f"frequencies.", ref="errata E26"))
     blocks += _twin_blocks(check)
     return Section(title="9. Decentralised control of the Sercalo", anchor="sercalo-control",
                    blocks=tuple(blocks))
