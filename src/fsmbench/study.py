@@ -33,7 +33,13 @@ from fsmbench.io.signals import EXPERIMENTS
 from fsmbench.io.truth import read_twin_truth
 from fsmbench.jsonutil import plain_json
 from fsmbench.report.html import Section, iter_figures, write_report
-from fsmbench.report.summary import Specification, Summary, build_summary, verdict_html
+from fsmbench.report.summary import (
+    PartSkipped,
+    Specification,
+    Summary,
+    build_summary,
+    verdict_html,
+)
 from fsmbench.stages import (
     IDENT_EXPERIMENTS,
     budget_stage,
@@ -262,12 +268,12 @@ def run_study(*, out_dir: str | Path, data_dir: str | Path | None = None,
                                   *budget.notices]))
     # What a stage left out of a record it had (a record the loader skipped, or one that
     # is simply absent, is already in loaded.skipped).
-    parts = {f"{stage} ({part})": why
+    parts = [PartSkipped(stage, part, why)
              for stage, skips in (("identification", ident.skipped if ident else {}),
                                   ("budget", budget.skipped))
              for part, why in skips.items()
              if part not in loaded.skipped and not why.startswith(("not in the recordings",
-                                                                  "missing"))}
+                                                                  "missing"))]
     summary = build_summary(
         source=source, is_twin=is_twin, spec=spec, skipped=loaded.skipped, parts_skipped=parts,
         n_experiments=len(EXPERIMENTS), n_read=len(recordings), checks=checks, notices=notices,

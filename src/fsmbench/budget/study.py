@@ -134,7 +134,8 @@ class BudgetResult:
             "dac_noise": None if self.dac_noise is None else self.dac_noise.to_json(),
             "repeatability": {k: r.to_json() for k, r in self.repeatability.items()},
             "nonrep_contributions": {k: v.to_json() for k, v in self.nonrep.items()},
-            "skipped": dict(self.skipped),
+            # Parts are named in words ("4QD noise from huddle data"): a list, not keys.
+            "skipped": [{"part": k, "reason": v} for k, v in self.skipped.items()],
             "checks": [c.to_json() for c in self.checks],
             "notices": [n.to_json() for n in self.notices],
         }

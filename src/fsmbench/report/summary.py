@@ -21,7 +21,7 @@ from fsmbench import __version__
 from fsmbench.checks import Check, Notice
 from fsmbench.jsonutil import plain_json
 
-__all__ = ["SUMMARY_FORMAT", "Requirement", "Specification", "StageLine", "Summary",
+__all__ = ["SUMMARY_FORMAT", "PartSkipped", "Requirement", "Specification", "StageLine", "Summary",
            "build_summary", "verdict_html"]
 
 SUMMARY_FORMAT = ("fsmbench.summary", 1)
@@ -70,6 +70,15 @@ class Requirement:
 
 
 @dataclass(frozen=True)
+class PartSkipped:
+    """A part of a stage's work left out although its record was read."""
+
+    stage: str
+    part: str
+    reason: str
+
+
+@dataclass(frozen=True)
 class StageLine:
     """One stage in one line: what it found, where it is in the report."""
 
@@ -93,7 +102,7 @@ class Summary:
     findings: tuple[str, ...] = ()
     fallbacks: tuple[str, ...] = ()
     skipped: Mapping[str, str] = field(default_factory=dict)
-    parts_skipped: Mapping[str, str] = field(default_factory=dict)
+    parts_skipped: tuple[PartSkipped, ...] = ()
     failed_checks: tuple[Check, ...] = ()
     notices: tuple[Notice, ...] = ()
     specification: Specification = field(default_factory=Specification)
@@ -108,7 +117,7 @@ class Summary:
             "requirements": [asdict(r) for r in self.requirements],
             "stages": [asdict(s) for s in self.stages],
             "findings": list(self.findings), "fallbacks": list(self.fallbacks),
-            "skipped": dict(self.skipped), "parts_skipped": dict(self.parts_skipped),
+            "skipped": dict(self.skipped), "parts_skipped": [asdict(p) for p in self.parts_skipped],
             "failed_checks": [c.to_json() for c in self.failed_checks],
             "notices": [n.to_json() for n in self.notices],
             "specification": asdict(self.specification),
@@ -192,7 +201,7 @@ def _twin_requirement(design: Mapping[str, Any]) -> Requirement | None:
 
 def build_summary(*, source: str, is_twin: bool, spec: Specification,
                   skipped: Mapping[str, str], n_experiments: int, n_read: int,
-                  parts_skipped: Mapping[str, str] | None = None,
+                  parts_skipped: Sequence[PartSkipped] = (),
                   checks: Sequence[Check] = (), notices: Sequence[Notice] = (),
                   identification: Mapping[str, Any] | None,
                   identification_headline: str = "",
@@ -208,9 +217,9 @@ def build_summary(*, source: str, is_twin: bool, spec: Specification,
     spec : Specification
     skipped : mapping
         Experiment → why it was not used.
-    parts_skipped : mapping, optional
-        ``"<stage>: <part>"`` → why a stage left out a part of its work on a record
-        it had (a huddle test too short to analyse …).
+    parts_skipped : sequence of PartSkipped
+        What a stage left out of a record it had (a huddle test too short to
+        analyse …), and why.
     n_experiments, n_read : int
         Experiments the study knows, experiments read.
     checks, notices : sequences
@@ -306,7 +315,7 @@ def build_summary(*, source: str, is_twin: bool, spec: Specification,
     return Summary(source=source, is_twin=is_twin, meets_specifications=meets, verdict=verdict,
                    limiting=limiting, requirements=tuple(reqs), stages=tuple(stages),
                    findings=tuple(findings), fallbacks=tuple(fallbacks), skipped=dict(skipped),
-                   parts_skipped=dict(parts_skipped or {}),
+                   parts_skipped=tuple(parts_skipped),
                    failed_checks=failed_checks, notices=tuple(notices), specification=spec)
 
 
@@ -336,7 +345,7 @@ def verdict_html(summary: Summary) -> str:
         out.append(f"<p>{e(finding)}</p>")
     problems = [*summary.fallbacks,
                 *(f"{name}: {why}" for name, why in summary.skipped.items()),
-                *(f"{part}: {why}" for part, why in summary.parts_skipped.items()),
+                *(f"{p.stage}, {p.part}: {p.reason}" for p in summary.parts_skipped),
                 *(c.sentence() for c in summary.failed_checks),
                 *(n.sentence() for n in summary.notices)]
     if problems:
