@@ -267,13 +267,14 @@ def run_study(*, out_dir: str | Path, data_dir: str | Path | None = None,
                                   *(ident.notices if ident is not None else ()),
                                   *budget.notices]))
     # What a stage left out of a record it had (a record the loader skipped, or one that
-    # is simply absent, is already in loaded.skipped).
+    # is simply absent, is already in loaded.skipped; a part refused by a check is in the
+    # failed checks).
     parts = [PartSkipped(stage, part, why)
              for stage, skips in (("identification", ident.skipped if ident else {}),
                                   ("budget", budget.skipped))
              for part, why in skips.items()
-             if part not in loaded.skipped and not why.startswith(("not in the recordings",
-                                                                  "missing"))]
+             if part not in loaded.skipped
+             and not why.startswith(("not in the recordings", "missing", "check "))]
     summary = build_summary(
         source=source, is_twin=is_twin, spec=spec, skipped=loaded.skipped, parts_skipped=parts,
         n_experiments=len(EXPERIMENTS), n_read=len(recordings), checks=checks, notices=notices,
