@@ -10,6 +10,7 @@ output folder byte for byte the previous run, nothing left beside it.
 
 from __future__ import annotations
 
+import os
 import signal
 import subprocess
 import time
@@ -116,3 +117,36 @@ def test_fsmbench_own_value_error_is_a_verdict(kit: SimpleNamespace, tmp_path: P
     r = run_cli("simulate", tmp_path / "out", "--duration", "1")
     kit.assert_one_line_verdict(r, "simulate", "--duration 1 s is too short")
     assert not (tmp_path / "out").exists() and kit.leftovers(tmp_path) == []
+
+
+def test_sigkill_leftovers_are_removed_by_the_next_run(kit: SimpleNamespace, old_run: Path,
+                                                       tmp_path: Path) -> None:
+    # SIGKILL cannot be caught: the killed run's staging folder stays beside --out. The
+    # next run into the same --out removes it, but never a live run's.
+    mark = tmp_path / "ready"
+    argv = kit.cli_command("simulate", old_run, "--experiments", "data_cal_pd_h",
+                           "--duration", "3",
+                           prelude=HOLD.format(mark=str(mark), phase="writing"))
+    child = subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        deadline = time.monotonic() + 120  # bounds a hang only
+        while not mark.exists() and child.poll() is None and time.monotonic() < deadline:
+            time.sleep(0.05)
+        assert mark.exists(), child.communicate()[1]
+        child.kill()
+        child.communicate(timeout=60)
+    finally:
+        if child.poll() is None:
+            child.kill()
+    killed = [p for p in old_run.parent.iterdir() if ".fsmbench-new-" in p.name]
+    assert len(killed) == 1 and f"-new-{child.pid}-" in killed[0].name
+    live = old_run.parent / f".{old_run.name}.fsmbench-new-{os.getpid()}-live"
+    live.mkdir()  # a run under way in this very process: must be kept
+    argv = kit.cli_command("simulate", old_run, "--experiments", "data_cal_pd_h",
+                           "--duration", "3")
+    done = subprocess.run(argv, capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stderr
+    assert not killed[0].exists() and live.is_dir()
+    assert sorted(kit.hashes(old_run)) == ["data_cal_pd_h.mat", "run.json", "twin_truth.json"]
+    live.rmdir()
+    assert kit.leftovers(old_run.parent) == []

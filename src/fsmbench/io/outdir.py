@@ -331,6 +331,30 @@ def _probe_replace(out: Path) -> None:
         os.rename(probe, out)
 
 
+def _remove_stale_staging(out: Path) -> None:
+    """Remove staging folders of ``out`` left by runs that were killed (SIGKILL, power loss).
+
+    A staging folder is named ``.<out>.fsmbench-new-<pid>-<random>``; it is stale when no
+    process has that pid any more. Folders of live runs, of other users' runs and of
+    unknown names are left alone.
+    """
+    prefix = f".{out.name}{_STAGING_TAG}"
+    try:
+        siblings = list(out.parent.iterdir())
+    except OSError:
+        return
+    for path in siblings:
+        pid_text = path.name[len(prefix):].split("-", 1)[0]
+        if not (path.name.startswith(prefix) and pid_text.isdigit() and path.is_dir()):
+            continue
+        try:
+            os.kill(int(pid_text), 0)
+        except ProcessLookupError:
+            shutil.rmtree(path, ignore_errors=True)
+        except OSError:  # a process of another user has that pid: alive
+            continue
+
+
 @contextlib.contextmanager
 def output_transaction(out_dir: str | Path, *, command: str, arguments: Sequence[str] = (),
                        data_dir: str | Path | None = None, need_bytes: int = 0,
@@ -368,8 +392,11 @@ def output_transaction(out_dir: str | Path, *, command: str, arguments: Sequence
         ``staging`` to write into, ``final`` and a mapping between them.
     """
     out = preflight(out_dir, data_dir=data_dir, need_bytes=need_bytes)
+    _remove_stale_staging(out)
     try:
-        staging = Path(tempfile.mkdtemp(prefix=f".{out.name}{_STAGING_TAG}", dir=out.parent))
+        # The pid in the name lets a later run tell a killed run's leftovers from a live one.
+        staging = Path(tempfile.mkdtemp(prefix=f".{out.name}{_STAGING_TAG}{os.getpid()}-",
+                                        dir=out.parent))
     except OSError as exc:
         raise OutputError(out.parent, f"cannot write the output folder here ({exc.strerror}); "
                                       "choose another --out") from exc
