@@ -31,9 +31,9 @@ import scipy.signal as sig
 
 from fsmbench.bench.params import default_bench
 from fsmbench.control.seed import seed_decentralised_controller
-from fsmbench.twin.controller import feedback_controller
-from fsmbench.twin.engine import Quantiser, run_loop, run_loop_python
-from fsmbench.twin.plant import ADC_CHANNELS, twin_discrete
+from fsmbench.sim.controller import feedback_controller
+from fsmbench.sim.engine import Quantiser, run_loop, run_loop_python
+from fsmbench.sim.plant import ADC_CHANNELS, twin_discrete
 from timing import timed_runs
 
 

@@ -240,9 +240,9 @@ def _stage_folder(args: argparse.Namespace, need_bytes: float) -> Any:
 
 
 def _cmd_identify(args: argparse.Namespace) -> int:
-    from fsmbench.ident.compare import compare_with_truth
     from fsmbench.io.truth import read_twin_truth
     from fsmbench.stages import identify_stage
+    from fsmbench.twin.compare import compare_with_truth
 
     with _stage_folder(args, _IDENT_BYTES) as run:
         reference = read_twin_truth(Path(args.data))

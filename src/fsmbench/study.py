@@ -24,7 +24,6 @@ from typing import Any
 
 from fsmbench import __version__
 from fsmbench.bench.params import Bench, default_bench
-from fsmbench.ident.compare import comparison_rows
 from fsmbench.ident.pipeline import Identification
 from fsmbench.io.atomic import atomic_write_text
 from fsmbench.io.folder import RecordingSet, load_recordings
@@ -47,6 +46,7 @@ from fsmbench.stages import (
     design_stage,
     identify_stage,
 )
+from fsmbench.twin.compare import comparison_rows
 
 __all__ = ["FIGURE_FORMATS", "StageStatus", "StudyResult", "run_study"]
 

@@ -10,9 +10,9 @@ import pytest
 import scipy.io
 
 from fsmbench.bench.params import Bench
-from fsmbench.ident.compare import TARGETS, comparison_rows
 from fsmbench.ident.pipeline import Identification, identify, write_identification
 from fsmbench.twin import TwinRun
+from fsmbench.twin.compare import TARGETS, comparison_rows
 
 
 @pytest.fixture(scope="module")

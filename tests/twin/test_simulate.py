@@ -13,10 +13,10 @@ from fsmbench.bench.params import Bench
 from fsmbench.control.seed import seed_decentralised_controller
 from fsmbench.ident import hanning, spectral_matrix
 from fsmbench.io.signals import EXPERIMENTS
+from fsmbench.sim.controller import closed_loop_spectral_radius
+from fsmbench.sim.plant import ADC_CHANNELS, twin_discrete
 from fsmbench.twin import TwinRun, feedback_controller, simulate_bench, write_twin
-from fsmbench.twin.controller import closed_loop_spectral_radius
 from fsmbench.twin.experiments import seed_experiments, with_duration
-from fsmbench.twin.plant import ADC_CHANNELS, twin_discrete
 from fsmbench.twin.simulate import simulate_experiment
 
 REQUIRED_TRUTH_KEYS = [

@@ -8,7 +8,7 @@ recorded 4QD voltages. The figure of merit is the variance accounted for,
 
 per path (1 is perfect, 0 is no better than the mean). The simulation is
 exact for the held (ZOH) command: the model is discretised with
-:func:`fsmbench.twin.discretize.zoh_with_delays`, whose hold contributes half
+:func:`fsmbench.sim.discretize.zoh_with_delays`, whose hold contributes half
 a sample, so the discrete input delay is ``τ/Ts − 1/2``. Both records have
 their mean removed, and the first ``settle_s`` seconds are left out because
 the model starts at rest while the bench was already moving (the lightly
@@ -28,8 +28,8 @@ import numpy as np
 import xarray as xr
 
 from fsmbench.ident.calibration import trim_recording
-from fsmbench.twin.discretize import zoh_with_delays
-from fsmbench.twin.engine import Quantiser, run_loop
+from fsmbench.sim.discretize import zoh_with_delays
+from fsmbench.sim.engine import Quantiser, run_loop
 
 if TYPE_CHECKING:
     from fsmbench.ident.sercalo import SercaloIdentification

@@ -14,7 +14,6 @@ from typing import Any
 import xarray as xr
 
 from fsmbench.bench.params import Bench
-from fsmbench.ident.compare import TARGETS, ComparisonRow, comparison_rows
 from fsmbench.ident.pipeline import (
     MAX_DIRECT_FIT_ERROR,
     MIN_DIRECT_VAF,
@@ -37,6 +36,7 @@ from fsmbench.report.ident_figures import (
     weights_figure,
 )
 from fsmbench.report.time_figures import SEED_TIME_FIGURES, experiment_figure
+from fsmbench.twin.compare import TARGETS, ComparisonRow, comparison_rows
 
 __all__ = ["comparison_table", "identification_section", "quantity"]
 

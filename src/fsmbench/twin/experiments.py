@@ -21,7 +21,8 @@ from __future__ import annotations
 import dataclasses
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Literal
+
+from fsmbench.sim.excitation import Excitation
 
 __all__ = [
     "EXPERIMENT_NAMES",
@@ -31,35 +32,6 @@ __all__ = [
     "seed_experiments",
     "with_duration",
 ]
-
-ExcitationKind = Literal["noise", "sine"]
-
-
-@dataclass(frozen=True)
-class Excitation:
-    """An open-loop command on one DAC channel.
-
-    Attributes
-    ----------
-    channel : str
-        ``Uch``, ``Ucv``, ``Unh`` or ``Unv``.
-    kind : {"noise", "sine"}
-        White Gaussian noise of standard deviation ``amplitude_v``, or a sine
-        of amplitude ``amplitude_v`` and frequency ``freq_hz`` starting at phase 0.
-    amplitude_v : float
-        [V]
-    start_s : float
-        The command is zero before this time [s].
-    freq_hz : float
-        Sine frequency [Hz] (unused for noise).
-    """
-
-    channel: str
-    kind: ExcitationKind
-    amplitude_v: float
-    start_s: float
-    freq_hz: float = 0.0
-
 
 @dataclass(frozen=True)
 class ExperimentSpec:

@@ -20,20 +20,18 @@ from typing import Any
 import numpy as np
 import xarray as xr
 
-from fsmbench.bench.blocks import newport_beam_matrix
 from fsmbench.bench.params import Bench, BenchParams, default_bench
 from fsmbench.control.seed import seed_decentralised_controller
 from fsmbench.io.atomic import atomic_write_text
 from fsmbench.io.recording import RecordingFormat, make_recording, write_recording
 from fsmbench.io.signals import EXPERIMENTS
 from fsmbench.jsonutil import stamped
-from fsmbench.twin.attocube import attocube_distance
-from fsmbench.twin.controller import closed_loop_spectral_radius, feedback_controller
-from fsmbench.twin.discretize import DiscretePlant
-from fsmbench.twin.engine import DiscreteController, Quantiser, run_loop
+from fsmbench.sim.controller import closed_loop_spectral_radius, feedback_controller
+from fsmbench.sim.discretize import DiscretePlant
+from fsmbench.sim.engine import DiscreteController
+from fsmbench.sim.plant import ADC_CHANNELS, twin_discrete
+from fsmbench.sim.stream import BenchStream
 from fsmbench.twin.experiments import ExperimentSpec, seed_experiments, with_duration
-from fsmbench.twin.noise import source_rng, white_noise
-from fsmbench.twin.plant import ADC_CHANNELS, DAC_CHANNELS, INTERNAL_SIGNALS, twin_discrete
 from fsmbench.twin.truth import TRUTH_FORMAT, twin_truth
 
 __all__ = [
@@ -72,23 +70,10 @@ class TwinRun:
     experiments: tuple[ExperimentSpec, ...] = field(default=())
 
 
-def _excitation(spec: ExperimentSpec, n: int, fs_hz: float, seed: int) -> np.ndarray:
-    u = np.zeros((n, len(DAC_CHANNELS)))
-    t = np.arange(n) / fs_hz
-    for ex in spec.excitations:
-        col = DAC_CHANNELS.index(ex.channel)
-        on = t >= ex.start_s
-        if ex.kind == "noise":
-            rng = source_rng(seed, spec.name, f"excitation_{ex.channel}")
-            u[on, col] = white_noise(rng, int(on.sum()), rms=ex.amplitude_v)
-        else:
-            u[on, col] = ex.amplitude_v * np.sin(2 * np.pi * ex.freq_hz * (t[on] - ex.start_s))
-    return u
-
-
 def simulate_experiment(bench: Bench, spec: ExperimentSpec, *, seed: int,
                         plant: DiscretePlant | None = None,
-                        controller: DiscreteController | None = None) -> ExperimentResult:
+                        controller: DiscreteController | None = None,
+                        block: int | None = None) -> ExperimentResult:
     """Simulate one experiment on the twin (the bench's ``true`` parameters).
 
     Parameters
@@ -102,64 +87,35 @@ def simulate_experiment(bench: Bench, spec: ExperimentSpec, *, seed: int,
     controller : DiscreteController, optional
         Used when ``spec.closed_loop``; default: the seed's decentralised
         controller of 9.2, Tustin at the converter rate.
+    block : int, optional
+        Run the streaming bench in blocks of this many samples (default: one
+        block); the record is the same bit for bit.
     """
     p: BenchParams = bench.true
     fs = p.converter.fs_hz
     n = round(spec.duration_s * fs)
-    plant = twin_discrete(p) if plant is None else plant
     if spec.closed_loop and controller is None:
         controller = feedback_controller(seed_decentralised_controller(),
                                          gd_v_per_rad=bench.nominal.quad_diode.gain_v_per_rad,
                                          ts_s=p.converter.ts_s, name="seed K (9.2)")
-
-    def rng_for(source: str) -> np.random.Generator:
-        return source_rng(seed, spec.name, source)
-
-    # Noise at the ADC inputs. The Newport's angle noise moves its mirror, so
-    # it reaches the 4QD through the optics and the metrology through its gain.
-    n_theta = np.column_stack([white_noise(rng_for(f"newport_angle_{a}"), n,
-                                           rms=p.newport.angle_noise_rms_rad) for a in "hv"])
-    n_metro = np.column_stack([white_noise(rng_for(f"metrology_{a}"), n,
-                                           rms=p.newport.metrology_noise_rms_rad) for a in "hv"])
-    n_qd = np.column_stack([white_noise(rng_for(f"qd_{a}"), n, rms=p.quad_diode.noise_rms_v[a])
-                            for a in "hv"])
-    n_vc = np.column_stack([white_noise(rng_for(f"vc_{a}"), n, rms=p.voltage_amplifier.noise_rms_v)
-                            for a in "hv"])
-    gd = np.diag(p.quad_diode.gain_v_per_rad.as_array())
-    beam_noise = n_theta @ newport_beam_matrix(p).T  # beam angle in the 4QD frame
-    adc_noise = np.column_stack([n_vc, n_qd + beam_noise @ gd.T,
-                                 (n_theta + n_metro) / p.newport.metrology_gain_rad_per_v])
-
-    conv = Quantiser(range_v=p.converter.range_v, bits=p.converter.bits)
-    u_ext = _excitation(spec, n, fs, seed)
-    loop = run_loop(plant, u_ext=u_ext, adc_noise=adc_noise, adc=conv, dac=conv,
-                    controller=controller if spec.closed_loop else None,
-                    n_adc=len(ADC_CHANNELS), specialise=True)
-    internal = {name: loop.internal[:, i] for i, name in enumerate(INTERNAL_SIGNALS)}
-    theta_c = np.column_stack([internal["theta_ch"], internal["theta_cv"]])
-    theta_n = np.column_stack([internal["theta_nh"], internal["theta_nv"]]) + n_theta
-    va = attocube_distance(p, theta_c_rad=theta_c, theta_n_rad=theta_n,
-                           compensation_unit=spec.compensation_unit, shielding=spec.shielding,
-                           fs_hz=fs, rng_for=rng_for)
-
-    channels = {name: loop.dac[:, i] for i, name in enumerate(DAC_CHANNELS)}
-    channels.update({name: loop.adc[:, i] for i, name in enumerate(ADC_CHANNELS)})
-    channels["Va"] = va.total_m
+    stream = BenchStream(p, seed=seed, name=spec.name, compensation_unit=spec.compensation_unit,
+                         shielding=spec.shielding,
+                         controller=controller if spec.closed_loop else None,
+                         excitations=spec.excitations, plant=plant)
+    out = stream.run(n, block=block)
     # A file holds what the seed loads from it. The other channels are not
     # recorded: e.g. in closed loop the 60 dB coil-voltage amplifier (Vch,
     # Vcv) sits on the ADC rails, which the real bench's files would show as
     # clipped data nobody uses.
-    signals = {name: channels[name] for name in EXPERIMENTS[spec.name].required if name != "t"}
+    signals = {name: out.signal(name) for name in EXPERIMENTS[spec.name].required if name != "t"}
     recording = make_recording(signals, fs_hz=fs, experiment=spec.name, source="fsmbench twin")
     realized = {
-        **{f"qd_noise_v.{a}": float(np.std(n_qd[:, i])) for i, a in enumerate("hv")},
-        **{f"newport_angle_noise_rad.{a}": float(np.std(n_theta[:, i]))
-           for i, a in enumerate("hv")},
-        **{f"newport_metrology_noise_rad.{a}": float(np.std(n_metro[:, i]))
-           for i, a in enumerate("hv")},
-        **{f"vc_noise_v.{a}": float(np.std(n_vc[:, i])) for i, a in enumerate("hv")},
-        **{f"va_{k}": v for k, v in va.std_m().items()},
+        f"{key}.{a}": float(np.std(out.noise[part][:, i]))
+        for key, part in (("qd_noise_v", "qd"), ("newport_angle_noise_rad", "newport_angle"),
+                          ("newport_metrology_noise_rad", "metrology"), ("vc_noise_v", "vc"))
+        for i, a in enumerate("hv")
     }
+    realized.update({f"va_{k}": v for k, v in out.va.std_m().items()})
     return ExperimentResult(recording=recording, realized=realized)
 
 
@@ -208,7 +164,7 @@ def simulate_bench(bench: Bench | None = None, *, seed: int = 0, duration_s: flo
     # experiment and source), so they run on every core; the compiled loop, the random
     # generators and most numpy work release the GIL. The result does not depend on the
     # number of threads.
-    from fsmbench.twin.codegen import specialised_kernel
+    from fsmbench.sim.codegen import specialised_kernel
 
     specialised_kernel(plant)  # load (or build) the loop once, before the threads use it
     with ThreadPoolExecutor(max_workers=max(1, min(len(specs), os.cpu_count() or 1))) as pool:

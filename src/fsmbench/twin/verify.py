@@ -31,7 +31,7 @@ import numpy as np
 
 from fsmbench.bench.blocks import PlantModel, ss_frequency_response
 from fsmbench.bench.params import Bench
-from fsmbench.twin.controller import feedback_controller
+from fsmbench.sim.controller import feedback_controller
 from fsmbench.twin.experiments import REP_AMPLITUDE_V, REP_FREQ_HZ
 from fsmbench.twin.simulate import simulate_bench
 

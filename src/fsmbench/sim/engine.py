@@ -1,4 +1,4 @@
-"""The per-sample engine of the twin: plant, converters and controller at 10 kHz.
+"""The per-sample engine of the bench: plant, converters and controller at 10 kHz.
 
 Each sample ``k`` does what the real-time target does:
 
@@ -9,11 +9,15 @@ Each sample ``k`` does what the real-time target does:
 3. the commands plus the open-loop excitation are quantised and clipped by
    the DAC and stored;
 4. the plant advances one sample with those commands (delays are states of
-   the discrete plant, see :mod:`fsmbench.twin.discretize`).
+   the discrete plant, see :mod:`fsmbench.sim.discretize`).
 
 The quantisers make the loop nonlinear, so it cannot be vectorised; the
 step is compiled with numba. ``run_loop_python`` runs the identical source
 as plain Python (numba's ``py_func``), for the benchmark and as a cross-check.
+
+The loop starts from a given plant and controller state and hands back the
+state it ends in, so a run cut into blocks gives, sample for sample, the
+bits of one run of the whole length (:mod:`fsmbench.sim.stream` relies on it).
 """
 
 from __future__ import annotations
@@ -24,7 +28,7 @@ from typing import Any
 import numpy as np
 from numba import njit
 
-from fsmbench.twin.discretize import DiscretePlant
+from fsmbench.sim.discretize import DiscretePlant
 
 __all__ = ["DiscreteController", "LoopResult", "Quantiser", "run_loop", "run_loop_python"]
 
@@ -90,11 +94,17 @@ class LoopResult:
     adc : array (n, n_adc) [V]
     dac : array (n, n_dac) [V]
     internal : array (n, n_internal) [plant output units]
+    plant_state : array (nz,)
+        Plant state after the last sample (the next run's ``z0``).
+    controller_state : array (nk,)
+        Controller state after the last sample (the next run's ``xk0``).
     """
 
     adc: np.ndarray
     dac: np.ndarray
     internal: np.ndarray
+    plant_state: np.ndarray
+    controller_state: np.ndarray
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
@@ -115,7 +125,7 @@ def _loop_body(ab_row: np.ndarray, ab_col: np.ndarray, ab_val: np.ndarray,
                adc_noise: np.ndarray, adc_lsb: float, adc_lo: float, adc_hi: float,
                ak: np.ndarray, bk: np.ndarray, ck: np.ndarray, dk: np.ndarray,
                k_in: np.ndarray, k_out: np.ndarray, u_ext: np.ndarray,
-               dac_lsb: float, dac_lo: float, dac_hi: float, z0: np.ndarray,
+               dac_lsb: float, dac_lo: float, dac_hi: float, z0: np.ndarray, xk0: np.ndarray,
                out_adc: np.ndarray, out_dac: np.ndarray, out_int: np.ndarray) -> None:
     # Plant matrices are in coordinate form (row, col, value): [A | B] acting
     # on [z; u], and C acting on z. The bench's discrete plant is ~90 % zeros
@@ -136,12 +146,14 @@ def _loop_body(ab_row: np.ndarray, ab_col: np.ndarray, ab_val: np.ndarray,
     for i in range(nz):
         zu[i] = z0[i]
     z_next = np.zeros(nz)
-    xk = z0[:0].copy() if nk == 0 else np.zeros(nk)
+    xk = np.zeros(nk)
+    for i in range(nk):
+        xk[i] = xk0[i]
     xk_next = np.zeros(nk)
     e = np.zeros(ni)
     for k in range(n_steps):
         # Plant outputs and ADC.
-        # <outputs> (fsmbench.twin.codegen replaces this block for one plant)
+        # <outputs> (fsmbench.sim.codegen replaces this block for one plant)
         for i in range(ny):
             y[i] = 0.0
         for q in range(n_c):
@@ -177,7 +189,7 @@ def _loop_body(ab_row: np.ndarray, ab_col: np.ndarray, ab_val: np.ndarray,
             zu[nz + i] = _quantise_scalar(zu[nz + i], dac_lsb, dac_lo, dac_hi)
             out_dac[k, i] = zu[nz + i]
         # Plant update.
-        # <update> (fsmbench.twin.codegen replaces this block for one plant)
+        # <update> (fsmbench.sim.codegen replaces this block for one plant)
         for i in range(nz):
             z_next[i] = 0.0
         for q in range(n_ab):
@@ -185,6 +197,11 @@ def _loop_body(ab_row: np.ndarray, ab_col: np.ndarray, ab_val: np.ndarray,
         # </update>
         for i in range(nz):
             zu[i] = z_next[i]
+    # Hand the state back (in place) for the next block.
+    for i in range(nz):
+        z0[i] = zu[i]
+    for i in range(nk):
+        xk0[i] = xk[i]
 
 
 def _coo(m: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -207,7 +224,7 @@ def _coo(m: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 
 def _prepare(plant: DiscretePlant, *, u_ext: np.ndarray, adc_noise: np.ndarray,
              adc: Quantiser, dac: Quantiser, controller: DiscreteController | None,
-             n_adc: int, z0: np.ndarray | None) -> tuple[Any, ...]:
+             n_adc: int, z0: np.ndarray | None, xk0: np.ndarray | None) -> tuple[Any, ...]:
     n_steps = u_ext.shape[0]
     if u_ext.shape[1] != plant.b.shape[1]:
         raise ValueError(f"u_ext has {u_ext.shape[1]} columns, plant has {plant.b.shape[1]} inputs")
@@ -225,7 +242,13 @@ def _prepare(plant: DiscretePlant, *, u_ext: np.ndarray, adc_noise: np.ndarray,
                           for x in (controller.a, controller.b, controller.c, controller.d))
         k_in = np.asarray(controller.adc_inputs, dtype=np.int64)
         k_out = np.asarray(controller.dac_outputs, dtype=np.int64)
-    z = np.zeros(plant.a.shape[0]) if z0 is None else np.asarray(z0, dtype=float)
+    # Copies: the kernel updates the state in place, the caller's arrays stay as given.
+    z = np.zeros(plant.a.shape[0]) if z0 is None else np.array(z0, dtype=float)
+    if z.shape != (plant.a.shape[0],):
+        raise ValueError(f"z0 must have shape {(plant.a.shape[0],)}, got {z.shape}")
+    xk = np.zeros(ak.shape[0]) if xk0 is None else np.array(xk0, dtype=float)
+    if xk.shape != (ak.shape[0],):
+        raise ValueError(f"xk0 must have shape {(ak.shape[0],)}, got {xk.shape}")
 
     def rails(q: Quantiser) -> tuple[float, float, float]:
         if q.bits == 0:
@@ -241,14 +264,15 @@ def _prepare(plant: DiscretePlant, *, u_ext: np.ndarray, adc_noise: np.ndarray,
     c = _coo(plant.c)
     args = (*ab, *c, n_adc, np.ascontiguousarray(adc_noise, dtype=float),
             a_lsb, a_lo, a_hi, ak, bk, ck, dk, k_in, k_out,
-            np.ascontiguousarray(u_ext, dtype=float), d_lsb, d_lo, d_hi, z,
+            np.ascontiguousarray(u_ext, dtype=float), d_lsb, d_lo, d_hi, z, xk,
             out_adc, out_dac, out_int)
     return args
 
 
 def run_loop(plant: DiscretePlant, *, u_ext: np.ndarray, adc_noise: np.ndarray, adc: Quantiser,
              dac: Quantiser, controller: DiscreteController | None = None, n_adc: int,
-             z0: np.ndarray | None = None, specialise: bool = False) -> LoopResult:
+             z0: np.ndarray | None = None, xk0: np.ndarray | None = None,
+             specialise: bool = False) -> LoopResult:
     """Run the compiled loop.
 
     Parameters
@@ -264,30 +288,39 @@ def run_loop(plant: DiscretePlant, *, u_ext: np.ndarray, adc_noise: np.ndarray, 
         ``None`` for open loop.
     n_adc : int
     z0 : array (nz,), optional
-        Initial plant state (default zero).
+        Initial plant state (default zero); not modified.
+    xk0 : array (nk,), optional
+        Initial controller state (default zero); not modified.
     specialise : bool
         Compile a loop for this plant with its products unrolled
-        (:mod:`fsmbench.twin.codegen`): ~5x faster per sample, bit-identical,
+        (:mod:`fsmbench.sim.codegen`): ~5x faster per sample, bit-identical,
         one compilation per plant (cached on disk). Worth it for long runs
         of one plant (the twin); the generic loop suits one-off plants.
     """
     args = _prepare(plant, u_ext=u_ext, adc_noise=adc_noise, adc=adc, dac=dac,
-                    controller=controller, n_adc=n_adc, z0=z0)
+                    controller=controller, n_adc=n_adc, z0=z0, xk0=xk0)
     if specialise:
-        from fsmbench.twin.codegen import specialised_kernel  # builds on this module
+        from fsmbench.sim.codegen import specialised_kernel  # builds on this module
 
         specialised_kernel(plant)(*args)
     else:
         _loop_body(*args)
-    return LoopResult(adc=args[-3], dac=args[-2], internal=args[-1])
+    return _result(args)
 
 
 def run_loop_python(plant: DiscretePlant, *, u_ext: np.ndarray, adc_noise: np.ndarray,
                     adc: Quantiser, dac: Quantiser, controller: DiscreteController | None = None,
-                    n_adc: int, z0: np.ndarray | None = None) -> LoopResult:
+                    n_adc: int, z0: np.ndarray | None = None,
+                    xk0: np.ndarray | None = None) -> LoopResult:
     """The same loop as :func:`run_loop`, interpreted (slow; benchmark and cross-check)."""
     args = _prepare(plant, u_ext=u_ext, adc_noise=adc_noise, adc=adc, dac=dac,
-                    controller=controller, n_adc=n_adc, z0=z0)
+                    controller=controller, n_adc=n_adc, z0=z0, xk0=xk0)
     # py_func is the undecorated Python source of the compiled loop.
     _loop_body.py_func(*args)
-    return LoopResult(adc=args[-3], dac=args[-2], internal=args[-1])
+    return _result(args)
+
+
+def _result(args: tuple[Any, ...]) -> LoopResult:
+    # args ends with z, xk (updated in place by the loop), out_adc, out_dac, out_int.
+    return LoopResult(adc=args[-3], dac=args[-2], internal=args[-1], plant_state=args[-5],
+                      controller_state=args[-4])

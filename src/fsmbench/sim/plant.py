@@ -27,7 +27,7 @@ from fsmbench.bench.blocks import (
     voltage_amplifier,
 )
 from fsmbench.bench.params import BenchParams
-from fsmbench.twin.discretize import DiscretePlant, zoh_with_delays
+from fsmbench.sim.discretize import DiscretePlant, zoh_with_delays
 
 __all__ = [
     "ADC_CHANNELS",

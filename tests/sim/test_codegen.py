@@ -9,10 +9,10 @@ import pytest
 
 from fsmbench.bench.params import Bench
 from fsmbench.control.seed import seed_decentralised_controller
-from fsmbench.twin import codegen
-from fsmbench.twin.controller import feedback_controller
-from fsmbench.twin.engine import Quantiser, run_loop
-from fsmbench.twin.plant import ADC_CHANNELS, twin_discrete
+from fsmbench.sim import codegen
+from fsmbench.sim.controller import feedback_controller
+from fsmbench.sim.engine import Quantiser, run_loop
+from fsmbench.sim.plant import ADC_CHANNELS, twin_discrete
 
 
 def test_unrolled_loop_is_bit_identical_to_the_generic_one(bench: Bench) -> None:

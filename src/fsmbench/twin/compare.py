@@ -1,5 +1,9 @@
 """Identified values against a reference: the twin's truth or the nominal model.
 
+Lives beside the twin, not in :mod:`fsmbench.ident`: identification knows
+nothing of the twin; the commands that print a comparison (``fsmbench
+identify``, the study) bring the two together.
+
 The identification issue's accuracy targets are attached to each key, so a
 comparison says at a glance whether the identification met them (on the
 twin) or how far the bench is from its datasheet (on recorded data).

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from fsmbench.twin.noise import first_order_lag, gauss_markov, source_rng, white_noise
+from fsmbench.sim.noise import first_order_lag, gauss_markov, source_rng, white_noise
 
 
 def test_sources_are_reproducible_and_independent() -> None:

@@ -5,8 +5,8 @@ from __future__ import annotations
 import pytest
 
 from fsmbench.bench.params import Bench
-from fsmbench.ident.compare import compare_with_truth, comparison_rows
 from fsmbench.jsonutil import stamped
+from fsmbench.twin.compare import compare_with_truth, comparison_rows
 from fsmbench.twin.truth import model_values
 
 

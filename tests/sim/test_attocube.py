@@ -7,8 +7,8 @@ import pytest
 
 from fsmbench.bench.geometry import closed_form_path_error, small_angle_law
 from fsmbench.bench.params import Bench
-from fsmbench.twin.attocube import VaComponents, air_sensitivity, attocube_distance
-from fsmbench.twin.noise import source_rng
+from fsmbench.sim.attocube import VaComponents, air_sensitivity, attocube_distance
+from fsmbench.sim.noise import source_rng
 
 N = 200_000  # 20 s at 10 kHz: long enough for the rms of 1 s-scale drifts
 

@@ -9,8 +9,8 @@ import scipy.signal as sig
 
 from fsmbench.bench.params import Bench
 from fsmbench.control.seed import seed_decentralised_controller
-from fsmbench.twin.engine import Quantiser, run_loop, run_loop_python
-from fsmbench.twin.plant import ADC_CHANNELS, DAC_CHANNELS, twin_discrete
+from fsmbench.sim.engine import Quantiser, run_loop, run_loop_python
+from fsmbench.sim.plant import ADC_CHANNELS, DAC_CHANNELS, twin_discrete
 
 IDEAL = Quantiser(range_v=20.0, bits=0)
 N_ADC = len(ADC_CHANNELS)
@@ -45,7 +45,7 @@ def test_open_loop_is_the_discrete_plant(plant) -> None:
 
 def test_closed_loop_matches_python_control(bench: Bench, plant) -> None:
     """Linear closed loop (ideal converters) against python-control's feedback of the blocks."""
-    from fsmbench.twin.controller import feedback_controller
+    from fsmbench.sim.controller import feedback_controller
 
     ts = plant.ts_s
     ctrl = feedback_controller(seed_decentralised_controller(),
@@ -72,7 +72,7 @@ def test_closed_loop_matches_python_control(bench: Bench, plant) -> None:
 
 
 def test_compiled_and_interpreted_loops_agree(bench: Bench, plant) -> None:
-    from fsmbench.twin.controller import feedback_controller
+    from fsmbench.sim.controller import feedback_controller
 
     ctrl = feedback_controller(seed_decentralised_controller(),
                                gd_v_per_rad=bench.nominal.quad_diode.gain_v_per_rad,

@@ -7,9 +7,9 @@ import numpy as np
 
 from fsmbench.bench.params import PerAxis
 from fsmbench.control.seed import tustin
-from fsmbench.twin.discretize import DiscretePlant
-from fsmbench.twin.engine import DiscreteController
-from fsmbench.twin.plant import ADC_CHANNELS, DAC_CHANNELS
+from fsmbench.sim.discretize import DiscretePlant
+from fsmbench.sim.engine import DiscreteController
+from fsmbench.sim.plant import ADC_CHANNELS, DAC_CHANNELS
 
 __all__ = ["closed_loop_spectral_radius", "feedback_controller"]
 

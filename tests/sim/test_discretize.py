@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 import scipy.signal as sig
 
-from fsmbench.twin.discretize import zoh_with_delays
+from fsmbench.sim.discretize import zoh_with_delays
 
 A = np.array([[0.0, 2 * np.pi * 300], [-2 * np.pi * 300, -2 * 0.05 * 2 * np.pi * 300]])
 B = np.array([[0.0], [2 * np.pi * 300]])
