@@ -1,0 +1,3 @@
+"""The bench live: streaming estimators and the Tango device."""
+
+__all__: list[str] = []
