@@ -22,6 +22,7 @@ bits of one run of the whole length (:mod:`fsmbench.sim.stream` relies on it).
 
 from __future__ import annotations
 
+import weakref
 from dataclasses import dataclass
 from typing import Any
 
@@ -30,7 +31,14 @@ from numba import njit
 
 from fsmbench.sim.discretize import DiscretePlant
 
-__all__ = ["DiscreteController", "LoopResult", "Quantiser", "run_loop", "run_loop_python"]
+__all__ = [
+    "DiscreteController",
+    "LoopResult",
+    "Quantiser",
+    "per_plant",
+    "run_loop",
+    "run_loop_python",
+]
 
 
 @dataclass(frozen=True)
@@ -222,6 +230,26 @@ def _coo(m: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
             np.ascontiguousarray(m[rows[order], cols[order]], dtype=float))
 
 
+_PER_PLANT: dict[tuple[int, str], Any] = {}
+
+
+def per_plant(plant: DiscretePlant, what: str, build: Any) -> Any:
+    """``build(plant)``, computed once per plant object (a stream steps one plant many times).
+
+    Keyed by identity (the plant's arrays make it unhashable); the entry goes
+    when the plant does.
+    """
+    key = (id(plant), what)
+    if key not in _PER_PLANT:
+        _PER_PLANT[key] = build(plant)
+        weakref.finalize(plant, _PER_PLANT.pop, key, None)
+    return _PER_PLANT[key]
+
+
+def _sparse(plant: DiscretePlant) -> tuple[np.ndarray, ...]:
+    return (*_coo(np.hstack([plant.a, plant.b])), *_coo(plant.c))
+
+
 def _prepare(plant: DiscretePlant, *, u_ext: np.ndarray, adc_noise: np.ndarray,
              adc: Quantiser, dac: Quantiser, controller: DiscreteController | None,
              n_adc: int, z0: np.ndarray | None, xk0: np.ndarray | None) -> tuple[Any, ...]:
@@ -260,9 +288,7 @@ def _prepare(plant: DiscretePlant, *, u_ext: np.ndarray, adc_noise: np.ndarray,
     out_adc = np.zeros((n_steps, n_adc))
     out_dac = np.zeros((n_steps, plant.b.shape[1]))
     out_int = np.zeros((n_steps, plant.c.shape[0] - n_adc))
-    ab = _coo(np.hstack([plant.a, plant.b]))
-    c = _coo(plant.c)
-    args = (*ab, *c, n_adc, np.ascontiguousarray(adc_noise, dtype=float),
+    args = (*per_plant(plant, "sparse", _sparse), n_adc, np.ascontiguousarray(adc_noise, dtype=float),
             a_lsb, a_lo, a_hi, ak, bk, ck, dk, k_in, k_out,
             np.ascontiguousarray(u_ext, dtype=float), d_lsb, d_lo, d_hi, z, xk,
             out_adc, out_dac, out_int)
@@ -302,7 +328,7 @@ def run_loop(plant: DiscretePlant, *, u_ext: np.ndarray, adc_noise: np.ndarray, 
     if specialise:
         from fsmbench.sim.codegen import specialised_kernel  # builds on this module
 
-        specialised_kernel(plant)(*args)
+        per_plant(plant, "kernel", specialised_kernel)(*args)
     else:
         _loop_body(*args)
     return _result(args)
