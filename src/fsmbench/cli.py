@@ -43,6 +43,7 @@ from typing import Any, NoReturn
 
 from fsmbench import __version__
 from fsmbench.bench.params import Bench, ParamsError, load_bench, param_rows, save_bench
+from fsmbench.live.serve import add_serve_command
 
 __all__ = ["EXIT_BUG", "EXIT_SIGINT", "EXIT_SIGTERM", "EXIT_USER_ERROR", "main"]
 
@@ -408,6 +409,11 @@ def _seconds(text: str) -> float:
     return _positive(text, "seconds")
 
 
+def _positive_number(text: str) -> float:
+    """A factor (> 0)."""
+    return _positive(text, "times real time")
+
+
 def _nanometres(text: str) -> float:
     """A distance given in nm, returned in m."""
     return _positive(text, "nm") * 1e-9
@@ -495,6 +501,8 @@ def _parser() -> argparse.ArgumentParser:
                    dest="distance_target_m",
                    help="largest acceptable Attocube distance error, rms [nm] (default 5)")
     p.set_defaults(func=_cmd_study)
+
+    add_serve_command(sub, factor=_positive_number)
     return parser
 
 

@@ -119,14 +119,19 @@ class AttocubeStream:
         self._room_h = gm("room_humidity", env.room_humidity_rms_pct, env.room_humidity_tau_s)
         self._local_t = gm("beam_path_temperature", env.beam_path_temperature_rms_k,
                            env.beam_path_temperature_tau_s)
-        self._ecu: tuple[GaussMarkovStream, ...] = ()
-        if compensation_unit:
-            self._ecu = (
-                gm("ecu_temperature_error", env.ecu_temperature_error_k, env.ecu_error_tau_s),
-                gm("ecu_pressure_error", env.ecu_pressure_error_pa, env.ecu_error_tau_s),
-                gm("ecu_humidity_error", env.ecu_humidity_error_pct, env.ecu_error_tau_s))
+        # The unit's sensor errors run whether or not the unit is on, so that
+        # switching it (the live bench) continues every process where it was.
+        self._ecu = (
+            gm("ecu_temperature_error", env.ecu_temperature_error_k, env.ecu_error_tau_s),
+            gm("ecu_pressure_error", env.ecu_pressure_error_pa, env.ecu_error_tau_s),
+            gm("ecu_humidity_error", env.ecu_humidity_error_pct, env.ecu_error_tau_s))
         self._frame = LagStream(tau_s=env.frame_time_constant_s, fs_hz=fs_hz)
         self._noise = WhiteStream(rng_for("attocube"), rms=p.attocube.noise_rms_m)
+
+    def set_environment(self, *, compensation_unit: bool, shielding: bool) -> None:
+        """Switch the compensation unit and the shielding from the next sample on."""
+        self._compensation_unit = compensation_unit
+        self._shielding = shielding
 
     def next(self, *, theta_c_rad: np.ndarray, theta_n_rad: np.ndarray) -> VaComponents:
         """``Va`` and its parts for the next block.
@@ -158,10 +163,10 @@ class AttocubeStream:
         if self._shielding:
             local_t = local_t / env.shielding_attenuation
         sens = self._sens
+        err_t, err_p, err_h = (g.next(n) for g in self._ecu)
         if self._compensation_unit:
             # The unit corrects for what its sensors read (room air, with their
             # errors); the beam's local fluctuation is invisible to it.
-            err_t, err_p, err_h = (g.next(n) for g in self._ecu)
             dn = (sens.dn_dt_per_k * (local_t - err_t) - sens.dn_dp_per_pa * err_p
                   - sens.dn_drh_per_pct * err_h)
         else:

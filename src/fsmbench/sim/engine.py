@@ -288,7 +288,8 @@ def _prepare(plant: DiscretePlant, *, u_ext: np.ndarray, adc_noise: np.ndarray,
     out_adc = np.zeros((n_steps, n_adc))
     out_dac = np.zeros((n_steps, plant.b.shape[1]))
     out_int = np.zeros((n_steps, plant.c.shape[0] - n_adc))
-    args = (*per_plant(plant, "sparse", _sparse), n_adc, np.ascontiguousarray(adc_noise, dtype=float),
+    args = (*per_plant(plant, "sparse", _sparse), n_adc,
+            np.ascontiguousarray(adc_noise, dtype=float),
             a_lsb, a_lo, a_hi, ak, bk, ck, dk, k_in, k_out,
             np.ascontiguousarray(u_ext, dtype=float), d_lsb, d_lo, d_hi, z, xk,
             out_adc, out_dac, out_int)

@@ -245,6 +245,10 @@ class BenchStream:
         self._excitations.append(stream)
         return peak
 
+    def set_environment(self, *, compensation_unit: bool, shielding: bool) -> None:
+        """Switch the Attocube's compensation unit and the beam path's shielding (Table 3)."""
+        self._attocube.set_environment(compensation_unit=compensation_unit, shielding=shielding)
+
     def clear_excitations(self) -> None:
         """Stop every excitation from the next sample."""
         self._excitations.clear()
