@@ -80,7 +80,7 @@ def main() -> None:
     err = np.max(np.abs(ours.adc - ref[:, :n_adc])) / np.max(np.abs(ref[:, :n_adc]))
     print(f"1. linear open loop, {n} samples, {plant.a.shape[0]} states")
     print(f"   fsmbench run_loop, this plant {t_ours * 1e3:7.1f} ms"
-          f"  ({t_ours / n * 1e9:6.0f} ns/sample, unrolled: twin.codegen)")
+          f"  ({t_ours / n * 1e9:6.0f} ns/sample, unrolled: sim.codegen)")
     print(f"   fsmbench run_loop, generic    {t_gen * 1e3:7.1f} ms"
           f"  ({t_gen / n * 1e9:6.0f} ns/sample)")
     print(f"   control.forced_response     {t_fr * 1e3:9.1f} ms"
