@@ -1,0 +1,241 @@
+"""``fsmbench montecarlo``: the closed-loop repeatability experiment over random plants.
+
+    fsmbench montecarlo DATA|--twin --out OUT [--n 1000] [--seed S]
+                        [--scheduler ADDRESS] [--workers N] [--ranges TOML]
+                        [--controller FILE[::NAME]] [--duration S] [--settle S]
+                        [--batch-size N] [--params FILE] [--timestamp]
+
+The controller is fsmbench's, designed as ``fsmbench design`` does: on the
+plant identified from DATA (or the nominal model if DATA does not allow it),
+or with ``--twin`` on the nominal physical plant; or one read from a
+``controllers.mat`` / ``controllers_sos.json`` / design folder with
+``--controller FILE`` (``FILE::NAME`` picks a controller by name).
+
+Draws run on Dask: a ``LocalCluster`` of ``--workers`` processes (default all
+cores), or the running scheduler at ``--scheduler``. ``--workers 1`` without
+``--scheduler`` runs in this process without Dask (the reference); the rows
+are the same in every case.
+
+The ranges file (``--ranges``) is TOML with ``key = [low, high]`` pairs; keys
+left out keep their default (:class:`fsmbench.scale.montecarlo.Ranges`)::
+
+    resonance_scale = [0.95, 1.05]          # Sercalo resonances, × (uniform)
+    damping_scale = [0.5, 2.0]              # Sercalo damping ratios, × (log-uniform)
+    qd_gain_scale = [0.97, 1.03]            # 4QD gains, ×
+    current_amp_gain_scale = [0.97, 1.03]   # current-amplifier gains, ×
+    newport_gain_scale = [0.97, 1.03]       # Newport gains, ×
+    dac_delay_samples = [-1.0, 1.0]         # DAC delay, + samples
+    newport_delay_samples = [-1.0, 1.0]     # Newport internal delay, + samples
+
+Writes ``OUT/montecarlo.json`` (format ``fsmbench.montecarlo`` version 1:
+quantiles, unstable fraction, worst draws, and every draw as a row) and
+``OUT/timings.json`` (workers, scheduler, wall time: not reproducible), and
+prints a short table.
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import json
+import math
+import os
+import sys
+import time
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+__all__ = ["add_montecarlo_command", "dask_client", "format_table"]
+
+# Bytes of montecarlo.json per draw (a row of ~40 numbers, indented), measured ~2.5 kB.
+_BYTES_PER_DRAW = 4e3
+
+
+def _count(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a whole number") from None
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"{text!r} must be at least 1")
+    return value
+
+
+def _seconds(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number of seconds") from None
+    if not math.isfinite(value) or value < 0:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a finite number of seconds >= 0")
+    return value
+
+
+def add_montecarlo_command(sub: Any) -> None:
+    """Add ``montecarlo`` to the CLI's sub-commands (``sub`` from ``add_subparsers``)."""
+    p = sub.add_parser("montecarlo", help="the closed-loop repeatability experiment over random "
+                                          "plants within their uncertainty (Dask)")
+    p.add_argument("data", metavar="DATA", nargs="?", default=None,
+                   help="folder of recordings: fsmbench's controller is designed on the plant "
+                        "identified from it")
+    p.add_argument("--twin", action="store_true",
+                   help="no recordings: design fsmbench's controller on the nominal physical "
+                        "plant")
+    p.add_argument("--out", metavar="DIR", required=True, help="output folder")
+    p.add_argument("--n", metavar="N", type=_count, default=1000,
+                   help="number of draws (default 1000)")
+    p.add_argument("--seed", metavar="S", type=int, default=0,
+                   help="root seed of the draws (default 0); the same seed gives the same "
+                        "rows whatever the workers")
+    p.add_argument("--scheduler", metavar="ADDRESS", default=None,
+                   help="a running dask.distributed scheduler, e.g. tcp://host:8786")
+    p.add_argument("--workers", metavar="N", type=_count, default=None,
+                   help="local worker processes (default: all cores); 1: in this process, "
+                        "without Dask")
+    p.add_argument("--batch-size", metavar="N", type=_count, default=None,
+                   help="draws per Dask task (default: about 4 tasks per worker, at most 20)")
+    p.add_argument("--ranges", metavar="TOML", default=None,
+                   help="ranges of the draws (default: the design's robust set, gains ±3 %%, "
+                        "delays ± one sample)")
+    p.add_argument("--controller", metavar="FILE[::NAME]", default=None,
+                   help="run this controller (controllers.mat, controllers_sos.json or a design "
+                        "folder; ::NAME picks one) instead of designing fsmbench's")
+    p.add_argument("--duration", metavar="S", type=_seconds, default=6.0,
+                   help="record length [s] (default 6: 4 whole periods after settling)")
+    p.add_argument("--settle", metavar="S", type=_seconds, default=2.0,
+                   help="start left out of the metrics [s] (default 2: 36 of the nominal "
+                        "loop's slowest time constants, 1 s after the sine starts)")
+    p.add_argument("--params", metavar="FILE", default=None,
+                   help="bench parameters (TOML); default: the packaged Sercalo bench")
+    p.add_argument("--timestamp", action="store_true",
+                   help="write the wall-clock time into run.json (default: none)")
+    p.set_defaults(func=_command)
+
+
+@contextlib.contextmanager
+def dask_client(*, scheduler: str | None, workers: int) -> Iterator[Any]:
+    """A ``distributed.Client``: to ``scheduler``, or to a new ``LocalCluster`` of
+    ``workers`` single-threaded processes; ``None`` for ``workers == 1`` and no scheduler."""
+    if scheduler is None and workers == 1:
+        yield None
+        return
+    try:
+        from distributed import Client, LocalCluster
+    except ImportError:
+        raise ValueError("fsmbench montecarlo on Dask needs dask.distributed: pip install "
+                         "'fsmbench[dask]' (or run in one process with --workers 1)") from None
+    if scheduler is not None:
+        try:
+            client = Client(scheduler, timeout="20s")
+        except OSError as exc:
+            raise ValueError(f"--scheduler {scheduler}: cannot connect ({exc})") from None
+        with client:
+            yield client
+        return
+    with LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
+                      dashboard_address=None) as cluster, Client(cluster) as client:
+        yield client
+
+
+def format_table(result: Any) -> str:
+    """The short table: quantiles of each metric in display units, the unstable fraction
+    and the worst draws."""
+    from fsmbench.scale.montecarlo import METRICS, summarise
+
+    s = summarise(result)
+    lines = [f"{len(result.draws)} draws, seed {result.seed}, controller "
+             f"{result.setup.controller.name}; unstable: {s['unstable_draws']} "
+             f"({100 * s['fraction_unstable']:.1f} %)",
+             f"{'metric':<40} {'unit':<9} {'5 %':>10} {'median':>10} {'95 %':>10} {'max':>10}"]
+
+    def num(x: float | None, factor: float) -> str:
+        return "—" if x is None or not math.isfinite(x) else f"{x * factor:.4g}"
+
+    for key, (words, unit, factor) in METRICS.items():
+        q = s["quantiles"][key]
+        lines.append(f"{words:<40} {unit:<9} " + " ".join(
+            f"{num(q[k], factor):>10}" for k in ("p5", "p50", "p95", "max")))
+    lines.append("worst draws (unstable first, then the larger tracking error):")
+    for row in s["worst_draws"]:
+        m = row["metrics"]
+        what = ("unstable, spectral radius " + num(m["spectral_radius"], 1.0)) if not row[
+            "stable"] else (f"tracking error h {num(m['tracking_error_rms_rad.h'], 1e6)}, "
+                            f"v {num(m['tracking_error_rms_rad.v'], 1e6)} µrad rms")
+        f = row["factors"]
+        lines.append(
+            f"  draw {row['index']}: {what}; resonance ×{f['resonance_scale.h']:.3f}/"
+            f"{f['resonance_scale.v']:.3f}, damping ×{f['damping_scale.h']:.2f}/"
+            f"{f['damping_scale.v']:.2f}, 4QD gain ×{f['qd_gain_scale.h']:.3f}/"
+            f"{f['qd_gain_scale.v']:.3f}, DAC delay {f['dac_delay_offset_samples']:+.2f} "
+            "samples")
+    return "\n".join(lines)
+
+
+def _controller(args: argparse.Namespace, bench: Any, say: Any) -> Any:
+    from fsmbench.scale.montecarlo import designed_controller, loaded_controller
+
+    if args.controller is not None:
+        path, _sep, name = str(args.controller).partition("::")
+        return loaded_controller(path, name=name or None, bench=bench)
+    if args.twin:
+        say("designing fsmbench's controller on the nominal physical plant")
+        return designed_controller(bench)
+    from fsmbench.io.folder import load_recordings
+    from fsmbench.stages import choose_plant
+
+    data = Path(args.data)
+    if not data.is_dir():
+        raise ValueError(f"{data}: no such folder of recordings")
+    conv = bench.nominal.converter
+    loaded = load_recordings(data, progress=say, fs_hz=conv.fs_hz, adc_range_v=conv.range_v,
+                             adc_bits=conv.bits)
+    plant = choose_plant(dict(loaded.recordings), bench=bench, progress=say)
+    say(f"designing fsmbench's controller on the {plant.source} plant")
+    return designed_controller(bench, plant=plant.plant, plant_source=plant.source)
+
+
+def _command(args: argparse.Namespace) -> int:
+    from fsmbench.bench.params import load_bench
+    from fsmbench.io.outdir import output_transaction
+    from fsmbench.scale.montecarlo import MonteCarloSetup, Ranges, run_montecarlo
+
+    if (args.data is None) == (not args.twin):
+        raise ValueError("give either a DATA folder or --twin")
+    if args.data is not None and args.controller is not None:
+        raise ValueError("DATA only serves to design fsmbench's controller; with --controller "
+                         "use --twin")
+    if args.settle >= args.duration:
+        raise ValueError(f"--settle {args.settle:g} s leaves nothing of a --duration "
+                         f"{args.duration:g} s record")
+    start = time.perf_counter()
+
+    def say(msg: str) -> None:
+        print(f"[{time.perf_counter() - start:6.1f} s] {msg}", file=sys.stderr, flush=True)
+
+    bench = load_bench(args.params)
+    ranges = Ranges() if args.ranges is None else Ranges.from_toml(args.ranges)
+    workers = args.workers or os.cpu_count() or 1
+    out = str(args.out)
+    argv = [("." if a == out else a) for a in getattr(args, "argv", [])]
+    with output_transaction(out, command="montecarlo", arguments=argv, data_dir=args.data,
+                            need_bytes=int(args.n * _BYTES_PER_DRAW),
+                            timestamp=args.timestamp) as run:
+        setup = MonteCarloSetup(bench=bench, controller=_controller(args, bench, say),
+                                ranges=ranges, duration_s=args.duration, settle_s=args.settle)
+        where = (f"scheduler {args.scheduler}" if args.scheduler else
+                 "this process" if workers == 1 else f"{workers} local worker processes")
+        say(f"running {args.n} draws on {where}")
+        t0 = time.perf_counter()
+        with dask_client(scheduler=args.scheduler, workers=workers) as client:
+            result = run_montecarlo(setup, n=args.n, seed=args.seed, client=client,
+                                    batch_size=args.batch_size, progress=say)
+        elapsed = time.perf_counter() - t0
+        path = run.staging / "montecarlo.json"
+        path.write_text(json.dumps(result.to_json(), indent=1, allow_nan=False) + "\n")
+        (run.staging / "timings.json").write_text(json.dumps(
+            {"draws": args.n, "wall_time_s": elapsed, "workers": None if args.scheduler
+             else workers, "scheduler": args.scheduler}, indent=1) + "\n")
+    print(format_table(result))
+    print(f"wrote {run.final_path(path)}", file=sys.stderr)
+    return 0

@@ -1,0 +1,698 @@
+"""Monte Carlo of the closed-loop repeatability experiment over the plant's uncertainty.
+
+Each *draw* perturbs the twin's plant (``bench.true``) within its uncertainty,
+runs the seed's repeatability experiments (section 11: ``data_rep_h`` and
+``data_rep_v``, a 1 V 1 Hz Newport sine from 1 s) in closed loop with one
+controller, and measures
+
+* the 4QD tracking error rms per axis [rad], as
+  :func:`fsmbench.twin.verify.measure_tracking` (the axis moved by its experiment);
+* the distance error: rms of ``Va`` about its mean [m], per experiment (it
+  holds the ~1 µm the Newport's sine moves the path, repeatable), and the
+  seed's non-repeatable part (11.4): ``Va`` minus its mean over the whole
+  1 s periods after settling, rms, times ``√(n/(n−1))`` for the mean taken
+  from the same ``n`` periods (``nonrep_rms_unbiased_m`` of
+  :mod:`fsmbench.budget.repeatability`);
+* the margins of the loop on the perturbed *physical* plant: gain, phase and
+  modulus margins of ``L_ii = (G Kd)_ii`` with the discrete controller
+  ``Kd(e^{jωT})`` and the plant's exact delays, below the Nyquist frequency
+  (the design study's discrete margins, :class:`fsmbench.control.loops.DiscreteComparison`);
+* the closed loop's spectral radius ``ρ`` (exact discrete loop, the twin's
+  stability test) and its slowest time constant ``−T / ln ρ`` [s].
+
+A draw whose loop is unstable (``ρ ≥ 1``) is recorded as such, with NaN metrics.
+
+What is drawn (:class:`Ranges`, overridable by a TOML file)
+    * Sercalo resonances, uniform in the design's robust set
+      (:class:`fsmbench.control.design.DesignOptions` ``frequency_scales``: ±5 %);
+    * Sercalo damping ratios, log-uniform over ``damping_scales`` (×0.5 … ×2);
+    * 4QD, current-amplifier and Newport gains, uniform ±3 %: the loosest of the
+      identification's accuracy targets on gains
+      (:data:`fsmbench.twin.compare.TARGETS`: 4QD 1 %, current amplifier 2 %,
+      Sercalo and Newport 3 %), so a controller designed on an identified
+      plant meets a plant at least as far off as the identification may be;
+    * the DAC delay and the Newport's internal delay, ± one sample (the
+      identification's delay target), uniform, fractional (the twin's
+      discretisation takes fractional delays).
+
+Reproducibility
+    Draw ``i``'s parameters and noise seed come from
+    ``np.random.SeedSequence(seed).spawn(n)[i]`` alone, never from a shared
+    generator; the results are sorted by draw index. The same ``seed`` gives
+    the same rows whatever the number of workers or the batch size, and the
+    first ``m`` draws of a run of ``n > m`` are those of a run of ``m``.
+
+Why not :func:`fsmbench.twin.simulate.simulate_bench`
+    It runs the loop compiled for one plant (numba, seconds and a cached file
+    per plant); every draw here is a new plant, so the draws run
+    :class:`fsmbench.sim.stream.BenchStream` with the generic loop, which is
+    bit-identical (the tests compare with :func:`~fsmbench.twin.verify.verify_on_twin`)
+    and takes ~0.1 s per 6 s record.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import tomllib
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from fsmbench.bench.blocks import physical_plant
+from fsmbench.bench.params import Bench, BenchParams, PerAxis
+from fsmbench.control.design import DesignOptions
+from fsmbench.jsonutil import plain_json, stamped
+from fsmbench.sim.engine import DiscreteController
+from fsmbench.twin.compare import TARGETS
+from fsmbench.twin.experiments import REP_FREQ_HZ
+
+__all__ = [
+    "METRICS",
+    "MONTECARLO_FORMAT",
+    "PARAMETERS",
+    "ControllerChoice",
+    "Draw",
+    "DrawResult",
+    "MonteCarloResult",
+    "MonteCarloSetup",
+    "Ranges",
+    "designed_controller",
+    "discrete_feedback",
+    "draw_parameters",
+    "loaded_controller",
+    "perturbed_bench",
+    "run_draw",
+    "run_draws",
+    "run_montecarlo",
+    "summarise",
+]
+
+#: ``montecarlo.json``'s format and version.
+MONTECARLO_FORMAT = ("fsmbench.montecarlo", 1)
+
+_EXPERIMENTS = (("h", "data_rep_h", "Vph"), ("v", "data_rep_v", "Vpv"))
+
+# The loosest identification target on a gain, and the delay target in samples.
+_GAIN_TOLERANCE = max(TARGETS[f"{k}.{a}"][1] for a in "hv"
+                      for k in ("qd_gain_v_per_rad", "current_amp_gain_a_per_v",
+                                "newport_gain_v_per_v"))
+_DELAY_TOLERANCE_S = max(TARGETS["delay_s.sercalo"][1], TARGETS["delay_s.newport"][1])
+
+#: Drawn factors and offsets, per key: what it multiplies or shifts.
+PARAMETERS: dict[str, str] = {
+    **{f"resonance_scale.{a}": f"Sercalo resonance, {a} axis, × [1]" for a in "hv"},
+    **{f"damping_scale.{a}": f"Sercalo damping ratio, {a} axis, × [1]" for a in "hv"},
+    **{f"qd_gain_scale.{a}": f"4QD gain, {a} axis, × [1]" for a in "hv"},
+    **{f"current_amp_gain_scale.{a}": f"current-amplifier gain, {a} axis, × [1]" for a in "hv"},
+    **{f"newport_gain_scale.{a}": f"Newport gain, {a} axis, × [1]" for a in "hv"},
+    "dac_delay_offset_samples": "DAC delay, + [samples]",
+    "newport_delay_offset_samples": "Newport internal delay, + [samples]",
+}
+
+#: Per-draw metrics: key -> (words for a table, unit shown, factor from SI to it).
+METRICS: dict[str, tuple[str, str, float]] = {
+    "tracking_error_rms_rad.h": ("tracking error h", "µrad rms", 1e6),
+    "tracking_error_rms_rad.v": ("tracking error v", "µrad rms", 1e6),
+    "distance_error_rms_m.h": ("distance error, h experiment", "nm rms", 1e9),
+    "distance_error_rms_m.v": ("distance error, v experiment", "nm rms", 1e9),
+    "distance_nonrepeatable_rms_m.h": ("non-repeatable distance, h experiment", "nm rms", 1e9),
+    "distance_nonrepeatable_rms_m.v": ("non-repeatable distance, v experiment", "nm rms", 1e9),
+    "gain_margin_db.h": ("gain margin h", "dB", 1.0),
+    "gain_margin_db.v": ("gain margin v", "dB", 1.0),
+    "phase_margin_deg.h": ("phase margin h", "°", 1.0),
+    "phase_margin_deg.v": ("phase margin v", "°", 1.0),
+    "modulus_margin.h": ("modulus margin h", "1", 1.0),
+    "modulus_margin.v": ("modulus margin v", "1", 1.0),
+    "spectral_radius": ("closed-loop spectral radius", "1", 1.0),
+    "slowest_time_constant_s": ("slowest closed-loop time constant", "ms", 1e3),
+}
+
+
+def _interval(values: Sequence[float]) -> tuple[float, float]:
+    return (float(min(values)), float(max(values)))
+
+
+_DESIGN = DesignOptions()
+
+
+@dataclass(frozen=True)
+class Ranges:
+    """Where the draws fall: ``(low, high)`` per kind of parameter.
+
+    Scales multiply the twin's true value (each axis drawn on its own);
+    offsets add to the delays [samples] (clipped at zero delay).
+
+    Attributes
+    ----------
+    resonance_scale : (float, float)
+        Uniform; default the design's robust set, ``DesignOptions().frequency_scales``.
+    damping_scale : (float, float)
+        Log-uniform; default ``DesignOptions().damping_scales``.
+    qd_gain_scale, current_amp_gain_scale, newport_gain_scale : (float, float)
+        Uniform; default ``1 ± 3 %`` (the loosest identification target on a gain).
+    dac_delay_samples, newport_delay_samples : (float, float)
+        Uniform offsets [samples]; default ± one sample (the identification's target).
+    """
+
+    resonance_scale: tuple[float, float] = _interval(_DESIGN.frequency_scales)
+    damping_scale: tuple[float, float] = _interval(_DESIGN.damping_scales)
+    qd_gain_scale: tuple[float, float] = (1 - _GAIN_TOLERANCE, 1 + _GAIN_TOLERANCE)
+    current_amp_gain_scale: tuple[float, float] = (1 - _GAIN_TOLERANCE, 1 + _GAIN_TOLERANCE)
+    newport_gain_scale: tuple[float, float] = (1 - _GAIN_TOLERANCE, 1 + _GAIN_TOLERANCE)
+    dac_delay_samples: tuple[float, float] = (-1.0, 1.0)
+    newport_delay_samples: tuple[float, float] = (-1.0, 1.0)
+
+    def __post_init__(self) -> None:
+        for f in dataclasses.fields(self):
+            lo, hi = getattr(self, f.name)
+            if not (math.isfinite(lo) and math.isfinite(hi)) or lo > hi:
+                raise ValueError(f"range {f.name} must be finite with low <= high, got "
+                                 f"({lo}, {hi})")
+            if f.name.endswith("_scale") and lo <= 0:
+                raise ValueError(f"range {f.name} is a factor and must be > 0, got ({lo}, {hi})")
+
+    @classmethod
+    def nominal(cls) -> Ranges:
+        """Zero-width ranges: every draw is the twin's own plant."""
+        return cls(**{f.name: ((0.0, 0.0) if f.name.endswith("_samples") else (1.0, 1.0))
+                      for f in dataclasses.fields(cls)})
+
+    @classmethod
+    def from_toml(cls, path: str | Path) -> Ranges:
+        """Read ranges from a TOML file; keys left out keep their default.
+
+        The file holds top-level ``key = [low, high]`` pairs, keys as the
+        attributes, e.g. ``resonance_scale = [0.9, 1.1]`` or
+        ``dac_delay_samples = [0, 0]``.
+
+        Raises
+        ------
+        ValueError
+            One line naming the file and the key: not TOML, unknown key, not a
+            pair of numbers, or an invalid range.
+        """
+        p = Path(path)
+        try:
+            data = tomllib.loads(p.read_text("utf-8"))
+        except FileNotFoundError:
+            raise ValueError(f"{p}: no such ranges file") from None
+        except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
+            raise ValueError(f"{p}: not valid TOML ({exc})") from None
+        names = [f.name for f in dataclasses.fields(cls)]
+        unknown = sorted(set(data) - set(names))
+        if unknown:
+            raise ValueError(f"{p}: unknown range(s) {', '.join(unknown)}; known: "
+                             f"{', '.join(names)}")
+        values: dict[str, tuple[float, float]] = {}
+        for key, raw in data.items():
+            ok = (isinstance(raw, list) and len(raw) == 2
+                  and all(isinstance(x, int | float) and not isinstance(x, bool) for x in raw))
+            if not ok:
+                raise ValueError(f"{p}: '{key}' must be a pair [low, high] of numbers, got {raw!r}")
+            values[key] = (float(raw[0]), float(raw[1]))
+        try:
+            return dataclasses.replace(cls(), **values)
+        except ValueError as exc:
+            raise ValueError(f"{p}: {exc}") from None
+
+    def to_json(self) -> dict[str, Any]:
+        """``{key: [low, high]}``."""
+        return plain_json(dataclasses.asdict(self))
+
+
+@dataclass(frozen=True)
+class Draw:
+    """One draw: its index, its noise seed and its factors (:data:`PARAMETERS` keys)."""
+
+    index: int
+    noise_seed: int
+    factors: Mapping[str, float]
+
+    def to_json(self) -> dict[str, Any]:
+        """Plain values."""
+        return plain_json({"index": self.index, "noise_seed": self.noise_seed,
+                           "factors": dict(self.factors)})
+
+
+def draw_parameters(*, seed: int, n: int, ranges: Ranges) -> list[Draw]:
+    """The ``n`` draws of a run: draw ``i`` from ``SeedSequence(seed).spawn(n)[i]`` alone.
+
+    Each child sequence spawns two: one seeds the generator of the factors
+    (drawn in the order of :data:`PARAMETERS`), the other gives the twin's
+    noise seed (a 32-bit integer).
+    """
+    if n < 1:
+        raise ValueError(f"the number of draws must be >= 1, got {n}")
+    out = []
+    for i, child in enumerate(np.random.SeedSequence(seed).spawn(n)):
+        params_ss, noise_ss = child.spawn(2)
+        rng = np.random.default_rng(params_ss)
+        factors: dict[str, float] = {}
+        for key in PARAMETERS:
+            kind = key.split(".")[0]
+            name = {"dac_delay_offset_samples": "dac_delay_samples",
+                    "newport_delay_offset_samples": "newport_delay_samples"}.get(kind, kind)
+            lo, hi = getattr(ranges, name)
+            u = float(rng.uniform())  # always drawn, so a zero-width range keeps the stream
+            if kind == "damping_scale":
+                factors[key] = float(math.exp(math.log(lo) + u * (math.log(hi) - math.log(lo))))
+            else:
+                factors[key] = lo + u * (hi - lo)
+        out.append(Draw(index=i, noise_seed=int(noise_ss.generate_state(1, np.uint32)[0]),
+                        factors=factors))
+    return out
+
+
+def _scaled(value: PerAxis, factors: Mapping[str, float], kind: str) -> PerAxis:
+    return PerAxis(h=value.h * factors[f"{kind}.h"], v=value.v * factors[f"{kind}.v"])
+
+
+def perturbed_bench(bench: Bench, factors: Mapping[str, float]) -> Bench:
+    """``bench`` with its ``true`` plant moved by ``factors`` (:data:`PARAMETERS` keys).
+
+    The current-amplifier gain ``1/(R + R_buffer + Rc)`` is scaled through
+    ``R_buffer`` (the coil's resistance also sets the coil voltage); the DAC
+    delay may become fractional (the twin's discretisation and the plant's
+    delays take it as a float).
+    """
+    p = bench.true
+    ts = p.converter.ts_s
+    r_tot = (p.current_amplifier.r_ohm.as_array() + p.current_amplifier.r_buffer_ohm.as_array()
+             + p.sercalo.r_coil_ohm.as_array())
+    gi = np.array([factors["current_amp_gain_scale.h"], factors["current_amp_gain_scale.v"]])
+    # Written as a change, so that a factor of 1 leaves the value bit for bit.
+    r_buffer = p.current_amplifier.r_buffer_ohm.as_array() + r_tot * (1.0 / gi - 1.0)
+    dac = max(0.0, p.converter.dac_delay_samples + factors["dac_delay_offset_samples"])
+    newport_delay = max(0.0, p.newport.internal_delay_s
+                        + factors["newport_delay_offset_samples"] * ts)
+    true = dataclasses.replace(
+        p,
+        sercalo=dataclasses.replace(
+            p.sercalo, resonance_hz=_scaled(p.sercalo.resonance_hz, factors, "resonance_scale"),
+            damping_ratio=_scaled(p.sercalo.damping_ratio, factors, "damping_scale")),
+        current_amplifier=dataclasses.replace(
+            p.current_amplifier, r_buffer_ohm=PerAxis(h=float(r_buffer[0]),
+                                                      v=float(r_buffer[1]))),
+        quad_diode=dataclasses.replace(
+            p.quad_diode, gain_v_per_rad=_scaled(p.quad_diode.gain_v_per_rad, factors,
+                                                 "qd_gain_scale")),
+        newport=dataclasses.replace(
+            p.newport, gain_rad_per_v=_scaled(p.newport.gain_rad_per_v, factors,
+                                              "newport_gain_scale"),
+            internal_delay_s=newport_delay),
+        # A fractional DAC delay (analog lag of the path) in the int field: twin_discrete and
+        # input_delays_s both take it as a float.
+        converter=dataclasses.replace(p.converter, dac_delay_samples=dac),  # type: ignore[arg-type]
+    )
+    return dataclasses.replace(bench, true=true)
+
+
+def _parameter_values(p: BenchParams) -> dict[str, float]:
+    """The drawn plant's values, SI (for the rows of ``montecarlo.json``)."""
+    gi = p.current_amp_gain_a_per_v()
+    out: dict[str, float] = {}
+    for a in "hv":
+        out[f"sercalo.resonance_hz.{a}"] = p.sercalo.resonance_hz[a]
+        out[f"sercalo.damping_ratio.{a}"] = p.sercalo.damping_ratio[a]
+        out[f"quad_diode.gain_v_per_rad.{a}"] = p.quad_diode.gain_v_per_rad[a]
+        out[f"current_amp_gain_a_per_v.{a}"] = gi[a]
+        out[f"newport.gain_rad_per_v.{a}"] = p.newport.gain_rad_per_v[a]
+    out["converter.dac_delay_s"] = float(p.converter.dac_delay_samples) * p.converter.ts_s
+    out["newport.internal_delay_s"] = p.newport.internal_delay_s
+    return out
+
+
+# ----------------------------------------------------------------------------- controllers
+
+
+@dataclass(frozen=True, eq=False)
+class ControllerChoice:
+    """The discrete controller of every draw, in the design's convention ``u = −K y``.
+
+    ``x[k+1] = a x[k] + b r[k]``, ``v[k] = c x[k] + d r[k]`` from the beam
+    angle ``r = [Rh, Rv]`` [rad] to ``v = [Uch, Ucv]`` [V]; the command is ``−v``.
+
+    Attributes
+    ----------
+    name : str
+    a, b, c, d : ndarray, shapes (n, n), (n, 2), (2, n), (2, 2)
+    ts_s : float
+        Sample time [s].
+    gd_v_per_rad : PerAxis
+        The 4QD gains the real-time code divides ``Vp`` by (the calibrated ones).
+    source : str
+        Where it comes from, in words.
+    continuous : control.StateSpace or None
+        The continuous ``K`` it was discretised from, when known (a design).
+    """
+
+    name: str
+    a: np.ndarray
+    b: np.ndarray
+    c: np.ndarray
+    d: np.ndarray
+    ts_s: float
+    gd_v_per_rad: PerAxis
+    source: str
+    continuous: Any = None
+
+    def to_json(self) -> dict[str, Any]:
+        """Name, source, order, sample time, 4QD gains."""
+        return plain_json({"name": self.name, "source": self.source,
+                           "states": int(self.a.shape[0]), "ts_s": self.ts_s,
+                           "gd_v_per_rad": {"h": self.gd_v_per_rad.h, "v": self.gd_v_per_rad.v}})
+
+
+def discrete_feedback(choice: ControllerChoice) -> DiscreteController:
+    """The twin's controller ``u = −K (Vp / Gd)`` (as ``fsmbench.live.core``'s loaded ones)."""
+    from fsmbench.sim.plant import ADC_CHANNELS, DAC_CHANNELS
+
+    scale = np.diag(1.0 / choice.gd_v_per_rad.as_array())
+    return DiscreteController(
+        a=np.asarray(choice.a, dtype=float), b=np.asarray(choice.b, dtype=float) @ scale,
+        c=-np.asarray(choice.c, dtype=float), d=-np.asarray(choice.d, dtype=float) @ scale,
+        adc_inputs=(ADC_CHANNELS.index("Vph"), ADC_CHANNELS.index("Vpv")),
+        dac_outputs=(DAC_CHANNELS.index("Uch"), DAC_CHANNELS.index("Ucv")), name=choice.name)
+
+
+def designed_controller(bench: Bench, *, plant: Any = None,
+                        plant_source: str = "physical (nominal)") -> ControllerChoice:
+    """fsmbench's controller designed on ``plant`` (default the nominal physical plant),
+    with the 6.1 objective of ``bench.nominal``, Tustin at the converter rate.
+
+    ``fsmbench design`` designs on the plant :func:`fsmbench.stages.choose_plant`
+    picks: the identified one when the recordings allow it, else this nominal model.
+    """
+    from fsmbench.control.analysis import control_objective
+    from fsmbench.control.design import design_controller
+    from fsmbench.control.seed import tustin
+
+    model = physical_plant(bench.nominal, source=plant_source) if plant is None else plant
+    k = design_controller(model, objective=control_objective(bench.nominal)).controller
+    ts = bench.true.converter.ts_s
+    kd = tustin(k, ts_s=ts)
+    return ControllerChoice(name="fsmbench controller", a=np.asarray(kd.A, dtype=float),
+                            b=np.asarray(kd.B, dtype=float), c=np.asarray(kd.C, dtype=float),
+                            d=np.asarray(kd.D, dtype=float), ts_s=ts,
+                            gd_v_per_rad=bench.nominal.quad_diode.gain_v_per_rad,
+                            source=f"designed on the {plant_source} plant, Tustin at {1/ts:g} Hz",
+                            continuous=k)
+
+
+def loaded_controller(path: str | Path, *, name: str | None, bench: Bench) -> ControllerChoice:
+    """A controller of a ``controllers.mat`` / ``controllers_sos.json`` / design folder.
+
+    ``name`` picks it (default fsmbench's, :func:`fsmbench.control.load.select_controller`);
+    its recorded 4QD gain is used if the file has one, else ``bench.nominal``'s.
+    """
+    from fsmbench.control.load import load_controllers, select_controller
+
+    ts = bench.true.converter.ts_s
+    chosen = select_controller(load_controllers(path, ts_s=ts), name)
+    gd = chosen.qd_gain_v_per_rad
+    gains = bench.nominal.quad_diode.gain_v_per_rad if gd is None else PerAxis(h=gd[0], v=gd[1])
+    return ControllerChoice(name=chosen.name, a=np.asarray(chosen.a), b=np.asarray(chosen.b),
+                            c=np.asarray(chosen.c), d=np.asarray(chosen.d), ts_s=chosen.ts_s,
+                            gd_v_per_rad=gains, source=str(chosen.source_path))
+
+
+# ----------------------------------------------------------------------------- one draw
+
+
+@dataclass(frozen=True, eq=False)
+class MonteCarloSetup:
+    """What every draw shares (sent once to each worker).
+
+    Attributes
+    ----------
+    bench : Bench
+        The nominal twin; draws perturb ``bench.true``.
+    controller : ControllerChoice
+    ranges : Ranges
+    duration_s, settle_s : float
+        Record length and the start left out of the metrics [s].
+    """
+
+    bench: Bench
+    controller: ControllerChoice
+    ranges: Ranges = field(default_factory=Ranges)
+    duration_s: float = 6.0
+    settle_s: float = 2.0
+
+    def to_json(self) -> dict[str, Any]:
+        """Controller, ranges, record length."""
+        return plain_json({"controller": self.controller.to_json(),
+                           "ranges": self.ranges.to_json(), "duration_s": self.duration_s,
+                           "settle_s": self.settle_s})
+
+
+@dataclass(frozen=True)
+class DrawResult:
+    """One draw's plant and what the loop did on it.
+
+    Attributes
+    ----------
+    index, noise_seed : int
+    stable : bool
+        Closed-loop spectral radius below 1.
+    factors : dict
+        The draw (:data:`PARAMETERS` keys).
+    parameters : dict
+        The drawn plant's values, SI (keys like ``sercalo.resonance_hz.h``).
+    metrics : dict
+        :data:`METRICS` keys, SI; NaN for an unstable draw (except the spectral radius).
+    """
+
+    index: int
+    noise_seed: int
+    stable: bool
+    factors: Mapping[str, float]
+    parameters: Mapping[str, float]
+    metrics: Mapping[str, float]
+
+    def to_json(self) -> dict[str, Any]:
+        """One row of ``montecarlo.json`` (NaN as null)."""
+        return plain_json({"index": self.index, "noise_seed": self.noise_seed,
+                           "stable": self.stable, "factors": dict(self.factors),
+                           "parameters": dict(self.parameters), "metrics": dict(self.metrics)})
+
+
+def _margins(p: BenchParams, choice: ControllerChoice) -> dict[str, float]:
+    """Gain, phase and modulus margins of ``L_ii = (G Kd)_ii`` below Nyquist (exact delays)."""
+    from fsmbench.control.freq import evaluate_ss, frequency_grid, siso_margins
+
+    plant = physical_plant(p, source="drawn")
+    cmds, meas = ["Uch", "Ucv"], ["Rh", "Rv"]
+    g_sub = plant.subsystem(outputs=meas, inputs=cmds)
+    tau = np.array([plant.input_delay_s[n] for n in cmds])
+    ts = choice.ts_s
+    eig_k = np.linalg.eigvals(choice.a) if choice.a.size else np.zeros(0)
+    eig_k = eig_k[np.abs(eig_k) > 0]
+    poles = np.concatenate([g_sub.poles(), np.log(eig_k.astype(complex)) / ts])
+    f = frequency_grid(poles, f_min_hz=1e-2, f_max_hz=0.999 * 0.5 / ts, per_decade=60)
+    out: dict[str, float] = {}
+    for i, axis in enumerate("hv"):
+        def loop(f_hz: np.ndarray, i: int = i) -> np.ndarray:
+            s = 2j * np.pi * np.asarray(f_hz, dtype=float).ravel()
+            g = evaluate_ss(g_sub, s) * np.exp(-s[:, None, None] * tau[None, None, :])
+            z = np.exp(s * ts)
+            n = choice.a.shape[0]
+            x = np.linalg.solve(z[:, None, None] * np.eye(n)[None] - choice.a[None],
+                                np.broadcast_to(choice.b, (z.size, *choice.b.shape))
+                                .astype(complex))
+            kz = np.einsum("pn,fnm->fpm", choice.c, x) + choice.d[None]
+            return np.asarray(np.einsum("fj,fj->f", g[:, i, :], kz[:, :, i]))
+
+        m = siso_margins(loop, f)
+        out[f"gain_margin_db.{axis}"] = m.gain_margin_db
+        out[f"phase_margin_deg.{axis}"] = m.phase_margin_deg
+        out[f"modulus_margin.{axis}"] = m.modulus_margin
+    return out
+
+
+def _nonrepeatable_rms(va: np.ndarray, *, period: int) -> float:
+    """Rms of ``va`` minus its mean over whole periods of ``period`` samples, unbiased [m]."""
+    m = va.size // period
+    if m < 2:
+        return math.nan
+    periods = va[:m * period].reshape(m, period)
+    rest = periods - periods.mean(axis=0)[None]
+    return float(np.sqrt(np.mean(rest**2) * m / (m - 1)))
+
+
+def run_draw(draw: Draw, setup: MonteCarloSetup) -> DrawResult:
+    """Simulate one draw: stability, tracking and distance errors, margins.
+
+    The repeatability experiments run as :func:`fsmbench.twin.simulate.simulate_experiment`
+    runs them (same streams, same noise seeds), with the generic loop.
+    """
+    from fsmbench.sim.controller import closed_loop_spectral_radius
+    from fsmbench.sim.plant import ADC_CHANNELS, twin_discrete
+    from fsmbench.sim.stream import BenchStream
+    from fsmbench.twin.experiments import seed_experiments, with_duration
+
+    bench = perturbed_bench(setup.bench, draw.factors)
+    p = bench.true
+    plant = twin_discrete(p)
+    dk = discrete_feedback(setup.controller)
+    rho = closed_loop_spectral_radius(plant, dk, n_adc=len(ADC_CHANNELS))
+    metrics = dict.fromkeys(METRICS, math.nan)
+    metrics["spectral_radius"] = rho
+    stable = rho < 1.0
+    if stable:
+        metrics["slowest_time_constant_s"] = -p.converter.ts_s / math.log(rho)
+        specs = {s.name: s for s in with_duration(
+            [s for s in seed_experiments() if s.name in {e for _a, e, _v in _EXPERIMENTS}],
+            duration_s=setup.duration_s)}
+        fs = p.converter.fs_hz
+        gd = bench.nominal.quad_diode.gain_v_per_rad
+        for axis, exp, vp in _EXPERIMENTS:
+            spec = specs[exp]
+            stream = BenchStream(p, seed=draw.noise_seed, name=spec.name,
+                                 compensation_unit=spec.compensation_unit,
+                                 shielding=spec.shielding, controller=dk,
+                                 excitations=spec.excitations, plant=plant, specialise=False)
+            out = stream.run(round(spec.duration_s * fs))
+            t = np.arange(out.adc.shape[0]) / fs  # the recording's time axis
+            keep = t >= t[0] + setup.settle_s
+            e = out.signal(vp)[keep] / gd[axis]
+            metrics[f"tracking_error_rms_rad.{axis}"] = float(np.sqrt(np.mean((e - e.mean())**2)))
+            va = out.signal("Va")[keep]
+            metrics[f"distance_error_rms_m.{axis}"] = float(np.sqrt(np.mean((va - va.mean())**2)))
+            metrics[f"distance_nonrepeatable_rms_m.{axis}"] = _nonrepeatable_rms(
+                va, period=round(fs / REP_FREQ_HZ))
+        metrics.update(_margins(p, setup.controller))
+    return DrawResult(index=draw.index, noise_seed=draw.noise_seed, stable=bool(stable),
+                      factors=dict(draw.factors), parameters=_parameter_values(p),
+                      metrics=metrics)
+
+
+def run_draws(draws: Sequence[Draw], setup: MonteCarloSetup) -> list[DrawResult]:
+    """Run a batch of draws in order (what one Dask task does)."""
+    return [run_draw(d, setup) for d in draws]
+
+
+# ----------------------------------------------------------------------------- many draws
+
+
+@dataclass(frozen=True, eq=False)
+class MonteCarloResult:
+    """Every draw of a run, sorted by index, and its setup.
+
+    Attributes
+    ----------
+    seed : int
+    setup : MonteCarloSetup
+    draws : tuple of DrawResult
+        Sorted by ``index``.
+    """
+
+    seed: int
+    setup: MonteCarloSetup
+    draws: tuple[DrawResult, ...]
+
+    def metric(self, key: str) -> np.ndarray:
+        """One metric over the draws, shape (n,), SI (NaN for unstable draws)."""
+        return np.array([d.metrics[key] for d in self.draws], dtype=float)
+
+    def to_json(self) -> dict[str, Any]:
+        """``montecarlo.json``'s content: summary, setup and one row per draw."""
+        name, version = MONTECARLO_FORMAT
+        return stamped(plain_json({
+            "seed": self.seed, "n": len(self.draws), **self.setup.to_json(),
+            **summarise(self), "metric_descriptions": {k: f"{w} [{u}]" for k, (w, u, _f)
+                                                       in METRICS.items()},
+            "parameter_descriptions": PARAMETERS,
+            "draws": [d.to_json() for d in self.draws]}), format=name, version=version)
+
+
+def _severity(d: DrawResult) -> tuple[int, float]:
+    """Sort key, worst first: unstable draws, then the larger tracking error (either axis)."""
+    if not d.stable:
+        return (0, -d.metrics["spectral_radius"])
+    return (1, -max(d.metrics["tracking_error_rms_rad.h"], d.metrics["tracking_error_rms_rad.v"]))
+
+
+def summarise(result: MonteCarloResult, *, worst: int = 5) -> dict[str, Any]:
+    """Quantiles of each metric over the stable draws, the unstable fraction, the worst draws.
+
+    Returns
+    -------
+    dict
+        ``quantiles``: ``{metric: {p5, p50, p95, min, max, n}}`` (SI);
+        ``fraction_unstable``; ``worst_draws``: the ``worst`` rows ranked by
+        :func:`_severity` (unstable first, then the larger tracking error).
+    """
+    quantiles: dict[str, dict[str, float]] = {}
+    for key in METRICS:
+        x = result.metric(key)
+        x = x[np.isfinite(x)]
+        if x.size == 0:
+            quantiles[key] = {"p5": math.nan, "p50": math.nan, "p95": math.nan,
+                              "min": math.nan, "max": math.nan, "n": 0}
+            continue
+        p5, p50, p95 = (float(v) for v in np.quantile(x, [0.05, 0.5, 0.95]))
+        quantiles[key] = {"p5": p5, "p50": p50, "p95": p95, "min": float(x.min()),
+                          "max": float(x.max()), "n": int(x.size)}
+    n = len(result.draws)
+    unstable = sum(not d.stable for d in result.draws)
+    ranked = sorted(result.draws, key=lambda d: (*_severity(d), d.index))
+    return {"quantiles": quantiles, "fraction_unstable": unstable / n if n else math.nan,
+            "unstable_draws": unstable,
+            "worst_draws": [d.to_json() for d in ranked[:worst]]}
+
+
+def _batches(draws: Sequence[Draw], size: int) -> list[list[Draw]]:
+    return [list(draws[i:i + size]) for i in range(0, len(draws), size)]
+
+
+def run_montecarlo(setup: MonteCarloSetup, *, n: int, seed: int, client: Any = None,
+                   batch_size: int | None = None,
+                   progress: Callable[[str], None] | None = None) -> MonteCarloResult:
+    """Run ``n`` draws, in this process or on a Dask cluster.
+
+    Parameters
+    ----------
+    setup : MonteCarloSetup
+    n : int
+        Number of draws.
+    seed : int
+        Root of every draw's :class:`numpy.random.SeedSequence`.
+    client : distributed.Client, optional
+        Run the batches on its cluster (``client.map``); ``None``: here, one
+        draw after the other (the reference).
+    batch_size : int, optional
+        Draws per Dask task; default about four tasks per worker, at most 20
+        draws (~8 s) per task, so progress shows and the load balances.
+    progress : callable, optional
+        Called with a short message after each batch.
+
+    Returns
+    -------
+    MonteCarloResult
+        The same for the same ``seed`` and ``setup`` whatever ``client`` and ``batch_size``.
+    """
+    draws = draw_parameters(seed=seed, n=n, ranges=setup.ranges)
+    results: list[DrawResult] = []
+    if client is None:
+        for d in draws:
+            results.append(run_draw(d, setup))
+            if progress is not None and (d.index + 1) % 10 == 0:
+                progress(f"{d.index + 1}/{n} draws")
+    else:
+        from distributed import as_completed
+
+        workers = max(1, len(client.scheduler_info().get("workers", {})))
+        size = batch_size or max(1, min(20, math.ceil(n / (4 * workers))))
+        shared = client.scatter(setup, broadcast=True)
+        futures = client.map(run_draws, _batches(draws, size), setup=shared, pure=False)
+        for future in as_completed(futures):
+            results.extend(future.result())
+            if progress is not None:
+                progress(f"{len(results)}/{n} draws")
+    results.sort(key=lambda r: r.index)
+    return MonteCarloResult(seed=seed, setup=setup, draws=tuple(results))
