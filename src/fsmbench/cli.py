@@ -39,15 +39,15 @@ from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from types import FrameType
-from typing import Any, NoReturn
+from typing import Any
 
 from fsmbench import __version__
 from fsmbench.bench.params import Bench, ParamsError, load_bench, param_rows, save_bench
+from fsmbench.cli_args import EXIT_USER_ERROR, Parser, factor, figure_formats, nanometres, seconds
 from fsmbench.live.serve import add_serve_command
 
 __all__ = ["EXIT_BUG", "EXIT_SIGINT", "EXIT_SIGTERM", "EXIT_USER_ERROR", "main"]
 
-EXIT_USER_ERROR = 2
 EXIT_SIGINT = 130
 EXIT_SIGTERM = 143
 EXIT_BUG = 1
@@ -172,7 +172,7 @@ def _twin_bytes(args: argparse.Namespace, fmt: str) -> float:
 
 
 def _cmd_simulate(args: argparse.Namespace) -> int:
-    from fsmbench.twin.simulate import simulate_bench, write_twin
+    from fsmbench.twin.simulate import stream_bench
 
     out = args.out_pos or args.out
     if out is None:
@@ -181,13 +181,41 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
     with _run_folder(args, out, data=None,
                      need_bytes=_twin_bytes(args, args.format) + _SMALL_BYTES) as run:
         say = _progress()
-        sim = simulate_bench(bench, seed=args.seed, duration_s=args.duration,
-                             experiments=args.experiments, progress=say)
-        say(f"writing {len(sim.recordings)} records to {out}")
-        paths = write_twin(sim, run.staging, format=args.format)
+        if args.format == "nexus":
+            # Streamed block by block: any --duration in bounded memory.
+            paths = stream_bench(bench, out_dir=run.staging, seed=args.seed,
+                                 duration_s=args.duration, experiments=args.experiments,
+                                 progress=say)
+        else:
+            paths = _simulate_in_memory(args, bench, run.staging, say)
     for p in paths:
         print(run.final_path(p))
     say("done")
+    return 0
+
+
+def _simulate_in_memory(args: argparse.Namespace, bench: Bench, staging: Path,
+                        say: Callable[[str], None]) -> list[Path]:
+    from fsmbench.twin.simulate import simulate_bench, write_twin
+
+    sim = simulate_bench(bench, seed=args.seed, duration_s=args.duration,
+                         experiments=args.experiments, progress=say)
+    say(f"writing {len(sim.recordings)} records")
+    return write_twin(sim, staging, format=args.format)
+
+
+def _cmd_convert(args: argparse.Namespace) -> int:
+    from fsmbench.io.lazy import convert_recording
+
+    src, dest = Path(args.source), Path(args.dest)
+    if not src.is_file():
+        raise FileNotFoundError(2, "no such recording", str(src))
+    if dest.resolve() == src.resolve():
+        raise ValueError(f"{dest}: the output would replace the input; inputs are never "
+                         "modified")
+    if not dest.parent.is_dir():
+        raise FileNotFoundError(2, "output folder does not exist", str(dest.parent))
+    print(convert_recording(src, dest, fs_hz=args.fs_hz, progress=_progress()))
     return 0
 
 
@@ -383,60 +411,12 @@ def _cmd_study(args: argparse.Namespace) -> int:
     return 0
 
 
-# ------------------------------------------------------------------ arguments
-
-
-class _Parser(argparse.ArgumentParser):
-    """argparse with errors as one line ``fsmbench <cmd>: error: ...`` and status 2."""
-
-    def error(self, message: str) -> NoReturn:
-        self.exit(EXIT_USER_ERROR, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
-
-
-def _positive(text: str, unit: str) -> float:
-    """A finite, positive number (``inf``, ``nan``, ``0``, ``-1`` rejected)."""
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not a number of {unit}") from None
-    if not math.isfinite(value) or value <= 0:
-        raise argparse.ArgumentTypeError(f"{text!r} is not a finite positive number of {unit}")
-    return value
-
-
-def _seconds(text: str) -> float:
-    """A duration [s]."""
-    return _positive(text, "seconds")
-
-
-def _positive_number(text: str) -> float:
-    """A factor (> 0)."""
-    return _positive(text, "times real time")
-
-
-def _nanometres(text: str) -> float:
-    """A distance given in nm, returned in m."""
-    return _positive(text, "nm") * 1e-9
-
-
-def _figure_formats(text: str) -> tuple[str, ...]:
-    """``png,pdf`` → ("png", "pdf"); ``none`` or empty → ()."""
-    items = [x.strip().lower() for x in text.split(",") if x.strip()]
-    if items == ["none"]:
-        return ()
-    bad = [x for x in items if x not in ("png", "pdf")]
-    if bad:
-        raise argparse.ArgumentTypeError(f"unknown figure format(s) {', '.join(bad)}; "
-                                         "use png, pdf or png,pdf")
-    return tuple(dict.fromkeys(items))
-
-
 def _parser() -> argparse.ArgumentParser:
-    parser = _Parser(
+    parser = Parser(
         prog="fsmbench",
         description="Fast-steering-mirror bench: digital twin, identification, budget, control.")
     parser.add_argument("--version", action="version", version=f"fsmbench {__version__}")
-    sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
+    sub = parser.add_subparsers(dest="command", required=True, parser_class=Parser)
 
     def common(p: argparse.ArgumentParser) -> None:
         p.add_argument("--params", metavar="FILE", default=None,
@@ -455,7 +435,7 @@ def _parser() -> argparse.ArgumentParser:
     common(p)
     p.add_argument("out_pos", metavar="OUT", nargs="?", default=None, help="output folder")
     p.add_argument("--out", metavar="DIR", default=None, help="output folder (same as OUT)")
-    p.add_argument("--duration", metavar="S", type=_seconds, default=None,
+    p.add_argument("--duration", metavar="S", type=seconds, default=None,
                    help="length of every record [s] (default: the seed's, 100 s huddle tests)")
     p.add_argument("--seed", metavar="N", type=int, default=0, help="random seed (default 0)")
     p.add_argument("--format", choices=("mat5", "mat73", "nexus"), default="mat5",
@@ -492,17 +472,27 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--data", metavar="DIR", default=None, help="folder of recordings (.mat)")
     p.add_argument("--out", metavar="DIR", required=True, help="output folder")
     p.add_argument("--seed", metavar="N", type=int, default=0, help="twin seed (default 0)")
-    p.add_argument("--duration", metavar="S", type=_seconds, default=None,
+    p.add_argument("--duration", metavar="S", type=seconds, default=None,
                    help="twin record length [s] (default: the seed's)")
-    p.add_argument("--figures", metavar="FORMATS", type=_figure_formats, default=(),
+    p.add_argument("--figures", metavar="FORMATS", type=figure_formats, default=(),
                    help="also write every figure as png and/or pdf into OUT/figures "
                         "(comma list: png, pdf, png,pdf; default none)")
-    p.add_argument("--distance-target", metavar="NM", type=_nanometres, default=5e-9,
+    p.add_argument("--distance-target", metavar="NM", type=nanometres, default=5e-9,
                    dest="distance_target_m",
                    help="largest acceptable Attocube distance error, rms [nm] (default 5)")
     p.set_defaults(func=_cmd_study)
 
-    add_serve_command(sub, factor=_positive_number)
+    add_serve_command(sub, factor=factor)
+
+    p = sub.add_parser("convert", help="copy a recording into a chunked NeXus archive (long "
+                                       "records: lazy reading, bounded memory)")
+    p.add_argument("source", metavar="IN", help="MATLAB v5/v7.3 or NeXus recording")
+    p.add_argument("dest", metavar="OUT", help="the NeXus archive to write (.h5)")
+    p.add_argument("--format", choices=("nexus",), default="nexus",
+                   help="output format (nexus: chunked HDF5, read lazily)")
+    p.add_argument("--fs", metavar="HZ", type=factor, default=None, dest="fs_hz",
+                   help="sampling rate [Hz] (default: from t)")
+    p.set_defaults(func=_cmd_convert)
     return parser
 
 

@@ -39,6 +39,7 @@ __all__ = [
     "TwinRun",
     "simulate_bench",
     "simulate_experiment",
+    "stream_bench",
     "write_twin",
 ]
 
@@ -119,6 +120,70 @@ def simulate_experiment(bench: Bench, spec: ExperimentSpec, *, seed: int,
     return ExperimentResult(recording=recording, realized=realized)
 
 
+def _prepare_run(bench: Bench, *, duration_s: float | None, experiments: Sequence[str] | None,
+                 controller: DiscreteController | None
+                 ) -> tuple[tuple[ExperimentSpec, ...], DiscretePlant, DiscreteController | None]:
+    """The experiments asked for, the twin's plant and a controller checked stable."""
+    specs = seed_experiments()
+    if experiments is not None:
+        unknown = sorted(set(experiments) - {s.name for s in specs})
+        if unknown:
+            raise ValueError(f"unknown experiment(s) {unknown}; known: {[s.name for s in specs]}")
+        specs = tuple(s for s in specs if s.name in set(experiments))
+    if duration_s is not None:
+        specs = with_duration(specs, duration_s=duration_s)
+    p = bench.true
+    plant = twin_discrete(p)
+    if controller is None and any(s.closed_loop for s in specs):
+        controller = feedback_controller(seed_decentralised_controller(),
+                                         gd_v_per_rad=bench.nominal.quad_diode.gain_v_per_rad,
+                                         ts_s=p.converter.ts_s, name="seed K (9.2)")
+    if controller is not None:
+        rho = closed_loop_spectral_radius(plant, controller, n_adc=len(ADC_CHANNELS))
+        if rho >= 1.0:
+            raise ValueError(f"controller '{controller.name}' does not stabilise the twin's plant "
+                             f"(closed-loop spectral radius {rho:.6f} >= 1)")
+    return specs, plant, controller
+
+
+def stream_bench(bench: Bench | None = None, *, out_dir: str | Path, seed: int = 0,
+                 duration_s: float | None = None, experiments: Sequence[str] | None = None,
+                 controller: DiscreteController | None = None,
+                 progress: Callable[[str], None] | None = None) -> list[Path]:
+    """Run the seed's experiments on the twin straight into NeXus archives (any length).
+
+    Each experiment streams block by block (:func:`fsmbench.twin.long.stream_experiment`),
+    so memory does not grow with ``duration_s``; the samples are those
+    :func:`simulate_bench` gives for the same seed, bit for bit. Writes
+    ``<name>.h5`` and ``twin_truth.json`` into ``out_dir``; returns the paths.
+    """
+    from fsmbench.sim.codegen import specialised_kernel
+    from fsmbench.twin.long import stream_experiment
+
+    bench = default_bench() if bench is None else bench
+    specs, plant, controller = _prepare_run(bench, duration_s=duration_s,
+                                            experiments=experiments, controller=controller)
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    specialised_kernel(plant)
+
+    def one(spec: ExperimentSpec) -> dict[str, float]:
+        return stream_experiment(bench, spec, seed=seed, path=out / f"{spec.name}.h5",
+                                 plant=plant, controller=controller, created=TWIN_CREATED_S,
+                                 progress=None if progress is None
+                                 else (lambda sp: progress(sp.line())))
+
+    with ThreadPoolExecutor(max_workers=max(1, min(len(specs), os.cpu_count() or 1))) as pool:
+        realized = dict(zip((s.name for s in specs), pool.map(one, specs), strict=True))
+    truth = twin_truth(bench, seed=seed, experiments=specs, realized=realized,
+                       controller_name=None if controller is None else controller.name)
+    truth_path = out / "twin_truth.json"
+    name, version = TRUTH_FORMAT
+    atomic_write_text(truth_path, json.dumps(stamped(truth, format=name, version=version),
+                                             indent=2, sort_keys=True) + "\n")
+    return [*(out / f"{s.name}.h5" for s in specs), truth_path]
+
+
 def simulate_bench(bench: Bench | None = None, *, seed: int = 0, duration_s: float | None = None,
                    experiments: Sequence[str] | None = None,
                    controller: DiscreteController | None = None,
@@ -141,25 +206,8 @@ def simulate_bench(bench: Bench | None = None, *, seed: int = 0, duration_s: flo
         Called with a short message before each experiment.
     """
     bench = default_bench() if bench is None else bench
-    specs = seed_experiments()
-    if experiments is not None:
-        unknown = sorted(set(experiments) - {s.name for s in specs})
-        if unknown:
-            raise ValueError(f"unknown experiment(s) {unknown}; known: {[s.name for s in specs]}")
-        specs = tuple(s for s in specs if s.name in set(experiments))
-    if duration_s is not None:
-        specs = with_duration(specs, duration_s=duration_s)
-    p = bench.true
-    plant = twin_discrete(p)
-    if controller is None and any(s.closed_loop for s in specs):
-        controller = feedback_controller(seed_decentralised_controller(),
-                                         gd_v_per_rad=bench.nominal.quad_diode.gain_v_per_rad,
-                                         ts_s=p.converter.ts_s, name="seed K (9.2)")
-    if controller is not None:
-        rho = closed_loop_spectral_radius(plant, controller, n_adc=len(ADC_CHANNELS))
-        if rho >= 1.0:
-            raise ValueError(f"controller '{controller.name}' does not stabilise the twin's plant "
-                             f"(closed-loop spectral radius {rho:.6f} >= 1)")
+    specs, plant, controller = _prepare_run(bench, duration_s=duration_s,
+                                            experiments=experiments, controller=controller)
     # The experiments are independent (each noise source has its own stream, keyed by
     # experiment and source), so they run on every core; the compiled loop, the random
     # generators and most numpy work release the GIL. The result does not depend on the

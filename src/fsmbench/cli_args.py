@@ -1,0 +1,65 @@
+"""Argument types and the parser class of the ``fsmbench`` command line.
+
+Shared by :mod:`fsmbench.cli` and the commands other packages register
+(``serve``, ``montecarlo``): every number a user types is checked here, and
+a bad one gives one line, status 2.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+from typing import NoReturn
+
+__all__ = ["EXIT_USER_ERROR", "Parser", "factor", "figure_formats", "nanometres", "positive",
+           "seconds"]
+
+#: Exit status of an error the user can fix (bad argument, bad data, unwritable folder).
+EXIT_USER_ERROR = 2
+
+
+class Parser(argparse.ArgumentParser):
+    """argparse with errors as one line ``fsmbench <cmd>: error: ...`` and status 2."""
+
+    def error(self, message: str) -> NoReturn:
+        self.exit(EXIT_USER_ERROR, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
+
+
+def positive(text: str, unit: str) -> float:
+    """A finite, positive number (``inf``, ``nan``, ``0``, ``-1`` rejected)."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number of {unit}") from None
+    if not math.isfinite(value) or value <= 0:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a finite positive number of {unit}")
+    return value
+
+
+def seconds(text: str) -> float:
+    """A duration [s]."""
+    return positive(text, "seconds")
+
+
+def factor(text: str) -> float:
+    """A factor (> 0)."""
+    return positive(text, "times real time")
+
+
+def nanometres(text: str) -> float:
+    """A distance given in nm, returned in m."""
+    return positive(text, "nm") * 1e-9
+
+
+def figure_formats(text: str) -> tuple[str, ...]:
+    """``png,pdf`` → ("png", "pdf"); ``none`` or empty → ()."""
+    items = [x.strip().lower() for x in text.split(",") if x.strip()]
+    if items == ["none"]:
+        return ()
+    bad = [x for x in items if x not in ("png", "pdf")]
+    if bad:
+        raise argparse.ArgumentTypeError(f"unknown figure format(s) {', '.join(bad)}; "
+                                         "use png, pdf or png,pdf")
+    return tuple(dict.fromkeys(items))
+
+

@@ -1,0 +1,366 @@
+"""Long recordings read lazily: xarray over Dask arrays, chunked along time.
+
+HDF5 files — NeXus archives and MATLAB v7.3 — can be read in pieces: each
+signal becomes a Dask array whose chunks read their own slice of the file
+when computed (the file is opened per chunk, so the graph pickles to
+``dask.distributed`` workers). MATLAB v5 files cannot be read in pieces
+(each variable is one zlib stream); :func:`open_recording` loads them whole
+when they fit in memory and otherwise says to convert them with
+``fsmbench convert IN OUT --format nexus``, which streams a v5 file's
+compressed variables one by one (:func:`convert_recording`) with memory
+bounded by one chunk.
+
+Dask is the ``fsmbench[dask]`` extra: this module imports it lazily.
+"""
+
+from __future__ import annotations
+
+import os
+import struct
+import zlib
+from collections.abc import Callable, Iterator
+from pathlib import Path
+from typing import Any
+
+import h5py
+import numpy as np
+import xarray as xr
+
+from fsmbench.io.errors import RecordingError
+from fsmbench.io.matfile import detect_format
+from fsmbench.io.nexus import _plain, is_nexus
+from fsmbench.io.nexus_stream import DEFAULT_CHUNK_SAMPLES, NexusAppender
+from fsmbench.io.signals import TIME
+
+__all__ = ["available_memory_bytes", "convert_recording", "open_recording"]
+
+_READ_BLOCK = 1 << 20  # samples per piece when streaming a conversion (8 MiB of float64)
+
+
+def available_memory_bytes() -> int:
+    """Memory the machine can still give [bytes] (Linux ``MemAvailable``; else 4 GiB)."""
+    try:
+        with open("/proc/meminfo") as fh:
+            for line in fh:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) * 1024
+    except OSError:
+        pass
+    return 4 << 30
+
+
+class _H5Vector:
+    """A float64 vector inside an HDF5 file, read slice by slice (a Dask source)."""
+
+    def __init__(self, path: Path, name: str, *, length: int, matlab: bool) -> None:
+        self.path = path
+        self.name = name
+        self.shape = (length,)
+        self.dtype = np.dtype(np.float64)
+        self.ndim = 1
+        self._matlab = matlab
+
+    def __getitem__(self, key: Any) -> np.ndarray:
+        if isinstance(key, tuple):  # Dask asks with one index per dimension
+            (key,) = key
+        with h5py.File(self.path, "r") as f:
+            dset = f[self.name]
+            if self._matlab and dset.ndim == 2:
+                # MATLAB stores an N x 1 column as HDF5 shape (1, N).
+                values = dset[0, key] if dset.shape[0] == 1 else dset[key, 0]
+            else:
+                values = dset[key]
+        return np.asarray(values, dtype=np.float64)
+
+
+def _vector_length(path: Path, dset: h5py.Dataset, name: str, matlab: bool) -> int:
+    shape = dset.shape
+    if matlab and len(shape) == 2 and 1 in shape:
+        return int(max(shape))
+    if len(shape) == 1:
+        return int(shape[0])
+    raise RecordingError(path, f"is not a vector (HDF5 shape {shape})", variable=name)
+
+
+def _lazy_dataset(path: Path, names: list[str], lengths: dict[str, int],
+                  attrs_of: dict[str, dict[str, Any]], attrs: dict[str, Any], *, matlab: bool,
+                  chunk_samples: int, prefix: str = "") -> xr.Dataset:
+    import dask.array as da
+
+    n = lengths[TIME]
+    uneven = sorted({k for k, v in lengths.items() if v != n})
+    if uneven:
+        raise RecordingError(path, f"signals of unequal lengths: {TIME} has {n} samples, "
+                             + ", ".join(f"{k} {lengths[k]}" for k in uneven))
+
+    def lazy(name: str) -> Any:
+        src = _H5Vector(path, prefix + name, length=n, matlab=matlab)
+        # A stable name: the same file and signal give the same graph keys.
+        token = f"fsmbench-{path.name}-{name}-{os.stat(path).st_mtime_ns}"
+        return da.from_array(src, chunks=(chunk_samples,), name=token, lock=False,
+                             asarray=True, meta=np.zeros(0))
+
+    # No index on t: xarray would load an index coordinate into memory (7 GB for a day).
+    coords = xr.Coordinates({TIME: xr.Variable(TIME, lazy(TIME), attrs_of.get(TIME, {}))},
+                            indexes={})
+    return xr.Dataset({name: (TIME, lazy(name), attrs_of.get(name, {})) for name in names},
+                      coords=coords, attrs=attrs)
+
+
+def _open_nexus(path: Path, chunk_samples: int) -> xr.Dataset:
+    with h5py.File(path, "r") as f:
+        entry = f["entry"]
+        data = entry["data"]
+        signal = _plain(data.attrs.get("signal"))
+        aux = _plain(data.attrs.get("auxiliary_signals", []))
+        order = ([signal] if signal else []) + ([aux] if isinstance(aux, str) else list(aux))
+        order += [k for k in data if k not in order and k != TIME]
+        if TIME not in data:
+            raise RecordingError(path, "is missing from /entry/data", variable=TIME)
+        lengths = {k: _vector_length(path, data[k], k, False) for k in [TIME, *order]}
+        attrs_of = {k: {a: _plain(v) for a, v in data[k].attrs.items()} for k in [TIME, *order]}
+        attrs = {k: _plain(v) for k, v in entry.attrs.items()
+                 if k not in ("NX_class", "default")}
+    return _lazy_dataset(path, order, lengths, attrs_of, attrs, matlab=False,
+                         chunk_samples=chunk_samples, prefix="entry/data/")
+
+
+def _open_mat73(path: Path, chunk_samples: int, fs_hz: float | None) -> xr.Dataset:
+    with h5py.File(path, "r") as f:
+        names = [k for k in f if not k.startswith("#") and isinstance(f[k], h5py.Dataset)
+                 and _plain(f[k].attrs.get("MATLAB_class")) == "double"]
+        if TIME not in names:
+            raise RecordingError(path, "has no time vector", variable=TIME)
+        lengths = {k: _vector_length(path, f[k], k, True) for k in names}
+    signals = [k for k in names if k != TIME]
+    from fsmbench.io.recording import _ordered, _signal_attrs
+
+    ds = _lazy_dataset(path, _ordered(signals), lengths,
+                       {k: _signal_attrs(k) for k in signals}, {}, matlab=True,
+                       chunk_samples=chunk_samples)
+    t = ds[TIME].data
+    if fs_hz is None:
+        head = np.asarray(t[: min(1001, t.shape[0])].compute())
+        fs_hz = float((head.size - 1) / (head[-1] - head[0])) if head.size > 1 else float("nan")
+    ds.attrs.update({"fs_hz": float(fs_hz), "experiment": path.stem, "source": str(path)})
+    return ds
+
+
+def open_recording(path: str | os.PathLike[str], *, chunk_samples: int = DEFAULT_CHUNK_SAMPLES,
+                   memory_fraction: float = 0.5) -> xr.Dataset:
+    """A recording as an xarray Dataset: lazy (Dask) for HDF5 files, in memory for v5.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        NeXus archive, MATLAB v7.3 or v5 file in the seed's layout.
+    chunk_samples : int
+        Dask chunk length along time (samples).
+    memory_fraction : float
+        A v5 file is refused when its samples would take more than this
+        fraction of the memory available now.
+
+    Raises
+    ------
+    RecordingError
+        Unreadable file, or a v5 file too large for memory (with the command
+        that converts it).
+    """
+    p = Path(path)
+    fmt = detect_format(p)
+    if fmt == "hdf5" and is_nexus(p):
+        return _open_nexus(p, chunk_samples)
+    if fmt == "mat73":
+        return _open_mat73(p, chunk_samples, None)
+    if fmt == "mat5":
+        need = sum(8 * n for _name, n in _v5_vectors(p))
+        have = available_memory_bytes()
+        if need > memory_fraction * have:
+            raise RecordingError(p, f"holds {need / 2**30:.1f} GiB of samples in MATLAB v5, "
+                                 "which cannot be read in pieces, and this machine has "
+                                 f"{have / 2**30:.1f} GiB available: convert it once with "
+                                 f"fsmbench convert {p} {p.with_suffix('.h5')} --format nexus")
+    from fsmbench.io.recording import read_recording
+
+    return read_recording(p)
+
+
+# --------------------------------------------------------------------- MATLAB v5, streamed
+
+_MI_INT8, _MI_UINT32, _MI_INT32, _MI_DOUBLE, _MI_MATRIX, _MI_COMPRESSED = 1, 6, 5, 9, 14, 15
+_MX_DOUBLE = 6
+_MI_BYTES = {1: 1, 2: 1, 3: 2, 4: 2, 5: 4, 6: 4, 7: 4, 9: 8, 12: 8, 13: 8}
+_MI_DTYPE = {1: "i1", 2: "u1", 3: "i2", 4: "u2", 5: "i4", 6: "u4", 7: "f4", 9: "f8",
+             12: "i8", 13: "u8"}
+
+
+class _Stream:
+    """Bytes of one v5 data element: raw file bytes, or a zlib stream inflated on demand."""
+
+    def __init__(self, fh: Any, size: int, *, compressed: bool) -> None:
+        self._fh = fh
+        self._left = size
+        self._z = zlib.decompressobj() if compressed else None
+        self._buf = b""
+
+    def read(self, n: int) -> bytes:
+        while len(self._buf) < n:
+            if self._left <= 0:
+                if self._z is not None and self._z.unconsumed_tail:
+                    self._buf += self._z.decompress(self._z.unconsumed_tail, 1 << 24)
+                    continue
+                raise EOFError
+            raw = self._fh.read(min(self._left, 1 << 20))
+            self._left -= len(raw)
+            self._buf += self._z.decompress(raw) if self._z is not None else raw
+        out, self._buf = self._buf[:n], self._buf[n:]
+        return out
+
+
+def _tag(s: _Stream, endian: str) -> tuple[int, int, bytes]:
+    """(type, size, small data) of the next tag; small elements pack data into the tag."""
+    head = s.read(8)
+    word = struct.unpack(endian + "I", head[:4])[0]
+    if word >> 16:
+        return word & 0xFFFF, word >> 16, head[4:4 + (word >> 16)]
+    return word, struct.unpack(endian + "I", head[4:])[0], b""
+
+
+def _skip_padded(s: _Stream, size: int) -> bytes:
+    data = s.read(size)
+    if size % 8:
+        s.read(8 - size % 8)
+    return data
+
+
+def _matrix_header(s: _Stream, endian: str) -> tuple[str, int, int]:
+    """Name, class and element count of a miMATRIX (flags, dims, name read)."""
+    _t, size, small = _tag(s, endian)
+    flags = small or _skip_padded(s, size)
+    mx_class = struct.unpack(endian + "I", flags[:4])[0] & 0xFF
+    t, size, small = _tag(s, endian)
+    dims_raw = small or _skip_padded(s, size)
+    dims = np.frombuffer(dims_raw, dtype=endian + _MI_DTYPE[t])
+    t, size, small = _tag(s, endian)
+    name = (small or _skip_padded(s, size)).decode("latin-1")
+    return name, mx_class, int(np.prod(dims)) if dims.size else 0
+
+
+def _v5_elements(path: Path) -> Iterator[tuple[Any, str, int, int, _Stream]]:
+    with open(path, "rb") as fh:
+        header = fh.read(128)
+        endian = "<" if header[126:128] == b"IM" else ">"
+        while True:
+            head = fh.read(8)
+            if len(head) < 8:
+                return
+            outer, size = struct.unpack(endian + "II", head)
+            start = fh.tell()
+            s = _Stream(fh, size, compressed=outer == _MI_COMPRESSED)
+            kind = outer
+            if outer == _MI_COMPRESSED:
+                kind, _inner_size = struct.unpack(endian + "II", s.read(8))
+            if kind == _MI_MATRIX:
+                yield fh, endian, start, size, s
+            # Uncompressed elements are padded to 8 bytes; compressed ones are not.
+            fh.seek(start + size + (-size % 8 if outer != _MI_COMPRESSED else 0))
+
+
+def _v5_vectors(path: Path) -> list[tuple[str, int]]:
+    """(name, samples) of every real double vector of a v5 file (headers only)."""
+    out = []
+    for _fh, endian, _start, _size, s in _v5_elements(path):
+        name, mx_class, count = _matrix_header(s, endian)
+        if mx_class == _MX_DOUBLE:
+            out.append((name, count))
+    return out
+
+
+def _v5_stream_variable(path: Path, wanted: str,
+                        block: int = _READ_BLOCK) -> Iterator[np.ndarray]:
+    """The samples of one real double vector of a v5 file, ``block`` at a time."""
+    for _fh, endian, _start, _size, s in _v5_elements(path):
+        name, mx_class, _count = _matrix_header(s, endian)
+        if name != wanted:
+            continue
+        if mx_class != _MX_DOUBLE:
+            raise RecordingError(path, "is not a real double vector", variable=name)
+        t, size, small = _tag(s, endian)
+        if small:
+            yield np.frombuffer(small, dtype=endian + _MI_DTYPE[t]).astype(np.float64)
+            return
+        width = _MI_BYTES[t]
+        left = size // width
+        while left > 0:
+            n = min(block, left)
+            yield np.frombuffer(s.read(n * width), dtype=endian + _MI_DTYPE[t]).astype(
+                np.float64)
+            left -= n
+        return
+    raise RecordingError(path, "is not in the file", variable=wanted)
+
+
+def convert_recording(source: str | os.PathLike[str], dest: str | os.PathLike[str], *,
+                      fs_hz: float | None = None,
+                      progress: Callable[[str], None] | None = None) -> Path:
+    """Copy a recording into a chunked NeXus archive, with memory bounded by one block.
+
+    Parameters
+    ----------
+    source : str or os.PathLike
+        MATLAB v5 (compressed or not), v7.3, or NeXus, in the seed's layout
+        (real double column vectors, ``t`` among them).
+    dest : str or os.PathLike
+        The NeXus archive to write (atomically).
+    fs_hz : float, optional
+        Sampling rate [Hz]; default: from the first samples of ``t``.
+    progress : callable, optional
+        Called with a line per signal.
+    """
+    from fsmbench.io.recording import _ordered
+
+    src, out = Path(source), Path(dest)
+    fmt = detect_format(src)
+    say = progress or (lambda _msg: None)
+    if fmt == "mat5":
+        vectors = dict(_v5_vectors(src))
+        if TIME not in vectors:
+            raise RecordingError(src, "has no time vector", variable=TIME)
+
+        def pieces(name: str) -> Iterator[np.ndarray]:
+            return _v5_stream_variable(src, name)
+        n = vectors[TIME]
+        signals = _ordered([k for k in vectors if k != TIME])
+        uneven = [k for k in signals if vectors[k] != n]
+        if uneven:
+            raise RecordingError(src, f"signals of unequal lengths ({', '.join(uneven)} vs "
+                                 f"{TIME})")
+        first_t = next(pieces(TIME))[:2]
+        attrs = {"experiment": src.stem, "source": str(src)}
+    elif fmt in ("mat73", "hdf5"):
+        ds = open_recording(src)
+        signals = [str(k) for k in ds.data_vars]
+        n = ds.sizes[TIME]
+
+        def pieces(name: str) -> Iterator[np.ndarray]:
+            arr = ds[name].data
+            for k in range(0, n, _READ_BLOCK):
+                yield np.asarray(arr[k:k + _READ_BLOCK].compute())
+        first_t = np.asarray(ds[TIME].data[:2].compute())
+        attrs = {k: v for k, v in ds.attrs.items() if k != "fs_hz"}
+    else:
+        raise RecordingError(src, "cannot be converted: MATLAB v4 files are small, read them "
+                             "directly")
+    rate = fs_hz if fs_hz is not None else (float(1.0 / (first_t[1] - first_t[0]))
+                                            if first_t.size > 1 else float("nan"))
+    if not np.isfinite(rate) or rate <= 0:
+        raise RecordingError(src, "has no usable time base to take the sampling rate from; "
+                             "give --fs", variable=TIME)
+    # One pass per signal keeps memory at one block: the archive is written column by
+    # column (HDF5 datasets grow independently), time first.
+    with NexusAppender(out, signals=signals, fs_hz=rate, attrs=attrs,
+                       t0_s=float(first_t[0])) as nx:
+        nx.write_columns({TIME: pieces(TIME), **{name: pieces(name) for name in signals}},
+                         n_samples=n)
+        say(f"{src.name}: {n} samples of {', '.join(signals)} into {out}")
+    return out
