@@ -30,6 +30,7 @@ import math
 import re
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, fields
+from typing import Any
 
 import control as ct
 import numpy as np
@@ -39,7 +40,8 @@ from numpy.typing import NDArray
 
 from fsmbench.bench.blocks import newport_beam_matrix
 from fsmbench.bench.params import BenchParams
-from fsmbench.budget.spectra import cumulative_power, first_order_lowpass, seed_welch
+from fsmbench.budget.signals import block_means, compute, is_lazy, lowpass_rms, trim_record
+from fsmbench.budget.spectra import cumulative_power, seed_welch
 from fsmbench.control.seed import tustin
 from fsmbench.ident import hanning
 from fsmbench.jsonutil import hv
@@ -92,8 +94,11 @@ def huddle_number(name: str) -> int:
 
 
 def trim_huddle(ds: xr.Dataset, *, name: str, t0_s: float = 1.0,
-                duration_s: float = 100.0) -> dict[str, FloatArray]:
+                duration_s: float | None = None) -> dict[str, FloatArray]:
     """The seed's 3.2 trimming: drop ``t < t0``, restart t at 0, keep ``tend·fs`` samples.
+
+    ``duration_s`` None keeps the whole rest of the record (the seed's
+    records hold 100 s after the trim, its ``tend``).
 
     Returns ``t`` [s], ``Vph``, ``Vpv`` [V] and ``Va`` [m] (not mean-removed),
     each shape (N,). ValueError (naming ``name``) if a signal is missing or
@@ -105,7 +110,7 @@ def trim_huddle(ds: xr.Dataset, *, name: str, t0_s: float = 1.0,
     fs = float(ds.attrs["fs_hz"])
     t = np.asarray(ds["t"].values, dtype=float)
     keep = t >= t0_s
-    n = min(int(keep.sum()), round(duration_s * fs))
+    n = int(keep.sum()) if duration_s is None else min(int(keep.sum()), round(duration_s * fs))
     if n < 2 * math.ceil(fs):
         raise ValueError(f"{name}: {n / fs:.3g} s left after removing t < {t0_s:g} s; the "
                          f"huddle analysis needs at least 2 s (two 1 s Welch windows)")
@@ -138,10 +143,10 @@ def _welch_band(f: FloatArray, psd: FloatArray, lo: float, hi: float, *, enbw_hz
     return math.sqrt(power), 0.5 / math.sqrt(n_ind * averages)
 
 
-def _drift(x: FloatArray, fs: float) -> tuple[float, float]:
+def _drift(x: Any, fs: float) -> tuple[float, float]:
     per = round(fs)
-    nb = x.size // per
-    m = x[: nb * per].reshape(nb, per).mean(axis=1)
+    m = block_means(x, per=per)
+    nb = m.size
     m = m - m.mean()
     # Independent spectral values of the 1 s means: a Hann-tapered periodogram (the
     # plain one leaks a red drift across all bins, which then look independent),
@@ -151,6 +156,24 @@ def _drift(x: FloatArray, fs: float) -> tuple[float, float]:
         return 0.0, math.inf
     n_ind = max(1.0, p.sum() ** 2 / float((p**2).sum()) / 1.5)
     return float(np.sqrt(np.mean(m**2))), 0.5 / math.sqrt(n_ind)
+
+
+def _trimmed(ds: xr.Dataset, *, name: str, t0_s: float, duration_s: float | None,
+             fs: float) -> dict[str, Any]:
+    """Mean-removed ``Va``, ``Vph``, ``Vpv`` after the trim: numpy, or Dask out of core."""
+    if not is_lazy(ds["Va"].data):
+        sig = trim_huddle(ds, name=name, t0_s=t0_s, duration_s=duration_s)
+        return {k: sig[k] - sig[k].mean() for k in ("Va", "Vph", "Vpv")}
+    missing = [v for v in ("Vph", "Vpv", "Va") if v not in ds]
+    if missing:
+        raise ValueError(f"{name}: missing {missing} (seed 3.1 loads t, Vph, Vpv, Va)")
+    trim = trim_record(ds, t0_s=t0_s, duration_s=duration_s, fs_hz=fs)
+    if trim.n < 2 * math.ceil(fs):
+        raise ValueError(f"{name}: {trim.n / fs:.3g} s left after removing t < {t0_s:g} s; "
+                         "the huddle analysis needs at least 2 s (two 1 s Welch windows)")
+    raw = {k: ds[k].data[trim.start:trim.start + trim.n] for k in ("Va", "Vph", "Vpv")}
+    means = compute(*(x.mean() for x in raw.values()))
+    return {k: x - float(m) for (k, x), m in zip(raw.items(), means, strict=True)}
 
 
 @dataclass(frozen=True)
@@ -205,7 +228,8 @@ class HuddleRecord:
 
 
 def analyse_huddle_record(ds: xr.Dataset, *, name: str | None = None, t0_s: float = 1.0,
-                          duration_s: float = 100.0, lpf_hz: float = 50.0) -> HuddleRecord:
+                          duration_s: float | None = None, lpf_hz: float = 50.0
+                          ) -> HuddleRecord:
     """Seed 3.2–3.5 on one record: trim, remove means, low-pass Va, Welch PSDs, band rms.
 
     Parameters
@@ -215,7 +239,9 @@ def analyse_huddle_record(ds: xr.Dataset, *, name: str | None = None, t0_s: floa
     name : str, optional
         ``data_huddle_test_<n>`` (default: the ``experiment`` attribute).
     t0_s, duration_s : float
-        The seed's trim: drop ``t < t0``, keep ``duration`` [s].
+        The seed's trim: drop ``t < t0``, keep ``duration`` [s] (None: the
+        whole rest of the record, however long; out of core when ``ds`` holds
+        Dask arrays).
     lpf_hz : float
         Corner of the low pass applied to Va [Hz] (seed 3.3: 50 Hz).
 
@@ -228,12 +254,14 @@ def analyse_huddle_record(ds: xr.Dataset, *, name: str | None = None, t0_s: floa
     number = huddle_number(name)
     closed, comp, alu = HUDDLE_CONFIGS[number]
     fs = float(ds.attrs["fs_hz"])
-    sig = trim_huddle(ds, name=name, t0_s=t0_s, duration_s=duration_s)
-    va, vph, vpv = (sig[k] - sig[k].mean() for k in ("Va", "Vph", "Vpv"))
-    vaf = first_order_lowpass(va, cutoff_hz=lpf_hz, fs_hz=fs)
+    sig = _trimmed(ds, name=name, t0_s=t0_s, duration_s=duration_s, fs=fs)
+    va, vph, vpv = sig["Va"], sig["Vph"], sig["Vpv"]
+    va_lpf_rms = lowpass_rms(va, cutoff_hz=lpf_hz, fs_hz=fs)
     s_va = seed_welch(va, fs_hz=fs, name=f"{name}.Va")
     s_ph = seed_welch(vph, fs_hz=fs, name=f"{name}.Vph")
     s_pv = seed_welch(vpv, fs_hz=fs, name=f"{name}.Vpv")
+    va_rms, vph_rms, vpv_rms = (float(v) for v in compute(
+        *(np.sqrt(np.mean(x**2)) for x in (va, vph, vpv))))
     f = np.asarray(s_va.f_hz)
     psd_va = np.asarray(s_va.values, dtype=float)
     w = hanning(s_va.window_length)
@@ -249,12 +277,11 @@ def analyse_huddle_record(ds: xr.Dataset, *, name: str | None = None, t0_s: floa
     total_rel = (math.sqrt(sum((b.rms**2 * 2 * b.rel_std) ** 2 for b in bands if
                                math.isfinite(b.rel_std))) / (2 * total_var)
                  if total_var > 0 else math.inf)
-    bands.append(BandRms("total", 0.0, fs / 2.0, float(np.sqrt(np.mean(va**2))), total_rel))
+    bands.append(BandRms("total", 0.0, fs / 2.0, va_rms, total_rel))
     return HuddleRecord(
         name=name, number=number, closed_loop=closed, compensation_unit=comp, shielding=alu,
-        fs_hz=fs, duration_s=va.size / fs, va_rms_m=float(np.sqrt(np.mean(va**2))),
-        va_lpf_rms_m=float(np.sqrt(np.mean((vaf - vaf.mean()) ** 2))),
-        vph_rms_v=float(np.sqrt(np.mean(vph**2))), vpv_rms_v=float(np.sqrt(np.mean(vpv**2))),
+        fs_hz=fs, duration_s=int(va.shape[0]) / fs, va_rms_m=va_rms, va_lpf_rms_m=va_lpf_rms,
+        vph_rms_v=vph_rms, vpv_rms_v=vpv_rms,
         f_hz=f, psd_va_m2_per_hz=psd_va,
         psd_vph_v2_per_hz=np.asarray(s_ph.values, dtype=float),
         psd_vpv_v2_per_hz=np.asarray(s_pv.values, dtype=float),
@@ -404,6 +431,11 @@ def estimate_dac_noise(recordings: Mapping[str, xr.Dataset], *, controller: ct.S
         if "Uch" not in ds or "Ucv" not in ds:
             skipped[name] = "no Uch, Ucv recorded"
             continue
+        if is_lazy(ds["Uch"].data):
+            # A long record: the quantisation error is white, its first duration_s (the
+            # seed's 100 s) give the estimate; the controller runs causally from rest.
+            trim = trim_record(ds, t0_s=t0_s, duration_s=duration_s, fs_hz=fs)
+            ds = ds.isel(t=slice(0, trim.start + trim.n)).compute()
         r = np.stack([np.asarray(ds["Vph"].values) / gd[0], np.asarray(ds["Vpv"].values) / gd[1]])
         u = -_run_controller(kd, r)
         t = np.asarray(ds["t"].values)
@@ -502,7 +534,7 @@ class HuddleAnalysis:
 
 
 def analyse_huddle(recordings: Mapping[str, xr.Dataset], *, params: BenchParams,
-                   t0_s: float = 1.0, duration_s: float = 100.0,
+                   t0_s: float = 1.0, duration_s: float | None = None,
                    lpf_hz: float = 50.0) -> HuddleAnalysis:
     """Seed section 3 on every ``data_huddle_test_<n>`` in ``recordings``.
 
