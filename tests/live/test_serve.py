@@ -1,0 +1,157 @@
+"""``fsmbench serve`` as a user runs it: a device server process without a Tango database.
+
+The server is a subprocess (``python -m fsmbench.cli serve --nodb``); a client
+connects to ``tango://localhost:<port>/fsmbench/bench/1#dbase=no``. Every
+wait has a wall-clock timeout that fails saying what it waited for; the
+process is always killed at the end. The refusals (status 2, one line) run
+the console script's entry point in this process: they exit before any
+server starts.
+"""
+
+from __future__ import annotations
+
+import json
+import queue
+import socket
+import subprocess
+import sys
+import threading
+import time
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+tango = pytest.importorskip("tango")
+
+from fsmbench.cli import main  # noqa: E402
+
+WAIT_S = 60.0  # wall-clock seconds a wait may take (server start on 2 busy cores)
+SERVE = [sys.executable, "-m", "fsmbench.cli", "serve"]
+
+
+def _free_port() -> int:
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
+        s.bind(("", 0))
+        return int(s.getsockname()[1])
+
+
+def _wait_until(check: Callable[[], Any], what: str, *, timeout_s: float = WAIT_S) -> Any:
+    deadline = time.monotonic() + timeout_s
+    while True:
+        value = check()
+        if value:
+            return value
+        if time.monotonic() > deadline:
+            pytest.fail(f"timed out after {timeout_s:g} s (wall clock) waiting for {what}")
+        time.sleep(0.05)
+
+
+def _lines(stream: Any) -> queue.Queue[str]:
+    """The stream's lines, read by a thread (a blocking read never hangs the test)."""
+    q: queue.Queue[str] = queue.Queue()
+
+    def pump() -> None:
+        for line in stream:
+            q.put(line)
+
+    threading.Thread(target=pump, daemon=True).start()
+    return q
+
+
+def _ready_line(lines: queue.Queue[str], proc: subprocess.Popen[str]) -> str:
+    deadline = time.monotonic() + WAIT_S
+    seen: list[str] = []
+    while time.monotonic() < deadline:
+        try:
+            line = lines.get(timeout=0.2)
+        except queue.Empty:
+            if proc.poll() is not None:
+                pytest.fail(f"fsmbench serve exited with status {proc.returncode}: "
+                            f"{''.join(seen)}{proc.stderr.read() if proc.stderr else ''}")
+            continue
+        seen.append(line)
+        if line.startswith("fsmbench serve:"):
+            return line
+    pytest.fail(f"no 'fsmbench serve:' line within {WAIT_S:g} s; stdout: {''.join(seen)}")
+
+
+def _connect(address: str) -> Any:
+    def ping() -> Any:
+        try:
+            proxy = tango.DeviceProxy(address)
+            proxy.ping()
+        except tango.DevFailed:
+            return None
+        return proxy
+
+    proxy = _wait_until(ping, f"the device at {address}")
+    proxy.set_source(tango.DevSource.DEV)  # the device's values, not the polling cache
+    return proxy
+
+
+def test_serve_nodb_runs_the_twin_for_a_client(tmp_path: Path) -> None:
+    port = _free_port()
+    out = tmp_path / "live-out"
+    proc = subprocess.Popen([*SERVE, "--nodb", "--port", str(port), "--speed", "50",
+                             "--out", str(out)], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True, cwd=tmp_path)
+    try:
+        line = _ready_line(_lines(proc.stdout), proc)
+        assert f":{port}/fsmbench/bench/1#dbase=no" in line, line
+        assert "twin" in line and "speed 50" in line, line
+        proxy = _connect(f"tango://localhost:{port}/fsmbench/bench/1#dbase=no")
+        assert proxy.state() == tango.DevState.ON
+        assert proxy.SpeedFactor == 50.0
+        t0 = proxy.BenchTime
+        _wait_until(lambda: proxy.BenchTime > t0 + 0.5, "BenchTime to advance 0.5 s")
+        proxy.CloseLoop()
+        assert proxy.state() == tango.DevState.RUNNING
+        assert proxy.LoopClosed is True
+        path = Path(proxy.Record(json.dumps({"signals": ["Vph", "Vpv"], "duration_s": 0.2,
+                                             "name": "served"})))
+        assert path == out.resolve() / "served.mat"  # --out is where Record writes
+        _wait_until(lambda: proxy.state() != tango.DevState.MOVING, "the record to be written")
+        assert proxy.state() == tango.DevState.RUNNING
+        assert path.is_file()
+        proc.terminate()
+        # Tango's own SIGTERM handler shuts the server down cleanly.
+        assert proc.wait(timeout=WAIT_S) == 0
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait(timeout=WAIT_S)
+
+
+def _serve_error(capsys: pytest.CaptureFixture[str], *args: str) -> str:
+    """``fsmbench serve ARGS`` (the console script's entry point, in this process) expecting
+    a user error: status 2, one line on stderr; returns it."""
+    status = main(["serve", *args])
+    err = capsys.readouterr().err
+    assert status == 2, (status, err)
+    lines = err.strip().splitlines()
+    assert len(lines) == 1, err
+    assert lines[0].startswith("fsmbench serve: error:"), lines[0]
+    return lines[0]
+
+
+def test_playback_without_a_folder_is_refused(capsys: pytest.CaptureFixture[str]) -> None:
+    line = _serve_error(capsys, "--backend", "playback", "--nodb", "--port", "0")
+    assert "--backend playback needs the folder to play" in line
+
+
+def test_playback_of_a_missing_folder_is_refused(tmp_path: Path,
+                                                 capsys: pytest.CaptureFixture[str]) -> None:
+    missing = tmp_path / "no-such-recordings"
+    line = _serve_error(capsys, "--backend", "playback", str(missing), "--nodb", "--port", "0")
+    assert f"{missing}: no such folder of recordings" in line
+
+
+def test_a_busy_port_is_refused(capsys: pytest.CaptureFixture[str]) -> None:
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as busy:
+        busy.bind(("", 0))
+        busy.listen()
+        port = busy.getsockname()[1]
+        line = _serve_error(capsys, "--nodb", "--port", str(port))
+    assert f"port {port} is not free" in line and "--port" in line
