@@ -5,6 +5,14 @@ attribute, loop, argument, live-FRF and protection tests in order; a second
 one plays a recorded folder back. Every wait polls the device with a
 wall-clock timeout that fails saying what it waited for; nothing asserts on
 wall-clock durations.
+
+NEEDS the fix in ``src/fsmbench/live/core.py`` that calls ``on_state`` outside
+``LiveBench``'s lock (state changes queued, flushed after the lock is
+released): the device's event push takes Tango's device monitor, which a
+client call holds while it waits for that lock, so without the fix the loop
+thread can deadlock with a client read (``Excitation``, the spectra, any
+command) and the device falls into FAULT ("not able to acquire serialization
+monitor"); ``test_live_frf_equals_batch_on_the_same_samples`` meets it.
 """
 
 from __future__ import annotations
@@ -206,6 +214,8 @@ class TestTwinDevice:
 
     def test_live_frf_equals_batch_on_the_same_samples(self, twin: tuple[Any, Path],
                                                        bench: Bench) -> None:
+        # Needs the core.py event fix (module notes): the loop thread pushes MOVING -> ON
+        # when the record ends, while this client polls the device.
         proxy, _ = twin
         fs = bench.nominal.converter.fs_hz
         path = Path(proxy.Record(json.dumps({"signals": ["Uch", "Vph", "Vpv"],
