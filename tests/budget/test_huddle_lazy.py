@@ -49,3 +49,18 @@ def test_lazy_dac_noise_equals_in_memory(archive: Path) -> None:
     assert mem is not None and lazy is not None
     # The long record is cut to the same 5 s before the controller runs: identical.
     assert lazy.rms_v == mem.rms_v
+
+
+def test_folder_reads_long_huddle_tests_lazily(archive: Path) -> None:
+    from fsmbench.budget.signals import is_lazy
+    from fsmbench.io.folder import load_recordings
+
+    lazy = load_recordings(archive.parent, fs_hz=10_000.0, lazy_bytes=0)
+    whole = load_recordings(archive.parent, fs_hz=10_000.0)
+    ds = lazy.recordings["data_huddle_test_5"]
+    assert is_lazy(ds["Va"].data) and not is_lazy(whole.recordings["data_huddle_test_5"]["Va"].data)
+    # The plausibility checks give the same verdicts and values out of core.
+    assert [(c.name, c.subject, c.passed) for c in lazy.checks] == \
+        [(c.name, c.subject, c.passed) for c in whole.checks]
+    for a, b in zip(lazy.checks, whole.checks, strict=True):
+        assert a.value == pytest.approx(b.value, rel=1e-12)

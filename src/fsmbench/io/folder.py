@@ -131,6 +131,32 @@ def _stored_dtype(var: xr.DataArray) -> np.dtype[Any]:
     return np.dtype(var.attrs.get("stored_dtype", var.dtype))
 
 
+def _signal_stats(x: Any, rail: float) -> tuple[float, int, float, float, float]:
+    """(peak |x|, samples at or beyond ±rail, max |x − mean|, rms of x − mean, x[0]).
+
+    In memory as the checks always computed them; out of core (Dask) in two
+    passes over the record, memory bounded by a chunk.
+    """
+    if not type(x).__module__.startswith("dask"):
+        x = np.asarray(x, dtype=np.float64)
+        with np.errstate(all="ignore"):
+            peak = float(np.max(np.abs(x))) if x.size else 0.0
+            at_rails = int(np.count_nonzero(np.abs(x) >= rail))
+        spread, rms = _finite_rms(x)
+        return peak, at_rails, spread, rms, float(x[0]) if x.size else math.nan
+    import dask
+    import dask.array as da
+
+    with np.errstate(all="ignore"):
+        peak, at_rails, mean, first = dask.compute(da.max(da.abs(x)),
+                                                   da.count_nonzero(da.abs(x) >= rail),
+                                                   x.mean(), x[0])
+        if not math.isfinite(float(peak)) or float(peak) == 0.0:
+            return float(peak), int(at_rails), float(peak), float(peak), float(first)
+        spread, ms = dask.compute(da.max(da.abs(x - mean)), ((x - mean) ** 2).mean())
+    return float(peak), int(at_rails), float(spread), math.sqrt(float(ms)), float(first)
+
+
 def _finite_rms(x: np.ndarray) -> tuple[float, float]:
     """(max |x − mean|, rms of x − mean) without overflow for huge values."""
     with np.errstate(all="ignore"):
@@ -199,9 +225,8 @@ def check_recording(ds: xr.Dataset, *, name: str | None = None, fs_hz: float | N
                                 f"{v} holds {stored} integers: raw converter counts, not "
                                 f"{'volts' if converter else SIGNALS[v].units}; {fix}"))
             continue
-        x = np.asarray(ds[v].values, dtype=np.float64)
-        with np.errstate(all="ignore"):
-            peak = float(np.max(np.abs(x))) if x.size else 0.0
+        rail = adc_range_v / 2 - 1.5 * lsb  # as SaturationWarning: both rails, nothing inside
+        peak, at_rails, spread, rms, first = _signal_stats(ds[v].data, rail)
         if converter:
             # Half a span plus 1 LSB: readings rounded to the converter's codes never exceed it.
             limit = adc_range_v / 2 + lsb
@@ -210,11 +235,9 @@ def check_recording(ds: xr.Dataset, *, name: str | None = None, fs_hz: float | N
                                 f"±{adc_range_v / 2:g} V)", subject,
                                 "" if ok else f"{v} exceeds what the converter can deliver: "
                                 "it is not in volts (counts, mV?) or not this bench's signal"))
-            rail = adc_range_v / 2 - 1.5 * lsb  # as SaturationWarning: both rails, nothing inside
-            if ok and v in ADC_SIGNALS and (count := int(np.count_nonzero(np.abs(x) >= rail))):
+            if ok and v in ADC_SIGNALS and at_rails:
                 notices.append(Notice("saturation", subject, str(SaturationWarning(
-                    label, v, count, x.size, rail))))
-        spread, rms = _finite_rms(x)
+                    label, v, at_rails, int(ds[v].shape[0]), rail))))
         measured = v in ADC_SIGNALS or v == "Va"
         if v in required and (measured or EXCITATION.get(exp) == v):
             ok = spread > 0.0
@@ -223,10 +246,10 @@ def check_recording(ds: xr.Dataset, *, name: str | None = None, fs_hz: float | N
                 why = ""
             elif EXCITATION.get(exp) == v:
                 why = (f"{v} is zero throughout: no power in the excitation" if peak == 0
-                       else f"{v} is constant at {x[0]:.6g} {unit}: no power in the excitation")
+                       else f"{v} is constant at {first:.6g} {unit}: no power in the excitation")
                 why += "; record it with the excitation on"
             else:
-                why = (f"{v} is {'zero' if peak == 0 else f'constant at {x[0]:.6g} {unit}'} "
+                why = (f"{v} is {'zero' if peak == 0 else f'constant at {first:.6g} {unit}'} "
                        "throughout: the channel is dead or not connected")
             checks.append(Check("signal_varies", ok, spread, f"> 0 {unit} peak-to-peak",
                                 subject, why))
@@ -319,9 +342,43 @@ def _mixed_rates(recordings: dict[str, xr.Dataset], found: dict[str, Path]) -> l
     return [Notice("rate", "", f"the recordings have different sampling rates ({text})")]
 
 
+#: HDF5 recordings (NeXus, MATLAB v7.3) larger than this are read lazily (Dask).
+LAZY_BYTES: Final = 512 << 20
+#: Experiments whose analyses run out of core; other long records must fit in memory.
+OUT_OF_CORE_EXPERIMENTS: Final = frozenset({f"data_huddle_test_{i}" for i in range(1, 6)})
+
+
+def _read(path: Path, name: str, *, adc_range_v: float, adc_bits: int,
+          lazy_bytes: int) -> xr.Dataset:
+    """The recording, lazily (Dask) when it is a large HDF5 file (see :data:`LAZY_BYTES`)."""
+    from fsmbench.io.matfile import detect_format
+
+    if path.stat().st_size <= lazy_bytes or detect_format(path) not in ("hdf5", "mat73"):
+        return read_recording(path, experiment=name, adc_range_v=adc_range_v, adc_bits=adc_bits)
+    try:
+        import dask  # noqa: F401
+    except ImportError:  # the fsmbench[dask] extra is not installed: read it whole
+        return read_recording(path, experiment=name, adc_range_v=adc_range_v, adc_bits=adc_bits)
+    from fsmbench.io.lazy import available_memory_bytes, open_recording
+
+    ds = open_recording(path)
+    ds.attrs["experiment"] = name
+    missing = [v for v in EXPERIMENTS[name].required if v not in ds.variables]
+    if missing:
+        raise RecordingError(path, f"is missing {', '.join(missing)}", variable=missing[0])
+    if name in OUT_OF_CORE_EXPERIMENTS:
+        return ds
+    need = 8 * ds.sizes[TIME] * (len(ds.data_vars) + 1)
+    if need > 0.5 * available_memory_bytes():
+        raise RecordingError(path, f"is {need / 2**30:.1f} GiB of samples: too long to analyse "
+                             "in memory, and only the huddle tests run out of core; cut it to "
+                             "the seed's length")
+    return ds.compute()
+
+
 def load_recordings(data_dir: Path, *, fs_hz: float | None = None, adc_range_v: float = 20.0,
-                    adc_bits: int = 16, progress: Callable[[str], None] | None = None
-                    ) -> RecordingSet:
+                    adc_bits: int = 16, progress: Callable[[str], None] | None = None,
+                    lazy_bytes: int = LAZY_BYTES) -> RecordingSet:
     """Read every seed experiment present in ``data_dir`` and check it.
 
     Parameters
@@ -336,6 +393,10 @@ def load_recordings(data_dir: Path, *, fs_hz: float | None = None, adc_range_v: 
         Converter span [V] and resolution [bit] (range and saturation).
     progress : callable, optional
         Receives one message per file read.
+    lazy_bytes : int
+        HDF5 files larger than this [bytes] are read lazily (Dask arrays);
+        the huddle tests stay lazy and are analysed out of core, other
+        experiments are loaded into memory if they fit.
 
     Raises
     ------
@@ -361,8 +422,8 @@ def load_recordings(data_dir: Path, *, fs_hz: float | None = None, adc_range_v: 
         try:
             with warnings.catch_warnings(record=True) as caught:
                 warnings.simplefilter("always")
-                ds = read_recording(found[name], experiment=name, adc_range_v=adc_range_v,
-                                    adc_bits=adc_bits)
+                ds = _read(found[name], name, adc_range_v=adc_range_v, adc_bits=adc_bits,
+                           lazy_bytes=lazy_bytes)
                 found_checks, found_notices = check_recording(
                     ds, name=name, fs_hz=fs_hz, adc_range_v=adc_range_v, adc_bits=adc_bits)
         except RecordingError as exc:
