@@ -232,23 +232,41 @@ def _parser() -> argparse.ArgumentParser:
     return parser
 
 
-def test_cli_writes_json_and_prints_table(tmp_path: Path,
+def test_cli_writes_json_and_prints_table(tmp_path: Path, client: Any,
                                           capsys: pytest.CaptureFixture[str]) -> None:
     ranges = tmp_path / "ranges.toml"
     ranges.write_text("resonance_scale = [0.9, 1.1]\ndac_delay_samples = [0, 0]\n")
-    out = tmp_path / "mc"
-    argv = ["montecarlo", "--twin", "--out", str(out), "--n", "3", "--workers", "1",
-            "--duration", str(DURATION_S), "--seed", "2", "--ranges", str(ranges)]
-    args = _parser().parse_args(argv)
-    assert args.func(args) == 0
-    doc = json.loads((out / "montecarlo.json").read_text())
-    assert doc["format"] == "fsmbench.montecarlo" and doc["n"] == 3
-    assert doc["ranges"]["resonance_scale"] == [0.9, 1.1]
-    assert all(r["factors"]["dac_delay_offset_samples"] == 0.0 for r in doc["draws"])
-    assert (out / "run.json").is_file()
-    printed = capsys.readouterr().out
-    assert "3 draws, seed 2" in printed and "tracking error h" in printed
-    assert "worst draws" in printed
+    docs = []
+    for where, how in (("one", ["--workers", "1"]),
+                       ("scheduler", ["--scheduler", client.scheduler.address])):
+        out = tmp_path / where
+        argv = ["montecarlo", "--twin", "--out", str(out), "--n", "3", "--duration",
+                str(DURATION_S), "--seed", "2", "--ranges", str(ranges), *how]
+        args = _parser().parse_args(argv)
+        assert args.func(args) == 0
+        doc = json.loads((out / "montecarlo.json").read_text())
+        assert doc["format"] == "fsmbench.montecarlo" and doc["n"] == 3
+        assert doc["ranges"]["resonance_scale"] == [0.9, 1.1]
+        assert all(r["factors"]["dac_delay_offset_samples"] == 0.0 for r in doc["draws"])
+        assert (out / "run.json").is_file()
+        printed = capsys.readouterr().out
+        assert "3 draws, seed 2" in printed and "tracking error h" in printed
+        assert "worst draws" in printed
+        docs.append(doc)
+    # The running scheduler gives the file the process gives.
+    assert docs[0] == docs[1]
+
+
+def test_cli_refuses_unclear_input(tmp_path: Path) -> None:
+    for argv, message in (
+            (["--out", str(tmp_path / "o")], "give either a DATA folder or --twin"),
+            ([str(tmp_path), "--twin", "--out", str(tmp_path / "o")],
+             "give either a DATA folder or --twin"),
+            (["--twin", "--out", str(tmp_path / "o"), "--settle", "6"], "leaves nothing")):
+        args = _parser().parse_args(["montecarlo", *argv])
+        with pytest.raises(ValueError, match=message):
+            args.func(args)
+    assert not (tmp_path / "o").exists()
 
 
 def test_bad_ranges_file_is_one_line(tmp_path: Path) -> None:

@@ -37,6 +37,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import importlib.util
 import json
 import math
 import os
@@ -216,6 +217,11 @@ def _command(args: argparse.Namespace) -> int:
     bench = load_bench(args.params)
     ranges = Ranges() if args.ranges is None else Ranges.from_toml(args.ranges)
     workers = args.workers or os.cpu_count() or 1
+    if args.workers is None and args.scheduler is None and importlib.util.find_spec(
+            "distributed") is None:
+        say("dask.distributed is not installed: running in this process "
+            "(pip install 'fsmbench[dask]' to use every core)")
+        workers = 1
     out = str(args.out)
     argv = [("." if a == out else a) for a in getattr(args, "argv", [])]
     with output_transaction(out, command="montecarlo", arguments=argv, data_dir=args.data,

@@ -688,7 +688,10 @@ def run_montecarlo(setup: MonteCarloSetup, *, n: int, seed: int, client: Any = N
 
         workers = max(1, len(client.scheduler_info().get("workers", {})))
         size = batch_size or max(1, min(20, math.ceil(n / (4 * workers))))
-        shared = client.scatter(setup, broadcast=True)
+        # Workers need the discrete controller only (a control.StateSpace does not pickle).
+        light = dataclasses.replace(setup, controller=dataclasses.replace(setup.controller,
+                                                                          continuous=None))
+        shared = client.scatter(light, broadcast=True)
         futures = client.map(run_draws, _batches(draws, size), setup=shared, pure=False)
         for future in as_completed(futures):
             results.extend(future.result())
