@@ -10,8 +10,9 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from fsmbench.bench.params import default_bench
+from fsmbench.live.arguments import parse_excitation
 from fsmbench.live.backend import LiveBlock
-from fsmbench.live.core import LiveBench, parse_excitation
+from fsmbench.live.core import LiveBench
 from fsmbench.live.monitor import LiveMonitor, Ring
 from fsmbench.twin.simulate import simulate_bench
 

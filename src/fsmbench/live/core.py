@@ -29,12 +29,12 @@ from fsmbench.control.load import load_controllers, select_controller
 from fsmbench.control.seed import seed_decentralised_controller
 from fsmbench.io.recording import make_recording, write_recording
 from fsmbench.io.signals import EXPERIMENTS
-from fsmbench.live.backend import LIVE_SIGNALS, LiveBlock, PlaybackBackend, TwinBackend
+from fsmbench.live.arguments import parse_excitation, parse_record
+from fsmbench.live.backend import LiveBlock, PlaybackBackend, TwinBackend
 from fsmbench.live.monitor import LiveMonitor, Trip
 from fsmbench.live.spectra import AccumulatingFrf, FrfSnapshot, RollingAsd
 from fsmbench.sim.controller import feedback_controller
 from fsmbench.sim.engine import DiscreteController
-from fsmbench.sim.excitation import Excitation
 from fsmbench.sim.plant import ADC_CHANNELS, DAC_CHANNELS
 from fsmbench.twin.experiments import seed_experiments
 
@@ -109,6 +109,7 @@ class LiveBench:
                                    half_range_v=conv.range_v / 2, lsb_v=conv.lsb_v)
         self.output_folder = Path(output_folder)
         self._on_state = on_state
+        self._pending_states: list[str] = []
         self._lock = threading.RLock()
         self._speed = self._check_speed(speed)
         self._asd = {name: RollingAsd(fs_hz=self.fs_hz, channels=(name,)) for name in ASD_SIGNALS}
@@ -164,8 +165,8 @@ class LiveBench:
             wall0, bench0 = time.monotonic(), self.backend.time_s
             speed = self._speed
             while not self._stop.is_set():
+                self.advance(self.block_samples)
                 with self._lock:
-                    self.advance(self.block_samples)
                     if self._speed != speed:
                         speed = self._speed
                         wall0, bench0 = time.monotonic(), self.backend.time_s
@@ -178,12 +179,19 @@ class LiveBench:
         except BaseException as exc:
             self._error = exc
             self._set_state("FAULT", f"The bench loop stopped: {exc}")
+            self._flush_states()
         finally:
             if ctx is not None:
                 ctx.__exit__(None, None, None)
 
     def advance(self, n: int) -> LiveBlock:
         """Run ``n`` samples now (the loop thread calls this; tests may too, without it)."""
+        with self._lock:
+            block = self._advance(n)
+        self._flush_states()
+        return block
+
+    def _advance(self, n: int) -> LiveBlock:
         with self._lock:
             block = self.backend.step(n)
             closed = self.backend.controller is not None
@@ -225,8 +233,21 @@ class LiveBench:
     def _set_state(self, state: str, status: str) -> None:
         changed = state != self._state
         self._state, self._status = state, status
-        if changed and self._on_state is not None:
-            self._on_state(state)
+        if changed:
+            self._pending_states.append(state)
+
+    def _flush_states(self) -> None:
+        """Tell ``on_state`` of the state changes, outside the lock.
+
+        The device's event push takes Tango's device monitor, which a client
+        call (a command, an attribute read) holds while it waits for this lock:
+        pushing with the lock held would deadlock the loop thread.
+        """
+        with self._lock:
+            pending, self._pending_states = self._pending_states, []
+        if self._on_state is not None:
+            for state in pending:
+                self._on_state(state)
 
     def _update_state(self) -> None:
         if self._state == "FAULT":
@@ -364,6 +385,7 @@ class LiveBench:
             if self.backend.controller is not None:
                 self.backend.set_controller(k, hold=True)
             self._update_state()
+        self._flush_states()
         return k.name
 
     def close_loop(self) -> None:
@@ -375,6 +397,7 @@ class LiveBench:
             k = self._loaded or self._seed_controller()
             self.backend.set_controller(k, hold=True)
             self._update_state()
+        self._flush_states()
 
     def open_loop(self) -> None:
         """Open the loop, holding the last command (bumpless)."""
@@ -384,6 +407,7 @@ class LiveBench:
                 raise ValueError(f"OpenLoop refused: {self._job.kind} {self._job.name} runs")
             self.backend.set_controller(None, hold=True)
             self._update_state()
+        self._flush_states()
 
     def reset(self) -> None:
         """Leave FAULT (loop open, command zero, excitations stopped)."""
@@ -397,8 +421,8 @@ class LiveBench:
             self._job_parts = []
             self._state = "ON"
             self._update_state()
-            if self._on_state is not None:
-                self._on_state(self._state)
+            self._pending_states.append(self._state)
+        self._flush_states()
 
     def start_excitation(self, argument: str) -> None:
         """Start an excitation from JSON (see :func:`parse_excitation`)."""
@@ -525,88 +549,19 @@ class LiveBench:
             self._begin(LiveJob(kind="experiment", name=name, path=path, signals=signals,
                                 n_samples=round(spec.duration_s * self.fs_hz),
                                 start_sample=round(t0 * self.fs_hz)))
-            return str(path)
+        self._flush_states()
+        return str(path)
 
     def record(self, argument: str) -> str:
         """Record signals from now: JSON ``{"signals": [...], "duration_s": s, "name": ...,
         "format": "mat"|"nexus"}``; returns the file's path (complete when MOVING ends)."""
-        try:
-            doc = json.loads(argument)
-        except json.JSONDecodeError as exc:
-            raise ValueError(f"Record: the argument is not valid JSON ({exc})") from None
-        if not isinstance(doc, dict):
-            raise ValueError('Record: give {"signals": [...], "duration_s": seconds}')
-        signals = doc.get("signals", list(LIVE_SIGNALS))
-        if not isinstance(signals, list) or not signals:
-            raise ValueError("Record: signals must be a non-empty list of names")
-        unknown = [s for s in signals if s not in LIVE_SIGNALS]
-        if unknown:
-            raise ValueError(f"Record: unknown signal(s) {', '.join(map(str, unknown))}; known: "
-                             f"{', '.join(LIVE_SIGNALS)}")
-        duration = doc.get("duration_s")
-        if not isinstance(duration, (int, float)) or not 0 < duration <= 3600:
-            raise ValueError(f"Record: duration_s must be a number of seconds in (0, 3600], "
-                             f"got {duration!r}")
-        fmt = doc.get("format", "mat")
-        if fmt not in ("mat", "nexus"):
-            raise ValueError(f"Record: format must be 'mat' or 'nexus', got {fmt!r}")
-        name = str(doc.get("name", "record"))
-        if not name.replace("_", "").replace("-", "").isalnum():
-            raise ValueError(f"Record: name {name!r} must be letters, digits, - and _")
+        request = parse_record(argument)
         with self._lock:
             self._busy("Record")
-            path = self.output_folder / f"{name}{'.mat' if fmt == 'mat' else '.h5'}"
-            self._begin(LiveJob(kind="record", name=name, path=path, signals=tuple(signals),
-                                n_samples=max(1, round(float(duration) * self.fs_hz)),
+            path = self.output_folder / f"{request.name}{request.suffix}"
+            self._begin(LiveJob(kind="record", name=request.name, path=path,
+                                signals=request.signals,
+                                n_samples=max(1, round(request.duration_s * self.fs_hz)),
                                 start_sample=round(self.backend.time_s * self.fs_hz)))
-            return str(path)
-
-
-_KINDS = ("noise", "sine", "multisine")
-
-
-def parse_excitation(argument: str, *, start_s: float, half_range_v: float) -> Excitation:
-    """An :class:`~fsmbench.sim.excitation.Excitation` from the device's JSON argument.
-
-    ``{"input": "Uch", "kind": "noise"|"sine"|"multisine", "amplitude_v": V,
-    "band_hz": [low, high], "frequency_hz": f, "period_s": T}``: ``amplitude_v``
-    is the standard deviation (noise), the amplitude (sine) or the rms
-    (multisine); ``band_hz`` limits noise and multisines; ``frequency_hz`` is
-    the sine's; ``period_s`` the multisine's (default 1 s).
-    """
-    try:
-        doc = json.loads(argument)
-    except json.JSONDecodeError as exc:
-        raise ValueError(f"StartExcitation: the argument is not valid JSON ({exc})") from None
-    if not isinstance(doc, dict):
-        raise ValueError('StartExcitation: give {"input": "Uch", "kind": "noise", '
-                         '"amplitude_v": 0.02}')
-    channel = doc.get("input")
-    if channel not in DAC_CHANNELS:
-        raise ValueError(f"StartExcitation: unknown input {channel!r}; the DAC drives "
-                         f"{', '.join(DAC_CHANNELS)}")
-    kind = doc.get("kind", "noise")
-    if kind not in _KINDS:
-        raise ValueError(f"StartExcitation: unknown kind {kind!r}; known: {', '.join(_KINDS)}")
-    amp = doc.get("amplitude_v")
-    if not isinstance(amp, (int, float)) or not np.isfinite(amp) or amp <= 0:
-        raise ValueError(f"StartExcitation: amplitude_v must be a positive number of volts, "
-                         f"got {amp!r}")
-    band = doc.get("band_hz")
-    if band is not None:
-        numbers = isinstance(band, list) and len(band) == 2 \
-            and all(isinstance(b, (int, float)) for b in band)
-        if not numbers or not 0 <= band[0] < band[1]:
-            raise ValueError(f"StartExcitation: band_hz must be [low, high] in Hz with "
-                             f"0 <= low < high, got {band!r}")
-        band = (float(band[0]), float(band[1]))
-    freq = float(doc.get("frequency_hz", 0.0))
-    if kind == "sine" and not freq > 0:
-        raise ValueError("StartExcitation: a sine needs frequency_hz > 0")
-    ex = Excitation(channel=str(channel), kind=kind, amplitude_v=float(amp), start_s=start_s,
-                    freq_hz=freq, band_hz=band, period_s=float(doc.get("period_s", 1.0)))
-    if ex.kind != "multisine" and ex.peak_v() > half_range_v:
-        what = "4.5 standard deviations" if kind == "noise" else "the amplitude"
-        raise ValueError(f"StartExcitation: {what} of {ex.peak_v():.3g} V would saturate the "
-                         f"DAC (±{half_range_v:g} V) on {channel}")
-    return ex
+        self._flush_states()
+        return str(path)
