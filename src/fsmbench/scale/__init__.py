@@ -1,0 +1,14 @@
+"""Long records out of core and runs on a cluster (Dask).
+
+The modules of this package import :mod:`dask` (the ``fsmbench[dask]`` extra);
+this ``__init__`` imports nothing, so ``import fsmbench`` works without Dask.
+Import the functions from their modules:
+
+- :mod:`fsmbench.scale.welch`: Welch PSD/CPSD/H1/coherence on Dask arrays,
+  MATLAB semantics, equal to :mod:`fsmbench.ident.welch`;
+- :mod:`fsmbench.scale.allan`: overlapping Allan deviation of long records and
+  its noise-type slope regions;
+- :mod:`fsmbench.scale.envelope`: min/max/mean envelope of long records for plots.
+"""
+
+__all__ = ["allan", "envelope", "welch"]
