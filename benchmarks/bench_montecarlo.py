@@ -31,8 +31,8 @@ import time
 import numpy as np
 
 from fsmbench.bench.params import default_bench
-from fsmbench.scale.mc_cli import dask_client
-from fsmbench.scale.montecarlo import METRICS, MonteCarloSetup, designed_controller, run_montecarlo
+from fsmbench.scale.mc_cli import dask_client, designed_controller
+from fsmbench.scale.montecarlo import METRICS, MonteCarloSetup, run_montecarlo
 from timing import timed_runs
 
 

@@ -19,18 +19,23 @@ from fsmbench.bench.params import Bench, default_bench
 from fsmbench.control.analysis import control_objective
 from fsmbench.control.export import InputScaling, write_controllers_mat
 from fsmbench.control.loops import LoopOptions, analyse_loop
-from fsmbench.scale.mc_cli import add_montecarlo_command, dask_client
+from fsmbench.scale.mc_cli import (
+    add_montecarlo_command,
+    dask_client,
+    designed_controller,
+    loaded_controller,
+    read_ranges,
+)
 from fsmbench.scale.montecarlo import (
     METRICS,
     PARAMETERS,
+    RANGE_OF_PARAMETER,
     ControllerChoice,
     DrawResult,
     MonteCarloSetup,
     Ranges,
-    designed_controller,
     discrete_feedback,
     draw_parameters,
-    loaded_controller,
     run_draw,
     run_montecarlo,
 )
@@ -104,10 +109,7 @@ def test_draws_depend_on_the_seed_only(setup: MonteCarloSetup, reference: Any) -
                for x, y in zip(a, other, strict=True))
     for d in a:
         for key, value in d.factors.items():
-            name = {"dac_delay_offset_samples": "dac_delay_samples",
-                    "newport_delay_offset_samples": "newport_delay_samples"}.get(
-                key, key.split(".")[0])
-            lo, hi = getattr(ranges, name)
+            lo, hi = getattr(ranges, RANGE_OF_PARAMETER[key])
             assert lo <= value <= hi, key
     # The rows of the reference run are those draws, and the metrics differ between draws.
     assert [r.factors for r in reference.draws] == [dict(d.factors) for d in a]
@@ -123,7 +125,8 @@ def test_defaults_are_the_design_robust_set_and_identification_targets() -> None
     assert r.damping_scale == (min(opts.damping_scales), max(opts.damping_scales))
     assert r.newport_gain_scale == pytest.approx((1 - TARGETS["newport_gain_v_per_v.h"][1],
                                                   1 + TARGETS["newport_gain_v_per_v.h"][1]))
-    assert r.dac_delay_samples == (-1.0, 1.0)
+    assert r.dac_delay_s == (-TARGETS["delay_s.sercalo"][1], TARGETS["delay_s.sercalo"][1])
+    assert r.newport_delay_s == (-TARGETS["delay_s.newport"][1], TARGETS["delay_s.newport"][1])
 
 
 def test_nominal_draw_is_verify_on_twin(bench: Bench, controller: ControllerChoice) -> None:
@@ -235,7 +238,7 @@ def _parser() -> argparse.ArgumentParser:
 def test_cli_writes_json_and_prints_table(tmp_path: Path, client: Any,
                                           capsys: pytest.CaptureFixture[str]) -> None:
     ranges = tmp_path / "ranges.toml"
-    ranges.write_text("resonance_scale = [0.9, 1.1]\ndac_delay_samples = [0, 0]\n")
+    ranges.write_text("resonance_scale = [0.9, 1.1]\ndac_delay_s = [0, 0]\n")
     docs = []
     for where, how in (("one", ["--workers", "1"]),
                        ("scheduler", ["--scheduler", client.scheduler.address])):
@@ -247,7 +250,7 @@ def test_cli_writes_json_and_prints_table(tmp_path: Path, client: Any,
         doc = json.loads((out / "montecarlo.json").read_text())
         assert doc["format"] == "fsmbench.montecarlo" and doc["n"] == 3
         assert doc["ranges"]["resonance_scale"] == [0.9, 1.1]
-        assert all(r["factors"]["dac_delay_offset_samples"] == 0.0 for r in doc["draws"])
+        assert all(r["factors"]["dac_delay_offset_s"] == 0.0 for r in doc["draws"])
         assert (out / "run.json").is_file()
         printed = capsys.readouterr().out
         assert "3 draws, seed 2" in printed and "tracking error h" in printed
@@ -273,10 +276,10 @@ def test_bad_ranges_file_is_one_line(tmp_path: Path) -> None:
     bad = tmp_path / "r.toml"
     bad.write_text("resonance = [0.9, 1.1]\n")
     with pytest.raises(ValueError, match=r"r\.toml: unknown range\(s\) resonance;"):
-        Ranges.from_toml(bad)
+        read_ranges(bad)
     bad.write_text("damping_scale = [2.0, 0.5]\n")
     with pytest.raises(ValueError, match=r"r\.toml: range damping_scale must be .* low <= high"):
-        Ranges.from_toml(bad)
+        read_ranges(bad)
     bad.write_text("qd_gain_scale = 1.0\n")
     with pytest.raises(ValueError, match=r"r\.toml: 'qd_gain_scale' must be a pair"):
-        Ranges.from_toml(bad)
+        read_ranges(bad)

@@ -17,15 +17,16 @@ cores), or the running scheduler at ``--scheduler``. ``--workers 1`` without
 are the same in every case.
 
 The ranges file (``--ranges``) is TOML with ``key = [low, high]`` pairs; keys
-left out keep their default (:class:`fsmbench.scale.montecarlo.Ranges`)::
+left out keep their default (:class:`fsmbench.scale.montecarlo.Ranges`,
+:func:`read_ranges`)::
 
     resonance_scale = [0.95, 1.05]          # Sercalo resonances, × (uniform)
     damping_scale = [0.5, 2.0]              # Sercalo damping ratios, × (log-uniform)
     qd_gain_scale = [0.97, 1.03]            # 4QD gains, ×
     current_amp_gain_scale = [0.97, 1.03]   # current-amplifier gains, ×
     newport_gain_scale = [0.97, 1.03]       # Newport gains, ×
-    dac_delay_samples = [-1.0, 1.0]         # DAC delay, + samples
-    newport_delay_samples = [-1.0, 1.0]     # Newport internal delay, + samples
+    dac_delay_s = [-1e-4, 1e-4]             # DAC delay, + s
+    newport_delay_s = [-1e-4, 1e-4]         # Newport internal delay, + s
 
 Writes ``OUT/montecarlo.json`` (format ``fsmbench.montecarlo`` version 1:
 quantiles, unstable fraction, worst draws, and every draw as a row) and
@@ -37,17 +38,26 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import dataclasses
 import importlib.util
 import json
 import math
 import os
 import sys
 import time
+import tomllib
 from collections.abc import Iterator
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-__all__ = ["add_montecarlo_command", "dask_client", "format_table"]
+# The CLI builds its parser with this module: the model, numba and Dask load only when
+# the command runs.
+if TYPE_CHECKING:
+    from fsmbench.bench.params import Bench
+    from fsmbench.scale.montecarlo import ControllerChoice, Ranges
+
+__all__ = ["add_montecarlo_command", "dask_client", "designed_controller", "format_table",
+           "loaded_controller", "read_ranges"]
 
 # Bytes of montecarlo.json per draw (a row of ~40 numbers, indented), measured ~2.5 kB.
 _BYTES_PER_DRAW = 4e3
@@ -98,7 +108,7 @@ def add_montecarlo_command(sub: Any) -> None:
                    help="draws per Dask task (default: about 4 tasks per worker, at most 20)")
     p.add_argument("--ranges", metavar="TOML", default=None,
                    help="ranges of the draws (default: the design's robust set, gains ±3 %%, "
-                        "delays ± one sample)")
+                        "delays ± 0.1 ms)")
     p.add_argument("--controller", metavar="FILE[::NAME]", default=None,
                    help="run this controller (controllers.mat, controllers_sos.json or a design "
                         "folder; ::NAME picks one) instead of designing fsmbench's")
@@ -112,6 +122,98 @@ def add_montecarlo_command(sub: Any) -> None:
     p.add_argument("--timestamp", action="store_true",
                    help="write the wall-clock time into run.json (default: none)")
     p.set_defaults(func=_command)
+
+
+# ----------------------------------------------------------------------------- the command's inputs
+
+
+def read_ranges(path: str | Path) -> Ranges:
+    """Read ``--ranges``: a TOML file of ranges; keys left out keep their default.
+
+    The file holds top-level ``key = [low, high]`` pairs, keys as the
+    attributes, e.g. ``resonance_scale = [0.9, 1.1]`` or
+    ``dac_delay_s = [0, 0]``.
+
+    Raises
+    ------
+    ValueError
+        One line naming the file and the key: not TOML, unknown key, not a
+        pair of numbers, or an invalid range.
+    """
+    from fsmbench.scale.montecarlo import Ranges
+
+    p = Path(path)
+    try:
+        data = tomllib.loads(p.read_text("utf-8"))
+    except FileNotFoundError:
+        raise ValueError(f"{p}: no such ranges file") from None
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
+        raise ValueError(f"{p}: not valid TOML ({exc})") from None
+    names = [f.name for f in dataclasses.fields(Ranges)]
+    unknown = sorted(set(data) - set(names))
+    if unknown:
+        raise ValueError(f"{p}: unknown range(s) {', '.join(unknown)}; known: "
+                         f"{', '.join(names)}")
+    values: dict[str, tuple[float, float]] = {}
+    for key, raw in data.items():
+        ok = (isinstance(raw, list) and len(raw) == 2
+              and all(isinstance(x, int | float) and not isinstance(x, bool) for x in raw))
+        if not ok:
+            raise ValueError(f"{p}: '{key}' must be a pair [low, high] of numbers, got {raw!r}")
+        values[key] = (float(raw[0]), float(raw[1]))
+    try:
+        return dataclasses.replace(Ranges(), **values)
+    except ValueError as exc:
+        raise ValueError(f"{p}: {exc}") from None
+
+
+def designed_controller(bench: Bench, *, plant: Any = None,
+                        plant_source: str = "physical (nominal)") -> ControllerChoice:
+    """fsmbench's controller designed on ``plant`` (default the nominal physical plant),
+    with the 6.1 objective of ``bench.nominal``, Tustin at the converter rate.
+
+    ``fsmbench design`` designs on the plant :func:`fsmbench.stages.choose_plant`
+    picks: the identified one when the recordings allow it, else this nominal model.
+    """
+    import numpy as np
+
+    from fsmbench.bench.blocks import physical_plant
+    from fsmbench.control.analysis import control_objective
+    from fsmbench.control.design import design_controller
+    from fsmbench.control.seed import tustin
+    from fsmbench.scale.montecarlo import ControllerChoice
+
+    model = physical_plant(bench.nominal, source=plant_source) if plant is None else plant
+    k = design_controller(model, objective=control_objective(bench.nominal)).controller
+    ts = bench.true.converter.ts_s
+    kd = tustin(k, ts_s=ts)
+    return ControllerChoice(name="fsmbench controller", a=np.asarray(kd.A, dtype=float),
+                            b=np.asarray(kd.B, dtype=float), c=np.asarray(kd.C, dtype=float),
+                            d=np.asarray(kd.D, dtype=float), ts_s=ts,
+                            gd_v_per_rad=bench.nominal.quad_diode.gain_v_per_rad,
+                            source=f"designed on the {plant_source} plant, Tustin at {1/ts:g} Hz",
+                            continuous=k)
+
+
+def loaded_controller(path: str | Path, *, name: str | None, bench: Bench) -> ControllerChoice:
+    """A controller of a ``controllers.mat`` / ``controllers_sos.json`` / design folder.
+
+    ``name`` picks it (default fsmbench's, :func:`fsmbench.control.load.select_controller`);
+    its recorded 4QD gain is used if the file has one, else ``bench.nominal``'s.
+    """
+    import numpy as np
+
+    from fsmbench.bench.params import PerAxis
+    from fsmbench.control.load import load_controllers, select_controller
+    from fsmbench.scale.montecarlo import ControllerChoice
+
+    ts = bench.true.converter.ts_s
+    chosen = select_controller(load_controllers(path, ts_s=ts), name)
+    gd = chosen.qd_gain_v_per_rad
+    gains = bench.nominal.quad_diode.gain_v_per_rad if gd is None else PerAxis(h=gd[0], v=gd[1])
+    return ControllerChoice(name=chosen.name, a=np.asarray(chosen.a), b=np.asarray(chosen.b),
+                            c=np.asarray(chosen.c), d=np.asarray(chosen.d), ts_s=chosen.ts_s,
+                            gd_v_per_rad=gains, source=str(chosen.source_path))
 
 
 @contextlib.contextmanager
@@ -147,7 +249,8 @@ def format_table(result: Any) -> str:
     s = summarise(result)
     lines = [f"{len(result.draws)} draws, seed {result.seed}, controller "
              f"{result.setup.controller.name}; unstable: {s['unstable_draws']} "
-             f"({100 * s['fraction_unstable']:.1f} %)",
+             f"({100 * s['fraction_unstable']:.1f} %); not settled before the metrics: "
+             f"{s['unsettled_draws']}",
              f"{'metric':<40} {'unit':<9} {'5 %':>10} {'median':>10} {'95 %':>10} {'max':>10}"]
 
     def num(x: float | None, factor: float) -> str:
@@ -168,14 +271,11 @@ def format_table(result: Any) -> str:
             f"  draw {row['index']}: {what}; resonance ×{f['resonance_scale.h']:.3f}/"
             f"{f['resonance_scale.v']:.3f}, damping ×{f['damping_scale.h']:.2f}/"
             f"{f['damping_scale.v']:.2f}, 4QD gain ×{f['qd_gain_scale.h']:.3f}/"
-            f"{f['qd_gain_scale.v']:.3f}, DAC delay {f['dac_delay_offset_samples']:+.2f} "
-            "samples")
+            f"{f['qd_gain_scale.v']:.3f}, DAC delay {1e6 * f['dac_delay_offset_s']:+.0f} µs")
     return "\n".join(lines)
 
 
 def _controller(args: argparse.Namespace, bench: Any, say: Any) -> Any:
-    from fsmbench.scale.montecarlo import designed_controller, loaded_controller
-
     if args.controller is not None:
         path, _sep, name = str(args.controller).partition("::")
         return loaded_controller(path, name=name or None, bench=bench)
@@ -215,7 +315,7 @@ def _command(args: argparse.Namespace) -> int:
         print(f"[{time.perf_counter() - start:6.1f} s] {msg}", file=sys.stderr, flush=True)
 
     bench = load_bench(args.params)
-    ranges = Ranges() if args.ranges is None else Ranges.from_toml(args.ranges)
+    ranges = Ranges() if args.ranges is None else read_ranges(args.ranges)
     workers = args.workers or os.cpu_count() or 1
     if args.workers is None and args.scheduler is None and importlib.util.find_spec(
             "distributed") is None:

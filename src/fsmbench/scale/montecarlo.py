@@ -31,9 +31,9 @@ What is drawn (:class:`Ranges`, overridable by a TOML file)
       (:data:`fsmbench.twin.compare.TARGETS`: 4QD 1 %, current amplifier 2 %,
       Sercalo and Newport 3 %), so a controller designed on an identified
       plant meets a plant at least as far off as the identification may be;
-    * the DAC delay and the Newport's internal delay, ± one sample (the
-      identification's delay target), uniform, fractional (the twin's
-      discretisation takes fractional delays).
+    * the DAC delay and the Newport's internal delay, uniform within the
+      identification's delay targets (± one sample, 0.1 ms), fractional (the
+      twin's discretisation takes fractional delays).
 
 Reproducibility
     Draw ``i``'s parameters and noise seed come from
@@ -54,10 +54,8 @@ from __future__ import annotations
 
 import dataclasses
 import math
-import tomllib
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -74,16 +72,16 @@ __all__ = [
     "METRICS",
     "MONTECARLO_FORMAT",
     "PARAMETERS",
+    "RANGE_OF_PARAMETER",
+    "SETTLED_TIME_CONSTANTS",
     "ControllerChoice",
     "Draw",
     "DrawResult",
     "MonteCarloResult",
     "MonteCarloSetup",
     "Ranges",
-    "designed_controller",
     "discrete_feedback",
     "draw_parameters",
-    "loaded_controller",
     "perturbed_bench",
     "run_draw",
     "run_draws",
@@ -96,11 +94,12 @@ MONTECARLO_FORMAT = ("fsmbench.montecarlo", 1)
 
 _EXPERIMENTS = (("h", "data_rep_h", "Vph"), ("v", "data_rep_v", "Vpv"))
 
-# The loosest identification target on a gain, and the delay target in samples.
+# The loosest identification target on a gain, and the delay targets [s].
 _GAIN_TOLERANCE = max(TARGETS[f"{k}.{a}"][1] for a in "hv"
                       for k in ("qd_gain_v_per_rad", "current_amp_gain_a_per_v",
                                 "newport_gain_v_per_v"))
-_DELAY_TOLERANCE_S = max(TARGETS["delay_s.sercalo"][1], TARGETS["delay_s.newport"][1])
+_DAC_DELAY_TOLERANCE_S = TARGETS["delay_s.sercalo"][1]
+_NEWPORT_DELAY_TOLERANCE_S = TARGETS["delay_s.newport"][1]
 
 #: Drawn factors and offsets, per key: what it multiplies or shifts.
 PARAMETERS: dict[str, str] = {
@@ -109,8 +108,14 @@ PARAMETERS: dict[str, str] = {
     **{f"qd_gain_scale.{a}": f"4QD gain, {a} axis, × [1]" for a in "hv"},
     **{f"current_amp_gain_scale.{a}": f"current-amplifier gain, {a} axis, × [1]" for a in "hv"},
     **{f"newport_gain_scale.{a}": f"Newport gain, {a} axis, × [1]" for a in "hv"},
-    "dac_delay_offset_samples": "DAC delay, + [samples]",
-    "newport_delay_offset_samples": "Newport internal delay, + [samples]",
+    "dac_delay_offset_s": "DAC delay, + [s]",
+    "newport_delay_offset_s": "Newport internal delay, + [s]",
+}
+
+#: The :class:`Ranges` attribute each drawn parameter comes from.
+RANGE_OF_PARAMETER: dict[str, str] = {
+    **{k: k.split(".")[0] for k in PARAMETERS if "." in k},
+    "dac_delay_offset_s": "dac_delay_s", "newport_delay_offset_s": "newport_delay_s",
 }
 
 #: Per-draw metrics: key -> (words for a table, unit shown, factor from SI to it).
@@ -129,7 +134,12 @@ METRICS: dict[str, tuple[str, str, float]] = {
     "modulus_margin.v": ("modulus margin v", "1", 1.0),
     "spectral_radius": ("closed-loop spectral radius", "1", 1.0),
     "slowest_time_constant_s": ("slowest closed-loop time constant", "ms", 1e3),
+    "settling_time_constants": ("time constants from sine start to metrics", "1", 1.0),
 }
+
+#: Fewer time constants than this between the sine's start and the metrics: "not settled"
+#: (e^-10 = 5e-5 of the start transient left).
+SETTLED_TIME_CONSTANTS = 10.0
 
 
 def _interval(values: Sequence[float]) -> tuple[float, float]:
@@ -144,7 +154,7 @@ class Ranges:
     """Where the draws fall: ``(low, high)`` per kind of parameter.
 
     Scales multiply the twin's true value (each axis drawn on its own);
-    offsets add to the delays [samples] (clipped at zero delay).
+    offsets add to the delays [s] (clipped at zero delay).
 
     Attributes
     ----------
@@ -154,8 +164,9 @@ class Ranges:
         Log-uniform; default ``DesignOptions().damping_scales``.
     qd_gain_scale, current_amp_gain_scale, newport_gain_scale : (float, float)
         Uniform; default ``1 ± 3 %`` (the loosest identification target on a gain).
-    dac_delay_samples, newport_delay_samples : (float, float)
-        Uniform offsets [samples]; default ± one sample (the identification's target).
+    dac_delay_s, newport_delay_s : (float, float)
+        Uniform offsets [s]; default the identification's delay targets (± 0.1 ms,
+        one sample).
     """
 
     resonance_scale: tuple[float, float] = _interval(_DESIGN.frequency_scales)
@@ -163,8 +174,9 @@ class Ranges:
     qd_gain_scale: tuple[float, float] = (1 - _GAIN_TOLERANCE, 1 + _GAIN_TOLERANCE)
     current_amp_gain_scale: tuple[float, float] = (1 - _GAIN_TOLERANCE, 1 + _GAIN_TOLERANCE)
     newport_gain_scale: tuple[float, float] = (1 - _GAIN_TOLERANCE, 1 + _GAIN_TOLERANCE)
-    dac_delay_samples: tuple[float, float] = (-1.0, 1.0)
-    newport_delay_samples: tuple[float, float] = (-1.0, 1.0)
+    dac_delay_s: tuple[float, float] = (-_DAC_DELAY_TOLERANCE_S, _DAC_DELAY_TOLERANCE_S)
+    newport_delay_s: tuple[float, float] = (-_NEWPORT_DELAY_TOLERANCE_S,
+                                            _NEWPORT_DELAY_TOLERANCE_S)
 
     def __post_init__(self) -> None:
         for f in dataclasses.fields(self):
@@ -178,46 +190,8 @@ class Ranges:
     @classmethod
     def nominal(cls) -> Ranges:
         """Zero-width ranges: every draw is the twin's own plant."""
-        return cls(**{f.name: ((0.0, 0.0) if f.name.endswith("_samples") else (1.0, 1.0))
+        return cls(**{f.name: ((0.0, 0.0) if f.name.endswith("_s") else (1.0, 1.0))
                       for f in dataclasses.fields(cls)})
-
-    @classmethod
-    def from_toml(cls, path: str | Path) -> Ranges:
-        """Read ranges from a TOML file; keys left out keep their default.
-
-        The file holds top-level ``key = [low, high]`` pairs, keys as the
-        attributes, e.g. ``resonance_scale = [0.9, 1.1]`` or
-        ``dac_delay_samples = [0, 0]``.
-
-        Raises
-        ------
-        ValueError
-            One line naming the file and the key: not TOML, unknown key, not a
-            pair of numbers, or an invalid range.
-        """
-        p = Path(path)
-        try:
-            data = tomllib.loads(p.read_text("utf-8"))
-        except FileNotFoundError:
-            raise ValueError(f"{p}: no such ranges file") from None
-        except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
-            raise ValueError(f"{p}: not valid TOML ({exc})") from None
-        names = [f.name for f in dataclasses.fields(cls)]
-        unknown = sorted(set(data) - set(names))
-        if unknown:
-            raise ValueError(f"{p}: unknown range(s) {', '.join(unknown)}; known: "
-                             f"{', '.join(names)}")
-        values: dict[str, tuple[float, float]] = {}
-        for key, raw in data.items():
-            ok = (isinstance(raw, list) and len(raw) == 2
-                  and all(isinstance(x, int | float) and not isinstance(x, bool) for x in raw))
-            if not ok:
-                raise ValueError(f"{p}: '{key}' must be a pair [low, high] of numbers, got {raw!r}")
-            values[key] = (float(raw[0]), float(raw[1]))
-        try:
-            return dataclasses.replace(cls(), **values)
-        except ValueError as exc:
-            raise ValueError(f"{p}: {exc}") from None
 
     def to_json(self) -> dict[str, Any]:
         """``{key: [low, high]}``."""
@@ -231,11 +205,6 @@ class Draw:
     index: int
     noise_seed: int
     factors: Mapping[str, float]
-
-    def to_json(self) -> dict[str, Any]:
-        """Plain values."""
-        return plain_json({"index": self.index, "noise_seed": self.noise_seed,
-                           "factors": dict(self.factors)})
 
 
 def draw_parameters(*, seed: int, n: int, ranges: Ranges) -> list[Draw]:
@@ -253,12 +222,9 @@ def draw_parameters(*, seed: int, n: int, ranges: Ranges) -> list[Draw]:
         rng = np.random.default_rng(params_ss)
         factors: dict[str, float] = {}
         for key in PARAMETERS:
-            kind = key.split(".")[0]
-            name = {"dac_delay_offset_samples": "dac_delay_samples",
-                    "newport_delay_offset_samples": "newport_delay_samples"}.get(kind, kind)
-            lo, hi = getattr(ranges, name)
+            lo, hi = getattr(ranges, RANGE_OF_PARAMETER[key])
             u = float(rng.uniform())  # always drawn, so a zero-width range keeps the stream
-            if kind == "damping_scale":
+            if key.startswith("damping_scale"):
                 factors[key] = float(math.exp(math.log(lo) + u * (math.log(hi) - math.log(lo))))
             else:
                 factors[key] = lo + u * (hi - lo)
@@ -286,9 +252,8 @@ def perturbed_bench(bench: Bench, factors: Mapping[str, float]) -> Bench:
     gi = np.array([factors["current_amp_gain_scale.h"], factors["current_amp_gain_scale.v"]])
     # Written as a change, so that a factor of 1 leaves the value bit for bit.
     r_buffer = p.current_amplifier.r_buffer_ohm.as_array() + r_tot * (1.0 / gi - 1.0)
-    dac = max(0.0, p.converter.dac_delay_samples + factors["dac_delay_offset_samples"])
-    newport_delay = max(0.0, p.newport.internal_delay_s
-                        + factors["newport_delay_offset_samples"] * ts)
+    dac = max(0.0, p.converter.dac_delay_samples + factors["dac_delay_offset_s"] / ts)
+    newport_delay = max(0.0, p.newport.internal_delay_s + factors["newport_delay_offset_s"])
     true = dataclasses.replace(
         p,
         sercalo=dataclasses.replace(
@@ -379,47 +344,6 @@ def discrete_feedback(choice: ControllerChoice) -> DiscreteController:
         dac_outputs=(DAC_CHANNELS.index("Uch"), DAC_CHANNELS.index("Ucv")), name=choice.name)
 
 
-def designed_controller(bench: Bench, *, plant: Any = None,
-                        plant_source: str = "physical (nominal)") -> ControllerChoice:
-    """fsmbench's controller designed on ``plant`` (default the nominal physical plant),
-    with the 6.1 objective of ``bench.nominal``, Tustin at the converter rate.
-
-    ``fsmbench design`` designs on the plant :func:`fsmbench.stages.choose_plant`
-    picks: the identified one when the recordings allow it, else this nominal model.
-    """
-    from fsmbench.control.analysis import control_objective
-    from fsmbench.control.design import design_controller
-    from fsmbench.control.seed import tustin
-
-    model = physical_plant(bench.nominal, source=plant_source) if plant is None else plant
-    k = design_controller(model, objective=control_objective(bench.nominal)).controller
-    ts = bench.true.converter.ts_s
-    kd = tustin(k, ts_s=ts)
-    return ControllerChoice(name="fsmbench controller", a=np.asarray(kd.A, dtype=float),
-                            b=np.asarray(kd.B, dtype=float), c=np.asarray(kd.C, dtype=float),
-                            d=np.asarray(kd.D, dtype=float), ts_s=ts,
-                            gd_v_per_rad=bench.nominal.quad_diode.gain_v_per_rad,
-                            source=f"designed on the {plant_source} plant, Tustin at {1/ts:g} Hz",
-                            continuous=k)
-
-
-def loaded_controller(path: str | Path, *, name: str | None, bench: Bench) -> ControllerChoice:
-    """A controller of a ``controllers.mat`` / ``controllers_sos.json`` / design folder.
-
-    ``name`` picks it (default fsmbench's, :func:`fsmbench.control.load.select_controller`);
-    its recorded 4QD gain is used if the file has one, else ``bench.nominal``'s.
-    """
-    from fsmbench.control.load import load_controllers, select_controller
-
-    ts = bench.true.converter.ts_s
-    chosen = select_controller(load_controllers(path, ts_s=ts), name)
-    gd = chosen.qd_gain_v_per_rad
-    gains = bench.nominal.quad_diode.gain_v_per_rad if gd is None else PerAxis(h=gd[0], v=gd[1])
-    return ControllerChoice(name=chosen.name, a=np.asarray(chosen.a), b=np.asarray(chosen.b),
-                            c=np.asarray(chosen.c), d=np.asarray(chosen.d), ts_s=chosen.ts_s,
-                            gd_v_per_rad=gains, source=str(chosen.source_path))
-
-
 # ----------------------------------------------------------------------------- one draw
 
 
@@ -434,7 +358,12 @@ class MonteCarloSetup:
     controller : ControllerChoice
     ranges : Ranges
     duration_s, settle_s : float
-        Record length and the start left out of the metrics [s].
+        Record length and the start left out of the metrics [s]. Default 6 s
+        and 2 s: the nominal loop's slowest closed-loop time constant is 56 ms
+        (``−T / ln ρ``, ``ρ = 0.99822``), so the 1 s between the sine's start
+        and the metrics holds 18 of them (``e^−18``: 1.5e-8 of the start
+        transient left); 4 whole periods remain for the rms and the period
+        mean. Each row records its own number of time constants.
     """
 
     bench: Bench
@@ -544,12 +473,15 @@ def run_draw(draw: Draw, setup: MonteCarloSetup) -> DrawResult:
     metrics["spectral_radius"] = rho
     stable = rho < 1.0
     if stable:
-        metrics["slowest_time_constant_s"] = -p.converter.ts_s / math.log(rho)
+        tau = -p.converter.ts_s / math.log(rho)
+        metrics["slowest_time_constant_s"] = tau
         specs = {s.name: s for s in with_duration(
             [s for s in seed_experiments() if s.name in {e for _a, e, _v in _EXPERIMENTS}],
             duration_s=setup.duration_s)}
         fs = p.converter.fs_hz
         gd = bench.nominal.quad_diode.gain_v_per_rad
+        starts = [ex.start_s for s in specs.values() for ex in s.excitations]
+        metrics["settling_time_constants"] = (setup.settle_s - max(starts)) / tau
         for axis, exp, vp in _EXPERIMENTS:
             spec = specs[exp]
             stream = BenchStream(p, seed=draw.noise_seed, name=spec.name,
@@ -624,7 +556,9 @@ def summarise(result: MonteCarloResult, *, worst: int = 5) -> dict[str, Any]:
     -------
     dict
         ``quantiles``: ``{metric: {p5, p50, p95, min, max, n}}`` (SI);
-        ``fraction_unstable``; ``worst_draws``: the ``worst`` rows ranked by
+        ``fraction_unstable``, ``unstable_draws``; ``unsettled_draws``: stable
+        draws with fewer than :data:`SETTLED_TIME_CONSTANTS` between the sine's
+        start and the metrics; ``worst_draws``: the ``worst`` rows ranked by
         :func:`_severity` (unstable first, then the larger tracking error).
     """
     quantiles: dict[str, dict[str, float]] = {}
@@ -641,8 +575,10 @@ def summarise(result: MonteCarloResult, *, worst: int = 5) -> dict[str, Any]:
     n = len(result.draws)
     unstable = sum(not d.stable for d in result.draws)
     ranked = sorted(result.draws, key=lambda d: (*_severity(d), d.index))
+    unsettled = sum(d.stable and not d.metrics["settling_time_constants"]
+                    >= SETTLED_TIME_CONSTANTS for d in result.draws)
     return {"quantiles": quantiles, "fraction_unstable": unstable / n if n else math.nan,
-            "unstable_draws": unstable,
+            "unstable_draws": unstable, "unsettled_draws": unsettled,
             "worst_draws": [d.to_json() for d in ranked[:worst]]}
 
 
