@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import itertools
 import math
 
 import dask.array as da
@@ -57,7 +58,7 @@ def _chunkings(draw: st.DrawFn) -> tuple[np.ndarray, tuple[int, ...], int, np.nd
     y = 1e-9 * rng.standard_normal(n) + 1e-12 * np.arange(n) + 0.7  # nm noise on 0.7 m
     cuts = sorted(set(draw(st.lists(st.integers(1, max(1, n - 1)), max_size=15))) - {n})
     edges = [0, *cuts, n]
-    chunks = tuple(b - a for a, b in zip(edges[:-1], edges[1:], strict=True))
+    chunks = tuple(b - a for a, b in itertools.pairwise(edges))
     cell = draw(st.integers(1, 64))
     m = np.unique(draw(st.lists(st.integers(1, n // 2), min_size=1, max_size=6)))
     return y, chunks, cell, m
@@ -148,5 +149,6 @@ def test_bad_input_verdicts() -> None:
     with pytest.raises(ValueError, match="shorter than one sample"):
         allan_deviation(y, fs_hz=10.0, taus_s=[0.01])
     y[37] = np.inf
-    with pytest.raises(ValueError, match=r"'Va' contains NaN or infinite samples \(first at index 37"):
+    verdict = r"'Va' contains NaN or infinite samples \(first at index 37\)"
+    with pytest.raises(ValueError, match=verdict):
         allan_deviation(da.from_array(y, chunks=10), fs_hz=10.0, name="'Va'", task_samples=8)

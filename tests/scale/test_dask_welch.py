@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import itertools
 import tracemalloc
 
 import dask
@@ -44,7 +45,7 @@ def _assert_csd_close(s_dask: np.ndarray, s_ref: np.ndarray) -> None:
 def _chunked(x: np.ndarray, cuts: list[int]) -> da.Array:
     n = x.shape[-1]
     edges = [0, *sorted({c for c in cuts if 0 < c < n}), n]
-    sizes = tuple(b - a for a, b in zip(edges[:-1], edges[1:], strict=True))
+    sizes = tuple(b - a for a, b in itertools.pairwise(edges))
     return da.from_array(x, chunks=(*x.shape[:-1], sizes))
 
 

@@ -26,6 +26,14 @@ and no running sum ever spans the record: a global cumulative sum would lose
 ``Va``'s nanometres under its metre-scale offset on a 10^9-sample record. The
 first sample is subtracted from every sample first (the deviation does not
 depend on a constant offset) for the same reason.
+
+Memory: each task holds ~7 cells. Dask keeps a loaded chunk until its last reader
+has run, and the readers of a chunk at lag ``m`` run ``2m`` samples apart, so with
+the long default taus (up to ``N/4``) the threaded scheduler may hold a good part
+of the record (measured: 320 MB of random chunks, peak RSS 0.66 GB against 0.19 GB
+for the interpreter). On ``dask.distributed`` workers spill to disk instead; a
+memory-bounded run on one machine should limit ``taus_s`` or read the record in
+several passes.
 """
 
 from __future__ import annotations
