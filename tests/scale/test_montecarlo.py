@@ -203,7 +203,7 @@ def test_destabilising_range_marks_draws_unstable(bench: Bench,
     assert all(math.isnan(d.metrics["tracking_error_rms_rad.h"]) for d in result.draws)
     doc = result.to_json()
     assert doc["fraction_unstable"] == 1.0
-    assert doc["quantiles"]["tracking_error_rms_rad.h"]["n"] == 0
+    assert doc["quantiles"]["tracking_error_rms_rad"]["h"]["n"] == 0
     json.dumps(doc, allow_nan=False)
 
 
@@ -212,21 +212,32 @@ def test_json_is_stamped_and_documented(reference: Any) -> None:
     assert (doc["format"], doc["format_version"]) == ("fsmbench.montecarlo", 1)
     assert list(doc)[:2] == ["format", "format_version"]
     json.dumps(doc, allow_nan=False)
-    for key in ("seed", "n", "controller", "ranges", "duration_s", "settle_s", "quantiles",
-                "fraction_unstable", "worst_draws", "draws", "metric_descriptions",
-                "parameter_descriptions"):
+    for key in ("fsmbench_version", "seed", "n", "controller", "ranges", "duration_s",
+                "settle_s", "quantiles", "fraction_unstable", "unsettled_draws", "worst_draws",
+                "draws", "metric_descriptions", "parameter_descriptions"):
         assert key in doc, key
     assert len(doc["draws"]) == N and len(doc["worst_draws"]) == 5
     for key in METRICS:
-        q = doc["quantiles"][key]
+        q = _at(doc["quantiles"], key)
         x = reference.metric(key)
         assert q["n"] == N
         assert q["min"] <= q["p5"] <= q["p50"] <= q["p95"] <= q["max"] == np.max(x)
         assert q["p50"] == pytest.approx(float(np.median(x)), rel=1e-12)
-    worst = doc["worst_draws"][0]["metrics"]
-    assert max(worst["tracking_error_rms_rad.h"], worst["tracking_error_rms_rad.v"]) == max(
-        doc["quantiles"]["tracking_error_rms_rad.h"]["max"],
-        doc["quantiles"]["tracking_error_rms_rad.v"]["max"])
+    worst = doc["worst_draws"][0]["metrics"]["tracking_error_rms_rad"]
+    tracking = doc["quantiles"]["tracking_error_rms_rad"]
+    assert max(worst.values()) == max(tracking["h"]["max"], tracking["v"]["max"])
+    # Keys are ids (docs/results.md): no dots; (h, v) pairs are objects.
+    text = json.dumps(doc)
+    assert '.h"' not in text and '.v"' not in text
+    assert set(doc["draws"][0]["factors"]["resonance_scale"]) == {"h", "v"}
+    assert _at(doc["metric_descriptions"], "tracking_error_rms_rad.h") == (
+        "tracking error h [µrad rms]")
+
+
+def _at(tree: dict[str, Any], dotted: str) -> Any:
+    for part in dotted.split("."):
+        tree = tree[part]
+    return tree
 
 
 def _parser() -> argparse.ArgumentParser:

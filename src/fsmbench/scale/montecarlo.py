@@ -82,6 +82,7 @@ __all__ = [
     "Ranges",
     "discrete_feedback",
     "draw_parameters",
+    "nested",
     "perturbed_bench",
     "run_draw",
     "run_draws",
@@ -404,10 +405,11 @@ class DrawResult:
     metrics: Mapping[str, float]
 
     def to_json(self) -> dict[str, Any]:
-        """One row of ``montecarlo.json`` (NaN as null)."""
+        """One row of ``montecarlo.json``: dotted keys nested, (h, v) pairs as objects."""
         return plain_json({"index": self.index, "noise_seed": self.noise_seed,
-                           "stable": self.stable, "factors": dict(self.factors),
-                           "parameters": dict(self.parameters), "metrics": dict(self.metrics)})
+                           "stable": self.stable, "factors": nested(self.factors),
+                           "parameters": nested(self.parameters),
+                           "metrics": nested(self.metrics)})
 
 
 def _margins(p: BenchParams, choice: ControllerChoice) -> dict[str, float]:
@@ -533,13 +535,32 @@ class MonteCarloResult:
 
     def to_json(self) -> dict[str, Any]:
         """``montecarlo.json``'s content: summary, setup and one row per draw."""
+        from fsmbench import __version__
+
         name, version = MONTECARLO_FORMAT
+        s = summarise(self)
         return stamped(plain_json({
-            "seed": self.seed, "n": len(self.draws), **self.setup.to_json(),
-            **summarise(self), "metric_descriptions": {k: f"{w} [{u}]" for k, (w, u, _f)
-                                                       in METRICS.items()},
-            "parameter_descriptions": PARAMETERS,
+            "fsmbench_version": __version__, "seed": self.seed, "n": len(self.draws),
+            **self.setup.to_json(), "quantiles": nested(s["quantiles"]),
+            "fraction_unstable": s["fraction_unstable"], "unstable_draws": s["unstable_draws"],
+            "unsettled_draws": s["unsettled_draws"],
+            "worst_draws": [d.to_json() for d in s["worst_draws"]],
+            "metric_descriptions": nested({k: f"{w} [{u}]" for k, (w, u, _f)
+                                           in METRICS.items()}),
+            "parameter_descriptions": nested(PARAMETERS),
             "draws": [d.to_json() for d in self.draws]}), format=name, version=version)
+
+
+def nested(flat: Mapping[str, Any]) -> dict[str, Any]:
+    """``{"a.h": 1, "a.v": 2, "b": 3}`` → ``{"a": {"h": 1, "v": 2}, "b": 3}`` (keys are ids)."""
+    out: dict[str, Any] = {}
+    for key, value in flat.items():
+        *parents, last = key.split(".")
+        node = out
+        for part in parents:
+            node = node.setdefault(part, {})
+        node[last] = value
+    return out
 
 
 def _severity(d: DrawResult) -> tuple[int, float]:
@@ -558,7 +579,7 @@ def summarise(result: MonteCarloResult, *, worst: int = 5) -> dict[str, Any]:
         ``quantiles``: ``{metric: {p5, p50, p95, min, max, n}}`` (SI);
         ``fraction_unstable``, ``unstable_draws``; ``unsettled_draws``: stable
         draws with fewer than :data:`SETTLED_TIME_CONSTANTS` between the sine's
-        start and the metrics; ``worst_draws``: the ``worst`` rows ranked by
+        start and the metrics; ``worst_draws`` (DrawResult): the ``worst`` rows ranked by
         :func:`_severity` (unstable first, then the larger tracking error).
     """
     quantiles: dict[str, dict[str, float]] = {}
@@ -579,7 +600,7 @@ def summarise(result: MonteCarloResult, *, worst: int = 5) -> dict[str, Any]:
                     >= SETTLED_TIME_CONSTANTS for d in result.draws)
     return {"quantiles": quantiles, "fraction_unstable": unstable / n if n else math.nan,
             "unstable_draws": unstable, "unsettled_draws": unsettled,
-            "worst_draws": [d.to_json() for d in ranked[:worst]]}
+            "worst_draws": ranked[:worst]}
 
 
 def _batches(draws: Sequence[Draw], size: int) -> list[list[Draw]]:
