@@ -117,7 +117,7 @@ def test_every_file_names_its_format_and_version(out: Path) -> None:
 def test_stamped_formats(out: Path) -> None:
     """The four files stamped for issue 9, with their versions (2 where the shape changed)."""
     expected = {"identification.json": ("fsmbench.identification", 2),
-                "budget.json": ("fsmbench.budget", 2),
+                "budget.json": ("fsmbench.budget", 3),
                 "design.json": ("fsmbench.design", 1),
                 "twin-data/twin_truth.json": ("fsmbench.twin_truth", 2)}
     for name, stamp in expected.items():

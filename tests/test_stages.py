@@ -79,7 +79,7 @@ def test_budget_stage_writes_the_contracted_keys(short_twin: TwinRun, bench: Ben
     for key in BUDGET_KEYS:
         value = _get(data, key)
         assert isinstance(value, float) and value >= 0, key
-    assert (data["format"], data["format_version"]) == ("fsmbench.budget", 2)
+    assert (data["format"], data["format_version"]) == ("fsmbench.budget", 3)
     assert {"id", "name", "rms_m"} <= set(data["budget"]["rows"][0])
     assert data["budget"]["total_rms_m"] == pytest.approx(result.total_rms_m)
     # One total, one table: nothing of the budget block repeated at the top.

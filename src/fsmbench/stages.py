@@ -53,7 +53,7 @@ IDENT_EXPERIMENTS = ("data_cal_pd_h", "data_cal_pd_v", "data_uch", "data_ucv", "
 
 #: ``budget.json``'s format and version (2: no duplicated total/rows/limiting at the top,
 #: ids for keys, (h, v) pairs as ``{"h", "v"}``, huddle bands as a list).
-BUDGET_FORMAT = ("fsmbench.budget", 2)
+BUDGET_FORMAT = ("fsmbench.budget", 3)
 #: ``design.json``'s format and version.
 DESIGN_FORMAT = ("fsmbench.design", 1)
 

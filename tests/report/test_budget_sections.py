@@ -32,7 +32,8 @@ EXPECTED_KEYS = {
     "budget_beam_angle_per_source", "budget_distance_per_source", "fig44_repeatability_time",
     "fig45_tracking_error_distance", "fig46_tracking_error_asd",
     "fig47_tracking_vs_distance_asd", "fig48_49_repeatability_periods",
-    "fig50_nonrepeatable_contributions", "fig52_lowpass_nonrepeatable",
+    "fig50_nonrepeatable_contributions", "fig52_lowpass_nonrepeatable", "huddle_allan",
+    "huddle_drift",
 }
 
 

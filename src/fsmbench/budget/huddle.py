@@ -57,6 +57,7 @@ __all__ = [
     "analyse_huddle",
     "analyse_huddle_record",
     "band_id",
+    "check_trim",
     "estimate_dac_noise",
     "estimate_qd_noise",
     "huddle_number",
@@ -156,6 +157,21 @@ def _drift(x: Any, fs: float) -> tuple[float, float]:
         return 0.0, math.inf
     n_ind = max(1.0, p.sum() ** 2 / float((p**2).sum()) / 1.5)
     return float(np.sqrt(np.mean(m**2))), 0.5 / math.sqrt(n_ind)
+
+
+def check_trim(ds: xr.Dataset, *, name: str, t0_s: float = 1.0) -> None:
+    """Raise the trim's ValueError (naming ``name``) if fewer than 2 s remain after ``t0_s``.
+
+    Reads only the first samples of ``t`` for a record out of core.
+    """
+    if not is_lazy(ds["t"].data):
+        trim_huddle(ds, name=name, t0_s=t0_s)
+        return
+    fs = float(ds.attrs["fs_hz"])
+    trim = trim_record(ds, t0_s=t0_s, duration_s=None, fs_hz=fs)
+    if trim.n < 2 * math.ceil(fs):
+        raise ValueError(f"{name}: {trim.n / fs:.3g} s left after removing t < {t0_s:g} s; "
+                         "the huddle analysis needs at least 2 s (two 1 s Welch windows)")
 
 
 def _trimmed(ds: xr.Dataset, *, name: str, t0_s: float, duration_s: float | None,

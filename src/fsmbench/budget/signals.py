@@ -27,6 +27,7 @@ __all__ = [
     "block_means",
     "compute",
     "is_lazy",
+    "lowpass",
     "lowpass_rms",
     "trim_record",
 ]
@@ -90,34 +91,43 @@ def trim_record(ds: xr.Dataset, *, t0_s: float, duration_s: float | None,
     return LazyTrim(start=start, n=max(n, 0), t0_s=t_start)
 
 
-def lowpass_rms(x: Any, *, cutoff_hz: float, fs_hz: float) -> float:
-    """Rms about the mean of ``x`` after the seed's first-order low pass (from rest).
+def lowpass(x: Any, *, cutoff_hz: float, fs_hz: float) -> Any:
+    """The seed's first-order low pass (from rest) of a record, numpy or Dask.
 
-    In memory: :func:`~fsmbench.filters.first_order_lowpass` then the rms.
-    Out of core: the same recursion run chunk after chunk with its state
-    carried, accumulating the output's moments (Chan's pairwise update).
+    Out of core the recursion is a chain of tasks, one per chunk, each
+    starting from the state the previous chunk ended in: the result is a
+    lazy Dask array equal to the in-memory filter (same recursion, same
+    order of operations), computed chunk by chunk.
     """
     if not is_lazy(x):
-        y = first_order_lowpass(np.asarray(x, dtype=float), cutoff_hz=cutoff_hz, fs_hz=fs_hz)
-        return float(np.sqrt(np.mean((y - y.mean()) ** 2)))
+        return first_order_lowpass(np.asarray(x, dtype=float), cutoff_hz=cutoff_hz,
+                                   fs_hz=fs_hz)
+    import dask
+    import dask.array as da
+
     a = math.exp(-2.0 * math.pi * cutoff_hz / fs_hz)
-    b_coef, a_coef = [0.0, 1.0 - a], [1.0, -a]
-    zi = lfilter_zi(b_coef, a_coef) * 0.0  # from rest, as the in-memory default
-    n, mean, m2 = 0, 0.0, 0.0
-    for block in x.to_delayed().ravel():
-        chunk = np.asarray(block.compute(), dtype=float)
-        y, zi = lfilter(b_coef, a_coef, chunk, zi=zi)
-        nb = y.size
-        if nb == 0:
-            continue
-        mb = float(np.mean(y))
-        m2b = float(np.sum((y - mb) ** 2))
-        total = n + nb
-        delta = mb - mean
-        mean += delta * nb / total
-        m2 += m2b + delta * delta * n * nb / total
-        n = total
-    return math.sqrt(m2 / n) if n else float("nan")
+    b_coef, a_coef = np.array([0.0, 1.0 - a]), np.array([1.0, -a])
+
+    def step(chunk: FloatArray, zi: FloatArray) -> tuple[FloatArray, FloatArray]:
+        y, zf = lfilter(b_coef, a_coef, np.asarray(chunk, dtype=float), zi=zi)
+        return np.asarray(y, dtype=float), np.asarray(zf, dtype=float)
+
+    zi: Any = lfilter_zi(b_coef, a_coef) * 0.0  # from rest, as the in-memory default
+    parts = []
+    for block, size in zip(x.to_delayed().ravel(), x.chunks[0], strict=True):
+        out = dask.delayed(step, nout=2)(block, zi)
+        parts.append(da.from_delayed(out[0], shape=(size,), dtype=float))
+        zi = out[1]
+    return da.concatenate(parts) if parts else x
+
+
+def lowpass_rms(x: Any, *, cutoff_hz: float, fs_hz: float) -> float:
+    """Rms about the mean of ``x`` after the seed's first-order low pass (from rest)."""
+    y = lowpass(x, cutoff_hz=cutoff_hz, fs_hz=fs_hz)
+    if not is_lazy(y):
+        return float(np.sqrt(np.mean((y - y.mean()) ** 2)))
+    mean = float(y.mean().compute())
+    return math.sqrt(float(((y - mean) ** 2).mean().compute()))
 
 
 def block_means(x: Any, *, per: int) -> FloatArray:

@@ -16,25 +16,27 @@ from __future__ import annotations
 
 import warnings
 from collections.abc import Mapping
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 
 import control as ct
 import xarray as xr
 
 from fsmbench.bench.blocks import PlantModel, physical_plant
-from fsmbench.bench.params import Bench
+from fsmbench.bench.params import Bench, BenchParams
 from fsmbench.budget.environment import AirBudget, FrameBudget, air_budget, frame_budget
 from fsmbench.budget.huddle import (
     HUDDLE_CONFIGS,
     DacNoiseEstimate,
     HuddleAnalysis,
     analyse_huddle,
+    check_trim,
     estimate_dac_noise,
-    trim_huddle,
+    huddle_number,
 )
 from fsmbench.budget.optics import GeometryBudget, geometry_budget
 from fsmbench.budget.quantisation import NoiseSources, noise_sources
 from fsmbench.budget.repeatability import RepeatabilityRecord, analyse_repeatability
+from fsmbench.budget.stability import StabilityRecord, analyse_stability
 from fsmbench.budget.table import AngleSources, ErrorBudget, angle_sources, budget_table
 from fsmbench.checks import Check, Notice, first_failure
 from fsmbench.control.seed import seed_decentralised_controller, tustin
@@ -98,6 +100,7 @@ class BudgetResult:
     skipped: Mapping[str, str]
     checks: tuple[Check, ...] = ()
     notices: tuple[Notice, ...] = ()
+    stability: Mapping[int, StabilityRecord] = field(default_factory=dict)
 
     @property
     def total_rms_m(self) -> float:
@@ -134,6 +137,7 @@ class BudgetResult:
             "dac_noise": None if self.dac_noise is None else self.dac_noise.to_json(),
             "repeatability": {k: r.to_json() for k, r in self.repeatability.items()},
             "nonrep_contributions": {k: v.to_json() for k, v in self.nonrep.items()},
+            "stability": {str(k): v.to_json() for k, v in self.stability.items()},
             # Parts are named in words ("4QD noise from huddle data"): a list, not keys.
             "skipped": [{"part": k, "reason": v} for k, v in self.skipped.items()],
             "checks": [c.to_json() for c in self.checks],
@@ -173,7 +177,7 @@ def _valid_huddles(recordings: Mapping[str, xr.Dataset],
             skipped[name] = "not in the recordings (seed 3)"
             continue
         try:
-            trim_huddle(recordings[name], name=name)
+            check_trim(recordings[name], name=name)
         except ValueError as exc:
             skipped[name] = str(exc)
             continue
@@ -231,6 +235,7 @@ def _budget_study(recordings: Mapping[str, xr.Dataset], *, bench: Bench,
                         notices=notices)
     valid = _valid_huddles(usable, skipped)
     huddle = analyse_huddle(valid, params=params) if valid else None
+    stability = _stability(valid, params=params, skipped=skipped)
     qd = None if huddle is None else huddle.qd_noise
     if qd is None:
         skipped["4QD noise from huddle data"] = ("no open-loop huddle test (1, 2, 4): the "
@@ -288,4 +293,21 @@ def _budget_study(recordings: Mapping[str, xr.Dataset], *, bench: Bench,
         geometry=geometry_budget(params), air=air_budget(params, window_s=window_s),
         frame=frame_budget(params, window_s=window_s), budget=budget, huddle=huddle,
         dac_noise=dac, predicted_huddle_va_rms_m=predicted, repeatability=reps,
-        nonrep=nonrep, skipped=skipped, checks=tuple(checks), notices=tuple(notices))
+        nonrep=nonrep, skipped=skipped, checks=tuple(checks), notices=tuple(notices),
+        stability=stability)
+
+
+def _stability(valid: Mapping[str, xr.Dataset], *, params: BenchParams,
+               skipped: dict[str, str]) -> dict[int, StabilityRecord]:
+    """Drift and Allan deviation of every valid huddle test (needs the dask extra)."""
+    try:
+        import dask  # noqa: F401
+    except ImportError:
+        if valid:
+            skipped["drift and Allan deviation of the huddle tests"] = (
+                "needs the fsmbench[dask] extra (pip install 'fsmbench[dask]')")
+        return {}
+    gd = params.quad_diode.gain_v_per_rad
+    return {huddle_number(name): analyse_stability(ds, name=name,
+                                                   qd_gain_v_per_rad=(gd.h, gd.v))
+            for name, ds in valid.items()}

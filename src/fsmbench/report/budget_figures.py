@@ -20,8 +20,10 @@ from fsmbench.bench.geometry import seed_theta_range, small_angle_law, trace_ben
 from fsmbench.budget.huddle import HuddleAnalysis, HuddleRecord, trim_huddle
 from fsmbench.budget.optics import SEED_4_1, GeometryBudget
 from fsmbench.budget.spectra import cumulative_power, first_order_lowpass, window_weight
+from fsmbench.budget.stability import StabilityRecord
 from fsmbench.budget.table import ErrorBudget
 from fsmbench.report.figure import H_COLOR, PALETTE, V_COLOR, Figure, Label, Line, Panel
+from fsmbench.report.stability_figures import envelope_line, time_axis
 
 __all__ = [
     "angle_asd_figure",
@@ -130,11 +132,32 @@ def _test_color(rec: HuddleRecord) -> str:
     return PALETTE[2 + (rec.number - 1) % (len(PALETTE) - 2)]
 
 
-def huddle_attocube_time_figure(h: HuddleAnalysis, recordings: Mapping[str, xr.Dataset]
+def huddle_attocube_time_figure(h: HuddleAnalysis, recordings: Mapping[str, xr.Dataset], *,
+                                stability: Mapping[int, StabilityRecord] | None = None
                                 ) -> Figure:
-    """Seed Fig. 29: Va of every test, one panel per test, raw and 50 Hz low pass."""
+    """Seed Fig. 29: Va of every test, one panel per test, raw and 50 Hz low pass.
+
+    A record analysed out of core is drawn from its min/max envelope
+    (``stability``), never sample by sample.
+    """
     panels = []
     for rec in _records(h):
+        title = (f"Test {rec.number}: {huddle_config_words(rec)} "
+                 f"({rec.va_rms_m * NM:.3g} nm rms raw, "
+                 f"{rec.va_lpf_rms_m * NM:.3g} nm low-passed)")
+        stab = (stability or {}).get(rec.number)
+        if stab is not None and stab.out_of_core:
+            divisor, x_label = time_axis(stab.duration_s)
+            raw, lpf = stab.drift["Va"], stab.drift["Va_lowpass"]
+            panels.append(Panel(
+                traces=(envelope_line(raw, scale=NM, offset=raw.overall_mean, divisor=divisor,
+                                      name="Va, raw (min/max per bin)", color=_RAW_COLOR,
+                                      group="raw"),
+                        envelope_line(lpf, scale=NM, offset=0.0, divisor=divisor,
+                                      name="Va, 50 Hz first-order low pass (min/max per bin)",
+                                      color=_LPF_COLOR, group="lpf", width=1.2)),
+                x_label=x_label, y_label="Va, mean removed [nm]", title=title))
+            continue
         sig = trim_huddle(recordings[rec.name], name=rec.name, duration_s=rec.duration_s)
         va = sig["Va"] - sig["Va"].mean()
         vaf = first_order_lowpass(va, cutoff_hz=50.0, fs_hz=rec.fs_hz)
@@ -143,33 +166,43 @@ def huddle_attocube_time_figure(h: HuddleAnalysis, recordings: Mapping[str, xr.D
                          group="raw", decimate=True),
                     Line(sig["t"], vaf * NM, name="Va, 50 Hz first-order low pass",
                          color=_LPF_COLOR, width=1.2, group="lpf", decimate=True)),
-            x_label="Time [s]", y_label="Va, mean removed [nm]",
-            title=f"Test {rec.number}: {huddle_config_words(rec)} "
-                  f"({rec.va_rms_m * NM:.3g} nm rms raw, "
-                  f"{rec.va_lpf_rms_m * NM:.3g} nm low-passed)"))
+            x_label="Time [s]", y_label="Va, mean removed [nm]", title=title))
     return Figure(
         key="fig29_huddle_attocube_time", title="Attocube distance during the huddle tests",
-        caption="Va after the seed's trimming (t ≥ 1 s dropped, then at most 100 s kept), mean "
+        caption="Va after the seed's trimming (t < 1 s dropped), mean "
                 "removed: light, as recorded; dark, after the seed's first-order low pass at "
                 "50 Hz (lsim from rest). One panel per test of Table 3; each panel has its "
-                "own vertical scale.",
+                "own vertical scale. Long records are drawn as the minimum and maximum of "
+                "each of their bins.",
         panels=tuple(panels), seed_ref="Fig. 29", share_x=True)
 
 
-def huddle_qd_time_figure(h: HuddleAnalysis, recordings: Mapping[str, xr.Dataset]) -> Figure:
+def huddle_qd_time_figure(h: HuddleAnalysis, recordings: Mapping[str, xr.Dataset], *,
+                          stability: Mapping[int, StabilityRecord] | None = None) -> Figure:
     """Seed Fig. 30: Vph (left, blue) and Vpv (right, orange) of every test."""
     panels = []
     for rec in _records(h):
-        sig = trim_huddle(recordings[rec.name], name=rec.name, duration_s=rec.duration_s)
+        stab = (stability or {}).get(rec.number)
         for v, color, rms in (("Vph", H_COLOR, rec.vph_rms_v), ("Vpv", V_COLOR, rec.vpv_rms_v)):
             axis = "horizontal" if v == "Vph" else "vertical"
+            title = (f"Test {rec.number}: {huddle_config_words(rec)}: {v} "
+                     f"({rms * MV:.3g} mV rms)")
+            if stab is not None and stab.out_of_core:
+                divisor, x_label = time_axis(stab.duration_s)
+                d = stab.drift["Rh" if v == "Vph" else "Rv"]
+                gain = stab.qd_gain_v_per_rad[0 if v == "Vph" else 1]
+                panels.append(Panel(
+                    traces=(envelope_line(d, scale=gain * MV, offset=d.overall_mean,
+                                          divisor=divisor, name=f"{v} (4QD {axis}, min/max "
+                                          "per bin)", color=color, group=v),),
+                    x_label=x_label, y_label=f"{v}, mean removed [mV]", title=title))
+                continue
+            sig = trim_huddle(recordings[rec.name], name=rec.name, duration_s=rec.duration_s)
             panels.append(Panel(
                 traces=(Line(sig["t"], (sig[v] - sig[v].mean()) * MV,
                              name=f"{v} (4QD {axis})", color=color, width=1.0, group=v,
                              decimate=True),),
-                x_label="Time [s]", y_label=f"{v}, mean removed [mV]",
-                title=f"Test {rec.number}: {huddle_config_words(rec)}: {v} "
-                      f"({rms * MV:.3g} mV rms)"))
+                x_label="Time [s]", y_label=f"{v}, mean removed [mV]", title=title))
     return Figure(
         key="fig30_huddle_qd_time", title="4QD signals during the huddle tests",
         caption="Vph (horizontal, left) and Vpv (vertical, right) after the seed's trimming, "

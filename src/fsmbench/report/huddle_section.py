@@ -6,7 +6,7 @@ from collections.abc import Mapping
 
 import xarray as xr
 
-from fsmbench.budget.huddle import HUDDLE_CONFIGS
+from fsmbench.budget.huddle import HUDDLE_CONFIGS, HuddleRecord
 from fsmbench.budget.study import BudgetResult
 from fsmbench.report.budget_figures import (
     huddle_attocube_asd_figure,
@@ -16,6 +16,7 @@ from fsmbench.report.budget_figures import (
     huddle_qd_time_figure,
 )
 from fsmbench.report.html import Block, Note, Section, Table
+from fsmbench.report.stability_figures import allan_figure, drift_figure, time_axis
 
 __all__ = ["huddle_section"]
 
@@ -50,6 +51,49 @@ def _missing_paragraph(result: BudgetResult) -> str:
             "4QD noise and the white DAC quantisation model.")
 
 
+def _lengths(recs: list[HuddleRecord]) -> str:
+    lengths = sorted({r.duration_s for r in recs})
+    divisor, label = time_axis(max(lengths))
+    unit = label.split("[")[1].rstrip("]")
+    return " and ".join(f"{d / divisor:.3g} {unit}" for d in lengths)
+
+
+def _stability_blocks(result: BudgetResult, recs: list[HuddleRecord]) -> list[Block]:
+    """Beyond the seed: drift and Allan deviation over the whole of each record."""
+    stab = result.stability
+    if not stab:
+        why = next((v for k, v in result.skipped.items() if "Allan" in k), "")
+        return [f"Drift and Allan deviation are not shown: {why}."] if why else []
+    longest = max(s.duration_s for s in stab.values())
+    divisor, label = time_axis(longest)
+    unit = label.split("[")[1].rstrip("]")
+    out: list[Block] = [
+        f"Beyond the seed: what the records show over their whole length "
+        f"({longest / divisor:.3g} {unit} for the longest). A long record is analysed out of "
+        "core, chunk by chunk, and its time plots show the minimum and maximum of each bin. "
+        "The Allan deviation separates white noise, flicker, random walk and drift by their "
+        "slope; the drift plot follows the 4QD's offset and the distance over the record.",
+        allan_figure(stab),
+    ]
+    rows = []
+    for n in sorted(stab):
+        s = stab[n]
+        for key, words in (("Va", "Attocube distance Va"), ("Rh", "4QD beam angle, horizontal"),
+                           ("Rv", "4QD beam angle, vertical")):
+            regions = s.allan[key].regions()
+            text = "; ".join(r.describe() for r in regions) or "no region with a clear slope"
+            drift = s.drift[key]
+            scale, u = (1e9, "nm") if drift.unit == "m" else (1e6, "µrad")
+            rows.append((str(n), words, f"{drift.peak_to_peak * scale:.3g} {u}", text))
+    out.append(Table(
+        caption="Noise types of the Allan deviation and drift over each record",
+        header=("test", "signal", "drift of the bin means (peak to peak)",
+                "Allan deviation regions (level at 1 s, slope, range of τ)"),
+        rows=tuple(rows)))
+    out.append(drift_figure(stab))
+    return out
+
+
 def huddle_section(result: BudgetResult, *, recordings: Mapping[str, xr.Dataset]) -> Section:
     """Seed section 3: configurations, time plots, spectra, the table and the conclusion.
 
@@ -80,12 +124,13 @@ def huddle_section(result: BudgetResult, *, recordings: Mapping[str, xr.Dataset]
                        "3.1); here every test present is analysed the same way.",
                        ref="seed 3.1"))
     blocks += [
-        f"Processing as the seed's 3.2–3.3: samples before t = 1 s are dropped, at most "
-        f"100 s are kept ({recs[0].duration_s:g} s here, at {fs:g} Hz), the mean is removed, "
-        "and Va is low-passed by a first-order filter at 50 Hz. Figure 29 shows Va of each "
-        "test on its own scale; Figure 30 the 4QD signals, horizontal and vertical apart.",
-        huddle_attocube_time_figure(h, recordings),
-        huddle_qd_time_figure(h, recordings),
+        f"Processing as the seed's 3.2–3.3: samples before t = 1 s are dropped and the rest "
+        f"is kept (the seed's records hold 100 s; {_lengths(recs)} here, at {fs:g} Hz), the "
+        "mean is removed, and Va is low-passed by a first-order filter at 50 Hz. Figure 29 "
+        "shows Va of each test on its own scale; Figure 30 the 4QD signals, horizontal and "
+        "vertical apart.",
+        huddle_attocube_time_figure(h, recordings, stability=result.stability),
+        huddle_qd_time_figure(h, recordings, stability=result.stability),
         "Spectra (seed 3.5): Welch estimates with a 1 s Hann window. The cumulative rms from "
         "0 Hz shows which band makes the rms.",
         huddle_attocube_asd_figure(h),
@@ -121,6 +166,7 @@ def huddle_section(result: BudgetResult, *, recordings: Mapping[str, xr.Dataset]
                         *(f"{c.ratios[b]:.2f}{' *' if c.significant.get(b) else ''}"
                           for b in bands)) for c in h.comparisons)))
     blocks.append("Conclusion (seed 3.6). " + h.conclusion)
+    blocks += _stability_blocks(result, recs)
     if h.qd_noise is not None:
         q = h.qd_noise
         blocks.append(

@@ -1,0 +1,110 @@
+"""Figures of the long-term view of the huddle tests: Allan deviation, drift, envelopes.
+
+The time plots of a long record draw the per-bin minimum and maximum (the
+envelope :mod:`fsmbench.budget.stability` computed out of core), never the
+samples: a day at 10 kHz is 864 million of them.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+
+import numpy as np
+from numpy.typing import NDArray
+
+from fsmbench.budget.stability import SignalDrift, StabilityRecord
+from fsmbench.report.figure import H_COLOR, PALETTE, V_COLOR, Figure, Line, Panel
+
+__all__ = [
+    "allan_figure",
+    "drift_figure",
+    "envelope_line",
+    "time_axis",
+]
+
+FloatArray = NDArray[np.float64]
+NM = 1e9
+URAD = 1e6
+
+
+def time_axis(duration_s: float) -> tuple[float, str]:
+    """Divisor and label of a time axis in s, min or h, by the record's length."""
+    if duration_s >= 3 * 3600:
+        return 3600.0, "Time [h]"
+    if duration_s >= 3 * 60:
+        return 60.0, "Time [min]"
+    return 1.0, "Time [s]"
+
+
+def envelope_line(d: SignalDrift, *, scale: float, offset: float, divisor: float, name: str,
+                  color: str, group: str = "", width: float = 1.0) -> Line:
+    """The min/max envelope as one line: each bin's minimum then maximum at its centre."""
+    t = np.repeat(d.t_s / divisor, 2)
+    y = np.empty(2 * d.minimum.size)
+    y[0::2], y[1::2] = d.minimum, d.maximum
+    return Line(t, (y - offset) * scale, name=name, color=color, width=width, group=group)
+
+
+def allan_figure(stability: Mapping[int, StabilityRecord]) -> Figure:
+    """Allan deviation of Va and of the 4QD beam angle, every huddle test."""
+    va_lines, qd_lines = [], []
+    for i, n in enumerate(sorted(stability)):
+        s = stability[n]
+        color = PALETTE[i % len(PALETTE)]
+        a = s.allan["Va"]
+        va_lines.append(Line(a.tau_s, a.adev * NM, name=f"test {n}", color=color,
+                             group=f"test{n}", markers=True))
+        for key in ("Rh", "Rv"):
+            r = s.allan[key]
+            qd_lines.append(Line(r.tau_s, r.adev * URAD, name=f"test {n}, "
+                                 f"{'horizontal' if key == 'Rh' else 'vertical'}",
+                                 color=color, dash="solid" if key == "Rh" else "dot",
+                                 group=f"test{n}", markers=True))
+    longest = max(s.duration_s for s in stability.values())
+    unit = time_axis(longest)[1].split("[")[1].rstrip("]")
+    return Figure(
+        key="huddle_allan", title="Allan deviation of the distance and of the beam angle",
+        caption=("Overlapping Allan deviation (IEEE Std 1139) over the whole of each huddle "
+                 "test after the seed's trim, the longest "
+                 f"{longest / time_axis(longest)[0]:.3g} {unit}. A slope of −1/2 is white "
+                 "noise, 0 flicker, +1/2 random walk, +1 drift; the table below names each "
+                 "region. Top: the Attocube distance Va; bottom: the beam angle the 4QD "
+                 "reads (Vph, Vpv over their calibrated gains)."),
+        panels=(Panel(traces=tuple(va_lines), x_label="Averaging time τ [s]",
+                      y_label="Allan deviation of Va [nm]", x_log=True, y_log=True,
+                      title="Attocube distance Va"),
+                Panel(traces=tuple(qd_lines), x_label="Averaging time τ [s]",
+                      y_label="Allan deviation of the beam angle [µrad]", x_log=True,
+                      y_log=True, title="4QD beam angle (solid horizontal, dotted vertical)")))
+
+
+def drift_figure(stability: Mapping[int, StabilityRecord]) -> Figure:
+    """The bin means of Va and of the 4QD beam angle over each whole record."""
+    longest = max(s.duration_s for s in stability.values())
+    divisor, x_label = time_axis(longest)
+    va, qd = [], []
+    for i, n in enumerate(sorted(stability)):
+        s = stability[n]
+        color = PALETTE[i % len(PALETTE)]
+        d = s.drift["Va"]
+        va.append(Line(d.t_s / divisor, (d.mean - d.mean[0]) * NM, name=f"test {n}",
+                       color=color, group=f"test{n}"))
+        for key, col in (("Rh", H_COLOR), ("Rv", V_COLOR)):
+            r = s.drift[key]
+            qd.append(Line(r.t_s / divisor, (r.mean - r.mean[0]) * URAD,
+                           name=f"test {n}, {'horizontal' if key == 'Rh' else 'vertical'}",
+                           color=color if len(stability) > 1 else col,
+                           dash="solid" if key == "Rh" else "dot", group=f"test{n}"))
+    bins = next(iter(stability.values())).drift["Va"].t_s.size
+    return Figure(
+        key="huddle_drift", title="Drift of the distance and of the 4QD offset",
+        caption=(f"Means over {bins} consecutive bins of each record (each "
+                 f"{longest / bins:.3g} s long for the longest), from their first bin: how "
+                 "the distance and the beam angle the 4QD reads wander over the record. The "
+                 "seed's 100 s records show seconds of this; long records show the hours."),
+        panels=(Panel(traces=tuple(va), x_label=x_label,
+                      y_label="Va, bin mean from the first bin [nm]", title="Attocube distance"),
+                Panel(traces=tuple(qd), x_label=x_label,
+                      y_label="Beam angle, bin mean from the first bin [µrad]",
+                      title="4QD beam angle (offset drift)")),
+        share_x=True)

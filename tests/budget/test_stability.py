@@ -1,0 +1,80 @@
+"""Drift and Allan deviation of whole records: closed forms, lazy = in memory."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+import xarray as xr
+
+from fsmbench.budget.stability import FULL_OVERLAP_MAX_TAU_S, _allan, analyse_stability
+from fsmbench.io.recording import make_recording
+
+pytest.importorskip("dask")
+FS = 1000.0
+
+
+def test_long_taus_on_a_drift_equal_the_closed_form() -> None:
+    # A linear drift a·t has Allan deviation a·τ/√2 exactly, at every τ, whichever
+    # averages are used: the strided part must give it as the full overlap does.
+    a = 3e-9
+    x = a * np.arange(round(400 * FS)) / FS
+    res = _allan(x, fs_hz=FS, unit="m", name="drift")
+    assert res.tau_s.max() > 4 * FULL_OVERLAP_MAX_TAU_S  # the strided part is exercised
+    # Rounding of the block means and sums of 4e5 samples: 1e-7 relative.
+    np.testing.assert_allclose(res.adev, a * res.tau_s / np.sqrt(2), rtol=1e-7)
+
+
+def test_long_taus_on_white_noise() -> None:
+    s = 2e-9
+    x = s * np.random.default_rng(3).standard_normal(round(800 * FS))
+    res = _allan(x, fs_hz=FS, unit="m", name="white")
+    m = res.tau_s * FS
+    ratio = res.adev / (s / np.sqrt(m))
+    long = res.tau_s > FULL_OVERLAP_MAX_TAU_S
+    assert long.any()
+    # Overlapping ADEV of white noise: N/m ≥ 4 averages give ≥ ~3 degrees of freedom;
+    # at 800 s and τ ≤ 200 s the 99.9 % chi-square band is within a factor 0.3–2.
+    assert np.all((ratio[long] > 0.3) & (ratio[long] < 2.0))
+    assert np.all(np.abs(ratio[res.tau_s < 1.0] - 1) < 0.1)  # hundreds of dof: 10 %
+
+
+@pytest.fixture(scope="module")
+def record() -> xr.Dataset:
+    rng = np.random.default_rng(1)
+    n = round(120 * FS)
+    t = np.arange(n) / FS
+    lsb = 20.0 / 2**16
+    return make_recording({"Vph": np.round((1e-3 * rng.standard_normal(n) + 2e-4 * t) / lsb) * lsb,
+                           "Vpv": np.round(1e-3 * rng.standard_normal(n) / lsb) * lsb,
+                           "Va": 1e-9 * rng.standard_normal(n) + 5e-11 * t},
+                          fs_hz=FS, experiment="data_huddle_test_4", source="synthetic")
+
+
+def test_lazy_equals_in_memory(record: xr.Dataset, tmp_path: Path) -> None:
+    from fsmbench.io.lazy import open_recording
+    from fsmbench.io.recording import write_recording
+
+    path = write_recording(record, tmp_path / "data_huddle_test_4.h5", format="nexus")
+    mem = analyse_stability(record, name="x", qd_gain_v_per_rad=(-5.0, 5.0), n_bins=300)
+    lazy = analyse_stability(open_recording(path, chunk_samples=3333), name="x",
+                             qd_gain_v_per_rad=(-5.0, 5.0), n_bins=300)
+    assert lazy.out_of_core and not mem.out_of_core
+    for key in mem.allan:
+        # Same estimator, Dask only reorders sums: 1e-12.
+        np.testing.assert_allclose(lazy.allan[key].adev, mem.allan[key].adev, rtol=1e-12)
+    for key in mem.drift:
+        for f in ("mean", "minimum", "maximum", "t_s"):
+            np.testing.assert_allclose(getattr(lazy.drift[key], f), getattr(mem.drift[key], f),
+                                       rtol=1e-12, atol=1e-30, err_msg=f"{key}.{f}")
+
+
+def test_drift_and_regions(record: xr.Dataset) -> None:
+    res = analyse_stability(record, name="x", qd_gain_v_per_rad=(-5.0, 5.0), n_bins=300)
+    # Vph drifts 2e-4 V/s over 119 s: the bin means span 119 s·2e-4 V/s / 5 V/rad.
+    assert res.drift["Rh"].peak_to_peak == pytest.approx(119 * 2e-4 / 5.0, rel=0.02)
+    kinds = {r.noise for r in res.allan["Va"].regions()}
+    assert {"white", "drift"} <= kinds
+    doc = res.to_json()
+    assert set(doc["allan"]) == {"Va", "Rh", "Rv"} and doc["duration_s"] == pytest.approx(119.0)
