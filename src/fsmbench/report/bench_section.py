@@ -106,8 +106,9 @@ def bench_section(bench: Bench, *, recordings: Mapping[str, xr.Dataset],
 
 
 def _duration_s(ds: xr.Dataset) -> float:
-    t = np.asarray(ds["t"].values, dtype=float)
-    return float(t[-1] - t[0] + 1.0 / float(ds.attrs["fs_hz"]))
+    t = ds["t"].data  # numpy, or Dask for a long record: only its two ends are read
+    first, last = (float(np.asarray(v)) for v in (t[0], t[-1]))
+    return last - first + 1.0 / float(ds.attrs["fs_hz"])
 
 
 def recordings_table(recordings: Mapping[str, xr.Dataset], *, skipped: Mapping[str, str],
