@@ -276,7 +276,9 @@ def test_cli_refuses_unclear_input(tmp_path: Path) -> None:
             (["--out", str(tmp_path / "o")], "give either a DATA folder or --twin"),
             ([str(tmp_path), "--twin", "--out", str(tmp_path / "o")],
              "give either a DATA folder or --twin"),
-            (["--twin", "--out", str(tmp_path / "o"), "--settle", "6"], "leaves nothing")):
+            (["--twin", "--out", str(tmp_path / "o"), "--settle", "6"], "leaves nothing"),
+            (["--twin", "--out", str(tmp_path / "o"), "--duration", "3"],
+             "--duration 3 s is too short for data_rep_h, data_rep_v")):
         args = _parser().parse_args(["montecarlo", *argv])
         with pytest.raises(ValueError, match=message):
             args.func(args)

@@ -135,7 +135,7 @@ METRICS: dict[str, tuple[str, str, float]] = {
     "modulus_margin.v": ("modulus margin v", "1", 1.0),
     "spectral_radius": ("closed-loop spectral radius", "1", 1.0),
     "slowest_time_constant_s": ("slowest closed-loop time constant", "ms", 1e3),
-    "settling_time_constants": ("time constants from sine start to metrics", "1", 1.0),
+    "settling_time_constants": ("time constants, sine start to metrics", "1", 1.0),
 }
 
 #: Fewer time constants than this between the sine's start and the metrics: "not settled"
