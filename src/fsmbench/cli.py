@@ -7,6 +7,11 @@
     fsmbench design   DATA --out OUT [--params FILE] [--seed N] [--identification DIR]
     fsmbench study    [--data DIR] --out OUT [--seed N] [--duration S] [--params FILE]
                       [--figures png,pdf]
+    fsmbench convert  IN OUT [--fs HZ]
+    fsmbench serve    [--backend twin|playback DIR] [--params FILE] [--seed N] [--speed X]
+                      [--nodb --port N] [--out DIR]
+    fsmbench montecarlo DATA|--twin --out OUT [--n N] [--seed S] [--scheduler ADDRESS]
+                      [--workers N] [--ranges TOML] [--controller FILE[::NAME]]
 
 Every writing command also takes ``--timestamp`` (wall-clock time in MAT-file
 headers and ``run.json``; default none, so the same inputs and seed give
@@ -45,6 +50,7 @@ from fsmbench import __version__
 from fsmbench.bench.params import Bench, ParamsError, load_bench, param_rows, save_bench
 from fsmbench.cli_args import EXIT_USER_ERROR, Parser, factor, figure_formats, nanometres, seconds
 from fsmbench.live.serve import add_serve_command
+from fsmbench.scale.mc_cli import add_montecarlo_command
 
 __all__ = ["EXIT_BUG", "EXIT_SIGINT", "EXIT_SIGTERM", "EXIT_USER_ERROR", "main"]
 
@@ -483,6 +489,7 @@ def _parser() -> argparse.ArgumentParser:
     p.set_defaults(func=_cmd_study)
 
     add_serve_command(sub, factor=factor)
+    add_montecarlo_command(sub)
 
     p = sub.add_parser("convert", help="copy a recording into a chunked NeXus archive (long "
                                        "records: lazy reading, bounded memory)")

@@ -33,9 +33,8 @@ from fsmbench.live.arguments import parse_excitation, parse_record
 from fsmbench.live.backend import LiveBlock, PlaybackBackend, TwinBackend
 from fsmbench.live.monitor import LiveMonitor, Trip
 from fsmbench.live.spectra import AccumulatingFrf, FrfSnapshot, RollingAsd
-from fsmbench.sim.controller import feedback_controller
+from fsmbench.sim.controller import feedback_controller, sercalo_feedback
 from fsmbench.sim.engine import DiscreteController
-from fsmbench.sim.plant import ADC_CHANNELS, DAC_CHANNELS
 from fsmbench.twin.experiments import seed_experiments
 
 __all__ = ["ASD_SIGNALS", "LiveBench", "LiveJob"]
@@ -345,14 +344,9 @@ class LiveBench:
     def _discrete(self, path: str, name: str | None) -> DiscreteController:
         ts = 1.0 / self.fs_hz
         chosen = select_controller(load_controllers(path, ts_s=ts), name)
-        gd = chosen.qd_gain_v_per_rad or self.qd_gain_v_per_rad
-        scale = np.diag(1.0 / np.asarray(gd, dtype=float))
-        return DiscreteController(
-            a=np.asarray(chosen.a), b=np.asarray(chosen.b) @ scale, c=-np.asarray(chosen.c),
-            d=-np.asarray(chosen.d) @ scale,
-            adc_inputs=(ADC_CHANNELS.index("Vph"), ADC_CHANNELS.index("Vpv")),
-            dac_outputs=(DAC_CHANNELS.index("Uch"), DAC_CHANNELS.index("Ucv")),
-            name=f"{chosen.name} ({Path(chosen.source_path).name})")
+        return sercalo_feedback(a=chosen.a, b=chosen.b, c=chosen.c, d=chosen.d,
+                                gd_v_per_rad=chosen.qd_gain_v_per_rad or self.qd_gain_v_per_rad,
+                                name=f"{chosen.name} ({Path(chosen.source_path).name})")
 
     def _seed_controller(self) -> DiscreteController:
         return feedback_controller(seed_decentralised_controller(),

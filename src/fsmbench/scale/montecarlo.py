@@ -335,14 +335,10 @@ class ControllerChoice:
 
 def discrete_feedback(choice: ControllerChoice) -> DiscreteController:
     """The twin's controller ``u = −K (Vp / Gd)`` (as ``fsmbench.live.core``'s loaded ones)."""
-    from fsmbench.sim.plant import ADC_CHANNELS, DAC_CHANNELS
+    from fsmbench.sim.controller import sercalo_feedback
 
-    scale = np.diag(1.0 / choice.gd_v_per_rad.as_array())
-    return DiscreteController(
-        a=np.asarray(choice.a, dtype=float), b=np.asarray(choice.b, dtype=float) @ scale,
-        c=-np.asarray(choice.c, dtype=float), d=-np.asarray(choice.d, dtype=float) @ scale,
-        adc_inputs=(ADC_CHANNELS.index("Vph"), ADC_CHANNELS.index("Vpv")),
-        dac_outputs=(DAC_CHANNELS.index("Uch"), DAC_CHANNELS.index("Ucv")), name=choice.name)
+    return sercalo_feedback(a=choice.a, b=choice.b, c=choice.c, d=choice.d,
+                            gd_v_per_rad=tuple(choice.gd_v_per_rad.as_array()), name=choice.name)
 
 
 # ----------------------------------------------------------------------------- one draw

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 import control as ct
 import numpy as np
 
@@ -11,7 +13,7 @@ from fsmbench.sim.discretize import DiscretePlant
 from fsmbench.sim.engine import DiscreteController
 from fsmbench.sim.plant import ADC_CHANNELS, DAC_CHANNELS
 
-__all__ = ["closed_loop_spectral_radius", "feedback_controller"]
+__all__ = ["closed_loop_spectral_radius", "feedback_controller", "sercalo_feedback"]
 
 
 def feedback_controller(k: ct.StateSpace, *, gd_v_per_rad: PerAxis, ts_s: float,
@@ -38,10 +40,29 @@ def feedback_controller(k: ct.StateSpace, *, gd_v_per_rad: PerAxis, ts_s: float,
         raise ValueError(f"controller sampled at {k.dt} s, twin runs at {ts_s} s")
     else:
         kd = k
-    scale = np.diag(1.0 / gd_v_per_rad.as_array())
+    return sercalo_feedback(a=kd.A, b=kd.B, c=kd.C, d=kd.D,
+                            gd_v_per_rad=tuple(gd_v_per_rad.as_array()), name=name)
+
+
+def sercalo_feedback(*, a: np.ndarray, b: np.ndarray, c: np.ndarray, d: np.ndarray,
+                     gd_v_per_rad: Sequence[float], name: str) -> DiscreteController:
+    """A discrete ``K: [Rh, Rv] -> [Uch, Ucv]`` wired as the real-time code runs it.
+
+    The code reads ``Vph, Vpv``, divides by the calibrated 4QD gains to get the
+    beam angle ``R`` and commands ``u = -K R``.
+
+    Parameters
+    ----------
+    a, b, c, d : arrays (n, n), (n, 2), (2, n), (2, 2)
+        Discrete ``K`` at the converter rate, beam angle [rad] to command [V].
+    gd_v_per_rad : (float, float)
+        Calibrated 4QD gains (h, v) [V/rad].
+    name : str
+    """
+    scale = np.diag(1.0 / np.asarray(gd_v_per_rad, dtype=float))
     return DiscreteController(
-        a=np.asarray(kd.A, dtype=float), b=np.asarray(kd.B, dtype=float) @ scale,
-        c=-np.asarray(kd.C, dtype=float), d=-np.asarray(kd.D, dtype=float) @ scale,
+        a=np.asarray(a, dtype=float), b=np.asarray(b, dtype=float) @ scale,
+        c=-np.asarray(c, dtype=float), d=-np.asarray(d, dtype=float) @ scale,
         adc_inputs=(ADC_CHANNELS.index("Vph"), ADC_CHANNELS.index("Vpv")),
         dac_outputs=(DAC_CHANNELS.index("Uch"), DAC_CHANNELS.index("Ucv")), name=name)
 
