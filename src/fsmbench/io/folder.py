@@ -26,6 +26,7 @@ import math
 import os
 import re
 import warnings
+import weakref
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -134,8 +135,8 @@ def _stored_dtype(var: xr.DataArray) -> np.dtype[Any]:
 def _signal_stats(x: Any, rail: float) -> tuple[float, int, float, float, float]:
     """(peak |x|, samples at or beyond ±rail, max |x − mean|, rms of x − mean, x[0]).
 
-    In memory as the checks always computed them; out of core (Dask) in two
-    passes over the record, memory bounded by a chunk.
+    In memory as the checks always computed them; out of core (Dask) in one
+    pass over the record, memory bounded by a chunk.
     """
     if not type(x).__module__.startswith("dask"):
         x = np.asarray(x, dtype=np.float64)
@@ -147,14 +148,21 @@ def _signal_stats(x: Any, rail: float) -> tuple[float, int, float, float, float]
     import dask
     import dask.array as da
 
+    # One pass: moments about the first sample (no cancellation for offsets large
+    # against the noise), extremes and the samples on the rails.
+    first = float(x[0].compute())
+    y = x - first
     with np.errstate(all="ignore"):
-        peak, at_rails, mean, first = dask.compute(da.max(da.abs(x)),
-                                                   da.count_nonzero(da.abs(x) >= rail),
-                                                   x.mean(), x[0])
-        if not math.isfinite(float(peak)) or float(peak) == 0.0:
-            return float(peak), int(at_rails), float(peak), float(peak), float(first)
-        spread, ms = dask.compute(da.max(da.abs(x - mean)), ((x - mean) ** 2).mean())
-    return float(peak), int(at_rails), float(spread), math.sqrt(float(ms)), float(first)
+        peak, at_rails, lo, hi, s1, s2 = dask.compute(
+            da.max(da.abs(x)), da.count_nonzero(da.abs(x) >= rail), da.min(y), da.max(y),
+            da.sum(y), da.sum(y * y))
+    n = int(x.shape[0])
+    if not math.isfinite(float(peak)) or float(peak) == 0.0:
+        return float(peak), int(at_rails), float(peak), float(peak), first
+    mean_y = float(s1) / n
+    spread = max(float(hi) - mean_y, mean_y - float(lo))
+    rms = math.sqrt(max(float(s2) / n - mean_y * mean_y, 0.0))
+    return float(peak), int(at_rails), spread, rms, first
 
 
 def _finite_rms(x: np.ndarray) -> tuple[float, float]:
@@ -166,6 +174,11 @@ def _finite_rms(x: np.ndarray) -> tuple[float, float]:
         y = x / scale
         y = y - y.mean()
         return scale * float(np.max(np.abs(y))), scale * float(np.sqrt(np.mean(y * y)))
+
+
+# Checks of records read out of core, by dataset identity: a pass over a day-long
+# record takes minutes, and the loader and the budget check the same record.
+_LAZY_CHECKED: dict[tuple[Any, ...], tuple[list[Check], list[Notice]]] = {}
 
 
 def check_recording(ds: xr.Dataset, *, name: str | None = None, fs_hz: float | None = None,
@@ -192,6 +205,21 @@ def check_recording(ds: xr.Dataset, *, name: str | None = None, fs_hz: float | N
         Checks in the order of the module docstring (only those that apply),
         and notices: saturation at the ADC rails, single-precision ``t``.
     """
+    lazy = any(type(v.data).__module__.startswith("dask") for v in ds.data_vars.values())
+    key = (id(ds), name, fs_hz, adc_range_v, adc_bits)
+    if lazy and key in _LAZY_CHECKED:
+        found, notes = _LAZY_CHECKED[key]
+        return list(found), list(notes)
+    result = _check_recording(ds, name=name, fs_hz=fs_hz, adc_range_v=adc_range_v,
+                              adc_bits=adc_bits)
+    if lazy:
+        _LAZY_CHECKED[key] = result
+        weakref.finalize(ds, _LAZY_CHECKED.pop, key, None)
+    return list(result[0]), list(result[1])
+
+
+def _check_recording(ds: xr.Dataset, *, name: str | None, fs_hz: float | None,
+                     adc_range_v: float, adc_bits: int) -> tuple[list[Check], list[Notice]]:
     exp = name or str(ds.attrs.get("experiment", ""))
     label = _label(ds, exp)
     checks: list[Check] = []
