@@ -17,6 +17,7 @@ monitor"); ``test_live_frf_equals_batch_on_the_same_samples`` meets it.
 
 from __future__ import annotations
 
+import itertools
 import json
 import math
 import re
@@ -180,6 +181,23 @@ class TestTwinDevice:
             states = events.of("State")
             i_run = states.index(tango.DevState.RUNNING)
             assert tango.DevState.ON in states[i_run + 1:]
+        finally:
+            for i in ids:
+                proxy.unsubscribe_event(i)
+
+    def test_periodic_events_on_the_scalars(self, twin: tuple[Any, Path]) -> None:
+        proxy, _ = twin
+        events = _Events()
+        # The scalars are polled every second and pushed as periodic events.
+        ids = [proxy.subscribe_event(name, tango.EventType.PERIODIC_EVENT, events)
+               for name in ("BenchTime", "TrackingErrorRmsH", "Distance")]
+        try:
+            wait_until(lambda: len(events.of("BenchTime")) >= 3
+                       and events.of("TrackingErrorRmsH") and events.of("Distance"),
+                       "three BenchTime periodic events and one of each other scalar")
+            times = events.of("BenchTime")
+            assert all(b > a for a, b in itertools.pairwise(times))  # the bench moved on
+            assert all(np.isfinite(v) for v in events.of("TrackingErrorRmsH"))
         finally:
             for i in ids:
                 proxy.unsubscribe_event(i)
