@@ -64,3 +64,22 @@ def test_folder_reads_long_huddle_tests_lazily(archive: Path) -> None:
         [(c.name, c.subject, c.passed) for c in whole.checks]
     for a, b in zip(lazy.checks, whole.checks, strict=True):
         assert a.value == pytest.approx(b.value, rel=1e-12)
+
+
+def test_folder_skips_a_long_record_with_a_nan(archive: Path, tmp_path: Path) -> None:
+    import h5py
+
+    from fsmbench.io.folder import load_recordings
+
+    bad = tmp_path / archive.name
+    bad.write_bytes(archive.read_bytes())
+    with h5py.File(bad, "r+") as f:
+        f["entry/data/Vpv"][12345] = np.nan
+    from fsmbench.io.errors import RecordingError
+
+    # The only record is unusable: the folder is refused, naming file, signal and sample.
+    with pytest.raises(RecordingError) as err:
+        load_recordings(tmp_path, fs_hz=10_000.0, lazy_bytes=0)
+    why = str(err.value)
+    assert str(bad) in why and "'Vpv'" in why and "1 NaN or Inf value" in why
+    assert "index 12345" in why

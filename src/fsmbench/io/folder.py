@@ -132,6 +132,10 @@ def _stored_dtype(var: xr.DataArray) -> np.dtype[Any]:
     return np.dtype(var.attrs.get("stored_dtype", var.dtype))
 
 
+class _NonFiniteError(Exception):
+    """A lazily read signal holds NaN or Inf (count, first index)."""
+
+
 def _signal_stats(x: Any, rail: float) -> tuple[float, int, float, float, float]:
     """(peak |x|, samples at or beyond ±rail, max |x − mean|, rms of x − mean, x[0]).
 
@@ -149,13 +153,16 @@ def _signal_stats(x: Any, rail: float) -> tuple[float, int, float, float, float]
     import dask.array as da
 
     # One pass: moments about the first sample (no cancellation for offsets large
-    # against the noise), extremes and the samples on the rails.
+    # against the noise), extremes, the samples on the rails and the non-finite ones.
     first = float(x[0].compute())
     y = x - first
     with np.errstate(all="ignore"):
-        peak, at_rails, lo, hi, s1, s2 = dask.compute(
+        peak, at_rails, lo, hi, s1, s2, bad = dask.compute(
             da.max(da.abs(x)), da.count_nonzero(da.abs(x) >= rail), da.min(y), da.max(y),
-            da.sum(y), da.sum(y * y))
+            da.sum(y), da.sum(y * y), da.count_nonzero(~da.isfinite(x)))
+    if int(bad):
+        index = int(da.argmax(~da.isfinite(x)).compute())
+        raise _NonFiniteError(int(bad), index)
     n = int(x.shape[0])
     if not math.isfinite(float(peak)) or float(peak) == 0.0:
         return float(peak), int(at_rails), float(peak), float(peak), first
@@ -254,7 +261,13 @@ def _check_recording(ds: xr.Dataset, *, name: str | None, fs_hz: float | None,
                                 f"{'volts' if converter else SIGNALS[v].units}; {fix}"))
             continue
         rail = adc_range_v / 2 - 1.5 * lsb  # as SaturationWarning: both rails, nothing inside
-        peak, at_rails, spread, rms, first = _signal_stats(ds[v].data, rail)
+        try:
+            peak, at_rails, spread, rms, first = _signal_stats(ds[v].data, rail)
+        except _NonFiniteError as exc:
+            count, index = exc.args
+            raise RecordingError(str(ds.encoding.get("source", label)),
+                                 f"holds {count} NaN or Inf value{'s' if count > 1 else ''} "
+                                 f"(first at index {index})", variable=v) from None
         if converter:
             # Half a span plus 1 LSB: readings rounded to the converter's codes never exceed it.
             limit = adc_range_v / 2 + lsb
@@ -389,7 +402,8 @@ def _read(path: Path, name: str, *, adc_range_v: float, adc_bits: int,
         return read_recording(path, experiment=name, adc_range_v=adc_range_v, adc_bits=adc_bits)
     from fsmbench.io.lazy import available_memory_bytes, open_recording
 
-    ds = open_recording(path)
+    # NaN and Inf in the signals are found by check_recording's pass (_signal_stats).
+    ds = open_recording(path, check_signals=False)
     ds.attrs["experiment"] = name
     missing = [v for v in EXPERIMENTS[name].required if v not in ds.variables]
     if missing:
