@@ -17,6 +17,7 @@ The seed (section 3) shows PSDs of 100 s records; these views sit next to them.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
@@ -33,6 +34,8 @@ FloatArray = NDArray[np.float64]
 
 #: Bins of the drift and envelope curves: about two per pixel of a report panel.
 DRIFT_BINS = 2000
+#: Shortest bin of the drift: shorter means show the noise, not the drift [s].
+DRIFT_MIN_BIN_S = 1.0
 
 
 @dataclass(frozen=True, eq=False)
@@ -51,6 +54,8 @@ class SignalDrift:
         Per bin, in ``unit`` (not mean-removed: offsets are the point).
     overall_mean : float
         Mean of every sample [unit].
+    samples_per_bin : ndarray of int (B,)
+    fs_hz : float
     """
 
     signal: str
@@ -60,11 +65,30 @@ class SignalDrift:
     minimum: FloatArray
     maximum: FloatArray
     overall_mean: float
+    samples_per_bin: NDArray[np.int64]
+    fs_hz: float
+
+    def means(self, *, min_bin_s: float = DRIFT_MIN_BIN_S) -> tuple[FloatArray, FloatArray]:
+        """(time [s], mean [unit]) over bins at least ``min_bin_s`` long.
+
+        Consecutive bins are merged (sample-weighted) until each is that long,
+        so that the means follow the drift, not the noise of short bins.
+        """
+        counts = self.samples_per_bin.astype(float)
+        if counts.size == 0:
+            return np.zeros(0), np.zeros(0)
+        per = max(1, math.ceil(min_bin_s * self.fs_hz / float(counts.min())))
+        groups = np.arange(counts.size) // per
+        weight = np.bincount(groups, weights=counts)
+        mean = np.bincount(groups, weights=self.mean * counts) / weight
+        t = np.bincount(groups, weights=self.t_s * counts) / weight
+        return t, mean
 
     @property
     def peak_to_peak(self) -> float:
-        """Range of the bin means [unit]: the drift over the record."""
-        return float(np.max(self.mean) - np.min(self.mean)) if self.mean.size else 0.0
+        """Range of the means over bins of at least 1 s [unit]: the drift over the record."""
+        _, mean = self.means()
+        return float(np.max(mean) - np.min(mean)) if mean.size else 0.0
 
 
 @dataclass(frozen=True, eq=False)
@@ -100,6 +124,7 @@ class StabilityRecord:
         return {
             "name": self.name, "duration_s": self.duration_s, "fs_hz": self.fs_hz,
             "out_of_core": self.out_of_core,
+            # Means over bins of at least 1 s: the drift, not the noise of short bins.
             "drift_peak_to_peak": {k: d.peak_to_peak for k, d in self.drift.items()},
             "allan": {k: {"unit": a.unit, "tau_s": a.tau_s.tolist(), "adev": a.adev.tolist(),
                           "regions": [{"noise": r.noise, "slope": r.slope,
@@ -119,7 +144,9 @@ def _binned(x: Any, *, signal: str, unit: str, n_bins: int, fs_hz: float) -> Sig
     return SignalDrift(signal=signal, unit=unit, t_s=np.asarray(env.t_s, dtype=float),
                        mean=mean, minimum=np.asarray(env.minimum, dtype=float),
                        maximum=np.asarray(env.maximum, dtype=float),
-                       overall_mean=float(np.sum(mean * counts) / np.sum(counts)))
+                       overall_mean=float(np.sum(mean * counts) / np.sum(counts)),
+                       samples_per_bin=np.asarray(env.samples_per_bin, dtype=np.int64),
+                       fs_hz=fs_hz)
 
 
 #: Averaging times up to this use averages starting at every sample [s]; longer ones use

@@ -87,7 +87,7 @@ def _stability_blocks(result: BudgetResult, recs: list[HuddleRecord]) -> list[Bl
             rows.append((str(n), words, f"{drift.peak_to_peak * scale:.3g} {u}", text))
     out.append(Table(
         caption="Noise types of the Allan deviation and drift over each record",
-        header=("test", "signal", "drift of the bin means (peak to peak)",
+        header=("test", "signal", "drift: range of the ≥ 1 s means",
                 "Allan deviation regions (level at 1 s, slope, range of τ)"),
         rows=tuple(rows)))
     out.append(drift_figure(stab))

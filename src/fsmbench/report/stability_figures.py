@@ -53,13 +53,13 @@ def allan_figure(stability: Mapping[int, StabilityRecord]) -> Figure:
         color = PALETTE[i % len(PALETTE)]
         a = s.allan["Va"]
         va_lines.append(Line(a.tau_s, a.adev * NM, name=f"test {n}", color=color,
-                             group=f"test{n}", markers=True))
+                             group=f"test{n}"))
         for key in ("Rh", "Rv"):
             r = s.allan[key]
             qd_lines.append(Line(r.tau_s, r.adev * URAD, name=f"test {n}, "
                                  f"{'horizontal' if key == 'Rh' else 'vertical'}",
                                  color=color, dash="solid" if key == "Rh" else "dot",
-                                 group=f"test{n}", markers=True))
+                                 group=f"test{n}"))
     longest = max(s.duration_s for s in stability.values())
     unit = time_axis(longest)[1].split("[")[1].rstrip("]")
     return Figure(
@@ -71,11 +71,12 @@ def allan_figure(stability: Mapping[int, StabilityRecord]) -> Figure:
                  "region. Top: the Attocube distance Va; bottom: the beam angle the 4QD "
                  "reads (Vph, Vpv over their calibrated gains)."),
         panels=(Panel(traces=tuple(va_lines), x_label="Averaging time τ [s]",
-                      y_label="Allan deviation of Va [nm]", x_log=True, y_log=True,
+                      y_label="Allan deviation [nm]", x_log=True, y_log=True,
                       title="Attocube distance Va"),
                 Panel(traces=tuple(qd_lines), x_label="Averaging time τ [s]",
-                      y_label="Allan deviation of the beam angle [µrad]", x_log=True,
-                      y_log=True, title="4QD beam angle (solid horizontal, dotted vertical)")))
+                      y_label="Allan deviation [µrad]", x_log=True,
+                      y_log=True, title="4QD beam angle (solid horizontal, dotted vertical)")),
+        share_x=True, height_px=760)
 
 
 def drift_figure(stability: Mapping[int, StabilityRecord]) -> Figure:
@@ -87,24 +88,28 @@ def drift_figure(stability: Mapping[int, StabilityRecord]) -> Figure:
         s = stability[n]
         color = PALETTE[i % len(PALETTE)]
         d = s.drift["Va"]
-        va.append(Line(d.t_s / divisor, (d.mean - d.mean[0]) * NM, name=f"test {n}",
+        t, mean = d.means()
+        va.append(Line(t / divisor, (mean - d.overall_mean) * NM, name=f"test {n}",
                        color=color, group=f"test{n}"))
         for key, col in (("Rh", H_COLOR), ("Rv", V_COLOR)):
             r = s.drift[key]
-            qd.append(Line(r.t_s / divisor, (r.mean - r.mean[0]) * URAD,
+            t, mean = r.means()
+            qd.append(Line(t / divisor, (mean - r.overall_mean) * URAD,
                            name=f"test {n}, {'horizontal' if key == 'Rh' else 'vertical'}",
                            color=color if len(stability) > 1 else col,
                            dash="solid" if key == "Rh" else "dot", group=f"test{n}"))
-    bins = next(iter(stability.values())).drift["Va"].t_s.size
+    t_longest, _ = max((s.drift["Va"].means() for s in stability.values()),
+                       key=lambda tm: tm[0].size)
+    bin_s = longest / max(1, t_longest.size)
     return Figure(
         key="huddle_drift", title="Drift of the distance and of the 4QD offset",
-        caption=(f"Means over {bins} consecutive bins of each record (each "
-                 f"{longest / bins:.3g} s long for the longest), from their first bin: how "
-                 "the distance and the beam angle the 4QD reads wander over the record. The "
+        caption=(f"Means over consecutive bins of at least 1 s ({t_longest.size} bins of "
+                 f"{bin_s:.3g} s for the longest record), from the record's mean: how the "
+                 "distance and the beam angle the 4QD reads wander over the record. The "
                  "seed's 100 s records show seconds of this; long records show the hours."),
         panels=(Panel(traces=tuple(va), x_label=x_label,
-                      y_label="Va, bin mean from the first bin [nm]", title="Attocube distance"),
-                Panel(traces=tuple(qd), x_label=x_label,
-                      y_label="Beam angle, bin mean from the first bin [µrad]",
-                      title="4QD beam angle (offset drift)")),
-        share_x=True)
+                      y_label="Va, from its mean [nm]", title="Attocube distance"),
+                Panel(traces=tuple(qd), x_label=x_label, y_label="Beam angle, from its mean "
+                      "[µrad]", title="4QD beam angle (offset drift; solid horizontal, dotted "
+                      "vertical)")),
+        share_x=True, height_px=700)
