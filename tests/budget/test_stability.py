@@ -78,3 +78,25 @@ def test_drift_and_regions(record: xr.Dataset) -> None:
     assert {"white", "drift"} <= kinds
     doc = res.to_json()
     assert set(doc["allan"]) == {"Va", "Rh", "Rv"} and doc["duration_s"] == pytest.approx(119.0)
+
+
+def test_records_in_memory_need_no_dask(record: xr.Dataset) -> None:
+    import subprocess
+    import sys
+
+    # The core installs without the dask extra: drift and Allan deviation of records in
+    # memory must not import it.
+    code = ("import sys; sys.modules['dask'] = None; sys.modules['distributed'] = None\n"
+            "import numpy as np\n"
+            "from fsmbench.io.recording import make_recording\n"
+            "from fsmbench.budget.stability import analyse_stability\n"
+            "rng = np.random.default_rng(0); n = 20000\n"
+            "ds = make_recording({'Vph': 1e-3 * rng.standard_normal(n), 'Vpv': 1e-3 * "
+            "rng.standard_normal(n), 'Va': 1e-9 * rng.standard_normal(n)}, fs_hz=1000.0, "
+            "experiment='data_huddle_test_4')\n"
+            "r = analyse_stability(ds, name='x', qd_gain_v_per_rad=(-5.0, 5.0))\n"
+            "print(len(r.allan['Va'].tau_s), r.drift['Va'].t_s.size)\n")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    assert out.returncode == 0, out.stderr
+    # 19 s after the trim at 1 kHz: τ = 2^k samples up to N/4 = 4750, k = 0..12.
+    assert out.stdout.split() == ["13", "2000"]

@@ -235,7 +235,7 @@ def _budget_study(recordings: Mapping[str, xr.Dataset], *, bench: Bench,
                         notices=notices)
     valid = _valid_huddles(usable, skipped)
     huddle = analyse_huddle(valid, params=params) if valid else None
-    stability = _stability(valid, params=params, skipped=skipped)
+    stability = _stability(valid, params=params)
     qd = None if huddle is None else huddle.qd_noise
     if qd is None:
         skipped["4QD noise from huddle data"] = ("no open-loop huddle test (1, 2, 4): the "
@@ -297,16 +297,9 @@ def _budget_study(recordings: Mapping[str, xr.Dataset], *, bench: Bench,
         stability=stability)
 
 
-def _stability(valid: Mapping[str, xr.Dataset], *, params: BenchParams,
-               skipped: dict[str, str]) -> dict[int, StabilityRecord]:
-    """Drift and Allan deviation of every valid huddle test (needs the dask extra)."""
-    try:
-        import dask  # noqa: F401
-    except ImportError:
-        if valid:
-            skipped["drift and Allan deviation of the huddle tests"] = (
-                "needs the fsmbench[dask] extra (pip install 'fsmbench[dask]')")
-        return {}
+def _stability(valid: Mapping[str, xr.Dataset], *,
+               params: BenchParams) -> dict[int, StabilityRecord]:
+    """Drift and Allan deviation of every valid huddle test (out of core for lazy records)."""
     gd = params.quad_diode.gain_v_per_rad
     return {huddle_number(name): analyse_stability(ds, name=name,
                                                    qd_gain_v_per_rad=(gd.h, gd.v))

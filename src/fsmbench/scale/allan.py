@@ -43,12 +43,8 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
-import dask
 import numpy as np
-from dask.base import tokenize
 from numpy.typing import ArrayLike, NDArray
-
-from fsmbench.scale.welch import _MIN_TASK_SAMPLES, _read, _TimeChunks, as_time_chunked
 
 __all__ = ["AllanRegion", "AllanResult", "allan_deviation", "allan_regions"]
 
@@ -166,6 +162,14 @@ def _si(value: float, unit: str) -> str:
 
 
 # --------------------------------------------------------------------------- tasks
+def _read(pieces: Sequence[NDArray[np.float64]], offset: int,
+          length: int) -> NDArray[np.float64]:
+    # The Dask graph's reader (fsmbench.scale.welch imports Dask: imported on use).
+    from fsmbench.scale.welch import _read as read
+
+    return read(pieces, offset, length)
+
+
 def _first(pieces: Sequence[NDArray[np.float64]]) -> float:
     return float(pieces[0][0])
 
@@ -278,6 +282,14 @@ def allan_deviation(
     fs = float(fs_hz)
     if not (math.isfinite(fs) and fs > 0.0):
         raise ValueError(f"fs_hz must be a positive finite frequency in Hz, got {fs_hz!r}")
+    if not type(x).__module__.startswith("dask"):
+        return _allan_in_memory(np.asarray(x, dtype=np.float64), fs=fs, taus_s=taus_s,
+                                unit=unit, name=name)
+    import dask
+    from dask.base import tokenize
+
+    from fsmbench.scale.welch import _MIN_TASK_SAMPLES, _TimeChunks, as_time_chunked
+
     arr = as_time_chunked(x, what=name)
     if arr.ndim != 1:
         raise ValueError(f"{name} must be a 1-D array of samples, got shape {arr.shape}")
@@ -342,6 +354,41 @@ def allan_deviation(
         tau_s=factors / fs, adev=np.sqrt(avar), n_terms=n_terms_all.astype(np.int64),
         m=factors.astype(np.int64), fs_hz=fs, n_samples=n, unit=unit,
     )
+    for a in (out.tau_s, out.adev, out.n_terms, out.m):
+        a.setflags(write=False)
+    return out
+
+
+def _allan_in_memory(x: NDArray[np.float64], *, fs: float, taus_s: ArrayLike | None,
+                     unit: str, name: str) -> AllanResult:
+    """The module's formula on a record in memory (no Dask needed).
+
+    The m-sample averages come from a cumulative sum of ``x - x[0]`` (the
+    offset removed first, so nanometre noise is not lost under a metre-scale
+    distance); the Dask path sums the same terms in cells.
+    """
+    if x.ndim != 1:
+        raise ValueError(f"{name} must be a 1-D array of samples, got shape {x.shape}")
+    n = int(x.size)
+    if n < 2:
+        raise ValueError(f"{name} has {n} sample(s); the Allan deviation needs at least 2")
+    bad = np.flatnonzero(~np.isfinite(x))
+    if bad.size:
+        raise ValueError(
+            f"{name} contains NaN or infinite samples (first at index {int(bad[0])}); remove or "
+            "interpolate them before the Allan deviation"
+        )
+    factors = _factors(taus_s, fs, n)
+    c = np.concatenate([[0.0], np.cumsum(x - x[0])])
+    sums = np.empty(factors.size)
+    for i, m in enumerate(int(v) for v in factors):
+        block = c[m:] - c[:-m]  # sums of m samples starting at each k, N - m + 1 of them
+        d = block[m:] - block[:-m]
+        sums[i] = math.fsum(d * d)
+    n_terms_all = n - 2 * factors + 1
+    avar = sums / (2.0 * factors.astype(np.float64) ** 2 * n_terms_all)
+    out = AllanResult(tau_s=factors / fs, adev=np.sqrt(avar), n_terms=n_terms_all.astype(np.int64),
+                      m=factors.astype(np.int64), fs_hz=fs, n_samples=n, unit=unit)
     for a in (out.tau_s, out.adev, out.n_terms, out.m):
         a.setflags(write=False)
     return out

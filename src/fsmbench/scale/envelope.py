@@ -18,12 +18,8 @@ import math
 from dataclasses import dataclass
 from typing import Any
 
-import dask
 import numpy as np
-from dask.base import tokenize
 from numpy.typing import NDArray
-
-from fsmbench.scale.welch import _MIN_TASK_SAMPLES, _read, _TimeChunks, as_time_chunked
 
 __all__ = ["Envelope", "minmax_envelope"]
 
@@ -57,7 +53,13 @@ def _bins(
     pieces: list[NDArray[np.float64]], offset: int, length: int, local_edges: NDArray[np.int64]
 ) -> NDArray[np.float64]:
     """``(3, bins)``: min, max, mean of ``data[local_edges[i]:local_edges[i+1]]``."""
-    data = _read(pieces, offset, length)
+    from fsmbench.scale.welch import _read  # the Dask graph's reader, imported on use
+
+    return _reduce(_read(pieces, offset, length), local_edges)
+
+
+def _reduce(data: NDArray[np.float64], local_edges: NDArray[np.int64]) -> NDArray[np.float64]:
+    """``(3, bins)``: min, max, mean of ``data`` between consecutive ``local_edges``."""
     starts = local_edges[:-1]
     counts = np.diff(local_edges)
     return np.stack([
@@ -106,7 +108,8 @@ def minmax_envelope(
     fs = float(fs_hz)
     if not (math.isfinite(fs) and fs > 0.0):
         raise ValueError(f"fs_hz must be a positive finite frequency in Hz, got {fs_hz!r}")
-    arr = as_time_chunked(x, what=name)
+    lazy = type(x).__module__.startswith("dask")
+    arr: Any = x if lazy else np.asarray(x, dtype=np.float64)
     if arr.ndim != 1:
         raise ValueError(f"{name} must be a 1-D array of samples, got shape {arr.shape}")
     n = int(arr.shape[0])
@@ -116,6 +119,14 @@ def minmax_envelope(
             f"{name}: n_bins must be between 1 and the number of samples ({n}), got {n_bins}"
         )
     edges = (np.arange(bins + 1, dtype=np.int64) * n) // bins
+    if not lazy:  # in memory: the same reduction, no Dask needed
+        return _envelope(_reduce(arr, edges), edges=edges, fs=fs, t0_s=t0_s)
+    import dask
+    from dask.base import tokenize
+
+    from fsmbench.scale.welch import _MIN_TASK_SAMPLES, _TimeChunks, as_time_chunked
+
+    arr = as_time_chunked(x, what=name)
     longest = max(arr.chunks[0])
     per_task = int(task_samples) if task_samples is not None else max(longest, _MIN_TASK_SAMPLES)
     if per_task < 1:
@@ -134,6 +145,11 @@ def minmax_envelope(
         parts.append((f"{gname}-part", j))
     dsk[(gname, 0, 0)] = (_concat, parts)
     (stats,) = dask.compute(chunks.array_from(gname, dsk, ((3,), (bins,)), np.float64))
+    return _envelope(stats, edges=edges, fs=fs, t0_s=t0_s)
+
+
+def _envelope(stats: NDArray[np.float64], *, edges: NDArray[np.int64], fs: float,
+              t0_s: float) -> Envelope:
     t_edges = t0_s + edges / fs
     t_mid = t0_s + (edges[:-1] + edges[1:] - 1) / (2.0 * fs)
     out = Envelope(
