@@ -155,6 +155,52 @@ FULL_OVERLAP_MAX_TAU_S = 10.0
 STRIDE_S = 0.1
 
 
+def _allan_streamed(x: Any, *, fs_hz: float, factors: NDArray[np.int64], unit: str,
+                    name: str, block: int = 1 << 20) -> Any:
+    """Overlapping Allan deviation of a Dask record, read once, block after block.
+
+    The formula of :mod:`fsmbench.scale.allan`. Each block is appended to the
+    samples still needed (the last ``2 m_max`` or so), the m-sums come from a
+    cumulative sum of that segment (``x - x[0]``), and every position is
+    counted once, when all the samples it needs are in. Memory: one block plus
+    ``2 m_max`` samples, whatever the record's length (a graph over all the
+    averaging times at once makes Dask keep chunks until the last of them
+    is done, which for a day is the whole record).
+    """
+    from fsmbench.scale.allan import AllanResult
+
+    n = int(x.shape[0])
+    m_all = np.asarray(factors, dtype=np.int64)
+    x0 = float(x[0].compute())
+    sums = np.zeros(m_all.size)
+    done = np.zeros(m_all.size, dtype=np.int64)  # next position to count, per m
+    last = n - 2 * m_all  # last position, per m
+    buf = np.zeros(0)
+    pos = 0  # global index of buf[0]
+    for part in x.rechunk(block).to_delayed().ravel():
+        chunk = np.asarray(part.compute(), dtype=np.float64)
+        if not np.all(np.isfinite(chunk)):
+            raise ValueError(f"{name} contains NaN or infinite samples; remove or interpolate "
+                             "them before the Allan deviation")
+        buf = np.concatenate([buf, chunk - x0])
+        c = np.concatenate([[0.0], np.cumsum(buf)])
+        for i, m in enumerate(int(v) for v in m_all):
+            stop = min(last[i], pos + buf.size - 2 * m)  # last position whose samples are in
+            if stop < done[i]:
+                continue
+            k = np.arange(done[i] - pos, stop - pos + 1)
+            d = (c[k + 2 * m] - c[k + m]) - (c[k + m] - c[k])
+            sums[i] += math.fsum(d * d)
+            done[i] = stop + 1
+        keep = int(min(done.min(), n)) - pos
+        buf = buf[keep:]
+        pos += keep
+    n_terms = n - 2 * m_all + 1
+    avar = sums / (2.0 * m_all.astype(np.float64) ** 2 * n_terms)
+    return AllanResult(tau_s=m_all / fs_hz, adev=np.sqrt(avar), n_terms=n_terms, m=m_all,
+                       fs_hz=fs_hz, n_samples=n, unit=unit)
+
+
 def _allan(x: Any, *, fs_hz: float, unit: str, name: str) -> Any:
     """Overlapping Allan deviation; beyond 10 s from averages starting every 0.1 s.
 
@@ -171,7 +217,10 @@ def _allan(x: Any, *, fs_hz: float, unit: str, name: str) -> Any:
     stride = max(1, round(STRIDE_S * fs_hz))
     m_full = max(1, min(n // 4, round(FULL_OVERLAP_MAX_TAU_S * fs_hz)))
     fine_m = 2 ** np.arange(int(np.floor(np.log2(m_full))) + 1)
-    fine = allan_deviation(x, fs_hz=fs_hz, taus_s=fine_m / fs_hz, unit=unit, name=name)
+    if is_lazy(x):
+        fine = _allan_streamed(x, fs_hz=fs_hz, factors=fine_m, unit=unit, name=name)
+    else:
+        fine = allan_deviation(x, fs_hz=fs_hz, taus_s=fine_m / fs_hz, unit=unit, name=name)
     means = block_means(x, per=stride)
     coarse_m = 2 ** np.arange(1, 64)
     coarse_m = coarse_m[(coarse_m * stride > fine_m[-1]) & (2 * coarse_m * 2 <= means.size)]
