@@ -26,16 +26,15 @@ import numpy as np
 
 from fsmbench.bench.params import Bench
 from fsmbench.control.load import load_controllers, select_controller
-from fsmbench.control.seed import seed_decentralised_controller
 from fsmbench.io.recording import make_recording, write_recording
 from fsmbench.io.signals import EXPERIMENTS
 from fsmbench.live.arguments import parse_excitation, parse_record
 from fsmbench.live.backend import LiveBlock, PlaybackBackend, TwinBackend
 from fsmbench.live.monitor import LiveMonitor, Trip
 from fsmbench.live.spectra import AccumulatingFrf, FrfSnapshot, RollingAsd
-from fsmbench.sim.controller import feedback_controller, sercalo_feedback
+from fsmbench.sim.controller import sercalo_feedback
 from fsmbench.sim.engine import DiscreteController
-from fsmbench.twin.experiments import seed_experiments
+from fsmbench.twin.experiments import seed_experiments, seed_feedback
 
 __all__ = ["ASD_SIGNALS", "LiveBench", "LiveJob"]
 
@@ -349,9 +348,7 @@ class LiveBench:
                                 name=f"{chosen.name} ({Path(chosen.source_path).name})")
 
     def _seed_controller(self) -> DiscreteController:
-        return feedback_controller(seed_decentralised_controller(),
-                                   gd_v_per_rad=self.bench.nominal.quad_diode.gain_v_per_rad,
-                                   ts_s=1.0 / self.fs_hz, name="seed controller (9.2)")
+        return replace(seed_feedback(self.bench), name="seed controller (9.2)")
 
     def load_controller(self, argument: str) -> str:
         """Load a controller: ``path`` or JSON ``{"path": ..., "controller": name}``.

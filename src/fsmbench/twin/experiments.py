@@ -22,14 +22,23 @@ import dataclasses
 from collections.abc import Sequence
 from dataclasses import dataclass
 
+from fsmbench.bench.params import Bench
+from fsmbench.control.seed import seed_decentralised_controller
+from fsmbench.sim.controller import feedback_controller
+from fsmbench.sim.discretize import DiscretePlant
+from fsmbench.sim.engine import DiscreteController
 from fsmbench.sim.excitation import Excitation
+from fsmbench.sim.stream import BenchStream
 
 __all__ = [
     "EXPERIMENT_NAMES",
     "MIN_DURATION_S",
+    "REALIZED_NOISE",
     "Excitation",
     "ExperimentSpec",
+    "experiment_stream",
     "seed_experiments",
+    "seed_feedback",
     "with_duration",
 ]
 
@@ -162,3 +171,31 @@ def with_duration(specs: Sequence[ExperimentSpec], *,
         raise ValueError(f"--duration {duration_s:g} s is too short for {', '.join(too_short)}: "
                          f"they need at least {need:g} s")
     return tuple(dataclasses.replace(s, duration_s=float(duration_s)) for s in specs)
+
+
+#: ``realized`` keys of ``twin_truth.json`` and the :class:`~fsmbench.sim.stream.BenchBlock`
+#: noise each is measured on.
+REALIZED_NOISE = (("qd_noise_v", "qd"), ("newport_angle_noise_rad", "newport_angle"),
+                  ("newport_metrology_noise_rad", "metrology"), ("vc_noise_v", "vc"))
+
+
+def seed_feedback(bench: Bench) -> DiscreteController:
+    """The seed's decentralised controller of 9.2, Tustin at the converter rate, in the loop."""
+    return feedback_controller(seed_decentralised_controller(),
+                               gd_v_per_rad=bench.nominal.quad_diode.gain_v_per_rad,
+                               ts_s=bench.true.converter.ts_s, name="seed K (9.2)")
+
+
+def experiment_stream(bench: Bench, spec: ExperimentSpec, *, seed: int,
+                      plant: DiscretePlant | None = None,
+                      controller: DiscreteController | None = None) -> BenchStream:
+    """The twin's bench set up for one experiment (loop, environment, excitations).
+
+    ``controller`` closes the loop when ``spec.closed_loop`` (default: :func:`seed_feedback`).
+    """
+    if spec.closed_loop and controller is None:
+        controller = seed_feedback(bench)
+    return BenchStream(bench.true, seed=seed, name=spec.name,
+                       compensation_unit=spec.compensation_unit, shielding=spec.shielding,
+                       controller=controller if spec.closed_loop else None,
+                       excitations=spec.excitations, plant=plant)

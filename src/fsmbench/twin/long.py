@@ -18,20 +18,15 @@ from pathlib import Path
 import numpy as np
 
 from fsmbench.bench.params import Bench
-from fsmbench.control.seed import seed_decentralised_controller
 from fsmbench.io.nexus_stream import NexusAppender
 from fsmbench.io.recording import _ordered
 from fsmbench.io.signals import EXPERIMENTS
-from fsmbench.sim.controller import feedback_controller
 from fsmbench.sim.discretize import DiscretePlant
 from fsmbench.sim.engine import DiscreteController
-from fsmbench.sim.stream import BenchBlock, BenchStream
-from fsmbench.twin.experiments import ExperimentSpec
+from fsmbench.sim.stream import BenchBlock
+from fsmbench.twin.experiments import REALIZED_NOISE, ExperimentSpec, experiment_stream
 
 __all__ = ["RunningMoments", "StreamProgress", "stream_experiment"]
-
-_NOISE_KEYS = (("qd_noise_v", "qd"), ("newport_angle_noise_rad", "newport_angle"),
-               ("newport_metrology_noise_rad", "metrology"), ("vc_noise_v", "vc"))
 
 
 @dataclass
@@ -103,7 +98,7 @@ class _Realized:
     moments: dict[str, RunningMoments] = field(default_factory=dict)
 
     def add(self, block: BenchBlock) -> None:
-        for key, part in _NOISE_KEYS:
+        for key, part in REALIZED_NOISE:
             for i, axis in enumerate("hv"):
                 self.moments.setdefault(f"{key}.{axis}", RunningMoments()).add(
                     block.noise[part][:, i])
@@ -147,17 +142,9 @@ def stream_experiment(bench: Bench, spec: ExperimentSpec, *, seed: int, path: st
         Standard deviation of every injected noise and ``Va`` part over the
         record (the ``realized`` entry of ``twin_truth.json``).
     """
-    p = bench.true
-    fs = p.converter.fs_hz
+    fs = bench.true.converter.fs_hz
     n_total = round(spec.duration_s * fs)
-    if spec.closed_loop and controller is None:
-        controller = feedback_controller(seed_decentralised_controller(),
-                                         gd_v_per_rad=bench.nominal.quad_diode.gain_v_per_rad,
-                                         ts_s=p.converter.ts_s, name="seed K (9.2)")
-    stream = BenchStream(p, seed=seed, name=spec.name, compensation_unit=spec.compensation_unit,
-                         shielding=spec.shielding,
-                         controller=controller if spec.closed_loop else None,
-                         excitations=spec.excitations, plant=plant)
+    stream = experiment_stream(bench, spec, seed=seed, plant=plant, controller=controller)
     # The seed's table order, as make_recording stores in-memory records.
     signals = _ordered(s for s in EXPERIMENTS[spec.name].required if s != "t")
     block = max(1, round(block_s * fs))

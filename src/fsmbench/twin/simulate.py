@@ -20,18 +20,23 @@ from typing import Any
 import numpy as np
 import xarray as xr
 
-from fsmbench.bench.params import Bench, BenchParams, default_bench
-from fsmbench.control.seed import seed_decentralised_controller
+from fsmbench.bench.params import Bench, default_bench
 from fsmbench.io.atomic import atomic_write_text
 from fsmbench.io.recording import RecordingFormat, make_recording, write_recording
 from fsmbench.io.signals import EXPERIMENTS
 from fsmbench.jsonutil import stamped
-from fsmbench.sim.controller import closed_loop_spectral_radius, feedback_controller
+from fsmbench.sim.controller import closed_loop_spectral_radius
 from fsmbench.sim.discretize import DiscretePlant
 from fsmbench.sim.engine import DiscreteController
 from fsmbench.sim.plant import ADC_CHANNELS, twin_discrete
-from fsmbench.sim.stream import BenchStream
-from fsmbench.twin.experiments import ExperimentSpec, seed_experiments, with_duration
+from fsmbench.twin.experiments import (
+    REALIZED_NOISE,
+    ExperimentSpec,
+    experiment_stream,
+    seed_experiments,
+    seed_feedback,
+    with_duration,
+)
 from fsmbench.twin.truth import TRUTH_FORMAT, twin_truth
 
 __all__ = [
@@ -92,17 +97,9 @@ def simulate_experiment(bench: Bench, spec: ExperimentSpec, *, seed: int,
         Run the streaming bench in blocks of this many samples (default: one
         block); the record is the same bit for bit.
     """
-    p: BenchParams = bench.true
-    fs = p.converter.fs_hz
+    fs = bench.true.converter.fs_hz
     n = round(spec.duration_s * fs)
-    if spec.closed_loop and controller is None:
-        controller = feedback_controller(seed_decentralised_controller(),
-                                         gd_v_per_rad=bench.nominal.quad_diode.gain_v_per_rad,
-                                         ts_s=p.converter.ts_s, name="seed K (9.2)")
-    stream = BenchStream(p, seed=seed, name=spec.name, compensation_unit=spec.compensation_unit,
-                         shielding=spec.shielding,
-                         controller=controller if spec.closed_loop else None,
-                         excitations=spec.excitations, plant=plant)
+    stream = experiment_stream(bench, spec, seed=seed, plant=plant, controller=controller)
     out = stream.run(n, block=block)
     # A file holds what the seed loads from it. The other channels are not
     # recorded: e.g. in closed loop the 60 dB coil-voltage amplifier (Vch,
@@ -112,8 +109,7 @@ def simulate_experiment(bench: Bench, spec: ExperimentSpec, *, seed: int,
     recording = make_recording(signals, fs_hz=fs, experiment=spec.name, source="fsmbench twin")
     realized = {
         f"{key}.{a}": float(np.std(out.noise[part][:, i]))
-        for key, part in (("qd_noise_v", "qd"), ("newport_angle_noise_rad", "newport_angle"),
-                          ("newport_metrology_noise_rad", "metrology"), ("vc_noise_v", "vc"))
+        for key, part in REALIZED_NOISE
         for i, a in enumerate("hv")
     }
     realized.update({f"va_{k}": v for k, v in out.va.std_m().items()})
@@ -135,9 +131,7 @@ def _prepare_run(bench: Bench, *, duration_s: float | None, experiments: Sequenc
     p = bench.true
     plant = twin_discrete(p)
     if controller is None and any(s.closed_loop for s in specs):
-        controller = feedback_controller(seed_decentralised_controller(),
-                                         gd_v_per_rad=bench.nominal.quad_diode.gain_v_per_rad,
-                                         ts_s=p.converter.ts_s, name="seed K (9.2)")
+        controller = seed_feedback(bench)
     if controller is not None:
         rho = closed_loop_spectral_radius(plant, controller, n_adc=len(ADC_CHANNELS))
         if rho >= 1.0:
