@@ -130,11 +130,12 @@ def _write_json(path: Path, payload: Mapping[str, Any]) -> Path:
 
 
 def budget_stage(recordings: Mapping[str, xr.Dataset], *, bench: Bench, out_dir: Path,
-                 plant: PlantChoice) -> tuple[Any, list[Path]]:
-    """Seed sections 3, 4, 11: ``budget.json``."""
+                 plant: PlantChoice, progress: Callable[[str], None] | None = None
+                 ) -> tuple[Any, list[Path]]:
+    """Seed sections 3, 4, 11: ``budget.json`` (``progress`` hears of long records' reads)."""
     from fsmbench.budget.study import budget_study
 
-    result = budget_study(recordings, bench=bench, plant=plant.plant)
+    result = budget_study(recordings, bench=bench, plant=plant.plant, progress=progress)
     # The stage's plant source (which blocks were identified, or why nominal) replaces the
     # plant model's own shorter one.
     payload = {**result.to_json(), "plant_source": plant.source}

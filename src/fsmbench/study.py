@@ -249,7 +249,8 @@ def run_study(*, out_dir: str | Path, data_dir: str | Path | None = None,
     lap("identify")
 
     say("noise and error budget, huddle tests, repeatability (seed sections 3, 4, 11)")
-    budget, written = budget_stage(recordings, bench=bench, out_dir=out, plant=plant)
+    budget, written = budget_stage(recordings, bench=bench, out_dir=out, plant=plant,
+                                   progress=say)
     stages.append(StageStatus("budget", True, outputs=tuple(str(p) for p in written),
                               reason="; ".join(f"{k}: {v}" for k, v in budget.skipped.items())))
     lap("budget")

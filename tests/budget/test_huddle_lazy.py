@@ -25,11 +25,16 @@ def archive(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return out / "data_huddle_test_5.h5"
 
 
-@pytest.mark.parametrize("chunk", [7777, 65536])
-def test_lazy_huddle_record_equals_in_memory(archive: Path, chunk: int) -> None:
+@pytest.mark.parametrize(("chunk", "block"), [(7777, 5003), (65536, 1 << 20)])
+def test_lazy_huddle_record_equals_in_memory(archive: Path, chunk: int, block: int) -> None:
+    from fsmbench.budget.long_record import summarise_long_record
+
     mem = analyse_huddle_record(read_recording(archive))
-    lazy = analyse_huddle_record(open_recording(archive, chunk_samples=chunk))
-    # Same samples, same estimators; Dask only reorders sums: 1e-12 relative.
+    ds = open_recording(archive, chunk_samples=chunk)
+    # Blocks shorter than a Welch segment (10 000 samples) and than the 1 s means.
+    summary = summarise_long_record(ds, name="data_huddle_test_5", block_samples=block)
+    lazy = analyse_huddle_record(ds, summary=summary)
+    # Same samples, same estimators; blocks only reorder sums: 1e-12 relative.
     for field in ("va_rms_m", "va_lpf_rms_m", "vph_rms_v", "vpv_rms_v", "duration_s",
                   "welch_averages"):
         assert getattr(lazy, field) == pytest.approx(getattr(mem, field), rel=1e-12), field

@@ -52,17 +52,22 @@ def record() -> xr.Dataset:
                           fs_hz=FS, experiment="data_huddle_test_4", source="synthetic")
 
 
-def test_lazy_equals_in_memory(record: xr.Dataset, tmp_path: Path) -> None:
+@pytest.mark.parametrize("block", [4099, 1 << 20])
+def test_lazy_equals_in_memory(record: xr.Dataset, tmp_path: Path, block: int) -> None:
+    from fsmbench.budget.long_record import summarise_long_record
     from fsmbench.io.lazy import open_recording
     from fsmbench.io.recording import write_recording
 
     path = write_recording(record, tmp_path / "data_huddle_test_4.h5", format="nexus")
     mem = analyse_stability(record, name="x", qd_gain_v_per_rad=(-5.0, 5.0), n_bins=300)
-    lazy = analyse_stability(open_recording(path, chunk_samples=3333), name="x",
-                             qd_gain_v_per_rad=(-5.0, 5.0), n_bins=300)
+    ds = open_recording(path, chunk_samples=3333)
+    # Blocks smaller than the longest Allan span (2 x 8192 samples) and than a drift bin.
+    summary = summarise_long_record(ds, name="x", n_bins=300, block_samples=block)
+    lazy = analyse_stability(ds, name="x", qd_gain_v_per_rad=(-5.0, 5.0), n_bins=300,
+                             summary=summary)
     assert lazy.out_of_core and not mem.out_of_core
     for key in mem.allan:
-        # Same estimator, Dask only reorders sums: 1e-12.
+        # Same estimator, blocks only reorder sums: 1e-12.
         np.testing.assert_allclose(lazy.allan[key].adev, mem.allan[key].adev, rtol=1e-12)
     for key in mem.drift:
         for f in ("mean", "minimum", "maximum", "t_s"):
@@ -104,17 +109,17 @@ def test_records_in_memory_need_no_dask(record: xr.Dataset) -> None:
 
 @pytest.mark.parametrize("block", [1000, 4097, 1 << 20])
 def test_streamed_allan_equals_in_memory(block: int) -> None:
-    import dask.array as da
-
-    from fsmbench.budget.stability import _allan_streamed
     from fsmbench.scale.allan import allan_deviation
+    from fsmbench.scale.streaming import AllanStream, read_blocks
 
     rng = np.random.default_rng(5)
     x = 1.0 + 1e-9 * np.cumsum(rng.standard_normal(50_000)) + 1e-9 * rng.standard_normal(50_000)
     m = 2 ** np.arange(0, 14)
     ref = allan_deviation(x, fs_hz=FS, taus_s=m / FS, unit="m")
-    got = _allan_streamed(da.from_array(x, chunks=3333), fs_hz=FS, factors=m, unit="m",
-                          name="x", block=block)
+    stream = AllanStream(n_samples=x.size, fs_hz=FS, factors=m, unit="m", name="x")
+    for _, part in read_blocks({"x": x}, start=0, stop=x.size, block_samples=block):
+        stream.update(part["x"])
+    got = stream.result()
     # Same terms, summed per block: rounding only (a metre offset on nm noise, removed first).
     np.testing.assert_allclose(got.adev, ref.adev, rtol=1e-10)
     np.testing.assert_array_equal(got.n_terms, ref.n_terms)

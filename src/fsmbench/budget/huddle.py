@@ -40,7 +40,8 @@ from numpy.typing import NDArray
 
 from fsmbench.bench.blocks import newport_beam_matrix
 from fsmbench.bench.params import BenchParams
-from fsmbench.budget.signals import block_means, compute, is_lazy, lowpass_rms, trim_record
+from fsmbench.budget.long_record import LongRecordSummary, summarise_long_record
+from fsmbench.budget.signals import block_means, is_lazy, lowpass_rms, trim_record
 from fsmbench.budget.spectra import cumulative_power, seed_welch
 from fsmbench.control.seed import tustin
 from fsmbench.ident import hanning
@@ -145,8 +146,11 @@ def _welch_band(f: FloatArray, psd: FloatArray, lo: float, hi: float, *, enbw_hz
 
 
 def _drift(x: Any, fs: float) -> tuple[float, float]:
-    per = round(fs)
-    m = block_means(x, per=per)
+    return _drift_of_means(block_means(x, per=round(fs)))
+
+
+def _drift_of_means(m: FloatArray) -> tuple[float, float]:
+    """Rms and relative std of the 1 s means ``m`` about their mean (the drift band)."""
     nb = m.size
     m = m - m.mean()
     # Independent spectral values of the 1 s means: a Hann-tapered periodogram (the
@@ -176,20 +180,9 @@ def check_trim(ds: xr.Dataset, *, name: str, t0_s: float = 1.0) -> None:
 
 def _trimmed(ds: xr.Dataset, *, name: str, t0_s: float, duration_s: float | None,
              fs: float) -> dict[str, Any]:
-    """Mean-removed ``Va``, ``Vph``, ``Vpv`` after the trim: numpy, or Dask out of core."""
-    if not is_lazy(ds["Va"].data):
-        sig = trim_huddle(ds, name=name, t0_s=t0_s, duration_s=duration_s)
-        return {k: sig[k] - sig[k].mean() for k in ("Va", "Vph", "Vpv")}
-    missing = [v for v in ("Vph", "Vpv", "Va") if v not in ds]
-    if missing:
-        raise ValueError(f"{name}: missing {missing} (seed 3.1 loads t, Vph, Vpv, Va)")
-    trim = trim_record(ds, t0_s=t0_s, duration_s=duration_s, fs_hz=fs)
-    if trim.n < 2 * math.ceil(fs):
-        raise ValueError(f"{name}: {trim.n / fs:.3g} s left after removing t < {t0_s:g} s; "
-                         "the huddle analysis needs at least 2 s (two 1 s Welch windows)")
-    raw = {k: ds[k].data[trim.start:trim.start + trim.n] for k in ("Va", "Vph", "Vpv")}
-    means = compute(*(x.mean() for x in raw.values()))
-    return {k: x - float(m) for (k, x), m in zip(raw.items(), means, strict=True)}
+    """Mean-removed ``Va``, ``Vph``, ``Vpv`` after the trim (a record in memory)."""
+    sig = trim_huddle(ds, name=name, t0_s=t0_s, duration_s=duration_s)
+    return {k: sig[k] - sig[k].mean() for k in ("Va", "Vph", "Vpv")}
 
 
 @dataclass(frozen=True)
@@ -244,8 +237,8 @@ class HuddleRecord:
 
 
 def analyse_huddle_record(ds: xr.Dataset, *, name: str | None = None, t0_s: float = 1.0,
-                          duration_s: float | None = None, lpf_hz: float = 50.0
-                          ) -> HuddleRecord:
+                          duration_s: float | None = None, lpf_hz: float = 50.0,
+                          summary: LongRecordSummary | None = None) -> HuddleRecord:
     """Seed 3.2–3.5 on one record: trim, remove means, low-pass Va, Welch PSDs, band rms.
 
     Parameters
@@ -260,6 +253,9 @@ def analyse_huddle_record(ds: xr.Dataset, *, name: str | None = None, t0_s: floa
         Dask arrays).
     lpf_hz : float
         Corner of the low pass applied to Va [Hz] (seed 3.3: 50 Hz).
+    summary : LongRecordSummary, optional
+        The record reduced out of core (:func:`~fsmbench.budget.long_record.summarise_long_record`
+        with the same trim); computed here when ``ds`` holds Dask arrays and none is given.
 
     Raises
     ------
@@ -270,20 +266,31 @@ def analyse_huddle_record(ds: xr.Dataset, *, name: str | None = None, t0_s: floa
     number = huddle_number(name)
     closed, comp, alu = HUDDLE_CONFIGS[number]
     fs = float(ds.attrs["fs_hz"])
-    sig = _trimmed(ds, name=name, t0_s=t0_s, duration_s=duration_s, fs=fs)
-    va, vph, vpv = sig["Va"], sig["Vph"], sig["Vpv"]
-    va_lpf_rms = lowpass_rms(va, cutoff_hz=lpf_hz, fs_hz=fs)
-    s_va = seed_welch(va, fs_hz=fs, name=f"{name}.Va")
-    s_ph = seed_welch(vph, fs_hz=fs, name=f"{name}.Vph")
-    s_pv = seed_welch(vpv, fs_hz=fs, name=f"{name}.Vpv")
-    va_rms, vph_rms, vpv_rms = (float(v) for v in compute(
-        *(np.sqrt(np.mean(x**2)) for x in (va, vph, vpv))))
+    if summary is None and is_lazy(ds["Va"].data):
+        summary = summarise_long_record(ds, name=name, t0_s=t0_s, duration_s=duration_s,
+                                        lpf_hz=lpf_hz)
+    if summary is not None:  # out of core: the reductions of two sequential reads
+        s_va, s_ph, s_pv = (summary.psd[k] for k in ("Va", "Vph", "Vpv"))
+        va_lpf_rms = summary.va_lowpass_rms_m
+        va_rms, vph_rms, vpv_rms = (summary.rms[k] for k in ("Va", "Vph", "Vpv"))
+        drift = _drift_of_means(summary.va_second_means_m)
+        n_samples = summary.n_samples
+    else:
+        sig = _trimmed(ds, name=name, t0_s=t0_s, duration_s=duration_s, fs=fs)
+        va, vph, vpv = sig["Va"], sig["Vph"], sig["Vpv"]
+        va_lpf_rms = lowpass_rms(va, cutoff_hz=lpf_hz, fs_hz=fs)
+        s_va = seed_welch(va, fs_hz=fs, name=f"{name}.Va")
+        s_ph = seed_welch(vph, fs_hz=fs, name=f"{name}.Vph")
+        s_pv = seed_welch(vpv, fs_hz=fs, name=f"{name}.Vpv")
+        va_rms, vph_rms, vpv_rms = (float(np.sqrt(np.mean(x**2))) for x in (va, vph, vpv))
+        drift = _drift(va, fs)
+        n_samples = int(va.shape[0])
     f = np.asarray(s_va.f_hz)
     psd_va = np.asarray(s_va.values, dtype=float)
     w = hanning(s_va.window_length)
     enbw = fs * float((w**2).sum()) / float(w.sum()) ** 2
     bands = []
-    rms, rel = _drift(va, fs)
+    rms, rel = drift
     bands.append(BandRms("drift", 0.0, 0.5, rms, rel))
     for lo, hi in _BANDS_HZ:
         hi_eff = min(hi, fs / 2.0)
@@ -296,7 +303,7 @@ def analyse_huddle_record(ds: xr.Dataset, *, name: str | None = None, t0_s: floa
     bands.append(BandRms("total", 0.0, fs / 2.0, va_rms, total_rel))
     return HuddleRecord(
         name=name, number=number, closed_loop=closed, compensation_unit=comp, shielding=alu,
-        fs_hz=fs, duration_s=int(va.shape[0]) / fs, va_rms_m=va_rms, va_lpf_rms_m=va_lpf_rms,
+        fs_hz=fs, duration_s=n_samples / fs, va_rms_m=va_rms, va_lpf_rms_m=va_lpf_rms,
         vph_rms_v=vph_rms, vpv_rms_v=vpv_rms,
         f_hz=f, psd_va_m2_per_hz=psd_va,
         psd_vph_v2_per_hz=np.asarray(s_ph.values, dtype=float),
@@ -551,7 +558,8 @@ class HuddleAnalysis:
 
 def analyse_huddle(recordings: Mapping[str, xr.Dataset], *, params: BenchParams,
                    t0_s: float = 1.0, duration_s: float | None = None,
-                   lpf_hz: float = 50.0) -> HuddleAnalysis:
+                   lpf_hz: float = 50.0,
+                   summaries: Mapping[str, LongRecordSummary] | None = None) -> HuddleAnalysis:
     """Seed section 3 on every ``data_huddle_test_<n>`` in ``recordings``.
 
     Parameters
@@ -562,6 +570,8 @@ def analyse_huddle(recordings: Mapping[str, xr.Dataset], *, params: BenchParams,
         ADC, 4QD gains and Newport angle noise (subtracted from the 4QD spectra).
     t0_s, duration_s, lpf_hz : float
         As :func:`analyse_huddle_record`.
+    summaries : mapping of str to LongRecordSummary, optional
+        Records already reduced out of core, by experiment name.
 
     Raises
     ------
@@ -571,8 +581,9 @@ def analyse_huddle(recordings: Mapping[str, xr.Dataset], *, params: BenchParams,
     names = sorted((n for n in recordings if _NAME.match(n)), key=huddle_number)
     if not names:
         raise ValueError("no huddle test (data_huddle_test_1..5) in the recordings")
-    records = {huddle_number(n): analyse_huddle_record(recordings[n], name=n, t0_s=t0_s,
-                                                       duration_s=duration_s, lpf_hz=lpf_hz)
+    records = {huddle_number(n): analyse_huddle_record(
+        recordings[n], name=n, t0_s=t0_s, duration_s=duration_s, lpf_hz=lpf_hz,
+        summary=(summaries or {}).get(n))
                for n in names}
     comps = tuple(_compare(effect, records[a], records[b]) for effect, a, b in _COMPARISONS
                   if a in records and b in records)

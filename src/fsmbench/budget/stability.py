@@ -26,9 +26,18 @@ import numpy as np
 import xarray as xr
 from numpy.typing import NDArray
 
-from fsmbench.budget.signals import block_means, compute, is_lazy, lowpass, trim_record
+from fsmbench.budget.long_record import (
+    FULL_OVERLAP_MAX_TAU_S,
+    STRIDE_S,
+    LongRecordSummary,
+    allan_factors,
+    summarise_long_record,
+)
+from fsmbench.budget.signals import block_means, is_lazy, lowpass, trim_record
+from fsmbench.scale.envelope import Envelope
 
-__all__ = ["SignalDrift", "StabilityRecord", "analyse_stability"]
+__all__ = ["FULL_OVERLAP_MAX_TAU_S", "SignalDrift", "StabilityRecord", "analyse_stability",
+           "stability_from_summary"]
 
 FloatArray = NDArray[np.float64]
 
@@ -138,71 +147,12 @@ class StabilityRecord:
 def _binned(x: Any, *, signal: str, unit: str, n_bins: int, fs_hz: float) -> SignalDrift:
     from fsmbench.scale.envelope import minmax_envelope
 
-    env = minmax_envelope(x, fs_hz=fs_hz, n_bins=n_bins)
-    mean = np.asarray(env.mean, dtype=float)
-    counts = np.asarray(env.samples_per_bin, dtype=float)
-    return SignalDrift(signal=signal, unit=unit, t_s=np.asarray(env.t_s, dtype=float),
-                       mean=mean, minimum=np.asarray(env.minimum, dtype=float),
-                       maximum=np.asarray(env.maximum, dtype=float),
-                       overall_mean=float(np.sum(mean * counts) / np.sum(counts)),
-                       samples_per_bin=np.asarray(env.samples_per_bin, dtype=np.int64),
-                       fs_hz=fs_hz)
-
-
-#: Averaging times up to this use averages starting at every sample [s]; longer ones use
-#: averages starting every :data:`STRIDE_S` (see :func:`_allan`).
-FULL_OVERLAP_MAX_TAU_S = 10.0
-STRIDE_S = 0.1
-
-
-def _allan_streamed(x: Any, *, fs_hz: float, factors: NDArray[np.int64], unit: str,
-                    name: str, block: int = 1 << 20) -> Any:
-    """Overlapping Allan deviation of a Dask record, read once, block after block.
-
-    The formula of :mod:`fsmbench.scale.allan`. Each block is appended to the
-    samples still needed (the last ``2 m_max`` or so), the m-sums come from a
-    cumulative sum of that segment (``x - x[0]``), and every position is
-    counted once, when all the samples it needs are in. Memory: one block plus
-    ``2 m_max`` samples, whatever the record's length (a graph over all the
-    averaging times at once makes Dask keep chunks until the last of them
-    is done, which for a day is the whole record).
-    """
-    from fsmbench.scale.allan import AllanResult
-
-    n = int(x.shape[0])
-    m_all = np.asarray(factors, dtype=np.int64)
-    x0 = float(x[0].compute())
-    sums = np.zeros(m_all.size)
-    done = np.zeros(m_all.size, dtype=np.int64)  # next position to count, per m
-    last = n - 2 * m_all  # last position, per m
-    buf = np.zeros(0)
-    pos = 0  # global index of buf[0]
-    for part in x.rechunk(block).to_delayed().ravel():
-        chunk = np.asarray(part.compute(), dtype=np.float64)
-        if not np.all(np.isfinite(chunk)):
-            raise ValueError(f"{name} contains NaN or infinite samples; remove or interpolate "
-                             "them before the Allan deviation")
-        buf = np.concatenate([buf, chunk - x0])
-        c = np.concatenate([[0.0], np.cumsum(buf)])
-        for i, m in enumerate(int(v) for v in m_all):
-            stop = min(last[i], pos + buf.size - 2 * m)  # last position whose samples are in
-            if stop < done[i]:
-                continue
-            k = np.arange(done[i] - pos, stop - pos + 1)
-            d = (c[k + 2 * m] - c[k + m]) - (c[k + m] - c[k])
-            sums[i] += math.fsum(d * d)
-            done[i] = stop + 1
-        keep = int(min(done.min(), n)) - pos
-        buf = buf[keep:]
-        pos += keep
-    n_terms = n - 2 * m_all + 1
-    avar = sums / (2.0 * m_all.astype(np.float64) ** 2 * n_terms)
-    return AllanResult(tau_s=m_all / fs_hz, adev=np.sqrt(avar), n_terms=n_terms, m=m_all,
-                       fs_hz=fs_hz, n_samples=n, unit=unit)
+    return _drift_of(minmax_envelope(x, fs_hz=fs_hz, n_bins=n_bins), signal=signal, unit=unit,
+                     fs_hz=fs_hz)
 
 
 def _allan(x: Any, *, fs_hz: float, unit: str, name: str) -> Any:
-    """Overlapping Allan deviation; beyond 10 s from averages starting every 0.1 s.
+    """Overlapping Allan deviation of a record in memory; beyond 10 s from 0.1 s averages.
 
     Fully overlapping estimates at long averaging times read samples 2m
     apart, which out of core holds a large part of the record in memory. Past
@@ -211,19 +161,20 @@ def _allan(x: Any, *, fs_hz: float, unit: str, name: str) -> Any:
     (``tests/budget/test_stability.py``). With hundreds of 0.1 s steps per
     averaging time, the loss of degrees of freedom is under a percent.
     """
+    from fsmbench.scale.allan import allan_deviation
+
+    fine_m, stride = allan_factors(int(x.shape[0]), fs_hz)
+    fine = allan_deviation(x, fs_hz=fs_hz, taus_s=fine_m / fs_hz, unit=unit, name=name)
+    return _with_coarse(fine, block_means(x, per=stride), stride=stride, name=name)
+
+
+def _with_coarse(fine: Any, means: FloatArray, *, stride: int, name: str) -> Any:
+    """``fine`` extended with the averaging times of the ``stride``-sample ``means`` beyond it."""
     from fsmbench.scale.allan import AllanResult, allan_deviation
 
-    n = int(x.shape[0])
-    stride = max(1, round(STRIDE_S * fs_hz))
-    m_full = max(1, min(n // 4, round(FULL_OVERLAP_MAX_TAU_S * fs_hz)))
-    fine_m = 2 ** np.arange(int(np.floor(np.log2(m_full))) + 1)
-    if is_lazy(x):
-        fine = _allan_streamed(x, fs_hz=fs_hz, factors=fine_m, unit=unit, name=name)
-    else:
-        fine = allan_deviation(x, fs_hz=fs_hz, taus_s=fine_m / fs_hz, unit=unit, name=name)
-    means = block_means(x, per=stride)
+    fs_hz, unit = fine.fs_hz, fine.unit
     coarse_m = 2 ** np.arange(1, 64)
-    coarse_m = coarse_m[(coarse_m * stride > fine_m[-1]) & (2 * coarse_m * 2 <= means.size)]
+    coarse_m = coarse_m[(coarse_m * stride > fine.m[-1]) & (2 * coarse_m * 2 <= means.size)]
     if coarse_m.size == 0:
         return fine
     coarse = allan_deviation(means, fs_hz=fs_hz / stride, taus_s=coarse_m * stride / fs_hz,
@@ -232,14 +183,61 @@ def _allan(x: Any, *, fs_hz: float, unit: str, name: str) -> Any:
                        adev=np.concatenate([fine.adev, coarse.adev]),
                        n_terms=np.concatenate([fine.n_terms, coarse.n_terms]),
                        m=np.concatenate([fine.m, coarse.m * stride]), fs_hz=fs_hz,
-                       n_samples=n, unit=unit,
+                       n_samples=fine.n_samples, unit=unit,
                        kind=f"overlapping (averages every {STRIDE_S:g} s beyond "
                             f"{FULL_OVERLAP_MAX_TAU_S:g} s)")
 
 
+def _scaled_allan(a: Any, *, gain: float, unit: str) -> Any:
+    """The Allan deviation of ``x / gain`` from that of ``x``."""
+    from fsmbench.scale.allan import AllanResult
+
+    return AllanResult(tau_s=a.tau_s, adev=a.adev / abs(gain), n_terms=a.n_terms, m=a.m,
+                       fs_hz=a.fs_hz, n_samples=a.n_samples, unit=unit, kind=a.kind)
+
+
+def _drift_of(env: Envelope, *, signal: str, unit: str, fs_hz: float,
+              gain: float = 1.0) -> SignalDrift:
+    """A :class:`SignalDrift` from the envelope of ``x``, for ``x / gain``."""
+    lo = np.asarray(env.minimum, dtype=float) / gain
+    hi = np.asarray(env.maximum, dtype=float) / gain
+    if gain < 0:
+        lo, hi = hi, lo
+    mean = np.asarray(env.mean, dtype=float) / gain
+    counts = np.asarray(env.samples_per_bin, dtype=float)
+    return SignalDrift(signal=signal, unit=unit, t_s=np.asarray(env.t_s, dtype=float),
+                       mean=mean, minimum=lo, maximum=hi,
+                       overall_mean=float(np.sum(mean * counts) / np.sum(counts)),
+                       samples_per_bin=np.asarray(env.samples_per_bin, dtype=np.int64),
+                       fs_hz=fs_hz)
+
+
+def stability_from_summary(summary: LongRecordSummary, *,
+                           qd_gain_v_per_rad: tuple[float, float]) -> StabilityRecord:
+    """The stability view of a record reduced out of core (:mod:`fsmbench.budget.long_record`)."""
+    fs, name = summary.fs_hz, summary.name
+    _, stride = allan_factors(summary.n_samples, fs)
+    gains = {"Va": 1.0, "Rh": qd_gain_v_per_rad[0], "Rv": qd_gain_v_per_rad[1]}
+    source = {"Va": "Va", "Rh": "Vph", "Rv": "Vpv"}
+    units = {"Va": "m", "Rh": "rad", "Rv": "rad"}
+    allan = {}
+    for key, sig in source.items():
+        fine = _scaled_allan(summary.allan_fine[sig], gain=gains[key], unit=units[key])
+        allan[key] = _with_coarse(fine, summary.stride_means[sig] / gains[key], stride=stride,
+                                  name=f"{name}.{key}")
+    drift = {key: _drift_of(summary.envelopes[sig], signal=key, unit=units[key], fs_hz=fs,
+                            gain=gains[key]) for key, sig in source.items()}
+    drift["Va_lowpass"] = _drift_of(summary.envelopes["Va_lowpass"], signal="Va_lowpass",
+                                    unit="m", fs_hz=fs)
+    order = ("Va", "Va_lowpass", "Rh", "Rv")
+    return StabilityRecord(name=name, duration_s=summary.n_samples / fs, fs_hz=fs, allan=allan,
+                           drift={k: drift[k] for k in order},
+                           qd_gain_v_per_rad=qd_gain_v_per_rad, out_of_core=True)
+
+
 def analyse_stability(ds: xr.Dataset, *, name: str, qd_gain_v_per_rad: tuple[float, float],
-                      t0_s: float = 1.0, lpf_hz: float = 50.0,
-                      n_bins: int = DRIFT_BINS) -> StabilityRecord:
+                      t0_s: float = 1.0, lpf_hz: float = 50.0, n_bins: int = DRIFT_BINS,
+                      summary: LongRecordSummary | None = None) -> StabilityRecord:
     """Drift and Allan deviation of ``Va`` and the 4QD angle over one whole record.
 
     Parameters
@@ -256,7 +254,14 @@ def analyse_stability(ds: xr.Dataset, *, name: str, qd_gain_v_per_rad: tuple[flo
         Corner of the seed's low pass applied to ``Va`` [Hz].
     n_bins : int
         Bins of the drift curves.
+    summary : LongRecordSummary, optional
+        The record already reduced out of core; computed here (two reads) when
+        ``ds`` holds Dask arrays and none is given.
     """
+    if summary is None and is_lazy(ds["Va"].data):
+        summary = summarise_long_record(ds, name=name, t0_s=t0_s, lpf_hz=lpf_hz, n_bins=n_bins)
+    if summary is not None:
+        return stability_from_summary(summary, qd_gain_v_per_rad=qd_gain_v_per_rad)
     fs = float(ds.attrs["fs_hz"])
     trim = trim_record(ds, t0_s=t0_s, duration_s=None, fs_hz=fs)
     if trim.n < 4:
@@ -266,10 +271,9 @@ def analyse_stability(ds: xr.Dataset, *, name: str, qd_gain_v_per_rad: tuple[flo
     va = ds["Va"].data[sl]
     angles = {"Rh": ds["Vph"].data[sl] / qd_gain_v_per_rad[0],
               "Rv": ds["Vpv"].data[sl] / qd_gain_v_per_rad[1]}
-    lazy = is_lazy(va)
     signals: Mapping[str, tuple[Any, str]] = {
         "Va": (va, "m"),
-        "Va_lowpass": (lowpass(va - compute(va.mean())[0], cutoff_hz=lpf_hz, fs_hz=fs), "m"),
+        "Va_lowpass": (lowpass(va - va.mean(), cutoff_hz=lpf_hz, fs_hz=fs), "m"),
         **{k: (v, "rad") for k, v in angles.items()},
     }
     bins = min(n_bins, trim.n)
@@ -278,4 +282,4 @@ def analyse_stability(ds: xr.Dataset, *, name: str, qd_gain_v_per_rad: tuple[flo
     allan = {key: _allan(x, fs_hz=fs, unit=unit, name=f"{name}.{key}")
              for key, (x, unit) in signals.items() if key != "Va_lowpass"}
     return StabilityRecord(name=name, duration_s=trim.n / fs, fs_hz=fs, allan=allan,
-                           drift=drift, qd_gain_v_per_rad=qd_gain_v_per_rad, out_of_core=lazy)
+                           drift=drift, qd_gain_v_per_rad=qd_gain_v_per_rad, out_of_core=False)

@@ -15,7 +15,7 @@ comparison with the huddle noise (Fig. 50). Everything left out is listed in
 from __future__ import annotations
 
 import warnings
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field, replace
 
 import control as ct
@@ -33,10 +33,12 @@ from fsmbench.budget.huddle import (
     estimate_dac_noise,
     huddle_number,
 )
+from fsmbench.budget.long_record import LongRecordSummary, summarise_long_record
 from fsmbench.budget.optics import GeometryBudget, geometry_budget
 from fsmbench.budget.quantisation import NoiseSources, noise_sources
 from fsmbench.budget.repeatability import RepeatabilityRecord, analyse_repeatability
-from fsmbench.budget.stability import StabilityRecord, analyse_stability
+from fsmbench.budget.signals import is_lazy
+from fsmbench.budget.stability import DRIFT_BINS, StabilityRecord, analyse_stability
 from fsmbench.budget.table import AngleSources, ErrorBudget, angle_sources, budget_table
 from fsmbench.checks import Check, Notice, first_failure
 from fsmbench.control.seed import seed_decentralised_controller, tustin
@@ -187,7 +189,8 @@ def _valid_huddles(recordings: Mapping[str, xr.Dataset],
 
 def budget_study(recordings: Mapping[str, xr.Dataset], *, bench: Bench,
                  plant: PlantModel | None = None, controller: ct.StateSpace | None = None,
-                 window_s: float = 100.0, df_hz: float = 0.1) -> BudgetResult:
+                 window_s: float = 100.0, df_hz: float = 0.1,
+                 progress: Callable[[str], None] | None = None) -> BudgetResult:
     """Seed sections 3, 4 and 11 on the recordings present.
 
     Parameters
@@ -208,11 +211,13 @@ def budget_study(recordings: Mapping[str, xr.Dataset], *, bench: Bench,
         Record length of the budget's rms [s] (the huddle tests' 100 s).
     df_hz : float
         Frequency step of the propagation grid [Hz].
+    progress : callable, optional
+        Receives the progress of the reads of huddle tests analysed out of core.
     """
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         result = _budget_study(recordings, bench=bench, plant=plant, controller=controller,
-                               window_s=window_s, df_hz=df_hz)
+                               window_s=window_s, df_hz=df_hz, progress=progress)
     numeric = tuple(Notice("numeric", "budget", f"{w.category.__name__}: {w.message}")
                     for w in caught)
     return replace(result, notices=result.notices + numeric) if numeric else result
@@ -220,7 +225,8 @@ def budget_study(recordings: Mapping[str, xr.Dataset], *, bench: Bench,
 
 def _budget_study(recordings: Mapping[str, xr.Dataset], *, bench: Bench,
                   plant: PlantModel | None, controller: ct.StateSpace | None,
-                  window_s: float, df_hz: float) -> BudgetResult:
+                  window_s: float, df_hz: float,
+                  progress: Callable[[str], None] | None) -> BudgetResult:
     params = bench.nominal
     plant = physical_plant(params, source="physical (nominal)") if plant is None else plant
     if controller is None:
@@ -234,8 +240,11 @@ def _budget_study(recordings: Mapping[str, xr.Dataset], *, bench: Bench,
     usable = _plausible(recordings, bench=bench, skipped=skipped, checks=checks,
                         notices=notices)
     valid = _valid_huddles(usable, skipped)
-    huddle = analyse_huddle(valid, params=params) if valid else None
-    stability = _stability(valid, params=params)
+    # Records out of core are read twice, in blocks, for everything below (huddle and stability).
+    summaries = {name: summarise_long_record(ds, name=name, n_bins=DRIFT_BINS, progress=progress)
+                 for name, ds in valid.items() if is_lazy(ds["Va"].data)}
+    huddle = analyse_huddle(valid, params=params, summaries=summaries) if valid else None
+    stability = _stability(valid, params=params, summaries=summaries)
     qd = None if huddle is None else huddle.qd_noise
     if qd is None:
         skipped["4QD noise from huddle data"] = ("no open-loop huddle test (1, 2, 4): the "
@@ -297,10 +306,10 @@ def _budget_study(recordings: Mapping[str, xr.Dataset], *, bench: Bench,
         stability=stability)
 
 
-def _stability(valid: Mapping[str, xr.Dataset], *,
-               params: BenchParams) -> dict[int, StabilityRecord]:
+def _stability(valid: Mapping[str, xr.Dataset], *, params: BenchParams,
+               summaries: Mapping[str, LongRecordSummary]) -> dict[int, StabilityRecord]:
     """Drift and Allan deviation of every valid huddle test (out of core for lazy records)."""
     gd = params.quad_diode.gain_v_per_rad
-    return {huddle_number(name): analyse_stability(ds, name=name,
-                                                   qd_gain_v_per_rad=(gd.h, gd.v))
+    return {huddle_number(name): analyse_stability(ds, name=name, qd_gain_v_per_rad=(gd.h, gd.v),
+                                                   summary=summaries.get(name))
             for name, ds in valid.items()}

@@ -385,6 +385,9 @@ def _mixed_rates(recordings: dict[str, xr.Dataset], found: dict[str, Path]) -> l
 
 #: HDF5 recordings (NeXus, MATLAB v7.3) larger than this are read lazily (Dask).
 LAZY_BYTES: Final = 512 << 20
+#: Samples per Dask chunk of a record read lazily: 8 MiB per signal, so that a day
+#: (864 M samples) is 824 chunks per signal, not 13 000 (whose graph alone costs ~0.5 GB).
+LAZY_CHUNK_SAMPLES: Final = 1 << 20
 #: Experiments whose analyses run out of core; other long records must fit in memory.
 OUT_OF_CORE_EXPERIMENTS: Final = frozenset({f"data_huddle_test_{i}" for i in range(1, 6)})
 
@@ -403,7 +406,7 @@ def _read(path: Path, name: str, *, adc_range_v: float, adc_bits: int,
     from fsmbench.io.lazy import available_memory_bytes, open_recording
 
     # NaN and Inf in the signals are found by check_recording's pass (_signal_stats).
-    ds = open_recording(path, check_signals=False)
+    ds = open_recording(path, check_signals=False, chunk_samples=LAZY_CHUNK_SAMPLES)
     ds.attrs["experiment"] = name
     missing = [v for v in EXPERIMENTS[name].required if v not in ds.variables]
     if missing:
