@@ -318,9 +318,12 @@ class AllanStream:
             stop = min(int(self._last[i]), self._pos + self._buf.size - 2 * m)
             if stop < self._next[i]:
                 continue
-            k = np.arange(self._next[i] - self._pos, stop - self._pos + 1)
-            d = (c[k + 2 * m] - c[k + m]) - (c[k + m] - c[k])
-            self._sums[i].append(math.fsum(d * d))
+            lo, hi = int(self._next[i]) - self._pos, stop - self._pos + 1
+            mid = c[lo + m:hi + m]
+            d = (c[lo + 2 * m:hi + 2 * m] - mid) - (mid - c[lo:hi])
+            # numpy's pairwise sum (error ~ log2(n) eps) per block, exact fsum across blocks:
+            # math.fsum over every term costs ~50 ns a sample, 35 min on a day's three signals.
+            self._sums[i].append(float(np.sum(d * d)))
             self._next[i] = stop + 1
         keep = int(min(int(self._next.min()), self.n)) - self._pos
         self._buf = self._buf[keep:]
