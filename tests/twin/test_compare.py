@@ -43,5 +43,5 @@ def test_format_stamps_are_not_compared(bench: Bench) -> None:
     rows = comparison_rows(stamped(ident, format="fsmbench.identification", version=2),
                            reference=stamped(truth, format="fsmbench.twin_truth", version=2),
                            bench=bench)
-    assert rows == plain and len(rows) == 14  # 6 (h, v) pairs + 2 delays
+    assert rows == plain and len(rows) == 20  # 9 (h, v) pairs + 2 delays
     assert not any(r.key.startswith("format") for r in rows)

@@ -28,6 +28,11 @@ TARGETS: dict[str, tuple[str, float]] = {
     **{f"sercalo.{a}.damping_ratio": ("rel", 0.25) for a in "hv"},
     **{f"sercalo.{a}.dc_gain_v_per_a": ("rel", 0.03) for a in "hv"},
     **{f"newport_gain_v_per_v.{a}": ("rel", 0.03) for a in "hv"},
+    # The Newport's two real poles are less sharply defined than a resonance: its natural
+    # frequency's std is ~0.15 % at the seed's record lengths, 1 % is ~7 of them.
+    **{f"newport.{a}.natural_freq_hz": ("rel", 0.01) for a in "hv"},
+    **{f"newport.{a}.damping_ratio": ("rel", 0.25) for a in "hv"},
+    **{f"newport.{a}.internal_delay_s": ("abs", 1e-4) for a in "hv"},  # one sample
     "delay_s.sercalo": ("abs", 1e-4),  # one sample
     "delay_s.newport": ("abs", 1e-4),
 }

@@ -56,7 +56,8 @@ def model_values(p: BenchParams) -> dict[str, Any]:
 
     ``fs_hz``, ``qd_gain_v_per_rad``, ``current_amp_gain_a_per_v``,
     ``sercalo.{h,v}.{resonance_hz, damping_ratio, dc_gain_v_per_a}``,
-    ``newport_gain_v_per_v``, ``delay_s`` — what an identification reports.
+    ``newport_gain_v_per_v``, ``newport.{h,v}.{natural_freq_hz, damping_ratio,
+    internal_delay_s}``, ``delay_s`` — what an identification reports.
     """
     plant = physical_plant(p, source="physical")
     gc, gn = plant.blocks["Gc"], plant.blocks["Gn"]
@@ -74,6 +75,10 @@ def model_values(p: BenchParams) -> dict[str, Any]:
             for i, axis in enumerate(("h", "v"))
         },
         "newport_gain_v_per_v": {"h": _dc(gn, 0, 0), "v": _dc(gn, 1, 1)},
+        # The same second order on both axes (docs/model.md, eq. N2).
+        "newport": {axis: {"natural_freq_hz": p.newport.natural_freq_hz,
+                           "damping_ratio": p.newport.damping_ratio,
+                           "internal_delay_s": p.newport.internal_delay_s} for axis in "hv"},
         "delay_s": {"sercalo": delays["Uch"], "newport": delays["Unh"]},
     }
 
