@@ -77,6 +77,12 @@ class FrequencyResponse:
         Number of averaged segments per input column (same order as ``input``).
     effective_averages : tuple of float
         Welch (1967) equivalent independent averages ``n_d`` per input column.
+    frf_variance : xarray.DataArray, float, or None
+        ``E|H_hat - H|^2`` per line, (U_out/U_in)^2, when the estimator gives
+        one directly (periodic averaging, LPM: :mod:`fsmbench.ident.frf_estimate`);
+        None for Welch, whose uncertainty is ``random_error``.
+    estimator : str
+        ``"welch"`` (H1, :func:`spectral_matrix`), ``"periodic"`` or ``"lpm"``.
     """
 
     frf: xr.DataArray
@@ -96,6 +102,8 @@ class FrequencyResponse:
     fs_hz: float
     n_segments: tuple[int, ...]
     effective_averages: tuple[float, ...]
+    frf_variance: xr.DataArray | None = None
+    estimator: str = "welch"
 
     _ARRAYS = (
         "frf", "coherence", "input_psd", "output_psd", "cross_psd", "random_error",
@@ -134,6 +142,7 @@ class FrequencyResponse:
                     "peak_gain_frequency_hz": float(self.frequency_hz[peak]),
                 })
         return {
+            "estimator": self.estimator,
             "inputs": list(self.input_names),
             "outputs": list(self.output_names),
             "fs_hz": self.fs_hz,
@@ -374,7 +383,7 @@ def combine_columns(responses: Sequence[FrequencyResponse]) -> FrequencyResponse
         raise ValueError("combine_columns needs at least one FrequencyResponse")
     first = items[0]
     for i, r in enumerate(items[1:], start=1):
-        for attr in ("fs_hz", "window_length", "noverlap", "nfft", "confidence"):
+        for attr in ("fs_hz", "window_length", "noverlap", "nfft", "confidence", "estimator"):
             if getattr(r, attr) != getattr(first, attr):
                 raise ValueError(
                     f"response {i} has {attr}={getattr(r, attr)!r} but response 0 has "
@@ -395,8 +404,13 @@ def combine_columns(responses: Sequence[FrequencyResponse]) -> FrequencyResponse
         name: xr.concat([getattr(r, name).sel(output=order) for r in items], dim="input")
         for name in FrequencyResponse._ARRAYS
     }
+    variances = [r.frf_variance for r in items]
     return FrequencyResponse(
         **fields,
+        frf_variance=(None if any(v is None for v in variances) else
+                      xr.concat([v.sel(output=order) for v in variances if v is not None],
+                                dim="input")),
+        estimator=first.estimator,
         confidence=first.confidence,
         window_length=first.window_length,
         noverlap=first.noverlap,
