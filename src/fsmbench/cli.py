@@ -2,6 +2,8 @@
 
     fsmbench params   [--params FILE] [--out DIR] [--json]
     fsmbench simulate OUT [--duration S] [--seed N] [--params FILE] [--format F]
+                      [--excitation FILE]
+    fsmbench excite   OUT --input Uch --amplitude-rms V [--kind K] [--band LO HI] ...
     fsmbench identify DATA --out OUT [--params FILE]
     fsmbench budget   DATA --out OUT [--params FILE] [--identification DIR]
     fsmbench design   DATA --out OUT [--params FILE] [--seed N] [--identification DIR]
@@ -49,6 +51,7 @@ from typing import Any
 from fsmbench import __version__
 from fsmbench.bench.params import Bench, ParamsError, load_bench, param_rows, save_bench
 from fsmbench.cli_args import EXIT_USER_ERROR, Parser, factor, figure_formats, nanometres, seconds
+from fsmbench.excite.cli import add_excite_command
 from fsmbench.live.serve import add_serve_command
 from fsmbench.scale.mc_cli import add_montecarlo_command
 
@@ -178,7 +181,7 @@ def _twin_bytes(args: argparse.Namespace, fmt: str) -> float:
 
 
 def _cmd_simulate(args: argparse.Namespace) -> int:
-    from fsmbench.twin.simulate import stream_bench
+    from fsmbench.twin.simulate import play_excitation, stream_bench
 
     out = args.out_pos or args.out
     if out is None:
@@ -187,7 +190,11 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
     with _run_folder(args, out, data=None,
                      need_bytes=_twin_bytes(args, args.format) + _SMALL_BYTES) as run:
         say = _progress()
-        if args.format == "nexus":
+        if args.excitation is not None:
+            paths = play_excitation(args.excitation, bench, out_dir=run.staging, seed=args.seed,
+                                    duration_s=args.duration, experiments=args.experiments,
+                                    format=args.format, progress=say)
+        elif args.format == "nexus":
             # Streamed block by block: any --duration in bounded memory.
             paths = stream_bench(bench, out_dir=run.staging, seed=args.seed,
                                  duration_s=args.duration, experiments=args.experiments,
@@ -448,6 +455,9 @@ def _parser() -> argparse.ArgumentParser:
                    help="file format (default: MATLAB v5)")
     p.add_argument("--experiments", metavar="NAME", nargs="+", default=None,
                    help="only these experiments (e.g. data_uch data_ucv)")
+    p.add_argument("--excitation", metavar="FILE", default=None,
+                   help="play this designed excitation (fsmbench excite: folder, .json or "
+                        ".mat) in its input's experiment instead of the seed's noise")
     p.set_defaults(func=_cmd_simulate)
 
     stage_commands = (
@@ -490,6 +500,7 @@ def _parser() -> argparse.ArgumentParser:
 
     add_serve_command(sub, factor=factor)
     add_montecarlo_command(sub)
+    add_excite_command(sub)
 
     p = sub.add_parser("convert", help="copy a recording into a chunked NeXus archive (long "
                                        "records: lazy reading, bounded memory)")

@@ -1,26 +1,28 @@
 """Open-loop commands the bench plays on its DAC channels, generated block by block.
 
 An :class:`Excitation` says what to play (white or band-limited noise, a
-sine, a random-phase multisine) on which channel from when; an
-:class:`ExcitationStream` plays it from a sample counter, so a record cut
-into blocks receives, bit for bit, the samples of one whole record: sines
-and multisines are functions of the absolute sample index, noise draws from
-its own generator sample by sample and its band-pass filter hands its state
-over between blocks.
+sine, a random-phase multisine) on which channel from when; a
+:class:`SampledExcitation` plays given samples (a designed excitation, see
+:mod:`fsmbench.excite`). An :class:`ExcitationStream` plays either from a
+sample counter, so a record cut into blocks receives, bit for bit, the
+samples of one whole record: sines, multisines and sample arrays are
+functions of the absolute sample index, noise draws from its own generator
+sample by sample and its band-pass filter hands its state over between blocks.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import hashlib
+from dataclasses import dataclass, field
 from typing import Literal
 
 import numpy as np
 from scipy.signal import butter, sosfilt, sosfilt_zi
 
 __all__ = ["DAC_LIMIT_FRACTION", "Excitation", "ExcitationKind", "ExcitationStream",
-           "multisine_lines"]
+           "SampledExcitation", "multisine_lines", "samples_sha256"]
 
-ExcitationKind = Literal["noise", "sine", "multisine"]
+ExcitationKind = Literal["noise", "sine", "multisine", "samples"]
 
 #: Peak of an excitation allowed against the DAC's half range (refused above).
 DAC_LIMIT_FRACTION = 1.0
@@ -70,6 +72,54 @@ class Excitation:
             # stream computes the real peak of the period it plays.
             return abs(self.amplitude_v) * 4.5
         return abs(self.amplitude_v) * 4.5
+
+
+def samples_sha256(samples_v: np.ndarray) -> str:
+    """SHA-256 of samples as little-endian float64 (names a sample array in files)."""
+    return hashlib.sha256(np.ascontiguousarray(samples_v, dtype="<f8").tobytes()).hexdigest()
+
+
+@dataclass(frozen=True)
+class SampledExcitation(Excitation):
+    """Given samples played on one DAC channel from ``start_s``, one per converter sample.
+
+    ``kind`` is ``"samples"``; ``amplitude_v`` is informative (e.g. the rms).
+
+    Attributes
+    ----------
+    samples_v : ndarray, shape (n,)
+        The commands [V], at the bench's sampling rate (stored read-only).
+    loop_from : int or None
+        After the last sample: None plays zeros; an index ``i`` repeats
+        ``samples_v[i:]`` for ever (``i`` = the transient samples of a
+        periodic excitation keeps it periodic).
+    samples_sha256 : str
+        SHA-256 of the samples (:func:`samples_sha256`), set on creation;
+        excitations compare equal when their samples do.
+    """
+
+    samples_v: np.ndarray = field(default_factory=lambda: np.zeros(0), compare=False,
+                                  repr=False)
+    loop_from: int | None = None
+    samples_sha256: str = field(init=False, default="")
+
+    def __post_init__(self) -> None:
+        x = np.array(self.samples_v, dtype=float)
+        if self.kind != "samples":
+            raise ValueError(f"a sampled excitation has kind 'samples', not {self.kind!r}")
+        if x.ndim != 1 or x.size == 0 or not np.all(np.isfinite(x)):
+            raise ValueError(f"excitation on {self.channel}: samples must be a non-empty, "
+                             f"finite 1-D array, got shape {x.shape}")
+        if self.loop_from is not None and not 0 <= self.loop_from < x.size:
+            raise ValueError(f"excitation on {self.channel}: loop start {self.loop_from} is "
+                             f"outside the {x.size} samples")
+        x.setflags(write=False)
+        object.__setattr__(self, "samples_v", x)
+        object.__setattr__(self, "samples_sha256", samples_sha256(x))
+
+    def peak_v(self) -> float:
+        """Largest command [V] (exact)."""
+        return float(np.max(np.abs(self.samples_v)))
 
 
 def multisine_lines(*, band_hz: tuple[float, float], period_s: float,
@@ -140,9 +190,13 @@ class ExcitationStream:
             one = np.cos(2.0 * np.pi * f[:, None] * t[None, :] + phases[:, None]).sum(axis=0)
             # Lines of equal amplitude a have rms a·sqrt(n/2): scale the period to the rms asked.
             self._period = one * (excitation.amplitude_v / np.sqrt(f.size / 2.0))
+        elif excitation.kind == "samples":
+            if not isinstance(excitation, SampledExcitation):
+                raise ValueError(f"excitation on {excitation.channel} of kind 'samples' must "
+                                 "be a SampledExcitation (it holds the samples)")
         elif excitation.kind not in ("noise", "sine"):
             raise ValueError(f"unknown excitation kind {excitation.kind!r}; "
-                             "known: noise, sine, multisine")
+                             "known: noise, sine, multisine, samples")
 
     def peak_v(self) -> float:
         """Largest command [V]: exact for sines and multisines, 4.5 σ for noise."""
@@ -173,6 +227,8 @@ class ExcitationStream:
         elif ex.kind == "sine":
             t = k[on] / self.fs_hz
             out[on] = ex.amplitude_v * np.sin(2 * np.pi * ex.freq_hz * (t - ex.start_s))
+        elif isinstance(ex, SampledExcitation):
+            out[on] = _played(ex, k[on] - self._start)
         else:
             assert self._period is not None
             out[on] = self._period[(k[on] - self._start) % self._period.size]
@@ -187,3 +243,16 @@ class ExcitationStream:
             h = sosfilt(self._sos, impulse)
             self._gain = float(np.sqrt(np.sum(h * h)))
         return self._gain
+
+
+def _played(ex: SampledExcitation, i: np.ndarray) -> np.ndarray:
+    """Samples at indices ``i >= 0`` counted from the first one played (see ``loop_from``)."""
+    x = ex.samples_v
+    n = x.size
+    out = np.zeros(i.size)
+    inside = i < n
+    out[inside] = x[i[inside]]
+    if ex.loop_from is not None and not inside.all():
+        span = n - ex.loop_from
+        out[~inside] = x[ex.loop_from + (i[~inside] - n) % span]
+    return out

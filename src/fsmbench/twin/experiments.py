@@ -14,6 +14,10 @@ data_rep_h / data_rep_v     11      closed loop, periodic 1 s Newport motion
 
 Start times match the seed's trimming (``t0`` in its scripts); default
 lengths give the seed's 100 s huddle tests after its 1 s trim.
+
+:func:`played_experiment` replaces the noise of ``data_uch``, ``data_ucv``,
+``data_unh`` or ``data_unv`` by given samples (a designed excitation,
+:mod:`fsmbench.excite`), played from the same start time.
 """
 
 from __future__ import annotations
@@ -22,21 +26,25 @@ import dataclasses
 from collections.abc import Sequence
 from dataclasses import dataclass
 
+import numpy as np
+
 from fsmbench.bench.params import Bench
 from fsmbench.control.seed import seed_decentralised_controller
 from fsmbench.sim.controller import feedback_controller
 from fsmbench.sim.discretize import DiscretePlant
 from fsmbench.sim.engine import DiscreteController
-from fsmbench.sim.excitation import Excitation
+from fsmbench.sim.excitation import Excitation, SampledExcitation
 from fsmbench.sim.stream import BenchStream
 
 __all__ = [
     "EXPERIMENT_NAMES",
+    "INPUT_EXPERIMENTS",
     "MIN_DURATION_S",
     "REALIZED_NOISE",
     "Excitation",
     "ExperimentSpec",
     "experiment_stream",
+    "played_experiment",
     "seed_experiments",
     "seed_feedback",
     "with_duration",
@@ -171,6 +179,55 @@ def with_duration(specs: Sequence[ExperimentSpec], *,
         raise ValueError(f"--duration {duration_s:g} s is too short for {', '.join(too_short)}: "
                          f"they need at least {need:g} s")
     return tuple(dataclasses.replace(s, duration_s=float(duration_s)) for s in specs)
+
+
+#: The identification experiment of each DAC channel.
+INPUT_EXPERIMENTS = {"Uch": "data_uch", "Ucv": "data_ucv", "Unh": "data_unh",
+                     "Unv": "data_unv"}
+
+
+def played_experiment(*, channel: str, samples_v: np.ndarray, fs_hz: float,
+                      loop_from: int | None = None, duration_s: float | None = None,
+                      description: str = "designed excitation") -> ExperimentSpec:
+    """The identification experiment of ``channel`` with ``samples_v`` instead of the noise.
+
+    Parameters
+    ----------
+    channel : str
+        ``Uch``, ``Ucv``, ``Unh`` or ``Unv`` (gives ``data_uch`` ... ``data_unv``).
+    samples_v : ndarray, shape (n,)
+        Commands [V] at the bench's rate ``fs_hz``, played from the seed's start
+        time of that experiment (1 s, 1 s, 3 s, 1.5 s).
+    fs_hz : float
+        Sampling rate [Hz] (the record's length is counted in its samples).
+    loop_from : int, optional
+        After the last sample: zeros (None) or ``samples_v[loop_from:]`` repeated.
+    duration_s : float, optional
+        Record length [s]; default: start time plus the samples (at least the
+        experiment's minimum), so every sample is played once.
+    description : str
+        What is played, for the experiment's description.
+
+    Raises
+    ------
+    ValueError
+        Unknown channel, or ``duration_s`` shorter than the experiment's minimum.
+    """
+    if channel not in INPUT_EXPERIMENTS:
+        raise ValueError(f"unknown input {channel!r}; an excitation file can drive "
+                         f"{', '.join(INPUT_EXPERIMENTS)}")
+    name = INPUT_EXPERIMENTS[channel]
+    spec = next(s for s in seed_experiments() if s.name == name)
+    start = spec.excitations[0].start_s
+    x = np.asarray(samples_v, dtype=float)
+    ex = SampledExcitation(channel, "samples", float(np.sqrt(np.mean(x * x))), start,
+                           samples_v=x, loop_from=loop_from)
+    if duration_s is None:
+        # Whole samples: the record ends with the last one played.
+        duration_s = max((round(start * fs_hz) + x.size) / fs_hz, spec.min_duration_s())
+    spec = dataclasses.replace(spec, excitations=(ex,),
+                               description=f"{description} on {channel} (from {start:g} s)")
+    return with_duration((spec,), duration_s=duration_s)[0]
 
 
 #: ``realized`` keys of ``twin_truth.json`` and the :class:`~fsmbench.sim.stream.BenchBlock`

@@ -5,6 +5,14 @@
 
 writes ``data_cal_pd_h.mat`` ... ``data_rep_v.mat`` (MATLAB v5, column
 vectors, the seed's variable names) and ``twin_truth.json``.
+
+>>> run = simulate_excitation("excite-out/excitation.json")  # doctest: +SKIP
+
+plays a designed excitation (``fsmbench excite``) in the experiment of its
+input (``data_uch`` for ``Uch`` ...) instead of the seed's noise: from the
+seed's start time, every sample once, then zeros (or, for a file whose
+``after_end`` is ``repeat``, its steady-state periods again when the record
+is longer).
 """
 
 from __future__ import annotations
@@ -28,11 +36,13 @@ from fsmbench.jsonutil import stamped
 from fsmbench.sim.controller import closed_loop_spectral_radius
 from fsmbench.sim.discretize import DiscretePlant
 from fsmbench.sim.engine import DiscreteController
+from fsmbench.sim.excitation import samples_sha256
 from fsmbench.sim.plant import ADC_CHANNELS, twin_discrete
 from fsmbench.twin.experiments import (
     REALIZED_NOISE,
     ExperimentSpec,
     experiment_stream,
+    played_experiment,
     seed_experiments,
     seed_feedback,
     with_duration,
@@ -42,7 +52,9 @@ from fsmbench.twin.truth import TRUTH_FORMAT, twin_truth
 __all__ = [
     "ExperimentResult",
     "TwinRun",
+    "play_excitation",
     "simulate_bench",
+    "simulate_excitation",
     "simulate_experiment",
     "stream_bench",
     "write_twin",
@@ -226,6 +238,66 @@ def simulate_bench(bench: Bench | None = None, *, seed: int = 0, duration_s: flo
     return TwinRun(recordings=recordings, truth=truth, seed=seed, experiments=specs)
 
 
+def simulate_excitation(source: str | Path, bench: Bench | None = None, *, seed: int = 0,
+                        duration_s: float | None = None,
+                        progress: Callable[[str], None] | None = None) -> TwinRun:
+    """Play a designed excitation on the twin in the experiment of its input.
+
+    Parameters
+    ----------
+    source : str or Path
+        The excitation: its folder, JSON description or MAT-file
+        (:func:`fsmbench.excite.files.read_excitation`, validated).
+    bench : Bench, optional
+        Default: the packaged bench; its sampling rate must be the file's.
+    seed : int
+        Run seed (the bench's own noise; the excitation is the file's).
+    duration_s : float, optional
+        Record length [s]; default: the seed's start time plus the file, so
+        every sample is played once (see the module notes for after the end).
+    progress : callable, optional
+        Called with a short message.
+
+    Returns
+    -------
+    TwinRun
+        One record (``data_uch`` ... ``data_unv``) and its truth; the truth's
+        experiment names the file and the samples' SHA-256 instead of the samples.
+
+    Raises
+    ------
+    ValueError
+        The file is invalid (one line naming it), sampled at another rate than
+        the bench, or ``duration_s`` is too short for the experiment.
+    """
+    from fsmbench.excite.files import ExcitationFileError, find_description, read_excitation
+
+    bench = default_bench() if bench is None else bench
+    described = find_description(source)
+    design = read_excitation(described)
+    fs = bench.true.converter.fs_hz
+    if abs(design.fs_hz - fs) > 1e-9 * fs:
+        raise ExcitationFileError(described, f"is sampled at {design.fs_hz:g} Hz; the twin's "
+                                             f"bench runs at {fs:g} Hz")
+    spec = played_experiment(
+        channel=design.input, samples_v=design.samples_v, fs_hz=fs, duration_s=duration_s,
+        loop_from=design.transient_samples if design.after_end == "repeat" else None,
+        description=f"{design.kind} of {described.name}")
+    if progress is not None:
+        progress(f"playing {described.name} ({design.kind}, {design.duration_s:g} s) in "
+                 f"{spec.name} ({spec.duration_s:g} s)")
+    result = simulate_experiment(bench, spec, seed=seed, plant=twin_discrete(bench.true))
+    truth = twin_truth(bench, seed=seed, experiments=(spec,),
+                       realized={spec.name: result.realized}, controller_name=None)
+    for ex in truth["experiments"][spec.name]["excitations"]:
+        ex["samples_v"] = {"file": described.name, "n_samples": int(design.samples_v.size)}
+    truth["excitation_file"] = {"description": described.name, "input": design.input,
+                                "kind": design.kind,
+                                "samples_sha256": samples_sha256(design.samples_v)}
+    return TwinRun(recordings={spec.name: result.recording}, truth=truth, seed=seed,
+                   experiments=(spec,))
+
+
 # Files stamp this creation time (the epoch, UTC), not the wall clock, so the
 # same seed gives byte-identical files.
 TWIN_CREATED_S = 0.0
@@ -253,3 +325,21 @@ def write_twin(run: TwinRun, out_dir: str | Path, *,
                                              indent=2, sort_keys=True) + "\n")
     paths.append(truth_path)
     return paths
+
+
+def play_excitation(source: str | Path, bench: Bench | None = None, *, out_dir: str | Path,
+                    seed: int = 0, duration_s: float | None = None,
+                    experiments: Sequence[str] | None = None,
+                    format: RecordingFormat = "mat5",
+                    progress: Callable[[str], None] | None = None) -> list[Path]:
+    """``fsmbench simulate --excitation``: :func:`simulate_excitation`, then :func:`write_twin`.
+
+    ``experiments`` must be None (the file's input names the experiment);
+    returns the paths written.
+    """
+    if experiments is not None:
+        raise ValueError("--excitation plays the experiment of its input; leave out "
+                         "--experiments")
+    run = simulate_excitation(source, bench, seed=seed, duration_s=duration_s,
+                              progress=progress)
+    return write_twin(run, out_dir, format=format)

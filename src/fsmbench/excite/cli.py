@@ -1,0 +1,161 @@
+"""``fsmbench excite``: design an excitation, check it against the converters, write it.
+
+    fsmbench excite OUT --input Uch --amplitude-rms 0.015
+                        [--kind multisine|noise|chirp] [--band 1 2000] [--resolution 0.5]
+                        [--periods P] [--transient-periods T] [--odd | --odd-odd]
+                        [--log-grid [--lines-per-decade N]] [--phases minimised|schroeder|random]
+                        [--duration S] [--sweep linear|log] [--seed N]
+                        [--params TOML] [--model nominal|true] [--timestamp]
+
+Checks the peak at the DAC and at every ADC channel the bench model carries
+the input to (:mod:`fsmbench.excite.limits`) before anything is written; a
+violation is one line with the rms amplitude that would fit. Then writes
+``OUT/excitation.mat`` (``t`` and the input's column at the bench's rate) and
+``OUT/excitation.json`` (:mod:`fsmbench.excite.files`) as one transaction with
+``run.json``, and prints the lines, crest factors and converter peaks.
+"""
+
+from __future__ import annotations
+
+import argparse
+import functools
+import sys
+from typing import Any
+
+from fsmbench.cli_args import positive, seconds
+
+__all__ = ["add_excite_command", "summary"]
+
+_CHANNELS = ("Uch", "Ucv", "Unh", "Unv")
+
+
+def _count(text: str, *, least: int) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a whole number") from None
+    if value < least:
+        raise argparse.ArgumentTypeError(f"{text!r} must be at least {least}")
+    return value
+
+
+def add_excite_command(sub: Any) -> None:
+    """Add ``excite`` to the CLI's sub-commands (``sub`` from ``add_subparsers``)."""
+    hz = functools.partial(positive, unit="Hz")
+    volts = functools.partial(positive, unit="volts")
+    p = sub.add_parser("excite", help="design an excitation (multisine, noise, chirp) a "
+                                      "real-time target or the twin can play")
+    p.add_argument("out", metavar="OUT", help="output folder")
+    p.add_argument("--input", required=True, choices=_CHANNELS,
+                   help="DAC channel to excite (the seed's signal name)")
+    p.add_argument("--kind", choices=("multisine", "noise", "chirp"), default="multisine",
+                   help="signal (default multisine)")
+    p.add_argument("--band", metavar=("LOW", "HIGH"), nargs=2, type=hz, default=(1.0, 2000.0),
+                   help="frequency band [Hz] (default 1 2000)")
+    p.add_argument("--resolution", metavar="HZ", type=hz, default=1.0,
+                   help="multisine line spacing = 1/period [Hz] (default 1)")
+    p.add_argument("--amplitude-rms", metavar="V", type=volts, required=True,
+                   dest="amplitude_rms", help="rms of the excitation [V]")
+    p.add_argument("--periods", metavar="P", type=functools.partial(_count, least=1),
+                   default=1, help="steady-state periods (default 1)")
+    p.add_argument("--transient-periods", metavar="T", type=functools.partial(_count, least=0),
+                   default=0, help="periods played first for the system to settle; the JSON "
+                                   "says how many, for FRF estimators to drop (default 0)")
+    grid = p.add_mutually_exclusive_group()
+    grid.add_argument("--odd", action="store_const", const="odd", dest="grid", default="full",
+                      help="odd lines only (multisine)")
+    grid.add_argument("--odd-odd", action="store_const", const="odd-odd", dest="grid",
+                      help="lines 1, 5, 9, ... only (multisine)")
+    p.add_argument("--log-grid", action="store_true",
+                   help="log-spaced lines: the grid lines nearest a geometric sequence")
+    p.add_argument("--lines-per-decade", metavar="N", type=functools.partial(positive,
+                                                                             unit="lines"),
+                   default=50.0, help="density of --log-grid (default 50)")
+    p.add_argument("--phases", choices=("minimised", "schroeder", "random"),
+                   default="minimised",
+                   help="multisine phases: crest factor minimised (default), Schroeder's, or "
+                        "plain random from --seed")
+    p.add_argument("--duration", metavar="S", type=seconds, default=30.0,
+                   help="noise or chirp period [s] (default 30, the seed's noise records)")
+    p.add_argument("--sweep", choices=("linear", "log"), default="linear",
+                   help="chirp sweep (default linear)")
+    p.add_argument("--seed", metavar="N", type=int, default=0,
+                   help="seed of random phases and noise (default 0)")
+    p.add_argument("--params", "--bench", metavar="TOML", default=None, dest="params",
+                   help="bench parameters (TOML); default: the packaged Sercalo bench")
+    p.add_argument("--model", choices=("nominal", "true"), default="nominal",
+                   help="parameters the limits are checked with: nominal (a real bench; the "
+                        "larger gains) or true (the twin) (default nominal)")
+    p.add_argument("--timestamp", action="store_true",
+                   help="write the wall-clock time into the MAT-file header and run.json "
+                        "(default: none, so that outputs are byte-identical)")
+    p.set_defaults(func=_command)
+
+
+def _design(args: argparse.Namespace, fs_hz: float) -> Any:
+    from fsmbench.excite.design import design_chirp, design_multisine, design_noise
+
+    common = {"input": args.input, "band_hz": tuple(args.band),
+              "amplitude_rms_v": args.amplitude_rms, "fs_hz": fs_hz, "seed": args.seed,
+              "periods": args.periods, "transient_periods": args.transient_periods}
+    if args.kind == "multisine":
+        return design_multisine(**common, resolution_hz=args.resolution, grid=args.grid,
+                                log_grid=args.log_grid, lines_per_decade=args.lines_per_decade,
+                                phase_method=args.phases)
+    if args.kind == "noise":
+        return design_noise(**common, duration_s=args.duration)
+    return design_chirp(**common, duration_s=args.duration, method=args.sweep)
+
+
+def summary(design: Any, report: Any) -> list[str]:
+    """The lines ``fsmbench excite`` prints: what was designed, crest factors, converter peaks."""
+    from fsmbench.excite.design import N_RANDOM_REFERENCE
+
+    d = design
+    lines = []
+    extra = (f" + {d.transient_periods} transient period{'s' if d.transient_periods != 1 else ''}"
+             if d.transient_periods else "")
+    if d.kind == "multisine":
+        spacing = "log-spaced" if d.log_grid else f"every {d.fs_hz / d.period_samples:g} Hz"
+        lines.append(f"{d.input} multisine: {d.lines_hz.size} lines from {d.lines_hz[0]:g} to "
+                     f"{d.lines_hz[-1]:g} Hz ({d.grid} grid, {spacing}), "
+                     f"{d.amplitude_rms_v:g} V rms")
+    else:
+        what = "band-limited noise" if d.kind == "noise" else f"{d.chirp_method} chirp"
+        lines.append(f"{d.input} {what} from {d.band_hz[0]:g} to {d.band_hz[1]:g} Hz, "
+                     f"{d.amplitude_rms_v:g} V rms")
+    lines.append(f"{d.periods} period{'s' if d.periods != 1 else ''} of {d.period_s:g} s{extra}: "
+                 f"{d.samples_v.size} samples at {d.fs_hz:g} Hz ({d.duration_s:g} s)")
+    cf = f"crest factor {d.crest_factor:.3f}"
+    if d.crest_factor_random_phase is not None:
+        cf += (f" ({d.phase_method} phases; random phases: {d.crest_factor_random_phase:.3f}, "
+               f"median of {N_RANDOM_REFERENCE} draws from seed {d.seed})")
+    lines.append(cf)
+    lines.append(f"peaks through the {report.model} bench model:")
+    lines += [f"  {c.line()}" for c in report.peaks]
+    return lines
+
+
+def _command(args: argparse.Namespace) -> int:
+    from fsmbench.bench.params import load_bench
+    from fsmbench.excite.files import write_excitation
+    from fsmbench.excite.limits import check_limits
+    from fsmbench.io.matwrite import wall_clock_headers
+    from fsmbench.io.outdir import output_transaction
+
+    bench = load_bench(args.params)
+    params = bench.nominal if args.model == "nominal" else bench.true
+    design = _design(args, params.converter.fs_hz)
+    report = check_limits(design, params=params, model=args.model)  # before any output
+    out = str(args.out)
+    argv = [("." if a == out else a) for a in getattr(args, "argv", [])]
+    # Two float64 columns, compressed or not, plus a JSON of the lines and phases.
+    need = 16 * design.samples_v.size + 64 * design.lines_hz.size + 65536
+    with output_transaction(out, command="excite", arguments=argv, need_bytes=need,
+                            timestamp=args.timestamp) as run, \
+            wall_clock_headers(args.timestamp):
+        paths = write_excitation(design, run.staging, limits=report)
+    print("\n".join(summary(design, report)))
+    for path in paths:
+        print(f"wrote {run.final_path(path)}", file=sys.stderr)
+    return 0
