@@ -1,4 +1,4 @@
-"""Non-repeatability of the measured distance (seed 11).
+"""Non-repeatability of the measured distance (seed 11), on records of any length.
 
 Alignment (11.1): the record starts ``align_s`` (1 s) after the first
 non-zero Newport command (``Unh`` for ``data_rep_h``, ``Unv`` for
@@ -6,6 +6,7 @@ non-zero Newport command (``Unh`` for ``data_rep_h``, ``Unv`` for
 seed keeps ``i0 … iend−1`` with ``i0 = find(Un ~= 0, 1) + fs`` and
 ``iend = i0 + fs·floor((N − i0)/fs)``; here that is ``s0 = first + fs``
 (0-based) and ``floor((N − s0 − 1)/P)`` periods of ``P = period·fs`` samples.
+The command is read block by block from the start until it moves.
 
 Repeatable part (11.4): the mean over periods at each position in the
 period (``mean(reshape(Va, [fs n]), 2)``); non-repeatable part: the rest.
@@ -25,11 +26,23 @@ its PSD, and its distance-error equivalent. The seed's law is
 ``ΔL = L·α²/2`` with L = 0.1 m per axis; the traced law is ``Σ cᵢ αᵢ²``
 with ``c = (6H + 4L)/16`` m/rad² (errata E15, E17). ``R`` includes the 4QD's
 own noise, so this equivalent is an upper bound of the true geometric term.
+
+Out of core: one code path for every record (NumPy or Dask), read twice
+block after block (:func:`fsmbench.scale.streaming.read_blocks`): read 1
+folds ``Va``, its low pass and the distance equivalent period on period
+(sums, minimum, maximum at each position: arrays of shape (P,)) and takes the
+means, Welch PSDs and envelopes of the raw signals; read 2 needs the
+repeatable parts and means: the non-repeatable rms's, their envelopes, the
+PSD of ``Va`` less its mean. ``Va`` is processed less its first aligned
+sample ``s`` (exact for a metre-scale offset with µm motion), so nanometres
+are not lost under the offset; the low pass from rest of ``Va`` is that of
+``Va − s`` plus the step response ``s·(1 − aᵏ)``. Memory: a few blocks.
 """
 
 from __future__ import annotations
 
 import math
+from collections.abc import Iterator, Mapping
 from dataclasses import dataclass, fields
 
 import numpy as np
@@ -39,16 +52,28 @@ from numpy.typing import NDArray
 from fsmbench.bench.blocks import rotation
 from fsmbench.bench.params import BenchParams
 from fsmbench.budget.propagation import distance_coefficients
-from fsmbench.budget.spectra import first_order_lowpass, seed_welch
+from fsmbench.ident.welch import WelchOptions, hanning
 from fsmbench.jsonutil import hv
+from fsmbench.scale.envelope import Envelope
+from fsmbench.scale.streaming import (
+    BLOCK_SAMPLES,
+    EnvelopeStream,
+    LowpassStream,
+    SumStream,
+    WelchStream,
+    read_blocks,
+)
 
 __all__ = [
+    "ENVELOPE_BINS",
     "SEED_11",
     "AlignedRecord",
+    "PeriodAlignment",
     "RepeatabilityRecord",
     "align_periods",
     "analyse_repeatability",
     "command_channel",
+    "find_alignment",
 ]
 
 FloatArray = NDArray[np.float64]
@@ -57,16 +82,31 @@ FloatArray = NDArray[np.float64]
 SEED_11: dict[str, float] = {"h_nonrep_rms_m": 19.6e-9, "v_nonrep_rms_m": 13.9e-9,
                              "h_nonrep_rms_lpf_m": 22.9e-9, "v_nonrep_rms_lpf_m": 13.9e-9,
                              "law_length_m": 0.1}
+#: Bins of the min/max envelopes of the time plots (at most the aligned samples).
+ENVELOPE_BINS = 2000
 _CHANNEL = {"data_rep_h": "Unh", "data_rep_v": "Unv"}
 _SIGNALS = ("Unh", "Unv", "Vph", "Vpv", "Va")
 
 
-def command_channel(name: str, ds: xr.Dataset) -> str:
+def _first_nonzero(ds: xr.Dataset, channels: tuple[str, ...],
+                   block_samples: int) -> dict[str, int]:
+    """First non-zero sample of each channel, read from the start up to the first block
+    where one of them moves (empty if none ever does)."""
+    signals = {c: ds[c].data for c in channels}
+    for offset, block in read_blocks(signals, start=0, stop=ds.sizes["t"],
+                                     block_samples=block_samples):
+        found = {c: offset + int(i[0]) for c, x in block.items()
+                 if (i := np.flatnonzero(x != 0)).size}
+        if found:
+            return found
+    return {}
+
+
+def command_channel(name: str, ds: xr.Dataset, *, block_samples: int = BLOCK_SAMPLES) -> str:
     """``Unh`` for ``data_rep_h``, ``Unv`` for ``data_rep_v``; else the command that moves first."""
     if name in _CHANNEL:
         return _CHANNEL[name]
-    firsts = {c: np.flatnonzero(np.asarray(ds[c].values) != 0) for c in ("Unh", "Unv") if c in ds}
-    moving = {c: int(i[0]) for c, i in firsts.items() if i.size}
+    moving = _first_nonzero(ds, tuple(c for c in ("Unh", "Unv") if c in ds), block_samples)
     if not moving:
         raise ValueError(f"{name}: no Newport command (Unh, Unv are zero or absent); the "
                          f"repeatability analysis aligns on the first command (seed 11.1)")
@@ -74,8 +114,8 @@ def command_channel(name: str, ds: xr.Dataset) -> str:
 
 
 @dataclass(frozen=True)
-class AlignedRecord:
-    """The record cut as the seed's 11.1: signals of shape (N,) from ``start`` on."""
+class PeriodAlignment:
+    """Where seed 11.1 cuts a record: samples ``start_index … stop_index − 1``, whole periods."""
 
     name: str
     channel: str
@@ -84,12 +124,24 @@ class AlignedRecord:
     start_index: int
     period_samples: int
     n_periods: int
+
+    @property
+    def stop_index(self) -> int:
+        """One past the last sample kept."""
+        return self.start_index + self.n_periods * self.period_samples
+
+
+@dataclass(frozen=True)
+class AlignedRecord(PeriodAlignment):
+    """The record cut as the seed's 11.1: signals of shape (N,) from ``start`` on (in memory)."""
+
     signals: dict[str, FloatArray]
 
 
-def align_periods(ds: xr.Dataset, *, name: str | None = None, align_s: float = 1.0,
-                  period_s: float = 1.0) -> AlignedRecord:
-    """Seed 11.1: start ``align_s`` after the first Newport command, keep whole periods.
+def find_alignment(ds: xr.Dataset, *, name: str | None = None, align_s: float = 1.0,
+                   period_s: float = 1.0, block_samples: int = BLOCK_SAMPLES) -> PeriodAlignment:
+    """Seed 11.1 without reading the signals: start ``align_s`` after the first Newport
+    command (read block by block until it moves), keep whole periods.
 
     Raises
     ------
@@ -103,34 +155,58 @@ def align_periods(ds: xr.Dataset, *, name: str | None = None, align_s: float = 1
         raise ValueError(f"{name}: missing {missing} (seed 11.1 loads t, Uch, Ucv, Unh, Unv, "
                          f"Vph, Vpv, Vnh, Vnv, Va)")
     fs = float(ds.attrs["fs_hz"])
-    channel = command_channel(name, ds)
-    nz = np.flatnonzero(np.asarray(ds[channel].values) != 0)
-    if nz.size == 0:
+    channel = command_channel(name, ds, block_samples=block_samples)
+    nz = _first_nonzero(ds, (channel,), block_samples)
+    if not nz:
         raise ValueError(f"{name}: the Newport command {channel} is zero throughout; the "
                          f"repeatability analysis aligns on its first non-zero sample (seed 11.1)")
     per = round(period_s * fs)
     n = ds.sizes["t"]
-    first = int(nz[0])
+    first = nz[channel]
     start = first + round(align_s * fs)
     n_periods = max(0, (n - start - 1) // per)
     if n_periods < 2:
         raise ValueError(f"{name}: {n_periods} whole period(s) of {period_s:g} s after "
                          f"{channel}'s first command + {align_s:g} s "
                          f"({(n - start) / fs:.3g} s left); at least two are needed")
-    stop = start + n_periods * per
-    sig = {s: np.asarray(ds[s].values, dtype=float)[start:stop] for s in _SIGNALS}
-    return AlignedRecord(name=name, channel=channel, fs_hz=fs, first_command_index=first,
-                         start_index=start, period_samples=per, n_periods=n_periods, signals=sig)
+    return PeriodAlignment(name=name, channel=channel, fs_hz=fs, first_command_index=first,
+                           start_index=start, period_samples=per, n_periods=n_periods)
 
 
-@dataclass(frozen=True)
+def align_periods(ds: xr.Dataset, *, name: str | None = None, align_s: float = 1.0,
+                  period_s: float = 1.0) -> AlignedRecord:
+    """:func:`find_alignment` and the aligned signals, in memory (short records).
+
+    Raises
+    ------
+    ValueError
+        As :func:`find_alignment`.
+    """
+    al = find_alignment(ds, name=name, align_s=align_s, period_s=period_s)
+    sl = slice(al.start_index, al.stop_index)
+    sig = {s: np.asarray(ds[s].isel(t=sl).values, dtype=float) for s in _SIGNALS}
+    return AlignedRecord(**{f.name: getattr(al, f.name) for f in fields(PeriodAlignment)},
+                         signals=sig)
+
+
+@dataclass(frozen=True, eq=False)
 class RepeatabilityRecord:
     """Seed 11.3–11.7 on one record (SI units).
 
-    Arrays: ``va_periods_m``, ``va_lpf_periods_m``, ``command_periods_v``,
-    ``tracking_distance_periods_m`` of shape (n_periods, P); ``repeatable_m``,
-    ``repeatable_lpf_m`` (P,); spectra on ``f_hz`` (F,): ``psd_tracking_rad2_per_hz``
-    (F, 2), ``psd_distance_m2_per_hz`` (F,) (traced law, both axes),
+    Folded over the periods, shape (P,) whatever the record's length:
+    ``repeatable_m``, ``repeatable_lpf_m`` (mean over periods of ``Va`` and of
+    its low pass); ``va_min_m``, ``va_max_m`` (smallest and largest ``Va`` at
+    each position, less the record's mean); ``va_nonrep_min_m``,
+    ``va_nonrep_max_m`` (of ``Va`` less the repeatable part);
+    ``va_lpf_settled_nonrep_min_m``, ``…_max_m`` (the low-passed periods 2 … n
+    less their own mean); ``va_lpf_first_nonrep_m`` (the first low-passed
+    period less ``repeatable_lpf_m``); ``tracking_distance_repeatable_m``.
+    ``envelopes``: min/max/mean per bin over the aligned record
+    (:data:`ENVELOPE_BINS`) of ``command`` [V], ``Vph``, ``Vpv`` [V], ``Va``
+    (less its mean), ``tracking_distance``, ``Va_nonrep``,
+    ``tracking_distance_nonrep`` [m], time from the alignment. Spectra on
+    ``f_hz`` (F,): ``psd_tracking_rad2_per_hz`` (F, 2),
+    ``psd_distance_m2_per_hz`` (F,) (traced law, both axes),
     ``psd_distance_seed_m2_per_hz`` (F, 2) (seed's ``L α²/2`` per axis),
     ``psd_va_m2_per_hz`` (F,).
     """
@@ -152,45 +228,121 @@ class RepeatabilityRecord:
     tracking_distance_std_m: float
     tracking_distance_nonrep_rms_m: float
     seed_law_distance_std_m: tuple[float, float]
-    va_periods_m: FloatArray
-    va_lpf_periods_m: FloatArray
-    command_periods_v: FloatArray
-    tracking_distance_periods_m: FloatArray
     repeatable_m: FloatArray
     repeatable_lpf_m: FloatArray
+    va_min_m: FloatArray
+    va_max_m: FloatArray
+    va_nonrep_min_m: FloatArray
+    va_nonrep_max_m: FloatArray
+    va_lpf_settled_nonrep_min_m: FloatArray
+    va_lpf_settled_nonrep_max_m: FloatArray
+    va_lpf_first_nonrep_m: FloatArray
+    tracking_distance_repeatable_m: FloatArray
+    envelopes: Mapping[str, Envelope]
     f_hz: FloatArray
     psd_tracking_rad2_per_hz: FloatArray
     psd_distance_m2_per_hz: FloatArray
     psd_distance_seed_m2_per_hz: FloatArray
     psd_va_m2_per_hz: FloatArray
 
+    @property
+    def period_samples(self) -> int:
+        """Samples per period P."""
+        return int(self.repeatable_m.size)
+
     def to_json(self) -> dict[str, object]:
         """Scalars, (h, v) pairs as ``{"h", "v"}``; the seed's numbers for this direction
-        under ``seed``."""
+        under ``seed`` (arrays and envelopes are left out)."""
         out: dict[str, object] = {}
         for f in fields(self):
             v = getattr(self, f.name)
-            if isinstance(v, np.ndarray):
+            if isinstance(v, (np.ndarray, Mapping)):
                 continue
             out[f.name] = hv(v) if isinstance(v, tuple) else v  # every tuple field is (h, v)
         out["seed"] = {k[2:]: v for k, v in SEED_11.items() if k.startswith(f"{self.direction}_")}
         return out
 
 
-def _nonrep(periods: FloatArray) -> tuple[FloatArray, float]:
-    rep = periods.mean(axis=0)
-    return rep, float(np.sqrt(np.mean((periods - rep) ** 2)))
+class _Fold:
+    """Sum, minimum and maximum over periods at each of the P positions, the first period
+    apart (kept whole) from the others, for samples given block after block."""
+
+    def __init__(self, per: int) -> None:
+        self.per = per
+        self.first = np.zeros(per)
+        self.rest_sum = np.zeros(per)
+        self.rest_min = np.full(per, np.inf)
+        self.rest_max = np.full(per, -np.inf)
+        self._pos = 0
+
+    def update(self, x: FloatArray) -> None:
+        per, i = self.per, 0
+        while i < x.size:
+            k, p = divmod(self._pos + i, per)
+            if p == 0 and k >= 1 and x.size - i >= per:
+                m = (x.size - i) // per
+                rows = x[i:i + m * per].reshape(m, per)
+                self.rest_sum += rows.sum(axis=0)
+                np.minimum(self.rest_min, rows.min(axis=0), out=self.rest_min)
+                np.maximum(self.rest_max, rows.max(axis=0), out=self.rest_max)
+                i += m * per
+                continue
+            j = min(x.size, i + per - p)
+            seg, sl = x[i:j], slice(p, p + j - i)
+            if k == 0:
+                self.first[sl] = seg
+            else:
+                self.rest_sum[sl] += seg
+                np.minimum(self.rest_min[sl], seg, out=self.rest_min[sl])
+                np.maximum(self.rest_max[sl], seg, out=self.rest_max[sl])
+            i = j
+        self._pos += x.size
+
+    def mean(self, n_periods: int) -> FloatArray:
+        """Mean over all periods, (P,)."""
+        return (self.first + self.rest_sum) / n_periods
+
+
+class _Signals:
+    """What both reads derive from a block: ``Va − s``, its low pass, the beam angle and the
+    distance equivalents (the same arithmetic in both reads, so their samples agree)."""
+
+    def __init__(self, *, params: BenchParams, fs_hz: float, lpf_hz: float, shift_m: float,
+                 ) -> None:
+        gd = params.quad_diode.gain_v_per_rad.as_array()
+        self.gd = (float(gd[0]), float(gd[1]))
+        self.rot_t = rotation(params.quad_diode.rotation_rad).T
+        self.c = np.asarray(distance_coefficients(params))
+        self.shift = shift_m
+        self.log_a = -2.0 * math.pi * lpf_hz / fs_hz
+        # a^k underflows to 0 past here: the step response s(1 − a^k) is then s.
+        self.k_step = math.ceil(760.0 / -self.log_a) + 1
+        self.lowpass = LowpassStream(cutoff_hz=lpf_hz, fs_hz=fs_hz)
+
+    def derive(self, offset: int, block: Mapping[str, FloatArray]) -> dict[str, FloatArray]:
+        va = block["Va"] - self.shift
+        lpf = self.lowpass.filter(va)  # lsim from rest of Va − s
+        if offset < self.k_step:  # … of Va, less s: minus s·a^k (the step response's start)
+            k = np.arange(offset, min(offset + va.size, self.k_step))
+            lpf[:k.size] -= self.shift * np.exp(k * self.log_a)
+        r = np.stack([block["Vph"] / self.gd[0], block["Vpv"] / self.gd[1]])  # beam angle [rad]
+        alpha = self.rot_t @ r  # table frame
+        seed = 0.5 * SEED_11["law_length_m"] * r**2
+        return {"va": va, "lpf": lpf, "rh": r[0], "rv": r[1], "dist": self.c @ alpha**2,
+                "seed_h": seed[0], "seed_v": seed[1]}
 
 
 def analyse_repeatability(ds: xr.Dataset, *, params: BenchParams, name: str | None = None,
-                          align_s: float = 1.0, period_s: float = 1.0,
-                          lpf_hz: float = 10.0) -> RepeatabilityRecord:
-    """Seed 11 on one record (``data_rep_h`` or ``data_rep_v``).
+                          align_s: float = 1.0, period_s: float = 1.0, lpf_hz: float = 10.0,
+                          n_bins: int = ENVELOPE_BINS,
+                          block_samples: int = BLOCK_SAMPLES) -> RepeatabilityRecord:
+    """Seed 11 on one record (``data_rep_h`` or ``data_rep_v``), read twice in blocks.
 
     Parameters
     ----------
     ds : xarray.Dataset
-        Record with ``Unh, Unv, Vph, Vpv, Va`` on ``t``, attribute ``fs_hz``.
+        Record with ``Unh, Unv, Vph, Vpv, Va`` on ``t`` (NumPy or Dask, N samples),
+        attribute ``fs_hz``.
     params : BenchParams
         4QD gains (``R = Vp/Gd``), geometry and beam factors (the distance law).
     name : str, optional
@@ -199,51 +351,117 @@ def analyse_repeatability(ds: xr.Dataset, *, params: BenchParams, name: str | No
         Delay after the first command and period [s] (seed: 1 s, 1 s).
     lpf_hz : float
         Corner of the low pass of 11.6 [Hz].
+    n_bins : int
+        Bins of the envelopes (at most the aligned samples).
+    block_samples : int
+        Samples per block read (memory: a few blocks of each signal).
 
     Raises
     ------
     ValueError
-        As :func:`align_periods`.
+        As :func:`find_alignment`; NaN or infinite samples (naming the signal).
     """
-    rec = align_periods(ds, name=name, align_s=align_s, period_s=period_s)
-    fs, n, per = rec.fs_hz, rec.n_periods, rec.period_samples
-    sig = rec.signals
-    va = sig["Va"]
-    vaf = first_order_lowpass(va, cutoff_hz=lpf_hz, fs_hz=fs)
-    va_p, vaf_p = va.reshape(n, per), vaf.reshape(n, per)
-    rep, nonrep = _nonrep(va_p)
-    rep_f, nonrep_f = _nonrep(vaf_p)
-    nonrep_settled = _nonrep(vaf_p[1:])[1] if n >= 3 else None
-    gd = params.quad_diode.gain_v_per_rad.as_array()
-    r = np.stack([sig["Vph"] / gd[0], sig["Vpv"] / gd[1]])  # (2, N) measured beam angle [rad]
-    alpha = rotation(params.quad_diode.rotation_rad).T @ r  # table frame
-    c = np.asarray(distance_coefficients(params))
-    dist = c @ alpha**2
-    law = SEED_11["law_length_m"]
-    seed_dist = 0.5 * law * r**2
-    dist_p = dist.reshape(n, per)
-    _, dist_nonrep = _nonrep(dist_p)
-    spectra = [seed_welch(x, fs_hz=fs, name=f"{rec.name}.{lab}") for x, lab in
-               ((r[0], "Rh"), (r[1], "Rv"), (dist, "dL"), (seed_dist[0], "dLh_seed"),
-                (seed_dist[1], "dLv_seed"), (va - va.mean(), "Va"))]
-    direction = {"Unh": "h", "Unv": "v"}[rec.channel]
+    al = find_alignment(ds, name=name, align_s=align_s, period_s=period_s,
+                        block_samples=block_samples)
+    fs, n, per = al.fs_hz, al.n_periods, al.period_samples
+    total = n * per
+    bins = min(n_bins, total)
+    signals = {k: ds[k].data for k in (al.channel, "Vph", "Vpv", "Va")}
+
+    def blocks(keys: tuple[str, ...]) -> Iterator[tuple[int, dict[str, FloatArray]]]:
+        for offset, block in read_blocks({k: signals[k] for k in keys}, start=al.start_index,
+                                         stop=al.stop_index, block_samples=block_samples):
+            for k, x in block.items():
+                if not np.all(np.isfinite(x)):
+                    first = al.start_index + offset + int(np.flatnonzero(~np.isfinite(x))[0])
+                    raise ValueError(f"{al.name}.{k} contains NaN or infinite samples (first "
+                                     f"at sample {first}); remove or interpolate them")
+            yield offset, block
+
+    shift = float(np.asarray(signals["Va"][al.start_index]))
+    options = WelchOptions.from_matlab(window=hanning(math.ceil(fs)), noverlap=None, nfft=None,
+                                       fs_hz=fs)
+    keys_psd = ("rh", "rv", "dist", "seed_h", "seed_v")
+
+    def envelope() -> EnvelopeStream:
+        return EnvelopeStream(n_samples=total, n_bins=bins, fs_hz=fs)
+
+    # Read 1: folds, means, spectra and envelopes of the raw signals.
+    derived = _Signals(params=params, fs_hz=fs, lpf_hz=lpf_hz, shift_m=shift)
+    sums = {k: SumStream() for k in ("va", "rh", "rv", "dist", "seed_h", "seed_v")}
+    welch = {k: WelchStream(options=options, n_samples=total, name=f"{al.name}.{k}")
+             for k in (*keys_psd, "va")}
+    fold_va, fold_lpf, fold_dist = _Fold(per), _Fold(per), _Fold(per)
+    env = {k: envelope() for k in ("command", "Vph", "Vpv", "tracking_distance")}
+    for offset, block in blocks((al.channel, "Vph", "Vpv", "Va")):
+        d = derived.derive(offset, block)
+        for k, s in sums.items():
+            s.update(d[k])
+        for k in keys_psd:
+            welch[k].update(d[k])
+        fold_va.update(d["va"])
+        fold_lpf.update(d["lpf"])
+        fold_dist.update(d["dist"])
+        env["command"].update(block[al.channel])
+        env["Vph"].update(block["Vph"])
+        env["Vpv"].update(block["Vpv"])
+        env["tracking_distance"].update(d["dist"])
+    va_mean = sums["va"].mean  # of Va − s
+    rep = fold_va.mean(n)
+    rep_f = fold_lpf.mean(n)
+    rep_settled = fold_lpf.rest_sum / (n - 1)
+    rep_dist = fold_dist.mean(n)
+
+    # Read 2: what needs the repeatable parts and the means.
+    derived = _Signals(params=params, fs_hz=fs, lpf_hz=lpf_hz, shift_m=shift)
+    nonrep = {k: SumStream() for k in ("va", "lpf", "settled", "dist")}
+    centred = {k: SumStream() for k in ("dist", "seed_h", "seed_v")}
+    env2 = {k: envelope() for k in ("Va", "Va_nonrep", "tracking_distance_nonrep")}
+    for offset, block in blocks(("Vph", "Vpv", "Va")):
+        d = derived.derive(offset, block)
+        pos = np.arange(offset, offset + d["va"].size) % per
+        va_nonrep = d["va"] - rep[pos]
+        nonrep["va"].update(va_nonrep)
+        nonrep["lpf"].update(d["lpf"] - rep_f[pos])
+        later = max(0, per - offset)  # samples of the first period in this block
+        if later < pos.size:
+            nonrep["settled"].update(d["lpf"][later:] - rep_settled[pos[later:]])
+        dist_nonrep = d["dist"] - rep_dist[pos]
+        nonrep["dist"].update(dist_nonrep)
+        for k, s in centred.items():
+            s.update(d[k] - sums[k].mean)
+        va_c = d["va"] - va_mean
+        welch["va"].update(va_c)
+        env2["Va"].update(va_c)
+        env2["Va_nonrep"].update(va_nonrep)
+        env2["tracking_distance_nonrep"].update(dist_nonrep)
+    psd = {k: np.asarray(w.result().values, dtype=float) for k, w in welch.items()}
+    f_hz = np.asarray(welch["va"].result().f_hz, dtype=float)
+    nonrep_rms = nonrep["va"].rms
+    va_lo = np.minimum(fold_va.first, fold_va.rest_min)
+    va_hi = np.maximum(fold_va.first, fold_va.rest_max)
     return RepeatabilityRecord(
-        name=rec.name, direction=direction, channel=rec.channel, fs_hz=fs,
-        period_s=per / fs, n_periods=n, start_s=rec.start_index / fs,
-        nonrep_rms_m=nonrep, nonrep_rms_unbiased_m=nonrep * math.sqrt(n / (n - 1)),
-        nonrep_rms_lpf_m=nonrep_f, nonrep_rms_lpf_settled_m=nonrep_settled,
+        name=al.name, direction={"Unh": "h", "Unv": "v"}[al.channel], channel=al.channel,
+        fs_hz=fs, period_s=per / fs, n_periods=n, start_s=al.start_index / fs,
+        nonrep_rms_m=nonrep_rms, nonrep_rms_unbiased_m=nonrep_rms * math.sqrt(n / (n - 1)),
+        nonrep_rms_lpf_m=nonrep["lpf"].rms,
+        nonrep_rms_lpf_settled_m=nonrep["settled"].rms if n >= 3 else None,
         repeatable_ptp_m=float(np.ptp(rep)),
-        tracking_rms_rad=(float(np.sqrt(np.mean(r[0] ** 2))), float(np.sqrt(np.mean(r[1] ** 2)))),
-        tracking_distance_mean_m=float(dist.mean()), tracking_distance_std_m=float(dist.std()),
-        tracking_distance_nonrep_rms_m=dist_nonrep,
-        seed_law_distance_std_m=(float(seed_dist[0].std()), float(seed_dist[1].std())),
-        va_periods_m=va_p, va_lpf_periods_m=vaf_p,
-        command_periods_v=sig[rec.channel].reshape(n, per), tracking_distance_periods_m=dist_p,
-        repeatable_m=rep, repeatable_lpf_m=rep_f, f_hz=np.asarray(spectra[0].f_hz),
-        psd_tracking_rad2_per_hz=np.stack([np.asarray(spectra[0].values, dtype=float),
-                                           np.asarray(spectra[1].values, dtype=float)], axis=1),
-        psd_distance_m2_per_hz=np.asarray(spectra[2].values, dtype=float),
-        psd_distance_seed_m2_per_hz=np.stack([np.asarray(spectra[3].values, dtype=float),
-                                              np.asarray(spectra[4].values, dtype=float)],
-                                             axis=1),
-        psd_va_m2_per_hz=np.asarray(spectra[5].values, dtype=float))
+        tracking_rms_rad=(sums["rh"].rms, sums["rv"].rms),
+        tracking_distance_mean_m=sums["dist"].mean, tracking_distance_std_m=centred["dist"].rms,
+        tracking_distance_nonrep_rms_m=nonrep["dist"].rms,
+        seed_law_distance_std_m=(centred["seed_h"].rms, centred["seed_v"].rms),
+        repeatable_m=shift + rep, repeatable_lpf_m=shift + rep_f,
+        va_min_m=va_lo - va_mean, va_max_m=va_hi - va_mean,
+        va_nonrep_min_m=va_lo - rep, va_nonrep_max_m=va_hi - rep,
+        va_lpf_settled_nonrep_min_m=fold_lpf.rest_min - rep_settled,
+        va_lpf_settled_nonrep_max_m=fold_lpf.rest_max - rep_settled,
+        va_lpf_first_nonrep_m=fold_lpf.first - rep_f,
+        tracking_distance_repeatable_m=rep_dist,
+        envelopes={**{k: e.result() for k, e in env.items()},
+                   **{k: e.result() for k, e in env2.items()}},
+        f_hz=f_hz,
+        psd_tracking_rad2_per_hz=np.stack([psd["rh"], psd["rv"]], axis=1),
+        psd_distance_m2_per_hz=psd["dist"],
+        psd_distance_seed_m2_per_hz=np.stack([psd["seed_h"], psd["seed_v"]], axis=1),
+        psd_va_m2_per_hz=psd["va"])

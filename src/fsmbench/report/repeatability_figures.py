@@ -6,7 +6,11 @@ filtering): one figure, with Fig. 49 (the non-repeatable part) below. Fig. 52
 (the non-repeatable part after the low pass) separates the filter's
 start-up transient (first period) from the settled periods (errata E32).
 Periods are drawn as their range (smallest and largest value at each
-instant), which stays readable for any number of periods.
+instant), which stays readable for any number of periods; time plots draw
+each signal's min/max envelope over the record (a few thousand points
+whatever its length). Both come folded or binned from the analysis
+(:class:`~fsmbench.budget.repeatability.RepeatabilityRecord`), so a night-long
+record is drawn without reading it again.
 """
 
 from __future__ import annotations
@@ -16,12 +20,14 @@ from collections.abc import Mapping
 import numpy as np
 import xarray as xr
 
-from fsmbench.budget.huddle import trim_huddle
-from fsmbench.budget.repeatability import RepeatabilityRecord, align_periods
-from fsmbench.budget.signals import is_lazy
+from fsmbench.budget.repeatability import ENVELOPE_BINS, RepeatabilityRecord
+from fsmbench.budget.signals import trim_record
 from fsmbench.budget.study import NonRepeatability
 from fsmbench.report.budget_figures import asd_line, cumulative_line
 from fsmbench.report.figure import H_COLOR, PALETTE, V_COLOR, Figure, Line, Panel, Rule
+from fsmbench.report.stability_figures import time_axis
+from fsmbench.scale.envelope import Envelope
+from fsmbench.scale.streaming import EnvelopeStream, SumStream, read_blocks
 
 __all__ = [
     "direction_words",
@@ -51,34 +57,70 @@ def _axis_color(direction: str) -> str:
     return H_COLOR if direction == "h" else V_COLOR
 
 
-def repeatability_time_figure(reps: Mapping[str, RepeatabilityRecord],
-                              recordings: Mapping[str, xr.Dataset]) -> Figure:
+def _envelope_line(env: Envelope, *, divisor: float, scale: float, name: str, color: str,
+                   group: str = "", width: float = 1.0) -> Line:
+    """A min/max envelope as one line: each bin's minimum then maximum at its centre."""
+    t = np.repeat(env.t_s / divisor, 2)
+    y = np.empty(2 * env.minimum.size)
+    y[0::2], y[1::2] = env.minimum, env.maximum
+    return Line(t, y * scale, name=name, color=color, width=width, group=group)
+
+
+def _aligned_axis(reps: Mapping[str, RepeatabilityRecord]) -> tuple[float, str]:
+    """Divisor and label of the time after the alignment (s, min or h by the longest)."""
+    divisor, label = time_axis(max(r.n_periods * r.period_s for r in reps.values()))
+    return divisor, label.replace("Time", "Time after alignment")
+
+
+def _huddle_va(ds: xr.Dataset, *, name: str, n_max: int,
+               n_bins: int) -> tuple[Envelope, float, int]:
+    """Va of a huddle test after the seed's trim, its first ``n_max`` samples at most:
+    envelope less its mean [m], rms about the mean [m], samples (read twice in blocks)."""
+    fs = float(ds.attrs["fs_hz"])
+    trim = trim_record(ds, t0_s=1.0, duration_s=None, fs_hz=fs)
+    n = min(n_max, trim.n)
+    if n < 1:
+        raise ValueError(f"{name}: no sample left after removing t < 1 s")
+    va = {"Va": ds["Va"].data}
+    stop = trim.start + n
+    sums = SumStream(shift=float(np.asarray(va["Va"][trim.start])))  # nm under an offset
+    for _, block in read_blocks(va, start=trim.start, stop=stop):
+        sums.update(block["Va"])
+    mean, centred = sums.mean, SumStream()
+    env = EnvelopeStream(n_samples=n, n_bins=min(n_bins, n), fs_hz=fs)
+    for _, block in read_blocks(va, start=trim.start, stop=stop):
+        centred.update(block["Va"] - mean)
+        env.update(block["Va"] - mean)
+    return env.result(), centred.rms, n
+
+
+def repeatability_time_figure(reps: Mapping[str, RepeatabilityRecord]) -> Figure:
     """Seed Fig. 44: command, Vph, Vpv and Va after the alignment; one column per record."""
     recs = list(reps.values())
     rows: list[list[Panel]] = [[], [], [], []]
+    div, x_label = _aligned_axis(reps)
     for r in recs:
-        al = align_periods(recordings[r.name], name=r.name)
-        s = al.signals
-        t = np.arange(s["Va"].size) / r.fs_hz
+        env = r.envelopes
         title = direction_words(r)
         rows[0].append(Panel(
-            (Line(t, s[r.channel], name=f"Newport command {r.channel}",
-                  color=_axis_color(r.direction), decimate=True, width=1.0),),
-            "Time after alignment [s]", f"Newport command {r.channel} [V]", title=title))
+            (_envelope_line(env["command"], divisor=div, scale=1.0,
+                            name=f"Newport command {r.channel}", color=_axis_color(r.direction)),),
+            x_label, f"Newport command {r.channel} [V]", title=title))
         for k, (v, color) in enumerate((("Vph", H_COLOR), ("Vpv", V_COLOR))):
             rows[1 + k].append(Panel(
-                (Line(t, s[v] * MV, name=f"{v} (4QD {'horizontal' if v == 'Vph' else 'vertical'})",
-                      color=color, group=v, decimate=True, width=1.0),),
-                "Time after alignment [s]", f"{v} [mV]"))
+                (_envelope_line(env[v], divisor=div, scale=MV, color=color, group=v,
+                                name=f"{v} (4QD {'horizontal' if v == 'Vph' else 'vertical'})"),),
+                x_label, f"{v} [mV]"))
         rows[3].append(Panel(
-            (Line(t, (s["Va"] - s["Va"].mean()) * NM, name="Va, mean removed",
-                  color="#333333", group="Va", decimate=True, width=1.0),),
-            "Time after alignment [s]", "Va, mean removed [nm]"))
+            (_envelope_line(env["Va"], divisor=div, scale=NM, name="Va, mean removed",
+                            color="#333333", group="Va"),),
+            x_label, "Va, mean removed [nm]"))
     return Figure(
         key="fig44_repeatability_time", title="Signals of the repeatability measurement",
         caption="From one second after the first Newport command, whole 1 s periods only "
                 "(seed 11.1): the Newport command, the 4QD (horizontal and vertical in separate "
-                "rows) and the Attocube distance; one column per record.",
+                "rows) and the Attocube distance; one column per record. Each line is the "
+                "smallest and largest value in each of a few thousand consecutive intervals.",
         panels=tuple(p for row in rows for p in row), seed_ref="Fig. 44", columns=len(recs),
         share_x=True)
 
@@ -86,14 +128,14 @@ def repeatability_time_figure(reps: Mapping[str, RepeatabilityRecord],
 def tracking_distance_figure(reps: Mapping[str, RepeatabilityRecord]) -> Figure:
     """Seed Fig. 45: the tracking error's distance equivalent over time (traced law)."""
     panels = []
+    div, x_label = _aligned_axis(reps)
     for r in reps.values():
-        t = np.arange(r.tracking_distance_periods_m.size) / r.fs_hz
         seed_std = float(np.hypot(*r.seed_law_distance_std_m))
         panels.append(Panel(
-            (Line(t, r.tracking_distance_periods_m.ravel() * NM,
-                  name="tracking error as distance, traced law (6H + 4L)/16·α²",
-                  color=PALETTE[2], group="traced", decimate=True, width=1.0),),
-            "Time after alignment [s]", "Distance equivalent [nm]",
+            (_envelope_line(r.envelopes["tracking_distance"], divisor=div, scale=NM,
+                            name="tracking error as distance, traced law (6H + 4L)/16·α²",
+                            color=PALETTE[2], group="traced"),),
+            x_label, "Distance equivalent [nm]",
             title=f"{direction_words(r)}: beam angle {r.tracking_rms_rad[0] * UM:.3g} µrad rms "
                   f"(h), {r.tracking_rms_rad[1] * UM:.3g} µrad rms (v); distance "
                   f"{r.tracking_distance_std_m * NM:.3g} nm std (seed's law "
@@ -161,9 +203,9 @@ def tracking_vs_distance_figure(reps: Mapping[str, RepeatabilityRecord]) -> Figu
         panels=tuple(panels), seed_ref="Fig. 47", columns=len(panels))
 
 
-def _range_lines(tp: np.ndarray, periods: np.ndarray, *, name: str) -> tuple[Line, Line]:
+def _range_lines(tp: np.ndarray, lo: np.ndarray, hi: np.ndarray, *,
+                 name: str) -> tuple[Line, Line]:
     """Minimum and maximum over periods at each instant (grey), one legend entry."""
-    lo, hi = periods.min(axis=0), periods.max(axis=0)
     return (Line(tp, lo * NM, name=name, color=_PERIOD_COLOR, width=1.0, group="range",
                  decimate=True),
             Line(tp, hi * NM, name=name, color=_PERIOD_COLOR, width=1.0, group="range",
@@ -187,17 +229,18 @@ def periods_figure(reps: Mapping[str, RepeatabilityRecord]) -> Figure:
     recs = list(reps.values())
     top, bottom = [], []
     for r in recs:
-        tp = np.arange(r.va_periods_m.shape[1]) / r.fs_hz
-        off = r.va_periods_m.mean()
+        tp = np.arange(r.period_samples) / r.fs_hz
+        off = r.repeatable_m.mean()  # the record's mean (whole periods)
         top.append(Panel(
-            (*_range_lines(tp, r.va_periods_m - off, name="range over the periods"),
+            (*_range_lines(tp, r.va_min_m, r.va_max_m, name="range over the periods"),
              Line(tp, (r.repeatable_m - off) * NM, name="mean over periods (repeatable part)",
                   color="#000000", width=1.2, dash="dash", group="mean")),
             "Time in the period [s]", "Va, record mean removed [nm]",
             title=f"{direction_words(r)}: {r.n_periods} periods, repeatable part "
                   f"{r.repeatable_ptp_m * NM:.4g} nm peak to peak"))
         bottom.append(Panel(
-            _range_lines(tp, r.va_periods_m - r.repeatable_m, name="range over the periods"),
+            _range_lines(tp, r.va_nonrep_min_m, r.va_nonrep_max_m,
+                         name="range over the periods"),
             "Time in the period [s]", "Non-repeatable Va [nm]",
             rules=_rms_rules(r.nonrep_rms_m),
             title=f"Non-repeatable part: {r.nonrep_rms_m * NM:.3g} nm rms"))
@@ -223,16 +266,16 @@ def nonrep_part_figure(reps: Mapping[str, RepeatabilityRecord]) -> Figure:
     recs = list(reps.values())
     top, bottom = [], []
     for r in recs:
-        tp = np.arange(r.va_periods_m.shape[1]) / r.fs_hz
-        settled = r.va_lpf_periods_m[1:]
+        tp = np.arange(r.period_samples) / r.fs_hz
         rms = r.nonrep_rms_lpf_settled_m
         top.append(Panel(
-            _range_lines(tp, settled - settled.mean(axis=0), name="range over the periods"),
+            _range_lines(tp, r.va_lpf_settled_nonrep_min_m, r.va_lpf_settled_nonrep_max_m,
+                         name="range over the periods"),
             "Time in the period [s]", "Non-repeatable Va [nm]", rules=_rms_rules(rms),
             title=f"{direction_words(r)}: periods 2 to {r.n_periods} (settled)"
                   + ("" if rms is None else f", {rms * NM:.3g} nm rms")))
         bottom.append(Panel(
-            (Line(tp, (r.va_lpf_periods_m[0] - r.repeatable_lpf_m) * NM,
+            (Line(tp, r.va_lpf_first_nonrep_m * NM,
                   name="first period (the filter's start-up transient)",
                   color=_TRANSIENT_COLOR, width=1.2, group="transient"),),
             "Time in the period [s]", "First period [nm]",
@@ -262,18 +305,16 @@ def nonrep_contributions_figure(reps: Mapping[str, RepeatabilityRecord],
     """
     panels = []
     longest = 0
+    div, x_label = _aligned_axis(reps)
     for r in reps.values():
-        t = np.arange(r.va_periods_m.size) / r.fs_hz
-        longest = max(longest, t.size)
-        va = (r.va_periods_m - r.repeatable_m).ravel()
-        tr = (r.tracking_distance_periods_m
-              - r.tracking_distance_periods_m.mean(axis=0)).ravel()
+        longest = max(longest, r.n_periods * r.period_samples)
         panels.append(Panel(
-            (Line(t, va * NM, name="Va, non-repeatable part", color="#333333", group="va",
-                  decimate=True, width=1.0),
-             Line(t, tr * NM, name="tracking error as distance, non-repeatable part",
-                  color=PALETTE[2], group="tracking", decimate=True, width=1.0)),
-            "Time after alignment [s]", "Distance [nm]",
+            (_envelope_line(r.envelopes["Va_nonrep"], divisor=div, scale=NM,
+                            name="Va, non-repeatable part", color="#333333", group="va"),
+             _envelope_line(r.envelopes["tracking_distance_nonrep"], divisor=div, scale=NM,
+                            name="tracking error as distance, non-repeatable part",
+                            color=PALETTE[2], group="tracking")),
+            x_label, "Distance [nm]",
             title=f"{direction_words(r)}: Va {r.nonrep_rms_m * NM:.3g} nm rms, tracking error "
                   f"{r.tracking_distance_nonrep_rms_m * NM:.3g} nm rms"))
     huddles = {nr.huddle_test for nr in nonrep.values()
@@ -282,21 +323,17 @@ def nonrep_contributions_figure(reps: Mapping[str, RepeatabilityRecord],
                "tracking error's distance equivalent (traced law), one panel per record")
     for name in sorted(huddles):
         ds = recordings[name]
-        if is_lazy(ds["Va"].data):
-            # A long huddle test: only its start is drawn next to the repeatability record.
-            ds = ds.isel(t=slice(0, longest + 2 * round(float(ds.attrs["fs_hz"])))).compute()
-        sig = trim_huddle(ds, name=name)
-        n = min(longest, sig["Va"].size)
-        hv = sig["Va"][:n] - sig["Va"][:n].mean()
+        # Its start, as long as the longest record, read in blocks (it may be out of core).
+        env, rms, n = _huddle_va(ds, name=name, n_max=longest, n_bins=ENVELOPE_BINS)
         number = name.rsplit("_", 1)[-1]
         config = (huddle_configs or {}).get(name, "")
         what = f" ({config})" if config else ""
         panels.append(Panel(
-            (Line(sig["t"][:n], hv * NM, name=f"Va in huddle test {number} (nothing moves)",
-                  color=PALETTE[0], group="huddle", decimate=True, width=1.0),),
-            "Time [s]", "Distance [nm]",
+            (_envelope_line(env, divisor=div, scale=NM, color=PALETTE[0], group="huddle",
+                            name=f"Va in huddle test {number} (nothing moves)"),),
+            x_label.replace("Time after alignment", "Time after the trim"), "Distance [nm]",
             title=f"Huddle test {number}{what}, nothing moves: "
-                  f"{float(np.sqrt(np.mean(hv**2))) * NM:.3g} nm rms over "
+                  f"{rms * NM:.3g} nm rms over "
                   f"{n / float(recordings[name].attrs['fs_hz']):g} s"))
         caption += f"; last panel: Va in huddle test {number}{what} over the same length"
     return Figure(

@@ -65,7 +65,7 @@ def repeatability_section(result: BudgetResult, *,
     if missing:
         s1.append("Not analysed: " + "; ".join(f"{n} ({result.skipped[n]})" for n in missing)
                   + ".")
-    s1.append(repeatability_time_figure(reps, recordings))
+    s1.append(repeatability_time_figure(reps))
     gd = result.noise.qd_gain_v_per_rad
     s3: tuple[Block, ...] = (
         "The 4QD measures the beam angle the loop leaves, α = Vp/Gd(0) with Gd(0) = "
