@@ -46,6 +46,9 @@ def test_detects_period_and_rejects_noise(rng: np.random.Generator) -> None:
     assert detect_period(u) == N
     assert detect_period(u + 0.1 * rng.standard_normal(u.size)) == N  # 20 dB SNR
     assert detect_period(rng.standard_normal(u.size)) is None
+    # low-pass noise correlates above 0.9 at lag 16 without repeating
+    slow = ss.lfilter([0.005], [1.0, -0.995], rng.standard_normal(20000))  # rho(16) = 0.92
+    assert detect_period(slow) is None
 
 
 def test_excited_lines_found() -> None:

@@ -54,6 +54,8 @@ _EXCITED_SNR = 10.0
 # this (normalised): noise excitation gives ~1/sqrt(L); a periodic input with a
 # 20 dB SNR still gives 0.99.
 _PERIODIC_CORRELATION = 0.9
+# ... after having fallen below this at a shorter lag (it decorrelates within a period).
+_DECORRELATED = 0.5
 
 
 @dataclass(frozen=True)
@@ -93,8 +95,10 @@ def detect_period(signal: ArrayLike, *, min_period: int = 16,
 
     The normalised correlation ``rho(N) = sum x(t) x(t+N) / sqrt(sum x(t)^2 sum x(t+N)^2)``
     (mean removed, over the overlap) is computed for every lag by one FFT; the
-    record is periodic with period ``N`` when ``rho(N) >= threshold`` and at
-    least two whole periods fit. Of the qualifying lags (``N``, ``2N``, ...
+    record is periodic with period ``N`` when ``rho(N) >= threshold`` after
+    ``rho`` has fallen below 0.5 at a shorter lag (a slowly varying signal
+    correlates at short lags without repeating) and at least two whole
+    periods fit. Of the qualifying lags (``N``, ``2N``, ...
     and their near neighbours) the smallest local maximum is returned.
 
     Parameters
@@ -127,8 +131,14 @@ def detect_period(signal: ArrayLike, *, min_period: int = 16,
     e_tail = c2[n] - c2[lags]
     with np.errstate(divide="ignore", invalid="ignore"):
         rho = acf / np.sqrt(e_head * e_tail)
-    rho[:min_period] = -np.inf
-    good = np.flatnonzero(np.nan_to_num(rho, nan=-np.inf) >= threshold)
+    rho = np.nan_to_num(rho, nan=-np.inf)
+    # a smooth (low-pass) signal correlates with itself at short lags without repeating:
+    # a period counts only after the correlation has first fallen below one half
+    below = np.flatnonzero(rho < _DECORRELATED)
+    if below.size == 0:
+        return None
+    rho[: max(min_period, int(below[0]))] = -np.inf
+    good = np.flatnonzero(rho >= threshold)
     if good.size == 0:
         return None
     k = int(good[0])

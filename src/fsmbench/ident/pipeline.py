@@ -35,7 +35,7 @@ import warnings as pywarnings
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
 import control as ct
 import numpy as np
@@ -117,6 +117,17 @@ class IdentifyOptions:
     refine_modes : bool
         Re-estimate each Sercalo mode's frequency and damping from the time
         records (:mod:`fsmbench.ident.modes`), which the 1 s window smears.
+    frf : {"auto", "welch", "lpm", "periodic"}
+        FRF estimator of the Sercalo and Newport matrices
+        (:func:`fsmbench.ident.sercalo.experiment_frf`). ``"auto"``: periodic
+        averaging when every experiment's input repeats with a period (three
+        whole periods at least), else Welch, the seed's estimator
+        (:func:`fsmbench.ident.sercalo.choose_estimator`).
+    weights : {"seed", "variance"}
+        Vector-fit weights: the seed's coherence recipe, or the inverse
+        standard deviation of every line (then the Sercalo's parameters carry
+        standard deviations, :mod:`fsmbench.ident.fit_std`). Overrides
+        ``sercalo.weights``.
     """
 
     window_s: float = 1.0
@@ -125,6 +136,14 @@ class IdentifyOptions:
     newport_band_hz: tuple[float, float] = (10.0, 100.0)
     current_amp_band_hz: tuple[float, float] = (20.0, 200.0)
     refine_modes: bool = True
+    frf: Literal["auto", "welch", "lpm", "periodic"] = "auto"
+    weights: Literal["seed", "variance"] = "seed"
+
+    def __post_init__(self) -> None:
+        if self.frf not in ("auto", "welch", "lpm", "periodic"):
+            raise ValueError(f"frf must be auto, welch, lpm or periodic, got {self.frf!r}")
+        if self.weights not in ("seed", "variance"):
+            raise ValueError(f"weights must be seed or variance, got {self.weights!r}")
 
     def to_json(self) -> dict[str, Any]:
         """Plain values."""
@@ -132,7 +151,7 @@ class IdentifyOptions:
                 "sercalo": dict(self.sercalo.__dict__),
                 "newport_band_hz": list(self.newport_band_hz),
                 "current_amp_band_hz": list(self.current_amp_band_hz),
-                "refine_modes": self.refine_modes}
+                "refine_modes": self.refine_modes, "frf": self.frf, "weights": self.weights}
 
 
 @dataclass(frozen=True, eq=False)
@@ -239,6 +258,9 @@ class Identification:
             "mode_refinement": None if self.modes is None else self.modes.to_json(),
             "validation": [v.to_json() for v in self.validation],
             "newport": None if self.newport is None else self.newport.summary(),
+            "frf_estimator": {name: part.frf.estimator
+                              for name, part in (("sercalo", self.sercalo),
+                                                 ("newport", self.newport)) if part is not None},
             "plant_blocks": self.plant_blocks,
             "skipped": self.skipped,
             "warnings": list(self.warnings),
@@ -377,9 +399,11 @@ def _identify(recordings: Mapping[str, xr.Dataset], *, bench: Bench, opts: Ident
         say("2.3 Sercalo: FRF matrix, delay, vector fitting")
         try:
             frf = experiment_frf(recordings, columns=[("data_uch", "Uch"), ("data_ucv", "Ucv")],
-                                 trims_s=opts.trims_s, window_s=opts.window_s)
+                                 trims_s=opts.trims_s, window_s=opts.window_s,
+                                 estimator=opts.frf)
+            say(f"2.3 Sercalo: FRF by {_ESTIMATOR_WORDS[frf.estimator]}")
             sercalo_id = fit_sercalo(frf, gi_a_per_v={a: g.gain_a_per_v for a, g in gi.items()},
-                                     options=opts.sercalo)
+                                     options=replace(opts.sercalo, weights=opts.weights))
             if opts.refine_modes:
                 say("2.3 Sercalo: refining the modes on the time records")
                 modes = refine_modes(recordings, sercalo=sercalo_id, trims_s=opts.trims_s)
@@ -399,7 +423,8 @@ def _identify(recordings: Mapping[str, xr.Dataset], *, bench: Bench, opts: Ident
         say("2.4 Newport: FRF matrix, delay and gains")
         try:
             nfrf = experiment_frf(recordings, columns=[("data_unh", "Unh"), ("data_unv", "Unv")],
-                                  trims_s=opts.trims_s, window_s=opts.window_s)
+                                  trims_s=opts.trims_s, window_s=opts.window_s,
+                                  estimator=opts.frf)
             newport_id = identify_newport(nfrf, band_hz=opts.newport_band_hz)
         except ValueError as exc:
             skipped["newport"] = f"failed (data_unh, data_unv): {exc}"
@@ -435,6 +460,9 @@ def _identify(recordings: Mapping[str, xr.Dataset], *, bench: Bench, opts: Ident
                           options=opts, source=source, warnings=warnings,
                           checks=tuple(checks), notices=tuple(notices))
 
+
+_ESTIMATOR_WORDS = {"welch": "Welch H1 (the seed's)", "lpm": "the local polynomial method",
+                    "periodic": "averaging over periods"}
 
 _QD_CHECKS = ("calibration_r2", "calibration_residual", "qd_gain_vs_nominal")
 

@@ -27,7 +27,7 @@ from __future__ import annotations
 import dataclasses
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, Literal
 
 import control as ct
 import numpy as np
@@ -35,7 +35,11 @@ import xarray as xr
 
 from fsmbench.ident.calibration import require_signals, trim_recording
 from fsmbench.ident.delay import DelayEstimate, estimate_delay, remove_delay
+from fsmbench.ident.fit_std import ParameterStd, sercalo_parameter_std
 from fsmbench.ident.frf import FrequencyResponse, combine_columns, spectral_matrix
+from fsmbench.ident.frf_estimate import FrfEstimate, combine_estimates
+from fsmbench.ident.frf_periodic import PeriodicOptions, detect_period, periodic_frf
+from fsmbench.ident.lpm import LpmOptions, local_polynomial_frf
 from fsmbench.ident.vectfit import VectorFit, VectorFitOptions, vector_fit
 from fsmbench.ident.welch import hanning
 
@@ -43,6 +47,7 @@ __all__ = [
     "NewportIdentification",
     "SercaloFitOptions",
     "SercaloIdentification",
+    "choose_estimator",
     "combined_delay",
     "detect_resonances",
     "experiment_frf",
@@ -50,7 +55,10 @@ __all__ = [
     "identify_newport",
     "refit_with_poles",
     "seed_weights",
+    "variance_weights",
 ]
+
+FrfEstimator = Literal["auto", "welch", "lpm", "periodic"]
 
 OUTPUTS = ("Vph", "Vpv")
 # Both mirrors are second-order mechanical systems: above their modes the
@@ -59,8 +67,31 @@ OUTPUTS = ("Vph", "Vpv")
 MIRROR_HIGH_FREQUENCY_SLOPE = -2.0
 
 
+def choose_estimator(recordings: Mapping[str, xr.Dataset], *,
+                     columns: Sequence[tuple[str, str]], trims_s: Mapping[str, float]) -> str:
+    """The "auto" rule: ``"periodic"`` when every column's input repeats, else ``"welch"``.
+
+    A record is periodic when its input correlates with itself shifted by one
+    period above 0.9 (:func:`fsmbench.ident.frf_periodic.detect_period`: one
+    FFT per record), with at least three whole periods (one dropped as the
+    transient, two for the noise estimate). Non-periodic (noise) excitation
+    keeps Welch's H1, the seed's estimator, so seed-style recordings give
+    today's results; ask for ``"lpm"`` explicitly for the LPM.
+    """
+    for experiment, signal in columns:
+        if experiment not in recordings or signal not in recordings[experiment]:
+            return "welch"  # experiment_frf reports what is missing
+        ds = trim_recording(recordings[experiment], t0_s=trims_s.get(experiment, 0.0))
+        u = np.asarray(ds[signal].values, dtype=float)
+        period = detect_period(u)
+        if period is None or u.size // period < 3:
+            return "welch"
+    return "periodic"
+
+
 def experiment_frf(recordings: Mapping[str, xr.Dataset], *, columns: Sequence[tuple[str, str]],
-                   trims_s: Mapping[str, float], window_s: float = 1.0) -> FrequencyResponse:
+                   trims_s: Mapping[str, float], window_s: float = 1.0,
+                   estimator: FrfEstimator = "welch") -> FrequencyResponse:
     """FRF matrix ``inputs → (Vph, Vpv)`` from single-input experiments.
 
     Parameters
@@ -71,21 +102,52 @@ def experiment_frf(recordings: Mapping[str, xr.Dataset], *, columns: Sequence[tu
     trims_s : mapping of experiment name to seconds
         Start of each record removed first (the seed's ``t0``).
     window_s : float
-        Hann window length [s] (seed: 1 s).
+        Hann window length [s] (seed: 1 s), Welch only.
+    estimator : {"welch", "lpm", "periodic", "auto"}
+        Welch H1 (the seed's); the local polynomial method on each whole
+        record (every experiment cut to the shortest one's length, kept from
+        its end, so that all columns share their lines; lines strided by the
+        window width, 13, so that they are nearly independent); periodic
+        averaging (one transient period dropped, the excited lines); or
+        :func:`choose_estimator`.
+
+    Returns
+    -------
+    FrequencyResponse
+        ``estimator`` says which; ``frf_variance`` set for LPM and periodic.
     """
-    parts = []
+    if estimator == "auto":
+        estimator = "periodic" if choose_estimator(
+            recordings, columns=columns, trims_s=trims_s) == "periodic" else "welch"
+    if estimator not in ("welch", "lpm", "periodic"):
+        raise ValueError(f"estimator must be auto, welch, lpm or periodic, got {estimator!r}")
+    data = []
     for experiment, signal in columns:
         if experiment not in recordings:
             raise ValueError(f"{experiment} is needed for the {signal} column and is missing")
         require_signals(recordings[experiment], (signal, *OUTPUTS),
                         purpose=f"the {signal} column of the FRF matrix")
         ds = trim_recording(recordings[experiment], t0_s=trims_s.get(experiment, 0.0))
-        fs = float(ds.attrs["fs_hz"])
-        parts.append(spectral_matrix(
-            ds[signal].values, np.column_stack([ds[o].values for o in OUTPUTS]),
-            input_names=[signal], output_names=list(OUTPUTS),
-            window=hanning(int(np.ceil(window_s * fs))), fs_hz=fs))
-    return combine_columns(parts)
+        data.append((experiment, signal, float(ds.attrs["fs_hz"]), np.asarray(ds[signal].values),
+                     np.column_stack([ds[o].values for o in OUTPUTS])))
+    if estimator == "welch":
+        return combine_columns([spectral_matrix(
+            u, y, input_names=[signal], output_names=list(OUTPUTS),
+            window=hanning(int(np.ceil(window_s * fs))), fs_hz=fs)
+            for _, signal, fs, u, y in data])
+    parts: list[FrfEstimate] = []
+    if estimator == "lpm":
+        length = min(u.size for *_, u, _y in data)
+        opts = LpmOptions(stride=2 * LpmOptions().n + 1)
+        parts = [local_polynomial_frf(u[-length:], y[-length:], fs_hz=fs, input_name=signal,
+                                      output_names=list(OUTPUTS), options=opts,
+                                      source=f"{exp}.mat")
+                 for exp, signal, fs, u, y in data]
+    else:
+        parts = [periodic_frf(u, y, fs_hz=fs, input_name=signal, output_names=list(OUTPUTS),
+                              options=PeriodicOptions(), source=f"{exp}.mat")
+                 for exp, signal, fs, u, y in data]
+    return combine_estimates(parts).to_frequency_response()
 
 
 def _path_delays(frf: FrequencyResponse, *, min_coherence: float) -> tuple[DelayEstimate, ...]:
@@ -147,6 +209,35 @@ def seed_weights(frf: FrequencyResponse, *, resonances_hz: Mapping[str, float],
     return w
 
 
+def variance_weights(frf: FrequencyResponse, *, f_max_hz: float = 1000.0) -> xr.DataArray:
+    """Inverse standard deviation of each line, ``1 / std(H)``, dims (frequency, output, input).
+
+    ``frf.frf_variance`` when the estimator gives it (periodic, LPM), else
+    Bendat & Piersol's ``var(H) = 2 (random_error |H|)^2`` of a Welch
+    estimate. As :func:`seed_weights`: 0 at DC and above ``f_max_hz`` (the
+    two-pole model is not meant for what lies above), and 0 where the
+    variance is not finite and positive. Weighted so, the fit's residuals have
+    unit variance (:mod:`fsmbench.ident.fit_std`).
+    """
+    if frf.frf_variance is not None:
+        var = frf.frf_variance
+    else:
+        var = 2.0 * (frf.random_error * np.abs(frf.frf)) ** 2
+    ok = np.isfinite(var) & (var > 0)
+    w = xr.where(ok, 1.0 / np.sqrt(var.where(ok, 1.0)), 0.0)
+    f = frf.frequency_hz
+    return w.where(xr.DataArray((f <= f_max_hz) & (f > 0), dims="frequency"), 0.0)
+
+
+def _fit_weights(weights: xr.DataArray, h: np.ndarray, keep: np.ndarray, kind: str
+                 ) -> np.ndarray:
+    """Weights given to the vector fit: seed weights over ``|H|`` (relative error), or 1/std."""
+    if kind == "variance":
+        return np.asarray(weights.values[keep], dtype=float)
+    mag = np.abs(h[keep])
+    return np.asarray(weights.values[keep] / np.where(mag > 0, mag, np.inf), dtype=float)
+
+
 @dataclass(frozen=True)
 class SercaloFitOptions:
     """Options of :func:`fit_sercalo`.
@@ -161,6 +252,9 @@ class SercaloFitOptions:
         Impose the delay instead of estimating it [s].
     n_poles : int, optional
         Model order; default two per detected resonance (one pair each).
+    weights : {"seed", "variance"}
+        The seed's coherence recipe over ``|H|`` (:func:`seed_weights`), or
+        the inverse standard deviation of each line (:func:`variance_weights`).
     """
 
     alpha: float = 0.1
@@ -169,6 +263,11 @@ class SercaloFitOptions:
     min_coherence: float = 0.9
     delay_s: float | None = None
     n_poles: int | None = None
+    weights: Literal["seed", "variance"] = "seed"
+
+    def __post_init__(self) -> None:
+        if self.weights not in ("seed", "variance"):
+            raise ValueError(f"weights must be seed or variance, got {self.weights!r}")
 
 
 @dataclass(frozen=True, eq=False)
@@ -186,7 +285,8 @@ class SercaloIdentification:
     resonances_hz : dict
         Detected peak per input (the starting poles).
     weights : xarray.DataArray
-        Seed weights used (before the ``1/|H|`` normalisation).
+        Seed weights used (before the ``1/|H|`` normalisation), or the
+        inverse standard deviations (``options.weights == "variance"``).
     fit : VectorFit
         Rational fit of the delay-free ``Uc → Vp`` matrix.
     gi_a_per_v : dict
@@ -197,6 +297,10 @@ class SercaloIdentification:
         Per element ``"Vph/Uch"``: rms relative magnitude error of the fit
         over 10 Hz–1 kHz where coherence > 0.9.
     options : SercaloFitOptions
+    parameter_std : ParameterStd or None
+        Resonance, damping and static gain per axis with standard deviations
+        propagated from the lines' variances (:mod:`fsmbench.ident.fit_std`);
+        None with the seed's weights (not inverse variances).
     """
 
     frf: FrequencyResponse
@@ -210,6 +314,7 @@ class SercaloIdentification:
     gc: ct.StateSpace
     fit_error: dict[str, float]
     options: SercaloFitOptions = field(default_factory=SercaloFitOptions)
+    parameter_std: ParameterStd | None = None
 
     def dc_gain_v_per_a(self) -> dict[str, float]:
         """``Gc(0)`` diagonal: Ich→Vph (h), Icv→Vpv (v) [V/A]."""
@@ -228,6 +333,8 @@ class SercaloIdentification:
                     "modes": [m.__dict__ for m in self.fit.modes()]},
             "fit_error_rms_relative": self.fit_error,
             "dc_gain_v_per_a": self.dc_gain_v_per_a(),
+            "frf_estimator": self.frf.estimator,
+            "parameter_std": None if self.parameter_std is None else self.parameter_std.to_json(),
             "options": self.options.__dict__,
         }
 
@@ -275,13 +382,15 @@ def fit_sercalo(frf: FrequencyResponse, *, gi_a_per_v: Mapping[str, float],
         delay, delay_std = float(opts.delay_s), 0.0
     clean = remove_delay(frf, delay)
     resonances = detect_resonances(clean, f_max_hz=opts.f_max_hz)
-    weights = seed_weights(clean, resonances_hz=resonances, alpha=opts.alpha, boost=opts.boost,
-                           f_max_hz=opts.f_max_hz)
+    if opts.weights == "variance":
+        weights = variance_weights(clean, f_max_hz=opts.f_max_hz)
+    else:
+        weights = seed_weights(clean, resonances_hz=resonances, alpha=opts.alpha,
+                               boost=opts.boost, f_max_hz=opts.f_max_hz)
     f = clean.frequency_hz
     h = clean.frf.values
     keep = f > 0  # vector fitting works on s = j2πf; the DC bin carries no weight anyway
-    mag = np.abs(h[keep])
-    w = weights.values[keep] / np.where(mag > 0, mag, np.inf)
+    w = _fit_weights(weights, h, keep, opts.weights)
     n_poles = opts.n_poles or 2 * len(set(np.round(list(resonances.values()), 0)))
     fit = vector_fit(f[keep], h[keep], weights=w, input_names=list(inputs),
                      output_names=list(outputs),
@@ -295,10 +404,12 @@ def fit_sercalo(frf: FrequencyResponse, *, gi_a_per_v: Mapping[str, float],
     model[keep] = fit.response(f[keep])
     model[~keep] = np.nan
     err = relative_fit_error(clean, model)
+    pstd = (sercalo_parameter_std(fit, f[keep], h[keep], w, resonances_hz=resonances,
+                                  gi_a_per_v=gi) if opts.weights == "variance" else None)
     return SercaloIdentification(frf=frf, delays=delays, delay_s=delay, delay_std_s=delay_std,
                                  resonances_hz=resonances, weights=weights, fit=fit,
                                  gi_a_per_v={"h": float(gi[0]), "v": float(gi[1])}, gc=gc,
-                                 fit_error=err, options=opts)
+                                 fit_error=err, options=opts, parameter_std=pstd)
 
 
 @dataclass(frozen=True, eq=False)
@@ -362,10 +473,8 @@ def _fit_inputs(sid: SercaloIdentification) -> tuple[np.ndarray, np.ndarray, np.
     clean = remove_delay(sid.frf, sid.delay_s)
     f = clean.frequency_hz
     keep = f > 0
-    h = clean.frf.values[keep]
-    mag = np.abs(h)
-    w = sid.weights.values[keep] / np.where(mag > 0, mag, np.inf)
-    return f[keep], h, w
+    h = clean.frf.values
+    return f[keep], h[keep], _fit_weights(sid.weights, h, keep, sid.options.weights)
 
 
 def refit_with_poles(sid: SercaloIdentification, *, poles: Mapping[str, complex]
@@ -460,5 +569,8 @@ def refit_with_poles(sid: SercaloIdentification, *, poles: Mapping[str, complex]
     full = np.full(sid.frf.frf.shape, np.nan, dtype=complex)
     full[sid.frf.frequency_hz > 0] = model
     clean = remove_delay(sid.frf, sid.delay_s)
-    return dataclasses.replace(sid, fit=new_fit, gc=gc,
+    pstd = (sercalo_parameter_std(new_fit, f, h, w, resonances_hz=sid.resonances_hz,
+                                  gi_a_per_v=gi, fixed_poles=True)
+            if sid.options.weights == "variance" else None)
+    return dataclasses.replace(sid, fit=new_fit, gc=gc, parameter_std=pstd,
                                fit_error=relative_fit_error(clean, full))

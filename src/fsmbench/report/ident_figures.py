@@ -4,7 +4,10 @@ Each function turns an identification result into a
 :class:`~fsmbench.report.figure.Figure`; nothing is drawn here. FRF matrices
 are small multiples, one panel per element (magnitude over phase), coloured
 by the input's axis (h blue, v orange); fitted models are dashed black.
-Every frequency line of a Welch estimate is kept.
+Every frequency line of a Welch estimate is kept. When the FRF estimator
+gives the variance of each line (periodic averaging, the local polynomial
+method) the matrix figure draws its confidence bounds around the measured
+curve; a Welch estimate has none drawn (:func:`estimator_description`).
 """
 
 from __future__ import annotations
@@ -23,6 +26,7 @@ from fsmbench.ident.calibration import (
 )
 from fsmbench.ident.delay import remove_delay
 from fsmbench.ident.frf import FrequencyResponse, spectral_matrix
+from fsmbench.ident.frf_estimate import circular_bound_factor
 from fsmbench.ident.sercalo import NewportIdentification, SercaloIdentification
 from fsmbench.ident.welch import hanning
 from fsmbench.report.figure import H_COLOR, V_COLOR, Figure, Line, Panel
@@ -32,6 +36,7 @@ __all__ = [
     "axis_color",
     "coherence_figure",
     "current_amplifier_figure",
+    "estimator_description",
     "frf_matrix_figure",
     "newport_delay_figure",
     "newport_model",
@@ -183,14 +188,59 @@ def coherence_figure(frf: FrequencyResponse, *, key: str, title: str, caption: s
 
 
 def weights_figure(sercalo: SercaloIdentification) -> Figure:
-    """Fig. 20: the seed's fit weights of each element of the Sercalo FRF matrix."""
+    """Fig. 20: the fit weights of each element of the Sercalo FRF matrix (seed's or 1/std)."""
+    if sercalo.options.weights == "variance":
+        caption = ("Inverse standard deviation of each line of the measured response (from the "
+                   "estimator's noise variance), 0 above 1 kHz: the fit's residuals have unit "
+                   "variance and the identified parameters carry standard deviations.")
+        label = "Weight 1/std [V/V]⁻¹"
+    else:
+        caption = ("The seed's weights: the coherence, 10 within ±10 % of the column's "
+                   "resonance, 0 above 1 kHz; the fit divides them by |H| so that it "
+                   "minimises the relative error.")
+        label = "Weight [–]"
     return Figure(key="fig20_fit_weights", title="Sercalo: weights of the rational fit",
-                  caption=("The seed's weights: the coherence, 10 within ±10 % of the column's "
-                           "resonance, 0 above 1 kHz; the fit divides them by |H| so that it "
-                           "minimises the relative error."),
-                  panels=_element_panels(sercalo.frf, sercalo.weights, y_label="Weight [–]",
-                                         name="weight"),
+                  caption=caption,
+                  panels=_element_panels(sercalo.frf, sercalo.weights, y_label=label,
+                                         name="weight", y_log=sercalo.options.weights ==
+                                         "variance"),
                   seed_ref="Fig. 20", columns=len(sercalo.frf.input_names), share_x=True)
+
+
+def estimator_description(frf: FrequencyResponse) -> str:
+    """How an FRF was estimated, in words, for captions (e.g. "Welch H1, 1 s Hann window")."""
+    if frf.estimator == "periodic":
+        return (f"averaged over the periods of the periodic excitation (period "
+                f"{frf.window_length / frf.fs_hz:g} s, excited lines only), with the noise "
+                "variance of each line from the spread between periods")
+    if frf.estimator == "lpm":
+        return (f"local polynomial method on the whole {frf.window_length / frf.fs_hz:g} s "
+                "record (transient removed, noise variance per line), every 13th line shown")
+    return f"Welch H1, {frf.window_length / frf.fs_hz:g} s Hann window"
+
+
+def _bound_lines(h: np.ndarray, var: np.ndarray, f: np.ndarray, *, color: str,
+                 confidence: float) -> tuple[list[Line], list[Line]]:
+    """Magnitude and phase confidence bounds of a circular error of variance ``var``.
+
+    The region ``|H_hat - H| <= r`` with ``r = sqrt(-ln(1 - c)) std``; its magnitude
+    range is ``|H| -/+ r`` and its phase range ``+/- asin(r / |H|)`` (all phases when
+    ``r >= |H|``).
+    """
+    r = circular_bound_factor(confidence) * np.sqrt(var)
+    mag = np.abs(h)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        half = np.degrees(np.where(r < mag, np.arcsin(np.minimum(r / mag, 1.0)), np.pi))
+    lo = np.where(mag - r > 0, mag - r, np.nan)  # a gap on the log axis where it reaches 0
+    ph = np.degrees(np.angle(h))
+    name = f"{100 * confidence:g} % confidence bounds"
+
+    def bound(y: np.ndarray, legend: bool) -> Line:
+        return Line(f, y, name=name, color=color, width=0.6, opacity=0.45, group="bounds",
+                    legend=legend)
+
+    return ([bound(lo, True), bound(mag + r, False)],
+            [bound(ph - half, True), bound(ph + half, False)])
 
 
 def frf_matrix_figure(frf: FrequencyResponse, *, delay_s: float, model: np.ndarray | None,
@@ -211,7 +261,8 @@ def frf_matrix_figure(frf: FrequencyResponse, *, delay_s: float, model: np.ndarr
 
     Each element gets a magnitude panel over a phase panel (wrapped to
     ±180°); the matrix keeps the seed's layout (rows: outputs, columns:
-    inputs).
+    inputs). With ``frf.frf_variance`` (periodic, LPM) each measured curve
+    has its confidence bounds at ``frf.confidence`` (thin lines).
     """
     clean = remove_delay(frf, delay_s)
     f = clean.frequency_hz
@@ -226,6 +277,11 @@ def frf_matrix_figure(frf: FrequencyResponse, *, delay_s: float, model: np.ndarr
             label = f"measured, from {inp}"
             mag_tr = [Line(f[sel], np.abs(h), name=label, color=color, width=1.0)]
             ph_tr = [Line(f[sel], np.degrees(np.angle(h)), name=label, color=color, width=1.0)]
+            if clean.frf_variance is not None:
+                var = clean.frf_variance.sel(output=out, input=inp).values[sel]
+                mb, pb = _bound_lines(h, var, f[sel], color=color, confidence=frf.confidence)
+                mag_tr += mb
+                ph_tr += pb
             if model is not None and np.isfinite(model[sel, i, j]).any():
                 m = model[sel, i, j]
                 mag_tr.append(Line(f[sel], np.abs(m), name=model_name, color=_MODEL_COLOR,

@@ -28,6 +28,7 @@ from fsmbench.report.ident_figures import (
     amplifier_frfs,
     coherence_figure,
     current_amplifier_figure,
+    estimator_description,
     frf_matrix_figure,
     newport_delay_figure,
     newport_model,
@@ -284,16 +285,24 @@ def _sercalo(result: Identification | None, *, recordings: Mapping[str, xr.Datas
                       "study uses the nominal block instead.")
         return Section(title="2.3 Sercalo dynamics", blocks=tuple(blocks))
     s = result.sercalo
+    how = estimator_description(s.frf)
+    blocks.append(f"Frequency response estimated by {how}.")
     blocks.append(coherence_figure(
         s.frf, key="fig17_sercalo_coherence", title="Sercalo: coherence of Uc → Vp",
-        caption="Coherence of each element (1 s Hann window); the fit weights it (Fig. 20).",
+        caption=(f"Coherence of each element ({how}; for a non-Welch estimate the coherence "
+                 "a noise-free input would give with the estimated output noise)"
+                 + ("; the fit weights it (Fig. 20)." if s.options.weights == "seed" else ".")),
         seed_ref="Fig. 17"))
     blocks.append(frf_matrix_figure(
         s.frf, delay_s=s.delay_s, model=sercalo_model(s), key="fig18_22_sercalo_frf",
         title="Sercalo: frequency-response matrix Uc → Vp and its fit",
-        caption=(f"Measured (colour) with the delay of {1e3 * s.delay_s:.4f} ms removed, and the "
-                 f"fitted model (dashed, {s.fit.n_poles} poles, modes re-estimated on the full "
-                 "records); magnitude above phase for each element."),
+        caption=(f"Measured (colour; {how}) with the delay of {1e3 * s.delay_s:.4f} ms removed, "
+                 f"and the fitted model (dashed, {s.fit.n_poles} poles"
+                 + (", modes re-estimated on the full records" if result.modes is not None
+                    else "") + "); magnitude above phase for each element"
+                 + (f"; thin lines: the {100 * s.frf.confidence:g} % confidence bounds of each "
+                    "line" if s.frf.frf_variance is not None else
+                    "; no per-line variance with this estimator, so no bounds drawn") + "."),
         seed_ref="Figs. 18, 19, 21, 22"))
     blocks.append(_delay_table(s, caption="Sercalo delays estimated from the phase"))
     blocks.append(Note("The seed removes one sample (0.1 ms). The DAC applies a command one "
@@ -342,15 +351,18 @@ def _newport(result: Identification | None, *, recordings: Mapping[str, xr.Datas
                       "study uses the nominal block instead.")
         return Section(title="2.4 Newport dynamics", blocks=tuple(blocks))
     n = result.newport
+    nhow = estimator_description(n.frf)
     blocks.append(coherence_figure(
         n.frf, key="fig25_newport_coherence", title="Newport: coherence of Un → Vp",
-        caption="Coherence of each element (1 s Hann window).", seed_ref="Fig. 25"))
+        caption=f"Coherence of each element ({nhow}).", seed_ref="Fig. 25"))
     blocks.append(frf_matrix_figure(
         n.frf, delay_s=n.delay_s, model=newport_model(n), key="fig26_27_newport_frf",
         title="Newport: frequency-response matrix Un → Vp",
-        caption=(f"Measured with the delay of {1e3 * n.delay_s:.4f} ms removed; dashed: the "
-                 f"signed constant gains over the {n.band_hz[0]:g}–{n.band_hz[1]:g} Hz band "
-                 "they are averaged on."),
+        caption=(f"Measured ({nhow}) with the delay of {1e3 * n.delay_s:.4f} ms removed; "
+                 f"dashed: the signed constant gains over the {n.band_hz[0]:g}–"
+                 f"{n.band_hz[1]:g} Hz band they are averaged on"
+                 + (f"; thin lines: {100 * n.frf.confidence:g} % confidence bounds"
+                    if n.frf.frf_variance is not None else "") + "."),
         seed_ref="Figs. 26, 27", model_name="constant gain (model)"))
     blocks.append(newport_delay_figure(n))
     blocks.append(Table(
