@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import argparse
 import functools
+import math
 import sys
 from typing import Any
 
@@ -133,6 +134,13 @@ def summary(design: Any, report: Any) -> list[str]:
     lines.append(cf)
     lines.append(f"peaks through the {report.model} bench model:")
     lines += [f"  {c.line()}" for c in report.peaks]
+    tau = report.slowest_time_constant_s
+    if tau > 0:
+        settle = d.transient_samples / d.fs_hz
+        left = 100 * math.exp(-settle / tau)
+        lines.append(f"slowest mode of the bench model (either axis): time constant {tau:.3g} s; "
+                     f"{settle:g} s of transient periods leave {left:.2g} % of its start-up "
+                     "transient in the first period kept")
     return lines
 
 

@@ -79,6 +79,7 @@ def description(design: ExcitationDesign, *, mat_file: str,
         "samples_sha256": samples_sha256(design.samples_v),
         "limits": None if limits is None else {
             "model": limits.model,
+            "slowest_time_constant_s": limits.slowest_time_constant_s,
             "peaks": [{"converter": c.converter, "signal": c.signal, "peak_v": c.peak_v,
                        "limit_v": c.limit_v} for c in limits.peaks]},
         "fsmbench_version": __version__,

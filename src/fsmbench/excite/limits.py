@@ -90,12 +90,17 @@ class LimitReport:
         Rms of the excitation checked [V].
     peaks : tuple of ConverterPeak
         The DAC first, then the ADC channels reached.
+    slowest_time_constant_s : float
+        Envelope time constant of the model's slowest mode [s] (the Sercalo's
+        lightly damped modes, ``1 / (xi w0)``): how long a start-up transient
+        lasts, what transient periods should cover.
     """
 
     input: str
     model: str
     amplitude_rms_v: float
     peaks: tuple[ConverterPeak, ...]
+    slowest_time_constant_s: float = 0.0
 
     def worst(self) -> ConverterPeak:
         """The channel nearest (or furthest beyond) its limit."""
@@ -222,7 +227,8 @@ def converter_peaks(design: ExcitationDesign, *, params: BenchParams,
               for name, p in zip(ADC_CHANNELS, peak, strict=True)
               if p > _REACHED_FRACTION * limit]
     return LimitReport(input=design.input, model=model, amplitude_rms_v=design.amplitude_rms_v,
-                       peaks=tuple(peaks))
+                       peaks=tuple(peaks),
+                       slowest_time_constant_s=_slowest_decay_samples(plant) * plant.ts_s)
 
 
 def check_limits(design: ExcitationDesign, *, params: BenchParams,
