@@ -331,7 +331,7 @@ def nonrep_contributions_figure(reps: Mapping[str, RepeatabilityRecord],
         panels.append(Panel(
             (_envelope_line(env, divisor=div, scale=NM, color=PALETTE[0], group="huddle",
                             name=f"Va in huddle test {number} (nothing moves)"),),
-            x_label.replace("Time after alignment", "Time after the trim"), "Distance [nm]",
+            x_label.replace("Time after alignment", "Time"), "Distance [nm]",
             title=f"Huddle test {number}{what}, nothing moves: "
                   f"{rms * NM:.3g} nm rms over "
                   f"{n / float(recordings[name].attrs['fs_hz']):g} s"))
