@@ -295,7 +295,8 @@ class SercaloIdentification:
         ``Ich, Icv → Vpch, Vpcv`` [V/A].
     fit_error : dict
         Per element ``"Vph/Uch"``: rms relative magnitude error of the fit
-        over 10 Hz–1 kHz where coherence > 0.9.
+        over 10 Hz–1 kHz where coherence > 0.9 (without the share of the
+        measurement noise when the FRF has a variance, :func:`relative_fit_error`).
     options : SercaloFitOptions
     parameter_std : ParameterStd or None
         Resonance, damping and static gain per axis with standard deviations
@@ -345,7 +346,11 @@ def relative_fit_error(frf: FrequencyResponse, model: np.ndarray, *,
     """Rms of ``|model|/|H| - 1`` per element over the band where coherence > threshold.
 
     ``model`` has shape (F, p, m) on ``frf``'s grid. Elements with no such
-    bin get NaN.
+    bin get NaN. When the FRF carries its variance (periodic, LPM: single
+    lines, noisier than a Welch average) the part the measurement noise
+    explains is removed: a circular error of variance ``var`` gives ``|H|``
+    a relative variance ``var / (2 |H|^2)``, so the misfit is
+    ``sqrt(max(0, mean(err^2) - mean(var / (2 |H|^2))))``.
     """
     f = frf.frequency_hz
     out = {}
@@ -355,7 +360,11 @@ def relative_fit_error(frf: FrequencyResponse, model: np.ndarray, *,
             c = frf.coherence.sel(output=o, input=inp).values
             sel = (f >= band_hz[0]) & (f <= band_hz[1]) & (c > min_coherence)
             err = np.abs(model[sel, i, j]) / np.abs(h[sel]) - 1
-            out[f"{o}/{inp}"] = float(np.sqrt(np.mean(err**2))) if sel.any() else float("nan")
+            ms = float(np.mean(err**2)) if sel.any() else float("nan")
+            if frf.frf_variance is not None and sel.any():
+                var = frf.frf_variance.sel(output=o, input=inp).values[sel]
+                ms = max(0.0, ms - float(np.mean(var / (2.0 * np.abs(h[sel]) ** 2))))
+            out[f"{o}/{inp}"] = float(np.sqrt(ms))
     return out
 
 
