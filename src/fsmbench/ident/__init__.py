@@ -1,6 +1,7 @@
 """Identification (seed section 2): spectral estimates with MATLAB semantics,
-calibrations, delays, vector fitting, modal estimation and the pipeline that
-turns recordings into an identified plant."""
+FRFs with per-line uncertainty (periodic averaging, the local polynomial
+method), calibrations, delays, vector fitting, modal estimation and the
+pipeline that turns recordings into an identified plant."""
 
 from fsmbench.ident.calibration import (
     CurrentAmplifierGain,
@@ -9,6 +10,9 @@ from fsmbench.ident.calibration import (
     calibrate_qd,
 )
 from fsmbench.ident.delay import DelayEstimate, estimate_delay, remove_delay
+from fsmbench.ident.frf_estimate import FrfEstimate, combine_estimates
+from fsmbench.ident.frf_periodic import PeriodicOptions, detect_period, periodic_frf
+from fsmbench.ident.lpm import LpmOptions, local_polynomial_frf
 from fsmbench.ident.modal import ModalEstimate, ModeEstimate, estimate_modes
 from fsmbench.ident.spectral import (
     FrequencyResponse,
@@ -33,9 +37,12 @@ __all__ = [
     "CurrentAmplifierGain",
     "DelayEstimate",
     "FrequencyResponse",
+    "FrfEstimate",
+    "LpmOptions",
     "ModalEstimate",
     "Mode",
     "ModeEstimate",
+    "PeriodicOptions",
     "QdCalibration",
     "SpectrumResult",
     "VectorFit",
@@ -44,16 +51,20 @@ __all__ = [
     "calibrate_current_amplifier",
     "calibrate_qd",
     "combine_columns",
+    "combine_estimates",
     "cpsd",
     "default_nfft",
     "default_noverlap",
+    "detect_period",
     "effective_averages",
     "estimate_delay",
     "estimate_modes",
     "hamming",
     "hann",
     "hanning",
+    "local_polynomial_frf",
     "mscohere",
+    "periodic_frf",
     "pwelch",
     "remove_delay",
     "spectral_matrix",

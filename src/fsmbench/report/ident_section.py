@@ -69,6 +69,14 @@ def quantity(key: str) -> tuple[str, str, float]:
         return f"Newport gain {inp} → {out} [V/V]", "V/V", 1.0
     if parts[0] == "delay_s":
         return f"Delay of the {parts[1].capitalize()} path [ms]", "ms", 1e3
+    if parts[0] == "newport" and len(parts) == 3:
+        axis, what = parts[1], parts[2]
+        if what == "natural_freq_hz":
+            return f"Newport natural frequency, {axis} [Hz]", "Hz", 1.0
+        if what == "damping_ratio":
+            return f"Newport damping ratio, {axis} [–]", "", 1.0
+        if what == "internal_delay_s":
+            return f"Newport internal delay, {axis} [ms]", "ms", 1e3
     if parts[0] == "sercalo" and len(parts) == 3:
         axis, what = parts[1], parts[2]
         if what == "resonance_hz":
