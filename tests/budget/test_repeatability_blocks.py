@@ -292,3 +292,10 @@ def test_memory_does_not_grow_with_the_periods(params):
         assert getattr(long, k).shape == (500,), k
     for k in ENVELOPES:
         assert long.envelopes[k].minimum.shape == (300,), k
+
+
+def test_progress_reports_both_reads(params):
+    lines: list[str] = []
+    analyse_repeatability(_rep_record(), params=params, block_samples=700, progress=lines.append)
+    assert any(x.startswith("data_rep_h: folding the periods 100 %") for x in lines)
+    assert lines[-1].startswith("data_rep_h: non-repeatable parts and spectra 100 %")

@@ -42,7 +42,7 @@ are not lost under the offset; the low pass from rest of ``Va`` is that of
 from __future__ import annotations
 
 import math
-from collections.abc import Iterator, Mapping
+from collections.abc import Callable, Iterator, Mapping
 from dataclasses import dataclass, fields
 
 import numpy as np
@@ -334,8 +334,8 @@ class _Signals:
 
 def analyse_repeatability(ds: xr.Dataset, *, params: BenchParams, name: str | None = None,
                           align_s: float = 1.0, period_s: float = 1.0, lpf_hz: float = 10.0,
-                          n_bins: int = ENVELOPE_BINS,
-                          block_samples: int = BLOCK_SAMPLES) -> RepeatabilityRecord:
+                          n_bins: int = ENVELOPE_BINS, block_samples: int = BLOCK_SAMPLES,
+                          progress: Callable[[str], None] | None = None) -> RepeatabilityRecord:
     """Seed 11 on one record (``data_rep_h`` or ``data_rep_v``), read twice in blocks.
 
     Parameters
@@ -355,6 +355,8 @@ def analyse_repeatability(ds: xr.Dataset, *, params: BenchParams, name: str | No
         Bins of the envelopes (at most the aligned samples).
     block_samples : int
         Samples per block read (memory: a few blocks of each signal).
+    progress : callable, optional
+        Receives a line per tenth of each read.
 
     Raises
     ------
@@ -368,7 +370,9 @@ def analyse_repeatability(ds: xr.Dataset, *, params: BenchParams, name: str | No
     bins = min(n_bins, total)
     signals = {k: ds[k].data for k in (al.channel, "Vph", "Vpv", "Va")}
 
-    def blocks(keys: tuple[str, ...]) -> Iterator[tuple[int, dict[str, FloatArray]]]:
+    def blocks(keys: tuple[str, ...], what: str,
+               ) -> Iterator[tuple[int, dict[str, FloatArray]]]:
+        tenth, shown = max(1, total // 10), 0
         for offset, block in read_blocks({k: signals[k] for k in keys}, start=al.start_index,
                                          stop=al.stop_index, block_samples=block_samples):
             for k, x in block.items():
@@ -377,6 +381,11 @@ def analyse_repeatability(ds: xr.Dataset, *, params: BenchParams, name: str | No
                     raise ValueError(f"{al.name}.{k} contains NaN or infinite samples (first "
                                      f"at sample {first}); remove or interpolate them")
             yield offset, block
+            done = offset + block["Va"].size
+            if progress is not None and done // tenth > shown:
+                shown = done // tenth
+                progress(f"{al.name}: {what} {100 * done // total} % "
+                         f"({done / fs / 3600:.2f} h of {total / fs / 3600:.2f} h)")
 
     shift = float(np.asarray(signals["Va"][al.start_index]))
     options = WelchOptions.from_matlab(window=hanning(math.ceil(fs)), noverlap=None, nfft=None,
@@ -393,7 +402,7 @@ def analyse_repeatability(ds: xr.Dataset, *, params: BenchParams, name: str | No
              for k in (*keys_psd, "va")}
     fold_va, fold_lpf, fold_dist = _Fold(per), _Fold(per), _Fold(per)
     env = {k: envelope() for k in ("command", "Vph", "Vpv", "tracking_distance")}
-    for offset, block in blocks((al.channel, "Vph", "Vpv", "Va")):
+    for offset, block in blocks((al.channel, "Vph", "Vpv", "Va"), "folding the periods"):
         d = derived.derive(offset, block)
         for k, s in sums.items():
             s.update(d[k])
@@ -417,7 +426,7 @@ def analyse_repeatability(ds: xr.Dataset, *, params: BenchParams, name: str | No
     nonrep = {k: SumStream() for k in ("va", "lpf", "settled", "dist")}
     centred = {k: SumStream() for k in ("dist", "seed_h", "seed_v")}
     env2 = {k: envelope() for k in ("Va", "Va_nonrep", "tracking_distance_nonrep")}
-    for offset, block in blocks(("Vph", "Vpv", "Va")):
+    for offset, block in blocks(("Vph", "Vpv", "Va"), "non-repeatable parts and spectra"):
         d = derived.derive(offset, block)
         pos = np.arange(offset, offset + d["va"].size) % per
         va_nonrep = d["va"] - rep[pos]
