@@ -49,11 +49,13 @@ __all__ = [
     "current_amplifier",
     "input_delays_s",
     "mode_block",
+    "mode_shape",
     "newport",
     "newport_angles",
     "newport_beam_matrix",
     "physical_plant",
     "quad_diode",
+    "quad_diode_lowpass",
     "rotation",
     "sercalo",
     "sercalo_angles",
@@ -127,26 +129,65 @@ def voltage_amplifier(p: BenchParams) -> ct.StateSpace:
                  name="Ga")
 
 
+def mode_shape(axis_index: int, angle_rad: float) -> np.ndarray:
+    """Unit mode shape in (h, v) mirror angles of the mode of axis 0 (h) or 1 (v), shape (2,).
+
+    The h mode's shape is ``(cos a, sin a)``, the v mode's ``(-sin a, cos a)``:
+    at ``a = 0`` each mode moves its own axis only.
+    """
+    c, s = np.cos(angle_rad), np.sin(angle_rad)
+    return np.array([c, s]) if axis_index == 0 else np.array([-s, c])
+
+
 def sercalo_angles(p: BenchParams) -> ct.StateSpace:
     """Coil currents to Sercalo mirror angles ``theta_ch, theta_cv`` [rad/A] (seed 1.2).
 
     Per axis a mass-spring-damper ``theta/I = g0 / (1 + 2 xi s/w0 + s**2/w0**2)``;
-    the coils' torques couple the axes through ``coupling_*``.
+    the coils' torques couple the axes through ``coupling_*``. A real bench
+    (docs/model.md, "real-bench features") adds:
+
+    - rotated mode shapes: the mode of axis ``i`` moves the mirror along
+      :func:`mode_shape` ``phi_i`` and is driven by the torque's projection on
+      it, ``theta = sum_i phi_i g_i H_i(s) phi_i^T T I`` (reciprocal: the
+      coupling is symmetric and strongest at each resonance, ``tan a``);
+    - a second, weaker mode per axis (``second_mode_*``), with its own shape
+      and DC gain relative to the first mode's; its two states follow the
+      first four, so a bench without it has exactly the seed's states.
     """
     s = p.sercalo
-    a = np.zeros((4, 4))
-    b = np.zeros((4, 2))
-    c = np.zeros((2, 4))
+    axes = ("h", "v")
+    second = [i for i, axis in enumerate(axes) if s.second_mode_hz[axis] > 0]
+    n = 4 + 2 * len(second)
+    a = np.zeros((n, n))
+    b = np.zeros((n, 2))
+    c = np.zeros((2, n))
     torque = np.array([[1.0, s.coupling_v_to_h], [s.coupling_h_to_v, 1.0]])
-    for i, axis in enumerate(("h", "v")):
-        mode = mode_block(freq_hz=s.resonance_hz[axis], damping_ratio=s.damping_ratio[axis])
-        ai, bi, ci = mode.A, mode.B, mode.C
-        a[2 * i:2 * i + 2, 2 * i:2 * i + 2] = ai
-        b[2 * i:2 * i + 2, :] = bi @ (s.dc_gain_rad_per_a[axis] * torque[i:i + 1, :])
-        c[i, 2 * i:2 * i + 2] = ci[0]
+
+    def place(k: int, i: int, freq_hz: float, damping: float, gain: float,
+              angle_rad: float) -> None:
+        mode = mode_block(freq_hz=freq_hz, damping_ratio=damping)
+        a[k:k + 2, k:k + 2] = mode.A
+        if angle_rad == 0.0:
+            # The seed's decoupled modes, with its exact arithmetic.
+            b[k:k + 2, :] = mode.B @ (gain * torque[i:i + 1, :])
+            c[i, k:k + 2] += mode.C[0]
+            return
+        phi = mode_shape(i, angle_rad)
+        b[k:k + 2, :] = mode.B @ (gain * (phi[None, :] @ torque))
+        c[:, k:k + 2] += phi[:, None] @ mode.C
+
+    for i, axis in enumerate(axes):
+        place(2 * i, i, s.resonance_hz[axis], s.damping_ratio[axis], s.dc_gain_rad_per_a[axis],
+              s.mode_shape_angle_rad[axis])
+    states = ["theta_ch", "dtheta_ch", "theta_cv", "dtheta_cv"]
+    for j, i in enumerate(second):
+        axis = axes[i]
+        place(4 + 2 * j, i, s.second_mode_hz[axis], s.second_mode_damping_ratio[axis],
+              s.second_mode_relative_gain[axis] * s.dc_gain_rad_per_a[axis],
+              s.second_mode_shape_angle_rad[axis])
+        states += [f"q2_c{axis}", f"dq2_c{axis}"]
     return ct.ss(a, b, c, np.zeros((2, 2)), inputs=["Ich", "Icv"],
-                 outputs=["theta_ch", "theta_cv"],
-                 states=["theta_ch", "dtheta_ch", "theta_cv", "dtheta_cv"], name="Gc_angles")
+                 outputs=["theta_ch", "theta_cv"], states=states, name="Gc_angles")
 
 
 def newport_angles(p: BenchParams) -> ct.StateSpace:
@@ -214,15 +255,38 @@ def quad_diode(p: BenchParams) -> ct.StateSpace:
                  inputs=["Rh", "Rv"], outputs=["Vph", "Vpv"], name="Gd")
 
 
+def quad_diode_lowpass(p: BenchParams) -> ct.StateSpace | None:
+    """The 4QD amplifier's low pass on ``Vph, Vpv`` (unit DC gain), or None when unlimited.
+
+    First order ``1/(1 + s/wb)`` or second-order Butterworth
+    ``1/(1 + sqrt(2) s/wb + s**2/wb**2)``; both are -3 dB at ``bandwidth_hz``.
+    """
+    qd = p.quad_diode
+    if qd.bandwidth_hz == 0.0:
+        return None
+    if qd.bandwidth_order == 1:
+        wb = 2.0 * np.pi * qd.bandwidth_hz
+        return ct.ss(-wb * np.eye(2), wb * np.eye(2), np.eye(2), np.zeros((2, 2)),
+                     inputs=["Vph_in", "Vpv_in"], outputs=["Vph", "Vpv"],
+                     states=["qd_lp_h", "qd_lp_v"], name="qd_lowpass")
+    m = mode_block(freq_hz=qd.bandwidth_hz, damping_ratio=1.0 / np.sqrt(2.0))
+    a = np.kron(np.eye(2), m.A)
+    b = np.kron(np.eye(2), m.B)
+    c = np.kron(np.eye(2), m.C)
+    return ct.ss(a, b, c, np.zeros((2, 2)), inputs=["Vph_in", "Vpv_in"], outputs=["Vph", "Vpv"],
+                 states=["qd_lp_h", "dqd_lp_h", "qd_lp_v", "dqd_lp_v"], name="qd_lowpass")
+
+
 def input_delays_s(p: BenchParams) -> dict[str, float]:
     """Pure delay of each plant input [s], as an identification sees it.
 
-    DAC commands reach the plant ``dac_delay_samples`` later and are then held
-    for one sample; a zero-order hold looks like a delay of half a sample below
-    Nyquist. The Newport adds its internal lag (seed 2.4: 0.5 ms in total).
+    DAC commands reach the plant ``dac_delay_samples`` (plus any fractional
+    ``dac_extra_delay_s``) later and are then held for one sample; a
+    zero-order hold looks like a delay of half a sample below Nyquist. The
+    Newport adds its internal lag (seed 2.4: 0.5 ms in total).
     """
     ts = p.converter.ts_s
-    dac = (p.converter.dac_delay_samples + 0.5) * ts
+    dac = (p.converter.dac_delay_samples + 0.5) * ts + p.converter.dac_extra_delay_s
     return {"Uch": dac, "Ucv": dac, "Unh": dac + p.newport.internal_delay_s,
             "Unv": dac + p.newport.internal_delay_s}
 

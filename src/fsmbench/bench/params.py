@@ -30,11 +30,12 @@ from collections.abc import Iterator
 from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
-from typing import Any, get_type_hints
+from typing import Any, get_args, get_origin, get_type_hints
 
 import numpy as np
 
 __all__ = [
+    "PACKAGED_BENCHES",
     "AttocubeParams",
     "Bench",
     "BenchParams",
@@ -56,6 +57,7 @@ __all__ = [
     "default_bench",
     "load_bench",
     "param_rows",
+    "real_bench",
     "save_bench",
 ]
 
@@ -83,9 +85,16 @@ class PerAxis:
         return np.array([self.h, self.v], dtype=float)
 
 
-def _p(unit: str, source: str, doc: str) -> Any:
-    """A parameter field: its unit, the seed section it comes from and what it is."""
-    return field(metadata={"unit": unit, "source": source, "doc": doc})
+def _p(unit: str, source: str, doc: str, default: Any = dataclasses.MISSING) -> Any:
+    """A parameter field: its unit, the seed section it comes from and what it is.
+
+    A ``default`` makes the key optional in a bench file: the real-bench
+    features (docs/model.md) default to "off", so older files keep their meaning.
+    """
+    return field(default=default, metadata={"unit": unit, "source": source, "doc": doc})
+
+
+_OFF = PerAxis(h=0.0, v=0.0)
 
 
 # --------------------------------------------------------------------------- datasheets
@@ -153,6 +162,11 @@ class ConverterParams:
         "seed 2.3d",
         "samples between a command being computed and the DAC applying it",
     )
+    dac_extra_delay_s: float = _p(
+        "s", "fsmbench (real bench)",
+        "further latency of every DAC command, any fraction of a sample (computation time)",
+        0.0,
+    )
 
     @property
     def ts_s(self) -> float:
@@ -193,6 +207,25 @@ class SercaloParams:
         "beam angle at the 4QD per Sercalo mirror angle (two reflections: 4, signed)",
     )
     max_stroke_rad: float = _p("rad", "seed 1.2 Table 1", "maximum mechanical stroke")
+    mode_shape_angle_rad: PerAxis = _p(
+        "rad", "fsmbench (real bench)",
+        "rotation of each axis's mode shape in the mirror plane (coupling through the modes)",
+        _OFF,
+    )
+    second_mode_hz: PerAxis = _p(
+        "Hz", "fsmbench (real bench)", "natural frequency of a second, weaker mode (0: none)",
+        _OFF,
+    )
+    second_mode_damping_ratio: PerAxis = _p(
+        "1", "fsmbench (real bench)", "damping ratio of the second mode", _OFF,
+    )
+    second_mode_relative_gain: PerAxis = _p(
+        "1", "fsmbench (real bench)",
+        "DC gain of the second mode relative to the first mode's dc_gain_rad_per_a", _OFF,
+    )
+    second_mode_shape_angle_rad: PerAxis = _p(
+        "rad", "fsmbench (real bench)", "rotation of the second mode's shape", _OFF,
+    )
 
 
 @dataclass(frozen=True)
@@ -261,6 +294,45 @@ class QuadDiodeParams:
     )
     noise_rms_v: PerAxis = _p(
         "V rms", "seed 4.5b", "white electronic noise of the 4QD outputs Vph, Vpv"
+    )
+    bandwidth_hz: float = _p(
+        "Hz", "fsmbench (real bench)", "-3 dB bandwidth of the 4QD amplifier (0: unlimited)", 0.0,
+    )
+    bandwidth_order: int = _p(
+        "1", "fsmbench (real bench)",
+        "order of the 4QD amplifier's low pass: 1, or 2 (Butterworth)", 1,
+    )
+    flicker_asd_v_per_rthz: PerAxis = _p(
+        "V/sqrt(Hz) at 1 Hz", "fsmbench (real bench)",
+        "1/f noise of the 4QD outputs: amplitude spectral density at 1 Hz", _OFF,
+    )
+    flicker_min_hz: float = _p(
+        "Hz", "fsmbench (real bench)", "frequency below which the 1/f noise flattens", 1.0e-3,
+    )
+    mains_freq_hz: float = _p("Hz", "fsmbench (real bench)", "mains frequency", 50.0)
+    mains_amplitude_v: tuple[float, ...] = _p(
+        "V peak", "fsmbench (real bench)",
+        "mains lines on the 4QD outputs: amplitude of the fundamental, 2nd, 3rd, ... harmonic",
+        (),
+    )
+    mains_phase_wander_rad_per_rts: float = _p(
+        "rad/sqrt(s)", "fsmbench (real bench)",
+        "random walk of the mains phase (0: fixed phase)", 0.0,
+    )
+    offset_drift_v_per_s: PerAxis = _p(
+        "V/s", "fsmbench (real bench)", "linear drift of the 4QD offsets", _OFF,
+    )
+    offset_random_walk_v_per_rts: PerAxis = _p(
+        "V/sqrt(s)", "fsmbench (real bench)", "random walk of the 4QD offsets", _OFF,
+    )
+    nonlinearity_pct: float = _p(
+        "%", "fsmbench (real bench)",
+        "compression of the 4QD response at full swing (cubic; >0: less than linear)", 0.0,
+    )
+    nonlinearity_full_swing_rad: float = _p(
+        "rad", "fsmbench (real bench)",
+        "beam angle at which the compression is nonlinearity_pct (the calibration's swing)",
+        0.0106,
     )
 
 
@@ -411,6 +483,8 @@ def _toml_value(value: Any) -> str:
         if math.isinf(value):
             return "inf" if value > 0 else "-inf"
         return repr(value)  # repr round-trips a float exactly
+    if isinstance(value, tuple):
+        return "[" + ", ".join(_toml_value(v) for v in value) + "]"
     if isinstance(value, str):
         escaped = value.replace("\\", "\\\\").replace('"', '\\"')
         return f'"{escaped}"'
@@ -451,9 +525,12 @@ def _build(cls: type, data: Any, where: str, origin: str, base: Any = None) -> A
         key = f"{where}.{f.name}"
         typ = hints[f.name]
         if f.name not in data:
-            if base is None:
+            if base is not None:
+                kwargs[f.name] = getattr(base, f.name)
+            elif f.default is not dataclasses.MISSING:
+                kwargs[f.name] = f.default
+            else:
                 raise ParamsError(f"{origin}: missing key '{key}'")
-            kwargs[f.name] = getattr(base, f.name)
             continue
         raw = data[f.name]
         sub_base = None if base is None else getattr(base, f.name)
@@ -475,6 +552,10 @@ def _build(cls: type, data: Any, where: str, origin: str, base: Any = None) -> A
             kwargs[f.name] = raw
         elif typ is float:
             kwargs[f.name] = _number(raw, key, origin)
+        elif get_origin(typ) is tuple and get_args(typ) == (float, Ellipsis):
+            if not isinstance(raw, list):
+                raise ParamsError(f"{origin}: '{key}' must be an array of numbers, got {raw!r}")
+            kwargs[f.name] = tuple(_number(v, key, origin) for v in raw)
         else:  # pragma: no cover - every field type is handled above
             raise ParamsError(f"{origin}: unsupported type for '{key}'")
     return cls(**kwargs)
@@ -489,7 +570,72 @@ def _number(raw: Any, key: str, origin: str) -> float:
     return value
 
 
+def _merged(base: dict[str, Any], over: dict[str, Any]) -> dict[str, Any]:
+    """``base`` with ``over``'s tables merged in key by key (``over`` wins)."""
+    out = dict(base)
+    for key, value in over.items():
+        if isinstance(value, dict) and isinstance(out.get(key), dict):
+            out[key] = _merged(out[key], value)
+        else:
+            out[key] = value
+    return out
+
+
+def _packaged_mapping(name: str) -> dict[str, Any]:
+    text = resources.files("fsmbench.bench").joinpath(name).read_text("utf-8")
+    return tomllib.loads(text)
+
+
+def _check_features(p: BenchParams, where: str, origin: str) -> None:
+    """One-line verdicts for real-bench feature values that cannot be simulated."""
+    qd, s = p.quad_diode, p.sercalo
+    problems = []
+    if qd.bandwidth_hz < 0:
+        problems.append(f"'{where}.quad_diode.bandwidth_hz' must be >= 0 (0: unlimited)")
+    if qd.bandwidth_order not in (1, 2):
+        problems.append(f"'{where}.quad_diode.bandwidth_order' must be 1 or 2, "
+                        f"got {qd.bandwidth_order}")
+    if qd.flicker_min_hz <= 0:
+        problems.append(f"'{where}.quad_diode.flicker_min_hz' must be > 0")
+    if qd.nonlinearity_full_swing_rad <= 0:
+        problems.append(f"'{where}.quad_diode.nonlinearity_full_swing_rad' must be > 0")
+    if not 0 <= qd.nonlinearity_pct < 30:
+        problems.append(f"'{where}.quad_diode.nonlinearity_pct' must be in [0, 30) %, "
+                        f"got {qd.nonlinearity_pct}")
+    if p.converter.dac_extra_delay_s < 0:
+        problems.append(f"'{where}.converter.dac_extra_delay_s' must be >= 0")
+    for axis in ("h", "v"):
+        if s.second_mode_hz[axis] < 0:
+            problems.append(f"'{where}.sercalo.second_mode_hz.{axis}' must be >= 0 (0: none)")
+        if s.second_mode_hz[axis] > 0 and s.second_mode_damping_ratio[axis] <= 0:
+            problems.append(f"'{where}.sercalo.second_mode_damping_ratio.{axis}' must be > 0 "
+                            "when the second mode is on")
+        if s.second_mode_hz[axis] >= p.converter.fs_hz / 2:
+            problems.append(f"'{where}.sercalo.second_mode_hz.{axis}' = "
+                            f"{s.second_mode_hz[axis]:g} Hz is not below the Nyquist "
+                            f"frequency {p.converter.fs_hz / 2:g} Hz")
+    if problems:
+        raise ParamsError(f"{origin}: {problems[0]}")
+
+
+#: Values of a file's top-level ``base`` key and the packaged bench each names.
+_BASES = {"default": "default_bench.toml", "real": "real_bench.toml"}
+
+
+def _resolve_base(data: dict[str, Any], origin: str) -> dict[str, Any]:
+    """A file that lists only its differences from a packaged bench, merged over that bench."""
+    if "base" not in data:
+        return data
+    base = data["base"]
+    if base not in _BASES:
+        raise ParamsError(f"{origin}: 'base' must be one of {sorted(_BASES)} (a packaged "
+                          f"bench), got {base!r}")
+    parent = _resolve_base(_packaged_mapping(_BASES[base]), _BASES[base])
+    return _merged(parent, {k: v for k, v in data.items() if k != "base"})
+
+
 def _bench_from_mapping(data: dict[str, Any], origin: str) -> Bench:
+    data = _resolve_base(data, origin)
     for section in ("datasheet", "nominal"):
         if section not in data:
             raise ParamsError(f"{origin}: missing table [{section}]")
@@ -499,13 +645,23 @@ def _bench_from_mapping(data: dict[str, Any], origin: str) -> Bench:
     datasheet = _build(Datasheet, data["datasheet"], "datasheet", origin)
     nominal = _build(BenchParams, data["nominal"], "nominal", origin)
     true = _build(BenchParams, data.get("true", {}), "true", origin, base=nominal)
+    _check_features(nominal, "nominal", origin)
+    _check_features(true, "true", origin)
     return Bench(datasheet=datasheet, nominal=nominal, true=true)
+
+
+#: Bench files shipped with fsmbench; ``load_bench`` finds them by name.
+PACKAGED_BENCHES = ("default_bench.toml", "real_bench.toml")
 
 
 def default_bench() -> Bench:
     """The Sercalo test bench of the seed, from the packaged ``default_bench.toml``."""
-    text = resources.files("fsmbench.bench").joinpath("default_bench.toml").read_text("utf-8")
-    return _bench_from_mapping(tomllib.loads(text), "default_bench.toml")
+    return _bench_from_mapping(_packaged_mapping("default_bench.toml"), "default_bench.toml")
+
+
+def real_bench() -> Bench:
+    """The default bench with every real-bench feature on (packaged ``real_bench.toml``)."""
+    return _bench_from_mapping(_packaged_mapping("real_bench.toml"), "real_bench.toml")
 
 
 def load_bench(path: str | Path | None = None) -> Bench:
@@ -516,7 +672,10 @@ def load_bench(path: str | Path | None = None) -> Bench:
     path : str or Path, optional
         TOML file with tables ``[datasheet.*]``, ``[nominal.*]`` and optionally
         ``[true.*]``; keys missing from ``[true]`` take the nominal value. With
-        ``None`` the packaged default bench is returned.
+        ``None`` the packaged default bench is returned. A file with the
+        top-level key ``base = "default"`` (or ``"real"``) lists only its
+        differences from that packaged bench. The name of a packaged bench (``real_bench.toml``)
+        that is not a file in the current folder loads the packaged one.
 
     Raises
     ------
@@ -526,6 +685,8 @@ def load_bench(path: str | Path | None = None) -> Bench:
     if path is None:
         return default_bench()
     p = Path(path)
+    if not p.exists() and str(path) in PACKAGED_BENCHES:
+        return _bench_from_mapping(_packaged_mapping(str(path)), str(path))
     try:
         data = tomllib.loads(p.read_text("utf-8"))
     except FileNotFoundError:
@@ -572,6 +733,8 @@ def _fmt(value: Any) -> str:
         return f"h {_fmt(value.h)}, v {_fmt(value.v)}"
     if isinstance(value, float):
         return f"{value:.6g}"
+    if isinstance(value, tuple):
+        return "[" + ", ".join(_fmt(v) for v in value) + "]"
     return str(value)
 
 

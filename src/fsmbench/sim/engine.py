@@ -130,7 +130,8 @@ def _quantise_scalar(x: float, lsb: float, lo: float, hi: float) -> float:
 @njit(cache=True, nogil=True, error_model="numpy")
 def _loop_body(ab_row: np.ndarray, ab_col: np.ndarray, ab_val: np.ndarray,
                c_row: np.ndarray, c_col: np.ndarray, c_val: np.ndarray, n_adc: int,
-               adc_noise: np.ndarray, adc_lsb: float, adc_lo: float, adc_hi: float,
+               adc_noise: np.ndarray, adc_cubic: np.ndarray,
+               adc_lsb: float, adc_lo: float, adc_hi: float,
                ak: np.ndarray, bk: np.ndarray, ck: np.ndarray, dk: np.ndarray,
                k_in: np.ndarray, k_out: np.ndarray, u_ext: np.ndarray,
                dac_lsb: float, dac_lo: float, dac_hi: float, z0: np.ndarray, xk0: np.ndarray,
@@ -168,7 +169,11 @@ def _loop_body(ab_row: np.ndarray, ab_col: np.ndarray, ab_val: np.ndarray,
             y[c_row[q]] += c_val[q] * zu[c_col[q]]
         # </outputs>
         for i in range(n_adc):
-            out_adc[k, i] = _quantise_scalar(y[i] + adc_noise[k, i], adc_lsb, adc_lo, adc_hi)
+            yi = y[i]
+            if adc_cubic[i] != 0.0:
+                # Sensor non-linearity y (1 + c y**2) (a 4QD's compression).
+                yi = yi + adc_cubic[i] * yi * yi * yi
+            out_adc[k, i] = _quantise_scalar(yi + adc_noise[k, i], adc_lsb, adc_lo, adc_hi)
         for i in range(n_adc, ny):
             out_int[k, i - n_adc] = y[i]
         # Controller.
@@ -252,8 +257,12 @@ def _sparse(plant: DiscretePlant) -> tuple[np.ndarray, ...]:
 
 def _prepare(plant: DiscretePlant, *, u_ext: np.ndarray, adc_noise: np.ndarray,
              adc: Quantiser, dac: Quantiser, controller: DiscreteController | None,
-             n_adc: int, z0: np.ndarray | None, xk0: np.ndarray | None) -> tuple[Any, ...]:
+             n_adc: int, z0: np.ndarray | None, xk0: np.ndarray | None,
+             adc_cubic: np.ndarray | None = None) -> tuple[Any, ...]:
     n_steps = u_ext.shape[0]
+    cubic = np.zeros(n_adc) if adc_cubic is None else np.array(adc_cubic, dtype=float)
+    if cubic.shape != (n_adc,):
+        raise ValueError(f"adc_cubic must have shape {(n_adc,)}, got {cubic.shape}")
     if u_ext.shape[1] != plant.b.shape[1]:
         raise ValueError(f"u_ext has {u_ext.shape[1]} columns, plant has {plant.b.shape[1]} inputs")
     if adc_noise.shape != (n_steps, n_adc):
@@ -289,7 +298,7 @@ def _prepare(plant: DiscretePlant, *, u_ext: np.ndarray, adc_noise: np.ndarray,
     out_dac = np.zeros((n_steps, plant.b.shape[1]))
     out_int = np.zeros((n_steps, plant.c.shape[0] - n_adc))
     args = (*per_plant(plant, "sparse", _sparse), n_adc,
-            np.ascontiguousarray(adc_noise, dtype=float),
+            np.ascontiguousarray(adc_noise, dtype=float), cubic,
             a_lsb, a_lo, a_hi, ak, bk, ck, dk, k_in, k_out,
             np.ascontiguousarray(u_ext, dtype=float), d_lsb, d_lo, d_hi, z, xk,
             out_adc, out_dac, out_int)
@@ -299,7 +308,7 @@ def _prepare(plant: DiscretePlant, *, u_ext: np.ndarray, adc_noise: np.ndarray,
 def run_loop(plant: DiscretePlant, *, u_ext: np.ndarray, adc_noise: np.ndarray, adc: Quantiser,
              dac: Quantiser, controller: DiscreteController | None = None, n_adc: int,
              z0: np.ndarray | None = None, xk0: np.ndarray | None = None,
-             specialise: bool = False) -> LoopResult:
+             specialise: bool = False, adc_cubic: np.ndarray | None = None) -> LoopResult:
     """Run the compiled loop.
 
     Parameters
@@ -323,9 +332,13 @@ def run_loop(plant: DiscretePlant, *, u_ext: np.ndarray, adc_noise: np.ndarray, 
         (:mod:`fsmbench.sim.codegen`): ~5x faster per sample, bit-identical,
         one compilation per plant (cached on disk). Worth it for long runs
         of one plant (the twin); the generic loop suits one-off plants.
+    adc_cubic : array (n_adc,), optional
+        Cubic non-linearity of each ADC channel's sensor, applied to the
+        noise-free output before the noise: ``y + c y**3`` [1/V**2]
+        (default zeros: linear sensors).
     """
     args = _prepare(plant, u_ext=u_ext, adc_noise=adc_noise, adc=adc, dac=dac,
-                    controller=controller, n_adc=n_adc, z0=z0, xk0=xk0)
+                    controller=controller, n_adc=n_adc, z0=z0, xk0=xk0, adc_cubic=adc_cubic)
     if specialise:
         from fsmbench.sim.codegen import specialised_kernel  # builds on this module
 
@@ -338,10 +351,11 @@ def run_loop(plant: DiscretePlant, *, u_ext: np.ndarray, adc_noise: np.ndarray, 
 def run_loop_python(plant: DiscretePlant, *, u_ext: np.ndarray, adc_noise: np.ndarray,
                     adc: Quantiser, dac: Quantiser, controller: DiscreteController | None = None,
                     n_adc: int, z0: np.ndarray | None = None,
-                    xk0: np.ndarray | None = None) -> LoopResult:
+                    xk0: np.ndarray | None = None,
+                    adc_cubic: np.ndarray | None = None) -> LoopResult:
     """The same loop as :func:`run_loop`, interpreted (slow; benchmark and cross-check)."""
     args = _prepare(plant, u_ext=u_ext, adc_noise=adc_noise, adc=adc, dac=dac,
-                    controller=controller, n_adc=n_adc, z0=z0, xk0=xk0)
+                    controller=controller, n_adc=n_adc, z0=z0, xk0=xk0, adc_cubic=adc_cubic)
     # py_func is the undecorated Python source of the compiled loop.
     _loop_body.py_func(*args)
     return _result(args)

@@ -17,13 +17,17 @@ from __future__ import annotations
 
 import hashlib
 import math
+from typing import Any
 
 import numpy as np
 from scipy.signal import lfilter, lfilter_zi
 
 __all__ = [
+    "DriftStream",
+    "FlickerStream",
     "GaussMarkovStream",
     "LagStream",
+    "MainsStream",
     "WhiteStream",
     "first_order_lag",
     "gauss_markov",
@@ -142,6 +146,149 @@ class LagStream:
             self._zi = lfilter_zi(self._b, self._a) * x[0]
         y, self._zi = lfilter(self._b, self._a, x, zi=self._zi)
         return np.asarray(y, dtype=float)
+
+
+class FlickerStream:
+    """1/f noise as a sum of Gauss-Markov processes with log-spaced corners, in blocks.
+
+    A Lorentzian of variance ``s**2`` and corner ``fc`` has the one-sided PSD
+    ``(2 s**2 / (pi fc)) / (1 + (f/fc)**2)``; corners spaced by a factor ``r``
+    with equal variances ``s**2 = A**2 ln r`` sum to ``A**2 / f`` between the
+    lowest and highest corner (the integral over ``ln fc`` of the Lorentzians
+    is ``pi/(2 f)``: van der Ziel's sum of relaxation processes). Three
+    corners per decade keep the sum within 0.2 dB of ``A**2 / f`` a decade
+    inside the corners (``tests/sim/test_real_bench.py``). Each process draws
+    from its own generator, so blocks of any length give the bits of one request.
+
+    Parameters
+    ----------
+    rngs : callable
+        ``rngs(i)`` returns the generator of process ``i`` (called once each).
+    asd_at_1hz : float
+        Amplitude spectral density at 1 Hz, ``A`` [unit/sqrt(Hz)] (0: off).
+    f_min_hz : float
+        Lowest corner [Hz]: below it the spectrum flattens.
+    fs_hz : float
+        Sampling frequency [Hz]; the highest corner is ``fs/2``.
+    per_decade : int
+        Corners per decade.
+    """
+
+    def __init__(self, rngs: Any, *, asd_at_1hz: float, f_min_hz: float, fs_hz: float,
+                 per_decade: int = 3) -> None:
+        self.asd_at_1hz = float(asd_at_1hz)
+        self._parts: list[GaussMarkovStream] = []
+        if self.asd_at_1hz == 0.0:
+            return
+        if not 0 < f_min_hz < fs_hz / 2:
+            raise ValueError(f"f_min_hz must be in (0, fs/2), got {f_min_hz}")
+        n = int(np.ceil(per_decade * np.log10(fs_hz / 2 / f_min_hz))) + 1
+        ratio = 10.0 ** (1.0 / per_decade)
+        rms = self.asd_at_1hz * math.sqrt(math.log(ratio))
+        self.corners_hz = f_min_hz * ratio ** np.arange(n)
+        self._parts = [GaussMarkovStream(rngs(i), rms=rms, tau_s=1.0 / (2 * math.pi * fc),
+                                         fs_hz=fs_hz) for i, fc in enumerate(self.corners_hz)]
+
+    def next(self, n: int) -> np.ndarray:
+        """The next ``n`` samples, shape (n,)."""
+        out = np.zeros(n)
+        for part in self._parts:
+            out += part.next(n)
+        return out
+
+
+def _random_walk(rng: np.random.Generator, zi: np.ndarray, step_rms: float,
+                 n: int) -> tuple[np.ndarray, np.ndarray]:
+    """``x[k] = x[k-1] + step_rms w[k]`` from state ``zi`` (sequential: bit-identical in blocks)."""
+    w = step_rms * rng.standard_normal(n)
+    y, zf = lfilter([1.0], [1.0, -1.0], w, zi=zi)
+    return np.asarray(y, dtype=float), np.asarray(zf, dtype=float)
+
+
+class MainsStream:
+    """Mains lines: ``sum_m A_m sin(2 pi m f0 t + p_m + m w(t))``, in blocks.
+
+    The phases ``p_m`` are drawn once (uniform); ``w(t)`` is an optional random
+    walk of the mains phase (``wander_rad_per_rts`` [rad/sqrt(s)]), the slow
+    wandering of the grid's frequency, which every harmonic follows ``m`` times.
+    Time is counted from the stream's first sample, so blocks give the bits
+    of one request.
+
+    Parameters
+    ----------
+    rng : numpy Generator
+    fs_hz : float
+        Sampling frequency [Hz].
+    freq_hz : float
+        Mains frequency f0 [Hz].
+    amplitudes : sequence of float
+        Peak amplitude of the fundamental, 2nd, 3rd, ... harmonic (unit of the result).
+    wander_rad_per_rts : float
+    """
+
+    def __init__(self, rng: np.random.Generator, *, fs_hz: float, freq_hz: float,
+                 amplitudes: Any, wander_rad_per_rts: float = 0.0) -> None:
+        self._rng = rng
+        self.amplitudes = np.asarray(amplitudes, dtype=float)
+        self.fs_hz = float(fs_hz)
+        self.freq_hz = float(freq_hz)
+        self._step = float(wander_rad_per_rts) / math.sqrt(self.fs_hz)
+        self._phases = (rng.uniform(0.0, 2 * math.pi, self.amplitudes.size)
+                        if np.any(self.amplitudes != 0) else np.zeros(0))
+        self._zi = np.zeros(1)
+        self._k = 0
+
+    def next(self, n: int) -> np.ndarray:
+        """The next ``n`` samples, shape (n,)."""
+        out = np.zeros(n)
+        if self._phases.size == 0:
+            return out
+        k = np.arange(self._k, self._k + n, dtype=float)
+        self._k += n
+        wander = np.zeros(n)
+        if self._step:
+            wander, self._zi = _random_walk(self._rng, self._zi, self._step, n)
+        for m, (amp, p0) in enumerate(zip(self.amplitudes, self._phases, strict=True), start=1):
+            if amp == 0.0:
+                continue
+            # Cycles modulo 1 keep the phase exact over days of samples.
+            cycles = np.mod(m * self.freq_hz * k / self.fs_hz, 1.0)
+            out += amp * np.sin(2 * math.pi * cycles + p0 + m * wander)
+        return out
+
+
+class DriftStream:
+    """Offset drift ``rate t + random walk`` (t from the first sample), in blocks.
+
+    Parameters
+    ----------
+    rng : numpy Generator
+    fs_hz : float
+        Sampling frequency [Hz].
+    rate_per_s : float
+        Linear drift [unit/s].
+    random_walk_per_rts : float
+        Random walk: the offset's standard deviation grows as this times
+        ``sqrt(t)`` [unit/sqrt(s)].
+    """
+
+    def __init__(self, rng: np.random.Generator, *, fs_hz: float, rate_per_s: float,
+                 random_walk_per_rts: float) -> None:
+        self._rng = rng
+        self.fs_hz = float(fs_hz)
+        self.rate_per_s = float(rate_per_s)
+        self._step = float(random_walk_per_rts) / math.sqrt(self.fs_hz)
+        self._zi = np.zeros(1)
+        self._k = 0
+
+    def next(self, n: int) -> np.ndarray:
+        """The next ``n`` samples, shape (n,)."""
+        out = self.rate_per_s * (np.arange(self._k, self._k + n, dtype=float) / self.fs_hz)
+        self._k += n
+        if self._step:
+            walk, self._zi = _random_walk(self._rng, self._zi, self._step, n)
+            out = out + walk
+        return out
 
 
 def white_noise(rng: np.random.Generator, n: int, *, rms: float) -> np.ndarray:

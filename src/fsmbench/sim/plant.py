@@ -22,6 +22,7 @@ from fsmbench.bench.blocks import (
     current_amplifier,
     newport_angles,
     newport_beam_matrix,
+    quad_diode_lowpass,
     sercalo_angles,
     sercalo_beam_matrix,
     voltage_amplifier,
@@ -50,14 +51,17 @@ def twin_continuous(p: BenchParams) -> ct.StateSpace:
     beam = ct.ss([], [], [], np.hstack([sercalo_beam_matrix(p), newport_beam_matrix(p)]),
                  inputs=["theta_ch", "theta_cv", "theta_nh", "theta_nv"], outputs=["Rh", "Rv"],
                  name="optics")
+    lowpass = quad_diode_lowpass(p)
+    qd_out = ["Vph", "Vpv"] if lowpass is None else ["Vph_in", "Vpv_in"]
     qd = ct.ss([], [], [], np.diag(p.quad_diode.gain_v_per_rad.as_array()),
-               inputs=["Rh", "Rv"], outputs=["Vph", "Vpv"], name="qd")
+               inputs=["Rh", "Rv"], outputs=qd_out, name="qd")
+    extra = [] if lowpass is None else [lowpass]
     metrology = ct.ss([], [], [], np.eye(2) / p.newport.metrology_gain_rad_per_v,
                       inputs=["theta_nh", "theta_nv"], outputs=["Vnh", "Vnv"], name="metrology")
     outputs = list(ADC_CHANNELS + INTERNAL_SIGNALS)
     sys = ct.interconnect(
         [current_amplifier(p), coil, voltage_amplifier(p), sercalo_angles(p), newport_angles(p),
-         beam, qd, metrology],
+         beam, qd, metrology, *extra],
         inplist=list(DAC_CHANNELS), outlist=outputs, inputs=list(DAC_CHANNELS), outputs=outputs,
         name="twin")
     return ct.ss(sys.A, sys.B, sys.C, sys.D, inputs=list(DAC_CHANNELS), outputs=outputs,
@@ -67,14 +71,19 @@ def twin_continuous(p: BenchParams) -> ct.StateSpace:
 def twin_discrete(p: BenchParams) -> DiscretePlant:
     """The twin's plant at the converter rate with its DAC and Newport delays.
 
-    Sercalo commands reach the plant ``dac_delay_samples`` after they are
-    computed; Newport commands additionally pass the FSM's internal lag.
+    Sercalo commands reach the plant ``dac_delay_samples`` (plus the
+    converter's ``dac_extra_delay_s``, any fraction of a sample) after they
+    are computed; Newport commands additionally pass the FSM's internal lag.
+    Fractional delays are exact for the held commands (modified z-transform,
+    :func:`~fsmbench.sim.discretize.zoh_with_delays`), at any sampling rate.
     """
     sys = twin_continuous(p)
     if np.any(np.asarray(sys.D) != 0):
         raise ValueError("twin plant must have no direct feedthrough")
     ts = p.converter.ts_s
     dac = float(p.converter.dac_delay_samples)
+    if p.converter.dac_extra_delay_s:
+        dac += p.converter.dac_extra_delay_s / ts
     nport = dac + p.newport.internal_delay_s / ts
     return zoh_with_delays(np.asarray(sys.A), np.asarray(sys.B), np.asarray(sys.C), ts_s=ts,
                            input_delay_samples=[dac, dac, nport, nport],

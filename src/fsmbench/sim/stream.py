@@ -25,6 +25,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -34,7 +35,13 @@ from fsmbench.sim.attocube import AttocubeStream, VaComponents
 from fsmbench.sim.discretize import DiscretePlant
 from fsmbench.sim.engine import DiscreteController, Quantiser, run_loop
 from fsmbench.sim.excitation import Excitation, ExcitationStream
-from fsmbench.sim.noise import WhiteStream, source_rng
+from fsmbench.sim.noise import (
+    DriftStream,
+    FlickerStream,
+    MainsStream,
+    WhiteStream,
+    source_rng,
+)
 from fsmbench.sim.plant import ADC_CHANNELS, DAC_CHANNELS, INTERNAL_SIGNALS, twin_discrete
 
 __all__ = ["BenchBlock", "BenchStream", "ControllerSwitch"]
@@ -59,7 +66,9 @@ class BenchBlock:
         The Attocube's distance and its parts [m].
     noise : dict of str to array (n, 2)
         The injected noises, h and v columns: ``newport_angle`` [rad],
-        ``metrology`` [rad], ``qd`` [V], ``vc`` [V].
+        ``metrology`` [rad], ``qd`` [V] (white), ``vc`` [V], and
+        ``qd_slow`` [V]: the real-bench 4QD disturbances (1/f noise, mains
+        lines, offset drift; zeros when off).
     """
 
     start_sample: int
@@ -181,11 +190,56 @@ class BenchStream:
                    WhiteStream(self.rng_for("qd_v"), rms=p.quad_diode.noise_rms_v.v)),
             "vc": white("vc", p.voltage_amplifier.noise_rms_v),
         }
+        self._qd_slow = self._qd_disturbances(p)
+        self._adc_cubic = self._qd_cubic(p)
         self._beam = newport_beam_matrix(p).T
         self._gd = np.diag(p.quad_diode.gain_v_per_rad.as_array()).T
         self._attocube = AttocubeStream(p, compensation_unit=compensation_unit,
                                         shielding=shielding, fs_hz=self.fs_hz,
                                         rng_for=self.rng_for)
+
+    def _qd_disturbances(self, p: BenchParams) -> list[tuple[Any, Any]] | None:
+        """The 4QD's 1/f noise, mains and drift streams (h, v), or None when all are off."""
+        qd = p.quad_diode
+        streams: list[tuple[Any, Any]] = []
+        if np.any(qd.flicker_asd_v_per_rthz.as_array() != 0):
+            streams.append(tuple(  # type: ignore[arg-type]
+                FlickerStream(lambda i, a=axis: self.rng_for(f"qd_flicker_{a}_{i}"),
+                              asd_at_1hz=qd.flicker_asd_v_per_rthz[axis],
+                              f_min_hz=qd.flicker_min_hz, fs_hz=self.fs_hz)
+                for axis in ("h", "v")))
+        if any(a != 0 for a in qd.mains_amplitude_v):
+            streams.append(tuple(  # type: ignore[arg-type]
+                MainsStream(self.rng_for(f"qd_mains_{axis}"), fs_hz=self.fs_hz,
+                            freq_hz=qd.mains_freq_hz, amplitudes=qd.mains_amplitude_v,
+                            wander_rad_per_rts=qd.mains_phase_wander_rad_per_rts)
+                for axis in ("h", "v")))
+        if np.any(qd.offset_drift_v_per_s.as_array() != 0) or np.any(
+                qd.offset_random_walk_v_per_rts.as_array() != 0):
+            streams.append(tuple(  # type: ignore[arg-type]
+                DriftStream(self.rng_for(f"qd_drift_{axis}"), fs_hz=self.fs_hz,
+                            rate_per_s=qd.offset_drift_v_per_s[axis],
+                            random_walk_per_rts=qd.offset_random_walk_v_per_rts[axis])
+                for axis in ("h", "v")))
+        return streams or None
+
+    @staticmethod
+    def _qd_cubic(p: BenchParams) -> np.ndarray | None:
+        """Cubic coefficient of each ADC channel [1/V**2]: the 4QD's compression, or None.
+
+        ``V = V_lin (1 - k (V_lin / V_fs)**2)``: the response falls short of the
+        linear one by ``k = nonlinearity_pct / 100`` at the full swing
+        ``V_fs = |gain| * nonlinearity_full_swing_rad`` (the calibration's).
+        """
+        qd = p.quad_diode
+        if qd.nonlinearity_pct == 0.0:
+            return None
+        cubic = np.zeros(len(ADC_CHANNELS))
+        k = qd.nonlinearity_pct / 100.0
+        for axis, name in (("h", "Vph"), ("v", "Vpv")):
+            v_fs = abs(qd.gain_v_per_rad[axis]) * qd.nonlinearity_full_swing_rad
+            cubic[ADC_CHANNELS.index(name)] = -k / v_fs**2
+        return cubic
 
     # -- configuration -------------------------------------------------------------
 
@@ -315,7 +369,13 @@ class BenchStream:
         n_qd = pair("qd")
         n_vc = pair("vc")
         beam_noise = n_theta @ self._beam
-        adc_noise = np.column_stack([n_vc, n_qd + beam_noise @ self._gd,
+        qd_noise = n_qd + beam_noise @ self._gd
+        n_slow = np.zeros((n, 2))
+        if self._qd_slow is not None:
+            for h, v in self._qd_slow:
+                n_slow += np.column_stack([h.next(n), v.next(n)])
+            qd_noise = qd_noise + n_slow
+        adc_noise = np.column_stack([n_vc, qd_noise,
                                      (n_theta + n_metro)
                                      / self.params.newport.metrology_gain_rad_per_v])
         u_ext = np.zeros((n, len(DAC_CHANNELS)))
@@ -327,7 +387,7 @@ class BenchStream:
                         dac=self.converter, controller=self._controller,
                         n_adc=len(ADC_CHANNELS), z0=self._z,
                         xk0=self._xk if self._controller is not None else None,
-                        specialise=self._specialise)
+                        specialise=self._specialise, adc_cubic=self._adc_cubic)
         self._z = loop.plant_state
         if self._controller is not None:
             self._xk = loop.controller_state
@@ -343,7 +403,7 @@ class BenchStream:
         return BenchBlock(start_sample=k0, fs_hz=self.fs_hz, dac=loop.dac, adc=loop.adc,
                           internal=internal, va=va,
                           noise={"newport_angle": n_theta, "metrology": n_metro, "qd": n_qd,
-                                 "vc": n_vc})
+                                 "vc": n_vc, "qd_slow": n_slow})
 
     def run(self, n: int, *, block: int | None = None,
             on_block: Callable[[BenchBlock], None] | None = None) -> BenchBlock:
