@@ -67,9 +67,11 @@ CHANNELS = ("Uch", "Ucv", "Unh", "Unv")
 N_RANDOM_REFERENCE = 21
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class ExcitationDesign:
     """One designed excitation: the samples a target plays and how they were made.
+
+    Compared by identity (it holds arrays); the arrays are read-only.
 
     Attributes
     ----------
@@ -132,6 +134,13 @@ class ExcitationDesign:
     crest_factor_random_phase: float | None = None
     chirp_method: ChirpMethod | None = None
     after_end: Literal["zero", "repeat"] = "zero"
+
+    def __post_init__(self) -> None:
+        # Arrays are stored read-only, so the design stays what was checked and written.
+        for name in ("samples_v", "lines_hz", "phases_rad"):
+            x = np.array(getattr(self, name), dtype=float)
+            x.setflags(write=False)
+            object.__setattr__(self, name, x)
 
     @property
     def period_s(self) -> float:

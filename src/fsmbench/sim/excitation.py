@@ -151,7 +151,7 @@ class ExcitationStream:
     fs_hz : float
         Bench sampling rate [Hz].
     rng : numpy Generator
-        Noise samples (noise) or line phases (multisine); unused for sines.
+        Noise samples (noise) or line phases (multisine); unused for sines and samples.
     """
 
     def __init__(self, excitation: Excitation, *, fs_hz: float,
@@ -199,7 +199,7 @@ class ExcitationStream:
                              "known: noise, sine, multisine, samples")
 
     def peak_v(self) -> float:
-        """Largest command [V]: exact for sines and multisines, 4.5 σ for noise."""
+        """Largest command [V]: exact for sines, multisines and samples, 4.5 σ for noise."""
         if self._period is not None:
             return float(np.max(np.abs(self._period)))
         return self.excitation.peak_v()
