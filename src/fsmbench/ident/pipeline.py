@@ -148,7 +148,7 @@ class IdentifyOptions:
     def to_json(self) -> dict[str, Any]:
         """Plain values."""
         return {"window_s": self.window_s, "trims_s": dict(self.trims_s),
-                "sercalo": dict(self.sercalo.__dict__),
+                "sercalo": {**self.sercalo.__dict__, "weights": self.weights},
                 "newport_band_hz": list(self.newport_band_hz),
                 "current_amp_band_hz": list(self.current_amp_band_hz),
                 "refine_modes": self.refine_modes, "frf": self.frf, "weights": self.weights}
