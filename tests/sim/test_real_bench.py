@@ -180,7 +180,7 @@ def test_mains_lines_on_the_simulated_4qd_record() -> None:
     spec = np.abs(np.fft.rfft(vph * w)) ** 2 * 2 / (vph.size * np.sum(w * w))
     df = 1 / (vph.size / p.converter.fs_hz)
     for m, a in enumerate((5e-4, 1.5e-4, 3e-4), start=1):
-        k = int(round(50 * m / df))
+        k = round(50 * m / df)
         # Power within +-2 Hz of the line (the wander's spread is ~0.01 Hz) less the white
         # floor (4QD and Newport-angle noise, ~6 % of the weakest line) measured 5-15 Hz away.
         power = np.sum(spec[k - 20:k + 21])
@@ -302,7 +302,7 @@ def test_default_twin_records_are_bit_identical_to_before_the_features() -> None
     h = hashlib.sha256()
     for spec in seed_experiments(duration_s=5.0):
         s = experiment_stream(DEFAULT, spec, seed=1)
-        out = s.run(int(round(spec.duration_s * s.fs_hz)))
+        out = s.run(round(spec.duration_s * s.fs_hz))
         for arr in (out.dac, out.adc, out.internal, out.va.total_m):
             h.update(np.ascontiguousarray(arr).tobytes())
     assert h.hexdigest() == "f29456b86ccde1ccf0aa9e2bb95083bb0c07ad3f0753de1ef80e53abd08385c1"
