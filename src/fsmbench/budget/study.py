@@ -279,7 +279,8 @@ def _budget_study(recordings: Mapping[str, xr.Dataset], *, bench: Bench,
             skipped[name] = "not in the recordings (seed 11)"
             continue
         try:
-            reps[direction] = analyse_repeatability(usable[name], params=params, name=name)
+            reps[direction] = analyse_repeatability(usable[name], params=params, name=name,
+                                                    progress=progress)
         except ValueError as exc:
             skipped[name] = str(exc)
     nonrep: dict[str, NonRepeatability] = {}

@@ -389,7 +389,8 @@ LAZY_BYTES: Final = 512 << 20
 #: (864 M samples) is 824 chunks per signal, not 13 000 (whose graph alone costs ~0.5 GB).
 LAZY_CHUNK_SAMPLES: Final = 1 << 20
 #: Experiments whose analyses run out of core; other long records must fit in memory.
-OUT_OF_CORE_EXPERIMENTS: Final = frozenset({f"data_huddle_test_{i}" for i in range(1, 6)})
+OUT_OF_CORE_EXPERIMENTS: Final = frozenset({*(f"data_huddle_test_{i}" for i in range(1, 6)),
+                                            "data_rep_h", "data_rep_v"})
 
 
 def _read(path: Path, name: str, *, adc_range_v: float, adc_bits: int,
@@ -416,8 +417,8 @@ def _read(path: Path, name: str, *, adc_range_v: float, adc_bits: int,
     need = 8 * ds.sizes[TIME] * (len(ds.data_vars) + 1)
     if need > 0.5 * available_memory_bytes():
         raise RecordingError(path, f"is {need / 2**30:.1f} GiB of samples: too long to analyse "
-                             "in memory, and only the huddle tests run out of core; cut it to "
-                             "the seed's length")
+                             "in memory, and only the huddle tests and the repeatability "
+                             "records run out of core; cut it to the seed's length")
     return ds.compute()
 
 
@@ -440,8 +441,8 @@ def load_recordings(data_dir: Path, *, fs_hz: float | None = None, adc_range_v: 
         Receives one message per file read.
     lazy_bytes : int
         HDF5 files larger than this [bytes] are read lazily (Dask arrays);
-        the huddle tests stay lazy and are analysed out of core, other
-        experiments are loaded into memory if they fit.
+        the huddle tests and the repeatability records stay lazy and are
+        analysed out of core, other experiments are loaded into memory if they fit.
 
     Raises
     ------
