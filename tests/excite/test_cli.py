@@ -1,0 +1,95 @@
+"""``fsmbench excite`` and ``fsmbench simulate --excitation`` end to end."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+import scipy.io
+
+from fsmbench.cli import main
+
+
+def test_excite_writes_mat_json_and_prints_the_summary(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    out = tmp_path / "ms"
+    assert main(["excite", str(out), "--input", "Uch", "--kind", "multisine", "--band", "1",
+                 "500", "--resolution", "1", "--amplitude-rms", "0.015", "--periods", "2",
+                 "--transient-periods", "1", "--odd", "--seed", "3"]) == 0
+    text = capsys.readouterr().out
+    assert sorted(p.name for p in out.iterdir()) == ["excitation.json", "excitation.mat",
+                                                     "run.json"]
+    meta = json.loads((out / "excitation.json").read_text())
+    assert meta["multisine"]["grid"] == "odd" and len(meta["multisine"]["lines_hz"]) == 250
+    assert scipy.io.loadmat(out / "excitation.mat")["Uch"].shape == (30000, 1)
+    lines = text.splitlines()
+    assert lines[0] == ("Uch multisine: 250 lines from 1 to 499 Hz (odd grid, every 1 Hz), "
+                        "0.015 V rms")
+    assert lines[1] == "2 periods of 1 s + 1 transient period: 30000 samples at 10000 Hz (3 s)"
+    cf = meta["crest_factor"]
+    assert lines[2].startswith(f"crest factor {cf:.3f} (minimised phases; random phases: ")
+    assert any(x.strip().startswith("ADC Vch: ") and "of ±10 V" in x for x in lines)
+
+
+def test_excite_refuses_over_range_before_writing(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    out = tmp_path / "loud"
+    assert main(["excite", str(out), "--input", "Uch", "--kind", "noise", "--duration", "30",
+                 "--amplitude-rms", "0.05"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1
+    assert err[0].startswith("fsmbench excite: error: Uch: an excitation of 0.05 V rms "
+                             "drives ADC Vch to ")
+    assert err[0].endswith("at most 0.0152 V rms fits")
+    assert not out.exists()  # nothing written
+
+
+@pytest.mark.parametrize(("argv", "message"), [
+    (["--input", "Vch", "--amplitude-rms", "0.01"], "invalid choice: 'Vch'"),
+    (["--input", "Uch", "--amplitude-rms", "-1"], "not a finite positive number of volts"),
+    (["--input", "Uch", "--amplitude-rms", "0.01", "--resolution", "0.3"],
+     "whole number of samples"),
+    (["--input", "Uch", "--amplitude-rms", "0.01", "--odd", "--odd-odd"], "not allowed with"),
+])
+def test_excite_bad_arguments_exit_2(tmp_path: Path, capsys: pytest.CaptureFixture[str],
+                                     argv: list[str], message: str) -> None:
+    assert main(["excite", str(tmp_path / "x"), *argv]) == 2
+    assert message in capsys.readouterr().err
+
+
+def test_simulate_plays_the_file(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    exc = tmp_path / "chirp"
+    assert main(["excite", str(exc), "--input", "Unv", "--kind", "chirp", "--band", "1", "100",
+                 "--duration", "2", "--amplitude-rms", "0.1"]) == 0
+    sim = tmp_path / "sim"
+    assert main(["simulate", str(sim), "--excitation", str(exc / "excitation.mat"),
+                 "--seed", "4"]) == 0
+    assert sorted(p.name for p in sim.iterdir()) == ["data_unv.mat", "run.json",
+                                                     "twin_truth.json"]
+    data = scipy.io.loadmat(sim / "data_unv.mat")
+    played = scipy.io.loadmat(exc / "excitation.mat")["Unv"][:, 0]
+    # data_unv's 3.5 s minimum: 1.5 s before the start, the 2 s chirp, nothing after.
+    assert data["Unv"].shape == (35000, 1)
+    # The DAC rounds each sample to its 16-bit step (0.305 mV): half a step at most.
+    np.testing.assert_allclose(data["Unv"][15000:, 0], played, atol=20 / 2**16 / 2 + 1e-15)
+    assert np.all(data["Unv"][:15000, 0] == 0.0)
+    truth = json.loads((sim / "twin_truth.json").read_text())
+    assert truth["excitation_file"]["kind"] == "chirp"
+    ex = truth["experiments"]["data_unv"]["excitations"][0]
+    assert ex["kind"] == "samples" and ex["samples_v"]["n_samples"] == 20000
+    assert main(["simulate", str(tmp_path / "s2"), "--excitation", str(exc),
+                 "--experiments", "data_uch"]) == 2
+    assert "leave out --experiments" in capsys.readouterr().err
+
+
+def test_excite_twice_gives_byte_identical_files(tmp_path: Path) -> None:
+    argv = ["--input", "Ucv", "--kind", "multisine", "--band", "10", "300", "--resolution",
+            "2", "--amplitude-rms", "0.01", "--log-grid", "--seed", "7"]
+    for name in ("a", "b"):
+        assert main(["excite", str(tmp_path / name / "run"), *argv]) == 0
+    for file in ("excitation.mat", "excitation.json", "run.json"):
+        a = (tmp_path / "a" / "run" / file).read_bytes()
+        assert a == (tmp_path / "b" / "run" / file).read_bytes(), file
+    assert b"/a/" not in (tmp_path / "a" / "run" / "run.json").read_bytes()  # no folder path
