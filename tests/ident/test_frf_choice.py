@@ -21,6 +21,8 @@ from fsmbench.excite.design import design_multisine
 from fsmbench.ident.fit_std import QUANTITIES
 from fsmbench.ident.pipeline import Identification, IdentifyOptions, identify
 from fsmbench.ident.sercalo import choose_estimator, experiment_frf
+from fsmbench.report.html import Table, iter_figures
+from fsmbench.report.ident_section import identification_section
 from fsmbench.twin import TwinRun
 from fsmbench.twin.experiments import played_experiment
 from fsmbench.twin.simulate import simulate_experiment, twin_discrete
@@ -106,3 +108,19 @@ def test_auto_picks_periodic_for_multisines(multisine_recordings: dict[str, xr.D
     np.testing.assert_allclose(np.diff(frf.frequency_hz), 0.5)  # every line of the grid
     assert result.warnings == ()
     assert _within_sigmas(result, ident_twin.truth, 4.0) == []
+
+
+def test_report_shows_bounds_estimator_and_parameter_std(lpm_result: Identification,
+                                                         ident_twin: TwinRun,
+                                                         bench: Bench) -> None:
+    sec = identification_section(lpm_result, recordings=ident_twin.recordings, bench=bench,
+                                 truth=ident_twin.truth, skipped={})
+    figs = {f.key: f for f in iter_figures([sec])}
+    frf_fig = figs["fig18_22_sercalo_frf"]
+    assert "local polynomial method" in frf_fig.caption
+    assert any("confidence" in t.name for p in frf_fig.panels for t in p.traces)
+    sercalo = next(s for s in sec.subsections if s.title.startswith("2.3"))
+    tables = [b for b in sercalo.blocks if isinstance(b, Table)]
+    std_table = next(t for t in tables if t.caption.startswith("Sercalo parameters of the fit"))
+    assert std_table.header[-1] == "static gain [V/A]"
+    assert all("±" in row[-1] for row in std_table.rows)

@@ -8,6 +8,7 @@ run says why in words and still shows the recordings that exist.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping, Sequence
 from typing import Any
 
@@ -254,26 +255,59 @@ def _vaf(result: Identification, key: str) -> str:
     return "–"
 
 
+def _fit_words(result: Identification) -> str:
+    """The fitted FRF in words: "the 1 s Welch estimate", "the LPM estimate" …"""
+    frf = result.sercalo.frf if result.sercalo is not None else None
+    if frf is None or frf.estimator == "welch":
+        return f"the {result.options.window_s:g} s Welch estimate"
+    return {"lpm": "the local-polynomial estimate",
+            "periodic": "the period-averaged estimate"}.get(frf.estimator, "the estimate")
+
+
 def _modes_table(result: Identification) -> Table:
     modes = result.sercalo_modes()
+    fit = _fit_words(result)
     if result.modes is not None:
         initial = result.modes.initial
         return Table(
             caption=("Sercalo modes, re-estimated on the full records (frequency-domain output "
-                     "error), against the vector fit of the 1 s Welch estimate; ± is one "
-                     "standard error"),
+                     f"error), against the vector fit of {fit}; ± is one standard error"),
             header=("axis", "resonance [Hz]", "± [Hz]", "damping ratio [–]", "± [–]",
-                    "damping ratio from the Welch fit [–]", "Welch fit / re-estimated [–]"),
+                    "damping ratio from the fit [–]", "fit / re-estimated [–]"),
             rows=tuple((_AXIS[a], f"{m['resonance_hz']:.4f}", f"{m['resonance_hz_std']:.2g}",
                         f"{m['damping_ratio']:.4e}", f"{m['damping_ratio_std']:.2g}",
                         f"{initial[a][1]:.4e}", f"{initial[a][1] / m['damping_ratio']:.2f}")
                        for a, m in modes.items()))
-    return Table(caption="Sercalo modes from the vector fit of the 1 s Welch estimate (not "
-                         "re-estimated on the full records); ± is one standard error",
+    return Table(caption=f"Sercalo modes from the vector fit of {fit} (not re-estimated on the "
+                         "full records); ± is one standard error",
                  header=("axis", "resonance [Hz]", "± [Hz]", "damping ratio [–]", "± [–]"),
                  rows=tuple((_AXIS[a], f"{m['resonance_hz']:.4f}", f"{m['resonance_hz_std']:.2g}",
                              f"{m['damping_ratio']:.4e}", f"{m['damping_ratio_std']:.2g}")
                             for a, m in modes.items()))
+
+
+def _parameter_std_table(result: Identification) -> Table | None:
+    """The variance-weighted fit's parameters with their propagated standard deviations."""
+    ps = result.sercalo.parameter_std if result.sercalo is not None else None
+    if ps is None:
+        return None
+
+    def pm(value: float, std: float, fmt: str) -> str:
+        return f"{value:{fmt}} ± {std:.2g}" if math.isfinite(std) else f"{value:{fmt}}"
+
+    rows = tuple((_AXIS[a], pm(v["resonance_hz"], ps.std[a]["resonance_hz"], ".4f"),
+                  pm(v["damping_ratio"], ps.std[a]["damping_ratio"], ".4e"),
+                  pm(v["dc_gain_v_per_a"], ps.std[a]["dc_gain_v_per_a"], ".3f"))
+                 for a, v in ps.value.items())
+    held = (" The poles were replaced by the re-estimated modes, so only the gain's standard "
+            "deviation comes from this fit." if ps.fixed_poles else "")
+    return Table(
+        caption=("Sercalo parameters of the fit weighted by the inverse standard deviation of "
+                 "each line; ± is one standard deviation propagated from the lines' variances "
+                 f"(reduced chi-square of the fit {ps.chi2_per_dof:.2f}; the current-amplifier "
+                 "gain and the delay taken as known)." + held),
+        header=("axis", "resonance [Hz]", "damping ratio [–]", "static gain [V/A]"),
+        rows=rows)
 
 
 def _sercalo(result: Identification | None, *, recordings: Mapping[str, xr.Dataset],
@@ -319,6 +353,8 @@ def _sercalo(result: Identification | None, *, recordings: Mapping[str, xr.Datas
                        ref="errata E20"))
     blocks.append(weights_figure(s))
     blocks.append(_modes_table(result))
+    if (std_table := _parameter_std_table(result)) is not None:
+        blocks.append(std_table)
     if result.modes is not None:
         blocks.append(Note("A mode with a damping ratio near 1e-3 has a half-power bandwidth "
                            "below 1 Hz, finer than the 1 s window resolves: the vector fit of "
