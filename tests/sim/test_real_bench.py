@@ -15,6 +15,8 @@ import hashlib
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from scipy.signal import welch
 
 from fsmbench.bench.blocks import mode_block, replace_params
@@ -29,8 +31,8 @@ from fsmbench.sim.plant import (
     twin_continuous,
     twin_discrete,
 )
-from fsmbench.sim.stream import BenchBlock, BenchStream
-from fsmbench.twin.experiments import experiment_stream, seed_experiments
+from fsmbench.sim.stream import BenchBlock, BenchStream, concatenate_blocks
+from fsmbench.twin.experiments import experiment_stream, seed_experiments, seed_feedback
 
 DEFAULT = default_bench()
 REAL = real_bench()
@@ -326,16 +328,35 @@ def test_streaming_is_bit_exact_with_every_feature_on() -> None:
         return BenchStream(p, seed=5, name="rb", plant=plant, excitations=ex, specialise=False)
 
     whole = stream().step(5000)
-    s = stream()
-    a, b = s.step(1234), s.step(5000 - 1234)
-    joined = BenchBlock(start_sample=0, fs_hz=a.fs_hz, dac=np.vstack([a.dac, b.dac]),
-                        adc=np.vstack([a.adc, b.adc]),
-                        internal=np.vstack([a.internal, b.internal]), va=whole.va,
-                        noise={k: np.vstack([a.noise[k], b.noise[k]]) for k in a.noise})
-    _same(whole, joined)
-    np.testing.assert_array_equal(whole.va.total_m,
-                                  np.concatenate([a.va.total_m, b.va.total_m]))
+    for sizes in ((1234, 3766), (0, 1, 2999, 0, 2000)):
+        s = stream()
+        parts = [s.step(n) for n in sizes]
+        _same(whole, concatenate_blocks(parts))
     assert np.any(whole.noise["qd_slow"] != 0)
+
+
+_RB_PLANT = twin_discrete(REAL.true)
+_RB_WHOLE: list[BenchBlock] = []
+
+
+@settings(max_examples=15, deadline=None)
+@given(st.lists(st.integers(min_value=0, max_value=900), min_size=1, max_size=8))
+def test_any_block_lengths_give_the_bits_of_one_run_with_every_feature(sizes: list[int]) -> None:
+    def stream() -> BenchStream:
+        return BenchStream(REAL.true, seed=6, name="rb", plant=_RB_PLANT, specialise=False,
+                           excitations=(Excitation("Ucv", "noise", 0.02, 0.0),))
+
+    if not _RB_WHOLE:
+        _RB_WHOLE.append(stream().step(8 * 900))
+    s = stream()
+    blocks = [s.step(n) for n in sizes]
+    total = sum(sizes)
+    whole = _RB_WHOLE[0]
+    got = concatenate_blocks(blocks) if len(blocks) > 1 else blocks[0]
+    np.testing.assert_array_equal(got.adc, whole.adc[:total])
+    np.testing.assert_array_equal(got.dac, whole.dac[:total])
+    for key in got.noise:
+        np.testing.assert_array_equal(got.noise[key], whole.noise[key][:total], err_msg=key)
 
 
 @pytest.mark.parametrize("fs_hz", [5000.0, 10000.0, 20000.0])
@@ -361,3 +382,12 @@ def test_twin_with_every_feature_runs_at_5_10_and_20_khz(fs_hz: float) -> None:
     band = (f > 380) & (f < 440)
     f_peak = f[band][np.argmax(np.abs(puy[band] / puu[band]))]
     assert abs(f_peak - p.sercalo.resonance_hz.h) <= 0.5
+    # The seed's controller (Tustin at this rate) still closes a stable loop on the real
+    # bench: the linear closed loop's eigenvalues lie inside the unit circle.
+    bench = dataclasses.replace(REAL, true=p,
+                                nominal=_with(REAL.nominal, converter={"fs_hz": fs_hz}))
+    k = seed_feedback(bench)
+    c_in = plant.c[list(k.adc_inputs)]
+    b_out = plant.b[:, list(k.dac_outputs)]
+    loop = np.block([[plant.a + b_out @ k.d @ c_in, b_out @ k.c], [k.b @ c_in, k.a]])
+    assert np.max(np.abs(np.linalg.eigvals(loop))) < 1.0

@@ -200,6 +200,9 @@ class FlickerStream:
 def _random_walk(rng: np.random.Generator, zi: np.ndarray, step_rms: float,
                  n: int) -> tuple[np.ndarray, np.ndarray]:
     """``x[k] = x[k-1] + step_rms w[k]`` from state ``zi`` (sequential: bit-identical in blocks)."""
+    if n == 0:
+        # scipy's lfilter returns an undefined final state for an empty input.
+        return np.zeros(0), zi
     w = step_rms * rng.standard_normal(n)
     y, zf = lfilter([1.0], [1.0, -1.0], w, zi=zi)
     return np.asarray(y, dtype=float), np.asarray(zf, dtype=float)
