@@ -24,15 +24,20 @@ can always print them.
 from __future__ import annotations
 
 import dataclasses
-import math
 import tomllib
 from collections.abc import Iterator
 from dataclasses import dataclass, field
-from importlib import resources
 from pathlib import Path
-from typing import Any, get_args, get_origin, get_type_hints
+from typing import Any
 
-import numpy as np
+from fsmbench.bench.axes import ParamsError, PerAxis
+from fsmbench.bench.paramfile import (
+    build,
+    check_features,
+    emit_toml,
+    packaged_mapping,
+    resolve_base,
+)
 
 __all__ = [
     "PACKAGED_BENCHES",
@@ -60,29 +65,6 @@ __all__ = [
     "real_bench",
     "save_bench",
 ]
-
-AXES = ("h", "v")
-
-
-class ParamsError(ValueError):
-    """A parameter file is malformed; the message names the file and the key."""
-
-
-@dataclass(frozen=True)
-class PerAxis:
-    """One value per mirror axis: ``h`` (horizontal, Sercalo AX1) and ``v`` (vertical, AX2)."""
-
-    h: float
-    v: float
-
-    def __getitem__(self, axis: str) -> float:
-        if axis not in AXES:
-            raise KeyError(f"axis must be 'h' or 'v', not {axis!r}")
-        return float(getattr(self, axis))
-
-    def as_array(self) -> np.ndarray:
-        """The values as a float array ``[h, v]``, shape (2,)."""
-        return np.array([self.h, self.v], dtype=float)
 
 
 def _p(unit: str, source: str, doc: str, default: Any = dataclasses.MISSING) -> Any:
@@ -463,190 +445,22 @@ class Bench:
             "# [true]: what the digital twin simulates (keys missing here default to nominal).",
         ]
         for name in ("datasheet", "nominal", "true"):
-            _emit_toml(getattr(self, name), name, lines)
+            emit_toml(getattr(self, name), name, lines)
         return "\n".join(lines) + "\n"
 
-
-# --------------------------------------------------------------------------- TOML (de)serialisation
-
-
-def _toml_value(value: Any) -> str:
-    if isinstance(value, PerAxis):
-        return f"{{ h = {_toml_value(value.h)}, v = {_toml_value(value.v)} }}"
-    if isinstance(value, bool):
-        return "true" if value else "false"
-    if isinstance(value, int):
-        return str(value)
-    if isinstance(value, float):
-        if math.isnan(value):
-            return "nan"
-        if math.isinf(value):
-            return "inf" if value > 0 else "-inf"
-        return repr(value)  # repr round-trips a float exactly
-    if isinstance(value, tuple):
-        return "[" + ", ".join(_toml_value(v) for v in value) + "]"
-    if isinstance(value, str):
-        escaped = value.replace("\\", "\\\\").replace('"', '\\"')
-        return f'"{escaped}"'
-    raise TypeError(f"cannot write {type(value).__name__} to TOML")
-
-
-def _emit_toml(obj: Any, prefix: str, lines: list[str]) -> None:
-    scalars = []
-    children = []
-    for f in dataclasses.fields(obj):
-        value = getattr(obj, f.name)
-        if dataclasses.is_dataclass(value) and not isinstance(value, PerAxis):
-            children.append((f.name, value))
-        else:
-            scalars.append((f, value))
-    if scalars:
-        lines.append("")
-        lines.append(f"[{prefix}]")
-        for f, value in scalars:
-            meta = f.metadata
-            lines.append(f"# {meta['doc']} [{meta['unit']}] ({meta['source']})")
-            lines.append(f"{f.name} = {_toml_value(value)}")
-    for name, child in children:
-        _emit_toml(child, f"{prefix}.{name}", lines)
-
-
-def _build(cls: type, data: Any, where: str, origin: str, base: Any = None) -> Any:
-    """Build dataclass ``cls`` from a TOML table; ``base`` supplies missing keys."""
-    if not isinstance(data, dict):
-        raise ParamsError(f"{origin}: [{where}] must be a table")
-    hints = get_type_hints(cls)
-    names = {f.name for f in dataclasses.fields(cls)}
-    unknown = sorted(set(data) - names)
-    if unknown:
-        raise ParamsError(f"{origin}: unknown key(s) {unknown} in [{where}]")
-    kwargs: dict[str, Any] = {}
-    for f in dataclasses.fields(cls):
-        key = f"{where}.{f.name}"
-        typ = hints[f.name]
-        if f.name not in data:
-            if base is not None:
-                kwargs[f.name] = getattr(base, f.name)
-            elif f.default is not dataclasses.MISSING:
-                kwargs[f.name] = f.default
-            else:
-                raise ParamsError(f"{origin}: missing key '{key}'")
-            continue
-        raw = data[f.name]
-        sub_base = None if base is None else getattr(base, f.name)
-        if typ is PerAxis:
-            if isinstance(raw, dict):
-                merged = {} if sub_base is None else {"h": sub_base.h, "v": sub_base.v}
-                merged.update(raw)
-                if set(merged) != {"h", "v"}:
-                    raise ParamsError(f"{origin}: '{key}' needs exactly the keys h and v")
-                kwargs[f.name] = PerAxis(h=_number(merged["h"], key, origin),
-                                         v=_number(merged["v"], key, origin))
-            else:
-                raise ParamsError(f"{origin}: '{key}' must be a table {{ h = ..., v = ... }}")
-        elif dataclasses.is_dataclass(typ):
-            kwargs[f.name] = _build(typ, raw, key, origin, sub_base)  # type: ignore[arg-type]
-        elif typ is int:
-            if not isinstance(raw, int) or isinstance(raw, bool):
-                raise ParamsError(f"{origin}: '{key}' must be an integer, got {raw!r}")
-            kwargs[f.name] = raw
-        elif typ is float:
-            kwargs[f.name] = _number(raw, key, origin)
-        elif get_origin(typ) is tuple and get_args(typ) == (float, Ellipsis):
-            if not isinstance(raw, list):
-                raise ParamsError(f"{origin}: '{key}' must be an array of numbers, got {raw!r}")
-            kwargs[f.name] = tuple(_number(v, key, origin) for v in raw)
-        else:  # pragma: no cover - every field type is handled above
-            raise ParamsError(f"{origin}: unsupported type for '{key}'")
-    return cls(**kwargs)
-
-
-def _number(raw: Any, key: str, origin: str) -> float:
-    if isinstance(raw, bool) or not isinstance(raw, int | float):
-        raise ParamsError(f"{origin}: '{key}' must be a number, got {raw!r}")
-    value = float(raw)
-    if not math.isfinite(value):
-        raise ParamsError(f"{origin}: '{key}' must be finite, got {raw!r}")
-    return value
-
-
-def _merged(base: dict[str, Any], over: dict[str, Any]) -> dict[str, Any]:
-    """``base`` with ``over``'s tables merged in key by key (``over`` wins)."""
-    out = dict(base)
-    for key, value in over.items():
-        if isinstance(value, dict) and isinstance(out.get(key), dict):
-            out[key] = _merged(out[key], value)
-        else:
-            out[key] = value
-    return out
-
-
-def _packaged_mapping(name: str) -> dict[str, Any]:
-    text = resources.files("fsmbench.bench").joinpath(name).read_text("utf-8")
-    return tomllib.loads(text)
-
-
-def _check_features(p: BenchParams, where: str, origin: str) -> None:
-    """One-line verdicts for real-bench feature values that cannot be simulated."""
-    qd, s = p.quad_diode, p.sercalo
-    problems = []
-    if qd.bandwidth_hz < 0:
-        problems.append(f"'{where}.quad_diode.bandwidth_hz' must be >= 0 (0: unlimited)")
-    if qd.bandwidth_order not in (1, 2):
-        problems.append(f"'{where}.quad_diode.bandwidth_order' must be 1 or 2, "
-                        f"got {qd.bandwidth_order}")
-    if qd.flicker_min_hz <= 0:
-        problems.append(f"'{where}.quad_diode.flicker_min_hz' must be > 0")
-    if qd.nonlinearity_full_swing_rad <= 0:
-        problems.append(f"'{where}.quad_diode.nonlinearity_full_swing_rad' must be > 0")
-    if not 0 <= qd.nonlinearity_pct < 30:
-        problems.append(f"'{where}.quad_diode.nonlinearity_pct' must be in [0, 30) %, "
-                        f"got {qd.nonlinearity_pct}")
-    if p.converter.dac_extra_delay_s < 0:
-        problems.append(f"'{where}.converter.dac_extra_delay_s' must be >= 0")
-    for axis in ("h", "v"):
-        if s.second_mode_hz[axis] < 0:
-            problems.append(f"'{where}.sercalo.second_mode_hz.{axis}' must be >= 0 (0: none)")
-        if s.second_mode_hz[axis] > 0 and s.second_mode_damping_ratio[axis] <= 0:
-            problems.append(f"'{where}.sercalo.second_mode_damping_ratio.{axis}' must be > 0 "
-                            "when the second mode is on")
-        if s.second_mode_hz[axis] >= p.converter.fs_hz / 2:
-            problems.append(f"'{where}.sercalo.second_mode_hz.{axis}' = "
-                            f"{s.second_mode_hz[axis]:g} Hz is not below the Nyquist "
-                            f"frequency {p.converter.fs_hz / 2:g} Hz")
-    if problems:
-        raise ParamsError(f"{origin}: {problems[0]}")
-
-
-#: Values of a file's top-level ``base`` key and the packaged bench each names.
-_BASES = {"default": "default_bench.toml", "real": "real_bench.toml"}
-
-
-def _resolve_base(data: dict[str, Any], origin: str) -> dict[str, Any]:
-    """A file that lists only its differences from a packaged bench, merged over that bench."""
-    if "base" not in data:
-        return data
-    base = data["base"]
-    if base not in _BASES:
-        raise ParamsError(f"{origin}: 'base' must be one of {sorted(_BASES)} (a packaged "
-                          f"bench), got {base!r}")
-    parent = _resolve_base(_packaged_mapping(_BASES[base]), _BASES[base])
-    return _merged(parent, {k: v for k, v in data.items() if k != "base"})
-
-
 def _bench_from_mapping(data: dict[str, Any], origin: str) -> Bench:
-    data = _resolve_base(data, origin)
+    data = resolve_base(data, origin)
     for section in ("datasheet", "nominal"):
         if section not in data:
             raise ParamsError(f"{origin}: missing table [{section}]")
     unknown = sorted(set(data) - {"datasheet", "nominal", "true"})
     if unknown:
         raise ParamsError(f"{origin}: unknown top-level table(s) {unknown}")
-    datasheet = _build(Datasheet, data["datasheet"], "datasheet", origin)
-    nominal = _build(BenchParams, data["nominal"], "nominal", origin)
-    true = _build(BenchParams, data.get("true", {}), "true", origin, base=nominal)
-    _check_features(nominal, "nominal", origin)
-    _check_features(true, "true", origin)
+    datasheet = build(Datasheet, data["datasheet"], "datasheet", origin)
+    nominal = build(BenchParams, data["nominal"], "nominal", origin)
+    true = build(BenchParams, data.get("true", {}), "true", origin, base=nominal)
+    check_features(nominal, "nominal", origin)
+    check_features(true, "true", origin)
     return Bench(datasheet=datasheet, nominal=nominal, true=true)
 
 
@@ -656,12 +470,12 @@ PACKAGED_BENCHES = ("default_bench.toml", "real_bench.toml")
 
 def default_bench() -> Bench:
     """The Sercalo test bench of the seed, from the packaged ``default_bench.toml``."""
-    return _bench_from_mapping(_packaged_mapping("default_bench.toml"), "default_bench.toml")
+    return _bench_from_mapping(packaged_mapping("default_bench.toml"), "default_bench.toml")
 
 
 def real_bench() -> Bench:
     """The default bench with every real-bench feature on (packaged ``real_bench.toml``)."""
-    return _bench_from_mapping(_packaged_mapping("real_bench.toml"), "real_bench.toml")
+    return _bench_from_mapping(packaged_mapping("real_bench.toml"), "real_bench.toml")
 
 
 def load_bench(path: str | Path | None = None) -> Bench:
@@ -686,7 +500,7 @@ def load_bench(path: str | Path | None = None) -> Bench:
         return default_bench()
     p = Path(path)
     if not p.exists() and str(path) in PACKAGED_BENCHES:
-        return _bench_from_mapping(_packaged_mapping(str(path)), str(path))
+        return _bench_from_mapping(packaged_mapping(str(path)), str(path))
     try:
         data = tomllib.loads(p.read_text("utf-8"))
     except FileNotFoundError:
