@@ -8,6 +8,7 @@ from fsmbench.bench.params import (
     default_bench,
     load_bench,
     param_rows,
+    real_bench,
     save_bench,
 )
 
@@ -19,5 +20,6 @@ __all__ = [
     "default_bench",
     "load_bench",
     "param_rows",
+    "real_bench",
     "save_bench",
 ]
