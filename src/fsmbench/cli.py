@@ -4,7 +4,8 @@
     fsmbench simulate OUT [--duration S] [--seed N] [--params FILE] [--format F]
                       [--excitation FILE]
     fsmbench excite   OUT --input Uch --amplitude-rms V [--kind K] [--band LO HI] ...
-    fsmbench identify DATA --out OUT [--params FILE]
+    fsmbench identify DATA --out OUT [--params FILE] [--frf auto|welch|lpm|periodic]
+                      [--weights seed|variance]
     fsmbench budget   DATA --out OUT [--params FILE] [--identification DIR]
     fsmbench design   DATA --out OUT [--params FILE] [--seed N] [--identification DIR]
     fsmbench study    [--data DIR] --out OUT [--seed N] [--duration S] [--params FILE]
@@ -50,8 +51,18 @@ from typing import Any
 
 from fsmbench import __version__
 from fsmbench.bench.params import Bench, ParamsError, load_bench, param_rows, save_bench
-from fsmbench.cli_args import EXIT_USER_ERROR, Parser, factor, figure_formats, nanometres, seconds
+from fsmbench.cli_args import (
+    EXIT_USER_ERROR,
+    Parser,
+    add_identify_options,
+    factor,
+    figure_formats,
+    identify_options,
+    nanometres,
+    seconds,
+)
 from fsmbench.excite.cli import add_excite_command
+from fsmbench.io.convert_cli import add_convert_command
 from fsmbench.live.serve import add_serve_command
 from fsmbench.scale.mc_cli import add_montecarlo_command
 
@@ -217,21 +228,6 @@ def _simulate_in_memory(args: argparse.Namespace, bench: Bench, staging: Path,
     return write_twin(sim, staging, format=args.format)
 
 
-def _cmd_convert(args: argparse.Namespace) -> int:
-    from fsmbench.io.lazy import convert_recording
-
-    src, dest = Path(args.source), Path(args.dest)
-    if not src.is_file():
-        raise FileNotFoundError(2, "no such recording", str(src))
-    if dest.resolve() == src.resolve():
-        raise ValueError(f"{dest}: the output would replace the input; inputs are never "
-                         "modified")
-    if not dest.parent.is_dir():
-        raise FileNotFoundError(2, "output folder does not exist", str(dest.parent))
-    print(convert_recording(src, dest, fs_hz=args.fs_hz, progress=_progress()))
-    return 0
-
-
 @dataclass(frozen=True)
 class _StageInput:
     """What every stage command starts from: folders, bench, progress, recordings."""
@@ -290,7 +286,8 @@ def _cmd_identify(args: argparse.Namespace) -> int:
         reference = read_twin_truth(Path(args.data))
         inp = _stage_input(args)
         result, paths = identify_stage(inp.recordings, bench=inp.bench, out_dir=run.staging,
-                                       source=str(inp.data), progress=inp.say)
+                                       source=str(inp.data), progress=inp.say,
+                                       options=identify_options(args))
     for step, why in result.skipped.items():
         inp.say(f"step {step} skipped: {why}")
     for warning in result.warnings:
@@ -331,7 +328,7 @@ def _cmd_budget(args: argparse.Namespace) -> int:
         plant = _plant(args, inp)
         inp.say("noise and error budget, huddle tests, repeatability (seed sections 3, 4, 11)")
         result, paths = budget_stage(inp.recordings, bench=inp.bench, out_dir=run.staging,
-                                     plant=plant)
+                                     plant=plant, progress=inp.say)
     for path in paths:
         print(run.final_path(path))
     print(f"total {1e9 * result.total_rms_m:.3g} nm rms; limiting source: {result.limiting}",
@@ -410,7 +407,8 @@ def _cmd_study(args: argparse.Namespace) -> int:
     with _run_folder(args, args.out, data=data, need_bytes=need) as run:
         result = run_study(out_dir=run.staging, data_dir=data, bench=bench, seed=args.seed,
                            duration_s=args.duration, progress=say, figures=args.figures,
-                           spec=Specification(distance_error_max_m=args.distance_target_m))
+                           spec=Specification(distance_error_max_m=args.distance_target_m),
+                           identify_options=identify_options(args))
     print(run.final_path(result.report))
     # Once each, one line each: what was not used, what failed a check, what to know.
     for name, why in result.skipped_experiments.items():
@@ -473,6 +471,8 @@ def _parser() -> argparse.ArgumentParser:
         common(p)
         p.add_argument("data", metavar="DATA", help="folder of recordings (.mat, .h5, .nxs)")
         p.add_argument("--out", metavar="DIR", required=True, help="output folder")
+        if name == "identify":
+            add_identify_options(p)
         if name == "design":
             p.add_argument("--seed", metavar="N", type=int, default=0,
                            help="twin seed of the closed-loop verification (default 0)")
@@ -496,21 +496,14 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--distance-target", metavar="NM", type=nanometres, default=5e-9,
                    dest="distance_target_m",
                    help="largest acceptable Attocube distance error, rms [nm] (default 5)")
+    add_identify_options(p)
     p.set_defaults(func=_cmd_study)
 
     add_serve_command(sub, factor=factor)
     add_montecarlo_command(sub)
     add_excite_command(sub)
 
-    p = sub.add_parser("convert", help="copy a recording into a chunked NeXus archive (long "
-                                       "records: lazy reading, bounded memory)")
-    p.add_argument("source", metavar="IN", help="MATLAB v5/v7.3 or NeXus recording")
-    p.add_argument("dest", metavar="OUT", help="the NeXus archive to write (.h5)")
-    p.add_argument("--format", choices=("nexus",), default="nexus",
-                   help="output format (nexus: chunked HDF5, read lazily)")
-    p.add_argument("--fs", metavar="HZ", type=factor, default=None, dest="fs_hz",
-                   help="sampling rate [Hz] (default: from t)")
-    p.set_defaults(func=_cmd_convert)
+    add_convert_command(sub, progress=_progress)
     return parser
 
 

@@ -9,10 +9,10 @@ from __future__ import annotations
 
 import argparse
 import math
-from typing import NoReturn
+from typing import Any, NoReturn
 
-__all__ = ["EXIT_USER_ERROR", "Parser", "factor", "figure_formats", "nanometres", "positive",
-           "seconds"]
+__all__ = ["EXIT_USER_ERROR", "Parser", "add_identify_options", "factor", "figure_formats",
+           "identify_options", "nanometres", "positive", "seconds"]
 
 #: Exit status of an error the user can fix (bad argument, bad data, unwritable folder).
 EXIT_USER_ERROR = 2
@@ -63,3 +63,22 @@ def figure_formats(text: str) -> tuple[str, ...]:
     return tuple(dict.fromkeys(items))
 
 
+
+
+def add_identify_options(p: argparse.ArgumentParser) -> None:
+    """``--frf`` and ``--weights`` of the identification (``identify`` and ``study``)."""
+    p.add_argument("--frf", choices=("auto", "welch", "lpm", "periodic"), default="auto",
+                   help="frequency-response estimator: auto (averaging over periods when every "
+                        "excitation repeats, else Welch as the seed), welch, lpm (local "
+                        "polynomial method), periodic (default auto)")
+    p.add_argument("--weights", choices=("seed", "variance"), default="seed",
+                   help="vector-fit weights: the seed's coherence recipe, or the inverse "
+                        "standard deviation of each line, which also gives the Sercalo's "
+                        "parameters standard deviations (default seed)")
+
+
+def identify_options(args: argparse.Namespace) -> Any:
+    """The :class:`~fsmbench.ident.pipeline.IdentifyOptions` of ``--frf`` and ``--weights``."""
+    from fsmbench.ident.pipeline import IdentifyOptions
+
+    return IdentifyOptions(frf=args.frf, weights=args.weights)

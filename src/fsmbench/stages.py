@@ -29,7 +29,12 @@ import xarray as xr
 
 from fsmbench.bench.blocks import PlantModel, physical_plant
 from fsmbench.bench.params import Bench
-from fsmbench.ident.pipeline import Identification, identify, write_identification
+from fsmbench.ident.pipeline import (
+    Identification,
+    IdentifyOptions,
+    identify,
+    write_identification,
+)
 from fsmbench.io.atomic import atomic_write_text
 from fsmbench.jsonutil import plain_json, stamped
 
@@ -72,10 +77,12 @@ class PlantChoice:
 
 
 def identify_stage(recordings: Mapping[str, xr.Dataset], *, bench: Bench, out_dir: Path,
-                   source: str, progress: Progress | None = None
+                   source: str, progress: Progress | None = None,
+                   options: IdentifyOptions | None = None
                    ) -> tuple[Identification, list[Path]]:
-    """Run seed section 2 and write its files."""
-    result = identify(recordings, bench=bench, source=source, progress=progress)
+    """Run seed section 2 and write its files (``options``: the estimator and weights)."""
+    result = identify(recordings, bench=bench, options=options, source=source,
+                      progress=progress)
     return result, write_identification(result, out_dir)
 
 

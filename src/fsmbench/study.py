@@ -24,7 +24,7 @@ from typing import Any
 
 from fsmbench import __version__
 from fsmbench.bench.params import Bench, default_bench
-from fsmbench.ident.pipeline import Identification
+from fsmbench.ident.pipeline import Identification, IdentifyOptions
 from fsmbench.io.atomic import atomic_write_text
 from fsmbench.io.folder import RecordingSet, load_recordings
 from fsmbench.io.outdir import check_out_dir
@@ -165,7 +165,8 @@ def _sections(*, bench: Bench, loaded: RecordingSet, source: str, is_twin: bool,
 def run_study(*, out_dir: str | Path, data_dir: str | Path | None = None,
               bench: Bench | None = None, seed: int = 0, duration_s: float | None = None,
               progress: Progress | None = None, figures: Sequence[str] = (),
-              spec: Specification | None = None) -> StudyResult:
+              spec: Specification | None = None,
+              identify_options: IdentifyOptions | None = None) -> StudyResult:
     """Run the study and write its report and results into ``out_dir``.
 
     Parameters
@@ -187,6 +188,8 @@ def run_study(*, out_dir: str | Path, data_dir: str | Path | None = None,
         Also write every figure to ``out_dir/figures`` in these formats.
     spec : Specification, optional
         The requirements of the verdict (default: the seed's, 5 nm distance error).
+    identify_options : IdentifyOptions, optional
+        FRF estimator and fit weights of the identification (default: ``auto``, the seed's).
     """
     say = progress or (lambda _msg: None)
     bench = default_bench() if bench is None else bench
@@ -237,7 +240,7 @@ def run_study(*, out_dir: str | Path, data_dir: str | Path | None = None,
     if any(n in recordings for n in IDENT_EXPERIMENTS):
         say("identification (seed section 2)")
         ident, written = identify_stage(recordings, bench=bench, out_dir=out, source=source,
-                                        progress=say)
+                                        progress=say, options=identify_options)
         stages.append(StageStatus(
             "identify", True, outputs=tuple(str(p) for p in written),
             reason="; ".join(f"{k}: {v}" for k, v in ident.skipped.items())))

@@ -9,12 +9,12 @@ import pytest
 
 from fsmbench.ident.delay import DelayEstimate
 from fsmbench.ident.frf import spectral_matrix
+from fsmbench.ident.newport import identify_newport
 from fsmbench.ident.sercalo import (
     combined_delay,
     detect_resonances,
     experiment_frf,
     fit_sercalo,
-    identify_newport,
     refit_with_poles,
     relative_fit_error,
     seed_weights,

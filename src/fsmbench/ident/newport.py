@@ -1,4 +1,8 @@
-"""The Newport FSM-300 identified with its dynamics and its delay (beyond the seed's 2.4).
+"""Seed 2.4: the Newport FSM-300 identified with its dynamics and its delay.
+
+``data_unh`` (3 s removed) and ``data_unv`` (1.5 s removed) give the 2×2
+matrix ``Un → Vp``. The seed's ``Gn = mean(abs(H(10–100 Hz)))`` drops the
+sign (errata E19); its value, signed, is kept as a diagnostic.
 
 The seed models the Newport as a constant, ``Gn = mean(|H(10–100 Hz)|)``
 (0.166 V/V), while its response falls to half of that by 1 kHz: a closed loop
@@ -39,9 +43,12 @@ from numpy.typing import NDArray
 from scipy.optimize import brentq, least_squares
 
 from fsmbench.checks import Check
+from fsmbench.ident.delay import DelayEstimate, remove_delay
 from fsmbench.ident.frf import FrequencyResponse
+from fsmbench.ident.sercalo import combined_delay, path_delays
 
-__all__ = ["NewportAxisFit", "NewportDynamics", "fit_newport_dynamics", "newport_checks"]
+__all__ = ["NewportAxisFit", "NewportDynamics", "NewportIdentification", "fit_newport_dynamics",
+           "identify_newport", "newport_checks"]
 
 FloatArray = NDArray[np.float64]
 _PATHS = {"h": ("Vph", "Unh"), "v": ("Vpv", "Unv")}
@@ -311,3 +318,109 @@ def newport_checks(dyn: NewportDynamics, *, amplitude_bandwidth_hz: float,
                             "" if peak <= peaking_max_db else
                             "the mirror rings more than its datasheet allows"))
     return checks
+
+
+@dataclass(frozen=True, eq=False)
+class NewportIdentification:
+    """What 2.4 identifies.
+
+    Attributes
+    ----------
+    frf : FrequencyResponse
+        Measured ``Un → Vp`` matrix (delay included).
+    delays : tuple of DelayEstimate
+        Each direct path's delay from its phase alone (Bode's gain–phase
+        relation), a cross-check of the joint fit's.
+    delay_s, delay_std_s : float
+        Mean delay of the two axes [s]: the joint fit's when it succeeded, else
+        the phase's.
+    gain_v_per_v : dict {"h", "v"}
+        Signed static gain Unh→Vph and Unv→Vpv [V/V]: the fitted ``K``, else the
+        seed's band mean.
+    seed_gain_v_per_v : dict {"h", "v"}
+        The seed's ``mean(|H|)`` over ``band_hz`` with the sign kept [V/V].
+    band_hz : tuple
+        The seed's averaging band [Hz] (10–100 Hz).
+    gn : control.StateSpace
+        ``Unh, Unv → Vpnh, Vpnv``: each axis's second order, or the seed's
+        constant diagonal when the dynamics could not be fitted.
+    dynamics : NewportDynamics or None
+    dynamics_skipped : str
+        Why the dynamics were not fitted (empty when they were).
+    """
+
+    frf: FrequencyResponse
+    delays: tuple[DelayEstimate, ...]
+    delay_s: float
+    delay_std_s: float
+    gain_v_per_v: dict[str, float]
+    seed_gain_v_per_v: dict[str, float]
+    band_hz: tuple[float, float]
+    gn: ct.StateSpace
+    dynamics: NewportDynamics | None = None
+    dynamics_skipped: str = ""
+
+    def input_delays_s(self) -> dict[str, float]:
+        """The delay of each Newport input [s] (per axis with the dynamics)."""
+        if self.dynamics is None:
+            return {"Unh": self.delay_s, "Unv": self.delay_s}
+        return {"Unh": self.dynamics.axes["h"].delay_s, "Unv": self.dynamics.axes["v"].delay_s}
+
+    def summary(self) -> dict[str, Any]:
+        """JSON-ready diagnostics."""
+        return {"delay_s": self.delay_s, "delay_std_s": self.delay_std_s,
+                "delays": [d.summary() for d in self.delays],
+                "gain_v_per_v": self.gain_v_per_v, "seed_gain_v_per_v": self.seed_gain_v_per_v,
+                "band_hz": list(self.band_hz),
+                "dynamics": None if self.dynamics is None else self.dynamics.summary(),
+                "dynamics_skipped": self.dynamics_skipped}
+
+
+def identify_newport(frf: FrequencyResponse, *, band_hz: tuple[float, float] = (10.0, 100.0),
+                     min_coherence: float = 0.9, dac_delay_samples: float = 1.0
+                     ) -> NewportIdentification:
+    """The Newport paths (seed 2.4) from the ``Un → Vp`` matrix: dynamics, delays, gains.
+
+    Parameters
+    ----------
+    frf : FrequencyResponse
+        ``Unh, Unv → Vph, Vpv``.
+    band_hz : (float, float)
+        The seed's averaging band of the constant gain [Hz].
+    min_coherence : float
+        Lines below it are not used by the phase-only delay estimate.
+    dac_delay_samples : float
+        The converter's transport delay [samples] (``converter.dac_delay_samples``).
+    """
+    inputs, outputs = frf.input_names, frf.output_names
+    if len(inputs) != 2 or len(outputs) != 2:
+        raise ValueError(f"the Newport identification needs a 2x2 matrix, got {outputs} x "
+                         f"{inputs}")
+    delays = path_delays(frf, min_coherence=min_coherence)
+    delay, delay_std = combined_delay(delays)
+    clean = remove_delay(frf, delay)
+    f = clean.frequency_hz
+    sel = (f > band_hz[0]) & (f < band_hz[1])
+    seed_gains = {}
+    for axis, j in (("h", 0), ("v", 1)):
+        h = clean.frf.sel(output=outputs[j], input=inputs[j]).values[sel]
+        seed_gains[axis] = float(np.sign(np.mean(h.real)) * np.mean(np.abs(h)))
+    try:
+        dyn: NewportDynamics | None = fit_newport_dynamics(frf,
+                                                           dac_delay_samples=dac_delay_samples)
+        why = ""
+    except ValueError as exc:
+        dyn, why = None, f"the constant gains are used: {exc}"
+    if dyn is not None:
+        gains = {a: dyn.axes[a].gain_v_per_v for a in "hv"}
+        delay = 0.5 * (dyn.axes["h"].delay_s + dyn.axes["v"].delay_s)
+        delay_std = 0.5 * math.hypot(dyn.axes["h"].delay_std_s, dyn.axes["v"].delay_std_s)
+        gn = dyn.gn()
+    else:
+        gains = dict(seed_gains)
+        gn = ct.ss([], [], [], np.diag([gains["h"], gains["v"]]), inputs=["Unh", "Unv"],
+                   outputs=["Vpnh", "Vpnv"], name="Gn")
+    return NewportIdentification(frf=frf, delays=delays, delay_s=delay, delay_std_s=delay_std,
+                                 gain_v_per_v=gains, seed_gain_v_per_v=seed_gains,
+                                 band_hz=(float(band_hz[0]), float(band_hz[1])), gn=gn,
+                                 dynamics=dyn, dynamics_skipped=why)

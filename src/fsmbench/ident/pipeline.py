@@ -65,13 +65,12 @@ from fsmbench.ident.calibration import (
 )
 from fsmbench.ident.export import write_frf_mat, write_plant_mat
 from fsmbench.ident.modes import ModeRefinement, refine_modes
+from fsmbench.ident.newport import NewportIdentification, identify_newport, newport_checks
 from fsmbench.ident.sercalo import (
-    NewportIdentification,
     SercaloFitOptions,
     SercaloIdentification,
     experiment_frf,
     fit_sercalo,
-    identify_newport,
     refit_with_poles,
 )
 from fsmbench.ident.validate import PathValidation, validate_sercalo
@@ -241,6 +240,11 @@ class Identification:
                                   "dc_gain_v_per_a": dc[a]} for a in modes}
         if self.newport is not None:
             out["newport_gain_v_per_v"] = dict(self.newport.gain_v_per_v)
+            dyn = self.newport.dynamics
+            if dyn is not None:
+                out["newport"] = {a: {"natural_freq_hz": dyn.axes[a].natural_freq_hz,
+                                      "damping_ratio": dyn.axes[a].damping_ratio,
+                                      "internal_delay_s": dyn.internal_delay_s(a)} for a in "hv"}
         delays = {}
         if self.sercalo is not None:
             delays["sercalo"] = self.sercalo.delay_s
@@ -425,7 +429,16 @@ def _identify(recordings: Mapping[str, xr.Dataset], *, bench: Bench, opts: Ident
             nfrf = experiment_frf(recordings, columns=[("data_unh", "Unh"), ("data_unv", "Unv")],
                                   trims_s=opts.trims_s, window_s=opts.window_s,
                                   estimator=opts.frf)
-            newport_id = identify_newport(nfrf, band_hz=opts.newport_band_hz)
+            newport_id = identify_newport(nfrf, band_hz=opts.newport_band_hz,
+                                          dac_delay_samples=conv.dac_delay_samples)
+            if newport_id.dynamics is not None:
+                ds_np = bench.datasheet.newport
+                checks.extend(newport_checks(
+                    newport_id.dynamics, amplitude_bandwidth_hz=ds_np.amplitude_bandwidth_hz,
+                    phase_bandwidth_hz=ds_np.phase_bandwidth_hz,
+                    peaking_max_db=ds_np.peaking_max_db))
+            else:
+                skipped["newport_dynamics"] = newport_id.dynamics_skipped
         except ValueError as exc:
             skipped["newport"] = f"failed (data_unh, data_unv): {exc}"
     else:
@@ -450,7 +463,7 @@ def _identify(recordings: Mapping[str, xr.Dataset], *, bench: Bench, opts: Ident
     if sercalo_id is not None:
         delays.update(Uch=sercalo_id.delay_s, Ucv=sercalo_id.delay_s)
     if newport_id is not None:
-        delays.update(Unh=newport_id.delay_s, Unv=newport_id.delay_s)
+        delays.update(newport_id.input_delays_s())
     plant = assemble_plant(gi=blocks["Gi"][1], zc=blocks["Zc"][1], ga=blocks["Ga"][1],
                            gc=blocks["Gc"][1], gn=blocks["Gn"][1], gd=blocks["Gd"][1],
                            input_delay_s=delays, source=f"identified ({source})")

@@ -15,11 +15,7 @@ Sercalo (2.3)
     starting poles), and converges instead of running 5 iterations.
     ``Gc = fit · Gi⁻¹`` with ``Gi`` from 2.2.
 
-Newport (2.4)
-    ``data_unh`` (3 s removed) and ``data_unv`` (1.5 s removed) give the 2×2
-    matrix ``Un → Vp``; its delay is estimated the same way (the seed assumes
-    0.5 ms). The seed's ``Gn = mean(abs(H(10–100 Hz)))`` drops the sign; here
-    the gain keeps the sign of the delay-free response's real part.
+Newport (2.4): :mod:`fsmbench.ident.newport`.
 """
 
 from __future__ import annotations
@@ -44,7 +40,6 @@ from fsmbench.ident.vectfit import VectorFit, VectorFitOptions, vector_fit
 from fsmbench.ident.welch import hanning
 
 __all__ = [
-    "NewportIdentification",
     "SercaloFitOptions",
     "SercaloIdentification",
     "choose_estimator",
@@ -52,7 +47,7 @@ __all__ = [
     "detect_resonances",
     "experiment_frf",
     "fit_sercalo",
-    "identify_newport",
+    "path_delays",
     "refit_with_poles",
     "seed_weights",
     "variance_weights",
@@ -150,7 +145,7 @@ def experiment_frf(recordings: Mapping[str, xr.Dataset], *, columns: Sequence[tu
     return combine_estimates(parts).to_frequency_response()
 
 
-def _path_delays(frf: FrequencyResponse, *, min_coherence: float) -> tuple[DelayEstimate, ...]:
+def path_delays(frf: FrequencyResponse, *, min_coherence: float) -> tuple[DelayEstimate, ...]:
     """Delay of each direct path; low coherence becomes advice, not just a failure."""
     out = []
     for j in range(2):
@@ -384,7 +379,7 @@ def fit_sercalo(frf: FrequencyResponse, *, gi_a_per_v: Mapping[str, float],
     inputs, outputs = frf.input_names, frf.output_names
     if len(inputs) != 2 or len(outputs) != 2:
         raise ValueError(f"the Sercalo fit needs a 2x2 matrix, got {outputs} x {inputs}")
-    delays = _path_delays(frf, min_coherence=opts.min_coherence)
+    delays = path_delays(frf, min_coherence=opts.min_coherence)
     if opts.delay_s is None:
         delay, delay_std = combined_delay(delays)
     else:
@@ -419,63 +414,6 @@ def fit_sercalo(frf: FrequencyResponse, *, gi_a_per_v: Mapping[str, float],
                                  resonances_hz=resonances, weights=weights, fit=fit,
                                  gi_a_per_v={"h": float(gi[0]), "v": float(gi[1])}, gc=gc,
                                  fit_error=err, options=opts, parameter_std=pstd)
-
-
-@dataclass(frozen=True, eq=False)
-class NewportIdentification:
-    """What 2.4 identifies.
-
-    Attributes
-    ----------
-    frf : FrequencyResponse
-        Measured ``Un → Vp`` matrix (delay included).
-    delays : tuple of DelayEstimate
-    delay_s, delay_std_s : float
-        Common delay [s].
-    gain_v_per_v : dict {"h", "v"}
-        Signed low-frequency gain Unh→Vph and Unv→Vpv [V/V].
-    band_hz : tuple
-        Averaging band [Hz] (seed: 10–100 Hz).
-    gn : control.StateSpace
-        Static diagonal ``Unh, Unv → Vpnh, Vpnv``, as the seed's ``Gn``.
-    """
-
-    frf: FrequencyResponse
-    delays: tuple[DelayEstimate, ...]
-    delay_s: float
-    delay_std_s: float
-    gain_v_per_v: dict[str, float]
-    band_hz: tuple[float, float]
-    gn: ct.StateSpace
-
-    def summary(self) -> dict[str, Any]:
-        """JSON-ready diagnostics."""
-        return {"delay_s": self.delay_s, "delay_std_s": self.delay_std_s,
-                "delays": [d.summary() for d in self.delays],
-                "gain_v_per_v": self.gain_v_per_v, "band_hz": list(self.band_hz)}
-
-
-def identify_newport(frf: FrequencyResponse, *, band_hz: tuple[float, float] = (10.0, 100.0),
-                     min_coherence: float = 0.9) -> NewportIdentification:
-    """Delay and signed gains of the Newport paths (seed 2.4) from the ``Un → Vp`` matrix."""
-    inputs, outputs = frf.input_names, frf.output_names
-    if len(inputs) != 2 or len(outputs) != 2:
-        raise ValueError(f"the Newport identification needs a 2x2 matrix, got {outputs} x "
-                         f"{inputs}")
-    delays = _path_delays(frf, min_coherence=min_coherence)
-    delay, delay_std = combined_delay(delays)
-    clean = remove_delay(frf, delay)
-    f = clean.frequency_hz
-    sel = (f > band_hz[0]) & (f < band_hz[1])
-    gains = {}
-    for axis, j in (("h", 0), ("v", 1)):
-        h = clean.frf.sel(output=outputs[j], input=inputs[j]).values[sel]
-        gains[axis] = float(np.sign(np.mean(h.real)) * np.mean(np.abs(h)))
-    gn = ct.ss([], [], [], np.diag([gains["h"], gains["v"]]), inputs=["Unh", "Unv"],
-               outputs=["Vpnh", "Vpnv"], name="Gn")
-    return NewportIdentification(frf=frf, delays=delays, delay_s=delay, delay_std_s=delay_std,
-                                 gain_v_per_v=gains, band_hz=(float(band_hz[0]),
-                                                              float(band_hz[1])), gn=gn)
 
 
 def _fit_inputs(sid: SercaloIdentification) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

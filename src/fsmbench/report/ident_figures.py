@@ -27,7 +27,8 @@ from fsmbench.ident.calibration import (
 from fsmbench.ident.delay import remove_delay
 from fsmbench.ident.frf import FrequencyResponse, spectral_matrix
 from fsmbench.ident.frf_estimate import circular_bound_factor
-from fsmbench.ident.sercalo import NewportIdentification, SercaloIdentification
+from fsmbench.ident.newport import NewportIdentification
+from fsmbench.ident.sercalo import SercaloIdentification
 from fsmbench.ident.welch import hanning
 from fsmbench.report.figure import H_COLOR, V_COLOR, Figure, Line, Panel
 
@@ -313,16 +314,24 @@ def sercalo_model(sercalo: SercaloIdentification) -> np.ndarray:
 
 
 def newport_model(newport: NewportIdentification) -> np.ndarray:
-    """The seed's Newport model on the grid: the signed gains over their band, shape (F, 2, 2).
+    """The identified Newport on the grid, delay-free, shape (F, 2, 2).
 
-    NaN off the diagonal (the seed's ``Gn`` is diagonal) and outside the
-    averaging band, so the figure shows where the gain was taken.
+    With its dynamics: each axis's second order (with the hold's droop, as
+    measured) over the band it was fitted on. Otherwise the seed's signed
+    constant gains over their averaging band. NaN off the diagonal (``Gn`` is
+    diagonal) and outside the band, so the figure shows where the model holds.
     """
     f = newport.frf.frequency_hz
     model = np.full(newport.frf.frf.shape, np.nan, dtype=complex)
-    band = (f >= newport.band_hz[0]) & (f <= newport.band_hz[1])
-    model[band, 0, 0] = newport.gain_v_per_v["h"]
-    model[band, 1, 1] = newport.gain_v_per_v["v"]
+    dyn = newport.dynamics
+    for i, axis in enumerate("hv"):
+        if dyn is not None:
+            a = dyn.axes[axis]
+            band = (f >= a.band_hz[0]) & (f <= a.band_hz[1])
+            model[band, i, i] = a.response(f[band], fs_hz=dyn.fs_hz, delay=False)
+        else:
+            band = (f >= newport.band_hz[0]) & (f <= newport.band_hz[1])
+            model[band, i, i] = newport.gain_v_per_v[axis]
     return model
 
 

@@ -12,16 +12,18 @@ import math
 from collections.abc import Mapping, Sequence
 from typing import Any
 
+import numpy as np
 import xarray as xr
 
 from fsmbench.bench.params import Bench
+from fsmbench.ident.newport import NewportIdentification
 from fsmbench.ident.pipeline import (
     MAX_DIRECT_FIT_ERROR,
     MIN_DIRECT_VAF,
     SEED_TRIMS_S,
     Identification,
 )
-from fsmbench.ident.sercalo import NewportIdentification, SercaloIdentification
+from fsmbench.ident.sercalo import SercaloIdentification
 from fsmbench.io.signals import EXPERIMENTS
 from fsmbench.report.figure import Figure
 from fsmbench.report.html import Block, Note, Section, Table
@@ -383,9 +385,10 @@ def _newport(result: Identification | None, *, recordings: Mapping[str, xr.Datas
     exps = ("data_unh", "data_unv")
     blocks: list[Block] = [
         "Noise on the Newport's commands Un, one axis after the other, with the 4QD outputs "
-        "recorded. The frequency-response matrix Un → Vp is flat up to the Newport's bandwidth "
-        "and nearly diagonal, so the seed models it as a constant gain per axis (mean over "
-        "10–100 Hz) after removing the delay.",
+        "recorded. The frequency-response matrix Un → Vp is nearly diagonal and flat up to "
+        "a few hundred hertz; the seed models it as a constant gain per axis (mean over "
+        "10–100 Hz) after removing the delay, fsmbench fits each axis's second order and "
+        "delay together and compares them with the FSM-300 datasheet.",
     ]
     for name in exps:
         blocks += _time_figure(name, recordings, bench=bench, trims=_trims(result))
@@ -399,23 +402,64 @@ def _newport(result: Identification | None, *, recordings: Mapping[str, xr.Datas
     blocks.append(coherence_figure(
         n.frf, key="fig25_newport_coherence", title="Newport: coherence of Un → Vp",
         caption=f"Coherence of each element ({nhow}).", seed_ref="Fig. 25"))
+    dyn = n.dynamics
+    model_words = ("dashed: each axis's fitted second order with the hold's droop, over the "
+                   f"{dyn.axes['h'].band_hz[0]:.3g}–{dyn.axes['h'].band_hz[1]:.4g} Hz band it "
+                   "was fitted on" if dyn is not None else
+                   f"dashed: the signed constant gains over the {n.band_hz[0]:g}–"
+                   f"{n.band_hz[1]:g} Hz band they are averaged on")
     blocks.append(frf_matrix_figure(
         n.frf, delay_s=n.delay_s, model=newport_model(n), key="fig26_27_newport_frf",
         title="Newport: frequency-response matrix Un → Vp",
         caption=(f"Measured ({nhow}) with the delay of {1e3 * n.delay_s:.4f} ms removed; "
-                 f"dashed: the signed constant gains over the {n.band_hz[0]:g}–"
-                 f"{n.band_hz[1]:g} Hz band they are averaged on"
+                 + model_words
                  + (f"; thin lines: {100 * n.frf.confidence:g} % confidence bounds"
                     if n.frf.frf_variance is not None else "") + "."),
-        seed_ref="Figs. 26, 27", model_name="constant gain (model)"))
+        seed_ref="Figs. 26, 27",
+        model_name="second order (model)" if dyn is not None else "constant gain (model)"))
     blocks.append(newport_delay_figure(n))
-    blocks.append(Table(
-        caption="Newport gains (signed)",
-        header=("path", "gain [V/V]", "averaging band [Hz]"),
-        rows=tuple((f"{inp} → {out}", f"{n.gain_v_per_v[a]:.5f}",
-                    f"{n.band_hz[0]:g}–{n.band_hz[1]:g}")
-                   for a, inp, out in (("h", "Unh", "Vph"), ("v", "Unv", "Vpv")))))
-    blocks.append(_delay_table(n, caption="Newport delays estimated from the phase"))
+    if dyn is not None:
+        ds_np = bench.datasheet.newport
+        rows = []
+        for a, inp, out in (("h", "Unh", "Vph"), ("v", "Unv", "Vpv")):
+            fit = dyn.axes[a]
+            rows.append((
+                f"{inp} → {out}", f"{fit.gain_v_per_v:.5f} ± {fit.gain_std_v_per_v:.1g}",
+                f"{n.seed_gain_v_per_v[a]:.5f}",
+                f"{fit.natural_freq_hz:.1f} ± {fit.natural_freq_std_hz:.1g}",
+                f"{fit.damping_ratio:.3f} ± {fit.damping_std:.1g}",
+                f"{1e3 * fit.delay_s:.4f} ± {1e3 * fit.delay_std_s:.1g}",
+                f"{1e3 * dyn.internal_delay_s(a):.4f}",
+                f"{dyn.amplitude_bandwidth_hz[a]:.0f} ({ds_np.amplitude_bandwidth_hz:g})",
+                f"{dyn.phase_bandwidth_hz[a]:.0f} ({ds_np.phase_bandwidth_hz:g})",
+                f"{dyn.peaking_db[a]:.2f} (≤ {ds_np.peaking_max_db:g})"))
+        blocks.append(Table(
+            caption=("Newport dynamics fitted jointly with the delay (± one standard "
+                     "deviation), against the FSM-300 datasheet in brackets; the phase "
+                     f"bandwidth is where the poles' lag and the internal lag reach "
+                     f"{dyn.phase_lag_deg:g}°, after removing the converter's own "
+                     f"{1e3 * dyn.converter_delay_s:.2f} ms"),
+            header=("path", "static gain [V/V]", "seed's constant gain [V/V]",
+                    "natural frequency [Hz]", "damping ratio", "delay [ms]",
+                    "internal lag [ms]", "−3 dB bandwidth [Hz]", "60° phase bandwidth [Hz]",
+                    "peaking [dB]"),
+            rows=tuple(rows)))
+        at_1k = {a: abs(dyn.axes[a].response(np.array([1000.0]), delay=False)[0]) for a in "hv"}
+        blocks.append(Note(
+            "The seed models the Newport as a constant gain (its mean over 10–100 Hz); the "
+            f"fitted response at 1 kHz is {at_1k['h'] / abs(n.gain_v_per_v['h']):.2f} (h) and "
+            f"{at_1k['v'] / abs(n.gain_v_per_v['v']):.2f} (v) of the static gain, so the "
+            "identified plant carries the Newport's dynamics instead.", ref="errata E19"))
+    else:
+        blocks.append(Table(
+            caption="Newport gains (signed)",
+            header=("path", "gain [V/V]", "averaging band [Hz]"),
+            rows=tuple((f"{inp} → {out}", f"{n.gain_v_per_v[a]:.5f}",
+                        f"{n.band_hz[0]:g}–{n.band_hz[1]:g}")
+                       for a, inp, out in (("h", "Unh", "Vph"), ("v", "Unv", "Vpv")))))
+        blocks.append(Note(f"The Newport's dynamics could not be fitted ({n.dynamics_skipped})."))
+    blocks.append(_delay_table(n, caption="Newport delays estimated from the phase alone "
+                                          "(cross-check)"))
     blocks.append(Note("The seed averages |H| and so drops the sign; with a negative 4QD gain "
                        "the path Unh → Vph is negative, and fsmbench keeps the sign. The "
                        "seed's assumed 0.5 ms delay is confirmed by the phase.",
