@@ -66,7 +66,7 @@ def test_twin_section_has_every_seed_figure_and_the_truth_table(
         assert float(cells[1]) == pytest.approx(row.identified * scale, rel=1e-5)  # 6 digits
         assert cells[-1] == "yes"
     by_name = {r[0]: r for r in table.rows}
-    assert by_name["Delay of the Sercalo path [ms]"][4] == "±0.1 ms"  # one sample at 10 kHz
+    assert by_name["Delay of the Sercalo path [ms]"][4] == "±0.1 ms (1 sample)"  # at 10 kHz
     assert by_name["4QD gain, h [V/rad]"][4] == "±1 %"
     text = _joined(sec)
     assert PASSED in text and "identification issue" not in text

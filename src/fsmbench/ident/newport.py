@@ -7,23 +7,28 @@ sign (errata E19); its value, signed, is kept as a diagnostic.
 The seed models the Newport as a constant, ``Gn = mean(|H(10–100 Hz)|)``
 (0.166 V/V), while its response falls to half of that by 1 kHz: a closed loop
 predicted with a flat Newport misjudges every disturbance it injects above a
-few hundred hertz. Here each direct path ``Un → Vp`` is fitted, jointly, with
+few hundred hertz. Here each direct path ``Un → Vp`` is fitted, jointly, with the second
+order of the datasheet's Fig. 4 (``docs/model.md`` §4) and a delay,
 
-    H(f) = K · wn² / (s² + 2 ζ wn s + wn²) · e^(−s τ) · sinc(f / fs),   s = j 2π f,
+    G(s) = K · wn² / (s² + 2 ζ wn s + wn²) · e^(−s τ),
 
-the second-order model of the datasheet's Fig. 4 (``docs/model.md`` §4), a
-pure delay ``τ`` (DAC transport, the hold's half sample and the Newport's
-internal lag) and the zero-order hold's amplitude droop ``sinc(f/fs)`` (which,
-left out, lowers the fitted ``wn`` by 5 %: the droop looks like roll-off).
-The poles are read from the magnitude, the delay from what the poles leave of
-the phase: estimated together they do not trade off, unlike a delay taken as
-the residual phase slope of a model fitted without it.
+as the converter samples it: the command held over each sample and a delay of
+any fraction of a sample, in closed form (:func:`sampled_response`; the hold's
+amplitude droop alone, left out, lowers the fitted ``wn`` by 5 % at 10 kHz).
+``τ`` counts the hold's half sample, the DAC transport and the Newport's
+internal lag, as the seed's 0.5 ms does. The poles are read from the
+magnitude, the delay from what the poles leave of the phase: estimated
+together they do not trade off, unlike a delay taken as the residual phase
+slope of a model fitted without it. The Newport's own lag is what remains
+after the converter's share: the Sercalo path's identified delay when it is
+known (same DAC, hold, 4QD and its amplifier, no internal lag), else the
+nominal DAC transport plus half a sample.
 
-Lines are used where the coherence is at least 0.9, from 5 Hz to ``0.2 fs``
-(beyond, the sampled response departs from the held continuous one by
-aliasing). Each line's residual is weighted by its random error; parameter
-standard deviations come from the Jacobian at the optimum, scaled by the
-residual variance and by the number of lines one Welch window correlates.
+Lines are used from 5 Hz up to where the coherence (smoothed over 51 lines)
+falls below 0.9, at most ``0.4 fs``.
+Each line's residual is weighted by its random error; parameter standard
+deviations come from the Jacobian at the optimum, scaled by the residual
+variance and by the number of lines one Welch window correlates.
 
 From the fit: the amplitude bandwidth (−3 dB), the phase bandwidth (the
 frequency where the lag of the poles and the internal lag reaches the
@@ -40,6 +45,8 @@ from typing import Any
 import control as ct
 import numpy as np
 from numpy.typing import NDArray
+from scipy.linalg import expm
+from scipy.ndimage import median_filter
 from scipy.optimize import brentq, least_squares
 
 from fsmbench.checks import Check
@@ -48,15 +55,15 @@ from fsmbench.ident.frf import FrequencyResponse
 from fsmbench.ident.sercalo import combined_delay, path_delays
 
 __all__ = ["NewportAxisFit", "NewportDynamics", "NewportIdentification", "fit_newport_dynamics",
-           "identify_newport", "newport_checks"]
+           "identify_newport", "newport_checks", "sampled_response"]
 
 FloatArray = NDArray[np.float64]
 _PATHS = {"h": ("Vph", "Unh"), "v": ("Vpv", "Unv")}
 
 #: Lines below this coherence are left out (the seed's own threshold for its fits).
 MIN_COHERENCE = 0.9
-#: Highest line fitted, as a fraction of the sampling rate (aliasing beyond).
-MAX_FRACTION_OF_FS = 0.2
+#: Highest line fitted, as a fraction of the sampling rate (a 4QD amplifier's roll-off beyond).
+MAX_FRACTION_OF_FS = 0.4
 #: Lowest line fitted [Hz] (the records' drift and the window's leakage below).
 MIN_FREQUENCY_HZ = 5.0
 
@@ -100,14 +107,21 @@ class NewportAxisFit:
 
     def response(self, f_hz: FloatArray, *, fs_hz: float | None = None,
                  delay: bool = True) -> NDArray[np.complex128]:
-        """The model at ``f_hz`` [Hz]: with the hold's droop when ``fs_hz`` is given."""
+        """The model at ``f_hz`` [Hz]: continuous, or as sampled at ``fs_hz`` (with the hold;
+        ``delay=False`` then removes ``delay_s`` as the measured FRF's figures do)."""
+        if fs_hz is not None:
+            h = sampled_response(f_hz, gain=self.gain_v_per_v,
+                                 natural_freq_hz=self.natural_freq_hz,
+                                 damping_ratio=self.damping_ratio, delay_s=self.delay_s,
+                                 fs_hz=fs_hz)
+            if not delay:
+                h = h * np.exp(2j * np.pi * np.asarray(f_hz, dtype=float) * self.delay_s)
+            return h
         s = 2j * np.pi * np.asarray(f_hz, dtype=float)
         wn = 2 * np.pi * self.natural_freq_hz
         h = self.gain_v_per_v * wn**2 / (s**2 + 2 * self.damping_ratio * wn * s + wn**2)
         if delay:
             h = h * np.exp(-s * self.delay_s)
-        if fs_hz is not None:
-            h = h * np.sinc(np.asarray(f_hz, dtype=float) / fs_hz)
         return np.asarray(h, dtype=np.complex128)
 
     def amplitude_bandwidth_hz(self) -> float:
@@ -194,6 +208,41 @@ class NewportDynamics:
                 "phase_lag_deg": self.phase_lag_deg}
 
 
+def sampled_response(f_hz: FloatArray, *, gain: float, natural_freq_hz: float,
+                     damping_ratio: float, delay_s: float, fs_hz: float
+                     ) -> NDArray[np.complex128]:
+    """The second order and delay as the converter samples them, at ``f_hz`` [Hz] (V/V).
+
+    Exact for a command held over each sample (zero-order hold) and a delay of
+    any fraction of a sample (modified z-transform, as :mod:`fsmbench.sim.discretize`
+    simulates it). ``delay_s`` follows the seed's convention: it includes half a
+    sample for the hold, so the pure delay after the hold is ``delay_s − T/2``.
+    """
+    t = 1.0 / fs_hz
+    wn = 2 * math.pi * natural_freq_hz
+    a = np.array([[0.0, 1.0], [-wn * wn, -2 * damping_ratio * wn]])
+    b = np.array([0.0, gain * wn * wn])
+    pure = max(delay_s - 0.5 * t, 0.0)
+    whole = math.floor(pure / t + 1e-12)
+    frac = pure / t - whole
+
+    def gamma(h: float) -> NDArray[np.float64]:
+        aug = np.zeros((3, 3))
+        aug[:2, :2], aug[:2, 2] = a, b
+        return np.asarray(expm(aug * h)[:2, 2])
+
+    phi = expm(a * t)
+    g0 = gamma((1 - frac) * t)
+    g1 = expm(a * (1 - frac) * t) @ gamma(frac * t)
+    z = np.exp(2j * np.pi * np.asarray(f_hz, dtype=float) * t)
+    # (z I − Φ)^-1 of a 2x2 in closed form, all lines at once; output = first state.
+    d11, d12, d21, d22 = z - phi[0, 0], -phi[0, 1], -phi[1, 0], z - phi[1, 1]
+    det = d11 * d22 - d12 * d21
+    g = g0[:, None] + g1[:, None] / z
+    first = (d22 * g[0] - d12 * g[1]) / det
+    return np.asarray(first * z ** (-whole), dtype=np.complex128)
+
+
 def _line_error(frf: FrequencyResponse, output: str, input_: str) -> FloatArray:
     """Standard deviation of each line's complex H [V/V] (the FRF's own estimate)."""
     h = frf.frf.sel(output=output, input=input_).values
@@ -211,20 +260,23 @@ def _fit_axis(frf: FrequencyResponse, axis: str, *, fs: float) -> NewportAxisFit
     h = frf.frf.sel(output=output, input=input_).values
     coh = frf.coherence.sel(output=output, input=input_).values
     sigma = _line_error(frf, output, input_)
-    sel = ((f >= MIN_FREQUENCY_HZ) & (f <= MAX_FRACTION_OF_FS * fs) & (coh >= MIN_COHERENCE)
-           & np.isfinite(h) & (sigma > 0))
+    # One contiguous band, up to where the coherence smoothed over ±25 lines falls below the
+    # threshold: keeping lines by their own coherence would keep those whose noise happened to
+    # raise |H| where the coherence is marginal, and bias the roll-off (+0.7 % on wn).
+    smooth = median_filter(np.nan_to_num(coh), size=51, mode="nearest")
+    low = (f > 100.0) & (smooth < MIN_COHERENCE)
+    f_top = min(MAX_FRACTION_OF_FS * fs, float(f[low][0]) if low.any() else math.inf)
+    sel = ((f >= MIN_FREQUENCY_HZ) & (f <= f_top) & np.isfinite(h) & np.isfinite(sigma)
+           & (sigma > 0))
     if sel.sum() < 20:
-        raise ValueError(f"{input_} → {output}: {int(sel.sum())} lines with coherence ≥ "
-                         f"{MIN_COHERENCE} between {MIN_FREQUENCY_HZ:g} Hz and "
-                         f"{MAX_FRACTION_OF_FS * fs:g} Hz; the Newport's dynamics need 20")
+        raise ValueError(f"{input_} → {output}: {int(sel.sum())} lines between "
+                         f"{MIN_FREQUENCY_HZ:g} Hz and {f_top:g} Hz, where the coherence stays "
+                         f"≥ {MIN_COHERENCE}; the Newport's dynamics need 20")
     fl, hl, sl = f[sel], h[sel], sigma[sel]
-    s = 2j * np.pi * fl
-    hold = np.sinc(fl / fs)
 
     def model(p: FloatArray) -> NDArray[np.complex128]:
-        k, fn, z, tau = p
-        wn = 2 * np.pi * fn
-        return k * wn**2 / (s**2 + 2 * z * wn * s + wn**2) * np.exp(-s * tau) * hold
+        return sampled_response(fl, gain=p[0], natural_freq_hz=p[1], damping_ratio=p[2],
+                                delay_s=p[3], fs_hz=fs)
 
     def residual(p: FloatArray) -> FloatArray:
         r = (model(p) - hl) / sl
@@ -237,14 +289,18 @@ def _fit_axis(frf: FrequencyResponse, axis: str, *, fs: float) -> NewportAxisFit
     slope = np.polyfit(2 * np.pi * fl, np.unwrap(np.angle(hl * np.sign(k0))), 1)[0]
     p0 = np.array([k0, 1000.0, 1.0, max(0.0, -float(slope) / 2)])
     out = least_squares(residual, p0, x_scale=np.array([abs(k0), 1000.0, 1.0, 1e-4]),
-                        bounds=([-np.inf, 1.0, 0.01, 0.0], [np.inf, fs, 20.0, 0.05]))
+                        bounds=([-np.inf, 1.0, 0.01, 0.5 / fs], [np.inf, fs, 20.0, 0.05]))
     m, n_par = 2 * fl.size, p0.size
     chi2 = float(np.sum(out.fun**2)) / max(1, m - n_par)
     # A Welch window of L samples zero-padded to nfft correlates ~1.5 nfft/L adjacent lines
     # (Hann's equivalent noise bandwidth): the fit has that many fewer independent lines.
     correlated = 1.5 * frf.nfft / frf.window_length
-    jtj = out.jac.T @ out.jac
-    cov = np.linalg.pinv(jtj) * chi2 * correlated
+    # Columns scaled to unit norm first: gain, frequency and delay differ by 1e7 in scale,
+    # and an unscaled pseudo-inverse drops the small directions as rank deficiency.
+    norms = np.linalg.norm(out.jac, axis=0)
+    norms[norms == 0] = 1.0
+    js = out.jac / norms
+    cov = np.linalg.pinv(js.T @ js) / np.outer(norms, norms) * chi2 * correlated
     std = np.sqrt(np.clip(np.diag(cov), 0.0, None))
     k, fn, z, tau = (float(v) for v in out.x)
     err = float(np.sqrt(np.mean(np.abs((model(out.x) - hl) / hl) ** 2)))
@@ -256,6 +312,7 @@ def _fit_axis(frf: FrequencyResponse, axis: str, *, fs: float) -> NewportAxisFit
 
 
 def fit_newport_dynamics(frf: FrequencyResponse, *, dac_delay_samples: float = 1.0,
+                         converter_delay_s: float | None = None,
                          phase_lag_deg: float = 60.0) -> NewportDynamics:
     """Fit both Newport paths (see the module) and derive their bandwidths.
 
@@ -265,7 +322,10 @@ def fit_newport_dynamics(frf: FrequencyResponse, *, dac_delay_samples: float = 1
         ``Unh, Unv → Vph, Vpv`` (at least the direct paths), with coherence.
     dac_delay_samples : float
         The converter's transport delay [samples]; with half a sample of hold it
-        is removed from the fitted delay to give the Newport's internal lag.
+        is the converter's share of the delay when ``converter_delay_s`` is None.
+    converter_delay_s : float, optional
+        The delay of the paths without the Newport [s] (the Sercalo's identified
+        delay): removed from the fitted delay to give the Newport's internal lag.
     phase_lag_deg : float
         Lag defining the phase bandwidth [deg] (FSM-300 datasheet: 60°).
 
@@ -280,7 +340,8 @@ def fit_newport_dynamics(frf: FrequencyResponse, *, dac_delay_samples: float = 1
                              f"FRF has {frf.input_names} → {frf.output_names}")
     fs = float(frf.fs_hz)
     axes = {axis: _fit_axis(frf, axis, fs=fs) for axis in "hv"}
-    converter = (dac_delay_samples + 0.5) / fs
+    converter = ((dac_delay_samples + 0.5) / fs if converter_delay_s is None
+                 else float(converter_delay_s))
     return NewportDynamics(
         axes=axes, fs_hz=fs, converter_delay_s=converter,
         amplitude_bandwidth_hz={k: a.amplitude_bandwidth_hz() for k, a in axes.items()},
@@ -377,8 +438,8 @@ class NewportIdentification:
 
 
 def identify_newport(frf: FrequencyResponse, *, band_hz: tuple[float, float] = (10.0, 100.0),
-                     min_coherence: float = 0.9, dac_delay_samples: float = 1.0
-                     ) -> NewportIdentification:
+                     min_coherence: float = 0.9, dac_delay_samples: float = 1.0,
+                     converter_delay_s: float | None = None) -> NewportIdentification:
     """The Newport paths (seed 2.4) from the ``Un → Vp`` matrix: dynamics, delays, gains.
 
     Parameters
@@ -391,6 +452,9 @@ def identify_newport(frf: FrequencyResponse, *, band_hz: tuple[float, float] = (
         Lines below it are not used by the phase-only delay estimate.
     dac_delay_samples : float
         The converter's transport delay [samples] (``converter.dac_delay_samples``).
+    converter_delay_s : float, optional
+        The Sercalo path's identified delay [s], the converter's share of the
+        Newport's (see :func:`fit_newport_dynamics`).
     """
     inputs, outputs = frf.input_names, frf.output_names
     if len(inputs) != 2 or len(outputs) != 2:
@@ -406,8 +470,8 @@ def identify_newport(frf: FrequencyResponse, *, band_hz: tuple[float, float] = (
         h = clean.frf.sel(output=outputs[j], input=inputs[j]).values[sel]
         seed_gains[axis] = float(np.sign(np.mean(h.real)) * np.mean(np.abs(h)))
     try:
-        dyn: NewportDynamics | None = fit_newport_dynamics(frf,
-                                                           dac_delay_samples=dac_delay_samples)
+        dyn: NewportDynamics | None = fit_newport_dynamics(
+            frf, dac_delay_samples=dac_delay_samples, converter_delay_s=converter_delay_s)
         why = ""
     except ValueError as exc:
         dyn, why = None, f"the constant gains are used: {exc}"

@@ -429,8 +429,9 @@ def _identify(recordings: Mapping[str, xr.Dataset], *, bench: Bench, opts: Ident
             nfrf = experiment_frf(recordings, columns=[("data_unh", "Unh"), ("data_unv", "Unv")],
                                   trims_s=opts.trims_s, window_s=opts.window_s,
                                   estimator=opts.frf)
-            newport_id = identify_newport(nfrf, band_hz=opts.newport_band_hz,
-                                          dac_delay_samples=conv.dac_delay_samples)
+            newport_id = identify_newport(
+                nfrf, band_hz=opts.newport_band_hz, dac_delay_samples=conv.dac_delay_samples,
+                converter_delay_s=None if sercalo_id is None else sercalo_id.delay_s)
             if newport_id.dynamics is not None:
                 ds_np = bench.datasheet.newport
                 checks.extend(newport_checks(

@@ -96,9 +96,11 @@ def _target(row: ComparisonRow) -> tuple[str, str]:
     """(target, difference) in words with units."""
     kind, tol = TARGETS[row.key]
     _name, unit, scale = quantity(row.key)
-    if kind == "abs":
+    if row.tolerance_abs is not None:
         diff = (row.identified - row.reference) * scale
-        return f"±{tol * scale:.3g} {unit}".strip(), f"{diff:+.3g} {unit}".strip()
+        what = f" ({tol:g} sample)" if kind == "samples" else ""
+        return (f"±{row.tolerance_abs * scale:.3g} {unit}".strip() + what,
+                f"{diff:+.3g} {unit}".strip())
     return f"±{100 * tol:.3g} %", f"{100 * row.relative_difference:+.3f} %"
 
 
@@ -437,8 +439,8 @@ def _newport(result: Identification | None, *, recordings: Mapping[str, xr.Datas
             caption=("Newport dynamics fitted jointly with the delay (± one standard "
                      "deviation), against the FSM-300 datasheet in brackets; the phase "
                      f"bandwidth is where the poles' lag and the internal lag reach "
-                     f"{dyn.phase_lag_deg:g}°, after removing the converter's own "
-                     f"{1e3 * dyn.converter_delay_s:.2f} ms"),
+                     f"{dyn.phase_lag_deg:g}°, after removing the converter's share of the delay "
+                     f"(the Sercalo path's, {1e3 * dyn.converter_delay_s:.3f} ms)"),
             header=("path", "static gain [V/V]", "seed's constant gain [V/V]",
                     "natural frequency [Hz]", "damping ratio", "delay [ms]",
                     "internal lag [ms]", "−3 dB bandwidth [Hz]", "60° phase bandwidth [Hz]",

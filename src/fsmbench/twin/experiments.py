@@ -233,7 +233,8 @@ def played_experiment(*, channel: str, samples_v: np.ndarray, fs_hz: float,
 #: ``realized`` keys of ``twin_truth.json`` and the :class:`~fsmbench.sim.stream.BenchBlock`
 #: noise each is measured on.
 REALIZED_NOISE = (("qd_noise_v", "qd"), ("newport_angle_noise_rad", "newport_angle"),
-                  ("newport_metrology_noise_rad", "metrology"), ("vc_noise_v", "vc"))
+                  ("newport_metrology_noise_rad", "metrology"), ("vc_noise_v", "vc"),
+                  ("qd_slow_disturbance_v", "qd_slow"))
 
 
 def seed_feedback(bench: Bench) -> DiscreteController:

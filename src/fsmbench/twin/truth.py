@@ -119,6 +119,32 @@ def twin_truth(bench: Bench, *, seed: int, experiments: Sequence[ExperimentSpec]
             "dac_transport": p.converter.dac_delay_samples * p.converter.ts_s,
             "zero_order_hold": 0.5 * p.converter.ts_s,
             "newport_internal": p.newport.internal_delay_s,
+            "dac_extra": p.converter.dac_extra_delay_s,
+        },
+        # What a real bench adds (bench TOML [true]; zeros: the feature is off).
+        "real_bench": {
+            "sercalo": {axis: {"mode_shape_angle_rad": p.sercalo.mode_shape_angle_rad[axis],
+                               "second_mode_hz": p.sercalo.second_mode_hz[axis],
+                               "second_mode_damping_ratio":
+                                   p.sercalo.second_mode_damping_ratio[axis],
+                               "second_mode_relative_gain":
+                                   p.sercalo.second_mode_relative_gain[axis],
+                               "second_mode_shape_angle_rad":
+                                   p.sercalo.second_mode_shape_angle_rad[axis]}
+                        for axis in "hv"},
+            "quad_diode": {
+                "bandwidth_hz": p.quad_diode.bandwidth_hz,
+                "bandwidth_order": p.quad_diode.bandwidth_order,
+                "flicker_asd_v_per_rthz": {a: p.quad_diode.flicker_asd_v_per_rthz[a]
+                                           for a in "hv"},
+                "mains_freq_hz": p.quad_diode.mains_freq_hz,
+                "mains_amplitude_v": list(p.quad_diode.mains_amplitude_v),
+                "offset_drift_v_per_s": {a: p.quad_diode.offset_drift_v_per_s[a] for a in "hv"},
+                "offset_random_walk_v_per_rts": {a: p.quad_diode.offset_random_walk_v_per_rts[a]
+                                                 for a in "hv"},
+                "nonlinearity_pct": p.quad_diode.nonlinearity_pct,
+                "nonlinearity_full_swing_rad": p.quad_diode.nonlinearity_full_swing_rad,
+            },
         },
         "experiments": {s.name: {k: v for k, v in dataclasses.asdict(s).items() if k != "name"}
                         for s in experiments},
