@@ -49,6 +49,27 @@ def test_standard_error_matches_the_scatter_of_the_slope() -> None:
     assert reported == pytest.approx(spread, rel=0.3)
 
 
+@pytest.mark.parametrize("compression", [0.0, 0.02, -0.01])
+def test_a_compressed_4qd_gives_its_small_signal_gain(compression: float) -> None:
+    rng = np.random.default_rng(7)
+    n = 50_000  # one whole period of the 0.2 Hz sweep: the 3/4 below holds exactly
+    t = np.arange(n) / 1e4
+    vn = 2.0 * np.sin(2 * np.pi * 0.2 * t)
+    x = 2 * 2.62e-3 * vn
+    swing = float(np.max(np.abs(x)))
+    # The real-bench twin's law: compressed by `compression` at the calibration's full swing.
+    vp = -31.0 * x * (1 - compression * (x / swing) ** 2) + 1e-3 * rng.standard_normal(n)
+    ds = make_recording({"Vph": vp, "Vpv": 0 * vp, "Vnh": vn}, t=t, experiment="data_cal_pd_h")
+    cal = calibrate_qd(ds, axis="h", metrology_gain_rad_per_v=2.62e-3, trim_s=0.0)
+    # Within 5 of its standard errors of the small-signal gain, whatever the compression.
+    assert abs(cal.gain_v_per_rad + 31.0) < 5 * cal.gain_std_v_per_rad
+    # The seed's straight line averages the slope over a sine's swing: 3/4 of the compression.
+    assert cal.linear_slope_v_per_rad == pytest.approx(-31.0 * (1 - 0.75 * compression),
+                                                       rel=1e-4)
+    if compression == 0.0:  # no cubic term found: the seed's line itself
+        assert cal.cubic_v_per_rad3 == 0.0 and cal.gain_v_per_rad == cal.linear_slope_v_per_rad
+
+
 def test_calibration_on_the_twin(ident_twin: TwinRun, bench: Bench) -> None:
     gn0 = bench.nominal.newport.metrology_gain_rad_per_v
     for axis in "hv":

@@ -181,7 +181,10 @@ def calibrate_qd(ds: xr.Dataset, *, axis: str, metrology_gain_rad_per_v: float,
     resid3 = y - cub @ coef
     s2_3 = float(resid3 @ resid3) / max(n - 3, 1)
     cov3 = s2_3 * np.linalg.inv(cub.T @ cub)
-    if n > 3 and abs(coef[2]) > 5 * math.sqrt(max(cov3[2, 2], 0.0)):
+    # ... and large enough to matter: 1e-4 of the line at full swing (a noise-free line's
+    # rounding-level cubic is "significant" against a rounding-level residual).
+    if (n > 3 and abs(coef[2]) > 5 * math.sqrt(max(cov3[2, 2], 0.0))
+            and abs(coef[2]) > 1e-4 * abs(coef[1])):
         b, gain, gain_std = float(coef[0]), float(coef[1]) / scale, \
             math.sqrt(cov3[1, 1]) / scale
         cubic = float(coef[2]) / scale**3
