@@ -152,3 +152,18 @@ def test_bad_input_verdicts() -> None:
     verdict = r"'Va' contains NaN or infinite samples \(first at index 37\)"
     with pytest.raises(ValueError, match=verdict):
         allan_deviation(da.from_array(y, chunks=10), fs_hz=10.0, name="'Va'", task_samples=8)
+
+
+def test_a_held_quantity_has_slope_minus_one() -> None:
+    """Differences of white noise (what a loop leaves of a held quantity): sqrt(3) sigma / m."""
+    from fsmbench.scale.allan import allan_regions
+
+    rng = np.random.default_rng(11)
+    w = rng.standard_normal(400_001)
+    y = np.diff(w)
+    res = allan_deviation(y, fs_hz=1.0, taus_s=2.0 ** np.arange(0, 10), unit="rad")
+    # Each m-average is (w[k+m] - w[k]) / m, so sigma^2 = (1/2) E[(w2 - 2 w1 + w0)^2] / m^2.
+    expected = np.sqrt(3.0) / res.m
+    # Hundreds of thousands of overlapping terms, correlated over 2m: 5 % at m = 512.
+    np.testing.assert_allclose(res.adev, expected, rtol=0.05)
+    assert [r.noise for r in allan_regions(res)] == ["bounded"]

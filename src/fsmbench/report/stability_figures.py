@@ -66,8 +66,9 @@ def allan_figure(stability: Mapping[int, StabilityRecord]) -> Figure:
         key="huddle_allan", title="Allan deviation of the distance and of the beam angle",
         caption=("Overlapping Allan deviation (IEEE Std 1139) over the whole of each huddle "
                  "test after the seed's trim, the longest "
-                 f"{longest / time_axis(longest)[0]:.3g} {unit}. A slope of −1/2 is white "
-                 "noise, 0 flicker, +1/2 random walk, +1 drift; the table below names each "
+                 f"{longest / time_axis(longest)[0]:.3g} {unit}. A slope of −1 is a bounded "
+                 "quantity (one the loop holds, like the beam angle in closed loop), −1/2 "
+                 "white noise, 0 flicker, +1/2 random walk, +1 drift; the table below names each "
                  "region. Top: the Attocube distance Va; bottom: the beam angle the 4QD "
                  "reads (Vph, Vpv over their calibrated gains)."),
         panels=(Panel(traces=tuple(va_lines), x_label="Averaging time τ [s]",

@@ -52,6 +52,9 @@ _Read = tuple[list[Any], int, int]  # (chunks, offset in the first, length)
 
 # Nominal log-log slopes of the overlapping ADEV of frequency-like data (SP 1065, Table 4).
 _NOISE_TYPES = (
+    # The differences of a white noise average to ~1/m: a quantity with no low-frequency
+    # content, e.g. one a feedback loop holds (SP 1065's white phase noise).
+    ("bounded", "bounded (white phase) noise", -1.0),
     ("white", "white noise", -0.5),
     ("flicker", "flicker noise", 0.0),
     ("random_walk", "random walk", 0.5),
