@@ -2,7 +2,7 @@
 
     fsmbench params   [--params FILE] [--out DIR] [--json]
     fsmbench simulate OUT [--duration S] [--seed N] [--params FILE] [--format F]
-                      [--excitation FILE]
+                      [--excitation FILE…]
     fsmbench excite   OUT --input Uch --amplitude-rms V [--kind K] [--band LO HI] ...
     fsmbench identify DATA --out OUT [--params FILE] [--frf auto|welch|lpm|periodic]
                       [--weights seed|variance]
@@ -453,9 +453,10 @@ def _parser() -> argparse.ArgumentParser:
                    help="file format (default: MATLAB v5)")
     p.add_argument("--experiments", metavar="NAME", nargs="+", default=None,
                    help="only these experiments (e.g. data_uch data_ucv)")
-    p.add_argument("--excitation", metavar="FILE", default=None,
-                   help="play this designed excitation (fsmbench excite: folder, .json or "
-                        ".mat) in its input's experiment instead of the seed's noise")
+    p.add_argument("--excitation", metavar="FILE", default=None, nargs="+",
+                   help="play these designed excitations (fsmbench excite: folder, .json or "
+                        ".mat) each in its input's experiment instead of the seed's noise; "
+                        "--experiments adds the seed's own")
     p.set_defaults(func=_cmd_simulate)
 
     stage_commands = (

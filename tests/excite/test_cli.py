@@ -79,9 +79,12 @@ def test_simulate_plays_the_file(tmp_path: Path, capsys: pytest.CaptureFixture[s
     assert truth["excitation_file"]["kind"] == "chirp"
     ex = truth["experiments"]["data_unv"]["excitations"][0]
     assert ex["kind"] == "samples" and ex["samples_v"]["n_samples"] == 20000
+    # The seed's other experiments can join the played one in the same folder.
     assert main(["simulate", str(tmp_path / "s2"), "--excitation", str(exc),
-                 "--experiments", "data_uch"]) == 2
-    assert "leave out --experiments" in capsys.readouterr().err
+                 "--experiments", "data_uch"]) == 0
+    both = json.loads((tmp_path / "s2" / "twin_truth.json").read_text())
+    assert sorted(both["experiments"]) == ["data_uch", "data_unv"]
+    assert both["experiments"]["data_unv"]["excitations"][0]["kind"] == "samples"
 
 
 def test_excite_twice_gives_byte_identical_files(tmp_path: Path) -> None:

@@ -6,7 +6,6 @@ from pathlib import Path
 
 import control as ct
 import numpy as np
-import pytest
 import scipy.io
 
 from fsmbench.bench.blocks import PlantModel
@@ -41,19 +40,25 @@ def test_frf_mat_uses_the_seeds_names(tmp_path: Path) -> None:
     np.testing.assert_array_equal(data["tf_Uch_Vpv"][:, 0], frf.frf.values[:, 1, 0])
 
 
-def test_grids_must_agree() -> None:
-    rng = np.random.default_rng(0)
-    u = rng.standard_normal(30000)
-    a = spectral_matrix(u, u, input_names=["Uch"], output_names=["Vph"], window=hanning(1000),
-                        fs_hz=1e4)
-    b = spectral_matrix(u, u, input_names=["Ucv"], output_names=["Vph"], window=hanning(2000),
-                        fs_hz=1e4)
-    with pytest.raises(ValueError, match="frequency grid of 'b'"):
-        frf_variables({"a": a, "b": b})
-
-
 def test_static_block_struct() -> None:
     g = ct.ss([], [], [], np.diag([2.0, 3.0]), inputs=["a", "b"], outputs=["c", "d"])
     s = ss_struct(g)
     assert s["A"].shape == (0, 0) and s["B"].shape == (0, 2) and s["StateName"] == []
     np.testing.assert_array_equal(s["D"], np.diag([2.0, 3.0]))
+
+
+def test_responses_on_two_grids_each_keep_their_own(tmp_path: Path) -> None:
+    rng = np.random.default_rng(0)
+    u = rng.standard_normal(20_000)
+    y = np.column_stack([u, 0.5 * u]) + 0.01 * rng.standard_normal((20_000, 2))
+    a = spectral_matrix(u, y, input_names=["Uch"], output_names=["Vph", "Vpv"],
+                        window=hanning(1000), fs_hz=1e4)
+    b = spectral_matrix(u, y, input_names=["Unh"], output_names=["Vph", "Vpv"],
+                        window=hanning(2000), fs_hz=1e4)
+    v = frf_variables({"sercalo": a, "newport": b})
+    assert v["frf_grid_Uch"] == "f" and v["frf_grid_Unh"] == "f_newport"
+    np.testing.assert_array_equal(v["f_newport"].ravel(), b.frequency_hz)
+    assert v["tf_Unh_Vph"].shape == v["f_newport"].shape
+    write_frf_mat(tmp_path / "frf.mat", {"sercalo": a, "newport": b})
+    m = scipy.io.loadmat(tmp_path / "frf.mat")
+    assert m["f_newport"].shape == (b.frequency_hz.size, 1)

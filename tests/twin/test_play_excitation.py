@@ -139,3 +139,39 @@ def test_a_file_at_another_rate_is_refused(tmp_path: Path) -> None:
     with pytest.raises(ExcitationFileError, match=r"excitation.json: is sampled at 20000 Hz; "
                                                   r"the twin's bench runs at 10000 Hz"):
         simulate_excitation(tmp_path, BENCH)
+
+
+def test_a_whole_identification_set_from_designed_excitations(tmp_path: Path) -> None:
+    """Uch and Ucv multisines plus the seed's other experiments: one folder, identified."""
+    import json
+
+    from fsmbench.ident.pipeline import IdentifyOptions, identify
+    from fsmbench.io.folder import load_recordings
+    from fsmbench.twin.compare import comparison_rows
+    from fsmbench.twin.simulate import play_excitation
+
+    files = []
+    for inp in ("Uch", "Ucv"):
+        d = design_multisine(input=inp, band_hz=(1.0, 2000.0), resolution_hz=1.0,
+                             amplitude_rms_v=0.015, fs_hz=FS, seed=2, periods=6,
+                             transient_periods=3)
+        folder = tmp_path / inp
+        folder.mkdir()
+        write_excitation(d, folder)
+        files.append(folder)
+    out = tmp_path / "set"
+    play_excitation(files, BENCH, out_dir=out, seed=4,
+                    experiments=["data_cal_pd_h", "data_cal_pd_v", "data_uch", "data_unh",
+                                 "data_unv"])
+    truth = json.loads((out / "twin_truth.json").read_text())
+    assert [f["input"] for f in truth["excitation_files"]] == ["Uch", "Ucv"]
+    assert sorted(truth["experiments"]) == sorted(
+        ["data_cal_pd_h", "data_cal_pd_v", "data_uch", "data_ucv", "data_unh", "data_unv"])
+    with pytest.raises(ValueError, match="two excitation files play data_uch"):
+        play_excitation([files[0], files[0]], BENCH, out_dir=tmp_path / "twice")
+    recs = load_recordings(out, fs_hz=FS).recordings
+    ident = identify(recs, bench=BENCH, options=IdentifyOptions(weights="variance"),
+                     source="twin")
+    assert ident.to_json()["diagnostics"]["frf_estimator"]["sercalo"] == "periodic"
+    rows = comparison_rows(ident.to_json(), reference=truth, bench=BENCH)
+    assert len(rows) == 20 and all(r.within_target for r in rows), [str(r) for r in rows]

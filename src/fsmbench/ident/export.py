@@ -3,7 +3,8 @@
 ``frf.mat`` holds the frequency vector ``f`` [Hz] (a column) and, for each
 measured pair, ``tf_<input>_<output>`` (complex FRF, column) and
 ``coh_<input>_<output>`` (coherence, column) — the seed's variable names, so a
-MATLAB user can lay them over their own ``tfestimate``/``mscohere`` results.
+MATLAB user can lay them over their own ``tfestimate``/``mscohere`` results
+(see :func:`frf_variables` for responses on other grids and their std).
 
 ``plant.mat`` holds one struct per block (``Gi, Zc, Ga, Gc, Gn, Gd``) and one
 for the full system (``sys``), each with fields ``A, B, C, D`` (double
@@ -31,23 +32,37 @@ __all__ = ["frf_variables", "plant_variables", "ss_struct", "write_frf_mat", "wr
 def frf_variables(responses: Mapping[str, FrequencyResponse]) -> dict[str, Any]:
     """The seed's variables for every (input, output) pair of ``responses``.
 
-    All responses must share one frequency grid (same window and fs).
+    ``f`` is the first response's grid; a response on another grid (e.g. the
+    Sercalo averaged over a multisine's periods, the Newport by Welch) gets its
+    own ``f_<key>`` column, named in ``frf_grid_<input>`` (written only when the
+    grids differ). An estimate with a
+    variance adds ``std_tf_<input>_<output>`` (standard deviation of the complex
+    FRF, column).
     """
     out: dict[str, Any] = {}
     f_ref: np.ndarray | None = None
     for key, resp in responses.items():
         f = resp.frequency_hz
+        grid = "f"
         if f_ref is None:
             f_ref = f
             out["f"] = f.reshape(-1, 1)
         elif f.shape != f_ref.shape or not np.allclose(f, f_ref, rtol=0, atol=1e-9):
-            raise ValueError(f"frequency grid of '{key}' differs from the first response's")
+            grid = f"f_{key}"
+            out[grid] = f.reshape(-1, 1)
         for inp in resp.input_names:
+            out[f"frf_grid_{inp}"] = grid
             for outp in resp.output_names:
                 h = resp.frf.sel(input=inp, output=outp).values
                 c = resp.coherence.sel(input=inp, output=outp).values
                 out[f"tf_{inp}_{outp}"] = np.asarray(h, dtype=complex).reshape(-1, 1)
                 out[f"coh_{inp}_{outp}"] = np.asarray(c, dtype=float).reshape(-1, 1)
+                if resp.frf_variance is not None:
+                    var = resp.frf_variance.sel(input=inp, output=outp).values
+                    out[f"std_tf_{inp}_{outp}"] = np.sqrt(
+                        np.asarray(var, dtype=float)).reshape(-1, 1)
+    if not any(k.startswith("f_") for k in out):  # one grid: the seed's variables only
+        out = {k: v for k, v in out.items() if not k.startswith("frf_grid_")}
     return out
 
 

@@ -327,19 +327,40 @@ def write_twin(run: TwinRun, out_dir: str | Path, *,
     return paths
 
 
-def play_excitation(source: str | Path, bench: Bench | None = None, *, out_dir: str | Path,
-                    seed: int = 0, duration_s: float | None = None,
+def play_excitation(sources: str | Path | Sequence[str | Path], bench: Bench | None = None, *,
+                    out_dir: str | Path, seed: int = 0, duration_s: float | None = None,
                     experiments: Sequence[str] | None = None,
                     format: RecordingFormat = "mat5",
                     progress: Callable[[str], None] | None = None) -> list[Path]:
-    """``fsmbench simulate --excitation``: :func:`simulate_excitation`, then :func:`write_twin`.
+    """``fsmbench simulate --excitation FILE… [--experiments NAME…]``, written to ``out_dir``.
 
-    ``experiments`` must be None (the file's input names the experiment);
-    returns the paths written.
+    Each designed excitation is played in its input's experiment
+    (:func:`simulate_excitation`); ``experiments`` adds the seed's own
+    experiments (those not played from a file), so one folder can hold a whole
+    identification set. Two files for the same input are refused. Returns the
+    paths written.
     """
-    if experiments is not None:
-        raise ValueError("--excitation plays the experiment of its input; leave out "
-                         "--experiments")
-    run = simulate_excitation(source, bench, seed=seed, duration_s=duration_s,
-                              progress=progress)
-    return write_twin(run, out_dir, format=format)
+    items = [sources] if isinstance(sources, (str, Path)) else list(sources)
+    played = [simulate_excitation(src, bench, seed=seed, duration_s=duration_s,
+                                  progress=progress) for src in items]
+    names = [next(iter(r.recordings)) for r in played]
+    twice = sorted({n for n in names if names.count(n) > 1})
+    if twice:
+        raise ValueError(f"two excitation files play {', '.join(twice)}; give one per input")
+    runs = list(played)
+    rest = [e for e in (experiments or ()) if e not in names]
+    if rest:
+        runs.append(simulate_bench(bench, seed=seed, duration_s=duration_s, experiments=rest,
+                                   progress=progress))
+    truth = dict(runs[-1].truth)
+    truth["experiments"] = {k: v for r in runs for k, v in r.truth["experiments"].items()}
+    truth["realized"] = {k: v for r in runs for k, v in r.truth["realized"].items()}
+    files = [r.truth["excitation_file"] for r in played]
+    truth.pop("excitation_file", None)
+    if len(files) == 1:
+        truth["excitation_file"] = files[0]
+    truth["excitation_files"] = files
+    merged = TwinRun(recordings={k: v for r in runs for k, v in r.recordings.items()},
+                     truth=truth, seed=seed,
+                     experiments=tuple(e for r in runs for e in r.experiments))
+    return write_twin(merged, out_dir, format=format)
