@@ -409,12 +409,20 @@ def _wls(a: NDArray[np.float64], y: NDArray[np.float64],
 
 def _coherent_band(f: NDArray[np.float64], coh: NDArray[np.float64], *, f_lo: float,
                    f_max: float, threshold: float, width: int) -> float:
-    """Top of the band: first frequency above ``f_lo`` where the running-median coherence fails."""
+    """Top of the band: first frequency above ``f_lo`` where the running-median coherence fails.
+
+    The median runs over the lines above ``f_lo`` only: the lowest lines (drift, 1/f noise,
+    the window's DC leakage) must not drag down the start of the band.
+    """
+    keep = f > f_lo
+    f, coh = f[keep], coh[keep]
+    if f.size == 0:
+        return f_lo
     half = width // 2
     padded = np.pad(np.nan_to_num(coh, nan=0.0), half, mode="edge")
     windows = np.lib.stride_tricks.sliding_window_view(padded, 2 * half + 1)
     smooth = np.median(windows, axis=1)
-    above = (f > f_lo) & (f <= f_max)
+    above = f <= f_max
     bad = np.flatnonzero(above & (smooth < threshold))
     if bad.size == 0:
         return float(f[above][-1]) if above.any() else f_lo
@@ -443,9 +451,10 @@ def estimate_delay(
     output_name, input_name : str
         The path.
     band_hz : (float, float), optional
-        Default: from ``10 fs / window_length`` (10 Hz for the seed's 1 s window,
-        clear of the window's DC leakage) up to where the coherence, smoothed by a
-        running median over ``~15 fs / window_length`` Hz (so that the narrow dip
+        Default: from ``10 fs / window_length``, at least 10 Hz (10 Hz for the seed's
+        1 s window, clear of the window's DC leakage) up to where the coherence,
+        smoothed by a running median over ``15 fs / window_length`` Hz, at least
+        15 Hz, of the response's own lines (so that the narrow dip
         at a smeared resonance does not end the band), first drops below
         ``min_coherence``; at most ``max_frequency_hz``.
     min_coherence : float
@@ -472,9 +481,12 @@ def estimate_delay(
     coh = frf.coherence.sel(output=output_name, input=input_name).values
     resolution = frf.fs_hz / frf.window_length
     if band_hz is None:
-        f_lo = 10.0 * resolution
+        # At least 10 Hz: an estimate over the whole record (LPM) resolves fractions of a
+        # hertz, where drift and 1/f noise leave no coherence; 1 s Welch starts there anyway.
+        f_lo = max(10.0 * resolution, 10.0)
         f_max = frf.fs_hz / 4.0 if max_frequency_hz is None else float(max_frequency_hz)
-        width = max(3, round(15.0 * resolution / (frf.fs_hz / frf.nfft)))
+        spacing = float(np.median(np.diff(f))) if f.size > 1 else frf.fs_hz / frf.nfft
+        width = max(3, round(max(15.0 * resolution, 15.0) / spacing))
         f_hi = _coherent_band(f, coh, f_lo=f_lo, f_max=f_max, threshold=min_coherence,
                               width=width)
         if f_hi <= 2.0 * f_lo:
