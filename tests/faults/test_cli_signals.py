@@ -27,8 +27,12 @@ from fsmbench import __version__
 # The child holds still at the chosen point (marker written, then a long sleep);
 # the parent signals it as soon as the marker exists. 60 s only bounds a hang.
 HOLD = """
-import pathlib, time
+import pathlib, signal, time
 import fsmbench.twin.simulate as s
+# Ctrl-C as a terminal delivers it to a foreground process: a test runner may hand its
+# children SIGINT ignored (a background job) or blocked (a mask inherited from a thread).
+signal.signal(signal.SIGINT, signal.default_int_handler)
+signal.pthread_sigmask(signal.SIG_UNBLOCK, {{signal.SIGINT, signal.SIGTERM}})
 MARK = pathlib.Path({mark!r})
 def hold():
     MARK.write_text("ready")
