@@ -299,3 +299,21 @@ def test_progress_reports_both_reads(params):
     analyse_repeatability(_rep_record(), params=params, block_samples=700, progress=lines.append)
     assert any(x.startswith("data_rep_h: folding the periods 100 %") for x in lines)
     assert lines[-1].startswith("data_rep_h: non-repeatable parts and spectra 100 %")
+
+
+def test_records_in_memory_need_no_dask() -> None:
+    """The core installs without the dask extra: seed 11 on a record in memory runs."""
+    import subprocess
+    import sys
+
+    code = ("import sys; sys.modules['dask'] = None; sys.modules['distributed'] = None\n"
+            "from fsmbench.bench.params import default_bench\n"
+            "from fsmbench.twin import simulate_bench\n"
+            "from fsmbench.budget.repeatability import analyse_repeatability\n"
+            "b = default_bench()\n"
+            "run = simulate_bench(b, seed=1, duration_s=6.0, experiments=['data_rep_h'])\n"
+            "r = analyse_repeatability(run.recordings['data_rep_h'], params=b.nominal)\n"
+            "print(r.n_periods)\n")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.split() == ["3"]  # 6 s less the start and alignment: 3 whole periods

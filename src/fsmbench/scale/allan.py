@@ -167,8 +167,7 @@ def _si(value: float, unit: str) -> str:
 # --------------------------------------------------------------------------- tasks
 def _read(pieces: Sequence[NDArray[np.float64]], offset: int,
           length: int) -> NDArray[np.float64]:
-    # The Dask graph's reader (fsmbench.scale.welch imports Dask: imported on use).
-    from fsmbench.scale.welch import _read as read
+    from fsmbench.scale.segments import read_span as read  # the Dask graph's reader
 
     return read(pieces, offset, length)
 

@@ -53,9 +53,9 @@ def _bins(
     pieces: list[NDArray[np.float64]], offset: int, length: int, local_edges: NDArray[np.int64]
 ) -> NDArray[np.float64]:
     """``(3, bins)``: min, max, mean of ``data[local_edges[i]:local_edges[i+1]]``."""
-    from fsmbench.scale.welch import _read  # the Dask graph's reader, imported on use
+    from fsmbench.scale.segments import read_span  # the Dask graph's reader
 
-    return _reduce(_read(pieces, offset, length), local_edges)
+    return _reduce(read_span(pieces, offset, length), local_edges)
 
 
 def _reduce(data: NDArray[np.float64], local_edges: NDArray[np.int64]) -> NDArray[np.float64]:

@@ -28,6 +28,7 @@ from scipy.signal import lfilter
 from fsmbench.ident.welch import SpectrumResult, WelchOptions, _result
 from fsmbench.scale.allan import AllanResult
 from fsmbench.scale.envelope import Envelope, _envelope
+from fsmbench.scale.segments import segment_sums
 
 __all__ = [
     "AllanStream",
@@ -143,8 +144,6 @@ class WelchStream:
 
     def update(self, block: FloatArray) -> None:
         """Add the next samples of the record (unit U)."""
-        from fsmbench.scale.welch import _segment_sums
-
         if self._done >= self.k_total:
             return
         data = np.concatenate([self._tail, block]) if self._tail.size else block
@@ -153,7 +152,7 @@ class WelchStream:
         n_seg = min(fit, self.k_total - self._done)
         if n_seg > 0:
             span = (n_seg - 1) * hop + length
-            acc = _segment_sums([data[None, :]], 0, span, n_seg, self._window, hop,
+            acc = segment_sums([data[None, :]], 0, span, n_seg, self._window, hop,
                                 self.options.nfft)
             self._acc += acc[0, 0].real
             self._done += n_seg

@@ -31,7 +31,6 @@ from typing import Any, cast
 import dask
 import dask.array as da
 import numpy as np
-import scipy.fft
 from dask.base import tokenize
 from dask.core import flatten
 from dask.highlevelgraph import HighLevelGraph
@@ -44,6 +43,7 @@ from fsmbench.ident.welch import (
     _label,
     _result,
 )
+from fsmbench.scale.segments import segment_sums
 
 __all__ = [
     "DEFAULT_CHUNK_SAMPLES",
@@ -61,7 +61,6 @@ DEFAULT_CHUNK_SAMPLES = 1 << 20
 # make one task (and one graph node) per segment; larger chunks give larger tasks.
 _MIN_TASK_SAMPLES = 1 << 18
 # Memory cap for one block of segment FFTs inside a task (complex128), as in the engine.
-_BLOCK_BYTES = 1 << 26
 # Fan-in of the tree that adds the per-task partial sums.
 _FAN_IN = 8
 
@@ -130,16 +129,6 @@ class _TimeChunks:
         return da.Array(graph, name, chunks=chunks, dtype=dtype)
 
 
-def _read(pieces: Sequence[NDArray[np.float64]], offset: int, length: int) -> NDArray[np.float64]:
-    """Samples ``offset .. offset+length-1`` of the concatenated chunks (time on the last axis)."""
-    if length == 0:
-        return np.zeros((0,), dtype=np.float64)
-    if len(pieces) == 1:
-        return pieces[0][..., offset : offset + length]
-    first = pieces[0][..., offset:]
-    return np.concatenate([first, *pieces[1:]], axis=-1)[..., :length]
-
-
 def _tree_sum(dsk: dict[Any, Any], name: str, keys: list[Any]) -> Any:
     """Add the arrays at ``keys`` in a tree of fan-in :data:`_FAN_IN`; return the root key."""
     level = 0
@@ -161,39 +150,6 @@ def _add_all(arrays: Sequence[NDArray[Any]]) -> NDArray[Any]:
 
 
 # --------------------------------------------------------------------------- engine
-def _segment_sums(
-    pieces: Sequence[NDArray[np.float64]], offset: int, length: int, n_seg: int,
-    window: NDArray[np.float64], hop: int, nfft: int,
-) -> NDArray[np.complex128]:
-    """Unscaled ``sum_k X_a conj(X_b)`` over ``n_seg`` segments, shape (c, c, nfft//2 + 1).
-
-    Mirrors the accumulation of :func:`fsmbench.ident.welch.cross_spectral_density`
-    (same windowing, datawrap, rfft and ``re^2 + im^2`` diagonal); keep them in step.
-    """
-    data = _read(pieces, offset, length)
-    c = data.shape[0]
-    win_len = window.size
-    n_freq = nfft // 2 + 1
-    acc = np.zeros((c, c, n_freq), dtype=np.complex128)
-    segments = np.lib.stride_tricks.sliding_window_view(data, win_len, axis=1)[:, ::hop][:, :n_seg]
-    block = max(1, _BLOCK_BYTES // (16 * c * n_freq))
-    for k0 in range(0, n_seg, block):
-        windowed = segments[:, k0 : k0 + block] * window
-        if nfft < win_len:
-            pad = -win_len % nfft
-            windowed = np.pad(windowed, ((0, 0), (0, 0), (0, pad)))
-            windowed = windowed.reshape(c, windowed.shape[1], -1, nfft).sum(axis=2)
-        spectra = scipy.fft.rfft(windowed, n=nfft, axis=-1)
-        for a in range(c):
-            acc[a, a] += (spectra[a].real ** 2 + spectra[a].imag ** 2).sum(axis=0)
-            for b in range(a + 1, c):
-                acc[a, b] += (spectra[a] * spectra[b].conj()).sum(axis=0)
-    for a in range(c):
-        for b in range(a):
-            acc[a, b] = acc[b, a].conj()
-    return acc
-
-
 def _scaled(acc: NDArray[np.complex128], scale: NDArray[np.float64]) -> NDArray[np.complex128]:
     return np.moveaxis(acc * scale, -1, 0)
 
@@ -252,7 +208,7 @@ def cross_spectral_density_dask(
         k1 = min(k0 + int(segments_per_task), k_total)
         pieces, offset, span = chunks.covering(k0 * hop, (k1 - 1) * hop + length)
         key = (f"{name}-part", j)
-        dsk[key] = (_segment_sums, pieces, offset, span, k1 - k0, window_key, hop, nfft)
+        dsk[key] = (segment_sums, pieces, offset, span, k1 - k0, window_key, hop, nfft)
         parts.append(key)
     # Same scaling as the engine: density |X|^2 / (fs sum(w^2)) over K segments, one-sided.
     n_freq = nfft // 2 + 1
