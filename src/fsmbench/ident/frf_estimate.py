@@ -39,7 +39,7 @@ from numpy.typing import NDArray
 
 from fsmbench.ident.frf import DIMS, FrequencyResponse, _bounds
 
-__all__ = ["FrfEstimate", "circular_bound_factor", "combine_estimates"]
+__all__ = ["FrfEstimate", "circular_bound_factor", "combine_estimates", "simo_signals"]
 
 
 def circular_bound_factor(confidence: float) -> float:
@@ -279,3 +279,26 @@ def combine_estimates(parts: Sequence[FrfEstimate]) -> FrfEstimate:
         resolution_hz=first.resolution_hz, estimator=first.estimator, options=first.options,
         dof=tuple(d for e in items for d in e.dof), transient=transient,
         confidence=first.confidence)
+
+
+def simo_signals(inputs: Any, outputs: Any, *, input_name: str,
+                 output_names: str | Sequence[str], source: str
+                 ) -> tuple[NDArray[np.float64], NDArray[np.float64], list[str]]:
+    """One experiment's input (L,) and outputs (L, p) as float arrays, with the output names.
+
+    Raises
+    ------
+    ValueError
+        Naming ``source`` and the input: shapes that do not match, NaN or inf samples.
+    """
+    u = np.asarray(inputs, dtype=float)
+    y = np.asarray(outputs, dtype=float)
+    if y.ndim == 1:
+        y = y[:, None]
+    names = [str(o) for o in ([output_names] if isinstance(output_names, str) else output_names)]
+    if u.ndim != 1 or y.ndim != 2 or y.shape[0] != u.size or y.shape[1] != len(names):
+        raise ValueError(f"{source}: input {input_name} has shape {u.shape} and the outputs "
+                         f"{y.shape}; expected (L,) and (L, {len(names)})")
+    if not (np.all(np.isfinite(u)) and np.all(np.isfinite(y))):
+        raise ValueError(f"{source}: {input_name} or an output has NaN/inf samples")
+    return u, y, names

@@ -56,7 +56,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from fsmbench.ident.frf_estimate import FrfEstimate
+from fsmbench.ident.frf_estimate import FrfEstimate, simo_signals
 
 __all__ = ["LpmOptions", "default_half_width", "local_polynomial_frf"]
 
@@ -193,16 +193,8 @@ def local_polynomial_frf(
         one window, an input without power, or no line in the band.
     """
     opts = options or LpmOptions()
-    u = np.asarray(inputs, dtype=float)
-    y = np.asarray(outputs, dtype=float)
-    if y.ndim == 1:
-        y = y[:, None]
-    names = [str(o) for o in ([output_names] if isinstance(output_names, str) else output_names)]
-    if u.ndim != 1 or y.ndim != 2 or y.shape[0] != u.size or y.shape[1] != len(names):
-        raise ValueError(f"{source}: input {input_name} has shape {u.shape} and the outputs "
-                         f"{y.shape}; expected (L,) and (L, {len(names)})")
-    if not (np.all(np.isfinite(u)) and np.all(np.isfinite(y))):
-        raise ValueError(f"{source}: {input_name} or an output has NaN/inf samples")
+    u, y, names = simo_signals(inputs, outputs, input_name=input_name,
+                               output_names=output_names, source=source)
     if not np.any(u != u[0]):
         raise ValueError(f"{source}: the input {input_name} is constant (no excitation)")
     n = opts.n
