@@ -37,6 +37,7 @@ __all__ = [
     "hanning",
     "mscohere",
     "pwelch",
+    "segment_sums",
     "tfestimate",
 ]
 
@@ -343,6 +344,42 @@ def _check_has_power(x: NDArray[np.float64], who: str) -> None:
 
 
 # --------------------------------------------------------------------------- engine
+def segment_sums(channels: NDArray[np.float64], *, n_segments: int,
+                 window: NDArray[np.float64], hop: int, nfft: int) -> NDArray[np.complex128]:
+    """Unscaled ``sum_k X_a conj(X_b)`` over the first ``n_segments`` segments.
+
+    ``channels`` (c, N) real; segment ``k`` is ``channels[:, k*hop : k*hop + L]``
+    times ``window`` (L,), MATLAB-datawrapped to ``nfft`` when ``nfft < L``.
+    Returns shape (c, c, nfft//2 + 1), Hermitian in ``(a, b)``. The one
+    accumulation of every Welch estimate here, in memory, in blocks and on Dask.
+    """
+    c = channels.shape[0]
+    length = int(np.asarray(window).size)
+    n_freq = nfft // 2 + 1
+    acc = np.zeros((c, c, n_freq), dtype=np.complex128)
+    # Strided view (no copy): segment k of channel a is channels[a, k*hop : k*hop + L].
+    segments = np.lib.stride_tricks.sliding_window_view(channels, length, axis=1)[:, ::hop]
+    segments = segments[:, :n_segments]
+    block = max(1, _BLOCK_BYTES // (16 * c * n_freq))
+    for k0 in range(0, n_segments, block):
+        windowed = segments[:, k0 : k0 + block] * window  # (c, kb, L), a copy
+        if nfft < length:
+            # MATLAB datawrap: zero-pad to a multiple of nfft and sum the nfft-long pieces.
+            pad = -length % nfft
+            windowed = np.pad(windowed, ((0, 0), (0, 0), (0, pad)))
+            windowed = windowed.reshape(c, windowed.shape[1], -1, nfft).sum(axis=2)
+        spectra = scipy.fft.rfft(windowed, n=nfft, axis=-1)  # every segment x channel at once
+        for a in range(c):
+            # |X|^2 as re^2 + im^2: a complex product may use FMA and leave a 1e-22 imaginary part
+            acc[a, a] += (spectra[a].real ** 2 + spectra[a].imag ** 2).sum(axis=0)
+            for b in range(a + 1, c):
+                acc[a, b] += (spectra[a] * spectra[b].conj()).sum(axis=0)
+    for a in range(c):
+        for b in range(a):
+            acc[a, b] = acc[b, a].conj()
+    return acc
+
+
 def cross_spectral_density(
     channels: NDArray[np.float64], options: WelchOptions
 ) -> tuple[NDArray[np.complex128], int]:
@@ -365,32 +402,13 @@ def cross_spectral_density(
     n_segments : int
         Number of segments ``K`` averaged.
     """
-    c, n = channels.shape
-    length, hop, nfft = options.window_length, options.hop, options.nfft
+    n = channels.shape[1]
+    hop, nfft = options.hop, options.nfft
     k_total = options.n_segments(n)
     if k_total < 1:
         raise ValueError(f"record of {n} samples is too short for {options.describe_window()}")
     n_freq = nfft // 2 + 1
-    acc = np.zeros((c, c, n_freq), dtype=np.complex128)
-    # Strided view (no copy): segment k of channel a is channels[a, k*hop : k*hop + L].
-    segments = np.lib.stride_tricks.sliding_window_view(channels, length, axis=1)[:, ::hop]
-    block = max(1, _BLOCK_BYTES // (16 * c * n_freq))
-    for k0 in range(0, k_total, block):
-        windowed = segments[:, k0 : k0 + block] * options.window  # (c, kb, L), a copy
-        if nfft < length:
-            # MATLAB datawrap: zero-pad to a multiple of nfft and sum the nfft-long pieces.
-            pad = -length % nfft
-            windowed = np.pad(windowed, ((0, 0), (0, 0), (0, pad)))
-            windowed = windowed.reshape(c, windowed.shape[1], -1, nfft).sum(axis=2)
-        spectra = scipy.fft.rfft(windowed, n=nfft, axis=-1)  # every segment x channel at once
-        for a in range(c):
-            # |X|^2 as re^2 + im^2: a complex product may use FMA and leave a 1e-22 imaginary part
-            acc[a, a] += (spectra[a].real ** 2 + spectra[a].imag ** 2).sum(axis=0)
-            for b in range(a + 1, c):
-                acc[a, b] += (spectra[a] * spectra[b].conj()).sum(axis=0)
-    for a in range(c):
-        for b in range(a):
-            acc[a, b] = acc[b, a].conj()
+    acc = segment_sums(channels, n_segments=k_total, window=options.window, hop=hop, nfft=nfft)
     # Density scaling |X|^2 / (fs * sum(w^2)), averaged over K segments; one-sided:
     # double every bin except DC and (even nfft) Nyquist, which have no mirror image.
     energy = float(np.dot(options.window, options.window))

@@ -1,4 +1,4 @@
-"""The segment arithmetic of Welch's method on chunks of a record, without Dask.
+"""Welch's segment sums on chunks of a record, without Dask.
 
 Shared by the Dask graphs of :mod:`fsmbench.scale.welch` (each task sums the
 segments it owns) and the block-fed estimators of :mod:`fsmbench.scale.streaming`
@@ -11,13 +11,11 @@ from __future__ import annotations
 from collections.abc import Sequence
 
 import numpy as np
-import scipy.fft
 from numpy.typing import NDArray
 
-__all__ = ["read_span", "segment_sums"]
+from fsmbench.ident.welch import segment_sums as welch_segment_sums
 
-# Windowed segments transformed at once: about 64 MiB of complex spectra.
-_BLOCK_BYTES = 1 << 26
+__all__ = ["read_span", "segment_sums"]
 
 
 def read_span(pieces: Sequence[NDArray[np.float64]], offset: int,
@@ -37,28 +35,8 @@ def segment_sums(
 ) -> NDArray[np.complex128]:
     """Unscaled ``sum_k X_a conj(X_b)`` over ``n_seg`` segments, shape (c, c, nfft//2 + 1).
 
-    Mirrors the accumulation of :func:`fsmbench.ident.welch.cross_spectral_density`
-    (same windowing, datawrap, rfft and ``re^2 + im^2`` diagonal); keep them in step.
+    The accumulation of :func:`fsmbench.ident.welch.segment_sums` on the samples
+    ``offset .. offset+length-1`` of the concatenated chunks.
     """
     data = read_span(pieces, offset, length)
-    c = data.shape[0]
-    win_len = window.size
-    n_freq = nfft // 2 + 1
-    acc = np.zeros((c, c, n_freq), dtype=np.complex128)
-    segments = np.lib.stride_tricks.sliding_window_view(data, win_len, axis=1)[:, ::hop][:, :n_seg]
-    block = max(1, _BLOCK_BYTES // (16 * c * n_freq))
-    for k0 in range(0, n_seg, block):
-        windowed = segments[:, k0 : k0 + block] * window
-        if nfft < win_len:
-            pad = -win_len % nfft
-            windowed = np.pad(windowed, ((0, 0), (0, 0), (0, pad)))
-            windowed = windowed.reshape(c, windowed.shape[1], -1, nfft).sum(axis=2)
-        spectra = scipy.fft.rfft(windowed, n=nfft, axis=-1)
-        for a in range(c):
-            acc[a, a] += (spectra[a].real ** 2 + spectra[a].imag ** 2).sum(axis=0)
-            for b in range(a + 1, c):
-                acc[a, b] += (spectra[a] * spectra[b].conj()).sum(axis=0)
-    for a in range(c):
-        for b in range(a):
-            acc[a, b] = acc[b, a].conj()
-    return acc
+    return welch_segment_sums(data, n_segments=n_seg, window=window, hop=hop, nfft=nfft)
