@@ -45,17 +45,19 @@ from typing import Any
 import control as ct
 import numpy as np
 from numpy.typing import NDArray
-from scipy.linalg import expm
 from scipy.ndimage import median_filter
-from scipy.optimize import brentq, least_squares
+from scipy.optimize import brentq
 
-from fsmbench.checks import Check
+from fsmbench.checks import Check, Notice
 from fsmbench.ident.delay import DelayEstimate, remove_delay
 from fsmbench.ident.frf import FrequencyResponse
+from fsmbench.ident.joint_delay import SensorEstimate, fit_jointly, line_std
+from fsmbench.ident.sampled import SensorLowpass, StateSpace3, second_order
+from fsmbench.ident.sampled import sampled_response as sampled_path
 from fsmbench.ident.sercalo import combined_delay, path_delays
 
 __all__ = ["NewportAxisFit", "NewportDynamics", "NewportIdentification", "fit_newport_dynamics",
-           "identify_newport", "newport_checks", "sampled_response"]
+           "identify_newport", "newport_checks", "sampled_response", "sensor_notices"]
 
 FloatArray = NDArray[np.float64]
 _PATHS = {"h": ("Vph", "Unh"), "v": ("Vpv", "Unv")}
@@ -66,6 +68,8 @@ MIN_COHERENCE = 0.9
 MAX_FRACTION_OF_FS = 0.4
 #: Lowest line fitted [Hz] (the records' drift and the window's leakage below).
 MIN_FREQUENCY_HZ = 5.0
+#: At most this many lines (every k-th) are fitted: the sensor's profile takes tens of fits.
+MAX_LINES = 400
 
 
 @dataclass(frozen=True)
@@ -90,6 +94,9 @@ class NewportAxisFit:
         Lines fitted.
     fit_error : float
         Rms of ``|H_model − H| / |H|`` over the lines fitted.
+    sensor : SensorEstimate or None
+        The 4QD amplifier in the fit and what the lines say of its bandwidth
+        (:mod:`fsmbench.ident.joint_delay`); ``delay_s`` excludes its lag.
     """
 
     axis: str
@@ -104,6 +111,12 @@ class NewportAxisFit:
     band_hz: tuple[float, float]
     n_lines: int
     fit_error: float
+    sensor: SensorEstimate | None = None
+
+    @property
+    def effective_delay_s(self) -> float:
+        """``delay_s`` plus the sensor's group delay [s]: the delay of a sensor-free model."""
+        return self.delay_s + (0.0 if self.sensor is None else self.sensor.group_delay_s)
 
     def response(self, f_hz: FloatArray, *, fs_hz: float | None = None,
                  delay: bool = True) -> NDArray[np.complex128]:
@@ -154,7 +167,11 @@ class NewportAxisFit:
 
     def summary(self) -> dict[str, Any]:
         """JSON-ready values."""
-        return {k: (list(v) if isinstance(v, tuple) else v) for k, v in self.__dict__.items()}
+        out = {k: (list(v) if isinstance(v, tuple) else v) for k, v in self.__dict__.items()
+               if k != "sensor"}
+        out["sensor"] = None if self.sensor is None else self.sensor.summary()
+        out["effective_delay_s"] = self.effective_delay_s
+        return out
 
 
 @dataclass(frozen=True)
@@ -167,8 +184,9 @@ class NewportDynamics:
     fs_hz : float
         Sampling rate of the records [Hz].
     converter_delay_s : float
-        The converter's own delay (DAC transport and half a sample of hold) [s],
-        removed from the fitted delay to give the Newport's internal lag.
+        The converter's own delay (DAC transport, half a sample of hold and the
+        sensor's lag) [s], removed from the fitted effective delay to give the
+        Newport's internal lag.
     amplitude_bandwidth_hz, phase_bandwidth_hz, peaking_db : dict {"h", "v"}
         From the fits (the phase bandwidth at ``phase_lag_deg`` with the internal lag).
     phase_lag_deg : float
@@ -184,8 +202,11 @@ class NewportDynamics:
     phase_lag_deg: float
 
     def internal_delay_s(self, axis: str) -> float:
-        """The Newport's own lag on ``axis`` [s]: the fitted delay less the converter's."""
-        return self.axes[axis].delay_s - self.converter_delay_s
+        """The Newport's own lag on ``axis`` [s]: the fitted delay less the converter's.
+
+        Both with the sensor's lag in (effective delays): the Sercalo path passes the
+        same 4QD amplifier."""
+        return self.axes[axis].effective_delay_s - self.converter_delay_s
 
     def gn(self) -> ct.StateSpace:
         """``Unh, Unv → Vpnh, Vpnv`` [V/V]: each axis's second order (delays kept apart)."""
@@ -209,57 +230,26 @@ class NewportDynamics:
 
 
 def sampled_response(f_hz: FloatArray, *, gain: float, natural_freq_hz: float,
-                     damping_ratio: float, delay_s: float, fs_hz: float
-                     ) -> NDArray[np.complex128]:
+                     damping_ratio: float, delay_s: float, fs_hz: float,
+                     sensor: SensorLowpass | None = None) -> NDArray[np.complex128]:
     """The second order and delay as the converter samples them, at ``f_hz`` [Hz] (V/V).
 
     Exact for a command held over each sample (zero-order hold) and a delay of
-    any fraction of a sample (modified z-transform, as :mod:`fsmbench.sim.discretize`
-    simulates it). ``delay_s`` follows the seed's convention: it includes half a
-    sample for the hold, so the pure delay after the hold is ``delay_s − T/2``.
+    any fraction of a sample (:func:`fsmbench.ident.sampled.sampled_response`),
+    with the sensor's low pass when given. ``delay_s`` follows the seed's
+    convention: it includes half a sample for the hold.
     """
-    t = 1.0 / fs_hz
-    wn = 2 * math.pi * natural_freq_hz
-    a = np.array([[0.0, 1.0], [-wn * wn, -2 * damping_ratio * wn]])
-    b = np.array([0.0, gain * wn * wn])
-    pure = max(delay_s - 0.5 * t, 0.0)
-    whole = math.floor(pure / t + 1e-12)
-    frac = pure / t - whole
-
-    def gamma(h: float) -> NDArray[np.float64]:
-        aug = np.zeros((3, 3))
-        aug[:2, :2], aug[:2, 2] = a, b
-        return np.asarray(expm(aug * h)[:2, 2])
-
-    phi = expm(a * t)
-    g0 = gamma((1 - frac) * t)
-    g1 = expm(a * (1 - frac) * t) @ gamma(frac * t)
-    z = np.exp(2j * np.pi * np.asarray(f_hz, dtype=float) * t)
-    # (z I − Φ)^-1 of a 2x2 in closed form, all lines at once; output = first state.
-    d11, d12, d21, d22 = z - phi[0, 0], -phi[0, 1], -phi[1, 0], z - phi[1, 1]
-    det = d11 * d22 - d12 * d21
-    g = g0[:, None] + g1[:, None] / z
-    first = (d22 * g[0] - d12 * g[1]) / det
-    return np.asarray(first * z ** (-whole), dtype=np.complex128)
+    path = second_order(gain=gain, natural_freq_hz=natural_freq_hz, damping_ratio=damping_ratio)
+    return sampled_path(path, f_hz=f_hz, fs_hz=fs_hz, delay_s=delay_s, sensor=sensor)
 
 
-def _line_error(frf: FrequencyResponse, output: str, input_: str) -> FloatArray:
-    """Standard deviation of each line's complex H [V/V] (the FRF's own estimate)."""
-    h = frf.frf.sel(output=output, input=input_).values
-    var = getattr(frf, "frf_variance", None)
-    if var is not None:
-        return np.sqrt(np.asarray(var.sel(output=output, input=input_).values, dtype=float))
-    # Welch H1: normalised random error of |H| (Bendat & Piersol 9.90).
-    return np.asarray(frf.random_error.sel(output=output, input=input_).values, dtype=float) \
-        * np.abs(h)
-
-
-def _fit_axis(frf: FrequencyResponse, axis: str, *, fs: float) -> NewportAxisFit:
+def _fit_axis(frf: FrequencyResponse, axis: str, *, fs: float,
+              sensor: SensorLowpass) -> NewportAxisFit:
     output, input_ = _PATHS[axis]
     f = frf.frequency_hz
     h = frf.frf.sel(output=output, input=input_).values
     coh = frf.coherence.sel(output=output, input=input_).values
-    sigma = _line_error(frf, output, input_)
+    sigma = line_std(frf, output, input_)
     # One contiguous band, up to where the coherence smoothed over ±25 lines falls below the
     # threshold: keeping lines by their own coherence would keep those whose noise happened to
     # raise |H| where the coherence is marginal, and bias the roll-off (+0.7 % on wn).
@@ -273,47 +263,38 @@ def _fit_axis(frf: FrequencyResponse, axis: str, *, fs: float) -> NewportAxisFit
                          f"{MIN_FREQUENCY_HZ:g} Hz and {f_top:g} Hz, where the coherence stays "
                          f"≥ {MIN_COHERENCE}; the Newport's dynamics need 20")
     fl, hl, sl = f[sel], h[sel], sigma[sel]
-
-    def model(p: FloatArray) -> NDArray[np.complex128]:
-        return sampled_response(fl, gain=p[0], natural_freq_hz=p[1], damping_ratio=p[2],
-                                delay_s=p[3], fs_hz=fs)
-
-    def residual(p: FloatArray) -> FloatArray:
-        r = (model(p) - hl) / sl
-        return np.concatenate([r.real, r.imag])
-
     low = fl < 10 * fl[0]
     k0 = float(np.mean(hl[low].real)) if low.any() else float(hl[0].real)
     # The phase slope over the band gives the start of the delay; 1 kHz near the FSM-300's
     # corner, ζ = 1 between its under- and over-damped fits.
     slope = np.polyfit(2 * np.pi * fl, np.unwrap(np.angle(hl * np.sign(k0))), 1)[0]
-    p0 = np.array([k0, 1000.0, 1.0, max(0.0, -float(slope) / 2)])
-    out = least_squares(residual, p0, x_scale=np.array([abs(k0), 1000.0, 1.0, 1e-4]),
-                        bounds=([-np.inf, 1.0, 0.01, 0.5 / fs], [np.inf, fs, 20.0, 0.05]))
-    m, n_par = 2 * fl.size, p0.size
-    chi2 = float(np.sum(out.fun**2)) / max(1, m - n_par)
+
+    def path(p: FloatArray) -> StateSpace3:
+        return second_order(gain=float(p[0]), natural_freq_hz=float(p[1]),
+                            damping_ratio=float(p[2]))
+
     # A Welch window of L samples zero-padded to nfft correlates ~1.5 nfft/L adjacent lines
     # (Hann's equivalent noise bandwidth): the fit has that many fewer independent lines.
-    correlated = 1.5 * frf.nfft / frf.window_length
-    # Columns scaled to unit norm first: gain, frequency and delay differ by 1e7 in scale,
-    # and an unscaled pseudo-inverse drops the small directions as rank deficiency.
-    norms = np.linalg.norm(out.jac, axis=0)
-    norms[norms == 0] = 1.0
-    js = out.jac / norms
-    cov = np.linalg.pinv(js.T @ js) / np.outer(norms, norms) * chi2 * correlated
-    std = np.sqrt(np.clip(np.diag(cov), 0.0, None))
-    k, fn, z, tau = (float(v) for v in out.x)
-    err = float(np.sqrt(np.mean(np.abs((model(out.x) - hl) / hl) ** 2)))
+    correlated = 1.5 * frf.nfft / frf.window_length if frf.frf_variance is None else 1.0
+    joint = fit_jointly(fl, hl, sl, path=path, start=np.array([k0, 1000.0, 1.0]),
+                        scale=np.array([abs(k0), 1000.0, 1.0]),
+                        lower=np.array([-np.inf, 1.0, 0.01]), upper=np.array([np.inf, fs, 20.0]),
+                        delay_start_s=max(0.5 / fs, -float(slope) / 2), fs_hz=fs,
+                        sensor=sensor, correlated_lines=correlated,
+                        max_lines=MAX_LINES)
+    k, fn, z = (float(v) for v in joint.parameters)
+    std = joint.parameter_std
     return NewportAxisFit(axis=axis, gain_v_per_v=k, gain_std_v_per_v=float(std[0]),
                           natural_freq_hz=fn, natural_freq_std_hz=float(std[1]),
-                          damping_ratio=z, damping_std=float(std[2]), delay_s=tau,
-                          delay_std_s=float(std[3]), band_hz=(float(fl[0]), float(fl[-1])),
-                          n_lines=int(fl.size), fit_error=err)
+                          damping_ratio=z, damping_std=float(std[2]), delay_s=joint.delay_s,
+                          delay_std_s=joint.delay_std_s, band_hz=(float(fl[0]), float(fl[-1])),
+                          n_lines=int(fl.size), fit_error=joint.fit_error, sensor=joint.sensor)
 
 
 def fit_newport_dynamics(frf: FrequencyResponse, *, dac_delay_samples: float = 1.0,
                          converter_delay_s: float | None = None,
-                         phase_lag_deg: float = 60.0) -> NewportDynamics:
+                         phase_lag_deg: float = 60.0,
+                         sensor: SensorLowpass | None = None) -> NewportDynamics:
     """Fit both Newport paths (see the module) and derive their bandwidths.
 
     Parameters
@@ -328,6 +309,9 @@ def fit_newport_dynamics(frf: FrequencyResponse, *, dac_delay_samples: float = 1
         delay): removed from the fitted delay to give the Newport's internal lag.
     phase_lag_deg : float
         Lag defining the phase bandwidth [deg] (FSM-300 datasheet: 60°).
+    sensor : SensorLowpass, optional
+        The bench model's 4QD amplifier (default unlimited); its bandwidth is
+        fitted when the lines resolve it (:mod:`fsmbench.ident.joint_delay`).
 
     Raises
     ------
@@ -339,14 +323,16 @@ def fit_newport_dynamics(frf: FrequencyResponse, *, dac_delay_samples: float = 1
             raise ValueError(f"the Newport's dynamics need the {input_} → {output} path; the "
                              f"FRF has {frf.input_names} → {frf.output_names}")
     fs = float(frf.fs_hz)
-    axes = {axis: _fit_axis(frf, axis, fs=fs) for axis in "hv"}
-    converter = ((dac_delay_samples + 0.5) / fs if converter_delay_s is None
-                 else float(converter_delay_s))
+    sensor = sensor or SensorLowpass()
+    axes = {axis: _fit_axis(frf, axis, fs=fs, sensor=sensor) for axis in "hv"}
+    converter = ((dac_delay_samples + 0.5) / fs + sensor.group_delay_s
+                 if converter_delay_s is None else float(converter_delay_s))
     return NewportDynamics(
         axes=axes, fs_hz=fs, converter_delay_s=converter,
         amplitude_bandwidth_hz={k: a.amplitude_bandwidth_hz() for k, a in axes.items()},
         phase_bandwidth_hz={k: a.phase_bandwidth_hz(lag_deg=phase_lag_deg,
-                                                    internal_delay_s=a.delay_s - converter,
+                                                    internal_delay_s=(a.effective_delay_s
+                                                                      - converter),
                                                     f_max_hz=fs / 2) for k, a in axes.items()},
         peaking_db={k: a.peaking_db() for k, a in axes.items()}, phase_lag_deg=phase_lag_deg)
 
@@ -379,6 +365,29 @@ def newport_checks(dyn: NewportDynamics, *, amplitude_bandwidth_hz: float,
                             "" if peak <= peaking_max_db else
                             "the mirror rings more than its datasheet allows"))
     return checks
+
+
+def sensor_notices(dyn: NewportDynamics, *, model: SensorLowpass) -> list[Notice]:
+    """A notice per axis whose lines resolve a 4QD amplifier bandwidth the bench model lacks.
+
+    The Sercalo's delay is fitted with the bench model's sensor (its band cannot
+    resolve one): the user should put the resolved value in the bench file.
+    """
+    out = []
+    for axis, fit in dyn.axes.items():
+        est = fit.sensor
+        if est is None or est.source != "fitted":
+            continue
+        if model.limited and abs(est.bandwidth_hz / model.bandwidth_hz - 1) <= (
+                2 * est.bandwidth_std_hz / est.bandwidth_hz):
+            continue  # the model's value is within two standard deviations
+        out.append(Notice("other", f"{_PATHS[axis][1]} → {_PATHS[axis][0]}",
+                          f"the 4QD amplifier's bandwidth is resolved at "
+                          f"{est.bandwidth_hz:.4g} ± {est.bandwidth_std_hz:.2g} Hz "
+                          f"(bench model: {model.bandwidth_hz:g} Hz, 0 = unlimited); set "
+                          f"quad_diode.bandwidth_hz in the bench file so that every path's "
+                          f"delay is fitted with it"))
+    return out
 
 
 @dataclass(frozen=True, eq=False)
@@ -422,10 +431,12 @@ class NewportIdentification:
     dynamics_skipped: str = ""
 
     def input_delays_s(self) -> dict[str, float]:
-        """The delay of each Newport input [s] (per axis with the dynamics)."""
+        """The delay of each Newport input in a plant model without the sensor's low pass [s]
+        (per axis with the dynamics: the effective delay, the sensor's lag in)."""
         if self.dynamics is None:
             return {"Unh": self.delay_s, "Unv": self.delay_s}
-        return {"Unh": self.dynamics.axes["h"].delay_s, "Unv": self.dynamics.axes["v"].delay_s}
+        return {"Unh": self.dynamics.axes["h"].effective_delay_s,
+                "Unv": self.dynamics.axes["v"].effective_delay_s}
 
     def summary(self) -> dict[str, Any]:
         """JSON-ready diagnostics."""
@@ -439,7 +450,8 @@ class NewportIdentification:
 
 def identify_newport(frf: FrequencyResponse, *, band_hz: tuple[float, float] = (10.0, 100.0),
                      min_coherence: float = 0.9, dac_delay_samples: float = 1.0,
-                     converter_delay_s: float | None = None) -> NewportIdentification:
+                     converter_delay_s: float | None = None,
+                     sensor: SensorLowpass | None = None) -> NewportIdentification:
     """The Newport paths (seed 2.4) from the ``Un → Vp`` matrix: dynamics, delays, gains.
 
     Parameters
@@ -453,8 +465,10 @@ def identify_newport(frf: FrequencyResponse, *, band_hz: tuple[float, float] = (
     dac_delay_samples : float
         The converter's transport delay [samples] (``converter.dac_delay_samples``).
     converter_delay_s : float, optional
-        The Sercalo path's identified delay [s], the converter's share of the
-        Newport's (see :func:`fit_newport_dynamics`).
+        The Sercalo path's identified (effective) delay [s], the converter's share
+        of the Newport's (see :func:`fit_newport_dynamics`).
+    sensor : SensorLowpass, optional
+        The bench model's 4QD amplifier (see :func:`fit_newport_dynamics`).
     """
     inputs, outputs = frf.input_names, frf.output_names
     if len(inputs) != 2 or len(outputs) != 2:
@@ -471,7 +485,8 @@ def identify_newport(frf: FrequencyResponse, *, band_hz: tuple[float, float] = (
         seed_gains[axis] = float(np.sign(np.mean(h.real)) * np.mean(np.abs(h)))
     try:
         dyn: NewportDynamics | None = fit_newport_dynamics(
-            frf, dac_delay_samples=dac_delay_samples, converter_delay_s=converter_delay_s)
+            frf, dac_delay_samples=dac_delay_samples, converter_delay_s=converter_delay_s,
+            sensor=sensor)
         why = ""
     except ValueError as exc:
         dyn, why = None, f"the constant gains are used: {exc}"

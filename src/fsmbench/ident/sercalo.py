@@ -35,7 +35,10 @@ from fsmbench.ident.fit_std import ParameterStd, sercalo_parameter_std
 from fsmbench.ident.frf import FrequencyResponse, combine_columns, spectral_matrix
 from fsmbench.ident.frf_estimate import FrfEstimate, combine_estimates
 from fsmbench.ident.frf_periodic import PeriodicOptions, detect_period, periodic_frf
+from fsmbench.ident.joint_delay import JointFit
 from fsmbench.ident.lpm import LpmOptions, local_polynomial_frf
+from fsmbench.ident.sampled import SensorLowpass
+from fsmbench.ident.sercalo_delay import joint_path_delays
 from fsmbench.ident.vectfit import VectorFit, VectorFitOptions, vector_fit
 from fsmbench.ident.welch import hanning
 
@@ -250,6 +253,9 @@ class SercaloFitOptions:
     weights : {"seed", "variance"}
         The seed's coherence recipe over ``|H|`` (:func:`seed_weights`), or
         the inverse standard deviation of each line (:func:`variance_weights`).
+    joint_delay : bool
+        Fit each direct path's delay with its poles and the 4QD amplifier
+        (:mod:`fsmbench.ident.sercalo_delay`); False keeps the phase-only delay.
     """
 
     alpha: float = 0.1
@@ -259,6 +265,7 @@ class SercaloFitOptions:
     delay_s: float | None = None
     n_poles: int | None = None
     weights: Literal["seed", "variance"] = "seed"
+    joint_delay: bool = True
 
     def __post_init__(self) -> None:
         if self.weights not in ("seed", "variance"):
@@ -297,6 +304,11 @@ class SercaloIdentification:
         Resonance, damping and static gain per axis with standard deviations
         propagated from the lines' variances (:mod:`fsmbench.ident.fit_std`);
         None with the seed's weights (not inverse variances).
+    joint_delays : tuple of JointFit
+        Each direct path fitted with its poles, delay and the 4QD amplifier;
+        ``delay_s`` is their combined effective delay (the sensor's lag in:
+        ``Gc`` has no sensor block). Empty when ``joint_delay_skipped`` says why.
+    joint_delay_skipped : str
     """
 
     frf: FrequencyResponse
@@ -311,6 +323,15 @@ class SercaloIdentification:
     fit_error: dict[str, float]
     options: SercaloFitOptions = field(default_factory=SercaloFitOptions)
     parameter_std: ParameterStd | None = None
+    joint_delays: tuple[JointFit, ...] = ()
+    joint_delay_skipped: str = ""
+
+    @property
+    def pure_delay_s(self) -> float:
+        """The paths' delay without the sensor's lag [s] (``delay_s`` without a joint fit)."""
+        if not self.joint_delays:
+            return self.delay_s
+        return self.delay_s - float(np.mean([j.sensor.group_delay_s for j in self.joint_delays]))
 
     def dc_gain_v_per_a(self) -> dict[str, float]:
         """``Gc(0)`` diagonal: Ich→Vph (h), Icv→Vpv (v) [V/A]."""
@@ -322,6 +343,10 @@ class SercaloIdentification:
         return {
             "delay_s": self.delay_s, "delay_std_s": self.delay_std_s,
             "delays": [d.summary() for d in self.delays],
+            "pure_delay_s": self.pure_delay_s,
+            "joint_delays": [{"output": d.output, "input": d.input, **j.summary()}
+                             for d, j in zip(self.delays, self.joint_delays, strict=False)],
+            "joint_delay_skipped": self.joint_delay_skipped,
             "resonances_detected_hz": self.resonances_hz,
             "fit": {"n_poles": self.fit.n_poles, "iterations": self.fit.iterations,
                     "converged": self.fit.converged,
@@ -364,7 +389,8 @@ def relative_fit_error(frf: FrequencyResponse, model: np.ndarray, *,
 
 
 def fit_sercalo(frf: FrequencyResponse, *, gi_a_per_v: Mapping[str, float],
-                options: SercaloFitOptions | None = None) -> SercaloIdentification:
+                options: SercaloFitOptions | None = None,
+                sensor: SensorLowpass | None = None) -> SercaloIdentification:
     """Delay, weights, rational fit and ``Gc`` from the ``Uc → Vp`` matrix (seed 2.3).
 
     Parameters
@@ -374,31 +400,42 @@ def fit_sercalo(frf: FrequencyResponse, *, gi_a_per_v: Mapping[str, float],
     gi_a_per_v : mapping {"h", "v"} -> float
         Current-amplifier gains [A/V] (2.2).
     options : SercaloFitOptions, optional
+    sensor : SensorLowpass, optional
+        The bench model's 4QD amplifier (default: unlimited), for the joint delay fit.
     """
     opts = options or SercaloFitOptions()
+    sensor = sensor or SensorLowpass()
     inputs, outputs = frf.input_names, frf.output_names
     if len(inputs) != 2 or len(outputs) != 2:
         raise ValueError(f"the Sercalo fit needs a 2x2 matrix, got {outputs} x {inputs}")
     delays = path_delays(frf, min_coherence=opts.min_coherence)
+    joint: tuple[JointFit, ...] = ()
+    joint_skipped = ""
     if opts.delay_s is None:
         delay, delay_std = combined_delay(delays)
+        if opts.joint_delay:
+            # The phase-only delay starts a first vector fit; each direct path is then fitted
+            # with its poles, its delay and the 4QD amplifier, and that delay is removed.
+            first = _vector_fit(remove_delay(frf, delay), opts)
+            try:
+                joint = joint_path_delays(frf, fit=first[0], starts=delays,
+                                          resonances_hz=first[1], sensor=sensor,
+                                          min_coherence=opts.min_coherence)
+                delay, delay_std = _combined_effective(joint)
+            except ValueError as exc:
+                joint_skipped = f"the phase-only delay is used: {exc}"
+        else:
+            joint_skipped = "disabled by option"
     else:
         delay, delay_std = float(opts.delay_s), 0.0
+        joint_skipped = "the delay was imposed"
     clean = remove_delay(frf, delay)
-    resonances = detect_resonances(clean, f_max_hz=opts.f_max_hz)
-    if opts.weights == "variance":
-        weights = variance_weights(clean, f_max_hz=opts.f_max_hz)
-    else:
-        weights = seed_weights(clean, resonances_hz=resonances, alpha=opts.alpha,
-                               boost=opts.boost, f_max_hz=opts.f_max_hz)
+    fit, resonances = _vector_fit(clean, opts)
+    weights = _weights(clean, resonances, opts)
     f = clean.frequency_hz
     h = clean.frf.values
     keep = f > 0  # vector fitting works on s = j2πf; the DC bin carries no weight anyway
     w = _fit_weights(weights, h, keep, opts.weights)
-    n_poles = opts.n_poles or 2 * len(set(np.round(list(resonances.values()), 0)))
-    fit = vector_fit(f[keep], h[keep], weights=w, input_names=list(inputs),
-                     output_names=list(outputs),
-                     options=VectorFitOptions(n_poles=n_poles, asymptote="d"))
     fitted = fit.to_statespace()
     gi = np.array([gi_a_per_v["h"], gi_a_per_v["v"]], dtype=float)
     gc = ct.ss(fitted.A, np.asarray(fitted.B) / gi[None, :], fitted.C,
@@ -413,7 +450,39 @@ def fit_sercalo(frf: FrequencyResponse, *, gi_a_per_v: Mapping[str, float],
     return SercaloIdentification(frf=frf, delays=delays, delay_s=delay, delay_std_s=delay_std,
                                  resonances_hz=resonances, weights=weights, fit=fit,
                                  gi_a_per_v={"h": float(gi[0]), "v": float(gi[1])}, gc=gc,
-                                 fit_error=err, options=opts, parameter_std=pstd)
+                                 fit_error=err, options=opts, parameter_std=pstd,
+                                 joint_delays=joint, joint_delay_skipped=joint_skipped)
+
+
+def _weights(clean: FrequencyResponse, resonances: Mapping[str, float],
+             opts: SercaloFitOptions) -> xr.DataArray:
+    if opts.weights == "variance":
+        return variance_weights(clean, f_max_hz=opts.f_max_hz)
+    return seed_weights(clean, resonances_hz=resonances, alpha=opts.alpha, boost=opts.boost,
+                        f_max_hz=opts.f_max_hz)
+
+
+def _vector_fit(clean: FrequencyResponse, opts: SercaloFitOptions
+                ) -> tuple[VectorFit, dict[str, float]]:
+    """The common-pole fit of a delay-free matrix and the resonances that started it."""
+    resonances = detect_resonances(clean, f_max_hz=opts.f_max_hz)
+    weights = _weights(clean, resonances, opts)
+    f = clean.frequency_hz
+    h = clean.frf.values
+    keep = f > 0
+    w = _fit_weights(weights, h, keep, opts.weights)
+    n_poles = opts.n_poles or 2 * len(set(np.round(list(resonances.values()), 0)))
+    fit = vector_fit(f[keep], h[keep], weights=w, input_names=list(clean.input_names),
+                     output_names=list(clean.output_names),
+                     options=VectorFitOptions(n_poles=n_poles, asymptote="d"))
+    return fit, resonances
+
+
+def _combined_effective(joint: Sequence[JointFit]) -> tuple[float, float]:
+    """Inverse-variance mean of the paths' effective delays (the sensor's lag in) [s]."""
+    d = np.array([j.effective_delay_s for j in joint])
+    w = 1.0 / np.array([max(j.delay_std_s, 1e-12) for j in joint]) ** 2
+    return float(np.sum(w * d) / np.sum(w)), float(1.0 / np.sqrt(np.sum(w)))
 
 
 def _fit_inputs(sid: SercaloIdentification) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -25,6 +25,7 @@ from fsmbench.ident.pipeline import (
 )
 from fsmbench.ident.sercalo import SercaloIdentification
 from fsmbench.io.signals import EXPERIMENTS
+from fsmbench.report.delay_tables import sensor_note, sercalo_delay_blocks
 from fsmbench.report.figure import Figure
 from fsmbench.report.html import Block, Note, Section, Table
 from fsmbench.report.ident_figures import (
@@ -350,7 +351,7 @@ def _sercalo(result: Identification | None, *, recordings: Mapping[str, xr.Datas
                     "line" if s.frf.frf_variance is not None else
                     "; no per-line variance with this estimator, so no bounds drawn") + "."),
         seed_ref="Figs. 18, 19, 21, 22"))
-    blocks.append(_delay_table(s, caption="Sercalo delays estimated from the phase"))
+    blocks.extend(sercalo_delay_blocks(s))
     blocks.append(Note("The seed removes one sample (0.1 ms). The DAC applies a command one "
                        "sample after it is computed and holds it for a sample, which adds half "
                        "a sample: the path's delay is 1.5 samples (0.15 ms), as estimated here.",
@@ -460,6 +461,8 @@ def _newport(result: Identification | None, *, recordings: Mapping[str, xr.Datas
                         f"{n.band_hz[0]:g}–{n.band_hz[1]:g}")
                        for a, inp, out in (("h", "Unh", "Vph"), ("v", "Unv", "Vpv")))))
         blocks.append(Note(f"The Newport's dynamics could not be fitted ({n.dynamics_skipped})."))
+    if dyn is not None:
+        blocks.append(sensor_note(dyn))
     blocks.append(_delay_table(n, caption="Newport delays estimated from the phase alone "
                                           "(cross-check)"))
     blocks.append(Note("The seed averages |H| and so drops the sign; with a negative 4QD gain "
