@@ -5,11 +5,15 @@
                         [--periods P] [--transient-periods T] [--odd | --odd-odd]
                         [--log-grid [--lines-per-decade N]] [--phases minimised|schroeder|random]
                         [--duration S] [--sweep linear|log] [--seed N]
-                        [--params TOML] [--model nominal|true] [--timestamp]
+                        [--params TOML] [--model nominal|true] [--max-4qd-compression PCT]
+                        [--mains-hz F] [--skip-mains] [--timestamp]
 
 Checks the peak at the DAC and at every ADC channel the bench model carries
-the input to (:mod:`fsmbench.excite.limits`) before anything is written; a
-violation is one line with the rms amplitude that would fit. Then writes
+the input to, and the 4QD's compression at its peak
+(:mod:`fsmbench.excite.limits`), before anything is written; a violation is
+one line with the rms amplitude that would fit. A multisine with lines on
+mains harmonics gets a one-line warning (:mod:`fsmbench.excite.mains`), or
+loses those lines with ``--skip-mains``. Then writes
 ``OUT/excitation.mat`` (``t`` and the input's column at the bench's rate) and
 ``OUT/excitation.json`` (:mod:`fsmbench.excite.files`) as one transaction with
 ``run.json``, and prints the lines, crest factors and converter peaks.
@@ -37,6 +41,16 @@ def _count(text: str, *, least: int) -> int:
         raise argparse.ArgumentTypeError(f"{text!r} is not a whole number") from None
     if value < least:
         raise argparse.ArgumentTypeError(f"{text!r} must be at least {least}")
+    return value
+
+
+def _mains_hz(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a frequency in Hz") from None
+    if not (math.isfinite(value) and value >= 0):
+        raise argparse.ArgumentTypeError(f"{text!r} is not 0 or a positive frequency in Hz")
     return value
 
 
@@ -87,6 +101,16 @@ def add_excite_command(sub: Any) -> None:
     p.add_argument("--model", choices=("nominal", "true"), default="nominal",
                    help="parameters the limits are checked with: nominal (a real bench; the "
                         "larger gains) or true (the twin) (default nominal)")
+    p.add_argument("--max-4qd-compression", metavar="PCT", dest="max_qd_compression",
+                   type=functools.partial(positive, unit="percent"), default=1.0,
+                   help="largest compression of the 4QD at the beam's peak [%%] (default 1: "
+                        "the identified gain about 0.75 %% low for a sine, less for peakier "
+                        "signals)")
+    p.add_argument("--mains-hz", metavar="F", dest="mains_hz", type=_mains_hz, default=50.0,
+                   help="mains frequency whose harmonics a multisine should not excite [Hz] "
+                        "(default 50; 60 for US grids; 0: no check)")
+    p.add_argument("--skip-mains", action="store_true",
+                   help="leave the multisine lines on mains harmonics out of the excited grid")
     p.add_argument("--timestamp", action="store_true",
                    help="write the wall-clock time into the MAT-file header and run.json "
                         "(default: none, so that outputs are byte-identical)")
@@ -102,7 +126,8 @@ def _design(args: argparse.Namespace, fs_hz: float) -> Any:
     if args.kind == "multisine":
         return design_multisine(**common, resolution_hz=args.resolution, grid=args.grid,
                                 log_grid=args.log_grid, lines_per_decade=args.lines_per_decade,
-                                phase_method=args.phases)
+                                phase_method=args.phases, mains_hz=args.mains_hz,
+                                skip_mains=args.skip_mains)
     if args.kind == "noise":
         return design_noise(**common, duration_s=args.duration)
     return design_chirp(**common, duration_s=args.duration, method=args.sweep)
@@ -134,6 +159,10 @@ def summary(design: Any, report: Any) -> list[str]:
     lines.append(cf)
     lines.append(f"peaks through the {report.model} bench model:")
     lines += [f"  {c.line()}" for c in report.peaks]
+    if report.qd_linear:
+        lines.append(f"  {report.qd_line()}")
+    else:
+        lines += [f"  {q.line()}" for q in report.quad_diode]
     tau = report.slowest_time_constant_s
     if tau > 0:
         settle = d.transient_samples / d.fs_hz
@@ -148,13 +177,18 @@ def _command(args: argparse.Namespace) -> int:
     from fsmbench.bench.params import load_bench
     from fsmbench.excite.files import write_excitation
     from fsmbench.excite.limits import check_limits
+    from fsmbench.excite.mains import mains_warning
     from fsmbench.io.matwrite import wall_clock_headers
     from fsmbench.io.outdir import output_transaction
 
     bench = load_bench(args.params)
     params = bench.nominal if args.model == "nominal" else bench.true
     design = _design(args, params.converter.fs_hz)
-    report = check_limits(design, params=params, model=args.model)  # before any output
+    report = check_limits(design, params=params, model=args.model,  # before any output
+                          max_qd_compression=args.max_qd_compression / 100.0)
+    warning = mains_warning(design)
+    if warning:
+        print(f"fsmbench excite: warning: {warning}", file=sys.stderr)
     out = str(args.out)
     argv = [("." if a == out else a) for a in getattr(args, "argv", [])]
     # Two float64 columns, compressed or not, plus a JSON of the lines and phases.

@@ -18,6 +18,7 @@ van der Ouderaa, Schoukens and Renneboog (1988: clip the peaks, keep the
 phases the clipped signal has on the grid lines), then Guillaume's L_p
 minimisation (1991) for increasing p (a smooth path to the L_inf norm, i.e.
 the peak). The crest factor is ``max|x| / rms(x)`` over the samples played.
+Lines on mains harmonics can be left out (``skip_mains``, :mod:`fsmbench.excite.mains`).
 
 *Noise* is the seed's: Gaussian, 4th-order Butterworth band-pass
 (:class:`fsmbench.sim.excitation.ExcitationStream`), scaled to the rms asked.
@@ -33,6 +34,7 @@ import numpy as np
 from scipy.optimize import minimize
 from scipy.signal import chirp as scipy_chirp
 
+from fsmbench.excite.mains import mains_hits
 from fsmbench.sim.excitation import Excitation, ExcitationStream
 
 __all__ = [
@@ -112,6 +114,11 @@ class ExcitationDesign:
     after_end : {"zero", "repeat"}
         What a player does after the last sample: stop (zero) or repeat the
         steady-state periods (multisines: the signal stays periodic).
+    mains_hz : float
+        Mains frequency whose harmonics the multisine's lines were checked
+        against [Hz] (0: not checked; :mod:`fsmbench.excite.mains`).
+    skipped_lines_hz : tuple of float
+        Grid lines left out because they are on mains harmonics [Hz].
     """
 
     input: str
@@ -134,6 +141,8 @@ class ExcitationDesign:
     crest_factor_random_phase: float | None = None
     chirp_method: ChirpMethod | None = None
     after_end: Literal["zero", "repeat"] = "zero"
+    mains_hz: float = 0.0
+    skipped_lines_hz: tuple[float, ...] = ()
 
     def __post_init__(self) -> None:
         # Arrays are stored read-only, so the design stays what was checked and written.
@@ -392,7 +401,8 @@ def design_multisine(*, input: str, band_hz: tuple[float, float], resolution_hz:
                      amplitude_rms_v: float, fs_hz: float, seed: int = 0, periods: int = 1,
                      transient_periods: int = 0, grid: GridKind = "full",
                      log_grid: bool = False, lines_per_decade: float = 50.0,
-                     phase_method: PhaseMethod = "minimised") -> ExcitationDesign:
+                     phase_method: PhaseMethod = "minimised", mains_hz: float = 0.0,
+                     skip_mains: bool = False) -> ExcitationDesign:
     """A periodic multisine of equal lines, rms ``amplitude_rms_v``.
 
     Parameters
@@ -417,12 +427,28 @@ def design_multisine(*, input: str, band_hz: tuple[float, float], resolution_hz:
     phase_method : {"random", "schroeder", "minimised"}
         Phases: random (uniform), Schroeder's, or the crest factor minimised
         (:func:`minimise_crest_factor`).
+    mains_hz : float
+        Mains frequency [Hz] whose harmonics the lines are checked against
+        (:func:`fsmbench.excite.mains.mains_hits`; 0: none).
+    skip_mains : bool
+        Leave the lines on mains harmonics out of the grid (they stay
+        non-excited; the phases are optimised on the lines left).
     """
     _check_common(input=input, amplitude_rms_v=amplitude_rms_v, periods=periods,
                   transient_periods=transient_periods)
     n = _period_samples(resolution_hz=resolution_hz, fs_hz=fs_hz)
     k = grid_lines(band_hz=band_hz, resolution_hz=resolution_hz, fs_hz=fs_hz, grid=grid,
                    log_grid=log_grid, lines_per_decade=lines_per_decade)
+    if not (np.isfinite(mains_hz) and mains_hz >= 0):
+        raise ValueError(f"the mains frequency must be 0 or positive [Hz], got {mains_hz!r}")
+    skipped: tuple[float, ...] = ()
+    if skip_mains and mains_hz > 0:
+        hit = mains_hits(k * (fs_hz / n), resolution_hz=fs_hz / n, mains_hz=mains_hz)
+        skipped = tuple(float(f) for f in k[hit] * (fs_hz / n))
+        k = k[~hit]
+        if k.size == 0:
+            raise ValueError(f"every line between {band_hz[0]:g} and {band_hz[1]:g} Hz is on a "
+                             f"harmonic of the {mains_hz:g} Hz mains; nothing left to excite")
     rng = np.random.default_rng(seed)
     cf_random, random_phases = random_phase_crest_factor(harmonics=k, n_samples=n, rng=rng)
     if phase_method == "random":
@@ -443,7 +469,8 @@ def design_multisine(*, input: str, band_hz: tuple[float, float], resolution_hz:
         band_hz=(float(band_hz[0]), float(band_hz[1])), seed=int(seed),
         crest_factor=crest_factor(one), lines_hz=k * (fs_hz / n), phases_rad=phases,
         line_amplitude_v=float(a), grid=grid, log_grid=log_grid, phase_method=phase_method,
-        crest_factor_random_phase=cf_random, after_end="repeat")
+        crest_factor_random_phase=cf_random, after_end="repeat", mains_hz=float(mains_hz),
+        skipped_lines_hz=skipped)
 
 
 def _record_samples(duration_s: float, fs_hz: float) -> int:

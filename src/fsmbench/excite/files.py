@@ -9,9 +9,10 @@ made and how to play and read it: kind, input, ``fs_hz``, samples per period,
 periods and transient periods (an FRF estimator drops the first
 ``transient_periods``), what a player does after the end (``after_end``:
 ``zero`` or ``repeat`` the steady-state periods), rms, band, seed, crest
-factors, the multisine's lines [Hz] and phases [rad], the converter peaks the
-limit check found, and the SHA-256 of the samples, which ties the two files
-together. Both are written atomically.
+factors, the multisine's lines [Hz] and phases [rad] (and its lines on mains
+harmonics, those skipped, the warning), the converter peaks and the 4QD's
+beam angle and compression the limit check found, and the SHA-256 of the
+samples, which ties the two files together. Both are written atomically.
 """
 
 from __future__ import annotations
@@ -26,6 +27,7 @@ import numpy as np
 from fsmbench import __version__
 from fsmbench.excite.design import CHANNELS, ExcitationDesign
 from fsmbench.excite.limits import LimitReport
+from fsmbench.excite.mains import mains_hits, mains_warning
 from fsmbench.io.atomic import atomic_write_text
 from fsmbench.io.errors import RecordingError
 from fsmbench.io.matfile import load_mat
@@ -62,6 +64,12 @@ def description(design: ExcitationDesign, *, mat_file: str,
             "line_amplitude_v": design.line_amplitude_v,
             "harmonics": np.rint(design.lines_hz / resolution).astype(int),
             "lines_hz": design.lines_hz, "phases_rad": design.phases_rad,
+            "mains": {
+                "mains_hz": design.mains_hz,
+                "lines_on_harmonics_hz": design.lines_hz[mains_hits(
+                    design.lines_hz, resolution_hz=resolution, mains_hz=design.mains_hz)],
+                "skipped_lines_hz": list(design.skipped_lines_hz),
+                "warning": mains_warning(design)},
         }
     payload = {
         "input": design.input, "kind": design.kind, "fs_hz": design.fs_hz,
@@ -81,7 +89,18 @@ def description(design: ExcitationDesign, *, mat_file: str,
             "model": limits.model,
             "slowest_time_constant_s": limits.slowest_time_constant_s,
             "peaks": [{"converter": c.converter, "signal": c.signal, "peak_v": c.peak_v,
-                       "limit_v": c.limit_v} for c in limits.peaks]},
+                       "limit_v": c.limit_v} for c in limits.peaks],
+            "quad_diode": {
+                "nonlinearity_pct": limits.qd_nonlinearity_pct,
+                "max_compression_pct": 100 * limits.max_qd_compression,
+                "summary": limits.qd_line(),
+                "channels": [{"signal": q.signal, "peak_v": q.peak_v, "rms_v": q.rms_v,
+                              "beam_angle_peak_mrad": 1e3 * q.angle_rad,
+                              "full_swing_v": q.full_swing_v,
+                              "compression_at_peak_pct": 100 * q.compression,
+                              "linear_gain_low_pct": 100 * q.gain_bias}
+                             for q in limits.quad_diode]},
+            "verdict": limits.verdict()},
         "fsmbench_version": __version__,
     }
     name, version = EXCITATION_FORMAT
@@ -148,6 +167,20 @@ def _get(meta: dict[str, Any], key: str, kind: type | tuple[type, ...], js: Path
     if isinstance(value, float) and not math.isfinite(value):
         raise ExcitationFileError(js, f"{key!r} is not finite")
     return value
+
+
+def _mains_fields(ms: dict[str, Any], js: Path) -> dict[str, Any]:
+    """``mains_hz`` and ``skipped_lines_hz`` of a multisine (absent in older files: none)."""
+    mains = ms.get("mains")
+    if mains is None:
+        return {}
+    if not isinstance(mains, dict):
+        raise ExcitationFileError(js, f"'mains' is {mains!r}, not a valid value")
+    skipped = _get(mains, "skipped_lines_hz", list, js)
+    if not all(isinstance(f, (int, float)) and not isinstance(f, bool) for f in skipped):
+        raise ExcitationFileError(js, "'skipped_lines_hz' is not a list of frequencies [Hz]")
+    return {"mains_hz": float(_get(mains, "mains_hz", (int, float), js)),
+            "skipped_lines_hz": tuple(float(f) for f in skipped)}
 
 
 def read_excitation(path: str | Path) -> ExcitationDesign:
@@ -230,6 +263,7 @@ def read_excitation(path: str | Path) -> ExcitationDesign:
         extra = {"grid": _get(ms, "grid", str, js), "log_grid": _get(ms, "log_grid", bool, js),
                  "phase_method": _get(ms, "phase_method", str, js),
                  "line_amplitude_v": float(_get(ms, "line_amplitude_v", number, js)),
+                 **_mains_fields(ms, js),
                  "crest_factor_random_phase": float(_get(meta, "crest_factor_random_phase",
                                                          number, js))}
     chirp = meta.get("chirp")
