@@ -17,9 +17,11 @@ band can. The rule, stated once:
 
 1. fit with the sensor the bench model gives (``quad_diode.bandwidth_hz``, a
    datasheet value; 0 = unlimited);
-2. fit again with its bandwidth free; when that lowers the weighted squared
-   residual by more than 10.83 noise units (a likelihood-ratio test at 99.9 %,
-   one parameter), the bandwidth is *fitted* and carries its standard deviation;
+2. fit again with its bandwidth free, as a first order and as a Butterworth
+   (the order that fits better is kept: same number of parameters); when that
+   lowers the weighted squared residual by more than 10.83 noise units (a
+   likelihood-ratio test at 99.9 %, one parameter), the bandwidth is *fitted*
+   and carries its standard deviation;
 3. otherwise the bench model's sensor stays and the profile of the fit over
    the bandwidth gives a one-sided 95 % lower bound (where the residual has
    grown by 2.71 units): "the data exclude a sensor slower than this".
@@ -275,8 +277,8 @@ def fit_jointly(f_hz: FloatArray, response: NDArray[np.complex128], sigma: Float
     jac = best.jac[:, :n_par + 1]
     if estimate.source == "fitted":
         bw, step = estimate.bandwidth_hz, 1e-3 * estimate.bandwidth_hz
-        up = residual(best.x, SensorLowpass(bandwidth_hz=bw + step, order=sensor.order))
-        down = residual(best.x, SensorLowpass(bandwidth_hz=bw - step, order=sensor.order))
+        up = residual(best.x, SensorLowpass(bandwidth_hz=bw + step, order=estimate.order))
+        down = residual(best.x, SensorLowpass(bandwidth_hz=bw - step, order=estimate.order))
         jac = np.column_stack([jac, (up - down) / (2 * step)])
     norms = np.linalg.norm(jac, axis=0)
     norms[norms == 0] = 1.0
@@ -299,22 +301,25 @@ def _resolve(solve: Callable[[FloatArray, SensorLowpass], _Solution], *, prior: 
              sensor: SensorLowpass, fs_hz: float, unit: float, estimate: SensorEstimate,
              f_max_hz: float) -> tuple[_Solution, SensorEstimate]:
     """Steps 2 and 3 of the module's rule: the bandwidth free, else its lower bound."""
-    order = sensor.order
 
-    def at(bandwidth_hz: float, x0: FloatArray) -> _Solution:
+    def at(bandwidth_hz: float, x0: FloatArray, order: int) -> _Solution:
         return solve(x0, SensorLowpass(bandwidth_hz=bandwidth_hz, order=order))
 
-    # The bandwidth free: a scan over a geometric grid (the cost is not convex in it: a
-    # fast sensor is a flat valley), then a golden-section refinement around the best.
+    # The bandwidth free, for either order (a first order and a Butterworth droop
+    # differently inside the band; the data choose, with the same number of parameters):
+    # a scan over a geometric grid (the cost is not convex in the bandwidth: a fast
+    # sensor is a flat valley), then a golden-section refinement around the best.
     grid = np.geomspace(max(SLOWEST_SENSOR_HZ, f_max_hz / 4), 50 * fs_hz, 13)
-    scans = [(at(float(bw), prior.x), float(bw)) for bw in grid]
-    sol_best, bw_best = min(scans, key=lambda item: item[0].cost)
+    scans_by_order = {o: [(at(float(bw), prior.x, o), float(bw)) for bw in grid]
+                      for o in (1, 2)}
+    order = min(scans_by_order, key=lambda o: min(sol.cost for sol, _ in scans_by_order[o]))
+    sol_best, bw_best = min(scans_by_order[order], key=lambda item: item[0].cost)
     k = int(np.flatnonzero(grid == bw_best)[0])
     lo_bw, hi_bw = grid[max(k - 1, 0)], grid[min(k + 1, grid.size - 1)]
     for _ in range(_BISECTIONS):
         a, b = math.exp(0.618 * math.log(lo_bw) + 0.382 * math.log(hi_bw)), \
             math.exp(0.382 * math.log(lo_bw) + 0.618 * math.log(hi_bw))
-        sa, sb = at(a, sol_best.x), at(b, sol_best.x)
+        sa, sb = at(a, sol_best.x, order), at(b, sol_best.x, order)
         if sa.cost < sb.cost:
             hi_bw = b
             if sa.cost < sol_best.cost:
@@ -327,7 +332,7 @@ def _resolve(solve: Callable[[FloatArray, SensorLowpass], _Solution], *, prior: 
     if lr > RESOLVED_LR and bw_best < grid[-1]:
         # Standard deviation of the bandwidth from the profile's curvature in 1/bandwidth.
         step = 0.05 * bw_best
-        up, down = at(bw_best + step, sol_best.x), at(bw_best - step, sol_best.x)
+        up, down = at(bw_best + step, sol_best.x, order), at(bw_best - step, sol_best.x, order)
         curvature = (up.cost + down.cost - 2 * sol_best.cost) / step**2
         std = math.sqrt(unit / curvature) if curvature > 0 else math.inf
         return sol_best, SensorEstimate(order=order, bandwidth_hz=float(bw_best),
@@ -335,8 +340,9 @@ def _resolve(solve: Callable[[FloatArray, SensorLowpass], _Solution], *, prior: 
                                         likelihood_ratio=float(lr))
     # Not resolved: the bench model's sensor stays; the bound is where the residual has
     # grown by BOUND_LR noise units over the best fit, on the slow side.
+    order = sensor.order
     floor = min(sol_best.cost, prior.cost)
-    excess = np.array([(s.cost - floor) / unit for s, _ in scans])
+    excess = np.array([(s.cost - floor) / unit for s, _ in scans_by_order[order]])
     bound = 0.0
     if excess[0] > BOUND_LR:
         # From the slow end: the first bandwidth the data accept, refined between it
@@ -346,7 +352,7 @@ def _resolve(solve: Callable[[FloatArray, SensorLowpass], _Solution], *, prior: 
         lo_bw, hi_bw = float(grid[max(i - 1, 0)]), float(grid[i])
         for _ in range(_BISECTIONS):
             mid = math.sqrt(lo_bw * hi_bw)
-            if (at(mid, sol_best.x).cost - floor) / unit > BOUND_LR:
+            if (at(mid, sol_best.x, order).cost - floor) / unit > BOUND_LR:
                 lo_bw = mid
             else:
                 hi_bw = mid

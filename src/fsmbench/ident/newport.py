@@ -382,11 +382,13 @@ def sensor_notices(dyn: NewportDynamics, *, model: SensorLowpass) -> list[Notice
                 2 * est.bandwidth_std_hz / est.bandwidth_hz):
             continue  # the model's value is within two standard deviations
         out.append(Notice("other", f"{_PATHS[axis][1]} → {_PATHS[axis][0]}",
-                          f"the 4QD amplifier's bandwidth is resolved at "
-                          f"{est.bandwidth_hz:.4g} ± {est.bandwidth_std_hz:.2g} Hz "
-                          f"(bench model: {model.bandwidth_hz:g} Hz, 0 = unlimited); set "
-                          f"quad_diode.bandwidth_hz in the bench file so that every path's "
-                          f"delay is fitted with it"))
+                          f"the 4QD amplifier is resolved as a "
+                          f"{'first-order' if est.order == 1 else 'second-order (Butterworth)'}"
+                          f" low pass at {est.bandwidth_hz:.4g} ± {est.bandwidth_std_hz:.2g} Hz"
+                          f" (bench model: {model.bandwidth_hz:g} Hz, 0 = unlimited); set "
+                          f"quad_diode.bandwidth_hz = {est.bandwidth_hz:.4g} and "
+                          f"quad_diode.bandwidth_order = {est.order} in the bench file's "
+                          f"[nominal] so that every path's delay is fitted with it"))
     return out
 
 
