@@ -67,6 +67,18 @@ def test_the_sampled_response_is_continuous_across_whole_samples(whole: int) -> 
     np.testing.assert_allclose(below, above, rtol=1e-6)  # 1e-12 s of delay, ~1e-8 of phase
 
 
+def test_a_badly_scaled_series_is_balanced_not_degraded() -> None:
+    # A Sercalo-like mode (numerator ~7e6) behind a 10 kHz Butterworth: A's entries span
+    # 1e15; the modal form on the balanced matrix stays exact.
+    path = mode_sum(natural_freq_hz=np.array([410.0, 1850.0]),
+                    damping_ratio=np.array([0.0012, 0.01]),
+                    numerator=np.array([[6.6e6, 0.0], [1.3e6, 0.0]]))
+    sensor = SensorLowpass(bandwidth_hz=10_000.0, order=2)
+    f = np.linspace(1.0, 0.45 * FS, 300)
+    h = sampled_response(path, f_hz=f, fs_hz=FS, delay_s=2.85e-4, sensor=sensor)
+    np.testing.assert_allclose(h, _reference(path, sensor, 2.85e-4, f), rtol=1e-9)
+
+
 def test_a_repeated_pole_takes_the_exact_line_by_line_path() -> None:
     # ζ = 1 makes Φ defective: the fallback must match the modal form just beside it.
     f = np.linspace(1.0, 4000.0, 80)
