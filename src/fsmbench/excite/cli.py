@@ -150,6 +150,11 @@ def summary(design: Any, report: Any) -> list[str]:
         what = "band-limited noise" if d.kind == "noise" else f"{d.chirp_method} chirp"
         lines.append(f"{d.input} {what} from {d.band_hz[0]:g} to {d.band_hz[1]:g} Hz, "
                      f"{d.amplitude_rms_v:g} V rms")
+    if d.skipped_lines_hz:
+        from fsmbench.excite.mains import harmonic_list
+
+        lines.append(f"{len(d.skipped_lines_hz)} lines on harmonics of the {d.mains_hz:g} Hz "
+                     f"mains left out ({harmonic_list(list(d.skipped_lines_hz))})")
     lines.append(f"{d.periods} period{'s' if d.periods != 1 else ''} of {d.period_s:g} s{extra}: "
                  f"{d.samples_v.size} samples at {d.fs_hz:g} Hz ({d.duration_s:g} s)")
     cf = f"crest factor {d.crest_factor:.3f}"

@@ -26,7 +26,8 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["mains_free_resolution", "mains_hits", "mains_warning", "odd_grids_avoid_mains"]
+__all__ = ["harmonic_list", "mains_free_resolution", "mains_hits", "mains_warning",
+           "odd_grids_avoid_mains"]
 
 # Relative rounding accepted when a ratio of frequencies is taken as a whole number.
 _WHOLE_RTOL = 1e-9
@@ -77,9 +78,10 @@ def mains_free_resolution(*, resolution_hz: float, mains_hz: float, fs_hz: float
     return None
 
 
-def _harmonic_list(harmonics_hz: list[float]) -> str:
+def harmonic_list(harmonics_hz: list[float]) -> str:
+    """``50, 100, …, 2000 Hz`` for evenly spaced frequencies, else a short list [Hz]."""
     h = harmonics_hz
-    if len(h) > 4 and np.allclose(np.diff(h), h[0]):
+    if len(h) > 4 and np.allclose(np.diff(h), h[1] - h[0]):
         return f"{h[0]:g}, {h[1]:g}, …, {h[-1]:g} Hz"
     if len(h) > 4:
         return f"{h[0]:g}, {h[1]:g}, … ({len(h)} harmonics), {h[-1]:g} Hz"
@@ -112,6 +114,6 @@ def mains_warning(design: Any) -> str | None:
                f"non-excited line ({mains:g} Hz is {mains / r:.0f} lines, an even number; "
                f"at {res:g} Hz it is {q:.6g})")
     return (f"{design.input} multisine: {n} excited line{'s' if n != 1 else ''} on harmonics "
-            f"of the {mains:g} Hz mains ({_harmonic_list(harmonics)}), where the bench's mains "
+            f"of the {mains:g} Hz mains ({harmonic_list(harmonics)}), where the bench's mains "
             f"pickup stays as a bias after averaging; {fix + ', or ' if fix else ''}"
             "--skip-mains leaves them out")
