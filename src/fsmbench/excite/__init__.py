@@ -7,7 +7,10 @@ without loading numpy's and scipy's heavier parts); import from the modules:
   multisines (full, odd, odd-odd, linear or log grids), band-limited noise as
   the seed injects it, chirps;
 - :mod:`fsmbench.excite.limits`: the peak at the DAC and at every ADC channel
-  the bench model carries the excitation to, checked before anything is written;
+  the bench model carries the excitation to, and the 4QD's compression at the
+  beam's peak, checked before anything is written;
+- :mod:`fsmbench.excite.mains`: multisine lines on mains harmonics, the grids
+  that avoid them, the warning;
 - :mod:`fsmbench.excite.files`: the MAT-file a real-time target plays and its
   JSON description (``fsmbench.excitation`` version 1), written and read back;
 - :mod:`fsmbench.excite.cli`: ``fsmbench excite``.
@@ -16,4 +19,4 @@ without loading numpy's and scipy's heavier parts); import from the modules:
 (:func:`fsmbench.twin.simulate.simulate_excitation`).
 """
 
-__all__ = ["cli", "design", "files", "limits"]
+__all__ = ["cli", "design", "files", "limits", "mains"]

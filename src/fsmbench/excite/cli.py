@@ -104,8 +104,8 @@ def add_excite_command(sub: Any) -> None:
     p.add_argument("--max-4qd-compression", metavar="PCT", dest="max_qd_compression",
                    type=functools.partial(positive, unit="percent"), default=1.0,
                    help="largest compression of the 4QD at the beam's peak [%%] (default 1: "
-                        "the identified gain about 0.75 %% low for a sine, less for peakier "
-                        "signals)")
+                        "it lowers the identified gain by at most 3/CF^2 of it, CF the crest "
+                        "factor at the 4QD: 0.75 %% for a sine)")
     p.add_argument("--mains-hz", metavar="F", dest="mains_hz", type=_mains_hz, default=50.0,
                    help="mains frequency whose harmonics a multisine should not excite [Hz] "
                         "(default 50; 60 for US grids; 0: no check)")
