@@ -112,13 +112,13 @@ class SensorEstimate:
         """What the fit concluded, in words with units."""
         kind = "first-order" if self.order == 1 else "second-order"
         if self.source == "fitted":
-            return (f"{kind} sensor bandwidth {self.bandwidth_hz:.4g} ± "
-                    f"{self.bandwidth_std_hz:.2g} Hz, resolved by the data")
-        used = (f"the bench model's {self.bandwidth_hz:.4g} Hz" if self.source == "bench model"
+            return (f"{kind} sensor bandwidth {self.bandwidth_hz:.0f} ± "
+                    f"{self.bandwidth_std_hz:.0f} Hz, resolved by the data")
+        used = (f"the bench model's {self.bandwidth_hz:.0f} Hz" if self.source == "bench model"
                 else "no sensor low pass")
         if math.isnan(self.lower_bound_hz):
             return f"sensor not estimated on this path: {used} is used"
-        bound = (f"the data exclude a {kind} sensor below {self.lower_bound_hz:.3g} Hz (95 %)"
+        bound = (f"the data exclude a {kind} sensor below {self.lower_bound_hz:.0f} Hz (95 %)"
                  if self.lower_bound_hz > 0 else "the data do not bound its bandwidth")
         return f"sensor not resolved in the band: {used} is used; {bound}"
 

@@ -15,32 +15,42 @@ def sercalo_delay_blocks(s: SercaloIdentification) -> list[Block]:
     for k, d in enumerate(s.delays):
         joint = s.joint_delays[k] if k < len(s.joint_delays) else None
         rows.append((
-            f"{d.input} → {d.output}",
-            f"{1e3 * d.delay_s:.4f} ± {1e3 * d.std_s:.1g}",
-            "–" if joint is None else f"{1e3 * joint.delay_s:.4f} ± {1e3 * joint.delay_std_s:.1g}",
+            f"{d.input} → {d.output}", _us(d.delay_s, d.std_s),
+            "–" if joint is None else _us(joint.delay_s, joint.delay_std_s),
             "–" if joint is None else ("a weaker mode" if "weaker mode" in joint.method
                                        else "a constant"),
             f"{d.band_hz[0]:.0f}–{d.band_hz[1]:.0f}"))
     removed = ("delay removed before the vector fit" if not s.joint_delays else
                "delay removed before the vector fit (the 4QD amplifier's lag in)")
-    rows.append((removed, f"{1e3 * s.delay_s:.4f} ± {1e3 * s.delay_std_s:.1g}", "–", "–", "–"))
+    rows.append((removed, _us(s.delay_s, s.delay_std_s), "–", "–", "–"))
     blocks: list[Block] = [Table(
         caption=("Sercalo delays: from the phase alone (Bode's gain–phase relation), and fitted "
                  "jointly with each path's own poles, the hold, a fractional delay and the 4QD "
                  "amplifier as the converters sample them (± one standard deviation)"),
-        header=("path", "phase only [ms]", "joint fit [ms]", "modes above the band",
+        header=("path", "phase only [µs]", "joint fit [µs]", "modes above the band",
                 "band [Hz]"),
         rows=tuple(rows))]
     if s.joint_delays:
+        lowpass = s.joint_delays[0].sensor.lowpass
+        amp = (f"the bench file's 4QD amplifier ({lowpass.bandwidth_hz:g} Hz, "
+               f"{'first order' if lowpass.order == 1 else 'Butterworth'}) is kept apart "
+               f"from it: the pure delay is {1e6 * s.pure_delay_s:.1f} µs, and the plant model, "
+               f"which has no sensor block, uses {1e6 * s.delay_s:.1f} µs"
+               if lowpass.limited else
+               "the bench file has no 4QD amplifier (its bandwidth is resolved, when the data "
+               "can, on the Newport's paths below), so its lag, if any, is in the delay")
         blocks.append(Note(
-            "The joint fit keeps the 4QD amplifier's lag apart from the delay: "
-            f"{s.joint_delays[0].sensor.sentence()}. Its pure delay is "
-            f"{1e3 * s.pure_delay_s:.4f} ms; the plant model, which has no sensor block, "
-            f"uses {1e3 * s.delay_s:.4f} ms. The phase-only estimate reads the modes' "
-            "approach to their asymptotes as extra lag; the joint fit models them."))
+            "The joint fit models the modes' approach to their asymptotes, which the "
+            f"phase-only estimate reads as extra lag; {amp}. A 125 kHz coil pole lags like "
+            "1.3 µs of delay and is counted in."))
     elif s.joint_delay_skipped:
         blocks.append(Note(f"No joint delay fit ({s.joint_delay_skipped})."))
     return blocks
+
+
+def _us(value_s: float, std_s: float) -> str:
+    """``151.4 ± 0.1`` [µs]."""
+    return f"{1e6 * value_s:.1f} ± {1e6 * std_s:.1g}"
 
 
 def sensor_note(dyn: NewportDynamics) -> Note:
