@@ -148,3 +148,12 @@ def test_linear_4qd_is_said_not_limited() -> None:
 def test_limit_must_be_positive() -> None:
     with pytest.raises(ValueError, match="compression limit must be > 0"):
         converter_peaks(_uch_multisine(0.001), params=TRUE, max_qd_compression=0.0)
+
+
+def test_linear_4qd_needs_no_full_swing_but_a_compressing_one_does() -> None:
+    qd0 = dataclasses.replace(QD, nonlinearity_pct=0.0, nonlinearity_full_swing_rad=0.0)
+    report = check_limits(_uch_multisine(0.001), params=dataclasses.replace(TRUE, quad_diode=qd0))
+    assert report.qd_linear and report.quad_diode[0].gain_bias == 0.0
+    bad = dataclasses.replace(QD, nonlinearity_full_swing_rad=0.0)
+    with pytest.raises(ValueError, match="compression of 2 % needs a full swing > 0 rad"):
+        converter_peaks(_uch_multisine(0.001), params=dataclasses.replace(TRUE, quad_diode=bad))

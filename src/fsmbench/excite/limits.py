@@ -137,6 +137,8 @@ class QuadDiodePeak:
     @property
     def compression(self) -> float:
         """``k (peak / V_fs)**2``: how far short of linear the peak reads [1]."""
+        if self.nonlinearity == 0.0:
+            return 0.0
         return self.nonlinearity * (self.peak_v / self.full_swing_v) ** 2
 
     @property
@@ -146,6 +148,8 @@ class QuadDiodePeak:
         The coherent part of the cubic on line ``l`` is ``3 k (rms**2 - |Y_l|**2 / 4) / V_fs**2``:
         this bound for many lines, twice the truth for a single sine.
         """
+        if self.nonlinearity == 0.0:
+            return 0.0
         return 3.0 * self.nonlinearity * (self.rms_v / self.full_swing_v) ** 2
 
     @property
@@ -369,6 +373,9 @@ def converter_peaks(design: ExcitationDesign, *, params: BenchParams,
               if p > _REACHED_FRACTION * limit]
     qd = params.quad_diode
     k = qd.nonlinearity_pct / 100.0
+    if k != 0.0 and not qd.nonlinearity_full_swing_rad > 0:
+        raise ValueError(f"the 4QD's compression of {qd.nonlinearity_pct:g} % needs a full swing "
+                         f"> 0 rad, got {qd.nonlinearity_full_swing_rad:g} rad")
     quad = []
     for name, axis in QD_CHANNELS:
         i = ADC_CHANNELS.index(name)
