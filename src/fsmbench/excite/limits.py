@@ -233,7 +233,8 @@ class LimitReport:
                      + [q.amplitude_factor() for q in self.quad_diode])
         x = self.amplitude_rms_v * factor
         step = 10.0 ** (math.floor(math.log10(x)) - 2)
-        return math.floor(x / step * (1 + 1e-12)) * step
+        # Printed through 3 digits, so that 0.00745 is not 0.007450000000000001.
+        return float(f"{math.floor(x / step * (1 + 1e-12)) * step:.3g}")
 
     def qd_line(self) -> str:
         """What the report says of the 4QD: linear, or the worst channel's compression."""
