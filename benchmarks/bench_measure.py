@@ -66,14 +66,6 @@ identification is counted as an infinite error and named below the table.
 The last lines give, per method, the shortest ``T`` whose median damping
 error is at most 5 % on both axes (``-`` when no length tried reaches it).
 
-Workaround: on the real-bench twin the LPM's lowest lines have low
-coherence (drift, 1/f noise), and the delay estimator searches the coherent
-band from 10 times the record's resolution (1 Hz at 10 s, 0.17 Hz at
-60 s) with a running median padded by the first line, so the LPM Sercalo
-step fails ("coherence >= 0.9 only up to 0 Hz", or 0.17 Hz ...). When it
-does, the LPM is rerun with the band searched over the lines above 10 Hz
-(the 1 s Welch window's 10 resolutions; this file's
-``_lines_above_low_edge``), and the count of such reruns is printed.
 Default run: 3 seeds x 6 lengths x 5 methods x 2: 6.5 minutes measured on
 a loaded 2-core machine (2.5 of simulation, 4 of identification).
 No assertion: numbers, not verdicts.
@@ -82,13 +74,12 @@ No assertion: numbers, not verdicts.
 from __future__ import annotations
 
 import argparse
-import contextlib
 import datetime as dt
 import math
 import platform
 import statistics
 import time
-from collections.abc import Iterator, Mapping, Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any, cast
 
@@ -98,7 +89,6 @@ import xarray as xr
 from fsmbench.bench.params import Bench, real_bench
 from fsmbench.excite.design import ExcitationDesign, GridKind, design_multisine
 from fsmbench.excite.limits import converter_peaks
-from fsmbench.ident import delay as delay_module
 from fsmbench.ident.pipeline import IdentifyOptions, identify
 from fsmbench.sim.discretize import DiscretePlant
 from fsmbench.sim.plant import twin_discrete
@@ -144,38 +134,11 @@ def _errors(result: Any, truth: Mapping[str, Any], bench: Bench) -> dict[str, fl
     return out
 
 
-_original_band = delay_module._coherent_band
-
-
-# Lower edge of the coherent-band search with 1 s Welch windows (10 resolutions): the LPM's
-# band search starts there too instead of at 10 lines of the whole record.
-LPM_BAND_SEARCH_FROM_HZ = 10.0
-
-
-def _lines_above_low_edge(f: np.ndarray, coh: np.ndarray, *, f_lo: float, f_max: float,
-                          threshold: float, width: int) -> float:
-    """The delay band's top, its running median over the lines above 10 Hz only."""
-    f_from = max(f_lo, LPM_BAND_SEARCH_FROM_HZ)
-    keep = f > f_from
-    return _original_band(f[keep], coh[keep], f_lo=f_from, f_max=f_max, threshold=threshold,
-                          width=width)
-
-
-@contextlib.contextmanager
-def _band_workaround() -> Iterator[None]:
-    delay_module._coherent_band = _lines_above_low_edge
-    try:
-        yield
-    finally:
-        delay_module._coherent_band = _original_band
-
-
 class Runner:
-    """Identifies one set of records with one method; counts failures and workarounds."""
+    """Identifies one set of records with one method; collects failures."""
 
     def __init__(self, bench: Bench) -> None:
         self.bench = bench
-        self.workarounds = 0
         self.failures: list[str] = []
 
     def errors(self, method: Method, recordings: Mapping[str, xr.Dataset],
@@ -186,11 +149,6 @@ class Runner:
                                refine_modes=method.refine)
         result = identify(recordings, bench=self.bench, options=opts, source="twin")
         reason = result.skipped.get("sercalo", "")
-        if method.frf == "lpm" and "coherence >= " in reason:
-            self.workarounds += 1
-            with _band_workaround():
-                result = identify(recordings, bench=self.bench, options=opts, source="twin")
-            reason = result.skipped.get("sercalo", "")
         if result.sercalo is None:
             self.failures.append(f"{method.label}, {tag}: {reason}")
         else:
@@ -381,9 +339,6 @@ def main(argv: Sequence[str] | None = None) -> None:
           " s):")
     for m in methods:
         print(f"  {m.label:{width}s}  {shortest[m.label]}")
-    if runner.workarounds:
-        print(f"LPM delay-band workaround used in {runner.workarounds} identification(s) "
-              "(see the module notes)")
     for line in runner.failures:
         print(f"not identified: {line}")
     total = time.perf_counter() - t_start

@@ -12,6 +12,7 @@ from scipy.integrate import quad
 
 from fsmbench.ident.delay import (
     DelayEstimate,
+    _coherent_band,
     _kernel_primitive,
     bode_minimum_phase,
     estimate_delay,
@@ -213,3 +214,16 @@ def test_seed_delays_are_within_one_sample_of_the_estimates(
                              ("data_unv", 5e-4)):
         # 1e-4 s: one sample; the seed's Sercalo value misses the half-sample hold (~0.5 sample)
         assert abs(twin_delays[name].delay_s - seed_value) < 1e-4
+
+
+def test_low_lines_at_the_start_do_not_end_the_coherent_band() -> None:
+    # Two low lines just above the band's start (drift, 1/f noise on a long record's LPM)
+    # must not be repeated over half the running median's window: the band runs on to
+    # where the coherence really falls.
+    f = np.arange(9.1, 1000.0, 1.3)
+    coh = np.full(f.size, 0.99)
+    coh[1:3] = 0.78
+    coh[f > 900.0] = 0.5
+    top = _coherent_band(f, coh, f_lo=10.0, f_max=2500.0, threshold=0.9, width=11)
+    # The last line below 900 Hz, one line's spacing: where the median first fails.
+    assert 890.0 < top <= 900.0

@@ -418,8 +418,10 @@ def _coherent_band(f: NDArray[np.float64], coh: NDArray[np.float64], *, f_lo: fl
     f, coh = f[keep], coh[keep]
     if f.size == 0:
         return f_lo
-    half = width // 2
-    padded = np.pad(np.nan_to_num(coh, nan=0.0), half, mode="edge")
+    half = min(width // 2, f.size - 1)
+    # Mirrored at the ends, not the end value repeated: two low lines at the band's start
+    # (drift, 1/f noise) repeated half a window would end the band where it begins.
+    padded = np.pad(np.nan_to_num(coh, nan=0.0), half, mode="reflect")
     windows = np.lib.stride_tricks.sliding_window_view(padded, 2 * half + 1)
     smooth = np.median(windows, axis=1)
     above = f <= f_max
