@@ -108,4 +108,4 @@ def test_dac_range_on_a_newport_input() -> None:
 def test_true_model_reaches_the_other_axis_through_coupling(seed_noise) -> None:
     report = converter_peaks(seed_noise, params=BENCH.true, model="true")
     assert "Vpv" in {c.signal for c in report.peaks}  # 2 % torque coupling, 4QD rotation
-    assert report.fits and report.verdict().endswith("true model)")
+    assert report.fits and report.verdict().endswith("true bench model)")

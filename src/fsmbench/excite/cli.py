@@ -5,7 +5,8 @@
                         [--periods P] [--transient-periods T] [--odd | --odd-odd]
                         [--log-grid [--lines-per-decade N]] [--phases minimised|schroeder|random]
                         [--duration S] [--sweep linear|log] [--seed N]
-                        [--params TOML] [--model nominal|true] [--max-4qd-compression PCT]
+                        [--params TOML] [--model nominal|true] [--identification DIR]
+                        [--max-4qd-compression PCT]
                         [--mains-hz F] [--skip-mains] [--timestamp]
 
 Checks the peak at the DAC and at every ADC channel the bench model carries
@@ -101,6 +102,10 @@ def add_excite_command(sub: Any) -> None:
     p.add_argument("--model", choices=("nominal", "true"), default="nominal",
                    help="parameters the limits are checked with: nominal (a real bench; the "
                         "larger gains) or true (the twin) (default nominal)")
+    p.add_argument("--identification", metavar="DIR", default=None,
+                   help="take the 4QD's gains and compression from a previous identify or "
+                        "study run (DIR/identification.json): a real bench's 4QD, where the "
+                        "packaged model's is linear")
     p.add_argument("--max-4qd-compression", metavar="PCT", dest="max_qd_compression",
                    type=functools.partial(positive, unit="percent"), default=1.0,
                    help="largest compression of the 4QD at the beam's peak [%%] (default 1: "
@@ -162,7 +167,7 @@ def summary(design: Any, report: Any) -> list[str]:
         cf += (f" ({d.phase_method} phases; random phases: {d.crest_factor_random_phase:.3f}, "
                f"median of {N_RANDOM_REFERENCE} draws from seed {d.seed})")
     lines.append(cf)
-    lines.append(f"peaks through the {report.model} bench model:")
+    lines.append(f"peaks through the {report.model_words}:")
     lines += [f"  {c.line()}" for c in report.peaks]
     if report.qd_linear:
         lines.append(f"  {report.qd_line()}")
@@ -181,6 +186,7 @@ def summary(design: Any, report: Any) -> list[str]:
 def _command(args: argparse.Namespace) -> int:
     from fsmbench.bench.params import load_bench
     from fsmbench.excite.files import write_excitation
+    from fsmbench.excite.identified import with_identified_quad_diode
     from fsmbench.excite.limits import check_limits
     from fsmbench.excite.mains import mains_warning
     from fsmbench.io.matwrite import wall_clock_headers
@@ -188,8 +194,12 @@ def _command(args: argparse.Namespace) -> int:
 
     bench = load_bench(args.params)
     params = bench.nominal if args.model == "nominal" else bench.true
+    model = args.model
+    if args.identification is not None:
+        params = with_identified_quad_diode(params, args.identification)
+        model = f"{args.model} bench model, 4QD identified in {args.identification}"
     design = _design(args, params.converter.fs_hz)
-    report = check_limits(design, params=params, model=args.model,  # before any output
+    report = check_limits(design, params=params, model=model,  # before any output
                           max_qd_compression=args.max_qd_compression / 100.0)
     warning = mains_warning(design)
     if warning:

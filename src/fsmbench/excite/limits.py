@@ -178,7 +178,8 @@ class LimitReport:
     input : str
         DAC channel excited.
     model : str
-        Which parameters the check used (``"nominal"`` or ``"true"``).
+        Which parameters the check used (``"nominal"`` or ``"true"``, or words
+        such as ``"nominal bench model, 4QD identified in DIR"``).
     amplitude_rms_v : float
         Rms of the excitation checked [V].
     peaks : tuple of ConverterPeak
@@ -244,6 +245,11 @@ class LimitReport:
             return f"4QD linear in this model: compression not limited{angle}"
         return q.line()
 
+    @property
+    def model_words(self) -> str:
+        """``"nominal bench model"``, or ``model`` itself when it is already words."""
+        return f"{self.model} bench model" if self.model in ("nominal", "true") else self.model
+
     def verdict(self) -> str:
         """One line: the first violation with the amplitude that would fit, or all fine."""
         w = self.worst()
@@ -254,17 +260,17 @@ class LimitReport:
                   f"{1e3 * q.angle_rad:.3g} mrad peak, within "
                   f"{100 * self.max_qd_compression:.3g} %")
             return (f"{self.input}: every converter within range (closest {w.line()}, "
-                    f"{self.model} model){qd}")
+                    f"{self.model_words}){qd}")
         if self.converters_fit and q is not None:
             return (f"{self.input}: an excitation of {self.amplitude_rms_v:.4g} V rms turns the "
                     f"beam on the 4QD ({q.signal}) to {1e3 * q.angle_rad:.3g} mrad peak, "
                     f"compressed {100 * q.compression:.3g} %, beyond the "
-                    f"{100 * q.limit:.3g} % limit ({self.model} bench model, "
-                    f"{self.qd_nonlinearity_pct:g} % at its full swing); at most "
+                    f"{100 * q.limit:.3g} % limit ({self.model_words}, "
+                    f"{self.qd_nonlinearity_pct:.3g} % at its full swing); at most "
                     f"{self.fitting_amplitude_rms_v():.3g} V rms keeps it within")
         return (f"{self.input}: an excitation of {self.amplitude_rms_v:.4g} V rms drives "
                 f"{w.converter} {w.signal} to {w.peak_v:.3g} V peak, beyond its "
-                f"±{w.limit_v:g} V range ({self.model} bench model); at most "
+                f"±{w.limit_v:g} V range ({self.model_words}); at most "
                 f"{self.fitting_amplitude_rms_v():.3g} V rms fits")
 
 

@@ -24,7 +24,7 @@ from fsmbench.io.errors import RecordingError
 if TYPE_CHECKING:
     from fsmbench.stages import PlantChoice
 
-__all__ = ["BLOCK_NAMES", "load_identified_plant", "read_plant_mat"]
+__all__ = ["BLOCK_NAMES", "load_identified_plant", "read_identification_json", "read_plant_mat"]
 
 #: The blocks ``plant.mat`` holds besides the full system ``sys``.
 BLOCK_NAMES = ("Gi", "Zc", "Ga", "Gc", "Gn", "Gd")
@@ -118,6 +118,35 @@ def read_plant_mat(path: str | Path) -> PlantModel:
                       source=source if isinstance(source, str) else "identified")
 
 
+def read_identification_json(folder: str | Path) -> tuple[Path, dict[str, Any]]:
+    """``FOLDER/identification.json`` of a previous ``identify`` or ``study`` run, parsed.
+
+    Raises
+    ------
+    RecordingError
+        The folder or file is missing, unreadable, or not a JSON object (one line).
+    """
+    d = Path(folder)
+    if not d.is_dir():
+        raise RecordingError(d, "--identification must be a folder written by fsmbench identify "
+                                "or study; " + ("it does not exist" if not d.exists()
+                                                else "it is a file"))
+    ident_path = d / "identification.json"
+    if not ident_path.is_file():
+        raise RecordingError(ident_path, "does not exist; --identification must be a folder "
+                                         "written by fsmbench identify or study")
+    try:
+        ident = json.loads(ident_path.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError) as exc:
+        raise RecordingError(ident_path, f"cannot be read ({exc})") from exc
+    except json.JSONDecodeError as exc:
+        raise RecordingError(ident_path, f"is not valid JSON: {exc.msg} at line {exc.lineno}, "
+                                         f"column {exc.colno}") from exc
+    if not isinstance(ident, dict):
+        raise RecordingError(ident_path, "is not a JSON object")
+    return ident_path, ident
+
+
 def load_identified_plant(folder: str | Path) -> PlantChoice:
     """The plant of a previous ``identify`` or ``study`` run in ``folder``.
 
@@ -142,24 +171,8 @@ def load_identified_plant(folder: str | Path) -> PlantChoice:
     """
     from fsmbench.stages import PlantChoice
 
-    d = Path(folder)
-    if not d.is_dir():
-        raise RecordingError(d, "--identification must be a folder written by fsmbench identify "
-                                "or study; " + ("it does not exist" if not d.exists()
-                                                else "it is a file"))
-    ident_path = d / "identification.json"
-    if not ident_path.is_file():
-        raise RecordingError(ident_path, "does not exist; --identification must be a folder "
-                                         "written by fsmbench identify or study")
-    try:
-        ident = json.loads(ident_path.read_text(encoding="utf-8"))
-    except (OSError, UnicodeDecodeError) as exc:
-        raise RecordingError(ident_path, f"cannot be read ({exc})") from exc
-    except json.JSONDecodeError as exc:
-        raise RecordingError(ident_path, f"is not valid JSON: {exc.msg} at line {exc.lineno}, "
-                                         f"column {exc.colno}") from exc
-    if not isinstance(ident, dict):
-        raise RecordingError(ident_path, "is not a JSON object")
+    ident_path, ident = read_identification_json(folder)
+    d = ident_path.parent
     diagnostics = ident.get("diagnostics") or {}
     warnings = diagnostics.get("warnings") if isinstance(diagnostics, dict) else None
     if "sercalo" not in ident:
