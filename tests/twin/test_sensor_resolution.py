@@ -76,7 +76,7 @@ def test_a_multisine_to_8_khz_resolves_the_4qd_amplifier(recordings: dict) -> No
     assert sum("quad_diode.bandwidth_hz" in n for n in notes) == 2, notes
 
 
-def test_with_the_amplifier_in_the_bench_file_the_sercalo_delay_is_pure(recordings: dict) -> None:
+def test_the_resolved_amplifier_makes_the_sercalo_delay_pure(recordings: dict) -> None:
     unknown = _identify(recordings, amplifier_known=False)
     known = _identify(recordings, amplifier_known=True)
     assert unknown.sercalo is not None and known.sercalo is not None
@@ -84,6 +84,10 @@ def test_with_the_amplifier_in_the_bench_file_the_sercalo_delay_is_pure(recordin
     # and 35 us of latency, 110 us. 2.5 us: the twin's 125 kHz coil pole (1.3 us) plus the
     # fit's scatter.
     assert known.sercalo.pure_delay_s == pytest.approx(1.1e-4, abs=2.5e-6)
-    # Unknown, the amplifier's 22.5 us group delay is counted in.
-    assert unknown.sercalo.pure_delay_s == pytest.approx(1.1e-4 + 2.25e-5, abs=2.5e-6)
+    # Unknown to the bench file, the amplifier the Newport's lines resolved is used in the
+    # same run: the same pure delay.
+    assert unknown.sercalo.pure_delay_s == pytest.approx(1.1e-4, abs=2.5e-6)
+    assert {j.sensor.source for j in unknown.sercalo.joint_delays} == {"Newport"}
+    # The effective delay (the plant's) is the same either way: the amplifier is a lag.
+    assert unknown.sercalo.delay_s == pytest.approx(known.sercalo.delay_s, abs=0.5e-6)
     assert not [n for n in known.notices if "quad_diode" in n.message]

@@ -78,8 +78,9 @@ class SensorEstimate:
         Bandwidth in the model [Hz]; 0 = unlimited.
     source : str
         ``"fitted"`` (the data resolve it), ``"bench model"`` (the bench
-        parameters' value, not resolved) or ``"unlimited"`` (no value given,
-        not resolved).
+        parameters' value, not resolved), ``"unlimited"`` (no value given,
+        not resolved) or ``"Newport"`` (resolved on the Newport's paths and
+        used on this one).
     bandwidth_std_hz : float
         Standard deviation when fitted [Hz], else NaN.
     lower_bound_hz : float
@@ -114,6 +115,9 @@ class SensorEstimate:
         if self.source == "fitted":
             return (f"{kind} sensor bandwidth {self.bandwidth_hz:.0f} ± "
                     f"{self.bandwidth_std_hz:.0f} Hz, resolved by the data")
+        if self.source == "Newport":
+            return (f"the {kind} sensor resolved on the Newport's paths "
+                    f"({self.bandwidth_hz:.0f} Hz) is used")
         used = (f"the bench model's {self.bandwidth_hz:.0f} Hz" if self.source == "bench model"
                 else "no sensor low pass")
         if math.isnan(self.lower_bound_hz):

@@ -57,7 +57,8 @@ from fsmbench.ident.sampled import sampled_response as sampled_path
 from fsmbench.ident.sercalo import combined_delay, path_delays
 
 __all__ = ["NewportAxisFit", "NewportDynamics", "NewportIdentification", "fit_newport_dynamics",
-           "identify_newport", "newport_checks", "sampled_response", "sensor_notices"]
+           "identify_newport", "newport_checks", "resolved_sensor", "sampled_response",
+           "sensor_notices"]
 
 FloatArray = NDArray[np.float64]
 _PATHS = {"h": ("Vph", "Unh"), "v": ("Vpv", "Unv")}
@@ -367,11 +368,26 @@ def newport_checks(dyn: NewportDynamics, *, amplitude_bandwidth_hz: float,
     return checks
 
 
+def resolved_sensor(dyn: NewportDynamics) -> SensorLowpass | None:
+    """The 4QD amplifier the Newport's lines resolved (the mean of the axes that did), or None.
+
+    Both axes' amplifiers are taken as one, as the bench file has one bandwidth; the
+    order is the better-fitting axis's (the larger likelihood ratio).
+    """
+    fitted = [a.sensor for a in dyn.axes.values()
+              if a.sensor is not None and a.sensor.source == "fitted"]
+    if not fitted:
+        return None
+    best = max(fitted, key=lambda e: e.likelihood_ratio)
+    return SensorLowpass(bandwidth_hz=float(np.mean([e.bandwidth_hz for e in fitted])),
+                         order=best.order)
+
+
 def sensor_notices(dyn: NewportDynamics, *, model: SensorLowpass) -> list[Notice]:
     """A notice per axis whose lines resolve a 4QD amplifier bandwidth the bench model lacks.
 
-    The Sercalo's delay is fitted with the bench model's sensor (its band cannot
-    resolve one): the user should put the resolved value in the bench file.
+    The run fits the Sercalo's delay again with it (:func:`resolved_sensor`); the bench
+    file should carry it so that the twin and a design's checks use it too.
     """
     out = []
     for axis, fit in dyn.axes.items():
@@ -388,7 +404,8 @@ def sensor_notices(dyn: NewportDynamics, *, model: SensorLowpass) -> list[Notice
                           f" (bench model: {model.bandwidth_hz:g} Hz, 0 = unlimited); set "
                           f"quad_diode.bandwidth_hz = {est.bandwidth_hz:.4g} and "
                           f"quad_diode.bandwidth_order = {est.order} in the bench file's "
-                          f"[nominal] so that every path's delay is fitted with it"))
+                          f"[nominal] (this run used it for the Sercalo's delay; the file "
+                          f"makes the twin and the checks of a design use it too)"))
     return out
 
 

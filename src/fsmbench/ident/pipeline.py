@@ -69,6 +69,7 @@ from fsmbench.ident.newport import (
     NewportIdentification,
     identify_newport,
     newport_checks,
+    resolved_sensor,
     sensor_notices,
 )
 from fsmbench.ident.sampled import SensorLowpass
@@ -79,6 +80,7 @@ from fsmbench.ident.sercalo import (
     fit_sercalo,
     refit_with_poles,
 )
+from fsmbench.ident.sercalo_delay import with_sensor
 from fsmbench.ident.validate import PathValidation, validate_sercalo
 from fsmbench.io.atomic import atomic_write_text
 from fsmbench.io.folder import check_recording
@@ -445,6 +447,11 @@ def _identify(recordings: Mapping[str, xr.Dataset], *, bench: Bench, opts: Ident
                 sensor=sensor)
             if newport_id.dynamics is not None:
                 notices.extend(sensor_notices(newport_id.dynamics, model=sensor))
+                resolved = resolved_sensor(newport_id.dynamics)
+                if resolved is not None and sercalo_id is not None:
+                    say("2.3 Sercalo: the delay again with the 4QD amplifier the Newport "
+                        "resolved")
+                    sercalo_id = with_sensor(sercalo_id, resolved)
                 ds_np = bench.datasheet.newport
                 checks.extend(newport_checks(
                     newport_id.dynamics, amplitude_bandwidth_hz=ds_np.amplitude_bandwidth_hz,

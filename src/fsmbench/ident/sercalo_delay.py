@@ -17,6 +17,7 @@ from __future__ import annotations
 import dataclasses
 import math
 from collections.abc import Mapping
+from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import NDArray
@@ -27,7 +28,10 @@ from fsmbench.ident.joint_delay import JointFit, fit_jointly, line_std
 from fsmbench.ident.sampled import SensorLowpass, StateSpace3, mode_sum
 from fsmbench.ident.vectfit_model import VectorFit
 
-__all__ = ["joint_path_delays", "sercalo_path_delay"]
+__all__ = ["joint_path_delays", "sercalo_path_delay", "with_sensor"]
+
+if TYPE_CHECKING:  # sercalo imports this module
+    from fsmbench.ident.sercalo import SercaloIdentification
 
 FloatArray = NDArray[np.float64]
 
@@ -182,3 +186,20 @@ def joint_path_delays(frf: FrequencyResponse, *, fit: VectorFit,
                                       start=est, resonance_hz=resonances_hz[est.input],
                                       sensor=sensor, min_coherence=min_coherence))
     return tuple(out)
+
+
+def with_sensor(sid: SercaloIdentification, sensor: SensorLowpass) -> SercaloIdentification:
+    """The joint delay fits again with another 4QD amplifier (one the Newport's lines resolved).
+
+    Only the split of the delay changes: the Sercalo's band sees the amplifier as a lag,
+    so the effective delay removed before the vector fit (``delay_s``) stays, and the fit,
+    the modes and ``Gc`` with it; ``pure_delay_s`` loses the amplifier's group delay.
+    """
+    if not sid.joint_delays:
+        return sid
+    joint = joint_path_delays(sid.frf, fit=sid.fit, starts=sid.delays,
+                              resonances_hz=sid.resonances_hz, sensor=sensor,
+                              min_coherence=sid.options.min_coherence)
+    joint = tuple(dataclasses.replace(j, sensor=dataclasses.replace(j.sensor, source="Newport"))
+                  for j in joint)
+    return dataclasses.replace(sid, joint_delays=joint)

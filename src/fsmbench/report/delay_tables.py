@@ -31,8 +31,11 @@ def sercalo_delay_blocks(s: SercaloIdentification) -> list[Block]:
                 "band [Hz]"),
         rows=tuple(rows))]
     if s.joint_delays:
-        lowpass = s.joint_delays[0].sensor.lowpass
-        amp = (f"the bench file's 4QD amplifier ({lowpass.bandwidth_hz:g} Hz, "
+        est = s.joint_delays[0].sensor
+        lowpass = est.lowpass
+        whose = ("the 4QD amplifier resolved on the Newport's paths" if est.source == "Newport"
+                 else "the bench file's 4QD amplifier")
+        amp = (f"{whose} ({lowpass.bandwidth_hz:.0f} Hz, "
                f"{'first order' if lowpass.order == 1 else 'Butterworth'}) is kept apart "
                f"from it: the pure delay is {1e6 * s.pure_delay_s:.1f} µs, and the plant model, "
                f"which has no sensor block, uses {1e6 * s.delay_s:.1f} µs"
