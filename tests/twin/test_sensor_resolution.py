@@ -15,7 +15,7 @@ from pathlib import Path
 
 import pytest
 
-from fsmbench.bench.blocks import replace_params
+from fsmbench.bench.blocks import input_delays_s, replace_params
 from fsmbench.bench.params import Bench, real_bench
 from fsmbench.excite.design import design_multisine
 from fsmbench.excite.files import write_excitation
@@ -36,6 +36,9 @@ def _bench(*, amplifier_known: bool) -> Bench:
             "bandwidth_order": b.true.quad_diode.bandwidth_order})
     return Bench(datasheet=b.datasheet, nominal=nominal,
                  true=replace_params(b.true, converter={"fs_hz": FS}))
+
+
+TRUE_DELAYS_S = input_delays_s(_bench(amplifier_known=False).true)
 
 
 @pytest.fixture(scope="module")
@@ -64,14 +67,15 @@ def _identify(recordings: dict, *, amplifier_known: bool) -> Identification:
 def test_a_multisine_to_8_khz_resolves_the_4qd_amplifier(recordings: dict) -> None:
     ident = _identify(recordings, amplifier_known=False)
     assert ident.newport is not None and ident.newport.dynamics is not None
-    truth = SensorLowpass(bandwidth_hz=10_000.0, order=2)
+    truth = SensorLowpass.from_params(_bench(amplifier_known=False).true)
     for axis, fit in ident.newport.dynamics.axes.items():
         assert fit.sensor is not None and fit.sensor.source == "fitted", axis
-        assert fit.sensor.order == 2
+        assert fit.sensor.order == truth.order
         # Three standard deviations: one record (h came out 2.3 sigma high once).
         assert abs(fit.sensor.bandwidth_hz - truth.bandwidth_hz) < 3 * fit.sensor.bandwidth_std_hz
-        # The Newport's pure delay: DAC 1 sample + 35 us latency + hold + 0.35 ms lag.
-        assert fit.delay_s == pytest.approx(4.6e-4, abs=3e-6)  # 3 us: the fit's ~1 us scatter
+        # The Newport's pure delay (DAC 1 sample + 35 us latency + hold + 0.35 ms lag: 460 us);
+        # 3 us: the fit's ~1 us scatter.
+        assert fit.delay_s == pytest.approx(TRUE_DELAYS_S["Unh"], abs=3e-6)
     notes = [n.sentence() for n in ident.notices]
     assert sum("quad_diode.bandwidth_hz" in n for n in notes) == 2, notes
 
@@ -83,10 +87,10 @@ def test_the_resolved_amplifier_makes_the_sercalo_delay_pure(recordings: dict) -
     # The truth: 1 sample of DAC transport and half a sample of hold at 20 kHz (75 us)
     # and 35 us of latency, 110 us. 2.5 us: the twin's 125 kHz coil pole (1.3 us) plus the
     # fit's scatter.
-    assert known.sercalo.pure_delay_s == pytest.approx(1.1e-4, abs=2.5e-6)
+    assert known.sercalo.pure_delay_s == pytest.approx(TRUE_DELAYS_S["Uch"], abs=2.5e-6)
     # Unknown to the bench file, the amplifier the Newport's lines resolved is used in the
     # same run: the same pure delay.
-    assert unknown.sercalo.pure_delay_s == pytest.approx(1.1e-4, abs=2.5e-6)
+    assert unknown.sercalo.pure_delay_s == pytest.approx(TRUE_DELAYS_S["Uch"], abs=2.5e-6)
     assert {j.sensor.source for j in unknown.sercalo.joint_delays} == {"Newport"}
     # The effective delay (the plant's) is the same either way: the amplifier is a lag.
     assert unknown.sercalo.delay_s == pytest.approx(known.sercalo.delay_s, abs=0.5e-6)

@@ -88,9 +88,9 @@ class SensorLowpass:
 
     def response(self, f_hz: FloatArray) -> NDArray[np.complex128]:
         """Continuous response at ``f_hz`` [Hz]."""
-        x = 1j * np.asarray(f_hz, dtype=float) / max(self.bandwidth_hz, 1e-300)
         if not self.limited:
             return np.ones(np.shape(f_hz), dtype=np.complex128)
+        x = 1j * np.asarray(f_hz, dtype=float) / self.bandwidth_hz
         den = 1 + x if self.order == 1 else 1 + math.sqrt(2.0) * x + x * x
         return np.asarray(1 / den, dtype=np.complex128)
 

@@ -166,10 +166,14 @@ def path_delays(frf: FrequencyResponse, *, min_coherence: float) -> tuple[DelayE
 
 def combined_delay(estimates: Sequence[DelayEstimate]) -> tuple[float, float]:
     """Inverse-variance mean of several delay estimates and its standard error [s]."""
-    d = np.array([e.delay_s for e in estimates])
-    s = np.array([max(e.std_s, 1e-12) for e in estimates])
-    w = 1.0 / s**2
-    return float(np.sum(w * d) / np.sum(w)), float(1.0 / np.sqrt(np.sum(w)))
+    return _inverse_variance_mean([e.delay_s for e in estimates], [e.std_s for e in estimates])
+
+
+def _inverse_variance_mean(values: Sequence[float], stds: Sequence[float]
+                           ) -> tuple[float, float]:
+    w = 1.0 / np.maximum(np.asarray(stds, dtype=float), 1e-12) ** 2
+    return (float(np.sum(w * np.asarray(values, dtype=float)) / np.sum(w)),
+            float(1.0 / np.sqrt(np.sum(w))))
 
 
 def detect_resonances(frf: FrequencyResponse, *, f_min_hz: float = 20.0,
@@ -480,9 +484,8 @@ def _vector_fit(clean: FrequencyResponse, opts: SercaloFitOptions
 
 def _combined_effective(joint: Sequence[JointFit]) -> tuple[float, float]:
     """Inverse-variance mean of the paths' effective delays (the sensor's lag in) [s]."""
-    d = np.array([j.effective_delay_s for j in joint])
-    w = 1.0 / np.array([max(j.delay_std_s, 1e-12) for j in joint]) ** 2
-    return float(np.sum(w * d) / np.sum(w)), float(1.0 / np.sqrt(np.sum(w)))
+    return _inverse_variance_mean([j.effective_delay_s for j in joint],
+                                  [j.delay_std_s for j in joint])
 
 
 def _fit_inputs(sid: SercaloIdentification) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
