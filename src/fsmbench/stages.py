@@ -7,7 +7,12 @@ files atomically into an output folder and returns its result:
 ``budget_stage``    sections 3, 4, 11 → ``budget.json``
 ``design_stage``    sections 5–10 → ``design.json``, ``controllers.mat``,
                     ``controllers_sos.json``; fsmbench's controller is then run on the
-                    twin (the repeatability experiment, 10 kHz, quantisation and noise)
+                    simulated bench (the repeatability experiment, quantisation and
+                    noise): the packaged twin on twin data, the bench identified from
+                    the recordings otherwise (:func:`simulation_bench`)
+``validation_stage`` the model checked on the recorded closed loop (``data_rep_h/v``
+                    against the same experiments simulated on the identified bench)
+                    → ``validation.json``
 
 The plant a stage uses is the identified one when the identification
 experiments are present and pass their checks, the nominal physical model
@@ -42,12 +47,17 @@ __all__ = [
     "BUDGET_FORMAT",
     "DESIGN_FORMAT",
     "IDENT_EXPERIMENTS",
+    "VALIDATION_FORMAT",
     "DesignStage",
     "PlantChoice",
+    "SimulationBench",
+    "ValidationStage",
     "budget_stage",
     "choose_plant",
     "design_stage",
     "identify_stage",
+    "simulation_bench",
+    "validation_stage",
 ]
 
 Progress = Callable[[str], None]
@@ -57,10 +67,14 @@ IDENT_EXPERIMENTS = ("data_cal_pd_h", "data_cal_pd_v", "data_uch", "data_ucv", "
 
 
 #: ``budget.json``'s format and version (2: no duplicated total/rows/limiting at the top,
-#: ids for keys, (h, v) pairs as ``{"h", "v"}``, huddle bands as a list).
-BUDGET_FORMAT = ("fsmbench.budget", 3)
-#: ``design.json``'s format and version.
-DESIGN_FORMAT = ("fsmbench.design", 1)
+#: ids for keys, (h, v) pairs as ``{"h", "v"}``, huddle bands as a list; 4: each row's
+#: provenance, ``stationary_total_rms_m``, ``recommended``: fsmbench's controller's budget).
+BUDGET_FORMAT = ("fsmbench.budget", 4)
+#: ``design.json``'s format and version (2: ``closed_loop_twin`` names the bench it ran on,
+#: ``bench``/``bench_kind``, and is null with ``closed_loop_skipped`` when there was none).
+DESIGN_FORMAT = ("fsmbench.design", 2)
+#: ``validation.json``'s format and version.
+VALIDATION_FORMAT = ("fsmbench.validation", 1)
 
 
 def _quiet(_msg: str) -> None:
@@ -137,12 +151,17 @@ def _write_json(path: Path, payload: Mapping[str, Any]) -> Path:
 
 
 def budget_stage(recordings: Mapping[str, xr.Dataset], *, bench: Bench, out_dir: Path,
-                 plant: PlantChoice, progress: Callable[[str], None] | None = None
-                 ) -> tuple[Any, list[Path]]:
-    """Seed sections 3, 4, 11: ``budget.json`` (``progress`` hears of long records' reads)."""
+                 plant: PlantChoice, progress: Callable[[str], None] | None = None,
+                 recommended: Any = None) -> tuple[Any, list[Path]]:
+    """Seed sections 3, 4, 11: ``budget.json`` (``progress`` hears of long records' reads).
+
+    ``recommended``: fsmbench's controller (continuous), whose budget is computed
+    beside the recorded loop's (the seed's controller of 9.2).
+    """
     from fsmbench.budget.study import budget_study
 
-    result = budget_study(recordings, bench=bench, plant=plant.plant, progress=progress)
+    result = budget_study(recordings, bench=bench, plant=plant.plant, progress=progress,
+                          recommended=recommended)
     # The stage's plant source (which blocks were identified, or why nominal) replaces the
     # plant model's own shorter one.
     payload = {**result.to_json(), "plant_source": plant.source}
@@ -154,36 +173,159 @@ def budget_stage(recordings: Mapping[str, xr.Dataset], *, bench: Bench, out_dir:
 
 
 @dataclass(frozen=True, eq=False)
+class SimulationBench:
+    """The bench every prediction of a study simulates, or why there is none.
+
+    ``bench`` is the packaged twin on twin data (it is the truth of the data),
+    the bench identified from the recordings on recorded data; None when the
+    recordings could not be identified (``reason`` says why): then nothing is
+    predicted on a bench that is not the user's.
+    """
+
+    bench: Bench | None
+    reason: str = ""
+
+
+def simulation_bench(*, bench: Bench, is_twin: bool, identification: Identification | None,
+                     identification_dir: Path | None = None,
+                     label: str = "") -> SimulationBench:
+    """The bench the study's simulations run (see :class:`SimulationBench`).
+
+    ``identification_dir``: where the identification was written (named as the
+    bench's folder); ``label`` names the identified bench in words.
+    """
+    if is_twin:
+        return SimulationBench(bench)
+    from fsmbench.io.errors import RecordingError
+    from fsmbench.sim.identified import bench_from_identification
+
+    if identification is None:
+        return SimulationBench(None, "no identification ran: none of its experiments is "
+                                     "usable")
+    if identification.sercalo is None or identification.plant is None:
+        why = identification.skipped.get("sercalo") or identification.skipped.get(
+            "current_amp") or "the Sercalo was not identified"
+        return SimulationBench(None, f"the Sercalo was not identified ({why})")
+    if identification.warnings:
+        return SimulationBench(None, "the identification raised warnings: "
+                                     + "; ".join(identification.warnings))
+    try:
+        folder = Path(".") if identification_dir is None else identification_dir
+        return SimulationBench(bench_from_identification(
+            identification.to_json(), plant=identification.plant, bench=bench,
+            path=folder / "identification.json", label=label))
+    except (RecordingError, ValueError) as exc:
+        return SimulationBench(None, f"the identified bench cannot be built: {exc}")
+
+
+@dataclass(frozen=True, eq=False)
 class DesignStage:
-    """The design study and the twin's verdict on fsmbench's controller."""
+    """The design study and the simulated bench's verdict on fsmbench's controller.
+
+    ``twin_check`` is None when there was no bench to simulate (``skipped`` says why).
+    """
 
     result: Any
     twin_check: Any
     payload: dict[str, Any]
+    skipped: str = ""
 
 
 def design_stage(*, bench: Bench, out_dir: Path, plant: PlantChoice, seed: int = 0,
-                 progress: Progress | None = None) -> tuple[DesignStage, list[Path]]:
-    """Seed sections 5–10 and the closed-loop proof on the twin."""
+                 progress: Progress | None = None,
+                 simulated: SimulationBench | None = None) -> tuple[DesignStage, list[Path]]:
+    """Seed sections 5–10 and the closed-loop proof on the simulated bench.
+
+    ``simulated``: the bench fsmbench's controller is run on (default: ``bench``
+    itself, the packaged twin).
+    """
     from fsmbench.control.study import design_study
     from fsmbench.twin.verify import verify_on_twin
 
     say = progress or _quiet
+    sim = SimulationBench(bench) if simulated is None else simulated
     say("designing and verifying the controllers (seed sections 5–10)")
     result = design_study(plant.plant, bench=bench)
     paths = result.write(out_dir)
-    say("running fsmbench's controller on the twin (repeatability experiment)")
-    check = verify_on_twin(result.controllers["fsmbench_controller"], bench=bench,
-                           plant=plant.plant, name="fsmbench controller", seed=seed)
-    payload = {**result.to_json(), "plant_source": plant.source,
-               "closed_loop_twin": {
-                   "tracking_error_rms_rad": check.measured_rms_rad,
-                   "predicted_rms_rad": check.predicted_rms_rad,
-                   "measured_over_predicted": check.ratio,
-                   "predicted_parts_rad": check.predicted_parts_rad,
-                   "duration_s": check.duration_s, "settle_s": check.settle_s,
-                   "seed": check.seed}}
+    check = None
+    closed: dict[str, Any] | None = None
+    if sim.bench is not None:
+        say(f"running fsmbench's controller on {sim.bench.label} (repeatability experiment)")
+        check = verify_on_twin(result.controllers["fsmbench_controller"], bench=sim.bench,
+                               plant=plant.plant, name="fsmbench controller", seed=seed)
+        closed = {"tracking_error_rms_rad": check.measured_rms_rad,
+                  "predicted_rms_rad": check.predicted_rms_rad,
+                  "measured_over_predicted": check.ratio,
+                  "predicted_parts_rad": check.predicted_parts_rad,
+                  "duration_s": check.duration_s, "settle_s": check.settle_s,
+                  "seed": check.seed, "bench": check.bench, "bench_kind": check.bench_kind}
+    payload = {**result.to_json(), "plant_source": plant.source, "closed_loop_twin": closed,
+               "closed_loop_skipped": sim.reason if sim.bench is None else ""}
     name, version = DESIGN_FORMAT
     paths.insert(0, _write_json(out_dir / "design.json",
                                 stamped(payload, format=name, version=version)))
-    return DesignStage(result=result, twin_check=check, payload=payload), paths
+    return DesignStage(result=result, twin_check=check, payload=payload,
+                       skipped=sim.reason), paths
+
+
+@dataclass(frozen=True, eq=False)
+class ValidationStage:
+    """The model's check on the recorded closed loop, or why it did not run."""
+
+    result: Any
+    skipped: str = ""
+
+
+def validation_stage(recordings: Mapping[str, xr.Dataset], *, bench: Bench,
+                     simulated: Bench | None, plant: PlantModel | None, out_dir: Path,
+                     seed: int = 0, progress: Progress | None = None
+                     ) -> tuple[ValidationStage, list[Path]]:
+    """``data_rep_h/v`` as recorded against the same experiments simulated on ``simulated``.
+
+    Parameters
+    ----------
+    recordings : mapping
+        The study's records (``data_rep_h``, ``data_rep_v``).
+    bench : Bench
+        The bench file: the 4QD gains the recorded loop divided by (assumed: its
+        nominal ones, as the seed's real-time code used).
+    simulated : Bench or None
+        The identified bench (or the twin); None: not run.
+    plant : PlantModel or None
+        The model's plant (the identified one).
+    """
+    from fsmbench.control.seed import seed_decentralised_controller, tustin
+    from fsmbench.control.validation import validate_closed_loop
+    from fsmbench.twin.experiments import seed_feedback
+    from fsmbench.twin.simulate import simulate_bench
+
+    say = progress or _quiet
+    names = [n for n in ("data_rep_h", "data_rep_v") if n in recordings]
+    if not names:
+        return ValidationStage(None, "neither data_rep_h nor data_rep_v was recorded"), []
+    if simulated is None or plant is None:
+        return ValidationStage(None, "no identified bench to predict the recorded loop on"), []
+    say(f"predicting the recorded closed loop ({', '.join(names)}) on {simulated.label}")
+    gd = bench.nominal.quad_diode.gain_v_per_rad
+    runs: dict[str, xr.Dataset] = {}
+    for name in names:
+        t = recordings[name]["t"].values
+        duration = float(t[-1] - t[0]) + 1.0 / bench.nominal.converter.fs_hz
+        # The recorded loop ran the seed's controller on the bench file's 4QD gains.
+        controller = seed_feedback(simulated)
+        run = simulate_bench(simulated, seed=seed, duration_s=duration, experiments=[name],
+                             controller=controller)
+        runs[name] = run.recordings[name]
+    k = tustin(seed_decentralised_controller(), ts_s=bench.nominal.converter.ts_s)
+    try:
+        result = validate_closed_loop(recordings, simulated=runs, plant=plant,
+                                      params=simulated.true, controller=k,
+                                      controller_name="the seed's controller (9.2)",
+                                      gd_used_v_per_rad=(gd.h, gd.v),
+                                      bench_label=simulated.label)
+    except ValueError as exc:
+        return ValidationStage(None, str(exc)), []
+    name, version = VALIDATION_FORMAT
+    path = _write_json(out_dir / "validation.json",
+                       stamped(result.to_json(), format=name, version=version))
+    return ValidationStage(result), [path]

@@ -37,14 +37,17 @@ from fsmbench.report.summary import (
     Specification,
     Summary,
     build_summary,
-    verdict_html,
 )
+from fsmbench.report.verdict import verdict_html
 from fsmbench.stages import (
     IDENT_EXPERIMENTS,
+    SimulationBench,
     budget_stage,
     choose_plant,
     design_stage,
     identify_stage,
+    simulation_bench,
+    validation_stage,
 )
 from fsmbench.twin.compare import comparison_rows
 
@@ -136,7 +139,8 @@ def _identification_headline(ident: Identification, truth: Mapping[str, Any] | N
 
 def _sections(*, bench: Bench, loaded: RecordingSet, source: str, is_twin: bool,
               ident: Identification | None, truth: Mapping[str, Any] | None,
-              budget: Any, design: Any, plant_source: str) -> list[Section]:
+              budget: Any, design: Any, plant_source: str, validation: Any = None,
+              validation_skipped: str = "") -> list[Section]:
     """Every chapter in the seed's order (1–11), then the parameters appendix."""
     from fsmbench.report.bench_section import bench_section, parameters_appendix
     from fsmbench.report.budget_section import budget_section
@@ -144,8 +148,10 @@ def _sections(*, bench: Bench, loaded: RecordingSet, source: str, is_twin: bool,
     from fsmbench.report.huddle_section import huddle_section
     from fsmbench.report.ident_section import identification_section
     from fsmbench.report.repeatability_section import repeatability_section
+    from fsmbench.report.validation_section import validation_subsection
 
     rec = loaded.recordings
+    chapter11 = repeatability_section(budget, recordings=rec)
     sections = [
         bench_section(bench, recordings=rec, skipped=loaded.skipped, source=source,
                       is_twin=is_twin),
@@ -154,7 +160,8 @@ def _sections(*, bench: Bench, loaded: RecordingSet, source: str, is_twin: bool,
         huddle_section(budget, recordings=rec),
         budget_section(budget, plant_source=plant_source),
         *control_sections(design, plant_source=plant_source),
-        repeatability_section(budget, recordings=rec),
+        replace(chapter11, subsections=(*chapter11.subsections, validation_subsection(
+            validation, skipped=validation_skipped))),
         parameters_appendix(bench, is_twin=is_twin),
     ]
     if len(sections) != len(_ANCHORS):
@@ -251,22 +258,46 @@ def run_study(*, out_dir: str | Path, data_dir: str | Path | None = None,
     say(f"plant for the budget and the design: {plant.source}")
     lap("identify")
 
+    # Every prediction runs on the bench the recordings came from: the packaged twin for
+    # twin data, the bench identified from them otherwise (never the packaged one).
+    identified = simulation_bench(bench=bench, is_twin=False,
+                                  identification_dir=out if ident is not None else None,
+                                  identification=ident,
+                                  label=("the bench identified from the twin's records"
+                                         if is_twin else
+                                         f"the bench identified from the recordings in {data}"))
+    simulated = SimulationBench(bench) if is_twin else identified
+    design, written = design_stage(bench=bench, out_dir=out, plant=plant, seed=seed,
+                                   progress=say, simulated=simulated)
+    stages.append(StageStatus("design", True, outputs=tuple(str(p) for p in written),
+                              reason=design.skipped))
+    lap("design")
+
     say("noise and error budget, huddle tests, repeatability (seed sections 3, 4, 11)")
+    # The recorded loop's budget (the seed's controller ran in the huddle tests) and the
+    # one the verdict recommends (fsmbench's), side by side.
     budget, written = budget_stage(recordings, bench=bench, out_dir=out, plant=plant,
-                                   progress=say)
+                                   progress=say,
+                                   recommended=design.result.controllers["fsmbench_controller"])
     stages.append(StageStatus("budget", True, outputs=tuple(str(p) for p in written),
                               reason="; ".join(f"{k}: {v}" for k, v in budget.skipped.items())))
     lap("budget")
 
-    design, written = design_stage(bench=bench, out_dir=out, plant=plant, seed=seed,
-                                   progress=say)
-    stages.append(StageStatus("design", True, outputs=tuple(str(p) for p in written)))
-    lap("design")
+    validation, written = validation_stage(
+        recordings, bench=bench, simulated=identified.bench,
+        plant=None if identified.bench is None else plant.plant, out_dir=out, seed=seed,
+        progress=say)
+    stages.append(StageStatus("validation", validation.result is not None,
+                              outputs=tuple(str(p) for p in written),
+                              reason=validation.skipped or identified.reason))
+    lap("validation")
 
     say("writing the report")
     # A check can be run by several stages on the same record: list each verdict once.
     checks = list(dict.fromkeys([*loaded.checks, *(ident.checks if ident is not None else ()),
-                                 *budget.checks]))
+                                 *budget.checks, *design.result.checks,
+                                 *(() if validation.result is None
+                                   else (validation.result.check,))]))
     notices = list(dict.fromkeys([*loaded.notices,
                                   *(ident.notices if ident is not None else ()),
                                   *budget.notices]))
@@ -288,10 +319,13 @@ def run_study(*, out_dir: str | Path, data_dir: str | Path | None = None,
             ident, truth, bench),
         plant_source=plant.source, plant_identified=plant.identification is not None
         and plant.source.startswith("identified"),
-        budget=budget, design=design.payload)
+        budget=budget, design=design.payload, validation=validation.result,
+        validation_skipped=validation.skipped or identified.reason,
+        simulated_bench="" if simulated.bench is None else simulated.bench.label)
     sections = _sections(bench=bench, loaded=loaded, source=source, is_twin=is_twin,
                          ident=ident, truth=truth, budget=budget, design=design,
-                         plant_source=plant.source)
+                         plant_source=plant.source, validation=validation.result,
+                         validation_skipped=validation.skipped or identified.reason)
     summary_json = summary.to_json()
     report_path = write_report(
         out / "report.html", title="Sercalo test bench study", sections=sections,

@@ -1,16 +1,19 @@
-"""The verdict: each requirement against its limit, and what went wrong in words."""
+"""The verdict: each requirement against its limit, where its number comes from, what next."""
 
 from __future__ import annotations
 
 import json
+import math
 from pathlib import Path
 from types import SimpleNamespace
 from typing import Any
 
 import pytest
 
+from fsmbench.budget.table import BudgetRow
 from fsmbench.checks import Check, Notice
-from fsmbench.report.summary import Specification, build_summary, verdict_html
+from fsmbench.report.summary import Specification, build_summary
+from fsmbench.report.verdict import verdict_html
 from fsmbench.study import StudyResult
 
 
@@ -20,55 +23,135 @@ def _loop(s1: float, gm: float = 12.0, pm: float = 45.0, stable: bool = True) ->
     return {"h": axis, "v": {**axis, "sensitivity_at_1hz": s1 / 2}, "meets_objective": s1 <= 2e-4}
 
 
-def _design(s1: float, **kw: Any) -> dict[str, Any]:
+def _design(s1: float, *, simulated: bool = True, kind: str = "identified",
+            **kw: Any) -> dict[str, Any]:
+    closed = {
+        "measured_over_predicted": {"h": 0.99, "v": 1.01},
+        "tracking_error_rms_rad": {"h": 3.0e-5, "v": 3.1e-5},
+        "predicted_rms_rad": {"h": 3.0e-5, "v": 3.1e-5},
+        "predicted_parts_rad": {"h": {"qd_noise": 2.9e-5}, "v": {"qd_noise": 3.0e-5}},
+        "bench": "the bench identified from the recordings in D", "bench_kind": kind}
     return {"fsmbench_controller": _loop(s1, **kw), "seed_controller": _loop(2.2e-3),
-            "robustness": {"all_stable": True, "cases": [{}] * 9, "worst_gain_margin_db": 8.0},
-            "closed_loop_twin": {
-                "measured_over_predicted": {"h": 0.99, "v": 1.01},
-                "tracking_error_rms_rad": {"h": 3.0e-5, "v": 3.1e-5},
-                "predicted_rms_rad": {"h": 3.0e-5, "v": 3.1e-5},
-                "predicted_parts_rad": {"h": {"qd_noise": 2.9e-5}, "v": {"qd_noise": 3.0e-5}}}}
+            "robustness": {"all_stable": True, "cases": [{"stable": True}] * 9,
+                           "worst_gain_margin_db": 8.0},
+            "closed_loop_twin": closed if simulated else None,
+            "closed_loop_skipped": "" if simulated else "the Sercalo was not identified"}
 
 
-def _budget(total_m: float) -> SimpleNamespace:
-    rows = [SimpleNamespace(name="DAC quantisation", rms_m=0.8 * total_m,
-                            mechanism="mirror piston"),
-            SimpleNamespace(name="4QD noise", rms_m=0.6 * total_m, mechanism="beam angle")]
-    return SimpleNamespace(budget=SimpleNamespace(total_rms_m=total_m, rows=rows), skipped={})
+def _row(name: str, rms: float, provenance: str, **kw: Any) -> BudgetRow:
+    return BudgetRow(name=name, section="4", mechanism="linear", rms_m=rms, bias_m=0.0,
+                     angle_rms_rad=None, seed_m=None, seed_note="", provenance=provenance, **kw)
+
+
+def _budget(total_m: float, *, huddle: bool = True) -> SimpleNamespace:
+    # Rows of 0.8 and 0.6 of the total: their squares sum to the total's.
+    rows = (_row("metrology frame expansion", 0.8 * total_m, "assumed",
+                 replace_by="a huddle test of at least 1 h"),
+            _row("4QD electronic noise", 0.6 * total_m, "measured"))
+    table = SimpleNamespace(total_rms_m=total_m, rows=rows, window_s=100.0, limiting=rows[0].name)
+    quoted = SimpleNamespace(controller="fsmbench's controller", budget=table,
+                             stationary_total_rms_m=3 * total_m)
+    return SimpleNamespace(
+        quoted=quoted, recommended=quoted, controller="seed 9.2 K", budget=table, skipped={},
+        huddle=SimpleNamespace(qd_noise=object()) if huddle else None,
+        frame=SimpleNamespace(expansion_per_k=23e-6), noise=SimpleNamespace(bits=16))
+
+
+def _validation(ratio: float = 1.02) -> SimpleNamespace:
+    return SimpleNamespace(
+        band_hz=(2.0, 5000.0), measured_rms_rad={"h": 4.0e-5 * ratio, "v": 4.1e-5 * ratio},
+        predicted_rms_rad={"h": 4.0e-5, "v": 4.1e-5}, ratio={"h": ratio, "v": ratio},
+        limits=(0.8, 1.25), passed=0.8 <= ratio <= 1.25, n_periods=40,
+        experiments=("data_rep_h", "data_rep_v"), bench="the identified bench",
+        controller="the seed's controller", reason="" if 0.8 <= ratio <= 1.25
+        else "h: recorded more than the model gives")
 
 
 def _summary(*, total_m: float = 2.25e-9, s1: float = 1.2e-4, skipped: dict[str, str] | None = None,
-             checks: tuple[Check, ...] = (), identified: bool = True, **kw: Any) -> Any:
+             checks: tuple[Check, ...] = (), identified: bool = True, huddle: bool = True,
+             validation: Any = "default", simulated: bool = True, **kw: Any) -> Any:
     return build_summary(
         source="test", is_twin=False, spec=Specification(), skipped=skipped or {},
         n_experiments=13, n_read=13 - len(skipped or {}), checks=checks,
         identification={"ran": True, "warnings": [], "skipped": {}},
         plant_source="identified" if identified else "nominal physical model (test)",
-        plant_identified=identified, budget=_budget(total_m), design=_design(s1, **kw))
+        plant_identified=identified, budget=_budget(total_m, huddle=huddle),
+        design=_design(s1, simulated=simulated, **kw),
+        validation=_validation() if validation == "default" else validation)
 
 
-def test_a_bench_within_every_limit_passes() -> None:
+def test_a_bench_within_every_limit_passes_with_numbers_and_provenance() -> None:
     s = _summary()
-    assert s.meets_specifications is True
+    assert s.meets_specifications is True and s.verdict_status == "meets"
     assert s.verdict.startswith("The bench meets its specifications")
-    assert all(r.passed for r in s.requirements)
-    # The limiting source is the largest row, with its share of the variance (0.8² = 64 %).
-    assert s.limiting.startswith("DAC quantisation, 1.8 nm")
-    budget = next(r for r in s.requirements if r.name == "distance_error_budget")
-    assert "64%" in budget.explanation
+    assert all(r.status == "pass" for r in s.requirements)
+    # Every requirement says where its number comes from, in one of four words.
+    assert {r.provenance for r in s.requirements} <= {"measured", "derived", "predicted",
+                                                      "assumed"}
+    by = {r.name: r for r in s.requirements}
+    assert by["closed_loop_simulation"].provenance == "predicted"
+    assert "identified from the recordings" in by["closed_loop_simulation"].provenance_detail
+    assert by["model_validation"].provenance == "measured"
+    assert by["control_objective"].values == {"h": 1.2e-4, "v": 6e-5}
+    assert by["control_objective"].limits == {"max": 2e-4}
+    # The distance row states its window and the stationary value (3 × 2.25 = 6.75 nm).
+    dist = by["distance_error_budget"]
+    assert "over 100 s, mean removed" in dist.description
+    assert "stationary value 6.75 nm" in dist.explanation
+    assert "64%" in dist.explanation  # 0.8² of the variance
+
+
+def test_the_next_step_is_computed_from_the_limiting_row() -> None:
+    s = _summary()
+    # An invar frame scales the frame row by 1.2e-6 / 23e-6; the other row stays.
+    frame = 0.8 * 2.25e-9 * 1.2e-6 / 23e-6
+    total = math.hypot(frame, 0.6 * 2.25e-9)
+    assert f"total to {total * 1e9:.3g} nm" in s.next_step
+    assert "assumed" in s.next_step and "a huddle test of at least 1 h" in s.next_step
 
 
 @pytest.mark.parametrize(("kw", "failing"), [
     ({"total_m": 6e-9}, "distance_error_budget"),           # above the 5 nm default
     ({"s1": 2.5e-4}, "control_objective"),                   # |S(1 Hz)| above 2e-4
-    ({"pm": 25.0}, "stability_margins"),                     # phase margin below 30°
-    ({"stable": False}, "stability_margins"),
+    ({"pm": 25.0}, "phase_margin"),                          # phase margin below 30°
+    ({"gm": 4.0}, "gain_margin"),                            # gain margin below 6 dB
 ])
-def test_each_requirement_fails_on_its_own(kw: dict[str, Any], failing: str) -> None:
+def test_each_requirement_fails_on_its_own_and_the_headline_gives_value_and_limit(
+        kw: dict[str, Any], failing: str) -> None:
     s = _summary(**kw)
-    assert s.meets_specifications is False
+    assert s.meets_specifications is False and s.verdict_status == "does_not_meet"
     assert [r.name for r in s.requirements if r.passed is False] == [failing]
-    assert "does NOT meet" in s.verdict
+    req = next(r for r in s.requirements if r.name == failing)
+    assert "does NOT meet" in s.verdict and f"{req.value} against {req.limit}" in s.verdict
+
+
+def test_an_unstable_loop_fails_both_margins() -> None:
+    s = _summary(stable=False)
+    assert {r.name for r in s.requirements if r.passed is False} == {"gain_margin",
+                                                                     "phase_margin"}
+
+
+@pytest.mark.parametrize(("kw", "open_row", "missing"), [
+    ({"identified": False}, "control_objective", "an identified plant"),
+    ({"huddle": False}, "distance_error_budget", "open-loop huddle test"),
+    ({"simulated": False}, "closed_loop_simulation", "the Sercalo was not identified"),
+    ({"validation": None}, "model_validation", "data_rep_h"),
+])
+def test_a_requirement_without_its_measurements_is_not_verified(
+        kw: dict[str, Any], open_row: str, missing: str) -> None:
+    s = _summary(**kw)
+    req = next(r for r in s.requirements if r.name == open_row)
+    assert req.status == "not verified" and missing in req.missing
+    assert s.meets_specifications is None and s.verdict_status == "not_verified"
+    assert s.verdict.startswith("Not verified") and "meets its specifications" not in s.verdict
+    assert s.next_step.startswith("Next: record")
+
+
+def test_a_model_that_misses_the_recorded_loop_makes_the_verdict_not_verified() -> None:
+    s = _summary(validation=_validation(ratio=1.6))
+    assert s.verdict_status == "not_verified" and s.meets_specifications is None
+    assert "does not predict their own closed loop" in s.verdict
+    assert "recorded more than the model gives" in s.next_step
 
 
 def test_the_distance_limit_is_configurable() -> None:
@@ -77,7 +160,7 @@ def test_the_distance_limit_is_configurable() -> None:
                       plant_source="identified", plant_identified=True,
                       budget=_budget(2.25e-9), design=None)
     req = next(r for r in s.requirements if r.name == "distance_error_budget")
-    assert req.passed is False and req.limit == "≤ 2 nm"
+    assert req.passed is False and req.limit == "≤ 2 nm" and req.limits == {"max": 2e-9}
 
 
 def test_skips_failed_checks_and_fallbacks_are_listed_first() -> None:
@@ -89,7 +172,7 @@ def test_skips_failed_checks_and_fallbacks_are_listed_first() -> None:
     assert "data_uch.mat: Vph: holds NaN" in page
     assert "calibration_r2 FAILED" in page and "check the 4QD cable" in page
     assert "nominal physical model" in page
-    assert "on the nominal model" in s.verdict
+    assert "NOT VERIFIED" in page and s.next_step in page
 
 
 def test_no_stage_no_verdict() -> None:
@@ -99,16 +182,26 @@ def test_no_stage_no_verdict() -> None:
     assert s.meets_specifications is None and s.verdict.startswith("No verdict")
 
 
-def test_summary_json_has_its_format_and_plain_values() -> None:
+def test_summary_json_has_numbers_units_provenance_and_the_display_beside() -> None:
     notice = Notice("saturation", "data_rep_h", "Vph: 5 % of samples at the ADC rails")
+    s = _summary(checks=(), skipped=None)
     s = build_summary(source="t", is_twin=False, spec=Specification(), skipped={},
-                      n_experiments=13, n_read=13, notices=(notice,), identification=None,
-                      plant_source="identified", plant_identified=True,
-                      budget=_budget(1e-9), design=_design(1e-4))
+                      n_experiments=13, n_read=13, notices=(notice,),
+                      identification=None, plant_source="identified", plant_identified=True,
+                      budget=_budget(1e-9), design=_design(1e-4), validation=_validation())
     js = json.loads(json.dumps(s.to_json(), allow_nan=False))
-    assert js["format"] == "fsmbench.summary" and js["format_version"] == 1
+    assert js["format"] == "fsmbench.summary" and js["format_version"] == 2
+    assert js["verdict_status"] == "meets" and js["next_step"]
     assert js["notices"][0]["kind"] == "saturation"
     assert all(" " not in k and "-" not in k for k in js)
+    for req in js["requirements"]:
+        assert req["status"] in ("pass", "fail", "not verified")
+        assert req["provenance"] in ("measured", "derived", "predicted", "assumed")
+        assert req["unit"] and req["limits"] and req["display"]["value"]
+        assert all(isinstance(v, float) or v is None for v in req["values"].values())
+    by = {r["name"]: r for r in js["requirements"]}
+    assert by["closed_loop_simulation"]["values"] == {"h": 3.0e-5, "v": 3.1e-5}
+    assert by["closed_loop_simulation"]["unit"] == "rad"
 
 
 def test_the_study_writes_the_summary_and_keeps_timings_apart(twin_study: StudyResult) -> None:
@@ -116,9 +209,13 @@ def test_the_study_writes_the_summary_and_keeps_timings_apart(twin_study: StudyR
     summary = json.loads((out / "summary.json").read_text())
     study = json.loads((out / "study.json").read_text())
     timings = json.loads((out / "timings.json").read_text())
-    assert summary["is_twin"] is True and summary["meets_specifications"] in (True, False)
+    assert summary["is_twin"] is True and summary["meets_specifications"] in (True, False, None)
     assert study["meets_specifications"] == summary["meets_specifications"]
     assert "seconds" not in json.dumps(study)  # wall-clock times only in timings.json
-    assert set(timings["seconds"]) >= {"simulate", "identify", "budget", "design", "report"}
+    assert set(timings["seconds"]) >= {"simulate", "identify", "budget", "design", "validation",
+                                       "report"}
     # Paths are relative to the output folder: the folder can move.
     assert study["report"] == "report.html" and study["data_dir"] == "twin-data"
+    # On twin data the closed loop runs on the packaged twin, which produced the data.
+    sim = next(r for r in summary["requirements"] if r["name"] == "closed_loop_simulation")
+    assert "packaged twin" in sim["provenance_detail"]

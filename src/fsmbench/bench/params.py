@@ -28,7 +28,7 @@ import tomllib
 from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from fsmbench.bench.axes import ParamsError, PerAxis
 from fsmbench.bench.paramfile import (
@@ -38,6 +38,9 @@ from fsmbench.bench.paramfile import (
     packaged_mapping,
     resolve_base,
 )
+
+if TYPE_CHECKING:
+    from fsmbench.bench.identified import IdentifiedModel
 
 __all__ = [
     "PACKAGED_BENCHES",
@@ -431,11 +434,43 @@ class BenchParams:
 
 @dataclass(frozen=True)
 class Bench:
-    """The bench: vendor numbers, the nominal model and the twin's true model."""
+    """The bench: vendor numbers, the nominal model and what the engine simulates.
+
+    Attributes
+    ----------
+    datasheet : Datasheet
+    nominal : BenchParams
+        The model before identification (the bench file's ``[nominal]``).
+    true : BenchParams
+        What the simulation engine reads: the packaged twin's ``[true]``, or for
+        an identified bench the bench file's values with the identified 4QD and
+        the noise fitted to the recordings (:func:`fsmbench.sim.identified.identified_bench`).
+    origin : str
+        The bench file it was read from, or the identification folder.
+    model : IdentifiedModel or None
+        None for a packaged bench (the engine simulates the physics of ``true``);
+        for an identified bench, the identified plant the engine runs instead.
+    """
 
     datasheet: Datasheet
     nominal: BenchParams
     true: BenchParams
+    origin: str = ""
+    model: IdentifiedModel | None = None
+
+    @property
+    def is_identified(self) -> bool:
+        """True when the engine runs an identified plant rather than the bench file's physics."""
+        return self.model is not None
+
+    @property
+    def label(self) -> str:
+        """Which bench a simulation runs, in words ("the packaged twin (default_bench.toml)")."""
+        if self.model is not None:
+            return self.model.label or f"the bench identified in {self.model.folder}"
+        name = self.origin or "default_bench.toml"
+        return (f"the packaged twin ({name})" if name in PACKAGED_BENCHES
+                else f"the twin of {name}")
 
     def to_toml(self) -> str:
         """The bench as TOML text, every value commented with unit and source."""
@@ -461,7 +496,7 @@ def _bench_from_mapping(data: dict[str, Any], origin: str) -> Bench:
     true = build(BenchParams, data.get("true", {}), "true", origin, base=nominal)
     check_features(nominal, "nominal", origin)
     check_features(true, "true", origin)
-    return Bench(datasheet=datasheet, nominal=nominal, true=true)
+    return Bench(datasheet=datasheet, nominal=nominal, true=true, origin=origin)
 
 
 #: Bench files shipped with fsmbench; ``load_bench`` finds them by name.

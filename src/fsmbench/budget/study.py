@@ -14,6 +14,7 @@ comparison with the huddle noise (Fig. 50). Everything left out is listed in
 
 from __future__ import annotations
 
+import math
 import warnings
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field, replace
@@ -45,7 +46,7 @@ from fsmbench.control.seed import seed_decentralised_controller, tustin
 from fsmbench.io.folder import check_recording
 from fsmbench.jsonutil import plain_json
 
-__all__ = ["BudgetResult", "NonRepeatability", "budget_study"]
+__all__ = ["BudgetResult", "ControllerBudget", "NonRepeatability", "budget_study"]
 
 _HUDDLE = tuple(f"data_huddle_test_{i}" for i in HUDDLE_CONFIGS)
 _REP = {"data_rep_h": "h", "data_rep_v": "v"}
@@ -78,6 +79,25 @@ class NonRepeatability:
 
 
 @dataclass(frozen=True)
+class ControllerBudget:
+    """The operating configuration's budget with one controller in the loop.
+
+    ``budget`` over the huddle tests' window (``window_s``, mean removed);
+    ``stationary_total_rms_m``: the same sources as stationary values (no window),
+    what a record much longer than every correlation time would show.
+    """
+
+    controller: str
+    budget: ErrorBudget
+    stationary_total_rms_m: float
+
+    def to_json(self) -> dict[str, object]:
+        """The controller, its budget and the stationary total."""
+        return {"controller": self.controller, "budget": self.budget.to_json(),
+                "stationary_total_rms_m": self.stationary_total_rms_m}
+
+
+@dataclass(frozen=True)
 class BudgetResult:
     """Everything :func:`budget_study` computed; ``to_json()`` for the study's JSON.
 
@@ -103,6 +123,15 @@ class BudgetResult:
     checks: tuple[Check, ...] = ()
     notices: tuple[Notice, ...] = ()
     stability: Mapping[int, StabilityRecord] = field(default_factory=dict)
+    stationary_total_rms_m: float = math.nan
+    recommended: ControllerBudget | None = None
+
+    @property
+    def quoted(self) -> ControllerBudget:
+        """The budget a verdict quotes: the recommended controller's when there is one."""
+        if self.recommended is not None:
+            return self.recommended
+        return ControllerBudget(self.controller, self.budget, self.stationary_total_rms_m)
 
     @property
     def total_rms_m(self) -> float:
@@ -131,6 +160,8 @@ class BudgetResult:
             "noise": self.noise.to_json(), "geometry": self.geometry.to_json(),
             "air": self.air.to_json(), "frame": self.frame.to_json(),
             "budget": self.budget.to_json(), "huddle": huddle,
+            "stationary_total_rms_m": self.stationary_total_rms_m,
+            "recommended": None if self.recommended is None else self.recommended.to_json(),
             "huddle_comparison": None if self.huddle is None else {
                 "comparisons": [c.to_json() for c in self.huddle.comparisons],
                 "conclusion": self.huddle.conclusion,
@@ -190,7 +221,9 @@ def _valid_huddles(recordings: Mapping[str, xr.Dataset],
 def budget_study(recordings: Mapping[str, xr.Dataset], *, bench: Bench,
                  plant: PlantModel | None = None, controller: ct.StateSpace | None = None,
                  window_s: float = 100.0, df_hz: float = 0.1,
-                 progress: Callable[[str], None] | None = None) -> BudgetResult:
+                 progress: Callable[[str], None] | None = None,
+                 recommended: ct.StateSpace | None = None,
+                 recommended_name: str = "fsmbench's controller") -> BudgetResult:
     """Seed sections 3, 4 and 11 on the recordings present.
 
     Parameters
@@ -213,11 +246,19 @@ def budget_study(recordings: Mapping[str, xr.Dataset], *, bench: Bench,
         Frequency step of the propagation grid [Hz].
     progress : callable, optional
         Receives the progress of the reads of huddle tests analysed out of core.
+    recommended : control.StateSpace, optional
+        The controller a verdict recommends (continuous, Tustin at ``1/fs`` as the
+        target runs it, or discrete): its budget of the operating configuration
+        is computed beside the recorded one, with the Sercalo DAC's error as white
+        ``q²/12`` (the huddle tests measured it behind the controller that ran).
+    recommended_name : str
+        Its name in words.
     """
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         result = _budget_study(recordings, bench=bench, plant=plant, controller=controller,
-                               window_s=window_s, df_hz=df_hz, progress=progress)
+                               window_s=window_s, df_hz=df_hz, progress=progress,
+                               recommended=recommended, recommended_name=recommended_name)
     numeric = tuple(Notice("numeric", "budget", f"{w.category.__name__}: {w.message}")
                     for w in caught)
     return replace(result, notices=result.notices + numeric) if numeric else result
@@ -226,7 +267,9 @@ def budget_study(recordings: Mapping[str, xr.Dataset], *, bench: Bench,
 def _budget_study(recordings: Mapping[str, xr.Dataset], *, bench: Bench,
                   plant: PlantModel | None, controller: ct.StateSpace | None,
                   window_s: float, df_hz: float,
-                  progress: Callable[[str], None] | None) -> BudgetResult:
+                  progress: Callable[[str], None] | None,
+                  recommended: ct.StateSpace | None = None,
+                  recommended_name: str = "") -> BudgetResult:
     params = bench.nominal
     plant = physical_plant(params, source="physical (nominal)") if plant is None else plant
     if controller is None:
@@ -265,6 +308,16 @@ def _budget_study(recordings: Mapping[str, xr.Dataset], *, bench: Bench,
         return cache[closed]
 
     budget = budget_table(params, angles(True), window_s=window_s)
+    stationary = budget_table(params, angles(True), window_s=None).total_rms_m
+    rec_budget = None
+    if recommended is not None:
+        k_rec = recommended if recommended.dt else tustin(recommended,
+                                                            ts_s=params.converter.ts_s)
+        rec_angles = angle_sources(params, plant=plant, controller=k_rec, closed_loop=True,
+                                   qd_noise=qd, dac_noise=None, df_hz=df_hz)
+        rec_budget = ControllerBudget(
+            recommended_name, budget_table(params, rec_angles, window_s=window_s),
+            budget_table(params, rec_angles, window_s=None).total_rms_m)
     predicted: dict[int, float] = {}
     if huddle is not None:
         for n, rec in huddle.records.items():
@@ -304,7 +357,7 @@ def _budget_study(recordings: Mapping[str, xr.Dataset], *, bench: Bench,
         frame=frame_budget(params, window_s=window_s), budget=budget, huddle=huddle,
         dac_noise=dac, predicted_huddle_va_rms_m=predicted, repeatability=reps,
         nonrep=nonrep, skipped=skipped, checks=tuple(checks), notices=tuple(notices),
-        stability=stability)
+        stability=stability, stationary_total_rms_m=stationary, recommended=rec_budget)
 
 
 def _stability(valid: Mapping[str, xr.Dataset], *, params: BenchParams,

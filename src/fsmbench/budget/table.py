@@ -21,6 +21,7 @@ huddle tests and the repeatability measurement see): spectra are weighted by
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import re
 from collections.abc import Mapping
@@ -43,6 +44,7 @@ from fsmbench.budget.propagation import (
     loop_response,
     propagate,
 )
+from fsmbench.budget.provenance import row_provenance
 from fsmbench.budget.quantisation import SEED_4_5
 from fsmbench.budget.spectra import window_weight
 
@@ -89,6 +91,11 @@ class BudgetRow:
 
     ``angle_rms_rad``: beam-angle rms (both axes in quadrature) for angle
     sources, else None. ``seed_m``: the seed's own number where it gives one.
+    ``perpendicular_rms_m`` and ``quadratic_rms_m``: an angle source's piston
+    and geometric parts (``rms_m`` is their root sum of squares), None for a
+    linear row. ``provenance``: ``measured``, ``derived`` or ``assumed``
+    (:mod:`fsmbench.budget.provenance`), ``provenance_detail`` in words,
+    ``replace_by`` the measurement that would replace an assumed row.
     """
 
     name: str
@@ -99,6 +106,11 @@ class BudgetRow:
     angle_rms_rad: float | None
     seed_m: float | None
     seed_note: str
+    perpendicular_rms_m: float | None = None
+    quadratic_rms_m: float | None = None
+    provenance: str = "derived"
+    provenance_detail: str = ""
+    replace_by: str = ""
 
     def to_json(self) -> dict[str, object]:
         """Plain values and the row's stable ``id`` (:func:`source_id`)."""
@@ -250,13 +262,15 @@ def budget_table(params: BenchParams, angles: AngleSources, *, compensation_unit
     quad_vars = 0.0
     for name, s in sources.items():
         qv = _wvar(f, s.quadratic.psd_m2_per_hz, w)
+        pv = _wvar(f, s.perpendicular_psd_m2_per_hz, w)
         quad_vars += qv
         seed_m, note = _SEED_ROW[name]
         rows.append(BudgetRow(
             name=name, section=s.seed_section, mechanism="piston (4.2) + geometric (4.1)",
-            rms_m=math.sqrt(_wvar(f, s.perpendicular_psd_m2_per_hz, w) + qv),
+            rms_m=math.sqrt(pv + qv),
             bias_m=s.quadratic.mean_m, angle_rms_rad=float(np.hypot(*s.angle_rms_rad)),
-            seed_m=seed_m, seed_note=note))
+            seed_m=seed_m, seed_note=note, perpendicular_rms_m=math.sqrt(pv),
+            quadratic_rms_m=math.sqrt(qv)))
     cross = max(_wvar(f, geo_all.psd_m2_per_hz, w) - quad_vars, 0.0)
     rows.append(BudgetRow("geometric cross terms between angle sources", "4.1",
                           "geometric (4.1)", math.sqrt(cross), 0.0, None, None, ""))
@@ -278,6 +292,12 @@ def budget_table(params: BenchParams, angles: AngleSources, *, compensation_unit
                   att.resolution_m / math.sqrt(12.0) * math.sqrt(white_w), 0.0, None, None,
                   "not in the seed's budget"),
     ]
+    expansion = params.geometry.frame_expansion_per_k
+    rows = [dataclasses.replace(r, provenance=prov.kind, provenance_detail=prov.detail,
+                                replace_by=prov.replace_by)
+            for r in rows
+            for prov in (row_provenance(r.name, angles.spectra_origin,
+                                        frame_expansion_per_k=expansion),)]
     total = math.sqrt(sum(r.rms_m**2 for r in rows))
     limiting = max(rows, key=lambda r: r.rms_m).name
     return ErrorBudget(

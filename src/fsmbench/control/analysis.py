@@ -24,16 +24,19 @@ import control as ct
 import numpy as np
 from scipy import linalg
 
-from fsmbench.bench.blocks import PlantModel
+from fsmbench.bench.blocks import PlantModel, ss_response
 from fsmbench.bench.params import BenchParams
+from fsmbench.checks import Check
 from fsmbench.control.freq import evaluate_ss, frequency_grid, plain_json, plant_response
 
 __all__ = [
     "SEED_LOOP_GAIN_AT_F0",
+    "AnalysisError",
     "ControlObjective",
     "CoprimeFactors",
     "PlantAnalysis",
     "analyse_plant",
+    "balanced_minimal",
     "control_objective",
     "normalized_coprime_factors",
     "rga",
@@ -154,10 +157,95 @@ class CoprimeFactors:
                            "n_states": int(self.n.nstates)})
 
 
-def normalized_coprime_factors(sys: ct.StateSpace) -> CoprimeFactors:
-    """Left normalised coprime factors of a continuous, delay-free model.
+class AnalysisError(ValueError):
+    """An optional analysis that cannot be computed on this plant; the message says why."""
 
-    With ``R = I + D D^T``, ``Z`` solves the filter Riccati equation
+
+def balanced_minimal(sys: ct.StateSpace, *, rtol: float = 1e-12) -> ct.StateSpace:
+    """Square-root balanced realisation of a stable model, without its negligible states.
+
+    The identified plants are realised column by column, so each mode appears
+    once per input: a non-minimal model whose uncontrollable or unobservable
+    copies of ~1 Hz-wide modes put eigenvalues of every Riccati equation's
+    Hamiltonian within 0.3 % of the imaginary axis (scipy and SLICOT both refuse
+    them, ``benchmarks/bench_coprime.py``). States whose Hankel singular value is
+    below ``rtol`` times the largest carry no input–output behaviour and are
+    dropped; the rest are balanced, so the equations that follow are well scaled.
+
+    Parameters
+    ----------
+    sys : control.StateSpace
+        Continuous, asymptotically stable (every pole in the open left half-plane).
+    rtol : float
+        Hankel singular values below ``rtol`` × the largest are removed [1]: the
+        duplicated modes' are ~1e-17 of it (rounding), a real but fast state's
+        (the 125 kHz coil pole beside the 1 Hz-wide modes) ~1e-8. The reduced
+        model is checked against the original on a frequency grid (relative
+        1e-9 of its peak); if it misses, the original is returned.
+
+    Returns
+    -------
+    control.StateSpace
+        Same inputs, outputs and D; states ``x0, x1, ...``.
+
+    Raises
+    ------
+    AnalysisError
+        The model is not stable (its Gramians do not exist).
+    """
+    a, b, c, d = (np.asarray(x, dtype=float) for x in (sys.A, sys.B, sys.C, sys.D))
+    labels = {"inputs": list(sys.input_labels), "outputs": list(sys.output_labels)}
+    if a.shape[0] == 0:
+        return ct.ss(a, b, c, d, **labels)
+    # A diagonal similarity first: the coil current (A/V) and the mirror angles (rad) differ
+    # by orders of magnitude, which the Gramians' square roots would not resolve.
+    a, (scale_d, _perm) = linalg.matrix_balance(a, permute=False, separate=True)
+    b = b / scale_d[:, None]
+    c = c * scale_d[None, :]
+    poles = np.linalg.eigvals(a)
+    if np.any(poles.real >= 0):
+        raise AnalysisError(f"the model has {int(np.sum(poles.real >= 0))} pole(s) in the closed "
+                            "right half-plane; a balanced realisation needs a stable model")
+    wc = linalg.solve_continuous_lyapunov(a, -b @ b.T)
+    wo = linalg.solve_continuous_lyapunov(a.T, -c.T @ c)
+
+    def factor(w: np.ndarray) -> np.ndarray:
+        # Gramians of a non-minimal model are singular: a symmetric square root
+        # (negative rounding clipped) instead of a Cholesky factor.
+        vals, vecs = np.linalg.eigh((w + w.T) / 2)
+        return np.asarray(vecs * np.sqrt(np.clip(vals, 0.0, None)))
+
+    lc, lo = factor(wc), factor(wo)
+    u, hsv, vt = np.linalg.svd(lo.T @ lc)
+    if hsv.size == 0 or hsv[0] == 0.0:
+        return ct.ss(np.zeros((0, 0)), np.zeros((0, b.shape[1])), np.zeros((c.shape[0], 0)),
+                     d, **labels)
+    k = int(np.sum(hsv > rtol * hsv[0]))
+    if k == a.shape[0]:
+        # Minimal already: the transformation would only add rounding (a 125 kHz coil pole
+        # beside 1 Hz-wide modes spans ten decades of Hankel singular values).
+        return ct.ss(a, b, c, d, **labels)
+    scale = hsv[:k] ** -0.5
+    t = (lc @ vt[:k].T) * scale
+    t_inv = scale[:, None] * (u[:, :k].T @ lo.T)
+    reduced = ct.ss(t_inv @ a @ t, t_inv @ b, c @ t, d, **labels)
+    # The reduction must not change the model: compare on a grid spanning its poles.
+    w = np.abs(poles)
+    s = 1j * np.concatenate([[0.0], np.geomspace(max(w.min(), 1e-3) / 10, w.max() * 10, 400),
+                             w])
+    full = ss_response(ct.ss(a, b, c, d), s)
+    err = np.max(np.abs(ss_response(reduced, s) - full)) / np.max(np.abs(full))
+    if not err <= 1e-9:
+        return ct.ss(a, b, c, d, **labels)
+    return reduced
+
+
+def normalized_coprime_factors(sys: ct.StateSpace) -> CoprimeFactors:
+    """Left normalised coprime factors of a continuous, delay-free, stable model.
+
+    The model is first brought to a balanced minimal realisation
+    (:func:`balanced_minimal`). With ``R = I + D D^T``, ``Z`` solves the filter
+    Riccati equation
     ``A Z + Z A^T - (Z C^T + B D^T) R^-1 (C Z + D B^T) + B B^T = 0`` and
     ``H = -(B D^T + Z C^T) R^-1``; then (Zhou, Doyle & Glover, sec. 13.6)
 
@@ -167,15 +255,28 @@ def normalized_coprime_factors(sys: ct.StateSpace) -> CoprimeFactors:
     Parameters
     ----------
     sys : control.StateSpace
-        ``p`` outputs, ``m`` inputs; stabilisable and detectable.
+        ``p`` outputs, ``m`` inputs; stable.
+
+    Raises
+    ------
+    AnalysisError
+        The model is unstable, or a Riccati equation has no stabilising
+        solution even on the balanced minimal realisation (named).
     """
-    a, b, c, d = (np.asarray(x, dtype=float) for x in (sys.A, sys.B, sys.C, sys.D))
+    minimal = balanced_minimal(sys)
+    a, b, c, d = (np.asarray(x, dtype=float) for x in (minimal.A, minimal.B, minimal.C,
+                                                        minimal.D))
     p, m = d.shape
     r = np.eye(p) + d @ d.T
     s_in = np.eye(m) + d.T @ d
-    # Filter ARE as the dual control ARE of scipy: A^T X + X A - (X B + S) R^-1 (...)^T + Q = 0.
-    z = linalg.solve_continuous_are(a.T, c.T, b @ b.T, r, s=b @ d.T)
-    x = linalg.solve_continuous_are(a, b, c.T @ c, s_in, s=c.T @ d)
+    try:
+        # Filter ARE as the dual control ARE of scipy: A^T X + X A - (X B + S) R^-1 (...)^T + Q = 0.
+        z = linalg.solve_continuous_are(a.T, c.T, b @ b.T, r, s=b @ d.T)
+        x = linalg.solve_continuous_are(a, b, c.T @ c, s_in, s=c.T @ d)
+    except (np.linalg.LinAlgError, ValueError) as exc:
+        raise AnalysisError(f"the Riccati equation of the coprime factors has no stabilising "
+                            f"solution on the {a.shape[0]}-state balanced realisation ({exc})"
+                            ) from exc
     h = -(b @ d.T + z @ c.T) @ np.linalg.inv(r)
     r_isqrt = np.real(linalg.inv(linalg.sqrtm(r)))
     af = a + h @ c
@@ -187,8 +288,10 @@ def normalized_coprime_factors(sys: ct.StateSpace) -> CoprimeFactors:
     cc = r_isqrt @ c
     wc = linalg.solve_continuous_lyapunov(af, -bb @ bb.T)
     wo = linalg.solve_continuous_lyapunov(af.T, -cc.T @ cc)
-    hankel = float(np.sqrt(np.max(np.real(np.linalg.eigvals(wc @ wo)))))
-    rho = float(np.max(np.real(np.linalg.eigvals(x @ z))))
+    hankel = float(np.sqrt(np.max(np.real(np.linalg.eigvals(wc @ wo)), initial=0.0)))
+    rho = float(np.max(np.real(np.linalg.eigvals(x @ z)), initial=0.0))
+    if not (np.isfinite(hankel) and np.isfinite(rho)):
+        raise AnalysisError("the coprime factors' Gramians are not finite")
     return CoprimeFactors(n=n_f, m=m_f, b_max=float(np.sqrt(max(0.0, 1.0 - hankel**2))),
                           hankel_norm=hankel, b_max_riccati=float(1.0 / np.sqrt(1.0 + rho)))
 
@@ -230,11 +333,14 @@ class PlantAnalysis:
     inputs_suffice : bool
         ``sigma_min(Gs) >= sigma_max(Gds) - 1`` wherever ``sigma_max(Gds) > 1``
         on the grid: a 10 V command can cancel a 1 V Newport disturbance.
-    coprime : CoprimeFactors
-        Of ``Gc Gi`` (``Uch, Ucv -> Vpch, Vpcv``, V/V), as seed 5.1.
-    coprime_scaled : CoprimeFactors
-        Of the scaled plant ``Uc/uc_max -> R/e_max``.
+    coprime : CoprimeFactors or None
+        Of ``Gc Gi`` (``Uch, Ucv -> Vpch, Vpcv``, V/V), as seed 5.1; None when
+        it cannot be computed (``checks`` says why).
+    coprime_scaled : CoprimeFactors or None
+        Of the scaled plant ``Uc/uc_max -> R/e_max``; None likewise.
     objective : ControlObjective
+    checks : tuple of Check
+        One per optional analysis: passed when computed, failed with the reason.
     """
 
     f_hz: np.ndarray
@@ -249,9 +355,10 @@ class PlantAnalysis:
     scaled_disturbance_gain: np.ndarray
     disturbance_bandwidth_hz: float
     inputs_suffice: bool
-    coprime: CoprimeFactors
-    coprime_scaled: CoprimeFactors
+    coprime: CoprimeFactors | None
+    coprime_scaled: CoprimeFactors | None
     objective: ControlObjective
+    checks: tuple[Check, ...] = ()
 
     def to_json(self) -> dict[str, Any]:
         """Scalars and the static matrices; the curves are left out."""
@@ -265,7 +372,9 @@ class PlantAnalysis:
             "condition_number_dc": float(np.linalg.cond(self.g0)),
             "disturbance_bandwidth_hz": self.disturbance_bandwidth_hz,
             "inputs_suffice": self.inputs_suffice,
-            "coprime": self.coprime.to_json(), "coprime_scaled": self.coprime_scaled.to_json(),
+            "coprime": None if self.coprime is None else self.coprime.to_json(),
+            "coprime_scaled": None if self.coprime_scaled is None
+            else self.coprime_scaled.to_json(),
             "objective": self.objective.to_json(),
         })
 
@@ -308,6 +417,9 @@ def analyse_plant(plant: PlantModel, *, params: BenchParams,
     scaled = ct.ss(delay_free.A, delay_free.B * sc.uc_max_v, delay_free.C / sc.error_max_rad,
                    delay_free.D * sc.uc_max_v / sc.error_max_rad, inputs=list(inputs),
                    outputs=list(outputs))
+    coprime, check_gcgi = _coprime_or_check(gcgi, subject="Gc Gi (Uc → Vpc, V/V)")
+    coprime_scaled, check_scaled = _coprime_or_check(
+        scaled, subject="the Table 5-scaled plant (Uc/uc_max → R/e_max)")
     return PlantAnalysis(
         f_hz=f, g=g, rga_number=rga_number(g),
         singular_values=np.linalg.svd(g, compute_uv=False), g0=g0,
@@ -316,10 +428,22 @@ def analyse_plant(plant: PlantModel, *, params: BenchParams,
         coupling=norm - np.eye(2), scaled_min_singular_value=gs_min,
         scaled_disturbance_gain=gds_max, disturbance_bandwidth_hz=band,
         inputs_suffice=bool(np.all(gs_min[above] >= gds_max[above] - 1.0)),
-        coprime=normalized_coprime_factors(gcgi),
-        coprime_scaled=normalized_coprime_factors(scaled),
-        objective=control_objective(params))
+        coprime=coprime, coprime_scaled=coprime_scaled,
+        objective=control_objective(params), checks=(check_gcgi, check_scaled))
 
+
+
+def _coprime_or_check(sys: ct.StateSpace, *, subject: str
+                      ) -> tuple[CoprimeFactors | None, Check]:
+    """The coprime factors of ``sys``, or None and a failed check naming why."""
+    try:
+        factors = normalized_coprime_factors(sys)
+    except AnalysisError as exc:
+        return None, Check("coprime_factor_margin", False, None, "computable", subject=subject,
+                           advice=f"{exc}; the margin b_max is left out, the rest of the "
+                                  "analysis stands")
+    return factors, Check("coprime_factor_margin", True, factors.b_max, "computable",
+                          subject=subject)
 
 
 def _disturbance_bandwidth(plant: PlantModel, outputs: Sequence[str],

@@ -30,6 +30,7 @@ import numpy as np
 
 from fsmbench.bench.blocks import PlantModel
 from fsmbench.bench.params import Bench
+from fsmbench.checks import Check
 from fsmbench.control.analysis import (
     ControlObjective,
     PlantAnalysis,
@@ -215,7 +216,13 @@ class DesignResult:
                                 else self.seed_robustness.to_json()),
             "newport_to_beam": {"attenuation_at_1hz": n2b},
             "options": self.options.to_json(),
+            "checks": [c.to_json() for c in self.checks],
         })
+
+    @property
+    def checks(self) -> tuple[Check, ...]:
+        """The optional analyses' checks: each computed, or failed with its reason."""
+        return self.plant.checks
 
     def write(self, out_dir: str | Path, *,
               method: str = DEFAULT_DISCRETISATION) -> list[Path]:

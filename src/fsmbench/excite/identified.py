@@ -20,7 +20,7 @@ from fsmbench.bench.axes import PerAxis
 from fsmbench.bench.params import BenchParams
 from fsmbench.io.errors import RecordingError
 
-__all__ = ["with_identified_quad_diode"]
+__all__ = ["quad_diode_from_identification", "with_identified_quad_diode"]
 
 
 def _number(qd: dict, axis: str, key: str, path: Path) -> float:
@@ -43,6 +43,12 @@ def with_identified_quad_diode(params: BenchParams, folder: str | Path) -> Bench
     from fsmbench.ident.load import read_identification_json
 
     path, ident = read_identification_json(folder)
+    return quad_diode_from_identification(params, ident, path=path)
+
+
+def quad_diode_from_identification(params: BenchParams, ident: dict, *,
+                                   path: Path) -> BenchParams:
+    """``params`` with the 4QD of a parsed ``identification.json`` (``path`` names it in errors)."""
     diagnostics = ident.get("diagnostics")
     qd = diagnostics.get("qd") if isinstance(diagnostics, dict) else None
     if not isinstance(qd, dict) or not all(a in qd for a in "hv"):

@@ -17,7 +17,7 @@ from fsmbench.bench.params import Bench
 from fsmbench.io.folder import load_recordings
 from fsmbench.sim.engine import DiscreteController
 from fsmbench.sim.excitation import Excitation
-from fsmbench.sim.plant import ADC_CHANNELS, DAC_CHANNELS
+from fsmbench.sim.plant import ADC_CHANNELS, DAC_CHANNELS, bench_discrete
 from fsmbench.sim.stream import BenchStream, ControllerSwitch
 
 __all__ = ["LIVE_SIGNALS", "LiveBlock", "PlaybackBackend", "TwinBackend"]
@@ -68,7 +68,8 @@ class TwinBackend:
 
     def __init__(self, bench: Bench, *, seed: int) -> None:
         self.bench = bench
-        self.stream = BenchStream(bench.true, seed=seed, name="live")
+        self.stream = BenchStream(bench.true, seed=seed, name="live",
+                                  plant=bench_discrete(bench))
         self.fs_hz = self.stream.fs_hz
         self.converter_half_range_v = bench.true.converter.range_v / 2
 

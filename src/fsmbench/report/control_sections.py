@@ -14,6 +14,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from fsmbench.control.analysis import CoprimeFactors
 from fsmbench.control.design import Robustness
 from fsmbench.control.loops import AXES, LoopAnalysis
 from fsmbench.control.study import DesignResult
@@ -39,8 +40,10 @@ if TYPE_CHECKING:
 
 __all__ = ["control_sections"]
 
-_PARTS = {"qd_noise": "4QD noise", "adc_quantisation": "ADC quantisation",
-          "newport_angle_noise": "Newport angle noise", "dac_quantisation": "DAC quantisation",
+_PARTS = {"qd_noise": "4QD noise (white, 1/f, drift)", "adc_quantisation": "ADC quantisation",
+          "newport_angle_noise": "Newport angle noise",
+          "sercalo_dac_quantisation": "Sercalo DAC quantisation",
+          "newport_dac_quantisation": "Newport DAC quantisation", "mains": "mains lines",
           "newport_sine": "Newport 1 Hz sine (1 V), through S Gn"}
 # An RGA number below this is rounding of a diagonal plant, not interaction.
 _RGA_ROUNDING = 1e-12
@@ -180,33 +183,44 @@ def _section5(res: DesignResult) -> Section:
     # b(G, K) is 0 for a loop that is unstable
     ratio = (f"fsmbench's {k_fsm / k_seed:.0f} times the seed's" if k_seed > 0
              else "the seed's loop is unstable (b = 0)")
+    def margin(factors: CoprimeFactors | None, field: str) -> str:
+        return "not computed" if factors is None else f"{getattr(factors, field):.3f}"
+
     table = Table(
         caption="Normalised left coprime factorisation G = M⁻¹ N (5.1) and stability margins",
         header=("quantity", "value [1]"),
         rows=(("largest stabilisable coprime-factor uncertainty b_max of Gc Gi (Uc → Vpc, V/V)",
-               f"{pa.coprime.b_max:.3f}"),
+               margin(pa.coprime, "b_max")),
               ("same, from the two Riccati solutions (independent check)",
-               f"{pa.coprime.b_max_riccati:.3f}"),
+               margin(pa.coprime, "b_max_riccati")),
               ("b_max of the scaled plant (Uc / 10 V → R / 10 µrad)",
-               f"{pa.coprime_scaled.b_max:.3f}"),
+               margin(pa.coprime_scaled, "b_max")),
               ("stability margin b(G, K) of the seed's controller (units of 5.1: Uc → Vp)",
                f"{k_seed:.2e}"),
               ("stability margin b(G, K) of fsmbench's controller (units of 5.1: Uc → Vp)",
                f"{k_fsm:.2e}")))
+    failed = [c for c in pa.checks if not c.passed]
+    if pa.coprime is None:
+        comparison = (f"b(G, K) is the coprime-factor uncertainty a given loop tolerates: "
+                      f"{k_seed:.1e} for the seed's controller and {k_fsm:.1e} for fsmbench's "
+                      f"({ratio}); b_max itself could not be computed on this plant.")
+    else:
+        comparison = (f"b(G, K) is the coprime-factor uncertainty a given loop tolerates. Both "
+                      f"controllers are far below b_max ({k_seed:.1e} and {k_fsm:.1e} against "
+                      f"{pa.coprime.b_max:.2f}), {ratio}: measured this way, neither loop "
+                      f"tolerates much unstructured uncertainty.")
     return Section(title="5. Plant uncertainty", anchor="plant-uncertainty", blocks=(
         "The seed factorises the Sercalo's electrical-to-mechanical path Gc Gi with MATLAB's "
         "lncf (5.1) and stops there. fsmbench computes the same normalised left coprime factors "
-        "(Zhou, Doyle & Glover, 13.6) and the largest coprime-factor uncertainty any controller "
-        "could stabilise, b_max = √(1 − ‖[N M]‖²_H), twice: from the factors' Gramians and from "
-        "the two Riccati equations.",
+        "(Zhou, Doyle & Glover, 13.6) on a balanced minimal realisation of the plant, and the "
+        "largest coprime-factor uncertainty any controller could stabilise, "
+        "b_max = √(1 − ‖[N M]‖²_H), twice: from the factors' Gramians and from the two "
+        "Riccati equations.",
         table,
-        f"b(G, K) is the coprime-factor uncertainty a given loop tolerates. Both controllers "
-        f"are far below b_max ({k_seed:.1e} and {k_fsm:.1e} against {pa.coprime.b_max:.2f}), "
-        f"{ratio}: measured this way, neither "
-        f"loop tolerates much unstructured uncertainty. That measure treats every frequency and "
-        f"direction alike, while this bench's uncertainty is structured (the Sercalo's "
-        f"resonance frequencies and damping), so robustness is checked against exactly that "
-        f"in section 9."))
+        *(Note(f"Not computed for {c.subject}: {c.advice}.") for c in failed),
+        comparison + " That measure treats every frequency and direction alike, while this "
+        "bench's uncertainty is structured (the Sercalo's resonance frequencies and damping), "
+        "so robustness is checked against exactly that in section 9."))
 
 
 def _section6(res: DesignResult) -> Section:
@@ -410,7 +424,7 @@ def _discrete_table(res: DesignResult) -> Table:
         rows=tuple(rows))
 
 
-def _section9(res: DesignResult, check: Any) -> Section:
+def _section9(res: DesignResult, check: Any, *, skipped: str = "") -> Section:
     seed, fsm = res.seed, res.fsmbench
     seed_rob = res.seed_robustness
     shapes = res.design.shapes
@@ -488,13 +502,17 @@ def _section9(res: DesignResult, check: Any) -> Section:
                            f"large relative difference above. Prewarping at the notch keeps it "
                            f"in place: the exported Kd has its notches at the continuous "
                            f"frequencies.", ref="errata E26"))
-    blocks += _twin_blocks(check)
+    blocks += _twin_blocks(check, skipped=skipped)
     return Section(title="9. Decentralised control of the Sercalo", anchor="sercalo-control",
                    blocks=tuple(blocks))
 
 
-def _twin_blocks(check: Any) -> list[Block]:
-    """The closed-loop run on the twin against the linear prediction."""
+def _twin_blocks(check: Any, *, skipped: str = "") -> list[Block]:
+    """The closed loop simulated on the study's bench against the linear prediction."""
+    if check is None:
+        return [f"Does the design hold on the bench? It is not simulated here: {skipped}. "
+                "fsmbench does not run a controller on a bench other than the one the "
+                "recordings came from."]
     rows = tuple((AXIS_WORDS[a], f"{1e6 * check.measured_rms_rad[a]:.2f}",
                   f"{1e6 * check.predicted_rms_rad[a]:.2f}", f"{check.ratio[a]:.3f}")
                  for a in AXES)
@@ -503,19 +521,22 @@ def _twin_blocks(check: Any) -> list[Block]:
     part_rows = tuple((_PARTS.get(k, k.replace("_", " ")),
                        *(f"{1e6 * parts[a].get(k, 0.0):.2f}" for a in AXES)) for k in names)
     worst = max(abs(check.ratio[a] - 1.0) for a in AXES)
+    bench = check.bench or "the packaged twin"
     return [
         f"Does the design hold on the bench? fsmbench runs the repeatability experiment "
-        f"(1 V, 1 Hz Newport sine) on the digital twin in closed loop with fsmbench's "
-        f"controller, discretised and executed every sample at 10 kHz with 16-bit converters "
-        f"and every noise source, for {check.duration_s:g} s (the first {check.settle_s:g} s "
-        f"left out). The tracking error is what the 4QD reports, and it is compared with the "
-        f"linear prediction from the plant model: each source through S (or S G for the DAC).",
-        Table(caption="fsmbench's controller on the twin: tracking error, measured and predicted",
-              header=("axis", "measured [µrad rms]", "predicted [µrad rms]",
-                      "measured / predicted [1]"), rows=rows),
+        f"(1 V, 1 Hz Newport sine) on {bench} in closed loop with fsmbench's controller, "
+        f"discretised and executed every sample with the converters' quantisation and every "
+        f"noise source of its noise model, for {check.duration_s:g} s (the first "
+        f"{check.settle_s:g} s left out). The tracking error is what the 4QD reports in that "
+        f"simulation, and it is compared with the linear prediction from the plant model: each "
+        f"source through S (or S G for the DAC).",
+        Table(caption=f"fsmbench's controller simulated on {bench}: tracking error, simulated "
+                      "and predicted",
+              header=("axis", "simulated [µrad rms]", "linear prediction [µrad rms]",
+                      "simulated / predicted [1]"), rows=rows),
         Table(caption="The prediction's terms", header=("source", "h [µrad rms]",
                                                          "v [µrad rms]"), rows=part_rows),
-        f"Measured and predicted agree within {100 * worst:.1f} %: the linear analysis above "
+        f"Simulated and predicted agree within {100 * worst:.1f} %: the linear analysis above "
         f"(loop gains, S, the margins) describes the sampled, quantised closed loop, so its "
         f"verdicts carry over to the implementation. The reported error is dominated by the "
         f"4QD's own noise: above the crossover S ≈ 1, so the sensor's noise appears in its own "
@@ -582,4 +603,5 @@ def control_sections(stage: DesignStage, *, plant_source: str) -> list[Section]:
              f"around it with its input delays exact.")
     sec5 = Section(title=sec5.title, anchor=sec5.anchor, blocks=(intro, *sec5.blocks))
     return [sec5, _section6(res), _section7(res), _section8(res),
-            _section9(res, stage.twin_check), _section10(res)]
+            _section9(res, stage.twin_check, skipped=getattr(stage, "skipped", "")),
+            _section10(res)]

@@ -1,30 +1,47 @@
 """The verdict a reader acts on: does the bench meet its specifications, and why.
 
 :func:`build_summary` reads the stages' results and states, for each of the
-bench's requirements (seed Table 5 and §6.1, and a distance target), the
-value found, the limit and pass or fail; what limits the performance; every
-skipped experiment, failed check and fallback in words; and one headline per
-stage. The same :class:`Summary` is written as ``summary.json``, embedded in
-the report as ``<script type="application/json" id="fsmbench-summary">`` and
-drawn as the report's first screen (:func:`verdict_html`).
+bench's requirements (seed Table 5 and §6.1, margins, robust stability, a
+distance target, the closed loop simulated on the bench, and the model's own
+check on the recorded closed loop):
+
+- the value found, per axis where it has axes, as numbers in SI with their
+  unit, and the display string beside them;
+- the limit, as numbers and in words;
+- its status: ``pass``, ``fail`` or ``not verified`` (what is missing);
+- its provenance: ``measured`` (from the recordings), ``derived`` (computed
+  from measurements), ``predicted`` (simulated or computed on a named bench)
+  or ``assumed`` (a bench-file value no recording checked), with the detail.
+
+The verdict is three-valued (meets / does not meet / not verified); a model
+that does not predict the user's own closed loop makes it *not verified*.
+It ends with the next step, computed from the results (:mod:`.verdict`).
+The same :class:`Summary` is written as ``summary.json``, embedded in the
+report and drawn as its first screen (:func:`fsmbench.report.verdict.verdict_html`).
 """
 
 from __future__ import annotations
 
-import html
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import asdict, dataclass, field
-from typing import Any
+from typing import Any, Literal
 
 from fsmbench import __version__
 from fsmbench.checks import Check, Notice
 from fsmbench.jsonutil import plain_json
+from fsmbench.report.verdict import next_step, verdict_html
 
 __all__ = ["SUMMARY_FORMAT", "PartSkipped", "Requirement", "Specification", "StageLine", "Summary",
            "build_summary", "verdict_html"]
 
-SUMMARY_FORMAT = ("fsmbench.summary", 1)
+#: 2: requirements carry numbers (``values`` per axis in SI, ``unit``, ``limits``), a
+#: ``status`` (pass / fail / not verified) and a ``provenance``; the verdict is three-valued
+#: (``verdict_status``) and ends with ``next_step``.
+SUMMARY_FORMAT = ("fsmbench.summary", 2)
+
+Provenance = Literal["measured", "derived", "predicted", "assumed", ""]
+Status = Literal["pass", "fail", "not verified"]
 
 
 @dataclass(frozen=True)
@@ -55,9 +72,34 @@ class Specification:
 
 @dataclass(frozen=True)
 class Requirement:
-    """One requirement against its measured or predicted value.
+    """One requirement against its limit.
 
-    ``passed`` is None when the study could not decide (the stage did not run).
+    Attributes
+    ----------
+    name : str
+        Identifier (``control_objective`` …).
+    description : str
+        What is required, in words with units.
+    value, limit : str
+        What was found and the limit, as a reader sees them.
+    passed : bool or None
+        None when not verified.
+    explanation : str
+    link : str
+        Anchor of the report chapter.
+    values : mapping
+        The numbers behind ``value``, SI: ``{"h": x, "v": y}`` per axis, or
+        ``{"total": x}``.
+    unit : str
+        Unit of ``values`` (``"1"`` for dimensionless).
+    limits : mapping
+        ``{"min": a}``, ``{"max": b}`` or both, in ``unit`` (a ratio's band for
+        the checks of a prediction).
+    provenance : {"measured", "derived", "predicted", "assumed"}
+    provenance_detail : str
+        Where the number comes from, in words (which bench it ran on).
+    missing : str
+        When not verified: what is missing, in words.
     """
 
     name: str
@@ -67,6 +109,28 @@ class Requirement:
     passed: bool | None
     explanation: str = ""
     link: str = ""
+    values: Mapping[str, float | None] = field(default_factory=dict)
+    unit: str = ""
+    limits: Mapping[str, float] = field(default_factory=dict)
+    provenance: Provenance = ""
+    provenance_detail: str = ""
+    missing: str = ""
+
+    @property
+    def status(self) -> Status:
+        """``pass``, ``fail`` or ``not verified``."""
+        if self.passed is None:
+            return "not verified"
+        return "pass" if self.passed else "fail"
+
+    def to_json(self) -> dict[str, Any]:
+        """Numbers first, then the words (``display`` holds what a reader sees)."""
+        return {"name": self.name, "description": self.description, "status": self.status,
+                "passed": self.passed, "values": dict(self.values), "unit": self.unit,
+                "limits": dict(self.limits), "provenance": self.provenance,
+                "provenance_detail": self.provenance_detail, "missing": self.missing,
+                "display": {"value": self.value, "limit": self.limit},
+                "explanation": self.explanation, "link": self.link}
 
 
 @dataclass(frozen=True)
@@ -106,15 +170,20 @@ class Summary:
     failed_checks: tuple[Check, ...] = ()
     notices: tuple[Notice, ...] = ()
     specification: Specification = field(default_factory=Specification)
+    verdict_status: str = "not_verified"
+    next_step: str = ""
+    simulated_bench: str = ""
 
     def to_json(self) -> dict[str, Any]:
         """``summary.json``: format name and version first, then the verdict."""
         out: dict[str, Any] = {
             "format": SUMMARY_FORMAT[0], "format_version": SUMMARY_FORMAT[1],
             "fsmbench_version": __version__, "source": self.source, "is_twin": self.is_twin,
-            "meets_specifications": self.meets_specifications, "verdict": self.verdict,
+            "meets_specifications": self.meets_specifications,
+            "verdict_status": self.verdict_status, "verdict": self.verdict,
+            "next_step": self.next_step, "simulated_bench": self.simulated_bench,
             "limiting": self.limiting,
-            "requirements": [asdict(r) for r in self.requirements],
+            "requirements": [r.to_json() for r in self.requirements],
             "stages": [asdict(s) for s in self.stages],
             "findings": list(self.findings), "fallbacks": list(self.fallbacks),
             "skipped": dict(self.skipped), "parts_skipped": [asdict(p) for p in self.parts_skipped],
@@ -139,8 +208,30 @@ def _pair(values: Mapping[str, float], spec: str, scale: float = 1.0) -> str:
     return " / ".join(format(values[a] * scale, spec) for a in ("h", "v") if a in values)
 
 
-def _loop_requirements(design: Mapping[str, Any], spec: Specification) -> list[Requirement]:
+def _hv(values: Mapping[str, Any]) -> dict[str, float | None]:
+    out: dict[str, float | None] = {}
+    for a in ("h", "v"):
+        v = values.get(a)
+        out[a] = None if v is None else float(v)
+    return out
+
+
+def _plant_words(plant_identified: bool, plant_source: str) -> tuple[Provenance, str]:
+    if plant_identified:
+        return "derived", "the plant identified from the recordings (seed 2) and the controller"
+    return "assumed", f"the {plant_source}, not an identified plant"
+
+
+def _loop_requirements(design: Mapping[str, Any], spec: Specification, *,
+                       plant_identified: bool, plant_source: str) -> list[Requirement]:
     """The control requirements, from ``design.json``'s payload."""
+    prov, detail = _plant_words(plant_identified, plant_source)
+    # Judged on a model no recording checked, a control number is not verified.
+    missing = "" if plant_identified else "an identified plant (data_uch, data_ucv)"
+
+    def judged(ok: bool) -> bool | None:
+        return ok if plant_identified else None
+
     out: list[Requirement] = []
     fsm = design["fsmbench_controller"]
     s1 = {a: float(fsm[a]["sensitivity_at_1hz"]) for a in ("h", "v")}
@@ -150,53 +241,156 @@ def _loop_requirements(design: Mapping[str, Any], spec: Specification) -> list[R
         description=(f"Sample motion rejected at {spec.objective_frequency_hz:g} Hz: |S| "
                      "with fsmbench's controller, h / v (seed §6.1)"),
         value=_pair(s1, ".2e"), limit=f"≤ {spec.sensitivity_bound:.0e}",
-        passed=worst <= spec.sensitivity_bound,
+        passed=judged(worst <= spec.sensitivity_bound),
         explanation=(f"The 0.05 rad stroke at 1 Hz leaves {worst * 0.05 * 1e6:.1f} µrad of "
                      "beam-angle error (the seed's maximum wanted error is 10 µrad)."),
-        link="#decentralised-control"))
-    gm = {a: float(fsm[a]["gain_margin_db"] or math.inf) for a in ("h", "v")}
-    pm = {a: float(fsm[a]["phase_margin_deg"] or math.inf) for a in ("h", "v")}
-    stable = all(bool(fsm[a]["stable"]) for a in ("h", "v"))
-    margins_ok = stable and min(gm.values()) >= spec.gain_margin_min_db \
-        and min(pm.values()) >= spec.phase_margin_min_deg
+        link="#decentralised-control", values=_hv(s1), unit="1",
+        limits={"max": spec.sensitivity_bound}, provenance=prov, provenance_detail=detail,
+        missing=missing))
+    stable = {a: bool(fsm[a]["stable"]) for a in ("h", "v")}
+    gm = {a: float(fsm[a]["gain_margin_db"] if fsm[a]["gain_margin_db"] is not None
+                   else math.inf) for a in ("h", "v")}
+    pm = {a: float(fsm[a]["phase_margin_deg"] if fsm[a]["phase_margin_deg"] is not None
+                   else math.inf) for a in ("h", "v")}
+    unstable = "" if all(stable.values()) else (
+        "Unstable on " + " and ".join(a for a in "hv" if not stable[a]) + ": the margins "
+        "of an unstable loop mean nothing.")
     out.append(Requirement(
-        name="stability_margins",
-        description="fsmbench's controller: closed loop stable, gain and phase margins, h / v",
-        value=f"{_pair(gm, '.1f')} dB, {_pair(pm, '.1f')}°",
-        limit=f"≥ {spec.gain_margin_min_db:g} dB and ≥ {spec.phase_margin_min_deg:g}°",
-        passed=margins_ok, link="#decentralised-control"))
+        name="gain_margin",
+        description="fsmbench's controller: closed loop stable, gain margin, h / v",
+        value=f"{_pair(gm, '.1f')} dB", limit=f"≥ {spec.gain_margin_min_db:g} dB",
+        passed=judged(all(stable.values()) and min(gm.values()) >= spec.gain_margin_min_db),
+        explanation=unstable, link="#decentralised-control",
+        values={a: (gm[a] if math.isfinite(gm[a]) else None) for a in "hv"}, unit="dB",
+        limits={"min": spec.gain_margin_min_db}, provenance=prov, provenance_detail=detail,
+        missing=missing))
+    out.append(Requirement(
+        name="phase_margin",
+        description="fsmbench's controller: closed loop stable, phase margin, h / v",
+        value=f"{_pair(pm, '.1f')}°", limit=f"≥ {spec.phase_margin_min_deg:g}°",
+        passed=judged(all(stable.values()) and min(pm.values()) >= spec.phase_margin_min_deg),
+        explanation=unstable, link="#decentralised-control",
+        values={a: (pm[a] if math.isfinite(pm[a]) else None) for a in "hv"}, unit="deg",
+        limits={"min": spec.phase_margin_min_deg}, provenance=prov, provenance_detail=detail,
+        missing=missing))
     rob = design.get("robustness") or {}
     if rob:
+        n = len(rob.get("cases", []))
+        n_unstable = sum(1 for c in rob.get("cases", []) if c.get("stable") is False)
         out.append(Requirement(
             name="robust_stability",
             description=("fsmbench's controller stays stable with the resonances ±5 % and the "
                          "damping ×0.5 and ×2"),
-            value=(f"{'all' if rob['all_stable'] else 'not all'} "
-                   f"{len(rob.get('cases', []))} perturbed plants stable, worst gain margin "
+            value=(f"{n - n_unstable} of {n} perturbed plants stable, worst gain margin "
                    f"{rob['worst_gain_margin_db']:.1f} dB"),
-            limit="all stable", passed=bool(rob["all_stable"]), link="#decentralised-control"))
+            limit="all stable", passed=judged(bool(rob["all_stable"])),
+            link="#decentralised-control",
+            values={"unstable_plants": float(n_unstable),
+                    "worst_gain_margin_db": float(rob["worst_gain_margin_db"])},
+            unit="count, dB", limits={"max": 0.0}, provenance=prov,
+            provenance_detail=detail + " over the perturbed plants", missing=missing))
     return out
 
 
-def _twin_requirement(design: Mapping[str, Any]) -> Requirement | None:
+def _closed_loop_requirement(design: Mapping[str, Any], *, is_twin: bool) -> Requirement:
     twin = design.get("closed_loop_twin")
+    description = ("fsmbench's controller simulated in closed loop (converter quantisation, "
+                   "every noise): tracking error, and its ratio to the linear prediction, h / v")
     if not twin:
-        return None
+        why = design.get("closed_loop_skipped") or "no bench to simulate"
+        return Requirement(
+            name="closed_loop_simulation", description=description, value="not simulated",
+            limit="simulated / predicted within 0.9–1.1", passed=None,
+            link="#decentralised-control", unit="rad", limits={"min": 0.9, "max": 1.1},
+            provenance="predicted", missing=f"a bench identified from the recordings ({why})")
     ratio = twin["measured_over_predicted"]
     ok = all(0.9 <= float(r) <= 1.1 for r in ratio.values())
     qd = twin["predicted_parts_rad"]
     share = {a: (qd[a].get("qd_noise", 0.0) / twin["predicted_rms_rad"][a]) ** 2
              for a in ("h", "v")}
+    bench = twin.get("bench") or "the packaged twin"
+    kind = twin.get("bench_kind", "packaged")
+    where = (f"simulated on {bench}, the bench the twin data came from" if is_twin
+             else f"simulated on {bench}")
+    if kind == "packaged" and not is_twin:
+        where += " (NOT the bench of these recordings)"
     return Requirement(
-        name="closed_loop_on_the_twin",
-        description=("fsmbench's controller run on the twin at 10 kHz (16-bit converters, every "
-                     "noise): tracking error measured against the linear prediction, h / v"),
-        value=(f"{_pair(twin['tracking_error_rms_rad'], '.3g', 1e6)} µrad rms measured, "
-               f"{_pair(twin['predicted_rms_rad'], '.3g', 1e6)} predicted"),
-        limit="measured / predicted within 0.9–1.1", passed=ok,
-        explanation=(f"The 4QD's own noise makes {_pair(share, '.0%')} of the predicted "
-                     "variance: the loop cannot reject what its sensor adds."),
-        link="#decentralised-control")
+        name="closed_loop_simulation", description=description,
+        value=(f"{_pair(twin['tracking_error_rms_rad'], '.3g', 1e6)} µrad rms simulated, "
+               f"{_pair(twin['predicted_rms_rad'], '.3g', 1e6)} linear; ratio "
+               f"{_pair(ratio, '.2f')}"),
+        limit="simulated / predicted within 0.9–1.1", passed=ok,
+        explanation=(f"Predicted: {where}. The 4QD's own noise makes {_pair(share, '.0%')} of "
+                     "the variance: the loop cannot reject what its sensor adds."),
+        link="#decentralised-control", values=_hv(twin["tracking_error_rms_rad"]), unit="rad",
+        limits={"min": 0.9, "max": 1.1}, provenance="predicted", provenance_detail=where)
+
+
+def _validation_requirement(validation: Any, skipped: str) -> Requirement:
+    description = ("The model predicts your own closed loop: data_rep_h/v tracking error "
+                   "(seed's controller, periodic motion removed), recorded against predicted, "
+                   "h / v")
+    if validation is None:
+        return Requirement(
+            name="model_validation", description=description, value="not compared",
+            limit="recorded / predicted within 0.8–1.25", passed=None, link="#validation",
+            unit="rad", limits={"min": 0.8, "max": 1.25}, provenance="measured",
+            missing=skipped or "data_rep_h, data_rep_v and an identified bench")
+    v = validation
+    lo, hi = v.band_hz
+    return Requirement(
+        name="model_validation", description=description,
+        value=(f"{_pair(v.measured_rms_rad, '.3g', 1e6)} µrad rms recorded, "
+               f"{_pair(v.predicted_rms_rad, '.3g', 1e6)} predicted; ratio "
+               f"{_pair(v.ratio, '.2f')}"),
+        limit=f"recorded / predicted within {v.limits[0]:g}–{v.limits[1]:g}",
+        passed=v.passed,
+        explanation=(f"{lo:g} Hz to {hi:g} Hz, {v.n_periods} periods; predicted by simulating "
+                     f"{', '.join(v.experiments)} on {v.bench} with {v.controller}."
+                     + (f" {v.reason}." if v.reason else "")),
+        link="#validation", values=_hv(v.measured_rms_rad), unit="rad",
+        limits={"min": v.limits[0], "max": v.limits[1]}, provenance="measured",
+        provenance_detail=f"recorded in {', '.join(v.experiments)}; compared with {v.bench}")
+
+
+def _distance_requirement(budget: Any, spec: Specification) -> tuple[Requirement, str, Any]:
+    quoted = budget.quoted
+    b = quoted.budget
+    total = float(b.total_rms_m)
+    limit = spec.distance_error_max_m
+    top = max(b.rows, key=lambda r: r.rms_m)
+    how = _MECHANISM_WORDS.get(top.mechanism, top.mechanism)
+    window = "stationary" if b.window_s is None else f"over {b.window_s:g} s, mean removed"
+    measured_inputs = [r.name for r in b.rows if getattr(r, "provenance", "") == "measured"]
+    assumed = [r for r in b.rows if getattr(r, "provenance", "") == "assumed"]
+    assumed_share = sum(r.rms_m**2 for r in assumed) / total**2 if total > 0 else 0.0
+    other = "" if budget.recommended is None else (
+        f" With {budget.controller}: {budget.budget.total_rms_m * 1e9:.3g} nm.")
+    huddle = getattr(budget, "huddle", None)
+    verified = huddle is not None and getattr(huddle, "qd_noise", None) is not None
+    explanation = (
+        f"With {quoted.controller}, {window}; stationary value "
+        f"{quoted.stationary_total_rms_m * 1e9:.3g} nm (a record much longer than the slowest "
+        f"drift). Limiting source: {top.name} ({top.rms_m * 1e9:.3g} nm, "
+        f"{(top.rms_m / total) ** 2:.0%} of the variance, "
+        f"{getattr(top, 'provenance', 'derived')}); it {how}. Assumed terms (bench file, no "
+        f"recording checked them) make {assumed_share:.0%} of the variance.{other}")
+    req = Requirement(
+        name="distance_error_budget",
+        description=(f"Attocube distance error {window}, every source combined (rms), with "
+                     f"{quoted.controller}"),
+        value=f"{total * 1e9:.3g} nm", limit=f"≤ {limit * 1e9:g} nm",
+        passed=(total <= limit) if verified else None, explanation=explanation,
+        link="#error-budget", values={"total": total}, unit="m", limits={"max": limit},
+        provenance="predicted",
+        provenance_detail=("budget of measured inputs (" + ", ".join(measured_inputs)
+                           + ") and assumed ones (" + ", ".join(r.name for r in assumed) + ")"
+                           if measured_inputs else
+                           "budget of the bench file's noise levels alone (no measured input)"),
+        missing="" if verified else "an open-loop huddle test (the measured 4QD noise)")
+    limiting = (f"{top.name}, {top.rms_m * 1e9:.3g} nm of the {total * 1e9:.3g} nm total "
+                f"({getattr(top, 'provenance', 'derived')}): it {how}.")
+    return req, limiting, top
 
 
 def build_summary(*, source: str, is_twin: bool, spec: Specification,
@@ -206,7 +400,9 @@ def build_summary(*, source: str, is_twin: bool, spec: Specification,
                   identification: Mapping[str, Any] | None,
                   identification_headline: str = "",
                   plant_source: str, plant_identified: bool,
-                  budget: Any | None, design: Mapping[str, Any] | None) -> Summary:
+                  budget: Any | None, design: Mapping[str, Any] | None,
+                  validation: Any | None = None, validation_skipped: str = "",
+                  simulated_bench: str = "") -> Summary:
     """The verdict of a study.
 
     Parameters
@@ -218,8 +414,7 @@ def build_summary(*, source: str, is_twin: bool, spec: Specification,
     skipped : mapping
         Experiment → why it was not used.
     parts_skipped : sequence of PartSkipped
-        What a stage left out of a record it had (a huddle test too short to
-        analyse …), and why.
+        What a stage left out of a record it had, and why.
     n_experiments, n_read : int
         Experiments the study knows, experiments read.
     checks, notices : sequences
@@ -234,6 +429,12 @@ def build_summary(*, source: str, is_twin: bool, spec: Specification,
     budget : BudgetResult or None
     design : mapping or None
         ``design.json``'s payload.
+    validation : ClosedLoopValidation or None
+        The model's check on the recorded closed loop.
+    validation_skipped : str
+        Why there is none.
+    simulated_bench : str
+        The bench the study's simulations ran on, in words.
     """
     reqs: list[Requirement] = []
     stages: list[StageLine] = []
@@ -258,33 +459,21 @@ def build_summary(*, source: str, is_twin: bool, spec: Specification,
         stages.append(StageLine("identification", status, text, "#identification"))
     if not plant_identified:
         fallbacks.append(f"The budget and the design used the {plant_source}.")
+    top = None
     if budget is not None:
-        b = budget.budget
-        total = float(b.total_rms_m)
-        limit = spec.distance_error_max_m
-        top = max(b.rows, key=lambda r: r.rms_m)
-        how = _MECHANISM_WORDS.get(top.mechanism, top.mechanism)
-        reqs.append(Requirement(
-            name="distance_error_budget",
-            description="Attocube distance error, every source combined (rms)",
-            value=f"{total * 1e9:.3g} nm", limit=f"≤ {limit * 1e9:g} nm",
-            passed=total <= limit,
-            explanation=(f"Limiting source: {top.name} ({top.rms_m * 1e9:.3g} nm, "
-                         f"{(top.rms_m / total) ** 2:.0%} of the variance); it {how}."),
-            link="#error-budget"))
-        stages.append(StageLine("budget", "ran" if not budget.skipped else "partial",
-                                f"distance error {total * 1e9:.3g} nm rms; limiting source "
-                                f"{top.name}", "#error-budget"))
-        limiting = (f"{top.name}, {top.rms_m * 1e9:.3g} nm of the {total * 1e9:.3g} nm total: "
-                    f"it {how}.")
+        req, limiting, top = _distance_requirement(budget, spec)
+        reqs.append(req)
+        stages.append(StageLine(
+            "budget", "ran" if not budget.skipped else "partial",
+            f"distance error {budget.quoted.budget.total_rms_m * 1e9:.3g} nm rms with "
+            f"{budget.quoted.controller}; limiting source {top.name}", "#error-budget"))
     else:
         stages.append(StageLine("budget", "skipped", "not run", "#error-budget"))
         limiting = "unknown: the budget did not run"
     if design is not None:
-        reqs += _loop_requirements(design, spec)
-        twin = _twin_requirement(design)
-        if twin is not None:
-            reqs.append(twin)
+        reqs += _loop_requirements(design, spec, plant_identified=plant_identified,
+                                   plant_source=plant_source)
+        reqs.append(_closed_loop_requirement(design, is_twin=is_twin))
         seed = design["seed_controller"]
         s_seed = {a: float(seed[a]["sensitivity_at_1hz"]) for a in ("h", "v")}
         if not seed.get("meets_objective"):
@@ -293,71 +482,53 @@ def build_summary(*, source: str, is_twin: bool, spec: Specification,
                 f"= {_pair(s_seed, '.1e')} against {spec.sensitivity_bound:.0e} (errata E27); "
                 "fsmbench's controller meets it.")
         fsm = design["fsmbench_controller"]
+        s1 = {a: fsm[a]["sensitivity_at_1hz"] for a in "hv"}
         stages.append(StageLine(
             "design", "ran",
-            f"fsmbench's controller: |S(1 Hz)| {_pair({a: fsm[a]['sensitivity_at_1hz'] for a in 'hv'}, '.1e')}, "  # noqa: E501
-            f"crossover {_pair({a: fsm[a]['crossover_hz'] for a in 'hv'}, '.0f')} Hz",
+            f"fsmbench's controller: |S(1 Hz)| {_pair(s1, '.1e')}, crossover "
+            f"{_pair({a: fsm[a]['crossover_hz'] for a in 'hv'}, '.0f')} Hz",
             "#decentralised-control"))
     else:
         stages.append(StageLine("design", "skipped", "not run", "#decentralised-control"))
-    decided = [r.passed for r in reqs if r.passed is not None]
-    meets = None if not decided else all(decided)
-    failed_names = [r.description for r in reqs if r.passed is False]
-    if meets is None:
-        verdict = "No verdict: the stages that decide it did not run."
-    elif meets:
-        verdict = ("The bench meets its specifications with fsmbench's controller"
-                   + (" (on the nominal model, not an identified one)." if not plant_identified
-                      else "."))
-    else:
-        verdict = "The bench does NOT meet its specifications: " + "; ".join(failed_names) + "."
+    if design is not None or validation is not None:
+        reqs.append(_validation_requirement(validation, validation_skipped))
+    status, verdict = _verdict(reqs, plant_identified=plant_identified)
     failed_checks = tuple(c for c in checks if not c.passed)
-    return Summary(source=source, is_twin=is_twin, meets_specifications=meets, verdict=verdict,
-                   limiting=limiting, requirements=tuple(reqs), stages=tuple(stages),
-                   findings=tuple(findings), fallbacks=tuple(fallbacks), skipped=dict(skipped),
-                   parts_skipped=tuple(parts_skipped),
-                   failed_checks=failed_checks, notices=tuple(notices), specification=spec)
+    step = next_step(status=status, requirements=reqs, budget=budget, limiting_row=top)
+    return Summary(source=source, is_twin=is_twin,
+                   meets_specifications={"meets": True, "does_not_meet": False}.get(status),
+                   verdict=verdict, limiting=limiting, requirements=tuple(reqs),
+                   stages=tuple(stages), findings=tuple(findings), fallbacks=tuple(fallbacks),
+                   skipped=dict(skipped), parts_skipped=tuple(parts_skipped),
+                   failed_checks=failed_checks, notices=tuple(notices), specification=spec,
+                   verdict_status=status, next_step=step, simulated_bench=simulated_bench)
 
 
-def _mark(passed: bool | None) -> str:
-    if passed is None:
-        return '<span class="info">not decided</span>'
-    return '<span class="pass">PASS</span>' if passed else '<span class="fail">FAIL</span>'
+def _against(r: Requirement) -> str:
+    return f"{r.description}: {r.value} against {r.limit}"
 
 
-def verdict_html(summary: Summary) -> str:
-    """The report's first screen: verdict, requirements, limiting source, what went wrong."""
-    e = html.escape
-    cls = {True: "pass", False: "fail", None: "info"}[summary.meets_specifications]
-    out = ['<section class="verdict" id="verdict">',
-           f'<h2 class="{cls}">{e(summary.verdict)}</h2>',
-           f'<p class="meta">Data: {e(summary.source)}.</p>',
-           "<table><thead><tr><th>requirement</th><th>found</th><th>limit</th><th>verdict</th>"
-           "</tr></thead><tbody>"]
-    for r in summary.requirements:
-        why = f"<br><small>{e(r.explanation)}</small>" if r.explanation else ""
-        link = f' <a href="{e(r.link)}">details</a>' if r.link else ""
-        out.append(f"<tr><td>{e(r.description)}{why}</td><td>{e(r.value)}</td>"
-                   f"<td>{e(r.limit)}</td><td>{_mark(r.passed)}{link}</td></tr>")
-    out.append("</tbody></table>")
-    out.append(f"<p><b>What limits the performance:</b> {e(summary.limiting)}</p>")
-    for finding in summary.findings:
-        out.append(f"<p>{e(finding)}</p>")
-    problems = [*summary.fallbacks,
-                *(f"{name}: {why}" for name, why in summary.skipped.items()),
-                *(f"{p.stage}, {p.part}: {p.reason}" for p in summary.parts_skipped),
-                *(c.sentence() for c in summary.failed_checks),
-                *(n.sentence() for n in summary.notices)]
-    if problems:
-        out.append('<p><b>Skipped, fallbacks and warnings:</b></p><ul class="skips">')
-        out += [f"<li>{e(p)}</li>" for p in problems]
-        out.append("</ul>")
-    else:
-        out.append("<p>Every experiment was read and used; no check failed; nothing fell back.</p>")
-    out.append("<table><thead><tr><th>stage</th><th>status</th><th>headline</th></tr></thead>"
-               "<tbody>")
-    for s in summary.stages:
-        name = f'<a href="{e(s.link)}">{e(s.name)}</a>' if s.link else e(s.name)
-        out.append(f"<tr><td>{name}</td><td>{e(s.status)}</td><td>{e(s.headline)}</td></tr>")
-    out.append("</tbody></table></section>")
-    return "\n".join(out)
+def _verdict(reqs: Sequence[Requirement], *, plant_identified: bool) -> tuple[str, str]:
+    """``(status, headline)``: meets / does_not_meet / not_verified, in words."""
+    if not reqs:
+        return "not_verified", "No verdict: the stages that decide it did not run."
+    model = next((r for r in reqs if r.name == "model_validation"), None)
+    if model is not None and model.passed is False:
+        return "not_verified", ("Not verified: the model identified from the recordings does "
+                                "not predict their own closed loop (" + model.value + "); "
+                                "every prediction on it is in doubt.")
+    failed = [r for r in reqs if r.passed is False]
+    if failed:
+        return "does_not_meet", ("The bench does NOT meet its specifications: "
+                                 + "; ".join(_against(r) for r in failed) + ".")
+    open_ = [r for r in reqs if r.passed is None]
+    if open_:
+        missing = sorted({r.missing for r in open_ if r.missing})
+        return "not_verified", ("Not verified: " + ", ".join(r.name.replace("_", " ")
+                                                             for r in open_)
+                                + " could not be judged (missing: " + "; ".join(missing)
+                                + ").")
+    dist = next((r for r in reqs if r.name == "distance_error_budget"), None)
+    tail = "" if dist is None else f" (distance error {dist.value}, limit {dist.limit})"
+    return "meets", ("The bench meets its specifications with fsmbench's controller" + tail
+                     + ("." if plant_identified else ", on the nominal model."))

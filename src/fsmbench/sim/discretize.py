@@ -75,20 +75,26 @@ def gamma_integral(a: np.ndarray, b: np.ndarray, h_s: float) -> tuple[np.ndarray
 
 def zoh_with_delays(a: np.ndarray, b: np.ndarray, c: np.ndarray, *, ts_s: float,
                     input_delay_samples: Sequence[float],
-                    input_names: Sequence[str], output_names: Sequence[str]) -> DiscretePlant:
-    """Discretise ``dx/dt = A x + B u(t - tau)``, ``y = C x`` for a zero-order-hold input.
+                    input_names: Sequence[str], output_names: Sequence[str],
+                    d: np.ndarray | None = None) -> DiscretePlant:
+    """Discretise ``dx/dt = A x + B u(t - tau)``, ``y = C x + D u(t - tau)`` for a held input.
 
     Parameters
     ----------
     a, b, c : arrays (n, n), (n, m), (p, n)
-        Continuous plant; no direct feedthrough (every measured bench output
-        is behind at least one integrator).
+        Continuous plant.
     ts_s : float
         Sampling period T [s].
     input_delay_samples : sequence of float, length m
         Delay of each input in samples (>= 0, fractional allowed), counted
         from the command sample to the start of its hold.
     input_names, output_names : sequences of str
+    d : array (p, m), optional
+        Direct feedthrough (an identified model's constant above its band). At
+        sample ``k`` the delayed held input is the command of sample
+        ``k - ceil(tau/T)``, a state of the shift register, so the discrete model
+        keeps ``y[k] = c z[k]``; an input with feedthrough needs a delay of at
+        least one sample (a real converter's), else ValueError.
 
     Returns
     -------
@@ -142,6 +148,19 @@ def zoh_with_delays(a: np.ndarray, b: np.ndarray, c: np.ndarray, *, ts_s: float,
         offset += lags[j]
     cd = np.zeros((c.shape[0], nz))
     cd[:, :n] = c
+    if d is not None:
+        d = np.asarray(d, dtype=float)
+        if d.shape != (c.shape[0], m):
+            raise ValueError(f"d has shape {d.shape}, expected {(c.shape[0], m)}")
+        offset = n
+        for j in range(m):
+            if np.any(d[:, j] != 0.0):
+                if lags[j] == 0:
+                    raise ValueError(f"input {input_names[j]} has a direct feedthrough and no "
+                                     "delay: the sampled loop would have an algebraic loop")
+                # u(kT - tau) with the hold is the command issued lags_j samples ago.
+                cd[:, offset + lags[j] - 1] += d[:, j]
+            offset += lags[j]
     return DiscretePlant(a=ad, b=bd, c=cd, ts_s=ts_s, input_names=tuple(input_names),
                          output_names=tuple(output_names), n_plant_states=n,
                          input_delay_samples=tuple(delays))

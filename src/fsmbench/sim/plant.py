@@ -27,13 +27,14 @@ from fsmbench.bench.blocks import (
     sercalo_beam_matrix,
     voltage_amplifier,
 )
-from fsmbench.bench.params import BenchParams
+from fsmbench.bench.params import Bench, BenchParams
 from fsmbench.sim.discretize import DiscretePlant, zoh_with_delays
 
 __all__ = [
     "ADC_CHANNELS",
     "DAC_CHANNELS",
     "INTERNAL_SIGNALS",
+    "bench_discrete",
     "twin_continuous",
     "twin_discrete",
 ]
@@ -87,4 +88,20 @@ def twin_discrete(p: BenchParams) -> DiscretePlant:
     nport = dac + p.newport.internal_delay_s / ts
     return zoh_with_delays(np.asarray(sys.A), np.asarray(sys.B), np.asarray(sys.C), ts_s=ts,
                            input_delay_samples=[dac, dac, nport, nport],
+                           input_names=DAC_CHANNELS, output_names=ADC_CHANNELS + INTERNAL_SIGNALS)
+
+
+def bench_discrete(bench: Bench) -> DiscretePlant:
+    """The plant the engine steps for ``bench``: packaged (physics) or identified.
+
+    A packaged bench is :func:`twin_discrete` of its ``true`` parameters; an
+    identified bench (:func:`fsmbench.sim.identified.identified_bench`) is its
+    identified plant, wired by :func:`fsmbench.bench.identified.engine_model`,
+    with the same exact hold and fractional delays.
+    """
+    if bench.model is None:
+        return twin_discrete(bench.true)
+    m = bench.model
+    return zoh_with_delays(m.a, m.b, m.c, d=m.d, ts_s=bench.true.converter.ts_s,
+                           input_delay_samples=m.input_delay_samples,
                            input_names=DAC_CHANNELS, output_names=ADC_CHANNELS + INTERNAL_SIGNALS)

@@ -34,6 +34,7 @@ from fsmbench.sim.controller import feedback_controller
 from fsmbench.sim.discretize import DiscretePlant
 from fsmbench.sim.engine import DiscreteController
 from fsmbench.sim.excitation import Excitation, SampledExcitation
+from fsmbench.sim.plant import bench_discrete
 from fsmbench.sim.stream import BenchStream
 
 __all__ = [
@@ -256,4 +257,5 @@ def experiment_stream(bench: Bench, spec: ExperimentSpec, *, seed: int,
     return BenchStream(bench.true, seed=seed, name=spec.name,
                        compensation_unit=spec.compensation_unit, shielding=spec.shielding,
                        controller=controller if spec.closed_loop else None,
-                       excitations=spec.excitations, plant=plant)
+                       excitations=spec.excitations,
+                       plant=bench_discrete(bench) if plant is None else plant)

@@ -37,7 +37,7 @@ from fsmbench.sim.controller import closed_loop_spectral_radius
 from fsmbench.sim.discretize import DiscretePlant
 from fsmbench.sim.engine import DiscreteController
 from fsmbench.sim.excitation import samples_sha256
-from fsmbench.sim.plant import ADC_CHANNELS, twin_discrete
+from fsmbench.sim.plant import ADC_CHANNELS, bench_discrete
 from fsmbench.twin.experiments import (
     REALIZED_NOISE,
     ExperimentSpec,
@@ -101,7 +101,8 @@ def simulate_experiment(bench: Bench, spec: ExperimentSpec, *, seed: int,
     seed : int
         Run seed; each noise source derives its own stream from it.
     plant : DiscretePlant, optional
-        Pre-computed :func:`twin_discrete` of ``bench.true`` (saves time over many runs).
+        Pre-computed :func:`~fsmbench.sim.plant.bench_discrete` of ``bench`` (saves time over
+        many runs).
     controller : DiscreteController, optional
         Used when ``spec.closed_loop``; default: the seed's decentralised
         controller of 9.2, Tustin at the converter rate.
@@ -140,15 +141,14 @@ def _prepare_run(bench: Bench, *, duration_s: float | None, experiments: Sequenc
         specs = tuple(s for s in specs if s.name in set(experiments))
     if duration_s is not None:
         specs = with_duration(specs, duration_s=duration_s)
-    p = bench.true
-    plant = twin_discrete(p)
+    plant = bench_discrete(bench)
     if controller is None and any(s.closed_loop for s in specs):
         controller = seed_feedback(bench)
     if controller is not None:
         rho = closed_loop_spectral_radius(plant, controller, n_adc=len(ADC_CHANNELS))
         if rho >= 1.0:
-            raise ValueError(f"controller '{controller.name}' does not stabilise the twin's plant "
-                             f"(closed-loop spectral radius {rho:.6f} >= 1)")
+            raise ValueError(f"controller '{controller.name}' does not stabilise "
+                             f"{bench.label} (closed-loop spectral radius {rho:.6f} >= 1)")
     return specs, plant, controller
 
 
@@ -286,7 +286,7 @@ def simulate_excitation(source: str | Path, bench: Bench | None = None, *, seed:
     if progress is not None:
         progress(f"playing {described.name} ({design.kind}, {design.duration_s:g} s) in "
                  f"{spec.name} ({spec.duration_s:g} s)")
-    result = simulate_experiment(bench, spec, seed=seed, plant=twin_discrete(bench.true))
+    result = simulate_experiment(bench, spec, seed=seed, plant=bench_discrete(bench))
     truth = twin_truth(bench, seed=seed, experiments=(spec,),
                        realized={spec.name: result.realized}, controller_name=None)
     for ex in truth["experiments"][spec.name]["excitations"]:

@@ -86,14 +86,27 @@ def model_values(p: BenchParams) -> dict[str, Any]:
 def twin_truth(bench: Bench, *, seed: int, experiments: Sequence[ExperimentSpec],
                realized: Mapping[str, Mapping[str, float]],
                controller_name: str | None) -> dict[str, Any]:
-    """The truth of a twin run as a JSON-ready dict (SI units, Hz)."""
+    """The truth of a twin run as a JSON-ready dict (SI units, Hz).
+
+    For an identified bench (``bench.model``) the contracted values are the
+    identification's (what the simulated bench *is*), the cross-coupling comes
+    from the identified plant, and ``bench`` says where each part came from.
+    """
     p = bench.true
-    plant = physical_plant(p, source="physical (true)")
+    if bench.model is None:
+        plant = physical_plant(p, source="physical (true)")
+        values = model_values(p)
+    else:
+        plant = bench.model.plant
+        values = {"fs_hz": p.converter.fs_hz, **dict(bench.model.values)}
     gc, gn = plant.blocks["Gc"], plant.blocks["Gn"]
     lsb = p.converter.lsb_v
     env = p.environment
     return {
-        **model_values(p),
+        **values,
+        "bench": {"kind": "identified" if bench.is_identified else "packaged",
+                  "label": bench.label, "origin": bench.origin,
+                  "provenance": {} if bench.model is None else dict(bench.model.provenance)},
         "noise_rms": {
             "qd_noise_v": {"h": p.quad_diode.noise_rms_v.h, "v": p.quad_diode.noise_rms_v.v},
             "newport_angle_noise_rad": p.newport.angle_noise_rms_rad,

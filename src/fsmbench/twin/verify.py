@@ -1,23 +1,26 @@
-"""A controller proven on the twin: the repeatability experiment in closed loop,
-measured, against the linear prediction from the model and the noise budget.
+"""A controller proven on a simulated bench: the repeatability experiment in closed loop,
+measured on the simulated records, against the linear prediction from the model and the
+noise model.
 
-Measured
-    The twin runs ``data_rep_h`` and ``data_rep_v`` (1 V, 1 Hz Newport sine
-    from 1 s) at 10 kHz with the controller executed every sample, 16-bit
-    converters and every noise source. The tracking error is what the 4QD
-    reports, ``e = [Vph, Vpv] / Gd`` (the calibrated gains), after
-    ``settle_s``; its rms per axis is taken in the experiment that moves
-    that axis.
+The bench simulated is the one :func:`verify_on_twin` is given: the packaged
+twin (the truth of twin data) or a bench identified from the user's recordings
+(:func:`fsmbench.sim.identified.identified_bench`); its label travels with the result.
+
+Simulated ("measured" on the simulated records)
+    The bench runs ``data_rep_h`` and ``data_rep_v`` (1 V, 1 Hz Newport sine
+    from 1 s) at its converter rate with the controller executed every sample,
+    its converters' quantisation and every noise source. The tracking error is
+    what the 4QD reports, ``e = [Vph, Vpv] / Gd`` (the gains the real-time code
+    divides by: the design plant's), after ``settle_s``; its rms per axis is
+    taken in the experiment that moves that axis.
 
 Predicted
     With ``G = ∂R/∂Uc`` and ``Gn = ∂R/∂Un`` from a plant model (exact delays)
-    and the controller ``K`` closed as ``Uc = −K R_meas``, the measured error
-    is ``e = S (Gn Un + d) + S n_s`` with ``S = (I + G K)⁻¹``: the Newport's
-    sine through ``S Gn``, the Newport angle noise ``d`` (beam angle, 2× the
-    mirror's), the 4QD's noise and ADC quantisation ``n_s`` (volts over
-    ``Gd``), and the DAC's quantisation entering through ``S G``. White
-    sources have one-sided PSD ``σ²/(fs/2)``; each contributes
-    ``∫ |transfer|² PSD df`` over 0–fs/2. The sine contributes its rms.
+    and the discrete controller ``K`` closed as ``Uc = −K R_meas``, each noise
+    of the bench's noise model (:func:`fsmbench.control.validation.tracking_error_spectra`:
+    the 4QD's white, 1/f, random-walk noise and mains lines, the Newport's angle
+    noise, ADC and DAC quantisation as white ``q²/12``) is integrated over
+    ``1/duration`` to ``fs/2``; the Newport's sine contributes its rms through ``S Gn``.
 """
 
 from __future__ import annotations
@@ -29,8 +32,11 @@ from typing import Any
 import control as ct
 import numpy as np
 
-from fsmbench.bench.blocks import PlantModel, ss_frequency_response
-from fsmbench.bench.params import Bench
+from fsmbench.bench.blocks import PlantModel
+from fsmbench.bench.params import Bench, PerAxis
+from fsmbench.budget.propagation import loop_response
+from fsmbench.control.seed import tustin
+from fsmbench.control.validation import tracking_error_spectra
 from fsmbench.sim.controller import feedback_controller
 from fsmbench.twin.experiments import REP_AMPLITUDE_V, REP_FREQ_HZ
 from fsmbench.twin.simulate import simulate_bench
@@ -54,6 +60,9 @@ class TrackingCheck:
     controller : str
     seed : int
     duration_s, settle_s : float
+    bench : str
+        The bench simulated, in words.
+    bench_kind : {"packaged", "identified"}
     """
 
     measured_rms_rad: dict[str, float]
@@ -64,23 +73,18 @@ class TrackingCheck:
     seed: int
     duration_s: float
     settle_s: float
+    bench: str = ""
+    bench_kind: str = "packaged"
 
     def to_json(self) -> dict[str, Any]:
         """Plain values (SI units)."""
         return asdict(self)
 
 
-def _loop(plant: PlantModel, k: ct.StateSpace, f_hz: np.ndarray
-          ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """``S = (I + G K)^-1``, ``G = ∂R/∂Uc`` and ``Gn = ∂R/∂Un`` at ``f_hz``, each (F, 2, 2)."""
-    g = plant.frequency_response(f_hz, outputs=["Rh", "Rv"], inputs=["Uch", "Ucv"]).values
-    gn = plant.frequency_response(f_hz, outputs=["Rh", "Rv"], inputs=["Unh", "Unv"]).values
-    s = np.linalg.inv(np.eye(2)[None] + g @ ss_frequency_response(k, f_hz))
-    return s, g, gn
-
-
 def predict_tracking(plant: PlantModel, k: ct.StateSpace, *, bench: Bench,
-                     n_freq: int = 20000) -> tuple[dict[str, float], dict[str, dict[str, float]]]:
+                     gd_used_v_per_rad: tuple[float, float] | None = None,
+                     n_freq: int = 20000, f_min_hz: float | None = None
+                     ) -> tuple[dict[str, float], dict[str, dict[str, float]]]:
     """Linear prediction of the 4QD tracking-error rms per axis [rad] (see module notes).
 
     Parameters
@@ -88,61 +92,62 @@ def predict_tracking(plant: PlantModel, k: ct.StateSpace, *, bench: Bench,
     plant : PlantModel
         The model predicted with (identified or physical).
     k : control.StateSpace
-        Continuous controller ``Rh, Rv → Uch, Ucv``.
+        Controller ``Rh, Rv → Uch, Ucv``: continuous (Tustin-discretised at the
+        converter rate, as the target runs it) or discrete.
     bench : Bench
-        Noise levels: the twin's 4QD noise and the Newport's angle noise from
-        ``bench.true`` (the budget's sources), converters from ``bench.nominal``.
+        Its ``true`` parameters give the noise model (the packaged twin's, or
+        the one fitted to the recordings) and the converters.
+    gd_used_v_per_rad : (float, float), optional
+        4QD gains the real-time code divides by [V/rad]; default the plant's ``Gd``.
     n_freq : int
-        Points of the frequency grid (linear, 0–fs/2; fine enough for the
+        Points of the linear frequency grid up to fs/2 (fine enough for the
         ~0.5 Hz-wide resonances the loop may leave).
+    f_min_hz : float, optional
+        Lowest frequency integrated [Hz] (the record's ``1/duration``); default fs/2/n_freq.
     """
-    p_true, p_nom = bench.true, bench.nominal
-    fs = p_nom.converter.fs_hz
-    f = np.linspace(fs / 2 / n_freq, fs / 2, n_freq)
-    df = f[1] - f[0]
-    s, g, _ = _loop(plant, k, f)
-    gd = np.abs(p_nom.quad_diode.gain_v_per_rad.as_array())
-    lsb = p_nom.converter.lsb_v
-    white = 1.0 / (fs / 2)  # one-sided PSD of unit-variance white noise
-    psd_qd = np.array([p_true.quad_diode.noise_rms_v.h, p_true.quad_diode.noise_rms_v.v])**2 \
-        / gd**2 * white
-    psd_adc = (lsb**2 / 12) / gd**2 * white
-    psd_beam = (p_true.newport.beam_angle_per_mirror_angle
-                * p_true.newport.angle_noise_rms_rad) ** 2 * white
-    psd_dac = lsb**2 / 12 * white
-
-    def integral(transfer: np.ndarray, psd: np.ndarray | float) -> np.ndarray:
-        # transfer (F, 2, 2) from independent per-channel sources of PSD psd
-        power = np.abs(transfer) ** 2 * np.broadcast_to(psd, (2,))[None, None, :]
-        return np.asarray(np.sum(power.sum(axis=2), axis=0) * df)
-
-    parts = {
-        "qd_noise": integral(s, psd_qd),
-        "adc_quantisation": integral(s, psd_adc),
-        "newport_angle_noise": integral(s, psd_beam),
-        "dac_quantisation": integral(s @ g, psd_dac),
-    }
-    s1, _, gn1 = (x[0] for x in _loop(plant, k, np.array([REP_FREQ_HZ])))
+    p = bench.true
+    fs = p.converter.fs_hz
+    kd = k if k.dt else tustin(k, ts_s=p.converter.ts_s)
+    gd = np.diag(np.asarray(plant.blocks["Gd"].D, dtype=float))
+    used = (float(gd[0]), float(gd[1])) if gd_used_v_per_rad is None else gd_used_v_per_rad
+    lo = fs / 2 / n_freq if f_min_hz is None else f_min_hz
+    f = np.linspace(lo, fs / 2, n_freq)
+    spectra = tracking_error_spectra(plant, kd, params=p, gd_used_v_per_rad=used, f_hz=f)
+    variance = spectra.band_variance((lo, fs / 2))
+    loop = loop_response(plant, params=p, f_hz=np.array([REP_FREQ_HZ]),
+                         controller=_effective(kd, gd, used))
+    sn = (loop.s @ loop.g_rn)[0]
     total: dict[str, float] = {}
     out_parts: dict[str, dict[str, float]] = {}
     for i, (axis, _exp, _un, _vp) in enumerate(_AXES):
-        sine = abs((s1 @ gn1)[i, i]) * REP_AMPLITUDE_V / np.sqrt(2)
-        terms = {name: float(np.sqrt(v[i])) for name, v in parts.items()}
-        terms["newport_sine"] = float(sine)
+        terms = {name: float(np.sqrt(max(v[i], 0.0))) for name, v in variance.items()}
+        terms["newport_sine"] = float(abs(sn[i, i]) * REP_AMPLITUDE_V / np.sqrt(2))
         out_parts[axis] = terms
         total[axis] = float(np.sqrt(sum(t**2 for t in terms.values())))
     return total, out_parts
 
 
-def measure_tracking(recordings: Mapping[str, Any], *, bench: Bench,
-                     settle_s: float) -> dict[str, float]:
-    """4QD tracking-error rms per axis [rad] in the experiment that moves that axis."""
-    gd = bench.nominal.quad_diode.gain_v_per_rad
+def _effective(kd: ct.StateSpace, gd: np.ndarray, used: tuple[float, float]) -> ct.StateSpace:
+    """The controller as it acts on the model's beam angle: ``K diag(Gd / gd_used)``."""
+    scale = np.diag(gd / np.asarray(used, dtype=float))
+    return ct.ss(kd.A, np.asarray(kd.B) @ scale, kd.C, np.asarray(kd.D) @ scale, kd.dt,
+                 inputs=["Rh", "Rv"], outputs=["Uch", "Ucv"])
+
+
+def measure_tracking(recordings: Mapping[str, Any], *, bench: Bench, settle_s: float,
+                     gd_v_per_rad: tuple[float, float] | None = None) -> dict[str, float]:
+    """4QD tracking-error rms per axis [rad] in the experiment that moves that axis.
+
+    ``gd_v_per_rad``: the 4QD gains the reading is divided by (default the bench
+    file's nominal ones, what the seed's real-time code used).
+    """
+    gd = (bench.nominal.quad_diode.gain_v_per_rad.as_array() if gd_v_per_rad is None
+          else np.asarray(gd_v_per_rad, dtype=float))
     out = {}
-    for axis, exp, _un, vp in _AXES:
+    for i, (axis, exp, _un, vp) in enumerate(_AXES):
         ds = recordings[exp]
         t = np.asarray(ds["t"].values)
-        e = np.asarray(ds[vp].values)[t >= t[0] + settle_s] / gd[axis]
+        e = np.asarray(ds[vp].values)[t >= t[0] + settle_s] / gd[i]
         out[axis] = float(np.sqrt(np.mean((e - e.mean()) ** 2)))
     return out
 
@@ -150,16 +155,17 @@ def measure_tracking(recordings: Mapping[str, Any], *, bench: Bench,
 def verify_on_twin(k: ct.StateSpace, *, bench: Bench, plant: PlantModel, name: str,
                    seed: int = 0, duration_s: float = 12.0, settle_s: float = 2.0
                    ) -> TrackingCheck:
-    """Run the repeatability experiments on the twin with ``k`` and compare with the prediction.
+    """Run the repeatability experiments on ``bench`` with ``k`` and compare with the prediction.
 
     Parameters
     ----------
     k : control.StateSpace
         Continuous controller ``Rh, Rv → Uch, Ucv`` (Tustin-discretised at
-        the converter rate for the twin).
+        the converter rate, as the target runs it).
     bench : Bench
+        The bench simulated: packaged (its physics) or identified (its model).
     plant : PlantModel
-        Model for the prediction.
+        Model for the prediction; its ``Gd`` are the gains the controller divides by.
     name : str
         Controller name for the report.
     seed : int
@@ -169,16 +175,22 @@ def verify_on_twin(k: ct.StateSpace, *, bench: Bench, plant: PlantModel, name: s
     Raises
     ------
     ValueError
-        The controller does not stabilise the twin (named, with the spectral radius).
+        The controller does not stabilise the bench (named, with the spectral radius).
     """
     p = bench.true
-    dk = feedback_controller(k, gd_v_per_rad=bench.nominal.quad_diode.gain_v_per_rad,
+    gd = np.diag(np.asarray(plant.blocks["Gd"].D, dtype=float))
+    used = (float(gd[0]), float(gd[1]))
+    dk = feedback_controller(k, gd_v_per_rad=PerAxis(h=used[0], v=used[1]),
                              ts_s=p.converter.ts_s, name=name)
     run = simulate_bench(bench, seed=seed, duration_s=duration_s,
                          experiments=[exp for _a, exp, _u, _v in _AXES], controller=dk)
-    measured = measure_tracking(run.recordings, bench=bench, settle_s=settle_s)
-    predicted, parts = predict_tracking(plant, k, bench=bench)
+    measured = measure_tracking(run.recordings, bench=bench, settle_s=settle_s,
+                                gd_v_per_rad=used)
+    predicted, parts = predict_tracking(plant, k, bench=bench, gd_used_v_per_rad=used,
+                                        f_min_hz=1.0 / (duration_s - settle_s))
     return TrackingCheck(measured_rms_rad=measured, predicted_rms_rad=predicted,
                          predicted_parts_rad=parts,
                          ratio={a: measured[a] / predicted[a] for a in measured},
-                         controller=name, seed=seed, duration_s=duration_s, settle_s=settle_s)
+                         controller=name, seed=seed, duration_s=duration_s, settle_s=settle_s,
+                         bench=bench.label,
+                         bench_kind="identified" if bench.is_identified else "packaged")
