@@ -2,19 +2,25 @@
 
     fsmbench params   [--params FILE] [--out DIR] [--json]
     fsmbench simulate OUT [--duration S] [--seed N] [--params FILE] [--format F]
-                      [--excitation FILE…]
+                      [--excitation FILE…] [--bench DIR]
     fsmbench excite   OUT --input Uch --amplitude-rms V [--kind K] [--band LO HI] ...
+                      [--bench DIR]
     fsmbench identify DATA --out OUT [--params FILE] [--frf auto|welch|lpm|periodic]
                       [--weights seed|variance]
-    fsmbench budget   DATA --out OUT [--params FILE] [--identification DIR]
-    fsmbench design   DATA --out OUT [--params FILE] [--seed N] [--identification DIR]
+    fsmbench budget   DATA --out OUT [--params FILE] [--bench DIR]
+    fsmbench design   DATA --out OUT [--params FILE] [--seed N] [--bench DIR]
     fsmbench study    [--data DIR] --out OUT [--seed N] [--duration S] [--params FILE]
                       [--figures png,pdf]
     fsmbench convert  IN OUT [--fs HZ]
-    fsmbench serve    [--backend twin|playback DIR] [--params FILE] [--seed N] [--speed X]
-                      [--nodb --port N] [--out DIR]
+    fsmbench serve    [--backend twin|playback DIR] [--params FILE] [--bench DIR] [--seed N]
+                      [--speed X] [--nodb --port N] [--out DIR]
     fsmbench montecarlo DATA|--twin --out OUT [--n N] [--seed S] [--scheduler ADDRESS]
-                      [--workers N] [--ranges TOML] [--controller FILE[::NAME]]
+                      [--workers N] [--ranges TOML] [--controller FILE[::NAME]] [--bench DIR]
+
+``--bench DIR`` is the one option of every command that simulates: the bench
+identified in DIR (``identify`` or ``study`` output) instead of the packaged
+twin. On recorded data the design's closed-loop check runs on the bench
+identified from them, never on the packaged twin.
 
 Every writing command also takes ``--timestamp`` (wall-clock time in MAT-file
 headers and ``run.json``; default none, so the same inputs and seed give
@@ -98,6 +104,31 @@ def _progress() -> Callable[[str], None]:
     return say
 
 
+BENCH_HELP = ("simulate the bench identified in DIR (the output of fsmbench identify or "
+              "study: identification.json, plant.mat) instead of the packaged twin; converters "
+              "and everything no recording measured come from --params")
+
+
+def add_bench_option(p: argparse.ArgumentParser, *, also: str = "") -> None:
+    """``--bench DIR``, the one option every simulating command takes (``also``: an alias)."""
+    names = ["--bench", *([also] if also else [])]
+    p.add_argument(*names, metavar="DIR", default=None, dest="bench_dir", help=BENCH_HELP)
+
+
+def sim_bench(args: argparse.Namespace) -> Bench:
+    """The bench a command simulates: identified in ``--bench DIR``, else the packaged one."""
+    bench = _bench(args)
+    folder = getattr(args, "bench_dir", None)
+    if folder is None:
+        return bench
+    if Path(folder).is_file():
+        raise ParamsError(f"{folder}: is a file; --bench needs a folder written by fsmbench "
+                          "identify or study (a bench TOML goes to --params)")
+    from fsmbench.sim.identified import identified_bench
+
+    return identified_bench(folder, bench=bench)
+
+
 def _bench(args: argparse.Namespace) -> Bench:
     path = args.params
     if path is not None and Path(path).is_dir():
@@ -145,7 +176,7 @@ def _run_folder(args: argparse.Namespace, out: str, *, data: str | Path | None,
 
     final = Path(out).resolve()
     for option, value in (("--params", args.params),
-                          ("--identification", getattr(args, "identification", None))):
+                          ("--bench", getattr(args, "bench_dir", None))):
         if value is not None and (Path(value).resolve() == final
                                   or final in Path(value).resolve().parents):
             raise OutputError(value, f"{option} is inside --out {out}, which this run replaces "
@@ -197,7 +228,7 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
     out = args.out_pos or args.out
     if out is None:
         raise ValueError("simulate needs an output folder: fsmbench simulate OUT")
-    bench = _bench(args)
+    bench = sim_bench(args)
     with _run_folder(args, out, data=None,
                      need_bytes=_twin_bytes(args, args.format) + _SMALL_BYTES) as run:
         say = _progress()
@@ -302,21 +333,30 @@ def _cmd_identify(args: argparse.Namespace) -> int:
 def _plant(args: argparse.Namespace, inp: _StageInput) -> Any:
     from fsmbench.stages import choose_plant
 
-    if args.identification is not None:
+    if args.bench_dir is not None:
         from fsmbench.ident.load import load_identified_plant
 
-        plant = load_identified_plant(args.identification)
+        plant = load_identified_plant(args.bench_dir)
     else:
         plant = choose_plant(inp.recordings, bench=inp.bench, progress=inp.say)
     inp.say(f"plant: {plant.source}")
     return plant
 
 
-def _check_identification(args: argparse.Namespace) -> None:
-    if args.identification is not None:
-        from fsmbench.ident.load import load_identified_plant
+def _simulated(args: argparse.Namespace, inp: _StageInput, plant: Any) -> Any:
+    """The bench the design's closed-loop check runs: identified, never the packaged twin."""
+    from fsmbench.stages import SimulationBench, simulation_bench
 
-        load_identified_plant(args.identification)  # bad files: one line, before any work
+    if args.bench_dir is not None:
+        return SimulationBench(sim_bench(args))
+    return simulation_bench(bench=inp.bench, is_twin=False,
+                            identification=plant.identification,
+                            label=f"the bench identified from the recordings in {inp.data}")
+
+
+def _check_identification(args: argparse.Namespace) -> None:
+    if args.bench_dir is not None:
+        sim_bench(args)  # bad files: one line, before any work
 
 
 def _cmd_budget(args: argparse.Namespace) -> int:
@@ -373,7 +413,8 @@ def _cmd_design(args: argparse.Namespace) -> int:
         inp = _stage_input(args)
         plant = _plant(args, inp)
         stage, paths = design_stage(bench=inp.bench, out_dir=run.staging, plant=plant,
-                                    seed=args.seed, progress=inp.say)
+                                    seed=args.seed, progress=inp.say,
+                                    simulated=_simulated(args, inp, plant))
     for path in paths:
         print(run.final_path(path))
     p = stage.payload
@@ -382,10 +423,13 @@ def _cmd_design(args: argparse.Namespace) -> int:
         if name in p:
             print(_loop_line(name, p[name], bound), file=sys.stderr)
     twin = p["closed_loop_twin"]
-    print("fsmbench controller on the twin: tracking error "
-          + ", ".join(f"{a} {1e6 * v:.3g} µrad rms (predicted "
-                      f"{1e6 * twin['predicted_rms_rad'][a]:.3g} µrad)"
-                      for a, v in twin["tracking_error_rms_rad"].items()), file=sys.stderr)
+    if twin is None:
+        print(f"fsmbench controller not simulated: {p['closed_loop_skipped']}", file=sys.stderr)
+    else:
+        print(f"fsmbench controller simulated on {twin['bench']}: tracking error "
+              + ", ".join(f"{a} {1e6 * v:.3g} µrad rms (linear prediction "
+                          f"{1e6 * twin['predicted_rms_rad'][a]:.3g} µrad)"
+                          for a, v in twin["tracking_error_rms_rad"].items()), file=sys.stderr)
     return 0
 
 
@@ -457,6 +501,7 @@ def _parser() -> argparse.ArgumentParser:
                    help="play these designed excitations (fsmbench excite: folder, .json or "
                         ".mat) each in its input's experiment instead of the seed's noise; "
                         "--experiments adds the seed's own")
+    add_bench_option(p)
     p.set_defaults(func=_cmd_simulate)
 
     stage_commands = (
@@ -478,10 +523,14 @@ def _parser() -> argparse.ArgumentParser:
             p.add_argument("--seed", metavar="N", type=int, default=0,
                            help="twin seed of the closed-loop verification (default 0)")
         if name in ("budget", "design"):
-            p.add_argument("--identification", metavar="DIR", default=None,
-                           help="reuse the identification in DIR (the output of fsmbench "
-                                "identify or study: identification.json and plant.mat) "
-                                "instead of identifying the plant again")
+            p.add_argument("--bench", "--identification", metavar="DIR", default=None,
+                           dest="bench_dir",
+                           help="the bench identified in DIR (the output of fsmbench identify "
+                                "or study: identification.json and plant.mat): its plant, "
+                                "instead of identifying DATA again"
+                                + ("; its simulation for the closed-loop check" if name ==
+                                   "design" else "")
+                                + " (--identification: the same, older name)")
         p.set_defaults(func=func)
 
     p = sub.add_parser("study", help="the whole study; the twin when no --data is given")

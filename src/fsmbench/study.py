@@ -88,6 +88,8 @@ class StudyResult:
     timings_s: dict[str, float] = field(default_factory=dict)
     figures: tuple[str, ...] = ()
     sections: tuple[Section, ...] = field(default=(), repr=False, compare=False)
+    design: Any = field(default=None, repr=False, compare=False)
+    plant: Any = field(default=None, repr=False, compare=False)
 
     def to_json(self) -> dict[str, Any]:
         """``study.json``: what ran, relative paths, no timings (they are in timings.json)."""
@@ -348,7 +350,7 @@ def run_study(*, out_dir: str | Path, data_dir: str | Path | None = None,
                          experiments=tuple(recordings),
                          skipped_experiments=dict(loaded.skipped), summary=summary,
                          timings_s=timings, figures=tuple(str(p) for p in exported),
-                         sections=tuple(sections))
+                         sections=tuple(sections), design=design, plant=plant.plant)
     atomic_write_text(out / "study.json", json.dumps(plain_json(result.to_json()), indent=2)
                       + "\n")
     atomic_write_text(out / "timings.json", json.dumps(

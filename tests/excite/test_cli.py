@@ -3,13 +3,22 @@
 from __future__ import annotations
 
 import json
+import re
 from pathlib import Path
 
 import numpy as np
 import pytest
 import scipy.io
 
+from fsmbench.bench.params import load_bench
 from fsmbench.cli import main
+from fsmbench.excite.design import design_noise
+from fsmbench.excite.limits import converter_peaks
+
+#: The one-line refusal of an excitation that leaves a converter's range.
+OVER_RANGE = re.compile(r"Uch: an excitation of 0\.05 V rms drives ADC Vch to (?P<peak>\S+) V "
+                        r"peak, beyond its ±10 V range \(nominal bench model\); at most "
+                        r"(?P<fit>\S+) V rms fits")
 
 
 def test_excite_writes_mat_json_and_prints_the_summary(
@@ -40,9 +49,18 @@ def test_excite_refuses_over_range_before_writing(
                  "--amplitude-rms", "0.05"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1
-    assert err[0].startswith("fsmbench excite: error: Uch: an excitation of 0.05 V rms "
-                             "drives ADC Vch to ")
-    assert err[0].endswith("at most 0.0152 V rms fits")
+    prefix = "fsmbench excite: error: "
+    assert err[0].startswith(prefix)
+    m = OVER_RANGE.fullmatch(err[0][len(prefix):])
+    assert m is not None, err[0]
+    # The numbers are those of the report of the same design (the command's defaults: the
+    # nominal model, 1-2000 Hz, seed 0), to 3 significant digits.
+    nominal = load_bench(None).nominal
+    report = converter_peaks(design_noise(input="Uch", band_hz=(1.0, 2000.0),
+                                          amplitude_rms_v=0.05, fs_hz=nominal.converter.fs_hz,
+                                          duration_s=30.0, seed=0), params=nominal)
+    assert float(m["peak"]) == float(f"{report.worst().peak_v:.3g}")
+    assert float(m["fit"]) == report.fitting_amplitude_rms_v()
     assert not out.exists()  # nothing written
 
 

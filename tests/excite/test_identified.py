@@ -1,4 +1,4 @@
-"""``fsmbench excite --identification DIR``: the 4QD a calibration measured limits the excitation.
+"""``fsmbench excite --bench DIR``: the 4QD a calibration measured limits the excitation.
 
 Reference: the real-bench twin's 4QD, 2 % compressed at 10.6 mrad of beam,
 calibrated by ``identify`` from its own ``data_cal_pd_h/v`` records.
@@ -51,7 +51,7 @@ def test_the_identified_compression_is_the_twins(calibrated: Path) -> None:
 def test_excite_refuses_what_the_identified_4qd_cannot_take(
         calibrated: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     args = ["--input", "Uch", "--band", "1", "2000", "--resolution", "1", "--periods", "2",
-            "--odd", "--identification", str(calibrated)]
+            "--odd", "--bench", str(calibrated)]
     assert main(["excite", str(tmp_path / "loud"), "--amplitude-rms", "0.015", *args]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "4QD (Vph)" in err[0] and "4QD identified in" in err[0], err

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import re
+
 import numpy as np
 import pytest
 from scipy.signal import dlsim
@@ -58,6 +60,12 @@ def test_coil_voltage_gain_is_ga_zc_gi() -> None:
     assert np.abs(y[:, ADC_CHANNELS.index("Vch")]).max() == pytest.approx(expected, rel=1e-5)
 
 
+#: The one-line refusal of an excitation that leaves a converter's range.
+OVER_RANGE = re.compile(r"Uch: an excitation of 0\.05 V rms drives ADC Vch to (?P<peak>\S+) V "
+                        r"peak, beyond its ±10 V range \(nominal bench model\); at most "
+                        r"(?P<fit>\S+) V rms fits")
+
+
 @pytest.fixture(scope="module")
 def seed_noise() -> ExcitationDesign:
     """The seed's level: 15 mV rms, 1-2000 Hz band noise on Uch, 30 s."""
@@ -83,14 +91,24 @@ def test_over_range_is_refused_with_the_amplitude_that_fits(seed_noise) -> None:
         check_limits(loud, params=NOM)
     msg = str(info.value)
     assert "\n" not in msg
-    assert msg.startswith("Uch: an excitation of 0.05 V rms drives ADC Vch to 32.7 V peak")
-    assert "beyond its ±10 V range" in msg and "at most 0.0152 V rms fits" in msg
-    # Linear: the amplitude offered fits (the same noise scaled), a bit more does not.
-    fit = converter_peaks(loud, params=NOM).fitting_amplitude_rms_v()
+    m = OVER_RANGE.fullmatch(msg)
+    assert m is not None, msg
+    # The numbers printed are the report's own (Vch at 32.7 V here), to 3 significant digits.
+    report = converter_peaks(loud, params=NOM)
+    vch = report.worst()
+    assert vch.signal == "Vch" and float(m["peak"]) == float(f"{vch.peak_v:.3g}")
+    fit = float(m["fit"])
+    assert fit == report.fitting_amplitude_rms_v()
+    # The rms that brings Vch to 10 V, floored to 3 significant digits (the floor forgives
+    # 1e-12 of rounding).
+    exact = 0.05 / vch.fraction
+    assert fit <= exact * (1 + 1e-12) and exact < fit + 10.0 ** (np.floor(np.log10(fit)) - 2)
+    # Linear: the amplitude offered fits (the same noise scaled). rel 1e-9: the same draws
+    # scaled by another factor through a linear model, rounding only.
     scaled = design_noise(input="Uch", band_hz=(1.0, 2000.0), amplitude_rms_v=fit, fs_hz=FS,
                           duration_s=30.0, seed=0)
     assert check_limits(scaled, params=NOM).worst().fraction == pytest.approx(
-        fit / 0.05 * 3.27, rel=0.01)
+        fit / 0.05 * vch.fraction, rel=1e-9)
     assert check_limits(scaled, params=NOM).fits
 
 

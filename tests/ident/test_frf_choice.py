@@ -23,9 +23,10 @@ from fsmbench.ident.pipeline import Identification, IdentifyOptions, identify
 from fsmbench.ident.sercalo import choose_estimator, experiment_frf
 from fsmbench.report.html import Table, iter_figures
 from fsmbench.report.ident_section import identification_section
+from fsmbench.sim.plant import twin_discrete
 from fsmbench.twin import TwinRun
 from fsmbench.twin.experiments import played_experiment
-from fsmbench.twin.simulate import simulate_experiment, twin_discrete
+from fsmbench.twin.simulate import simulate_experiment
 
 SERCALO_COLUMNS = [("data_uch", "Uch"), ("data_ucv", "Ucv")]
 

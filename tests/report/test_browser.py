@@ -101,7 +101,8 @@ def test_the_embedded_summary_is_summary_json(twin_page: Page, twin_study: Study
     assert embedded == on_disk
     assert embedded["format"] == "fsmbench.summary"
     assert {r["name"] for r in embedded["requirements"]} >= {
-        "distance_error_budget", "control_objective", "stability_margins"}
+        "distance_error_budget", "control_objective", "gain_margin", "phase_margin",
+        "closed_loop_simulation", "model_validation"}
 
 
 def test_zooming_a_bode_plot_changes_its_frequency_range(twin_page: Page) -> None:

@@ -177,7 +177,7 @@ def test_robustness_small_multiples_mark_the_unstable_cases(sections: list[Secti
 
 
 def test_twin_table_matches_the_check(sections: list[Section], stage: DesignStage) -> None:
-    tab = _table(sections[4], "fsmbench's controller on the twin")
+    tab = _table(sections[4], "fsmbench's controller simulated on the packaged twin")
     chk = stage.twin_check
     for row, axis in zip(tab.rows, "hv", strict=True):
         assert float(row[1]) == pytest.approx(1e6 * chk.measured_rms_rad[axis], abs=0.006)

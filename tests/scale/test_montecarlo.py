@@ -135,9 +135,10 @@ def test_nominal_draw_is_verify_on_twin(bench: Bench, controller: ControllerChoi
                               duration_s=DURATION_S, settle_s=SETTLE_S)
     draw = draw_parameters(seed=3, n=1, ranges=nominal.ranges)[0]
     row = run_draw(draw, nominal)
+    gd = bench.nominal.quad_diode.gain_v_per_rad  # what discrete_feedback divides by
     check = verify_on_twin(controller.continuous, bench=bench, plant=physical_plant(bench.true),
                            name="fsmbench controller", seed=draw.noise_seed,
-                           duration_s=DURATION_S, settle_s=SETTLE_S)
+                           duration_s=DURATION_S, settle_s=SETTLE_S, gd_v_per_rad=(gd.h, gd.v))
     # Same noise streams, same controller arithmetic: the same numbers, bit for bit.
     for axis in "hv":
         assert row.metrics[f"tracking_error_rms_rad.{axis}"] == check.measured_rms_rad[axis]
@@ -210,7 +211,7 @@ def test_destabilising_range_marks_draws_unstable(bench: Bench,
 
 def test_json_is_stamped_and_documented(reference: Any) -> None:
     doc = reference.to_json()
-    assert (doc["format"], doc["format_version"]) == ("fsmbench.montecarlo", 1)
+    assert (doc["format"], doc["format_version"]) == ("fsmbench.montecarlo", 2)
     assert list(doc)[:2] == ["format", "format_version"]
     json.dumps(doc, allow_nan=False)
     for key in ("fsmbench_version", "seed", "n", "controller", "ranges", "duration_s",
@@ -274,9 +275,9 @@ def test_cli_writes_json_and_prints_table(tmp_path: Path, client: Any,
 
 def test_cli_refuses_unclear_input(tmp_path: Path) -> None:
     for argv, message in (
-            (["--out", str(tmp_path / "o")], "give either a DATA folder or --twin"),
+            (["--out", str(tmp_path / "o")], "give one of a DATA folder, --bench DIR or --twin"),
             ([str(tmp_path), "--twin", "--out", str(tmp_path / "o")],
-             "give either a DATA folder or --twin"),
+             "give one of a DATA folder, --bench DIR or --twin"),
             (["--twin", "--out", str(tmp_path / "o"), "--settle", "6"], "leaves nothing"),
             (["--twin", "--out", str(tmp_path / "o"), "--duration", "3"],
              "--duration 3 s is too short for data_rep_h, data_rep_v")):

@@ -333,6 +333,9 @@ class PlantAnalysis:
     inputs_suffice : bool
         ``sigma_min(Gs) >= sigma_max(Gds) - 1`` wherever ``sigma_max(Gds) > 1``
         on the grid: a 10 V command can cancel a 1 V Newport disturbance.
+    disturbance_rolloff_hz : float
+        Lowest natural frequency of the Newport block ``Gn`` [Hz], where its
+        response starts to fall; NaN when the model's Newport is a constant gain.
     coprime : CoprimeFactors or None
         Of ``Gc Gi`` (``Uch, Ucv -> Vpch, Vpcv``, V/V), as seed 5.1; None when
         it cannot be computed (``checks`` says why).
@@ -359,6 +362,7 @@ class PlantAnalysis:
     coprime_scaled: CoprimeFactors | None
     objective: ControlObjective
     checks: tuple[Check, ...] = ()
+    disturbance_rolloff_hz: float = float("nan")
 
     def to_json(self) -> dict[str, Any]:
         """Scalars and the static matrices; the curves are left out."""
@@ -371,6 +375,7 @@ class PlantAnalysis:
             "rga_number_max_at_hz": float(self.f_hz[k]),
             "condition_number_dc": float(np.linalg.cond(self.g0)),
             "disturbance_bandwidth_hz": self.disturbance_bandwidth_hz,
+            "disturbance_rolloff_hz": self.disturbance_rolloff_hz,
             "inputs_suffice": self.inputs_suffice,
             "coprime": None if self.coprime is None else self.coprime.to_json(),
             "coprime_scaled": None if self.coprime_scaled is None
@@ -429,8 +434,16 @@ def analyse_plant(plant: PlantModel, *, params: BenchParams,
         scaled_disturbance_gain=gds_max, disturbance_bandwidth_hz=band,
         inputs_suffice=bool(np.all(gs_min[above] >= gds_max[above] - 1.0)),
         coprime=coprime, coprime_scaled=coprime_scaled,
-        objective=control_objective(params), checks=(check_gcgi, check_scaled))
+        objective=control_objective(params), checks=(check_gcgi, check_scaled),
+        disturbance_rolloff_hz=_rolloff_hz(plant.blocks["Gn"]))
 
+
+
+def _rolloff_hz(block: ct.StateSpace) -> float:
+    """Lowest natural frequency of a block's poles [Hz]; NaN for a static block."""
+    poles = np.linalg.eigvals(np.asarray(block.A, dtype=float)) if block.nstates else []
+    w = [abs(p) for p in poles if abs(p) > 0]
+    return float(min(w) / (2 * np.pi)) if w else float("nan")
 
 
 def _coprime_or_check(sys: ct.StateSpace, *, subject: str

@@ -5,7 +5,7 @@
                         [--periods P] [--transient-periods T] [--odd | --odd-odd]
                         [--log-grid [--lines-per-decade N]] [--phases minimised|schroeder|random]
                         [--duration S] [--sweep linear|log] [--seed N]
-                        [--params TOML] [--model nominal|true] [--identification DIR]
+                        [--params TOML] [--model nominal|true] [--bench DIR]
                         [--max-4qd-compression PCT]
                         [--mains-hz F] [--skip-mains] [--timestamp]
 
@@ -26,6 +26,7 @@ import argparse
 import functools
 import math
 import sys
+from pathlib import Path
 from typing import Any
 
 from fsmbench.cli_args import positive, seconds
@@ -97,15 +98,17 @@ def add_excite_command(sub: Any) -> None:
                    help="chirp sweep (default linear)")
     p.add_argument("--seed", metavar="N", type=int, default=0,
                    help="seed of random phases and noise (default 0)")
-    p.add_argument("--params", "--bench", metavar="TOML", default=None, dest="params",
+    p.add_argument("--params", metavar="TOML", default=None, dest="params",
                    help="bench parameters (TOML); default: the packaged Sercalo bench")
     p.add_argument("--model", choices=("nominal", "true"), default="nominal",
                    help="parameters the limits are checked with: nominal (a real bench; the "
                         "larger gains) or true (the twin) (default nominal)")
-    p.add_argument("--identification", metavar="DIR", default=None,
-                   help="take the 4QD's gains and compression from a previous identify or "
-                        "study run (DIR/identification.json): a real bench's 4QD, where the "
-                        "packaged model's is linear")
+    p.add_argument("--bench", "--identification", metavar="DIR", default=None,
+                   dest="bench_dir",
+                   help="check the limits on the bench identified in DIR (a previous identify "
+                        "or study run: its plant, delays, 4QD gains and compression, where the "
+                        "packaged model's 4QD is linear) instead of the bench file's model "
+                        "(--identification: the same, older name)")
     p.add_argument("--max-4qd-compression", metavar="PCT", dest="max_qd_compression",
                    type=functools.partial(positive, unit="percent"), default=1.0,
                    help="largest compression of the 4QD at the beam's peak [%%] (default 1: "
@@ -186,7 +189,6 @@ def summary(design: Any, report: Any) -> list[str]:
 def _command(args: argparse.Namespace) -> int:
     from fsmbench.bench.params import load_bench
     from fsmbench.excite.files import write_excitation
-    from fsmbench.excite.identified import with_identified_quad_diode
     from fsmbench.excite.limits import check_limits
     from fsmbench.excite.mains import mains_warning
     from fsmbench.io.matwrite import wall_clock_headers
@@ -195,11 +197,29 @@ def _command(args: argparse.Namespace) -> int:
     bench = load_bench(args.params)
     params = bench.nominal if args.model == "nominal" else bench.true
     model = args.model
-    if args.identification is not None:
-        params = with_identified_quad_diode(params, args.identification)
-        model = f"{args.model} bench model, 4QD identified in {args.identification}"
+    plant = None
+    if args.bench_dir is not None:
+        if Path(args.bench_dir).is_file():
+            raise ValueError(f"{args.bench_dir}: is a file; --bench needs a folder written by "
+                             "fsmbench identify or study (a bench TOML goes to --params)")
+        from fsmbench.excite.identified import with_identified_quad_diode
+        from fsmbench.ident.load import read_identification_json
+        from fsmbench.sim.identified import identified_bench
+        from fsmbench.sim.plant import bench_discrete
+
+        _path, ident = read_identification_json(args.bench_dir)
+        if "sercalo" in ident:
+            identified = identified_bench(args.bench_dir, bench=bench)
+            params, plant = identified.true, bench_discrete(identified)
+            model = f"bench identified in {args.bench_dir} (4QD identified in it too)"
+        else:
+            # Before the Sercalo is identified (the excitation is for that), the calibration
+            # alone: the bench file's plant with the 4QD the calibration measured.
+            params = with_identified_quad_diode(params, args.bench_dir)
+            model = (f"{args.model} bench model, 4QD identified in {args.bench_dir} (no "
+                     "identified Sercalo there yet)")
     design = _design(args, params.converter.fs_hz)
-    report = check_limits(design, params=params, model=model,  # before any output
+    report = check_limits(design, params=params, model=model, plant=plant,  # before any output
                           max_qd_compression=args.max_qd_compression / 100.0)
     warning = mains_warning(design)
     if warning:

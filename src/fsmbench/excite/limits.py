@@ -336,7 +336,8 @@ def input_response(plant: DiscretePlant, f_hz: np.ndarray, *, input: str,
 
 def converter_peaks(design: ExcitationDesign, *, params: BenchParams,
                     model: str = "nominal",
-                    max_qd_compression: float = DEFAULT_MAX_QD_COMPRESSION) -> LimitReport:
+                    max_qd_compression: float = DEFAULT_MAX_QD_COMPRESSION,
+                    plant: DiscretePlant | None = None) -> LimitReport:
     """Peak of ``design`` at the DAC and at each ADC channel it reaches (see the module notes).
 
     Parameters
@@ -349,6 +350,9 @@ def converter_peaks(design: ExcitationDesign, *, params: BenchParams,
         Name of ``params`` in the report.
     max_qd_compression : float
         Largest compression allowed at a 4QD peak [1] (0.01: 1 %).
+    plant : DiscretePlant, optional
+        The plant the engine runs for an identified bench
+        (:func:`fsmbench.sim.plant.bench_discrete`); default the physics of ``params``.
 
     Raises
     ------
@@ -365,7 +369,8 @@ def converter_peaks(design: ExcitationDesign, *, params: BenchParams,
         raise ValueError(f"unknown input {design.input!r}; DAC channels are "
                          f"{', '.join(DAC_CHANNELS)}")
     limit = params.converter.range_v / 2
-    plant = twin_discrete(params)
+    if plant is None:
+        plant = twin_discrete(params)
     y = response_from_rest(design.samples_v, input=design.input, plant=plant)
     peak = np.abs(y).max(axis=0)
     rms = np.sqrt(np.mean(y * y, axis=0))
@@ -400,7 +405,8 @@ def converter_peaks(design: ExcitationDesign, *, params: BenchParams,
 
 def check_limits(design: ExcitationDesign, *, params: BenchParams,
                  model: str = "nominal",
-                 max_qd_compression: float = DEFAULT_MAX_QD_COMPRESSION) -> LimitReport:
+                 max_qd_compression: float = DEFAULT_MAX_QD_COMPRESSION,
+                 plant: DiscretePlant | None = None) -> LimitReport:
     """:func:`converter_peaks`, raising when a converter's range or the 4QD's linear range is left.
 
     Raises
@@ -411,7 +417,7 @@ def check_limits(design: ExcitationDesign, *, params: BenchParams,
         would fit.
     """
     report = converter_peaks(design, params=params, model=model,
-                             max_qd_compression=max_qd_compression)
+                             max_qd_compression=max_qd_compression, plant=plant)
     if not report.fits:
         raise ExcitationLimitError(report.verdict())
     return report

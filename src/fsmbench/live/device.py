@@ -8,8 +8,9 @@ running.
 
 Device properties (set by ``fsmbench serve`` or in the Tango database):
 ``Backend`` (``twin`` or ``playback``), ``PlaybackFolder``, ``ParamsFile``
-(a bench TOML; empty: the packaged bench), ``Seed``, ``Speed`` and
-``OutputFolder``.
+(a bench TOML; empty: the packaged bench), ``BenchFolder`` (an identification
+folder: the twin simulates the bench identified there), ``Seed``, ``Speed``
+and ``OutputFolder``.
 
 This module imports PyTango: it is the ``fsmbench[tango]`` extra. The
 rest of fsmbench imports without it.
@@ -44,6 +45,9 @@ class FsmBench(Device):
                                      doc="folder of recordings for the playback backend")
     ParamsFile = device_property(dtype=str, default_value="",
                                  doc="bench parameters (TOML); empty: the packaged bench")
+    BenchFolder = device_property(dtype=str, default_value="",
+                                  doc="identification folder (fsmbench identify or study): the "
+                                      "twin simulates that bench; empty: the bench file's")
     Seed = device_property(dtype=int, default_value=0, doc="seed of every noise source")
     Speed = device_property(dtype=float, default_value=1.0,
                             doc="bench seconds per wall-clock second")
@@ -57,6 +61,10 @@ class FsmBench(Device):
         self.set_change_event("State", True, False)
         self.set_change_event("LoopClosed", True, False)
         bench = load_bench(self.ParamsFile) if self.ParamsFile else default_bench()
+        if self.BenchFolder:
+            from fsmbench.sim.identified import identified_bench
+
+            bench = identified_bench(self.BenchFolder, bench=bench)
         self.bench = LiveBench(bench, backend=self.Backend,
                                playback_folder=self.PlaybackFolder or None, seed=self.Seed,
                                speed=self.Speed, output_folder=self.OutputFolder,

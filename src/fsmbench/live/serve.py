@@ -33,6 +33,8 @@ class ServeOptions:
     backend : {"twin", "playback"}
     playback_folder : Path or None
     params_file : Path or None
+    bench_folder : Path or None
+        An identification folder: the twin simulates the bench identified there.
     seed : int
     speed : float
         Bench seconds per wall-clock second.
@@ -55,6 +57,7 @@ class ServeOptions:
     output_folder: Path
     device_name: str = "fsmbench/bench/1"
     instance: str = "fsmbench"
+    bench_folder: Path | None = None
 
     def properties(self) -> dict[str, str]:
         """The device properties, as text."""
@@ -63,6 +66,7 @@ class ServeOptions:
             "PlaybackFolder": str(self.playback_folder.resolve()) if self.playback_folder
             else "",
             "ParamsFile": str(self.params_file.resolve()) if self.params_file else "",
+            "BenchFolder": str(self.bench_folder.resolve()) if self.bench_folder else "",
             "Seed": str(self.seed),
             "Speed": repr(float(self.speed)),
             "OutputFolder": str(self.output_folder.resolve()),
@@ -108,6 +112,15 @@ def serve(options: ServeOptions, *, ready: str = "") -> int:
         raise ValueError(f"{options.playback_folder}: no such folder of recordings")
     if options.params_file is not None and not options.params_file.is_file():
         raise ValueError(f"{options.params_file}: no such parameter file")
+    if options.bench_folder is not None:
+        if options.backend != "twin":
+            raise ValueError("--bench DIR is the bench the twin simulates; it does not go with "
+                             "--backend playback")
+        from fsmbench.bench.params import load_bench
+        from fsmbench.sim.identified import identified_bench
+
+        # Bad folders are one line here, before the server starts.
+        identified_bench(options.bench_folder, bench=load_bench(options.params_file))
     if options.nodb:
         _check_port(options.port)
         with tempfile.TemporaryDirectory(prefix="fsmbench-tango-") as tmp:
@@ -142,6 +155,9 @@ def add_serve_command(sub: Any, *, factor: Callable[[str], float]) -> None:
                    help="twin (default), or playback DIR: replay a folder of recordings")
     p.add_argument("--params", metavar="FILE", default=None,
                    help="bench parameters (TOML); default: the packaged Sercalo bench")
+    p.add_argument("--bench", metavar="DIR", default=None, dest="bench_dir",
+                   help="the twin simulates the bench identified in DIR (the output of "
+                        "fsmbench identify or study) instead of the packaged one")
     p.add_argument("--seed", metavar="N", type=int, default=0, help="twin seed (default 0)")
     p.add_argument("--speed", metavar="X", type=factor, default=1.0,
                    help="bench seconds per wall-clock second (default 1: real time)")
@@ -160,4 +176,5 @@ def _command(args: argparse.Namespace) -> int:
     return serve(ServeOptions(
         backend=kind, playback_folder=Path(rest[0]) if rest else None,
         params_file=Path(args.params) if args.params else None, seed=args.seed,
-        speed=args.speed, nodb=args.nodb, port=args.port, output_folder=Path(args.out)))
+        speed=args.speed, nodb=args.nodb, port=args.port, output_folder=Path(args.out),
+        bench_folder=Path(args.bench_dir) if args.bench_dir else None))

@@ -155,8 +155,13 @@ def perturbed_bench(bench: Bench, factors: Mapping[str, float]) -> Bench:
     The current-amplifier gain ``1/(R + R_buffer + Rc)`` is scaled through
     ``R_buffer`` (the coil's resistance also sets the coil voltage); the DAC
     delay may become fractional (the twin's discretisation and the plant's
-    delays take it as a float).
+    delays take it as a float). An identified bench (``bench.model``) is moved
+    in its identified plant instead (:func:`fsmbench.sim.identified.perturbed_identified`).
     """
+    if bench.model is not None:
+        from fsmbench.sim.identified import perturbed_identified
+
+        return perturbed_identified(bench, factors)
     p = bench.true
     ts = p.converter.ts_s
     r_tot = (p.current_amplifier.r_ohm.as_array() + p.current_amplifier.r_buffer_ohm.as_array()
@@ -188,13 +193,22 @@ def perturbed_bench(bench: Bench, factors: Mapping[str, float]) -> Bench:
     return dataclasses.replace(bench, true=true)
 
 
-def parameter_values(p: BenchParams) -> dict[str, float]:
-    """The drawn plant's values, SI (for the rows of ``montecarlo.json``)."""
+def parameter_values(p: BenchParams, *,
+                     identified: Mapping[str, Any] | None = None) -> dict[str, float]:
+    """The drawn plant's values, SI (for the rows of ``montecarlo.json``).
+
+    ``identified``: an identified bench's values (``bench.model.values``): the
+    Sercalo's modes come from it, not from the bench file's physics.
+    """
     gi = p.current_amp_gain_a_per_v()
     out: dict[str, float] = {}
     for a in "hv":
-        out[f"sercalo.resonance_hz.{a}"] = p.sercalo.resonance_hz[a]
-        out[f"sercalo.damping_ratio.{a}"] = p.sercalo.damping_ratio[a]
+        if identified is not None and "sercalo" in identified:
+            out[f"sercalo.resonance_hz.{a}"] = float(identified["sercalo"][a]["resonance_hz"])
+            out[f"sercalo.damping_ratio.{a}"] = float(identified["sercalo"][a]["damping_ratio"])
+        else:
+            out[f"sercalo.resonance_hz.{a}"] = p.sercalo.resonance_hz[a]
+            out[f"sercalo.damping_ratio.{a}"] = p.sercalo.damping_ratio[a]
         out[f"quad_diode.gain_v_per_rad.{a}"] = p.quad_diode.gain_v_per_rad[a]
         out[f"current_amp_gain_a_per_v.{a}"] = gi[a]
         out[f"newport.gain_rad_per_v.{a}"] = p.newport.gain_rad_per_v[a]

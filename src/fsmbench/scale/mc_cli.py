@@ -1,15 +1,20 @@
 """``fsmbench montecarlo``: the closed-loop repeatability experiment over random plants.
 
-    fsmbench montecarlo DATA|--twin --out OUT [--n 1000] [--seed S]
+    fsmbench montecarlo DATA|--bench DIR|--twin --out OUT [--n 1000] [--seed S]
                         [--scheduler ADDRESS] [--workers N] [--ranges TOML]
                         [--controller FILE[::NAME]] [--duration S] [--settle S]
                         [--batch-size N] [--params FILE] [--timestamp]
 
+The draws move the bench the data came from: the bench identified from DATA,
+or the one identified in ``--bench DIR`` (the output of ``identify`` or
+``study``), or with ``--twin`` the packaged twin (its physics). A DATA folder
+that cannot be identified is refused with the reason: fsmbench never draws
+around the packaged bench for someone else's data.
+
 The controller is fsmbench's, designed as ``fsmbench design`` does: on the
-plant identified from DATA (or the nominal model if DATA does not allow it),
-or with ``--twin`` on the nominal physical plant; or one read from a
-``controllers.mat`` / ``controllers_sos.json`` / design folder with
-``--controller FILE`` (``FILE::NAME`` picks a controller by name).
+identified plant (DATA or ``--bench``), or with ``--twin`` on the nominal physical
+plant; or one read from a ``controllers.mat`` / ``controllers_sos.json`` /
+design folder with ``--controller FILE`` (``FILE::NAME`` picks a controller by name).
 
 Draws run on Dask: a ``LocalCluster`` of ``--workers`` processes (default all
 cores), or the running scheduler at ``--scheduler``. ``--workers 1`` without
@@ -91,8 +96,11 @@ def add_montecarlo_command(sub: Any) -> None:
                    help="folder of recordings: fsmbench's controller is designed on the plant "
                         "identified from it")
     p.add_argument("--twin", action="store_true",
-                   help="no recordings: design fsmbench's controller on the nominal physical "
-                        "plant")
+                   help="no recordings: draw around the packaged twin and design fsmbench's "
+                        "controller on the nominal physical plant")
+    p.add_argument("--bench", metavar="DIR", default=None, dest="bench_dir",
+                   help="draw around the bench identified in DIR (the output of fsmbench "
+                        "identify or study) and design fsmbench's controller on its plant")
     p.add_argument("--out", metavar="DIR", required=True, help="output folder")
     p.add_argument("--n", metavar="N", type=_count, default=1000,
                    help="number of draws (default 1000)")
@@ -288,15 +296,16 @@ def format_table(result: Any) -> str:
     return "\n".join(lines)
 
 
-def _controller(args: argparse.Namespace, bench: Any, say: Any) -> Any:
-    if args.controller is not None:
-        path, _sep, name = str(args.controller).partition("::")
-        return loaded_controller(path, name=name or None, bench=bench)
+def _drawn_bench(args: argparse.Namespace, bench: Any, say: Any) -> Any:
+    """The bench the draws move: the packaged twin, or the one identified (DATA or --bench)."""
     if args.twin:
-        say("designing fsmbench's controller on the nominal physical plant")
-        return designed_controller(bench)
+        return bench
+    if args.bench_dir is not None:
+        from fsmbench.sim.identified import identified_bench
+
+        return identified_bench(args.bench_dir, bench=bench)
     from fsmbench.io.folder import load_recordings
-    from fsmbench.stages import choose_plant
+    from fsmbench.stages import choose_plant, simulation_bench
 
     data = Path(args.data)
     if not data.is_dir():
@@ -305,8 +314,25 @@ def _controller(args: argparse.Namespace, bench: Any, say: Any) -> Any:
     loaded = load_recordings(data, progress=say, fs_hz=conv.fs_hz, adc_range_v=conv.range_v,
                              adc_bits=conv.bits)
     plant = choose_plant(dict(loaded.recordings), bench=bench, progress=say)
-    say(f"designing fsmbench's controller on the {plant.source} plant")
-    return designed_controller(bench, plant=plant.plant, plant_source=plant.source)
+    sim = simulation_bench(bench=bench, is_twin=False, identification=plant.identification,
+                           label=f"the bench identified from the recordings in {data}")
+    if sim.bench is None:
+        raise ValueError(f"{data}: the bench cannot be identified from these recordings "
+                         f"({sim.reason}); the draws would move the packaged twin instead, "
+                         "which is not your bench: fix the recordings, or use --twin on purpose")
+    return sim.bench
+
+
+def _controller(args: argparse.Namespace, bench: Any, drawn: Any, say: Any) -> Any:
+    if args.controller is not None:
+        path, _sep, name = str(args.controller).partition("::")
+        return loaded_controller(path, name=name or None, bench=bench)
+    if drawn.model is None:
+        say("designing fsmbench's controller on the nominal physical plant")
+        return designed_controller(bench)
+    plant = drawn.model.plant
+    say(f"designing fsmbench's controller on the plant of {drawn.label}")
+    return designed_controller(bench, plant=plant, plant_source=f"identified ({drawn.label})")
 
 
 def _command(args: argparse.Namespace) -> int:
@@ -315,11 +341,9 @@ def _command(args: argparse.Namespace) -> int:
     from fsmbench.jsonutil import stamped
     from fsmbench.scale.montecarlo import MonteCarloSetup, Ranges, run_montecarlo
 
-    if (args.data is None) == (not args.twin):
-        raise ValueError("give either a DATA folder or --twin")
-    if args.data is not None and args.controller is not None:
-        raise ValueError("DATA only serves to design fsmbench's controller; with --controller "
-                         "use --twin")
+    given = [x for x in (args.data is not None, args.twin, args.bench_dir is not None) if x]
+    if len(given) != 1:
+        raise ValueError("give one of a DATA folder, --bench DIR or --twin")
     from fsmbench.twin.experiments import seed_experiments, with_duration
 
     # A record too short for the repeatability experiments: one line, before any work.
@@ -346,7 +370,9 @@ def _command(args: argparse.Namespace) -> int:
     with output_transaction(out, command="montecarlo", arguments=argv, data_dir=args.data,
                             need_bytes=int(args.n * _BYTES_PER_DRAW),
                             timestamp=args.timestamp) as run:
-        setup = MonteCarloSetup(bench=bench, controller=_controller(args, bench, say),
+        drawn = _drawn_bench(args, bench, say)
+        say(f"draws around {drawn.label}")
+        setup = MonteCarloSetup(bench=drawn, controller=_controller(args, bench, drawn, say),
                                 ranges=ranges, duration_s=args.duration, settle_s=args.settle)
         where = (f"scheduler {args.scheduler}" if args.scheduler else
                  "this process" if workers == 1 else f"{workers} local worker processes")

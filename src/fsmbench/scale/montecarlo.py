@@ -61,7 +61,7 @@ from typing import Any
 import numpy as np
 
 from fsmbench.bench.blocks import physical_plant
-from fsmbench.bench.params import Bench, BenchParams, PerAxis
+from fsmbench.bench.params import Bench, PerAxis
 from fsmbench.jsonutil import plain_json, stamped
 from fsmbench.scale.draws import (
     PARAMETERS,
@@ -98,7 +98,8 @@ __all__ = [
 ]
 
 #: ``montecarlo.json``'s format and version.
-MONTECARLO_FORMAT = ("fsmbench.montecarlo", 1)
+#: 2: `bench` and `bench_kind`: the bench the draws move (packaged or identified).
+MONTECARLO_FORMAT = ("fsmbench.montecarlo", 2)
 
 _EXPERIMENTS = (("h", "data_rep_h", "Vph"), ("v", "data_rep_v", "Vpv"))
 
@@ -185,7 +186,8 @@ class MonteCarloSetup:
     Attributes
     ----------
     bench : Bench
-        The nominal twin; draws perturb ``bench.true``.
+        The bench the draws move: the packaged twin (its ``true`` physics) or an
+        identified bench (its identified plant).
     controller : ControllerChoice
     ranges : Ranges
     duration_s, settle_s : float
@@ -204,8 +206,11 @@ class MonteCarloSetup:
     settle_s: float = 2.0
 
     def to_json(self) -> dict[str, Any]:
-        """Controller, ranges, record length."""
-        return plain_json({"controller": self.controller.to_json(),
+        """The bench drawn around, controller, ranges, record length."""
+        return plain_json({"bench": self.bench.label,
+                           "bench_kind": "identified" if self.bench.is_identified
+                           else "packaged",
+                           "controller": self.controller.to_json(),
                            "ranges": self.ranges.to_json(), "duration_s": self.duration_s,
                            "settle_s": self.settle_s})
 
@@ -242,11 +247,12 @@ class DrawResult:
                            "metrics": nested(self.metrics)})
 
 
-def _margins(p: BenchParams, choice: ControllerChoice) -> dict[str, float]:
+def _margins(bench: Bench, choice: ControllerChoice) -> dict[str, float]:
     """Gain, phase and modulus margins of ``L_ii = (G Kd)_ii`` below Nyquist (exact delays)."""
     from fsmbench.control.freq import evaluate_ss, frequency_grid, siso_margins
 
-    plant = physical_plant(p, source="drawn")
+    plant = (physical_plant(bench.true, source="drawn") if bench.model is None
+             else bench.model.plant)
     cmds, meas = ["Uch", "Ucv"], ["Rh", "Rv"]
     g_sub = plant.subsystem(outputs=meas, inputs=cmds)
     tau = np.array([plant.input_delay_s[n] for n in cmds])
@@ -292,13 +298,13 @@ def run_draw(draw: Draw, setup: MonteCarloSetup) -> DrawResult:
     runs them (same streams, same noise seeds), with the generic loop.
     """
     from fsmbench.sim.controller import closed_loop_spectral_radius
-    from fsmbench.sim.plant import ADC_CHANNELS, twin_discrete
+    from fsmbench.sim.plant import ADC_CHANNELS, bench_discrete
     from fsmbench.sim.stream import BenchStream
     from fsmbench.twin.experiments import seed_experiments, with_duration
 
     bench = perturbed_bench(setup.bench, draw.factors)
     p = bench.true
-    plant = twin_discrete(p)
+    plant = bench_discrete(bench)
     dk = discrete_feedback(setup.controller)
     rho = closed_loop_spectral_radius(plant, dk, n_adc=len(ADC_CHANNELS))
     metrics = dict.fromkeys(METRICS, math.nan)
@@ -329,9 +335,10 @@ def run_draw(draw: Draw, setup: MonteCarloSetup) -> DrawResult:
             metrics[f"distance_error_rms_m.{axis}"] = float(np.sqrt(np.mean((va - va.mean())**2)))
             metrics[f"distance_nonrepeatable_rms_m.{axis}"] = _nonrepeatable_rms(
                 va, period=round(fs / REP_FREQ_HZ))
-        metrics.update(_margins(p, setup.controller))
+        metrics.update(_margins(bench, setup.controller))
     return DrawResult(index=draw.index, noise_seed=draw.noise_seed, stable=bool(stable),
-                      factors=dict(draw.factors), parameters=parameter_values(p),
+                      factors=dict(draw.factors), parameters=parameter_values(
+                          p, identified=None if bench.model is None else bench.model.values),
                       metrics=metrics)
 
 

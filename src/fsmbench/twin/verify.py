@@ -153,8 +153,8 @@ def measure_tracking(recordings: Mapping[str, Any], *, bench: Bench, settle_s: f
 
 
 def verify_on_twin(k: ct.StateSpace, *, bench: Bench, plant: PlantModel, name: str,
-                   seed: int = 0, duration_s: float = 12.0, settle_s: float = 2.0
-                   ) -> TrackingCheck:
+                   seed: int = 0, duration_s: float = 12.0, settle_s: float = 2.0,
+                   gd_v_per_rad: tuple[float, float] | None = None) -> TrackingCheck:
     """Run the repeatability experiments on ``bench`` with ``k`` and compare with the prediction.
 
     Parameters
@@ -171,6 +171,9 @@ def verify_on_twin(k: ct.StateSpace, *, bench: Bench, plant: PlantModel, name: s
     seed : int
     duration_s, settle_s : float
         Record length and the start left out [s].
+    gd_v_per_rad : (float, float), optional
+        The 4QD gains the real-time code divides by [V/rad]; default the plant's
+        ``Gd`` (what fsmbench's export gives the target, ``controllers_sos.json``).
 
     Raises
     ------
@@ -179,7 +182,8 @@ def verify_on_twin(k: ct.StateSpace, *, bench: Bench, plant: PlantModel, name: s
     """
     p = bench.true
     gd = np.diag(np.asarray(plant.blocks["Gd"].D, dtype=float))
-    used = (float(gd[0]), float(gd[1]))
+    used = (float(gd[0]), float(gd[1])) if gd_v_per_rad is None else (
+        float(gd_v_per_rad[0]), float(gd_v_per_rad[1]))
     dk = feedback_controller(k, gd_v_per_rad=PerAxis(h=used[0], v=used[1]),
                              ts_s=p.converter.ts_s, name=name)
     run = simulate_bench(bench, seed=seed, duration_s=duration_s,
