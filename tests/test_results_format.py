@@ -29,6 +29,8 @@ _BAD_KEY = re.compile(r"[^A-Za-z0-9_]")
 # values. Any other 2-element list under a key is taken for an (h, v) pair.
 NOT_HV = frozenset({
     "band_hz", "current_amp_band_hz", "newport_band_hz",  # [low_hz, high_hz]
+    "fit_band_hz", "va_fit_band_hz",  # the noise model's bands, [low_hz, high_hz]
+    "limits",  # a ratio's accepted band, [low, high]
     "shift_m", "path_change_m", "closed_form_m", "measured_change_m",  # per test shift
     "cos_incidence",  # per reflection
     "extra_integrators", "damping_scales", "frequency_scales", "gain_scales",  # candidates
@@ -115,10 +117,12 @@ def test_every_file_names_its_format_and_version(out: Path) -> None:
 
 
 def test_stamped_formats(out: Path) -> None:
-    """The four files stamped for issue 9, with their versions (2 where the shape changed)."""
-    expected = {"identification.json": ("fsmbench.identification", 2),
-                "budget.json": ("fsmbench.budget", 3),
-                "design.json": ("fsmbench.design", 1),
+    """The stamped files with their versions (bumped where the shape changed)."""
+    expected = {"identification.json": ("fsmbench.identification", 3),
+                "budget.json": ("fsmbench.budget", 4),
+                "design.json": ("fsmbench.design", 2),
+                "summary.json": ("fsmbench.summary", 2),
+                "validation.json": ("fsmbench.validation", 1),
                 "twin-data/twin_truth.json": ("fsmbench.twin_truth", 2)}
     for name, stamp in expected.items():
         data = _load(out / name)

@@ -441,7 +441,8 @@ def analyse_plant(plant: PlantModel, *, params: BenchParams,
 
 def _rolloff_hz(block: ct.StateSpace) -> float:
     """Lowest natural frequency of a block's poles [Hz]; NaN for a static block."""
-    poles = np.linalg.eigvals(np.asarray(block.A, dtype=float)) if block.nstates else []
+    poles = (np.linalg.eigvals(np.asarray(block.A, dtype=float)) if block.nstates
+             else np.zeros(0))
     w = [abs(p) for p in poles if abs(p) > 0]
     return float(min(w) / (2 * np.pi)) if w else float("nan")
 

@@ -72,6 +72,7 @@ from fsmbench.ident.newport import (
     resolved_sensor,
     sensor_notices,
 )
+from fsmbench.ident.noise_model import NoiseModelFit, fit_noise_model
 from fsmbench.ident.sampled import SensorLowpass
 from fsmbench.ident.sercalo import (
     SercaloFitOptions,
@@ -88,6 +89,7 @@ from fsmbench.jsonutil import plain_json, stamped
 
 __all__ = [
     "IDENTIFICATION_FORMAT",
+    "NOISE_EXPERIMENTS",
     "SEED_TRIMS_S",
     "Identification",
     "IdentifyOptions",
@@ -97,14 +99,18 @@ __all__ = [
 ]
 
 # The seed's t0 for each experiment (2.1: 1 s, 2.3: 1 s, 2.4: 3 s and 1.5 s).
+#: The records the noise model is fitted to (open-loop huddle tests, seed 3).
+NOISE_EXPERIMENTS = ("data_huddle_test_1", "data_huddle_test_2", "data_huddle_test_4")
+
 SEED_TRIMS_S = {"data_cal_pd_h": 1.0, "data_cal_pd_v": 1.0, "data_uch": 1.0, "data_ucv": 1.0,
                 "data_unh": 3.0, "data_unv": 1.5}
 
 Progress = Callable[[str], None]
 
 #: ``identification.json``'s format and version (docs/results.md); 2: the keys of
-#: ``diagnostics.sercalo.fit_error_rms_relative`` are ``Uch_to_Vph``, not ``Vph/Uch``.
-IDENTIFICATION_FORMAT = ("fsmbench.identification", 2)
+#: ``diagnostics.sercalo.fit_error_rms_relative`` are ``Uch_to_Vph``, not ``Vph/Uch``;
+#: 3: ``noise_model``, the noise fitted to the open-loop huddle tests.
+IDENTIFICATION_FORMAT = ("fsmbench.identification", 3)
 
 
 @dataclass(frozen=True)
@@ -208,6 +214,7 @@ class Identification:
     warnings: tuple[str, ...] = ()
     checks: tuple[Check, ...] = ()
     notices: tuple[Notice, ...] = ()
+    noise_model: NoiseModelFit | None = None
 
     def sercalo_modes(self) -> dict[str, dict[str, float]]:
         """Resonance and damping per axis: refined when available, else from the fit."""
@@ -260,6 +267,8 @@ class Identification:
             delays["newport"] = self.newport.delay_s
         if delays:
             out["delay_s"] = delays
+        if self.noise_model is not None:
+            out["noise_model"] = self.noise_model.to_json()
         out["checks"] = [c.to_json() for c in self.checks]
         out["notices"] = [n.to_json() for n in self.notices]
         out["diagnostics"] = {
@@ -487,11 +496,19 @@ def _identify(recordings: Mapping[str, xr.Dataset], *, bench: Bench, opts: Ident
     plant = assemble_plant(gi=blocks["Gi"][1], zc=blocks["Zc"][1], ga=blocks["Ga"][1],
                            gc=blocks["Gc"][1], gn=blocks["Gn"][1], gd=blocks["Gd"][1],
                            input_delay_s=delays, source=f"identified ({source})")
+    noise = None
+    if any(n in recordings for n in NOISE_EXPERIMENTS):
+        say("noise model of the open-loop huddle tests (the identified bench's noise)")
+        try:
+            noise = fit_noise_model(recordings, params=nom, qd_gain_v_per_rad=(
+                (qd["h"].gain_v_per_rad, qd["v"].gain_v_per_rad) if qd else None))
+        except ValueError as exc:
+            skipped["noise_model"] = str(exc)
     return Identification(qd=qd, current_amp=gi, sercalo=sercalo_id, modes=modes,
                           validation=validation, newport=newport_id, plant=plant,
                           plant_blocks={k: v[0] for k, v in blocks.items()}, skipped=skipped,
                           options=opts, source=source, warnings=warnings,
-                          checks=tuple(checks), notices=tuple(notices))
+                          checks=tuple(checks), notices=tuple(notices), noise_model=noise)
 
 
 _ESTIMATOR_WORDS = {"welch": "Welch H1 (the seed's)", "lpm": "the local polynomial method",

@@ -8,7 +8,8 @@ the streams :class:`~fsmbench.sim.stream.BenchStream` runs
 - white noise of standard deviation σ: one-sided ``2σ²/fs``;
 - a sampled Gauss–Markov process ``x[k+1] = a x[k] + √(1−a²) s w[k]``:
   ``2 s² (1−a²) / (fs |1 − a e^{−jωT}|²)`` (its variance is ``s²``, Parseval);
-  the 1/f noise is a sum of them (:class:`~fsmbench.sim.noise.FlickerStream`);
+  the 1/f noise is a sum of them (:class:`~fsmbench.sim.noise.FlickerStream`,
+  :func:`flicker_psd`); the noise model's fit uses the same closed forms;
 - a random walk of step ``σ_w`` per sample: ``2 σ_w² / (fs |1 − e^{−jωT}|²)``
   (non-stationary: its spectrum over a record of length T is this one above
   ``1/T``);
@@ -24,8 +25,10 @@ import numpy as np
 from numpy.typing import NDArray
 
 from fsmbench.bench.params import BenchParams
+from fsmbench.sim.noise import FlickerStream
 
-__all__ = ["NoiseSpectrum", "gauss_markov_psd", "qd_noise_spectrum"]
+__all__ = ["NoiseSpectrum", "flicker_corners", "flicker_psd", "gauss_markov_psd",
+           "qd_noise_spectrum", "walk_psd"]
 
 FloatArray = NDArray[np.float64]
 
@@ -65,6 +68,35 @@ def gauss_markov_psd(f_hz: FloatArray, *, rms: float, tau_s: float, fs_hz: float
     return np.asarray(2.0 * rms**2 * (1.0 - a * a) / (fs_hz * np.abs(1.0 - a * z) ** 2))
 
 
+def flicker_corners(f_min_hz: float, fs_hz: float) -> tuple[FloatArray, float]:
+    """:class:`~fsmbench.sim.noise.FlickerStream`'s corners [Hz] and ``ln`` of their ratio.
+
+    Each of its Gauss–Markov parts has variance ``A² ln(ratio)`` for an ASD ``A`` at 1 Hz.
+    """
+    c = FlickerStream(lambda i: None, asd_at_1hz=1.0, f_min_hz=f_min_hz, fs_hz=fs_hz).corners_hz
+    return np.asarray(c, dtype=float), math.log(c[1] / c[0])
+
+
+def flicker_psd(f_hz: FloatArray, *, f_min_hz: float, fs_hz: float) -> FloatArray:
+    """One-sided PSD of FlickerStream for ``A = 1`` [1/Hz]: its sampled AR(1) parts, exactly.
+
+    Each part ``2 s² (1 − a²) / (fs |1 − a e^{−jωT}|²)`` is written as
+    ``(1 − a²) / ((1 − a)² + 4 a sin²(ωT/2))`` with ``expm1``: no cancellation for
+    the slowest corners, where ``a → 1``.
+    """
+    corners, s2 = flicker_corners(f_min_hz, fs_hz)
+    la = -2.0 * np.pi * corners / fs_hz  # ln a: a = exp(-1/(fs tau)), tau = 1/(2 pi fc)
+    sin2 = np.sin(np.pi * np.asarray(f_hz, dtype=float) / fs_hz)[..., None] ** 2
+    part = -np.expm1(2 * la) / (np.expm1(la) ** 2 + 4 * np.exp(la) * sin2)
+    return np.asarray(2.0 * s2 / fs_hz * part.sum(axis=-1), dtype=float)
+
+
+def walk_psd(f_hz: FloatArray, *, fs_hz: float) -> FloatArray:
+    """One-sided PSD of a random walk of 1 unit/√s sampled at ``fs_hz`` [1/Hz]."""
+    return np.asarray(1.0 / (2 * fs_hz**2 * np.sin(np.pi * np.asarray(f_hz, dtype=float)
+                                                     / fs_hz) ** 2))
+
+
 def qd_noise_spectrum(params: BenchParams, f_hz: FloatArray) -> NoiseSpectrum:
     """The 4QD output noise the engine adds (white, 1/f, offset random walk, mains) [V].
 
@@ -88,22 +120,14 @@ def qd_noise_spectrum(params: BenchParams, f_hz: FloatArray) -> NoiseSpectrum:
     qd = params.quad_diode
     fs = params.converter.fs_hz
     psd = np.zeros((f.size, 2))
-    z = np.exp(-2j * np.pi * f / fs)
     for i, axis in enumerate("hv"):
         psd[:, i] = 2.0 * qd.noise_rms_v[axis] ** 2 / fs
         asd = qd.flicker_asd_v_per_rthz[axis]
         if asd:
-            per_decade = 3  # FlickerStream's default
-            n = int(np.ceil(per_decade * np.log10(fs / 2 / qd.flicker_min_hz))) + 1
-            ratio = 10.0 ** (1.0 / per_decade)
-            rms = asd * math.sqrt(math.log(ratio))
-            for fc in qd.flicker_min_hz * ratio ** np.arange(n):
-                psd[:, i] += gauss_markov_psd(f, rms=rms, tau_s=1.0 / (2 * math.pi * fc),
-                                              fs_hz=fs)
+            psd[:, i] += asd**2 * flicker_psd(f, f_min_hz=qd.flicker_min_hz, fs_hz=fs)
         walk = qd.offset_random_walk_v_per_rts[axis]
         if walk:
-            step = walk / math.sqrt(fs)
-            psd[:, i] += 2.0 * step**2 / (fs * np.abs(1.0 - z) ** 2)
+            psd[:, i] += walk**2 * walk_psd(f, fs_hz=fs)
     amps = np.asarray(qd.mains_amplitude_v, dtype=float)
     keep = np.nonzero(amps != 0.0)[0]
     freqs = (keep + 1) * qd.mains_freq_hz

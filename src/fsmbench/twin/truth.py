@@ -106,7 +106,10 @@ def twin_truth(bench: Bench, *, seed: int, experiments: Sequence[ExperimentSpec]
         **values,
         "bench": {"kind": "identified" if bench.is_identified else "packaged",
                   "label": bench.label, "origin": bench.origin,
-                  "provenance": {} if bench.model is None else dict(bench.model.provenance)},
+                  # Parts are named in words: a list, not keys.
+                  "provenance": [] if bench.model is None else [
+                      {"part": part, "source": source}
+                      for part, source in bench.model.provenance.items()]},
         "noise_rms": {
             "qd_noise_v": {"h": p.quad_diode.noise_rms_v.h, "v": p.quad_diode.noise_rms_v.v},
             "newport_angle_noise_rad": p.newport.angle_noise_rms_rad,
