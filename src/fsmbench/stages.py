@@ -160,8 +160,10 @@ def budget_stage(recordings: Mapping[str, xr.Dataset], *, bench: Bench, out_dir:
     """
     from fsmbench.budget.study import budget_study
 
+    ident = plant.identification
     result = budget_study(recordings, bench=bench, plant=plant.plant, progress=progress,
-                          recommended=recommended)
+                          recommended=recommended,
+                          noise_model=None if ident is None else ident.noise_model)
     # The stage's plant source (which blocks were identified, or why nominal) replaces the
     # plant model's own shorter one.
     payload = {**result.to_json(), "plant_source": plant.source}

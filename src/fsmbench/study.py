@@ -149,16 +149,19 @@ def _sections(*, bench: Bench, loaded: RecordingSet, source: str, is_twin: bool,
     from fsmbench.report.control_sections import control_sections
     from fsmbench.report.huddle_section import huddle_section
     from fsmbench.report.ident_section import identification_section
+    from fsmbench.report.noise_section import noise_subsection
     from fsmbench.report.repeatability_section import repeatability_section
     from fsmbench.report.validation_section import validation_subsection
 
     rec = loaded.recordings
+    chapter2 = identification_section(ident, recordings=rec, bench=bench, truth=truth,
+                                      skipped=loaded.skipped)
     chapter11 = repeatability_section(budget, recordings=rec)
     sections = [
         bench_section(bench, recordings=rec, skipped=loaded.skipped, source=source,
                       is_twin=is_twin),
-        identification_section(ident, recordings=rec, bench=bench, truth=truth,
-                               skipped=loaded.skipped),
+        replace(chapter2, subsections=(*chapter2.subsections, noise_subsection(
+            None if ident is None else ident.noise_model))),
         huddle_section(budget, recordings=rec),
         budget_section(budget, plant_source=plant_source),
         *control_sections(design, plant_source=plant_source),

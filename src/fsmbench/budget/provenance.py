@@ -65,7 +65,8 @@ def row_provenance(name: str, spectra_origin: Mapping[str, str], *,
     name : str
         The row's display name (:data:`fsmbench.budget.table.SOURCE_IDS`).
     spectra_origin : mapping
-        ``ErrorBudget.spectra_origin``: where the 4QD and Sercalo DAC spectra came from.
+        ``ErrorBudget.spectra_origin``: where the 4QD and Sercalo DAC spectra came from,
+        and (``newport_angle``, ``attocube``) the noise levels the noise model measured.
     frame_expansion_per_k : float
         The bench file's frame expansion [1/K] (named in the detail).
     """
@@ -85,6 +86,8 @@ def row_provenance(name: str, spectra_origin: Mapping[str, str], *,
     if name == "geometric cross terms between angle sources":
         return RowProvenance("derived", "the angle sources combined through the path geometry")
     if name == "Newport angle noise":
+        if spectra_origin.get("newport_angle", "").startswith("measured"):
+            return RowProvenance("measured", spectra_origin["newport_angle"])
         return RowProvenance("assumed", "the FSM-300 datasheet's noise-equivalent angle "
                                         "(bench file)",
                              "the Newport's metrology outputs Vnh, Vnv recorded with the mirror "
@@ -100,6 +103,8 @@ def row_provenance(name: str, spectra_origin: Mapping[str, str], *,
                              "a huddle test of at least 1 h (several frame time constants) or "
                              "a temperature log of the frame")
     if name == "Attocube noise":
+        if spectra_origin.get("attocube", "").startswith("measured"):
+            return RowProvenance("measured", spectra_origin["attocube"])
         return RowProvenance("assumed", "the bench file's Attocube noise",
                              "Va of a huddle test above 100 Hz (the interferometer's floor)")
     if name == "Attocube resolution":

@@ -18,6 +18,7 @@ import math
 import warnings
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field, replace
+from typing import Any
 
 import control as ct
 import xarray as xr
@@ -223,7 +224,8 @@ def budget_study(recordings: Mapping[str, xr.Dataset], *, bench: Bench,
                  window_s: float = 100.0, df_hz: float = 0.1,
                  progress: Callable[[str], None] | None = None,
                  recommended: ct.StateSpace | None = None,
-                 recommended_name: str = "fsmbench's controller") -> BudgetResult:
+                 recommended_name: str = "fsmbench's controller",
+                 noise_model: Any = None) -> BudgetResult:
     """Seed sections 3, 4 and 11 on the recordings present.
 
     Parameters
@@ -253,12 +255,18 @@ def budget_study(recordings: Mapping[str, xr.Dataset], *, bench: Bench,
         ``q²/12`` (the huddle tests measured it behind the controller that ran).
     recommended_name : str
         Its name in words.
+    noise_model : NoiseModelFit, optional
+        The noise the identification fitted to the huddle tests
+        (:mod:`fsmbench.ident.noise_model`): the Newport's angle noise and the
+        Attocube's floor it measured replace the bench file's (their rows become
+        *measured*).
     """
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         result = _budget_study(recordings, bench=bench, plant=plant, controller=controller,
                                window_s=window_s, df_hz=df_hz, progress=progress,
-                               recommended=recommended, recommended_name=recommended_name)
+                               recommended=recommended, recommended_name=recommended_name,
+                               noise_model=noise_model)
     numeric = tuple(Notice("numeric", "budget", f"{w.category.__name__}: {w.message}")
                     for w in caught)
     return replace(result, notices=result.notices + numeric) if numeric else result
@@ -269,8 +277,8 @@ def _budget_study(recordings: Mapping[str, xr.Dataset], *, bench: Bench,
                   window_s: float, df_hz: float,
                   progress: Callable[[str], None] | None,
                   recommended: ct.StateSpace | None = None,
-                  recommended_name: str = "") -> BudgetResult:
-    params = bench.nominal
+                  recommended_name: str = "", noise_model: Any = None) -> BudgetResult:
+    params, measured = _measured_params(bench.nominal, noise_model)
     plant = physical_plant(params, source="physical (nominal)") if plant is None else plant
     if controller is None:
         controller = tustin(seed_decentralised_controller(), ts_s=params.converter.ts_s)
@@ -302,9 +310,9 @@ def _budget_study(recordings: Mapping[str, xr.Dataset], *, bench: Bench,
 
     def angles(closed: bool) -> AngleSources:
         if closed not in cache:
-            cache[closed] = angle_sources(params, plant=plant, controller=controller,
-                                          closed_loop=closed, qd_noise=qd, dac_noise=dac,
-                                          df_hz=df_hz)
+            a = angle_sources(params, plant=plant, controller=controller, closed_loop=closed,
+                              qd_noise=qd, dac_noise=dac, df_hz=df_hz)
+            cache[closed] = replace(a, spectra_origin={**a.spectra_origin, **measured})
         return cache[closed]
 
     budget = budget_table(params, angles(True), window_s=window_s)
@@ -315,6 +323,7 @@ def _budget_study(recordings: Mapping[str, xr.Dataset], *, bench: Bench,
                                                             ts_s=params.converter.ts_s)
         rec_angles = angle_sources(params, plant=plant, controller=k_rec, closed_loop=True,
                                    qd_noise=qd, dac_noise=None, df_hz=df_hz)
+        rec_angles = replace(rec_angles, spectra_origin={**rec_angles.spectra_origin, **measured})
         rec_budget = ControllerBudget(
             recommended_name, budget_table(params, rec_angles, window_s=window_s),
             budget_table(params, rec_angles, window_s=None).total_rms_m)
@@ -358,6 +367,25 @@ def _budget_study(recordings: Mapping[str, xr.Dataset], *, bench: Bench,
         dac_noise=dac, predicted_huddle_va_rms_m=predicted, repeatability=reps,
         nonrep=nonrep, skipped=skipped, checks=tuple(checks), notices=tuple(notices),
         stability=stability, stationary_total_rms_m=stationary, recommended=rec_budget)
+
+
+def _measured_params(params: BenchParams, noise_model: Any) -> tuple[BenchParams, dict[str, str]]:
+    """The bench file's values with what the noise model measured, and where each came from."""
+    measured: dict[str, str] = {}
+    if noise_model is None:
+        return params, measured
+    tests = ", ".join(noise_model.tests)
+    if noise_model.newport_noise_rad.significant:
+        params = replace(params, newport=replace(
+            params.newport, angle_noise_rms_rad=noise_model.newport_noise_rad.value))
+        measured["newport_angle"] = (f"measured: the 4QD–Va cross-spectrum of {tests} "
+                                     f"({noise_model.newport_noise_rad.value * 1e6:.3g} µrad rms)")
+    if str(noise_model.provenance.get("attocube.noise_rms_m", "")).startswith("measured"):
+        params = replace(params, attocube=replace(
+            params.attocube, noise_rms_m=noise_model.attocube_noise_rms_m.value))
+        measured["attocube"] = (f"measured: the Va floor of {tests} "
+                                f"({noise_model.attocube_noise_rms_m.value * 1e9:.3g} nm rms)")
+    return params, measured
 
 
 def _stability(valid: Mapping[str, xr.Dataset], *, params: BenchParams,
