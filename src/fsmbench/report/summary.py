@@ -218,7 +218,8 @@ def _hv(values: Mapping[str, Any]) -> dict[str, float | None]:
 
 def _plant_words(plant_identified: bool, plant_source: str) -> tuple[Provenance, str]:
     if plant_identified:
-        return "derived", "the plant identified from the recordings (seed 2) and the controller"
+        return "derived", ("the plant identified from the recordings (the study's section 2) "
+                           "and the controller")
     return "assumed", f"the {plant_source}, not an identified plant"
 
 

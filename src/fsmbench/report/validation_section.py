@@ -38,16 +38,14 @@ def validation_figure(v: Any) -> Figure:
                                   dash="dot"))
         panels.append(Panel(tuple(lines), "Frequency [Hz]",
                             f"ASD of the tracking error {name} [µrad/√Hz]", x_log=True,
-                            y_log=True, title=f"{name} ({words}), ratio {v.ratio[axis]:.2f}",
-                            shade=v.band_hz))
+                            y_log=True, title=f"{name} ({words}), ratio {v.ratio[axis]:.2f}"))
     return Figure(
         key="validation_tracking_error_asd",
         title="The model against the recorded closed loop",
         caption=(f"Tracking error α = Vp/Gd of {', '.join(v.experiments)} with the periodic "
                  f"motion removed ({v.n_periods} periods), recorded and predicted on "
                  f"{v.bench} with {v.controller}; dotted: each source's share from the linear "
-                 f"model. The rms is compared over the shaded band, {v.band_hz[0]:g}–"
-                 f"{v.band_hz[1]:g} Hz."),
+                 f"model. The rms is compared from {v.band_hz[0]:g} Hz to {v.band_hz[1]:g} Hz."),
         panels=tuple(panels), columns=2)
 
 

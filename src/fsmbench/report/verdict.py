@@ -21,7 +21,7 @@ if TYPE_CHECKING:
 __all__ = ["next_step", "verdict_html"]
 
 _PROVENANCE_WORDS = {"measured": "measured", "derived": "derived from measurements",
-                     "predicted": "predicted", "assumed": "assumed (bench file)"}
+                     "predicted": "predicted", "assumed": "assumed from the bench file"}
 
 
 def _budget_step(budget: Any, row: Any) -> str:
