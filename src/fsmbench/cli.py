@@ -66,6 +66,7 @@ from fsmbench.cli_args import (
     identify_options,
     nanometres,
     seconds,
+    seed,
 )
 from fsmbench.excite.cli import add_excite_command
 from fsmbench.io.convert_cli import add_convert_command
@@ -83,6 +84,17 @@ EXIT_BUG = 1
 # MATLAB v5, 313.6 MB of raw float64 (what v7.3 and NeXus store uncompressed).
 _TWIN_BYTES_PER_S = {"mat5": 76.65e6 / 737.5, "mat73": 313.6e6 / 737.5,
                      "nexus": 313.6e6 / 737.5}
+# Peak memory of `fsmbench simulate` in the mat5/mat73 formats, which simulate every record
+# in memory before writing (measured peak RSS, /usr/bin/time, 10 kHz): 0.33 GB of interpreter,
+# numba and plant; one experiment of d seconds peaks at 0.33 GB + 4.85 MB per record-second
+# (data_uch, data_cal_pd_h, data_huddle_test_1/3, data_rep_h at 200 s: 1.23-1.30 GB; data_rep_h
+# at 400 s: 2.27 GB), i.e. ~61 float64 per sample in flight; the records finished before the
+# others are held at <= 11 float64 per sample (t + the 10 signals of data_rep_*). The model
+# over-estimates the default run (1.78 GB against 1.52 GB measured) and 13 x 60 s (1.49 GB
+# against 1.20 GB).
+_SIM_BASE_BYTES = 0.33e9
+_SIM_WORKING_BYTES_PER_SAMPLE = 4.85e6 / 1e4
+_SIM_HELD_BYTES_PER_SAMPLE = 11 * 8
 # What the stages write besides the twin's records, measured on the twin study:
 # report.html 7.7 MB, frf.mat 1.5 MB, the JSON files and small MAT-files < 0.2 MB.
 _STUDY_BYTES = 10e6
@@ -165,27 +177,41 @@ def _out_arguments(argv: Sequence[str], out: str | None) -> list[str]:
     return result
 
 
+def _inputs(args: argparse.Namespace, data: str | Path | None) -> list[tuple[str, Any]]:
+    """Every input path of the command line, with the option that named it."""
+    argv = getattr(args, "argv", [])
+    bench_option = "--identification" if "--identification" in argv else "--bench"
+    pairs: list[tuple[str, Any]] = [("--data" if args.command == "study" else "DATA", data),
+                                    ("--params", args.params),
+                                    (bench_option, getattr(args, "bench_dir", None))]
+    pairs += [("--excitation", path) for path in getattr(args, "excitation", None) or ()]
+    return pairs
+
+
+def _check_inputs_first(args: argparse.Namespace, data: str | Path | None) -> None:
+    """The inputs against the output folder, before any of them is read (``_run_folder``
+    checks them again as the transaction starts)."""
+    from fsmbench.io.outdir import check_inputs
+
+    out = getattr(args, "out_pos", None) or getattr(args, "out", None)  # as _cmd_simulate
+    if out is not None:
+        check_inputs(out, _inputs(args, data))
+
+
 @contextlib.contextmanager
 def _run_folder(args: argparse.Namespace, out: str, *, data: str | Path | None,
                 need_bytes: float) -> Iterator[Any]:
     from fsmbench.io.matwrite import wall_clock_headers
-    from fsmbench.io.outdir import OutputError, output_transaction
+    from fsmbench.io.outdir import output_transaction
 
     def warn(msg: str) -> None:
         print(f"fsmbench {args.command}: warning: {msg}", file=sys.stderr)
 
-    final = Path(out).resolve()
-    for option, value in (("--params", args.params),
-                          ("--bench", getattr(args, "bench_dir", None))):
-        if value is not None and (Path(value).resolve() == final
-                                  or final in Path(value).resolve().parents):
-            raise OutputError(value, f"{option} is inside --out {out}, which this run replaces "
-                                     "as a whole; copy it elsewhere or choose another --out")
-
     with output_transaction(out, command=args.command,
                             arguments=_out_arguments(args.argv, out), data_dir=data,
                             need_bytes=int(need_bytes), timestamp=args.timestamp,
-                            warn=warn) as run, wall_clock_headers(args.timestamp):
+                            warn=warn, inputs=_inputs(args, data)) as run, \
+            wall_clock_headers(args.timestamp):
         _Current.run = run  # kept after an error too: main maps paths in its message
         yield run
 
@@ -222,13 +248,60 @@ def _twin_bytes(args: argparse.Namespace, fmt: str) -> float:
     return seconds * _TWIN_BYTES_PER_S[fmt]
 
 
+def _simulation_memory_bytes(args: argparse.Namespace, bench: Bench) -> float:
+    """Peak memory of simulating the records in memory (see ``_SIM_BASE_BYTES``)."""
+    import os
+
+    from fsmbench.twin.experiments import seed_experiments
+
+    specs = seed_experiments()
+    if args.experiments:
+        specs = tuple(s for s in specs if s.name in set(args.experiments))
+    durations = [args.duration if args.duration is not None else s.duration_s for s in specs]
+    if args.duration is not None:  # one record per excitation file
+        durations += [args.duration] * len(args.excitation or ())
+    durations.sort(reverse=True)
+    in_flight = max(1, min(len(durations), os.cpu_count() or 1))  # simulate_bench's threads
+    fs = bench.true.converter.fs_hz
+    return (_SIM_BASE_BYTES + _SIM_WORKING_BYTES_PER_SAMPLE * fs * sum(durations[:in_flight])
+            + _SIM_HELD_BYTES_PER_SAMPLE * fs * sum(durations[in_flight:]))
+
+
+def _check_simulation_memory(args: argparse.Namespace, bench: Bench) -> None:
+    """Refuse an in-memory simulation larger than the memory available, with the way out."""
+    from fsmbench.io.matfile import available_memory_bytes
+
+    if args.excitation is None and args.format == "nexus":
+        return  # streamed block by block
+    if args.excitation is not None and args.duration is None:
+        return  # the files' own lengths, which excite bounds
+    need = _simulation_memory_bytes(args, bench)
+    have = available_memory_bytes()
+    if need <= have:
+        return
+    length = (f"--duration {args.duration:g} s" if args.duration is not None
+              else "the seed's record lengths")
+    if args.excitation is not None:
+        what, fix = ("--excitation", "an excitation is played in memory whatever the format: "
+                                     "shorten --duration")
+    else:
+        what, fix = (f"--format {args.format}", "--format nexus streams the records to disk "
+                     "block by block in bounded memory (0.39 GB measured for a day), or "
+                     "shorten --duration")
+    raise ValueError(f"{what}: {length} needs about {need / 1e9:.1f} GB of memory (every "
+                     f"record is simulated whole before it is written) and this machine has "
+                     f"{have / 1e9:.1f} GB available; {fix}")
+
+
 def _cmd_simulate(args: argparse.Namespace) -> int:
     from fsmbench.twin.simulate import play_excitation, stream_bench
 
     out = args.out_pos or args.out
     if out is None:
         raise ValueError("simulate needs an output folder: fsmbench simulate OUT")
+    _check_inputs_first(args, None)
     bench = sim_bench(args)
+    _check_simulation_memory(args, bench)  # before anything is simulated or written
     with _run_folder(args, out, data=None,
                      need_bytes=_twin_bytes(args, args.format) + _SMALL_BYTES) as run:
         say = _progress()
@@ -355,6 +428,7 @@ def _simulated(args: argparse.Namespace, inp: _StageInput, plant: Any) -> Any:
 
 
 def _check_identification(args: argparse.Namespace) -> None:
+    _check_inputs_first(args, getattr(args, "data", None))
     if args.bench_dir is not None:
         sim_bench(args)  # bad files: one line, before any work
 
@@ -492,7 +566,7 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--out", metavar="DIR", default=None, help="output folder (same as OUT)")
     p.add_argument("--duration", metavar="S", type=seconds, default=None,
                    help="length of every record [s] (default: the seed's, 100 s huddle tests)")
-    p.add_argument("--seed", metavar="N", type=int, default=0, help="random seed (default 0)")
+    p.add_argument("--seed", metavar="N", type=seed, default=0, help="random seed (default 0)")
     p.add_argument("--format", choices=("mat5", "mat73", "nexus"), default="mat5",
                    help="file format (default: MATLAB v5)")
     p.add_argument("--experiments", metavar="NAME", nargs="+", default=None,
@@ -520,7 +594,7 @@ def _parser() -> argparse.ArgumentParser:
         if name == "identify":
             add_identify_options(p)
         if name == "design":
-            p.add_argument("--seed", metavar="N", type=int, default=0,
+            p.add_argument("--seed", metavar="N", type=seed, default=0,
                            help="twin seed of the closed-loop verification (default 0)")
         if name in ("budget", "design"):
             p.add_argument("--bench", "--identification", metavar="DIR", default=None,
@@ -537,7 +611,7 @@ def _parser() -> argparse.ArgumentParser:
     common(p)
     p.add_argument("--data", metavar="DIR", default=None, help="folder of recordings (.mat)")
     p.add_argument("--out", metavar="DIR", required=True, help="output folder")
-    p.add_argument("--seed", metavar="N", type=int, default=0, help="twin seed (default 0)")
+    p.add_argument("--seed", metavar="N", type=seed, default=0, help="twin seed (default 0)")
     p.add_argument("--duration", metavar="S", type=seconds, default=None,
                    help="twin record length [s] (default: the seed's)")
     p.add_argument("--figures", metavar="FORMATS", type=figure_formats, default=(),

@@ -11,11 +11,16 @@ import argparse
 import math
 from typing import Any, NoReturn
 
-__all__ = ["EXIT_USER_ERROR", "Parser", "add_identify_options", "factor", "figure_formats",
-           "identify_options", "nanometres", "positive", "seconds"]
+__all__ = ["EXIT_USER_ERROR", "SEED_MAX", "Parser", "add_identify_options", "factor",
+           "figure_formats", "identify_options", "nanometres", "port", "positive", "seconds",
+           "seed"]
 
 #: Exit status of an error the user can fix (bad argument, bad data, unwritable folder).
 EXIT_USER_ERROR = 2
+
+#: Largest ``--seed``: numpy's SeedSequence takes non-negative integers only, and the live
+#: device keeps the seed in a Tango 64-bit signed integer property.
+SEED_MAX = 2**63 - 1
 
 
 class Parser(argparse.ArgumentParser):
@@ -51,6 +56,30 @@ def nanometres(text: str) -> float:
     return positive(text, "nm") * 1e-9
 
 
+def seed(text: str) -> int:
+    """A random seed: a whole number from 0 to :data:`SEED_MAX`."""
+    try:
+        value = int(text.strip(), 10)
+    except ValueError:
+        value = -1
+    if not 0 <= value <= SEED_MAX:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a seed: seeds are whole numbers "
+                                         "from 0 to 2**63 - 1")
+    return value
+
+
+def port(text: str) -> int:
+    """A TCP port: 0 (any free port) to 65535 (ports are 16-bit numbers)."""
+    try:
+        value = int(text.strip(), 10)
+    except ValueError:
+        value = -1
+    if not 0 <= value <= 65535:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a TCP port from 0 to 65535 "
+                                         "(0: any free port)")
+    return value
+
+
 def figure_formats(text: str) -> tuple[str, ...]:
     """``png,pdf`` → ("png", "pdf"); ``none`` or empty → ()."""
     items = [x.strip().lower() for x in text.split(",") if x.strip()]
@@ -61,8 +90,6 @@ def figure_formats(text: str) -> tuple[str, ...]:
         raise argparse.ArgumentTypeError(f"unknown figure format(s) {', '.join(bad)}; "
                                          "use png, pdf or png,pdf")
     return tuple(dict.fromkeys(items))
-
-
 
 
 def add_identify_options(p: argparse.ArgumentParser) -> None:

@@ -161,9 +161,11 @@ def budget_stage(recordings: Mapping[str, xr.Dataset], *, bench: Bench, out_dir:
     from fsmbench.budget.study import budget_study
 
     ident = plant.identification
+    # The measured noise replaces the bench file's only from a trusted identification.
+    trusted = ident is not None and not ident.warnings and plant.plant is ident.plant
     result = budget_study(recordings, bench=bench, plant=plant.plant, progress=progress,
                           recommended=recommended,
-                          noise_model=None if ident is None else ident.noise_model)
+                          noise_model=ident.noise_model if trusted and ident else None)
     # The stage's plant source (which blocks were identified, or why nominal) replaces the
     # plant model's own shorter one.
     payload = {**result.to_json(), "plant_source": plant.source}

@@ -139,6 +139,22 @@ def _identification_headline(ident: Identification, truth: Mapping[str, Any] | N
     return "; ".join(parts) or "ran"
 
 
+# The blocks the Sercalo loop's numbers rest on, and the records that identify each.
+_LOOP_BLOCKS = {"Gd": "the 4QD calibration (data_cal_pd_h, data_cal_pd_v)",
+                "Gi": "the current amplifier (data_uch, data_ucv)",
+                "Gc": "the Sercalo (data_uch, data_ucv)"}
+
+
+def _loop_blocks_missing(ident: Identification | None) -> str:
+    """The loop's blocks an identification left nominal, in words (empty when none)."""
+    if ident is None:
+        return ""
+    gone = [words for block, words in _LOOP_BLOCKS.items()
+            if ident.plant_blocks.get(block) != "identified"]
+    return ("identified " + ", ".join(gone) + " (the plant used the bench file's)"
+            if gone else "")
+
+
 def _sections(*, bench: Bench, loaded: RecordingSet, source: str, is_twin: bool,
               ident: Identification | None, truth: Mapping[str, Any] | None,
               budget: Any, design: Any, plant_source: str, validation: Any = None,
@@ -324,6 +340,7 @@ def run_study(*, out_dir: str | Path, data_dir: str | Path | None = None,
             ident, truth, bench),
         plant_source=plant.source, plant_identified=plant.identification is not None
         and plant.source.startswith("identified"),
+        plant_missing=_loop_blocks_missing(plant.identification),
         budget=budget, design=design.payload, validation=validation.result,
         validation_skipped=validation.skipped or identified.reason,
         simulated_bench="" if simulated.bench is None else simulated.bench.label)

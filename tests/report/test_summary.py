@@ -219,3 +219,15 @@ def test_the_study_writes_the_summary_and_keeps_timings_apart(twin_study: StudyR
     # On twin data the closed loop runs on the packaged twin, which produced the data.
     sim = next(r for r in summary["requirements"] if r["name"] == "closed_loop_simulation")
     assert "packaged twin" in sim["provenance_detail"]
+
+
+def test_data_contradicting_itself_is_never_a_pass_but_a_device_finding_is() -> None:
+    lie = Check(name="qd_gain_newport_vs_calibration", passed=False, value=10.1,
+                limit="0.8 to 1.25", subject="data_unh.mat: Vph",
+                advice="the Newport run gives -1.66 V/V where … predict -0.165 V/V")
+    s = _summary(checks=(lie,))
+    assert s.verdict_status == "not_verified" and s.meets_specifications is None
+    assert "data_unh.mat: Vph" in s.verdict and s.next_step.startswith("Next: correct")
+    finding = Check(name="newport_amplitude_bandwidth", passed=False, value=815.8,
+                    limit="within 25% of the datasheet's 600 Hz", subject="Newport h")
+    assert _summary(checks=(finding,)).verdict_status == "meets"

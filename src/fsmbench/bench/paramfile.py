@@ -18,7 +18,17 @@ from fsmbench.bench.axes import ParamsError, PerAxis
 if TYPE_CHECKING:
     from fsmbench.bench.params import BenchParams
 
-__all__ = ["build", "check_features", "emit_toml", "packaged_mapping", "resolve_base"]
+__all__ = ["build", "check_features", "check_ranges", "emit_toml", "packaged_mapping",
+           "resolve_base"]
+
+#: Magnitudes a bench file's non-zero numbers may have, in their SI units. The packaged
+#: benches span 1e-12 (the Attocube's 1 pm resolution) to 1.0e5 (air pressure in Pa); this
+#: window is 1000x wider on each side, and keeps the products of parameters the model forms
+#: (and their squares in the noise PSDs) inside float64, where 1e300 overflowed the plant's
+#: matrices to inf (numba then failed to compile the loop).
+MAGNITUDE_MIN = 1e-15
+MAGNITUDE_MAX = 1e9
+
 
 def _toml_value(value: Any) -> str:
     if isinstance(value, PerAxis):
@@ -143,10 +153,123 @@ def build(cls: type, data: Any, where: str, origin: str, base: Any = None) -> An
 def _number(raw: Any, key: str, origin: str) -> float:
     if isinstance(raw, bool) or not isinstance(raw, int | float):
         raise ParamsError(f"{origin}: '{key}' must be a number, got {raw!r}")
-    value = float(raw)
+    try:
+        value = float(raw)
+    except OverflowError:  # a TOML integer beyond float64
+        value = math.inf
     if not math.isfinite(value):
         raise ParamsError(f"{origin}: '{key}' must be finite, got {raw!r}")
+    if value != 0 and not MAGNITUDE_MIN <= abs(value) <= MAGNITUDE_MAX:
+        raise ParamsError(f"{origin}: '{key}' = {value:g} is not a physical value of this "
+                          f"bench: non-zero values must lie within {MAGNITUDE_MIN:g} to "
+                          f"{MAGNITUDE_MAX:g} in magnitude (SI units, the unit is in the key's "
+                          "name)")
     return value
+
+
+#: Highest sampling rate: 100x the seed's 10 kHz real-time target; the engine simulates
+#: every sample, so a record's memory and time grow with the rate.
+FS_MAX_HZ = 1e6
+#: Most converter bits: no ADC or DAC resolves more than 32 bits, and the quantiser's codes
+#: (+-2**(bits-1)) stay exact in float64 up to 53.
+BITS_MAX = 32
+#: Longest delay in samples (DAC latency, the Newport's internal lag): each sample of delay
+#: is a state of the discrete plant; 1000 samples (0.1 s at 10 kHz) is 500x the seed's path
+#: delay and keeps the plant's matrices small.
+DELAY_MAX_SAMPLES = 1000
+
+# Physical ranges, by key (section.name): what each must be and what it is, for the message.
+_POSITIVE = {
+    "converter.fs_hz": "a sampling rate", "converter.range_v": "a converter span",
+    "sercalo.resonance_hz": "a resonance", "sercalo.r_coil_ohm": "a resistance",
+    "sercalo.l_coil_h": "an inductance", "sercalo.max_stroke_rad": "a stroke",
+    "current_amplifier.r_ohm": "a resistance", "voltage_amplifier.cutoff_hz": "a cut-off",
+    "newport.natural_freq_hz": "a resonance",
+    "environment.room_temperature_tau_s": "a correlation time",
+    "environment.room_pressure_tau_s": "a correlation time",
+    "environment.room_humidity_tau_s": "a correlation time",
+    "environment.beam_path_temperature_tau_s": "a correlation time",
+    "environment.ecu_error_tau_s": "a correlation time",
+    "environment.frame_time_constant_s": "a time constant",
+}
+_NON_NEGATIVE = {
+    "sercalo.damping_ratio": "a damping ratio", "newport.damping_ratio": "a damping ratio",
+    "sercalo.second_mode_damping_ratio": "a damping ratio",
+    "current_amplifier.r_buffer_ohm": "a resistance",
+    "converter.dac_extra_delay_s": "a delay", "newport.internal_delay_s": "a delay",
+    "attocube.resolution_m": "a resolution",
+    "quad_diode.flicker_asd_v_per_rthz": "a noise density",
+    "quad_diode.offset_random_walk_v_per_rts": "a random walk",
+    "quad_diode.mains_phase_wander_rad_per_rts": "a random walk",
+}
+_NON_ZERO = {
+    "sercalo.dc_gain_rad_per_a": "a gain", "sercalo.beam_angle_per_mirror_angle": "a gain",
+    "voltage_amplifier.gain": "a gain", "newport.gain_rad_per_v": "a gain",
+    "newport.metrology_gain_rad_per_v": "a gain",
+    "newport.beam_angle_per_mirror_angle": "a gain", "quad_diode.gain_v_per_rad": "a gain",
+}
+
+
+def _values(p: Any, prefix: str = "") -> list[tuple[str, Any]]:
+    """(``section.name[.h|.v|[i]]``, value) of every number of a BenchParams."""
+    out: list[tuple[str, Any]] = []
+    for f in dataclasses.fields(p):
+        value = getattr(p, f.name)
+        key = f"{prefix}{f.name}"
+        if isinstance(value, PerAxis):
+            out += [(f"{key}.h", value.h), (f"{key}.v", value.v)]
+        elif dataclasses.is_dataclass(value):
+            out += _values(value, f"{key}.")
+        elif isinstance(value, tuple):
+            out += [(f"{key}[{i}]", v) for i, v in enumerate(value)]
+        else:
+            out.append((key, value))
+    return out
+
+
+def check_ranges(p: BenchParams, where: str, origin: str) -> None:
+    """Refuse values outside their physical range, naming the file, the key and the value.
+
+    Resistances, inductances, resonances, cut-offs, spans and time constants
+    are > 0; damping ratios, noises (``*noise*``, ``*_rms_*``), delays and
+    resolutions >= 0; gains non-zero; ``bits`` 1 to :data:`BITS_MAX`; the
+    sampling rate at most :data:`FS_MAX_HZ`; delays at most
+    :data:`DELAY_MAX_SAMPLES` samples. Every number is finite and within
+    :data:`MAGNITUDE_MIN`..:data:`MAGNITUDE_MAX` already (checked as read).
+
+    Raises
+    ------
+    ParamsError
+        The first value out of range.
+    """
+    conv = p.converter
+    for key, value in _values(p):
+        base = key.split("[")[0].removesuffix(".h").removesuffix(".v")
+        name = f"'{where}.{key}' = {value:g}"
+        if base in _POSITIVE and not value > 0:
+            raise ParamsError(f"{origin}: {name} must be > 0 ({_POSITIVE[base]})")
+        noise = "noise" in base or "_rms_" in base
+        if (base in _NON_NEGATIVE or noise) and not value >= 0:
+            what = _NON_NEGATIVE.get(base, "a noise level")
+            raise ParamsError(f"{origin}: {name} must be >= 0 ({what})")
+        if base in _NON_ZERO and value == 0:
+            raise ParamsError(f"{origin}: {name} must be non-zero ({_NON_ZERO[base]}: 0 "
+                              "would cut the signal path)")
+    if not 1 <= conv.bits <= BITS_MAX:
+        raise ParamsError(f"{origin}: '{where}.converter.bits' = {conv.bits} must be a whole "
+                          f"number from 1 to {BITS_MAX} (the converters' resolution)")
+    if conv.fs_hz > FS_MAX_HZ:
+        raise ParamsError(f"{origin}: '{where}.converter.fs_hz' = {conv.fs_hz:g} Hz is above "
+                          f"{FS_MAX_HZ:g} Hz, 100x the seed's real-time target")
+    if not 0 <= conv.dac_delay_samples <= DELAY_MAX_SAMPLES:
+        raise ParamsError(f"{origin}: '{where}.converter.dac_delay_samples' = "
+                          f"{conv.dac_delay_samples} must be from 0 to {DELAY_MAX_SAMPLES}")
+    for key, delay in (("converter.dac_extra_delay_s", conv.dac_extra_delay_s),
+                       ("newport.internal_delay_s", p.newport.internal_delay_s)):
+        if delay * conv.fs_hz > DELAY_MAX_SAMPLES:
+            raise ParamsError(f"{origin}: '{where}.{key}' = {delay:g} s is "
+                              f"{delay * conv.fs_hz:g} samples at {conv.fs_hz:g} Hz, more "
+                              f"than {DELAY_MAX_SAMPLES}")
 
 
 def _merged(base: dict[str, Any], over: dict[str, Any]) -> dict[str, Any]:

@@ -34,6 +34,7 @@ from fsmbench.bench.axes import ParamsError, PerAxis
 from fsmbench.bench.paramfile import (
     build,
     check_features,
+    check_ranges,
     emit_toml,
     packaged_mapping,
     resolve_base,
@@ -455,8 +456,9 @@ class Bench:
     datasheet: Datasheet
     nominal: BenchParams
     true: BenchParams
-    origin: str = ""
-    model: IdentifiedModel | None = None
+    # Where a bench came from is not what it is: two benches with the same values are equal.
+    origin: str = field(default="", compare=False)
+    model: IdentifiedModel | None = field(default=None, compare=False)
 
     @property
     def is_identified(self) -> bool:
@@ -494,8 +496,9 @@ def _bench_from_mapping(data: dict[str, Any], origin: str) -> Bench:
     datasheet = build(Datasheet, data["datasheet"], "datasheet", origin)
     nominal = build(BenchParams, data["nominal"], "nominal", origin)
     true = build(BenchParams, data.get("true", {}), "true", origin, base=nominal)
-    check_features(nominal, "nominal", origin)
-    check_features(true, "true", origin)
+    for section, p in (("nominal", nominal), ("true", true)):
+        check_ranges(p, section, origin)  # physical ranges first: the features assume them
+        check_features(p, section, origin)
     return Bench(datasheet=datasheet, nominal=nominal, true=true, origin=origin)
 
 

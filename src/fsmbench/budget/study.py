@@ -23,7 +23,7 @@ from typing import Any
 import control as ct
 import xarray as xr
 
-from fsmbench.bench.blocks import PlantModel, physical_plant
+from fsmbench.bench.blocks import PlantModel, newport_beam_matrix, physical_plant
 from fsmbench.bench.params import Bench, BenchParams
 from fsmbench.budget.environment import AirBudget, FrameBudget, air_budget, frame_budget
 from fsmbench.budget.huddle import (
@@ -307,6 +307,7 @@ def _budget_study(recordings: Mapping[str, xr.Dataset], *, bench: Bench,
             "no usable closed-loop huddle test (3, 5) with Uch, Ucv: the white q²/(12 fs) "
             "model is used")
     cache: dict[bool, AngleSources] = {}
+    cache_ref: dict[tuple[bool, str], AngleSources] = {}
 
     def angles(closed: bool) -> AngleSources:
         if closed not in cache:
@@ -333,6 +334,20 @@ def _budget_study(recordings: Mapping[str, xr.Dataset], *, bench: Bench,
             closed, comp, alu = HUDDLE_CONFIGS[n]
             predicted[n] = budget_table(params, angles(closed), compensation_unit=comp,
                                         shielding=alu, window_s=rec.duration_s).total_rms_m
+        # The cross-check's reference is the bench file alone: a measured input (the 4QD's
+        # noise, the DAC's error) that is itself wrong must not hide, or fake, a wrong Va.
+        nominal = bench.nominal
+        reference: dict[int, float] = {}
+        for n, rec in huddle.records.items():
+            closed, comp, alu = HUDDLE_CONFIGS[n]
+            if (closed, "reference") not in cache_ref:
+                cache_ref[(closed, "reference")] = angle_sources(
+                    nominal, plant=plant, controller=controller, closed_loop=closed,
+                    df_hz=df_hz)
+            reference[n] = budget_table(nominal, cache_ref[(closed, "reference")],
+                                        compensation_unit=comp, shielding=alu,
+                                        window_s=rec.duration_s).total_rms_m
+        checks.extend(huddle_cross_checks(huddle, predicted_va_rms_m=reference, params=nominal))
     reps: dict[str, RepeatabilityRecord] = {}
     for name, direction in _REP.items():
         if name in skipped:
@@ -367,6 +382,74 @@ def _budget_study(recordings: Mapping[str, xr.Dataset], *, bench: Bench,
         dac_noise=dac, predicted_huddle_va_rms_m=predicted, repeatability=reps,
         nonrep=nonrep, skipped=skipped, checks=tuple(checks), notices=tuple(notices),
         stability=stability, stationary_total_rms_m=stationary, recommended=rec_budget)
+
+
+#: Measured huddle Va rms against the budget's prediction for the same configuration: the
+#: budget's environment terms are the bench file's assumptions (room drifts, sensor errors),
+#: good to a factor ~2; a factor 5 (14 dB) apart is a unit, a jump or a wrong channel.
+HUDDLE_VA_BAND = (0.2, 5.0)
+#: Measured open-loop 4QD rms against the bench file's noise model: a 4QD amplifier a few
+#: times noisier than its datasheet is a bench; a factor 10 (20 dB) is a unit or a channel.
+HUDDLE_QD_BAND = (0.1, 10.0)
+
+
+def _unit_cause(ratio: float, *, unit: str) -> str:
+    """A ratio near a power of a thousand names the unit slip (empty otherwise)."""
+    for power, prefix in ((1, "m"), (2, "µ"), (3, "n")):
+        factor = 1e3**power
+        if abs(math.log10(ratio / factor)) < 0.15:  # within 40 % of the round factor
+            return f"a unit: the record in {prefix}{unit}, not {unit} ({factor:g}× too large)"
+        if abs(math.log10(ratio * factor)) < 0.15:
+            return f"a unit: the record {factor:g}× too small (a scaling applied twice?)"
+    return ""
+
+
+def huddle_cross_checks(huddle: HuddleAnalysis, *, predicted_va_rms_m: Mapping[int, float],
+                        params: BenchParams) -> list[Check]:
+    """The huddle tests' measured rms against what the bench file predicts for them.
+
+    ``huddle_va_vs_prediction`` (each test: measured ``Va`` rms over the budget of its
+    configuration from the bench file alone, :data:`HUDDLE_VA_BAND`) and
+    ``huddle_qd_vs_model`` (each open-loop
+    test: the 4QD outputs' rms over the bench file's 4QD, Newport and ADC noise,
+    :data:`HUDDLE_QD_BAND`). A failed one names the file, the signal, both numbers and
+    the likely cause; the verdict's distance requirement is then not verified.
+    """
+    out: list[Check] = []
+    conv = params.converter
+    gd = params.quad_diode.gain_v_per_rad.as_array()
+    newport = gd**2 * (newport_beam_matrix(params) ** 2).sum(axis=1) \
+        * params.newport.angle_noise_rms_rad**2
+    for n, rec in huddle.records.items():
+        pred = predicted_va_rms_m.get(n)
+        if pred is not None and pred > 0:
+            ratio = rec.va_rms_m / pred
+            ok = bool(math.isfinite(ratio) and HUDDLE_VA_BAND[0] <= ratio <= HUDDLE_VA_BAND[1])
+            cause = _unit_cause(ratio, unit="m") or (
+                "a jump in Va (the interferometer lost count) or an environment far from the "
+                "bench file's" if ratio > 1 else "Va not the beam path's distance")
+            out.append(Check(
+                "huddle_va_vs_prediction", ok, float(ratio),
+                f"{HUDDLE_VA_BAND[0]:g} to {HUDDLE_VA_BAND[1]:g} times the budget's prediction",
+                f"{rec.name}.mat: Va", "" if ok else
+                f"measured {rec.va_rms_m * 1e9:.4g} nm rms where the budget predicts "
+                f"{pred * 1e9:.3g} nm for this configuration; likely {cause}"))
+        if rec.closed_loop:
+            continue
+        for i, (vp, rms) in enumerate((("Vph", rec.vph_rms_v), ("Vpv", rec.vpv_rms_v))):
+            model = math.sqrt(params.quad_diode.noise_rms_v.as_array()[i] ** 2 + newport[i]
+                              + conv.lsb_v**2 / 12.0)
+            ratio = rms / model
+            ok = bool(math.isfinite(ratio) and HUDDLE_QD_BAND[0] <= ratio <= HUDDLE_QD_BAND[1])
+            cause = _unit_cause(ratio, unit="V") or "a wrong channel or a 4QD amplifier not the "\
+                "bench file's"
+            out.append(Check(
+                "huddle_qd_vs_model", ok, float(ratio),
+                f"{HUDDLE_QD_BAND[0]:g} to {HUDDLE_QD_BAND[1]:g} times the bench file's noise",
+                f"{rec.name}.mat: {vp}", "" if ok else
+                f"measured {rms * 1e3:.4g} mV rms with nothing moving where the bench file's 4QD, "
+                f"Newport and ADC noise give {model * 1e3:.3g} mV; likely {cause}"))
+    return out
 
 
 def _measured_params(params: BenchParams, noise_model: Any) -> tuple[BenchParams, dict[str, str]]:

@@ -29,11 +29,22 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from fsmbench.cli_args import positive, seconds
+from fsmbench.cli_args import positive, seconds, seed
 
 __all__ = ["add_excite_command", "summary"]
 
 _CHANNELS = ("Uch", "Ucv", "Unh", "Unv")
+
+# Longest multisine period with crest-factor-minimised phases: the optimisation runs ~1500
+# FFTs of one period (300 clipping steps, then 6 norms x 200 L-BFGS iterations); measured
+# 22 s and 0.63 GB at 1e6 samples (--resolution 0.01 at 10 kHz), 52 s and 0.98 GB at 2e6,
+# and --resolution 0.0001 (1e8 samples) ran over 15 min at 4.3 GB.
+_PERIOD_MAX_SAMPLES = 2**20
+# Longest record (all periods): the converter checks convolve the whole record with the
+# bench's responses, ~310 bytes per sample (measured 2.6 GB and 14 s for 2**23 samples of
+# noise, 2.5 GB and 33 s for 8 periods of 1e6); 2**23 samples is 839 s at 10 kHz, 8x the
+# seed's longest record (101 s).
+_RECORD_MAX_SAMPLES = 2**23
 
 
 def _count(text: str, *, least: int) -> int:
@@ -96,7 +107,7 @@ def add_excite_command(sub: Any) -> None:
                    help="noise or chirp period [s] (default 30, the seed's noise records)")
     p.add_argument("--sweep", choices=("linear", "log"), default="linear",
                    help="chirp sweep (default linear)")
-    p.add_argument("--seed", metavar="N", type=int, default=0,
+    p.add_argument("--seed", metavar="N", type=seed, default=0,
                    help="seed of random phases and noise (default 0)")
     p.add_argument("--params", metavar="TOML", default=None, dest="params",
                    help="bench parameters (TOML); default: the packaged Sercalo bench")
@@ -123,6 +134,43 @@ def add_excite_command(sub: Any) -> None:
                    help="write the wall-clock time into the MAT-file header and run.json "
                         "(default: none, so that outputs are byte-identical)")
     p.set_defaults(func=_command)
+
+
+def _check_band(args: argparse.Namespace, fs_hz: float) -> None:
+    """Refuse a band reaching the Nyquist frequency (nothing can be excited there)."""
+    lo, hi = (float(x) for x in args.band)
+    nyquist = fs_hz / 2
+    if hi >= nyquist:
+        raise ValueError(f"--band {lo:g} {hi:g}: {hi:g} Hz is not below the Nyquist frequency "
+                         f"{nyquist:g} Hz of the bench's {fs_hz:g} Hz converters, where no "
+                         f"line can be excited; give a high edge below {nyquist:g} Hz")
+
+
+def _check_length(args: argparse.Namespace, fs_hz: float) -> None:
+    """Refuse a period or a record too long to design and check (see the limits above)."""
+    repeats = args.periods + args.transient_periods
+    if args.kind == "multisine":
+        period = fs_hz / args.resolution
+        option = f"--resolution {args.resolution:g} Hz"
+        if args.phases == "minimised" and period > _PERIOD_MAX_SAMPLES:
+            raise ValueError(
+                f"{option}: a period of {period:.4g} samples ({period / fs_hz:.4g} s at "
+                f"{fs_hz:g} Hz); with --phases minimised the longest is {_PERIOD_MAX_SAMPLES} "
+                f"samples ({_PERIOD_MAX_SAMPLES / fs_hz:.4g} s: --resolution "
+                f"{fs_hz / _PERIOD_MAX_SAMPLES:.3g} Hz or more), as the crest-factor "
+                "optimisation transforms the period ~1500 times (22 s and 0.6 GB measured at "
+                "1e6 samples); choose a coarser --resolution or --phases schroeder")
+    else:
+        period = args.duration * fs_hz
+        option = f"--duration {args.duration:g} s"
+    record = period * repeats
+    if record > _RECORD_MAX_SAMPLES:
+        raise ValueError(
+            f"{option} x {repeats} period{'s' if repeats != 1 else ''} (--periods, "
+            f"--transient-periods): a record of {record:.4g} samples ({record / fs_hz:.4g} s at "
+            f"{fs_hz:g} Hz), longer than the {_RECORD_MAX_SAMPLES} samples "
+            f"({_RECORD_MAX_SAMPLES / fs_hz:.4g} s) fsmbench designs and checks at the "
+            "converters (2.6 GB of memory measured at that length); fewer or shorter periods")
 
 
 def _design(args: argparse.Namespace, fs_hz: float) -> Any:
@@ -192,8 +240,10 @@ def _command(args: argparse.Namespace) -> int:
     from fsmbench.excite.limits import check_limits
     from fsmbench.excite.mains import mains_warning
     from fsmbench.io.matwrite import wall_clock_headers
-    from fsmbench.io.outdir import output_transaction
+    from fsmbench.io.outdir import check_inputs, output_transaction
 
+    inputs = [("--params", args.params), ("--bench", args.bench_dir)]
+    check_inputs(args.out, inputs)  # before anything is read or computed
     bench = load_bench(args.params)
     params = bench.nominal if args.model == "nominal" else bench.true
     model = args.model
@@ -218,6 +268,8 @@ def _command(args: argparse.Namespace) -> int:
             params = with_identified_quad_diode(params, args.bench_dir)
             model = (f"{args.model} bench model, 4QD identified in {args.bench_dir} (no "
                      "identified Sercalo there yet)")
+    _check_band(args, params.converter.fs_hz)  # before the design, which may take long
+    _check_length(args, params.converter.fs_hz)
     design = _design(args, params.converter.fs_hz)
     report = check_limits(design, params=params, model=model, plant=plant,  # before any output
                           max_qd_compression=args.max_qd_compression / 100.0)
@@ -229,7 +281,7 @@ def _command(args: argparse.Namespace) -> int:
     # Two float64 columns, compressed or not, plus a JSON of the lines and phases.
     need = 16 * design.samples_v.size + 64 * design.lines_hz.size + 65536
     with output_transaction(out, command="excite", arguments=argv, need_bytes=need,
-                            timestamp=args.timestamp) as run, \
+                            timestamp=args.timestamp, inputs=inputs) as run, \
             wall_clock_headers(args.timestamp):
         paths = write_excitation(design, run.staging, limits=report)
     print("\n".join(summary(design, report)))

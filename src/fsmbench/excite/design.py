@@ -436,6 +436,10 @@ def design_multisine(*, input: str, band_hz: tuple[float, float], resolution_hz:
     """
     _check_common(input=input, amplitude_rms_v=amplitude_rms_v, periods=periods,
                   transient_periods=transient_periods)
+    if not float(band_hz[1]) < fs_hz / 2:
+        # Refused, not clipped: the description would name a band with no line in its top.
+        raise ValueError(f"the multisine band must end below Nyquist ({fs_hz / 2:g} Hz), got "
+                         f"{float(band_hz[0]):g} to {float(band_hz[1]):g} Hz")
     n = _period_samples(resolution_hz=resolution_hz, fs_hz=fs_hz)
     k = grid_lines(band_hz=band_hz, resolution_hz=resolution_hz, fs_hz=fs_hz, grid=grid,
                    log_grid=log_grid, lines_per_decade=lines_per_decade)

@@ -27,26 +27,15 @@ import numpy as np
 import xarray as xr
 
 from fsmbench.io.errors import RecordingError
-from fsmbench.io.matfile import detect_format
+from fsmbench.io.matfile import available_memory_bytes, detect_format
 from fsmbench.io.nexus import _plain, is_nexus
 from fsmbench.io.nexus_stream import DEFAULT_CHUNK_SAMPLES, NexusAppender
 from fsmbench.io.signals import TIME
 
-__all__ = ["available_memory_bytes", "convert_recording", "open_recording"]
+__all__ = ["CONVERTED_FROM", "available_memory_bytes", "convert_recording", "converted_from",
+           "open_recording"]
 
 _READ_BLOCK = 1 << 20  # samples per piece when streaming a conversion (8 MiB of float64)
-
-
-def available_memory_bytes() -> int:
-    """Memory the machine can still give [bytes] (Linux ``MemAvailable``; else 4 GiB)."""
-    try:
-        with open("/proc/meminfo") as fh:
-            for line in fh:
-                if line.startswith("MemAvailable:"):
-                    return int(line.split()[1]) * 1024
-    except OSError:
-        pass
-    return 4 << 30
 
 
 class _H5Vector:
@@ -345,9 +334,29 @@ def _v5_stream_variable(path: Path, wanted: str,
     raise RecordingError(path, "is not in the file", variable=wanted)
 
 
+#: Root attribute of an archive ``fsmbench convert`` wrote: the absolute path of its input.
+CONVERTED_FROM = "converted_from"
+#: How far ``--fs`` may be from the rate of ``t``: the readers' tolerance on the time step
+#: (:data:`fsmbench.io.recording._STEP_TOLERANCE`, 0.1 %), so what is written reads back.
+_FS_TOLERANCE = 1e-3
+
+
+def converted_from(path: str | os.PathLike[str]) -> str | None:
+    """The input ``fsmbench convert`` made the archive ``path`` from (absolute), or None
+    when ``path`` is not such an archive (another file, another tool's, unreadable)."""
+    try:
+        with h5py.File(path, "r") as f:
+            value = _plain(f.attrs.get(CONVERTED_FROM))
+            creator = str(_plain(f.attrs.get("creator", "")))
+    except (OSError, ValueError):
+        return None
+    return value if isinstance(value, str) and creator.startswith("fsmbench") else None
+
+
 def convert_recording(source: str | os.PathLike[str], dest: str | os.PathLike[str], *,
                       fs_hz: float | None = None,
-                      progress: Callable[[str], None] | None = None) -> Path:
+                      progress: Callable[[str], None] | None = None,
+                      created: float | None = None) -> Path:
     """Copy a recording into a chunked NeXus archive, with memory bounded by one block.
 
     Parameters
@@ -356,11 +365,21 @@ def convert_recording(source: str | os.PathLike[str], dest: str | os.PathLike[st
         MATLAB v5 (compressed or not), v7.3, or NeXus, in the seed's layout
         (real double column vectors, ``t`` among them).
     dest : str or os.PathLike
-        The NeXus archive to write (atomically).
+        The NeXus archive to write (atomically). Its root records the source's
+        absolute path (attribute :data:`CONVERTED_FROM`).
     fs_hz : float, optional
-        Sampling rate [Hz]; default: from the first samples of ``t``.
+        Sampling rate [Hz]; default: from the first samples of ``t``. When
+        ``t`` has two samples or more, it must agree with them within 0.1 %
+        (``t`` is copied as it is, so another rate would contradict it).
     progress : callable, optional
         Called with a line per signal.
+    created : float, optional
+        ``file_time`` of the archive [s since the epoch]; default now.
+
+    Raises
+    ------
+    RecordingError
+        Unreadable input, no usable time base, or ``fs_hz`` contradicting ``t``.
     """
     from fsmbench.io.recording import _ordered
 
@@ -396,15 +415,22 @@ def convert_recording(source: str | os.PathLike[str], dest: str | os.PathLike[st
     else:
         raise RecordingError(src, "cannot be converted: MATLAB v4 files are small, read them "
                              "directly")
-    rate = fs_hz if fs_hz is not None else (float(1.0 / (first_t[1] - first_t[0]))
-                                            if first_t.size > 1 else float("nan"))
+    from_t = float(1.0 / (first_t[1] - first_t[0])) if first_t.size > 1 else float("nan")
+    if fs_hz is not None and np.isfinite(from_t) and from_t > 0 \
+            and abs(fs_hz - from_t) > _FS_TOLERANCE * from_t:
+        raise RecordingError(src, f"is sampled at {from_t:.6g} Hz (t[1] - t[0] = "
+                             f"{first_t[1] - first_t[0]:.6g} s) but --fs is {fs_hz:g} Hz; t is "
+                             "copied as it is, so leave --fs out (the rate comes from t) or "
+                             "fix t", variable=TIME)
+    rate = fs_hz if fs_hz is not None else from_t
     if not np.isfinite(rate) or rate <= 0:
         raise RecordingError(src, "has no usable time base to take the sampling rate from; "
                              "give --fs", variable=TIME)
     # One pass per signal keeps memory at one block: the archive is written column by
     # column (HDF5 datasets grow independently), time first.
     with NexusAppender(out, signals=signals, fs_hz=rate, attrs=attrs,
-                       t0_s=float(first_t[0])) as nx:
+                       t0_s=float(first_t[0]) if first_t.size else 0.0, created=created,
+                       root_attrs={CONVERTED_FROM: str(src.resolve())}) as nx:
         nx.write_columns({TIME: pieces(TIME), **{name: pieces(name) for name in signals}},
                          n_samples=n)
         say(f"{src.name}: {n} samples of {', '.join(signals)} into {out}")

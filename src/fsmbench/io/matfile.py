@@ -50,6 +50,7 @@ from fsmbench.io.errors import RecordingError
 __all__ = [
     "HDF5_SIGNATURE",
     "FileFormat",
+    "available_memory_bytes",
     "detect_format",
     "load_mat",
 ]
@@ -61,11 +62,27 @@ FileFormat = Literal["mat4", "mat5", "mat73", "hdf5"]
 HDF5_SIGNATURE: Final = b"\x89HDF\r\n\x1a\n"
 _MAT73_TEXT: Final = b"MATLAB 7.3 MAT-file"
 
+#: Fraction of the available memory an HDF5 file's datasets may claim before they are read
+#: whole: the reader holds the stored array and the float64 copy the recording is built from.
+_MEMORY_FRACTION: Final = 0.5
+
 _DTYPE_OF: Final[dict[str, str]] = {
     "double": "f8", "single": "f4", "int8": "i1", "uint8": "u1", "int16": "i2",
     "uint16": "u2", "int32": "i4", "uint32": "u4", "int64": "i8", "uint64": "u8",
     "logical": "?", "char": "u2",
 }
+
+
+def available_memory_bytes() -> int:
+    """Memory the machine can still give [bytes] (Linux ``MemAvailable``; else 4 GiB)."""
+    try:
+        with open("/proc/meminfo") as fh:
+            for line in fh:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) * 1024
+    except OSError:
+        pass
+    return 4 << 30
 
 
 # --------------------------------------------------------------------------- format
@@ -326,7 +343,9 @@ def _load_h5(
     out: dict[str, Any] = {}
     with f:
         keys = [k for k in f if not k.startswith("#")]  # "#refs#", "#subsystem#"
-        for name in keys if names is None else [k for k in keys if k in names]:
+        wanted = keys if names is None else [k for k in keys if k in names]
+        _check_claimed_size(p, f, wanted)
+        for name in wanted:
             try:
                 out[name] = _from_h5(f[name], f, name)
             except _UnreadableError as exc:
@@ -334,6 +353,48 @@ def _load_h5(
             except (OSError, KeyError, ValueError) as exc:
                 raise RecordingError(p, f"cannot be read ({exc})", variable=name) from exc
     return out
+
+
+def _claimed_bytes(obj: Any) -> tuple[int, str, tuple[int, ...]]:
+    """Bytes the datasets under ``obj`` claim (shape x item size, not what is stored),
+    with the largest dataset's name and shape."""
+    sizes: list[tuple[int, str, tuple[int, ...]]] = []
+
+    def add(name: str, item: Any) -> None:
+        if isinstance(item, h5py.Dataset) and item.shape is not None:
+            sizes.append((int(np.prod(item.shape, dtype=object)) * item.dtype.itemsize,
+                          item.name, tuple(int(n) for n in item.shape)))
+
+    if isinstance(obj, h5py.Group):
+        obj.visititems(add)
+    else:
+        add(obj.name, obj)
+    if not sizes:
+        return 0, "", ()
+    largest = max(sizes)
+    return sum(n for n, _name, _shape in sizes), largest[1], largest[2]
+
+
+def _check_claimed_size(p: Path, f: h5py.File, names: list[str]) -> None:
+    """Refuse, before reading, datasets whose claimed size does not fit in memory.
+
+    An HDF5 header may claim any shape (a damaged file, or chunks never
+    written); reading it whole would end in ``MemoryError``.
+    """
+    total, name, worst = 0, "", 0
+    shape: tuple[int, ...] = ()
+    for key in names:
+        n, big, big_shape = _claimed_bytes(f[key])
+        total += n
+        if n > worst:
+            worst, name, shape = n, big.lstrip("/"), big_shape
+    have = available_memory_bytes()
+    if total > _MEMORY_FRACTION * have:
+        raise RecordingError(p, f"its datasets claim {total / 2**30:.1f} GiB ('{name}' has "
+                                f"shape {shape}), more than half of the {have / 2**30:.1f} GiB "
+                                "this machine has available, so it is not read whole: a "
+                                "damaged file, or a record to read in pieces after fsmbench "
+                                f"convert {p} {p.with_suffix('.h5')}")
 
 
 def _from_h5(obj: Any, f: h5py.File, where: str) -> Any:

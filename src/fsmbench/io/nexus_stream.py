@@ -53,12 +53,16 @@ class NexusAppender:
         HDF5 chunk length along time.
     created : float, optional
         ``file_time`` [s since the epoch]; default now.
+    root_attrs : mapping, optional
+        More attributes of the file's root (``/``), such as the provenance
+        ``fsmbench convert`` records.
     """
 
     def __init__(self, path: str | os.PathLike[str], *, signals: Sequence[str], fs_hz: float,
                  attrs: Mapping[str, Any], t0_s: float = 0.0,
                  chunk_samples: int = DEFAULT_CHUNK_SAMPLES,
-                 created: float | None = None) -> None:
+                 created: float | None = None,
+                 root_attrs: Mapping[str, Any] | None = None) -> None:
         if not signals:
             raise ValueError(f"{path}: a recording needs at least one signal")
         self.path = Path(path)
@@ -69,6 +73,7 @@ class NexusAppender:
         self._attrs = {**dict(attrs), "fs_hz": self.fs_hz}
         self._chunk = int(chunk_samples)
         self._created = created
+        self._root_attrs = dict(root_attrs or {})
         self._stack = contextlib.ExitStack()
         self._file: h5py.File | None = None
         self._data: h5py.Group | None = None
@@ -85,6 +90,8 @@ class NexusAppender:
             datetime.datetime.now().astimezone() if self._created is None
             else datetime.datetime.fromtimestamp(self._created, tz=datetime.UTC)).isoformat()
         f.attrs["HDF5_Version"] = h5py.version.hdf5_version
+        for key, value in self._root_attrs.items():
+            f.attrs[key] = value
         entry = f.create_group("entry")
         entry.attrs["NX_class"] = "NXentry"
         entry.attrs["default"] = "data"

@@ -13,6 +13,12 @@ one.
 
 ``run.json`` lists every file of the run (relative path, sha256, size), the
 command and the fsmbench version; a wall-clock time only when asked.
+
+Inputs are never touched: every path named on the command line (``--params``,
+``--bench``, ``--controller``, ``--excitation``, ``--ranges``, DATA, …) is checked
+against ``--out`` before anything runs (:func:`check_inputs`), and a previous
+run whose files no longer match its ``run.json`` (edited by hand) is not
+replaced (:func:`preflight`).
 """
 
 from __future__ import annotations
@@ -28,7 +34,7 @@ import signal
 import tempfile
 import threading
 import time
-from collections.abc import Iterator, Sequence
+from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from types import FrameType
@@ -36,9 +42,12 @@ from typing import Any, Final
 
 __all__ = [
     "MANIFEST",
+    "InputPaths",
     "OutputError",
     "RunFolder",
+    "check_inputs",
     "check_out_dir",
+    "check_path_text",
     "output_transaction",
     "preflight",
     "read_manifest",
@@ -88,6 +97,81 @@ def check_out_dir(out_dir: Path, data_dir: Path | None) -> None:
     if out in data.parents:
         raise OutputError(out_dir, f"--out contains the data folder {data_dir}; a run replaces "
                                    "its output folder as a whole, choose another --out")
+
+
+#: The inputs of a command: (option as the user typed it, path) pairs; None paths are skipped.
+InputPaths = Iterable[tuple[str, "str | os.PathLike[str] | None"]]
+
+
+def _shown(raw: str) -> str:
+    """A path as text that prints anywhere (bytes that are not UTF-8 as ``\\xff``)."""
+    return os.fsencode(raw).decode("utf-8", "backslashreplace")
+
+
+#: Options that name a file, never a folder: a folder given there is the command's own
+#: error ("is a folder; --params needs a TOML file"), not a placement problem.
+_FILE_OPTIONS: Final = frozenset({"--params", "--ranges"})
+
+
+def check_path_text(option: str, path: str | os.PathLike[str]) -> None:
+    """Refuse an input path that is not UTF-8 (``OutputError`` naming it and the byte).
+
+    fsmbench records its inputs' paths in its results (JSON, MAT-files, HDF5
+    attributes), which hold UTF-8 text; a path with other bytes (Latin-1 names
+    on a UTF-8 system) cannot be written there.
+    """
+    raw = os.fspath(path)
+    encoded = os.fsencode(raw)
+    try:
+        encoded.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        raise OutputError(_shown(raw), f"the {option} path is not valid UTF-8 (byte "
+                                       f"0x{encoded[exc.start]:02x} at position {exc.start}); "
+                                       "fsmbench records its inputs' paths in its results "
+                                       "(JSON, MAT-files), which are UTF-8: rename it, or link "
+                                       "it under a UTF-8 name") from None
+
+
+def check_inputs(out_dir: str | Path, inputs: InputPaths) -> None:
+    """Refuse, before anything runs, an input the run would destroy or write into.
+
+    Parameters
+    ----------
+    out_dir : str or Path
+        The ``--out`` folder (it need not exist).
+    inputs : iterable of (str, path or None)
+        Every path the command line names as an input, with its option
+        (``"--controller"``, ``"DATA"``, ...); a ``FILE::NAME`` controller is
+        passed as its file.
+
+    Raises
+    ------
+    OutputError
+        Naming the input and its option: the input is ``--out`` or inside it
+        (the run replaces ``--out`` as a whole, so it would be deleted), or
+        ``--out`` is inside an input folder (outputs never go into inputs), or
+        the input's path is not UTF-8 (results record their inputs' paths in
+        UTF-8 JSON and MAT-files, which cannot hold it).
+    """
+    out = Path(out_dir).resolve()
+    for option, value in inputs:
+        if value is None:
+            continue
+        raw = os.fspath(value)
+        check_path_text(option, raw)
+        if option in ("DATA", "--data"):  # the data folder's own wording
+            check_out_dir(Path(out_dir), Path(raw))
+            continue
+        path = Path(raw).resolve()
+        if path == out or out in path.parents:
+            where = "is the --out folder" if path == out else "is inside --out"
+            raise OutputError(raw, f"{option} {where} {_shown(os.fspath(out_dir))}, which this "
+                                   "run replaces as a whole; copy it elsewhere or choose "
+                                   "another --out")
+        if path in out.parents and path.is_dir() and option not in _FILE_OPTIONS:
+            raise OutputError(out_dir, f"--out is inside the {option} folder {raw}; fsmbench "
+                                       "never writes into its inputs' folders, choose another "
+                                       "--out")
 
 
 def read_manifest(folder: Path) -> dict[str, Any] | None:
@@ -141,8 +225,9 @@ def preflight(out_dir: str | Path, *, data_dir: str | Path | None = None,
     OutputError
         With the folder and the problem: a file in the way, a non-empty folder
         that is not a previous fsmbench run (its files are never deleted), a
-        folder that cannot be written (read-only, immutable), too little free
-        space.
+        previous run with a file changed since it was written (checked
+        against the SHA-256 in its ``run.json``), a folder that cannot be
+        written (read-only, immutable), too little free space.
     OSError
         The parent folders cannot be created (read-only, no permission).
     """
@@ -184,13 +269,39 @@ def _check_replaceable(out: Path) -> None:
         raise OutputError(out, f"is not empty ({len(entries)} entries, e.g. {entries[0]}) and "
                                f"holds no fsmbench run ({MANIFEST}); a run replaces its output "
                                "folder as a whole, so choose a new or empty --out")
-    listed = {f["path"] for f in manifest.get("files", []) if isinstance(f, dict)}
+    entries_listed = [f for f in manifest.get("files", [])
+                      if isinstance(f, dict) and isinstance(f.get("path"), str)]
+    listed = {f["path"] for f in entries_listed}
     for path in sorted(out.rglob("*")):
         rel = path.relative_to(out).as_posix()
         if path.is_file() and rel != MANIFEST and rel not in listed:
             raise OutputError(path, f"is not part of the fsmbench run in {out} (not listed in "
                                     f"its {MANIFEST}); move it away or choose another --out, "
                                     "fsmbench never deletes files it did not write")
+    for entry in entries_listed:
+        _check_unchanged(out, entry)
+
+
+def _check_unchanged(out: Path, entry: dict[str, Any]) -> None:
+    """Refuse to replace a listed file that was changed since fsmbench wrote it.
+
+    The size is compared first (no read), then the SHA-256. A listed file that
+    is gone is no loss. A file edited by hand is the user's work now: the run
+    refuses rather than delete it. No ``--force``: moving the one named file
+    away is the way out, and an option to skip this check would be one more
+    way to lose what it protects.
+    """
+    path = out / entry["path"]
+    if not path.is_file() or out not in path.resolve().parents:
+        return
+    size, digest = entry.get("size_bytes"), entry.get("sha256")
+    changed = ((isinstance(size, int) and path.stat().st_size != size)
+               or (isinstance(digest, str) and _sha256(path) != digest))
+    if changed:
+        raise OutputError(path, f"was changed after fsmbench wrote it (its SHA-256 no longer "
+                                f"matches {MANIFEST}); a run replaces {out} as a whole, so move "
+                                "this file away (or delete it) or choose another --out: "
+                                "fsmbench never overwrites a file it did not write")
 
 
 @dataclass(frozen=True)
@@ -360,7 +471,7 @@ def output_transaction(out_dir: str | Path, *, command: str, arguments: Sequence
                        data_dir: str | Path | None = None, need_bytes: int = 0,
                        timestamp: bool = False,
                        not_reproducible: Sequence[str] = ("timings.json",),
-                       warn: Any = None) -> Iterator[RunFolder]:
+                       warn: Any = None, inputs: InputPaths = ()) -> Iterator[RunFolder]:
     """Run a command's writes as one transaction on ``out_dir``.
 
     Parameters
@@ -385,12 +496,16 @@ def output_transaction(out_dir: str | Path, *, command: str, arguments: Sequence
     warn : callable, optional
         Receives a one-line message if the previous run cannot be removed
         after the swap (the new run is in place regardless).
+    inputs : iterable of (str, path or None)
+        Every input the command line names, with its option; checked by
+        :func:`check_inputs` before anything else.
 
     Yields
     ------
     RunFolder
         ``staging`` to write into, ``final`` and a mapping between them.
     """
+    check_inputs(out_dir, inputs)
     out = preflight(out_dir, data_dir=data_dir, need_bytes=need_bytes)
     _remove_stale_staging(out)
     try:

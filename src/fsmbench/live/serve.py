@@ -19,6 +19,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from fsmbench import cli_args
+
 __all__ = ["ServeOptions", "add_serve_command", "file_database", "serve"]
 
 SERVER = "FsmBench"
@@ -158,11 +160,12 @@ def add_serve_command(sub: Any, *, factor: Callable[[str], float]) -> None:
     p.add_argument("--bench", metavar="DIR", default=None, dest="bench_dir",
                    help="the twin simulates the bench identified in DIR (the output of "
                         "fsmbench identify or study) instead of the packaged one")
-    p.add_argument("--seed", metavar="N", type=int, default=0, help="twin seed (default 0)")
+    p.add_argument("--seed", metavar="N", type=cli_args.seed, default=0,
+                   help="twin seed (default 0)")
     p.add_argument("--speed", metavar="X", type=factor, default=1.0,
                    help="bench seconds per wall-clock second (default 1: real time)")
     p.add_argument("--nodb", action="store_true", help="run without a Tango database")
-    p.add_argument("--port", metavar="N", type=int, default=10000,
+    p.add_argument("--port", metavar="N", type=cli_args.port, default=10000,
                    help="TCP port with --nodb (default 10000)")
     p.add_argument("--out", metavar="DIR", default="fsmbench-live",
                    help="where RunExperiment and Record write (default fsmbench-live)")

@@ -32,8 +32,15 @@ from fsmbench.checks import Check, Notice
 from fsmbench.jsonutil import plain_json
 from fsmbench.report.verdict import next_step, verdict_html
 
-__all__ = ["SUMMARY_FORMAT", "PartSkipped", "Requirement", "Specification", "StageLine", "Summary",
-           "build_summary", "verdict_html"]
+__all__ = ["FINDINGS", "SUMMARY_FORMAT", "PartSkipped", "Requirement", "Specification",
+           "StageLine", "Summary", "build_summary", "verdict_html"]
+
+#: Failed checks that are findings about a device or an analysis, not data contradicting
+#: itself: the Newport found off its datasheet, a margin the numerics could not compute.
+#: Every other failed check leaves the verdict not verified (issue 21: never a pass on data
+#: that contradicts itself or the bench file).
+FINDINGS = frozenset({"newport_amplitude_bandwidth", "newport_phase_bandwidth",
+                      "newport_peaking", "coprime_factor_margin"})
 
 #: 2: requirements carry numbers (``values`` per axis in SI, ``unit``, ``limits``), a
 #: ``status`` (pass / fail / not verified) and a ``provenance``; the verdict is three-valued
@@ -224,14 +231,20 @@ def _plant_words(plant_identified: bool, plant_source: str) -> tuple[Provenance,
 
 
 def _loop_requirements(design: Mapping[str, Any], spec: Specification, *,
-                       plant_identified: bool, plant_source: str) -> list[Requirement]:
-    """The control requirements, from ``design.json``'s payload."""
-    prov, detail = _plant_words(plant_identified, plant_source)
+                       plant_identified: bool, plant_source: str,
+                       plant_missing: str = "") -> list[Requirement]:
+    """The control requirements, from ``design.json``'s payload.
+
+    ``plant_missing``: the loop's blocks left nominal in an identified plant, in words
+    (the 4QD calibration, the current amplifier): then the rows are not verified either.
+    """
+    prov, detail = _plant_words(plant_identified and not plant_missing, plant_source)
     # Judged on a model no recording checked, a control number is not verified.
-    missing = "" if plant_identified else "an identified plant (data_uch, data_ucv)"
+    missing = ("an identified plant (data_uch, data_ucv)" if not plant_identified
+               else plant_missing)
 
     def judged(ok: bool) -> bool | None:
-        return ok if plant_identified else None
+        return ok if plant_identified and not plant_missing else None
 
     out: list[Requirement] = []
     fsm = design["fsmbench_controller"]
@@ -368,7 +381,11 @@ def _distance_requirement(budget: Any, spec: Specification) -> tuple[Requirement
     other = "" if budget.recommended is None else (
         f" With {budget.controller}: {budget.budget.total_rms_m * 1e9:.3g} nm.")
     huddle = getattr(budget, "huddle", None)
-    verified = huddle is not None and getattr(huddle, "qd_noise", None) is not None
+    measured = huddle is not None and getattr(huddle, "qd_noise", None) is not None
+    # A budget whose own huddle tests contradict it is not a verdict (issue 21).
+    contradicted = [c for c in getattr(budget, "checks", ())
+                    if not c.passed and c.name in ("huddle_va_vs_prediction", "huddle_qd_vs_model")]
+    verified = measured and not contradicted
     explanation = (
         f"With {quoted.controller}, {window}; stationary value "
         f"{quoted.stationary_total_rms_m * 1e9:.3g} nm (a record much longer than the slowest "
@@ -388,7 +405,10 @@ def _distance_requirement(budget: Any, spec: Specification) -> tuple[Requirement
                            + ") and assumed ones (" + ", ".join(r.name for r in assumed) + ")"
                            if measured_inputs else
                            "budget of the bench file's noise levels alone (no measured input)"),
-        missing="" if verified else "an open-loop huddle test (the measured 4QD noise)")
+        missing="" if verified else (
+            "huddle tests that agree with the budget (" + "; ".join(
+                f"{c.subject}: {c.advice}" for c in contradicted) + ")" if contradicted
+            else "an open-loop huddle test (the measured 4QD noise)"))
     limiting = (f"{top.name}, {top.rms_m * 1e9:.3g} nm of the {total * 1e9:.3g} nm total "
                 f"({getattr(top, 'provenance', 'derived')}): it {how}.")
     return req, limiting, top
@@ -402,6 +422,7 @@ def build_summary(*, source: str, is_twin: bool, spec: Specification,
                   identification_headline: str = "",
                   plant_source: str, plant_identified: bool,
                   budget: Any | None, design: Mapping[str, Any] | None,
+                  plant_missing: str = "",
                   validation: Any | None = None, validation_skipped: str = "",
                   simulated_bench: str = "") -> Summary:
     """The verdict of a study.
@@ -427,6 +448,8 @@ def build_summary(*, source: str, is_twin: bool, spec: Specification,
     plant_source : str
         Which plant the budget and design used, with the reason of any fallback.
     plant_identified : bool
+    plant_missing : str
+        The loop's blocks the identification left nominal, in words (empty: none).
     budget : BudgetResult or None
     design : mapping or None
         ``design.json``'s payload.
@@ -473,7 +496,7 @@ def build_summary(*, source: str, is_twin: bool, spec: Specification,
         limiting = "unknown: the budget did not run"
     if design is not None:
         reqs += _loop_requirements(design, spec, plant_identified=plant_identified,
-                                   plant_source=plant_source)
+                                   plant_source=plant_source, plant_missing=plant_missing)
         reqs.append(_closed_loop_requirement(design, is_twin=is_twin))
         seed = design["seed_controller"]
         s_seed = {a: float(seed[a]["sensitivity_at_1hz"]) for a in ("h", "v")}
@@ -495,6 +518,13 @@ def build_summary(*, source: str, is_twin: bool, spec: Specification,
         reqs.append(_validation_requirement(validation, validation_skipped))
     status, verdict = _verdict(reqs, plant_identified=plant_identified)
     failed_checks = tuple(c for c in checks if not c.passed)
+    contradictions = [c for c in failed_checks if c.name not in FINDINGS]
+    if status == "meets" and contradictions:
+        first = contradictions[0]
+        status = "not_verified"
+        verdict = (f"Not verified: {len(contradictions)} check(s) of the recordings failed (first: "
+                   f"{first.subject}, {first.name}); a verdict on data that contradict "
+                   "themselves or the bench file would not be one.")
     step = next_step(status=status, requirements=reqs, budget=budget, limiting_row=top)
     return Summary(source=source, is_twin=is_twin,
                    meets_specifications={"meets": True, "does_not_meet": False}.get(status),

@@ -60,6 +60,9 @@ def next_step(*, status: str, requirements: Sequence[Requirement], budget: Any |
     if open_:
         missing = sorted({r.missing for r in open_ if r.missing})
         return "Next: record " + "; ".join(missing) + ", then run the study again."
+    if status == "not_verified":
+        return ("Next: correct or record again the files the failed checks name (listed "
+                "below with the likely cause), then run the study again.")
     if budget is not None and limiting_row is not None:
         return "Next, to do better: " + _budget_step(budget, limiting_row)
     return ""

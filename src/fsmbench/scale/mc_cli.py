@@ -55,6 +55,8 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from fsmbench.cli_args import seed
+
 # The CLI builds its parser with this module: the model, numba and Dask load only when
 # the command runs.
 if TYPE_CHECKING:
@@ -104,7 +106,7 @@ def add_montecarlo_command(sub: Any) -> None:
     p.add_argument("--out", metavar="DIR", required=True, help="output folder")
     p.add_argument("--n", metavar="N", type=_count, default=1000,
                    help="number of draws (default 1000)")
-    p.add_argument("--seed", metavar="S", type=int, default=0,
+    p.add_argument("--seed", metavar="S", type=seed, default=0,
                    help="root seed of the draws (default 0); the same seed gives the same "
                         "rows whatever the workers")
     p.add_argument("--scheduler", metavar="ADDRESS", default=None,
@@ -335,15 +337,24 @@ def _controller(args: argparse.Namespace, bench: Any, drawn: Any, say: Any) -> A
     return designed_controller(bench, plant=plant, plant_source=f"identified ({drawn.label})")
 
 
+def _inputs(args: argparse.Namespace) -> list[tuple[str, Any]]:
+    """Every input path of the command line, with its option (``FILE::NAME`` as FILE)."""
+    controller = (None if args.controller is None
+                  else str(args.controller).partition("::")[0])
+    return [("DATA", args.data), ("--bench", args.bench_dir), ("--controller", controller),
+            ("--ranges", args.ranges), ("--params", args.params)]
+
+
 def _command(args: argparse.Namespace) -> int:
     from fsmbench.bench.params import load_bench
-    from fsmbench.io.outdir import output_transaction
+    from fsmbench.io.outdir import check_inputs, output_transaction
     from fsmbench.jsonutil import stamped
     from fsmbench.scale.montecarlo import MonteCarloSetup, Ranges, run_montecarlo
 
     given = [x for x in (args.data is not None, args.twin, args.bench_dir is not None) if x]
     if len(given) != 1:
         raise ValueError("give one of a DATA folder, --bench DIR or --twin")
+    check_inputs(args.out, _inputs(args))  # before anything is read or computed
     from fsmbench.twin.experiments import seed_experiments, with_duration
 
     # A record too short for the repeatability experiments: one line, before any work.
@@ -369,7 +380,7 @@ def _command(args: argparse.Namespace) -> int:
     argv = [("." if a == out else a) for a in getattr(args, "argv", [])]
     with output_transaction(out, command="montecarlo", arguments=argv, data_dir=args.data,
                             need_bytes=int(args.n * _BYTES_PER_DRAW),
-                            timestamp=args.timestamp) as run:
+                            timestamp=args.timestamp, inputs=_inputs(args)) as run:
         drawn = _drawn_bench(args, bench, say)
         say(f"draws around {drawn.label}")
         setup = MonteCarloSetup(bench=drawn, controller=_controller(args, bench, drawn, say),
