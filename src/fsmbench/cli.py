@@ -47,7 +47,6 @@ import math
 import signal
 import sys
 import threading
-import time
 import traceback
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
@@ -108,12 +107,14 @@ class Terminated(BaseException):
 
 
 def _progress() -> Callable[[str], None]:
-    start = time.perf_counter()
+    from fsmbench.progress import Reporter
 
-    def say(msg: str) -> None:
-        print(f"[{time.perf_counter() - start:6.1f} s] {msg}", file=sys.stderr, flush=True)
+    def final(msg: str) -> str:
+        # A run's hidden staging folder is where it writes, not where its files will be.
+        run = _Current.run
+        return run.final_text(msg) if run is not None else msg
 
-    return say
+    return Reporter(rewrite=final)
 
 
 BENCH_HELP = ("simulate the bench identified in DIR (the output of fsmbench identify or "
@@ -209,9 +210,10 @@ def _run_folder(args: argparse.Namespace, out: str, *, data: str | Path | None,
 
     with output_transaction(out, command=args.command,
                             arguments=_out_arguments(args.argv, out), data_dir=data,
-                            need_bytes=int(need_bytes), timestamp=args.timestamp,
+                            need_bytes=int(need_bytes),
+                            timestamp=getattr(args, "timestamp", False),
                             warn=warn, inputs=_inputs(args, data)) as run, \
-            wall_clock_headers(args.timestamp):
+            wall_clock_headers(getattr(args, "timestamp", False)):
         _Current.run = run  # kept after an error too: main maps paths in its message
         yield run
 
@@ -350,8 +352,13 @@ def _check_data(data: Path) -> None:
                                  str(data))
 
 
-def _stage_input(args: argparse.Namespace) -> _StageInput:
-    """Read the bench and every experiment present (the folders are checked first)."""
+def _stage_input(args: argparse.Namespace, *,
+                 uses: tuple[str, ...] | None = None) -> _StageInput:
+    """Read the bench and every experiment present (the folders are checked first).
+
+    ``uses``: the experiments the command reads; a file it does not use, or one that
+    is simply absent, is not mentioned (the command's own output says what ran).
+    """
     from fsmbench.checks import failed
     from fsmbench.io.folder import load_recordings
 
@@ -362,10 +369,13 @@ def _stage_input(args: argparse.Namespace) -> _StageInput:
     loaded = load_recordings(data, progress=say, fs_hz=conv.fs_hz, adc_range_v=conv.range_v,
                              adc_bits=conv.bits)
     for name, why in loaded.skipped.items():
-        say(f"skipped {name}: {why}")
-    # What the user must know about the files, once each, one line each.
+        absent = why.startswith(f"no {name}.mat")
+        if not absent and (uses is None or name in uses):
+            say(f"skipped {name}: {why}")
+    # What the user must know about the files it uses, once each, one line each.
     for check in failed(loaded.checks):
-        say(f"check failed: {check.sentence()}")
+        if uses is None or check.subject.split(".")[0] in uses:
+            say(f"check failed: {check.sentence()}")
     for notice in loaded.notices:
         say(f"note: {notice.sentence()}")
     return _StageInput(data=data, bench=bench, say=say, recordings=dict(loaded.recordings))
@@ -384,7 +394,7 @@ def _stage_folder(args: argparse.Namespace, need_bytes: float) -> Any:
 def _cmd_identify(args: argparse.Namespace) -> int:
     from fsmbench.io.truth import read_twin_truth
     from fsmbench.stages import identify_stage
-    from fsmbench.twin.compare import compare_with_truth
+    from fsmbench.twin.compare import comparison_rows, readable_table
 
     with _stage_folder(args, _IDENT_BYTES) as run:
         reference = read_twin_truth(Path(args.data))
@@ -397,9 +407,19 @@ def _cmd_identify(args: argparse.Namespace) -> int:
     for warning in result.warnings:
         print(f"fsmbench identify: warning: {warning}", file=sys.stderr)
     for path in paths:
-        print(run.final_path(path))
-    for row in compare_with_truth(result.to_json(), reference=reference, bench=inp.bench):
-        print(row, file=sys.stderr)
+        print(f"wrote {run.final_path(path)}", file=sys.stderr)
+    js = result.to_json()
+    if args.json:
+        rows = comparison_rows(js, reference=reference, bench=inp.bench)
+        print(json.dumps({"files": [str(run.final_path(p)) for p in paths],
+                          "reference": "true" if reference is not None else "nominal",
+                          "rows": [r.to_json() for r in rows],
+                          "skipped": result.skipped, "warnings": list(result.warnings)},
+                         indent=2, allow_nan=False))
+    else:
+        print("\n".join(readable_table(js, reference=reference, bench=inp.bench)))
+        for step, why in result.skipped.items():
+            print(f"not identified: {step}: {why}")
     return 0
 
 
@@ -411,7 +431,8 @@ def _plant(args: argparse.Namespace, inp: _StageInput) -> Any:
 
         plant = load_identified_plant(args.bench_dir)
     else:
-        plant = choose_plant(inp.recordings, bench=inp.bench, progress=inp.say)
+        plant = choose_plant(inp.recordings, bench=inp.bench, progress=inp.say,
+                             source=str(inp.data))
     inp.say(f"plant: {plant.source}")
     return plant
 
@@ -452,9 +473,9 @@ def _cmd_budget(args: argparse.Namespace) -> int:
     return 0
 
 
-_CONTROLLER_NAMES = {"seed_controller": "seed controller (9.2)",
-                     "fsmbench_controller": "fsmbench controller",
-                     "newport_controller": "Newport controller"}
+_CONTROLLER_NAMES = {"seed_controller": "the study's controller (9.2)",
+                     "fsmbench_controller": "fsmbench's controller",
+                     "newport_controller": "Newport alignment (10.2)"}
 
 
 def _num(value: Any, fmt: str, unit: str = "") -> str:
@@ -467,43 +488,65 @@ def _num(value: Any, fmt: str, unit: str = "") -> str:
     return f"{x:{fmt}}{unit}"
 
 
-def _loop_line(name: str, loop: dict[str, Any], bound: float | None) -> str:
-    """One controller's margins, rounded, with units, and its verdict on objective 6.1."""
-    axes = "; ".join(
-        f"{a}: GM {_num(loop[a].get('gain_margin_db'), '.1f', ' dB')}, "
-        f"PM {_num(loop[a].get('phase_margin_deg'), '.1f', '°')}, "
-        f"crossover {_num(loop[a].get('crossover_hz'), '.1f', ' Hz')}, "
-        f"|S(1 Hz)| {_num(loop[a].get('sensitivity_at_1hz'), '.1e')}" for a in ("h", "v"))
-    limit = f" (|S(1 Hz)| <= {bound:.0e})" if bound is not None else ""
-    meets = "yes" if loop.get("meets_objective") else "no"
-    return f"{_CONTROLLER_NAMES.get(name, name)}: meets 6.1{limit}: {meets}; {axes}"
+def design_table(payload: dict[str, Any]) -> list[str]:
+    """What ``fsmbench design`` prints: each loop's margins in words and units, the verdicts.
+
+    The 1 Hz objective of seed 6.1 (|S| ≤ e_max / y_max) is the Sercalo loop's: the
+    Newport's alignment loop (10.2) is shown with its margins only.
+    """
+    bound = payload.get("objective", {}).get("sensitivity_bound_at_1hz")
+    head = ["controller", "axis", "stable", "gain margin", "phase margin", "crossover",
+            "|S(1 Hz)|", "objective 6.1"]
+    body = []
+    for name, words in _CONTROLLER_NAMES.items():
+        loop = payload.get(name)
+        if not loop:
+            continue
+        sercalo = name != "newport_controller"
+        for a in ("h", "v"):
+            ax = loop[a]
+            verdict = ("–" if not sercalo or bound is None else
+                       "met" if ax.get("sensitivity_at_1hz", math.inf) <= bound else "missed")
+            body.append([words, a, "yes" if ax.get("stable") else "NO",
+                         _num(ax.get("gain_margin_db"), ".1f", " dB"),
+                         _num(ax.get("phase_margin_deg"), ".1f", "°"),
+                         _num(ax.get("crossover_hz"), ".1f", " Hz"),
+                         _num(ax.get("sensitivity_at_1hz"), ".2e"), verdict])
+    widths = [max(len(str(x)) for x in col) for col in zip(head, *body, strict=True)]
+    lines = ["  ".join(str(c).ljust(w) for c, w in zip(row, widths, strict=True)).rstrip()
+             for row in (head, *body)]
+    if bound is not None:
+        lines.append(f"Objective 6.1 (the Sercalo loop): |S(1 Hz)| ≤ {bound:.0e}; the Newport "
+                     "loop aligns, it does not reject the sample motion.")
+    twin = payload.get("closed_loop_twin")
+    if twin is None:
+        lines.append(f"fsmbench's controller not simulated: {payload.get('closed_loop_skipped')}")
+    else:
+        lines.append(
+            f"fsmbench's controller simulated on {twin['bench']}: tracking error "
+            + ", ".join(f"{a} {1e6 * v:.3g} µrad rms (linear prediction "
+                        f"{1e6 * twin['predicted_rms_rad'][a]:.3g} µrad)"
+                        for a, v in twin["tracking_error_rms_rad"].items()))
+    return lines
 
 
 def _cmd_design(args: argparse.Namespace) -> int:
-    from fsmbench.stages import design_stage
+    from fsmbench.stages import IDENT_EXPERIMENTS, design_stage
 
     _check_identification(args)
     with _stage_folder(args, _SMALL_BYTES) as run:
-        inp = _stage_input(args)
+        inp = _stage_input(args, uses=IDENT_EXPERIMENTS if args.bench_dir is None else ())
         plant = _plant(args, inp)
         stage, paths = design_stage(bench=inp.bench, out_dir=run.staging, plant=plant,
                                     seed=args.seed, progress=inp.say,
                                     simulated=_simulated(args, inp, plant))
     for path in paths:
-        print(run.final_path(path))
-    p = stage.payload
-    bound = p.get("objective", {}).get("sensitivity_bound_at_1hz")
-    for name in _CONTROLLER_NAMES:
-        if name in p:
-            print(_loop_line(name, p[name], bound), file=sys.stderr)
-    twin = p["closed_loop_twin"]
-    if twin is None:
-        print(f"fsmbench controller not simulated: {p['closed_loop_skipped']}", file=sys.stderr)
+        print(f"wrote {run.final_path(path)}", file=sys.stderr)
+    if args.json:
+        print(json.dumps({"files": [str(run.final_path(p)) for p in paths],
+                          "design": stage.payload}, indent=2, allow_nan=False))
     else:
-        print(f"fsmbench controller simulated on {twin['bench']}: tracking error "
-              + ", ".join(f"{a} {1e6 * v:.3g} µrad rms (linear prediction "
-                          f"{1e6 * twin['predicted_rms_rad'][a]:.3g} µrad)"
-                          for a, v in twin["tracking_error_rms_rad"].items()), file=sys.stderr)
+        print("\n".join(design_table(stage.payload)))
     return 0
 
 
@@ -547,15 +590,16 @@ def _parser() -> argparse.ArgumentParser:
     parser.add_argument("--version", action="version", version=f"fsmbench {__version__}")
     sub = parser.add_subparsers(dest="command", required=True, parser_class=Parser)
 
-    def common(p: argparse.ArgumentParser) -> None:
+    def common(p: argparse.ArgumentParser, *, mat_files: bool = True) -> None:
         p.add_argument("--params", metavar="FILE", default=None,
                        help="bench parameters (TOML); default: the packaged Sercalo bench")
+        where = "MAT-file headers and run.json" if mat_files else "run.json (with --out)"
         p.add_argument("--timestamp", action="store_true",
-                       help="write the wall-clock time into MAT-file headers and run.json "
-                            "(default: none, so that outputs are byte-identical)")
+                       help=f"write the wall-clock time into {where} (default: none, so "
+                            "that outputs are byte-identical)")
 
     p = sub.add_parser("params", help="print the bench parameters with units and sources")
-    common(p)
+    common(p, mat_files=False)
     p.add_argument("--out", metavar="DIR", default=None, help="also write DIR/bench.toml")
     p.add_argument("--json", action="store_true", help="print JSON instead of a table")
     p.set_defaults(func=_cmd_params)
@@ -593,7 +637,12 @@ def _parser() -> argparse.ArgumentParser:
         p.add_argument("--out", metavar="DIR", required=True, help="output folder")
         if name == "identify":
             add_identify_options(p)
+            p.add_argument("--json", action="store_true",
+                           help="print the comparison as JSON on stdout instead of the table")
         if name == "design":
+            p.add_argument("--json", action="store_true",
+                           help="print the design (design.json's content) as JSON on stdout "
+                                "instead of the table")
             p.add_argument("--seed", metavar="N", type=seed, default=0,
                            help="twin seed of the closed-loop verification (default 0)")
         if name in ("budget", "design"):
@@ -609,7 +658,8 @@ def _parser() -> argparse.ArgumentParser:
 
     p = sub.add_parser("study", help="the whole study; the twin when no --data is given")
     common(p)
-    p.add_argument("--data", metavar="DIR", default=None, help="folder of recordings (.mat)")
+    p.add_argument("--data", metavar="DIR", default=None,
+                   help="folder of recordings (.mat, .h5, .nxs)")
     p.add_argument("--out", metavar="DIR", required=True, help="output folder")
     p.add_argument("--seed", metavar="N", type=seed, default=0, help="twin seed (default 0)")
     p.add_argument("--duration", metavar="S", type=seconds, default=None,

@@ -23,8 +23,22 @@ EXIT_USER_ERROR = 2
 SEED_MAX = 2**63 - 1
 
 
+class _DescribedSubParsers(argparse._SubParsersAction):
+    """Sub-commands whose ``--help`` page opens with their one-line ``help``."""
+
+    def add_parser(self, name: str, **kwargs: Any) -> argparse.ArgumentParser:
+        text = kwargs.get("help")
+        if text and "description" not in kwargs:
+            kwargs["description"] = text[0].upper() + text[1:] + "."
+        return super().add_parser(name, **kwargs)
+
+
 class Parser(argparse.ArgumentParser):
     """argparse with errors as one line ``fsmbench <cmd>: error: ...`` and status 2."""
+
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        super().__init__(*args, **kwargs)
+        self.register("action", "parsers", _DescribedSubParsers)
 
     def error(self, message: str) -> NoReturn:
         self.exit(EXIT_USER_ERROR, f"{self.prog}: error: {message} (see {self.prog} --help)\n")

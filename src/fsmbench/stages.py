@@ -102,19 +102,20 @@ def identify_stage(recordings: Mapping[str, xr.Dataset], *, bench: Bench, out_di
 
 def choose_plant(recordings: Mapping[str, xr.Dataset], *, bench: Bench,
                  identification: Identification | None = None,
-                 progress: Progress | None = None) -> PlantChoice:
+                 progress: Progress | None = None, source: str = "") -> PlantChoice:
     """The identified plant if the Sercalo could be identified, else the nominal model.
 
     ``source`` says which and why: the missing experiments, or the failed
     check or step of the identification (never "missing" when the file was
     there). Blocks that fell back to nominal inside an identified plant are
-    named with their reason too.
+    named with their reason too. ``source``: where the recordings are (named in the
+    identified plant's source when it is identified here).
     """
     say = progress or _quiet
     ident = identification
     if ident is None and all(n in recordings for n in ("data_uch", "data_ucv")):
         say("identifying the plant first (seed section 2)")
-        ident = identify(recordings, bench=bench, progress=say)
+        ident = identify(recordings, bench=bench, progress=say, source=source or "recordings")
     if ident is not None and ident.plant is not None and ident.sercalo is not None \
             and not ident.warnings:
         parts = []

@@ -297,8 +297,10 @@ def test_memory_does_not_grow_with_the_periods(params):
 def test_progress_reports_both_reads(params):
     lines: list[str] = []
     analyse_repeatability(_rep_record(), params=params, block_samples=700, progress=lines.append)
-    assert any(x.startswith("data_rep_h: folding the periods 100 %") for x in lines)
-    assert lines[-1].startswith("data_rep_h: non-repeatable parts and spectra 100 %")
+    assert any(x.startswith("data_rep_h: folding the periods: 100 %") for x in lines)
+    assert lines[-1].startswith("data_rep_h: non-repeatable parts and spectra: 100 %")
+    # A record of seconds is counted in seconds, not in hundredths of an hour.
+    assert " h of " not in lines[-1] and lines[-1].endswith(" s)")
 
 
 def test_records_in_memory_need_no_dask() -> None:

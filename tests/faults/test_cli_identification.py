@@ -126,14 +126,19 @@ def test_budget_reuses_an_identification(kit: SimpleNamespace, stage_data: Path,
 
 
 def test_design_prints_rounded_values_with_units() -> None:
-    from fsmbench.cli import _loop_line
+    from fsmbench.cli import design_table
 
     axis = {"gain_margin_db": 14.467792213829014, "phase_margin_deg": 52.74239733270343,
-            "crossover_hz": 36.90111458340814, "sensitivity_at_1hz": 0.00011787110436707398}
+            "crossover_hz": 36.90111458340814, "sensitivity_at_1hz": 0.00011787110436707398,
+            "stable": True}
     loop = {"h": axis, "v": {**axis, "gain_margin_db": float("inf"),
-                             "phase_margin_deg": None}, "meets_objective": True}
-    assert _loop_line("fsmbench_controller", loop, 2e-4) == (
-        "fsmbench controller: meets 6.1 (|S(1 Hz)| <= 2e-04): yes; "
-        "h: GM 14.5 dB, PM 52.7°, crossover 36.9 Hz, |S(1 Hz)| 1.2e-04; "
-        "v: GM ∞, PM none, crossover 36.9 Hz, |S(1 Hz)| 1.2e-04")
-    assert ": no;" in _loop_line("seed_controller", {**loop, "meets_objective": False}, None)
+                             "phase_margin_deg": None, "sensitivity_at_1hz": 3e-4}}
+    lines = design_table({"objective": {"sensitivity_bound_at_1hz": 2e-4},
+                          "fsmbench_controller": loop, "newport_controller": loop,
+                          "closed_loop_twin": None, "closed_loop_skipped": "no bench"})
+    rows = [line.split() for line in lines[1:5]]
+    # Rounded values with their units; the objective only where it applies (the Sercalo loop).
+    assert rows[0][2:] == ["h", "yes", "14.5", "dB", "52.7°", "36.9", "Hz", "1.18e-04", "met"]
+    assert rows[1][2:] == ["v", "yes", "∞", "none", "36.9", "Hz", "3.00e-04", "missed"]
+    assert rows[2][-1] == "–" and rows[3][-1] == "–"
+    assert lines[-1] == "fsmbench's controller not simulated: no bench"

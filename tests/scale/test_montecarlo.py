@@ -233,7 +233,7 @@ def test_json_is_stamped_and_documented(reference: Any) -> None:
     assert '.h"' not in text and '.v"' not in text
     assert set(doc["draws"][0]["factors"]["resonance_scale"]) == {"h", "v"}
     assert _at(doc["metric_descriptions"], "tracking_error_rms_rad.h") == (
-        "tracking error h [µrad rms]")
+        "tracking error h (4QD, sine and noise) [µrad rms]")
 
 
 def _at(tree: dict[str, Any], dotted: str) -> Any:

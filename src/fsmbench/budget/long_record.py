@@ -32,6 +32,7 @@ from numpy.typing import NDArray
 
 from fsmbench.budget.signals import LazyTrim, trim_record
 from fsmbench.ident.welch import SpectrumResult, WelchOptions, hanning
+from fsmbench.progress import advance
 from fsmbench.scale.allan import AllanResult
 from fsmbench.scale.envelope import Envelope
 from fsmbench.scale.streaming import (
@@ -143,7 +144,7 @@ def summarise_long_record(ds: xr.Dataset, *, name: str, t0_s: float = 1.0,
     block_samples : int
         Samples per block read.
     progress : callable, optional
-        Receives a line per tenth of each read.
+        Receives each read's progress (:func:`fsmbench.progress.advance`).
 
     Raises
     ------
@@ -166,8 +167,6 @@ def summarise_long_record(ds: xr.Dataset, *, name: str, t0_s: float = 1.0,
     bins = min(n_bins, n)
 
     def blocks(what: str):  # type: ignore[no-untyped-def]
-        tenth = max(1, n // 10)
-        shown = 0
         for offset, block in read_blocks(signals, start=trim.start, stop=trim.start + n,
                                          block_samples=block_samples):
             for k, x in block.items():
@@ -177,10 +176,7 @@ def summarise_long_record(ds: xr.Dataset, *, name: str, t0_s: float = 1.0,
                                      f"sample {trim.start + first}); remove or interpolate them")
             yield block
             done = offset + len(block["Va"])
-            if progress is not None and done // tenth > shown:
-                shown = done // tenth
-                progress(f"{name}: {what} {100 * done // n} % "
-                         f"({done / fs / 3600:.2f} h of {n / fs / 3600:.2f} h)")
+            advance(progress, f"{name}: {what}", done / fs, n / fs, "s")
 
     # Read 1: the raw signals.
     sums = {k: SumStream() for k in SIGNALS}

@@ -54,6 +54,7 @@ from fsmbench.bench.params import BenchParams
 from fsmbench.budget.propagation import distance_coefficients
 from fsmbench.ident.welch import WelchOptions, hanning
 from fsmbench.jsonutil import hv
+from fsmbench.progress import advance
 from fsmbench.scale.envelope import Envelope
 from fsmbench.scale.streaming import (
     BLOCK_SAMPLES,
@@ -372,7 +373,6 @@ def analyse_repeatability(ds: xr.Dataset, *, params: BenchParams, name: str | No
 
     def blocks(keys: tuple[str, ...], what: str,
                ) -> Iterator[tuple[int, dict[str, FloatArray]]]:
-        tenth, shown = max(1, total // 10), 0
         for offset, block in read_blocks({k: signals[k] for k in keys}, start=al.start_index,
                                          stop=al.stop_index, block_samples=block_samples):
             for k, x in block.items():
@@ -382,10 +382,7 @@ def analyse_repeatability(ds: xr.Dataset, *, params: BenchParams, name: str | No
                                      f"at sample {first}); remove or interpolate them")
             yield offset, block
             done = offset + block["Va"].size
-            if progress is not None and done // tenth > shown:
-                shown = done // tenth
-                progress(f"{al.name}: {what} {100 * done // total} % "
-                         f"({done / fs / 3600:.2f} h of {total / fs / 3600:.2f} h)")
+            advance(progress, f"{al.name}: {what}", done / fs, total / fs, "s")
 
     shift = float(np.asarray(signals["Va"][al.start_index]))
     options = WelchOptions.from_matlab(window=hanning(math.ceil(fs)), noverlap=None, nfft=None,

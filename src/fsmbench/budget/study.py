@@ -294,7 +294,12 @@ def _budget_study(recordings: Mapping[str, xr.Dataset], *, bench: Bench,
     # Records out of core are read twice, in blocks, for everything below (huddle and stability).
     summaries = {name: summarise_long_record(ds, name=name, n_bins=DRIFT_BINS, progress=progress)
                  for name, ds in valid.items() if is_lazy(ds["Va"].data)}
+    say = progress or (lambda _msg: None)
+    if valid:
+        say(f"huddle tests: spectra and rms of {', '.join(sorted(valid))} (seed 3)")
     huddle = analyse_huddle(valid, params=params, summaries=summaries) if valid else None
+    if valid:
+        say("huddle tests: drift and Allan deviation over each whole record")
     stability = _stability(valid, params=params, summaries=summaries)
     qd = None if huddle is None else huddle.qd_noise
     if qd is None:
@@ -316,10 +321,13 @@ def _budget_study(recordings: Mapping[str, xr.Dataset], *, bench: Bench,
             cache[closed] = replace(a, spectra_origin={**a.spectra_origin, **measured})
         return cache[closed]
 
+    say(f"error budget: every source through the plant and the loop with {controller_name} "
+        "(seed 4)")
     budget = budget_table(params, angles(True), window_s=window_s)
     stationary = budget_table(params, angles(True), window_s=None).total_rms_m
     rec_budget = None
     if recommended is not None:
+        say(f"error budget: the same with {recommended_name}")
         k_rec = recommended if recommended.dt else tustin(recommended,
                                                             ts_s=params.converter.ts_s)
         rec_angles = angle_sources(params, plant=plant, controller=k_rec, closed_loop=True,
@@ -355,6 +363,7 @@ def _budget_study(recordings: Mapping[str, xr.Dataset], *, bench: Bench,
         if name not in usable:
             skipped[name] = "not in the recordings (seed 11)"
             continue
+        say(f"repeatability: {name} (seed 11)")
         try:
             reps[direction] = analyse_repeatability(usable[name], params=params, name=name,
                                                     progress=progress)

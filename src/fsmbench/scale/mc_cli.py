@@ -265,24 +265,45 @@ def dask_client(*, scheduler: str | None, workers: int) -> Iterator[Any]:
         yield client
 
 
+def _passes(result: Any) -> list[tuple[str, int]]:
+    """Draws meeting each requirement of the design (stable, margins, |S| is not simulated)."""
+    from fsmbench.control.design import DesignOptions
+
+    gm, pm = DesignOptions().gain_margin_db, DesignOptions().phase_margin_deg
+    draws = result.draws
+
+    def both(key: str, low: float) -> int:
+        return sum(1 for d in draws if d.stable and all(
+            (math.isfinite(d.metrics[f"{key}.{a}"]) and d.metrics[f"{key}.{a}"] >= low)
+            or d.metrics[f"{key}.{a}"] == math.inf for a in "hv"))
+
+    return [("closed loop stable", sum(1 for d in draws if d.stable)),
+            (f"gain margin ≥ {gm:g} dB", both("gain_margin_db", gm)),
+            (f"phase margin ≥ {pm:g}°", both("phase_margin_deg", pm))]
+
+
 def format_table(result: Any) -> str:
     """The short table: quantiles of each metric in display units, the unstable fraction
     and the worst draws."""
     from fsmbench.scale.montecarlo import METRICS, summarise
 
     s = summarise(result)
-    lines = [f"{len(result.draws)} draws, seed {result.seed}, controller "
-             f"{result.setup.controller.name}; unstable: {s['unstable_draws']} "
-             f"({100 * s['fraction_unstable']:.1f} %); not settled before the metrics: "
+    n = len(result.draws)
+    lines = [f"{n} draws, seed {result.seed}, controller {result.setup.controller.name}, "
+             f"around {result.setup.bench.label}; not settled before the metrics: "
              f"{s['unsettled_draws']}",
-             f"{'metric':<40} {'unit':<9} {'5 %':>10} {'median':>10} {'95 %':>10} {'max':>10}"]
+             "requirements over the draws (a draw passes when both axes do):"]
+    for words, ok in _passes(result):
+        lines.append(f"  {words:<58} {ok:>4} of {n} ({100 * ok / n:.0f} %)")
+    lines.append(f"{'metric':<50} {'unit':<9} {'5 %':>10} {'median':>10} {'95 %':>10} "
+                 f"{'max':>10}")
 
     def num(x: float | None, factor: float) -> str:
         return "—" if x is None or not math.isfinite(x) else f"{x * factor:.4g}"
 
     for key, (words, unit, factor) in METRICS.items():
         q = s["quantiles"][key]
-        lines.append(f"{words:<40} {unit:<9} " + " ".join(
+        lines.append(f"{words:<50} {unit:<9} " + " ".join(
             f"{num(q[k], factor):>10}" for k in ("p5", "p50", "p95", "max")))
     lines.append("worst draws (unstable first, then the larger tracking error):")
     for row in s["worst_draws"]:
@@ -315,7 +336,7 @@ def _drawn_bench(args: argparse.Namespace, bench: Any, say: Any) -> Any:
     conv = bench.nominal.converter
     loaded = load_recordings(data, progress=say, fs_hz=conv.fs_hz, adc_range_v=conv.range_v,
                              adc_bits=conv.bits)
-    plant = choose_plant(dict(loaded.recordings), bench=bench, progress=say)
+    plant = choose_plant(dict(loaded.recordings), bench=bench, progress=say, source=str(data))
     sim = simulation_bench(bench=bench, is_twin=False, identification=plant.identification,
                            label=f"the bench identified from the recordings in {data}")
     if sim.bench is None:

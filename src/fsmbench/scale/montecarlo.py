@@ -105,12 +105,12 @@ _EXPERIMENTS = (("h", "data_rep_h", "Vph"), ("v", "data_rep_v", "Vpv"))
 
 #: Per-draw metrics: key -> (words for a table, unit shown, factor from SI to it).
 METRICS: dict[str, tuple[str, str, float]] = {
-    "tracking_error_rms_rad.h": ("tracking error h", "µrad rms", 1e6),
-    "tracking_error_rms_rad.v": ("tracking error v", "µrad rms", 1e6),
-    "distance_error_rms_m.h": ("distance error, h experiment", "nm rms", 1e9),
-    "distance_error_rms_m.v": ("distance error, v experiment", "nm rms", 1e9),
-    "distance_nonrepeatable_rms_m.h": ("non-repeatable distance, h experiment", "nm rms", 1e9),
-    "distance_nonrepeatable_rms_m.v": ("non-repeatable distance, v experiment", "nm rms", 1e9),
+    "tracking_error_rms_rad.h": ("tracking error h (4QD, sine and noise)", "µrad rms", 1e6),
+    "tracking_error_rms_rad.v": ("tracking error v (4QD, sine and noise)", "µrad rms", 1e6),
+    "distance_error_rms_m.h": ("Va about its mean, h run (with the 1 Hz motion)", "nm rms", 1e9),
+    "distance_error_rms_m.v": ("Va about its mean, v run (with the 1 Hz motion)", "nm rms", 1e9),
+    "distance_nonrepeatable_rms_m.h": ("non-repeatable distance, h run (11.4)", "nm rms", 1e9),
+    "distance_nonrepeatable_rms_m.v": ("non-repeatable distance, v run (11.4)", "nm rms", 1e9),
     "gain_margin_db.h": ("gain margin h", "dB", 1.0),
     "gain_margin_db.v": ("gain margin v", "dB", 1.0),
     "phase_margin_deg.h": ("phase margin h", "°", 1.0),

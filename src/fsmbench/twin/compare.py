@@ -18,7 +18,8 @@ from typing import Any
 from fsmbench.bench.params import Bench
 from fsmbench.twin.truth import model_values
 
-__all__ = ["TARGETS", "ComparisonRow", "compare_with_truth", "comparison_rows"]
+__all__ = ["TARGETS", "ComparisonRow", "compare_with_truth", "comparison_rows", "quantity",
+           "readable_table"]
 
 # key -> (kind, tolerance): "rel" relative, "abs" absolute in the key's unit, "samples"
 # absolute in sampling periods of the reference's (or the identification's) fs_hz.
@@ -70,6 +71,41 @@ class ComparisonRow:
                 f"{self.target:10s} {mark}")
 
 
+def quantity(key: str) -> tuple[str, str, float]:
+    """A comparison key in words: (name with unit, unit, display units per SI unit).
+
+    ``"qd_gain_v_per_rad.h"`` → ``("4QD gain, h [V/rad]", "V/rad", 1.0)``.
+    """
+    parts = key.split(".")
+    if parts[0] == "qd_gain_v_per_rad":
+        return f"4QD gain, {parts[1]} [V/rad]", "V/rad", 1.0
+    if parts[0] == "current_amp_gain_a_per_v":
+        return f"Current-amplifier gain, {parts[1]} [mA/V]", "mA/V", 1e3
+    if parts[0] == "newport_gain_v_per_v":
+        out, inp = ("Vph", "Unh") if parts[1] == "h" else ("Vpv", "Unv")
+        return f"Newport gain {inp} → {out} [V/V]", "V/V", 1.0
+    if parts[0] == "delay_s":
+        return f"Delay of the {parts[1].capitalize()} path [ms]", "ms", 1e3
+    if parts[0] == "newport" and len(parts) == 3:
+        axis, what = parts[1], parts[2]
+        if what == "natural_freq_hz":
+            return f"Newport natural frequency, {axis} [Hz]", "Hz", 1.0
+        if what == "damping_ratio":
+            return f"Newport damping ratio, {axis} [1]", "", 1.0
+        if what == "internal_delay_s":
+            return f"Newport internal delay, {axis} [ms]", "ms", 1e3
+    if parts[0] == "sercalo" and len(parts) == 3:
+        axis, what = parts[1], parts[2]
+        if what == "resonance_hz":
+            return f"Sercalo resonance, {axis} [Hz]", "Hz", 1.0
+        if what == "damping_ratio":
+            return f"Sercalo damping ratio, {axis} [1]", "", 1.0
+        if what == "dc_gain_v_per_a":
+            inp, out = {"h": ("Ich", "Vph"), "v": ("Icv", "Vpv")}[axis]
+            return f"Sercalo static gain {inp} → {out} [V/A]", "V/A", 1.0
+    return key.replace("_", " ").replace(".", ", "), "", 1.0
+
+
 def _get(tree: Mapping[str, Any], key: str) -> float | None:
     node: Any = tree
     for part in key.split("."):
@@ -107,6 +143,65 @@ def comparison_rows(identified: Mapping[str, Any], *, reference: Mapping[str, An
                                   within_target=(err <= tol) if reference is not None else None,
                                   tolerance_abs=None if tol_kind == "rel" else tol))
     return rows
+
+
+def readable_table(identified: Mapping[str, Any], *, reference: Mapping[str, Any] | None,
+                   bench: Bench) -> list[str]:
+    """What ``fsmbench identify`` prints: each quantity in words, engineering units, std.
+
+    Against the twin's truth: the accuracy target and ``ok`` / ``MISSED``; against the
+    nominal model (recorded data): the difference, which is how far the bench is from
+    its bench file, not an error.
+    """
+    rows = comparison_rows(identified, reference=reference, bench=bench)
+    stds = _stds(identified)
+    ref_word = "true value" if reference is not None else "bench file"
+    head = ["quantity", "identified", "± std", ref_word, "difference"]
+    if reference is not None:
+        head += ["target", ""]
+    body = []
+    for r in rows:
+        name, unit, scale = quantity(r.key)
+        std = stds.get(r.key)
+        diff = (f"{(r.identified - r.reference) * scale:+.3g} {unit}".strip()
+                if r.tolerance_abs is not None else f"{100 * r.relative_difference:+.2f} %")
+        cells = [name, f"{r.identified * scale:.5g}",
+                 "" if std is None else f"{std * scale:.2g}", f"{r.reference * scale:.5g}", diff]
+        if reference is not None:
+            _kind, tol = TARGETS[r.key]
+            target = (f"±{r.tolerance_abs * scale:.3g} {unit}".strip() if r.tolerance_abs
+                      is not None else f"±{100 * tol:.3g} %")
+            cells += [target, {True: "ok", False: "MISSED", None: ""}[r.within_target]]
+        body.append(cells)
+    widths = [max(len(str(x)) for x in col) for col in zip(head, *body, strict=True)]
+    lines = ["  ".join(str(c).ljust(w) if i == 0 else str(c).rjust(w)
+                       for i, (c, w) in enumerate(zip(cells, widths, strict=True))).rstrip()
+             for cells in (head, *body)]
+    if reference is None:
+        lines.append("Against the bench file: the difference is how far this bench is from "
+                     "it, not an error of the identification.")
+    else:
+        met = sum(1 for r in rows if r.within_target)
+        lines.append(f"{met} of {len(rows)} values within their accuracy targets.")
+    return lines
+
+
+def _stds(identified: Mapping[str, Any]) -> dict[str, float]:
+    """The standard deviations ``identification.json`` reports, by comparison key."""
+    out: dict[str, float] = {}
+    diag = identified.get("diagnostics") or {}
+    for axis, cal in (diag.get("qd") or {}).items():
+        if isinstance(cal, Mapping) and cal.get("gain_std_v_per_rad") is not None:
+            out[f"qd_gain_v_per_rad.{axis}"] = float(cal["gain_std_v_per_rad"])
+    for axis, gi in (diag.get("current_amp") or {}).items():
+        if isinstance(gi, Mapping) and gi.get("gain_std_a_per_v") is not None:
+            out[f"current_amp_gain_a_per_v.{axis}"] = float(gi["gain_std_a_per_v"])
+    for axis, mode in (diag.get("sercalo_modes") or {}).items():
+        for key in ("resonance_hz", "damping_ratio"):
+            std = mode.get(f"{key}_std") if isinstance(mode, Mapping) else None
+            if std is not None:
+                out[f"sercalo.{axis}.{key}"] = float(std)
+    return out
 
 
 def compare_with_truth(identified: Mapping[str, Any], *, reference: Mapping[str, Any] | None,

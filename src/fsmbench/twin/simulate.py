@@ -33,6 +33,7 @@ from fsmbench.io.atomic import atomic_write_text
 from fsmbench.io.recording import RecordingFormat, make_recording, write_recording
 from fsmbench.io.signals import EXPERIMENTS
 from fsmbench.jsonutil import stamped
+from fsmbench.progress import advance
 from fsmbench.sim.controller import closed_loop_spectral_radius
 from fsmbench.sim.discretize import DiscretePlant
 from fsmbench.sim.engine import DiscreteController
@@ -177,7 +178,9 @@ def stream_bench(bench: Bench | None = None, *, out_dir: str | Path, seed: int =
         return stream_experiment(bench, spec, seed=seed, path=out / f"{spec.name}.h5",
                                  plant=plant, controller=controller, created=TWIN_CREATED_S,
                                  progress=None if progress is None
-                                 else (lambda sp: progress(sp.line())))
+                                 else (lambda sp: advance(
+                                     progress, f"simulating {sp.experiment}", sp.samples_done,
+                                     sp.samples_total, "samples", line=sp.line())))
 
     with ThreadPoolExecutor(max_workers=max(1, min(len(specs), os.cpu_count() or 1))) as pool:
         realized = dict(zip((s.name for s in specs), pool.map(one, specs), strict=True))
@@ -227,8 +230,8 @@ def simulate_bench(bench: Bench | None = None, *, seed: int = 0, duration_s: flo
         results = []
         for i, (spec, future) in enumerate(zip(specs, futures, strict=True), start=1):
             results.append(future.result())
-            if progress is not None:
-                progress(f"[{i}/{len(specs)}] simulated {spec.name} ({spec.duration_s:g} s)")
+            advance(progress, "simulating the experiments", i, len(specs), "experiments",
+                    line=f"[{i}/{len(specs)}] simulated {spec.name} ({spec.duration_s:g} s)")
     recordings: dict[str, xr.Dataset] = {s.name: r.recording for s, r in zip(specs, results,
                                                                              strict=True)}
     realized: dict[str, dict[str, float]] = {s.name: r.realized for s, r in zip(specs, results,
