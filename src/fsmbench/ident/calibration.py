@@ -278,7 +278,9 @@ def calibrate_current_amplifier(ds: xr.Dataset, *, axis: str, nominal: BenchPara
     name = require_signals(ds, (u_name, v_name), purpose="the current amplifier")
     rec = trim_recording(ds, t0_s=trim_s)
     fs = float(rec.attrs["fs_hz"])
-    est = spectral_matrix(rec[u_name].values, rec[v_name].values, input_names=[u_name],
+    u, v = (np.asarray(rec[n].values, dtype=float) for n in (u_name, v_name))
+    # Offsets removed: a constant leaks through the window onto the band's lines.
+    est = spectral_matrix(u - u.mean(), v - v.mean(), input_names=[u_name],
                           output_names=[v_name], window=hanning(int(np.ceil(window_s * fs))),
                           fs_hz=fs)
     f = est.frequency_hz

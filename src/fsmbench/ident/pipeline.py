@@ -63,6 +63,8 @@ from fsmbench.ident.calibration import (
     current_amp_checks,
     qd_checks,
 )
+from fsmbench.ident.consistency import screen_recordings
+from fsmbench.ident.crosscheck import NOISE_CHECKS, cross_checks, floor_checks
 from fsmbench.ident.export import write_frf_mat, write_plant_mat
 from fsmbench.ident.modes import ModeRefinement, refine_modes
 from fsmbench.ident.newport import (
@@ -338,7 +340,22 @@ def identify(recordings: Mapping[str, xr.Dataset], *, bench: Bench,
                            source=source, say=progress or (lambda _msg: None))
     numeric = [Notice("numeric", "identification", f"{w.category.__name__}: {w.message}")
                for w in caught]
-    return replace(result, notices=result.notices + tuple(numeric)) if numeric else result
+    # Records against each other and against the physical model (ident.crosscheck): a
+    # failed one makes the identification untrusted, as a quality warning does.
+    crossed = [*cross_checks(result.to_json(), params=bench.nominal),
+               *floor_checks(recordings, fs_hz=bench.nominal.converter.fs_hz)]
+    failed = [c for c in crossed if not c.passed and c.name not in NOISE_CHECKS]
+    noise_failed = [c for c in crossed if not c.passed and c.name in NOISE_CHECKS]
+    skipped = dict(result.skipped)
+    if noise_failed:
+        skipped["noise_model"] = ("the fitted noise contradicts the bench file ("
+                                  + "; ".join(f"{c.subject}: {c.advice}" for c in noise_failed)
+                                  + "): simulations use the bench file's noise, assumed")
+    return replace(result, notices=result.notices + tuple(numeric),
+                   checks=result.checks + tuple(crossed), skipped=skipped,
+                   noise_model=None if noise_failed else result.noise_model,
+                   warnings=result.warnings + tuple(
+                       f"{c.subject}: {c.name} failed: {c.advice}" for c in failed))
 
 
 def _failure_reason(check: Check, fallback: str) -> str:
@@ -370,6 +387,18 @@ def _identify(recordings: Mapping[str, xr.Dataset], *, bench: Bench, opts: Ident
                 checks.extend(found)
                 notices.extend(notes)
         return first_failure(c for n in names for c in seen[n])
+
+    # ---- issue 21 (ident.consistency): signs, swapped cables and 4QD offsets across the
+    # records. A failed check joins its records' own: each step using them falls back
+    # naming it. Huddle tests failing their checks (a jump in Va …) leave the noise model.
+    screen = screen_recordings(recordings, params=nom, trims_s=opts.trims_s,
+                               failure=data_failure)
+    for name, extra in screen.by_experiment.items():
+        seen[name] = [*seen[name], *extra]
+    checks.extend(screen.checks)
+    notices.extend(screen.notices)
+    recordings = screen.recordings
+    # ---- end of issue 21
 
     qd: dict[str, QdCalibration] = {}
     if gone := missing("data_cal_pd_h", "data_cal_pd_v"):

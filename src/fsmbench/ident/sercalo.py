@@ -113,6 +113,12 @@ def experiment_frf(recordings: Mapping[str, xr.Dataset], *, columns: Sequence[tu
     -------
     FrequencyResponse
         ``estimator`` says which; ``frf_variance`` set for LPM and periodic.
+
+    Notes
+    -----
+    Each record's means (after trimming) are removed first: a beam off the 4QD's
+    centre reads volts of mean, which Welch's window leaks onto the lines of a
+    response of millivolts; a constant changes only the 0 Hz line otherwise.
     """
     if estimator == "auto":
         estimator = "periodic" if choose_estimator(
@@ -126,8 +132,10 @@ def experiment_frf(recordings: Mapping[str, xr.Dataset], *, columns: Sequence[tu
         require_signals(recordings[experiment], (signal, *OUTPUTS),
                         purpose=f"the {signal} column of the FRF matrix")
         ds = trim_recording(recordings[experiment], t0_s=trims_s.get(experiment, 0.0))
-        data.append((experiment, signal, float(ds.attrs["fs_hz"]), np.asarray(ds[signal].values),
-                     np.column_stack([ds[o].values for o in OUTPUTS])))
+        u = np.asarray(ds[signal].values, dtype=float)  # means removed (Notes)
+        y = np.column_stack([ds[o].values for o in OUTPUTS]).astype(float)
+        data.append((experiment, signal, float(ds.attrs["fs_hz"]), u - u.mean(),
+                     y - y.mean(axis=0)))
     if estimator == "welch":
         return combine_columns([spectral_matrix(
             u, y, input_names=[signal], output_names=list(OUTPUTS),

@@ -16,15 +16,25 @@ fails it is skipped *with the check's name as the reason*:
 ``integer_samples``   no signal stored as integers (raw converter counts)
 ``converter_range``   ADC/DAC signals within the converter's ±range/2
 ``signal_varies``     measured signals and the excitation are not constant
-``va_in_metres``      the Attocube distance varies by ≤ 1 mm rms (it is in m, not nm)
+``va_in_metres``      the Attocube distance varies by ≤ 1 mm rms (it is in m, not nm);
+                      the advice names the unit that makes the rms the experiment's own
+``va_continuous``     ``Va`` of a huddle or repeatability record has no single-sample step
+                      above 10 robust standard deviations of its increments (fringe loss:
+                      :mod:`fsmbench.io.va_jumps`), the sample, time and size named
+
+A name that is there but is not a readable file (a directory, a symbolic link
+that loops or points nowhere) is named as what it is, not as missing.
 """
 
 from __future__ import annotations
 
+import contextlib
 import difflib
+import errno
 import math
 import os
 import re
+import stat
 import warnings
 import weakref
 from collections.abc import Callable, Iterable
@@ -39,6 +49,7 @@ from fsmbench.checks import Check, Notice
 from fsmbench.io.errors import RecordingError, SaturationWarning
 from fsmbench.io.recording import find_experiments, read_recording
 from fsmbench.io.signals import ADC_SIGNALS, DAC_SIGNALS, EXPERIMENTS, SIGNALS, TIME
+from fsmbench.io.va_jumps import jump_check, va_unit_hint
 
 __all__ = [
     "EXCITATION",
@@ -48,6 +59,7 @@ __all__ = [
     "check_recording",
     "folder_hints",
     "load_recordings",
+    "not_a_file",
 ]
 
 #: Relative tolerance of the sampling-rate check: a clock off by more than 1 %
@@ -296,10 +308,11 @@ def _check_recording(ds: xr.Dataset, *, name: str | None, fs_hz: float | None,
                                 subject, why))
         if v == "Va":
             ok = rms <= MAX_VA_RMS_M
-            hint = ("it looks like nanometres: save Va in metres (Va = Va*1e-9)"
-                    if 1e-1 < rms < 1e6 else "Va is not a distance in metres")
             checks.append(Check("va_in_metres", ok, rms, f"≤ {MAX_VA_RMS_M:g} m rms (the bench "
-                                "moves by nm to µm)", subject, "" if ok else hint))
+                                "moves by nm to µm)", subject,
+                                "" if ok else va_unit_hint(rms, exp)))
+            if ok and v in required:  # jumps in a Va that is not in metres say nothing more
+                checks.append(jump_check(ds, subject))
     return checks, notices
 
 
@@ -360,6 +373,69 @@ def folder_hints(folder: str | os.PathLike[str],
             why = "a copy's name; the study reads only the exact name"
         hints[exp] = f"found {p.name}: rename it {exp}{suffix} ({why})"
     return hints
+
+
+def not_a_file(folder: Path, name: str) -> str | None:
+    """Why ``folder/name.mat`` (or ``.h5``, ``.nxs``) is there but is not a file to read.
+
+    Parameters
+    ----------
+    folder : Path
+        The data folder.
+    name : str
+        An experiment name (``"data_uch"``).
+
+    Returns
+    -------
+    str or None
+        ``"data_uch.mat in DIR is a directory, not a recording file …"``, a
+        symbolic link that loops or points to nothing, a named pipe …; None
+        when no entry of that name exists (or it is a file).
+    """
+    for suffix in _SUFFIXES:
+        path = folder / f"{name}{suffix}"
+        if not os.path.lexists(path):
+            continue
+        head = f"{path.name} in {folder} is"
+        if path.is_symlink():
+            target = os.readlink(path)
+            try:
+                mode = os.stat(path).st_mode
+            except OSError as exc:
+                if exc.errno == errno.ELOOP:
+                    return (f"{head} a symbolic link that loops ({path.name} → {target} → …, "
+                            "never reaching a file): point it at the recording")
+                return (f"{head} a symbolic link to {target}, which does not exist (a dangling "
+                        "link: the file was moved or deleted): point it at the recording")
+            if stat.S_ISREG(mode):
+                continue
+            what = f"a symbolic link to {target}, " + _kind(mode)
+        else:
+            try:
+                mode = os.lstat(path).st_mode
+            except OSError as exc:
+                return f"{head} not readable ({exc.strerror})"
+            if stat.S_ISREG(mode):
+                continue
+            what = _kind(mode)
+        inside = ""
+        if stat.S_ISDIR(mode):
+            with contextlib.suppress(OSError):
+                held = sorted(p.name for p in path.iterdir())
+                inside = (f" holding {', '.join(held[:5])}{' …' if len(held) > 5 else ''}"
+                          if held else " (empty)")
+        return (f"{head} {what}{inside}, not a recording file: the study reads {name}.mat as "
+                "a MAT-file (or .h5/.nxs)")
+    return None
+
+
+def _kind(mode: int) -> str:
+    for test, words in ((stat.S_ISDIR, "a directory"), (stat.S_ISFIFO, "a named pipe (FIFO)"),
+                        (stat.S_ISSOCK, "a socket"), (stat.S_ISCHR, "a character device"),
+                        (stat.S_ISBLK, "a block device")):
+        if test(mode):
+            return words
+    return "not a regular file"
 
 
 def _notice_of(w: warnings.WarningMessage, label: str) -> Notice | None:
@@ -458,9 +534,11 @@ def load_recordings(data_dir: Path, *, fs_hz: float | None = None, adc_range_v: 
     skipped: dict[str, str] = {}
     notices: list[Notice] = []
     checks: list[Check] = []
+    odd = {name: why for name in EXPERIMENTS if name not in found
+           and (why := not_a_file(Path(data_dir), name)) is not None}
     for name in EXPERIMENTS:
         if name not in found:
-            skipped[name] = f"no {name}.mat (or .h5/.nxs) in {data_dir}" + (
+            skipped[name] = odd.get(name) or f"no {name}.mat (or .h5/.nxs) in {data_dir}" + (
                 f"; {hints[name]}" if name in hints else "")
             continue
         if progress is not None:
@@ -480,7 +558,8 @@ def load_recordings(data_dir: Path, *, fs_hz: float | None = None, adc_range_v: 
         notices += [n for w in caught if (n := _notice_of(w, found[name].name)) is not None]
         notices += found_notices
     if not recordings:
-        raise RecordingError(data_dir, _empty_problem(Path(data_dir), found, skipped, hints))
+        raise RecordingError(data_dir, _empty_problem(Path(data_dir), found, skipped, hints,
+                                                      odd))
     if fs_hz is None:
         notices += _mixed_rates(recordings, found)
     else:
@@ -491,11 +570,11 @@ def load_recordings(data_dir: Path, *, fs_hz: float | None = None, adc_range_v: 
 
 
 def _empty_problem(root: Path, found: dict[str, Path], skipped: dict[str, str],
-                   hints: dict[str, str]) -> str:
+                   hints: dict[str, str], odd: dict[str, str]) -> str:
     names = sorted(p.name for p in root.iterdir()) if root.is_dir() else []
     shown = ", ".join(names[:12]) + (f" … ({len(names)} entries)" if len(names) > 12 else "")
-    if found:
-        bad = "; ".join(skipped[n] for n in found)
+    if found or odd:
+        bad = "; ".join(skipped[n] for n in EXPERIMENTS if n in found or n in odd)
         return f"no recording in this folder can be used: {bad}"
     looked = (f"looked for the seed's recordings ({', '.join(list(EXPERIMENTS)[:2])} … "
               f"{list(EXPERIMENTS)[-1]}, {len(EXPERIMENTS)} names, as .mat, .h5 or .nxs)")

@@ -120,6 +120,15 @@ def _nonfinite_problem(v: np.ndarray, t: np.ndarray | None) -> str | None:
     return f"holds {' and '.join(counts)} value{'s' if total > 1 else ''} ({where})"
 
 
+def _two_times(a: float, b: float) -> tuple[str, str]:
+    """Two times [s] with 10 significant digits, or as many more as tell them apart."""
+    for digits in range(10, 18):
+        sa, sb = f"{a:.{digits}g}", f"{b:.{digits}g}"
+        if sa != sb or a == b:
+            return sa, sb
+    return sa, sb
+
+
 def _check_time(t: np.ndarray, origin: str) -> float:
     """Check that ``t`` (s) is finite, increasing and uniform; return the median step (s)."""
     problem = _nonfinite_problem(t, None)
@@ -129,20 +138,21 @@ def _check_time(t: np.ndarray, origin: str) -> float:
     not_up = ~(dt > 0)
     if not_up.any():
         i = int(np.argmax(not_up))
+        a, b = _two_times(t[i], t[i + 1])
         raise RecordingError(
             origin,
-            f"is not increasing at index {i + 1}: t[{i}] = {t[i]:.10g} s, "
-            f"t[{i + 1}] = {t[i + 1]:.10g} s",
+            f"is not increasing at index {i + 1}: t[{i}] = {a} s, t[{i + 1}] = {b} s",
             variable=TIME,
         )
     step = float(np.median(dt))
     off = np.abs(dt - step) > _STEP_TOLERANCE * step
     if off.any():
         i = int(np.argmax(off))
+        a, b = _two_times(t[i], t[i + 1])
         raise RecordingError(
             origin,
-            f"is not uniformly sampled at index {i + 1}: t[{i}] = {t[i]:.10g} s, "
-            f"t[{i + 1}] = {t[i + 1]:.10g} s, a step of {dt[i]:.6g} s where the median "
+            f"is not uniformly sampled at index {i + 1}: t[{i}] = {a} s, "
+            f"t[{i + 1}] = {b} s, a step of {dt[i]:.6g} s where the median "
             f"step is {step:.6g} s (tolerance {100 * _STEP_TOLERANCE:g} % of it)",
             variable=TIME,
         )
@@ -472,8 +482,30 @@ def read_recording(
         if exc.variable == TIME and stored.kind == "f" and stored.itemsize < 8:
             raise RecordingError(origin, exc.problem + "; " + _single_precision(t, stored),
                                  variable=TIME) from None
+        if exc.variable == TIME and (coarse := _coarse_double(t)):
+            raise RecordingError(origin, exc.problem + "; " + coarse, variable=TIME) from None
         raise
     return ds
+
+
+def _coarse_double(t: np.ndarray) -> str | None:
+    """Why a double ``t`` far from 0 (Unix time: doubles near 1.7e9 s are 2.4e-7 s apart,
+    0.24 % of a 10 kHz step) cannot be uniform: rounding alone moves a step by more than
+    half the tolerance ``_STEP_TOLERANCE``. None otherwise."""
+    if t.size < 2 or not np.isfinite(t).all():
+        return None
+    top, step = float(np.max(np.abs(t))), float(np.median(np.diff(t)))
+    spacing = float(np.spacing(top))
+    if not (step > 0 and spacing > 0.5 * _STEP_TOLERANCE * step):
+        return None
+    unix = 1e8 < float(t[0]) < 1e10  # 1973 to 2286 in seconds since 1970
+    return (f"t is stored in double precision (float64), whose values near {top:.4g} s are "
+            f"{spacing:.3g} s apart ({100 * spacing / step:.2g} % of the {step:.3g} s step), so "
+            "the steps cannot be uniform"
+            + ("; t looks like an absolute time (seconds since 1970, Unix time)"
+               if unix else "; t starts far from 0")
+            + ": save the time from the record's start, rebuilt from the sample numbers "
+            "(MATLAB: t = (0:N-1)'/fs), and the start time, if needed, in another variable")
 
 
 def _single_precision(t: np.ndarray, stored: np.dtype[Any]) -> str:

@@ -1,0 +1,543 @@
+"""The identification records against each other and the bench file, before any step runs.
+
+Each step of :mod:`fsmbench.ident.pipeline` checks its own records (rate, range,
+r², coherence). A flipped sign, a swapped cable or a beam off the 4QD's centre
+pass those checks and give a wrong or no result with the wrong advice. This
+module reads the six identification records once, each along its own
+excitation (``data_cal_pd_h``: ``Vnh``; ``data_uch``: ``Uch`` …), and compares
+what they say with the bench file's nominal model and with each other:
+
+``excited_axis``
+    The excitation moves its own axis: the direct output (``Vph`` for
+    ``Uch``, ``Unh``, ``Vnh``) responds more than the cross one, and for a
+    Sercalo run with both coil voltages recorded, its own coil's. The cross
+    paths are couplings of a few % (the twin's direct paths are 26–76× its
+    cross ones), so a cross output that moves more than the direct one,
+    coherently and with a direct path's gain (:data:`SWAP_GAIN_FACTOR`),
+    means the other axis was driven: a swapped DAC cable, or the other run
+    saved under this name. A dead direct channel beside a coupling is not a
+    swap: the steps' own checks name it.
+``sign_vs_bench``
+    Each direct path's sign against the model's, from its response in
+    :data:`SIGN_BAND_HZ` projected on the model's phase (``ρ``, the cosine
+    of the phase between them weighted by magnitude: +1 agrees, −1 is
+    reversed). The disagreements are then attributed: a 4QD output reversed
+    in every file that drives it (the 4QD's polarity, or the bench file's
+    sign: one check, attached to every such file, so the 4QD gain, the
+    Sercalo and the Newport all fall back together rather than a reversed
+    4QD mixing with a nominal one); both paths of a Sercalo run reversed (the
+    command ``Uch`` flipped in that file); one path reversed (that file's
+    output, or its command).
+
+A failed check is attached to the records it concerns
+(:attr:`Screening.by_experiment`): every step that uses them falls back
+naming it. 4QD offsets are notices: a mean beyond the bench file's linear
+span of the 4QD (``quad_diode.nonlinearity_full_swing_rad``) is named, and
+the estimators remove it (the calibration's intercept, the mean removed
+before every FRF estimate). The open-loop huddle tests whose own checks
+(:func:`fsmbench.io.folder.check_recording`) fail are left out of the
+recordings the noise model sees.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+from typing import Final
+
+import numpy as np
+import scipy.signal
+import xarray as xr
+
+from fsmbench.bench.blocks import PlantModel, newport_beam_matrix, physical_plant
+from fsmbench.bench.params import BenchParams
+from fsmbench.checks import Check, Notice, first_failure
+from fsmbench.ident.calibration import trim_recording
+from fsmbench.io.folder import check_recording
+
+__all__ = [
+    "AXIS_RATIO_MIN",
+    "MIN_COHERENCE",
+    "OFFSET_SPAN_FACTOR",
+    "SIGN_AGREEMENT",
+    "SIGN_BAND_HZ",
+    "SWAP_GAIN_FACTOR",
+    "AxisRatio",
+    "PathSign",
+    "Screening",
+    "screen_recordings",
+]
+
+#: Band of the sign estimates [Hz]: below the Sercalo's modes (≥ 250 Hz) and the
+#: Newport's 600 Hz bandwidth, where every direct path is near its static gain and the
+#: model's phase (delays, poles) is known to a few degrees; the seed's Newport band.
+SIGN_BAND_HZ: Final = (10.0, 100.0)
+#: ``|ρ|`` at which a path's sign is judged: cos 60°. The model's phase is within a few
+#: degrees in the band and a reversed sign is 180° off (ρ ≈ −1); noise or a dead path
+#: leaves ρ near 0 and no verdict.
+SIGN_AGREEMENT: Final = 0.5
+#: Direct over cross response below which the other axis moved: the cross paths are
+#: couplings of a few % (on the twin's records the direct paths are 26–76× the cross ones;
+#: the bench file's model has none), so below 1 the excitation drove the other axis.
+AXIS_RATIO_MIN: Final = 1.0
+#: A path is coherent when the excitation explains at least half of its output in the band
+#: (median γ² ≥ 0.5; the calibration: r² ≥ 0.5): its gain is the path's, not noise. Only
+#: a coherent cross path can show that the other axis moved (a dead direct channel is the
+#: steps' own finding, not a swap).
+MIN_COHERENCE: Final = 0.5
+#: A swapped run's cross output carries a direct gain (the other axis's: 0.6–1.2× the
+#: model's direct gain on the twin), a coupling only a few % of it: the cross path must
+#: reach the model's direct gain divided by this (a factor 2 for a gain against its
+#: nominal, as the steps allow, times 2 between the bench's axes) to show a swap, and not
+#: a dead direct channel beside a coupling.
+SWAP_GAIN_FACTOR: Final = 4.0
+#: Notice a 4QD offset beyond this many times the bench file's linear span of the 4QD.
+OFFSET_SPAN_FACTOR: Final = 1.0
+
+_CAL = ("data_cal_pd_h", "data_cal_pd_v")
+
+
+@dataclass(frozen=True)
+class _Run:
+    experiment: str
+    axis: int  # 0: h, 1: v
+    command: str  # the excitation (Uch, Unh) or the calibration's regressor (Vnh)
+    direct: str
+    cross: str
+    coil: str | None = None
+    other_coil: str | None = None
+
+
+_RUNS: Final = (
+    _Run("data_cal_pd_h", 0, "Vnh", "Vph", "Vpv"),
+    _Run("data_cal_pd_v", 1, "Vnv", "Vpv", "Vph"),
+    _Run("data_uch", 0, "Uch", "Vph", "Vpv", "Vch", "Vcv"),
+    _Run("data_ucv", 1, "Ucv", "Vpv", "Vph", "Vcv", "Vch"),
+    _Run("data_unh", 0, "Unh", "Vph", "Vpv"),
+    _Run("data_unv", 1, "Unv", "Vpv", "Vph"),
+)
+_NOISE_RUNS: Final = ("data_huddle_test_1", "data_huddle_test_2", "data_huddle_test_4")
+
+
+@dataclass(frozen=True)
+class PathSign:
+    """One direct path's gain against the model's.
+
+    Attributes
+    ----------
+    experiment, input, output : str
+    measured : float
+        The response in :data:`SIGN_BAND_HZ` in phase with the model's static
+        sign [output unit / input unit] (the calibration: its slope).
+    model : float
+        The model's, signed, same unit.
+    agreement : float
+        ρ in [−1, 1]: +1 the model's sign, −1 reversed.
+    """
+
+    experiment: str
+    input: str
+    output: str
+    measured: float
+    model: float
+    agreement: float
+
+    @property
+    def verdict(self) -> int:
+        """+1 agrees, −1 reversed, 0 not judged (``|ρ| < SIGN_AGREEMENT``)."""
+        return 1 if self.agreement >= SIGN_AGREEMENT else (
+            -1 if self.agreement <= -SIGN_AGREEMENT else 0)
+
+    def words(self) -> str:
+        """``Uch → Vph −0.96 V/V (model +0.96)``."""
+        unit = "V/V"
+        return f"{self.input} → {self.output} {self.measured:+.3g} {unit} (model {self.model:+.3g})"
+
+
+@dataclass(frozen=True)
+class AxisRatio:
+    """How much more the excitation moves its own axis than the other.
+
+    Attributes
+    ----------
+    experiment, input, direct, cross : str
+    direct_gain, cross_gain : float
+        Rms response magnitudes [V/V] in the band (the calibration: slopes).
+    model_ratio : float
+        The model's direct over cross (inf without a cross path).
+    direct_coherence, cross_coherence : float
+        Median γ² in the band (the calibration: r²).
+    model_direct_gain : float
+        The model's direct gain, same measure as ``direct_gain`` [V/V].
+    coil : tuple of (str, float, str, float) or None
+        Own coil voltage and gain, other coil and gain, when both were recorded.
+    """
+
+    experiment: str
+    input: str
+    direct: str
+    cross: str
+    direct_gain: float
+    cross_gain: float
+    model_ratio: float
+    direct_coherence: float
+    cross_coherence: float
+    model_direct_gain: float
+    coil: tuple[str, float, str, float] | None = None
+
+    @property
+    def judged(self) -> bool:
+        """At least one of the two paths is coherent (:data:`MIN_COHERENCE`)."""
+        return max(self.direct_coherence, self.cross_coherence) >= MIN_COHERENCE
+
+    @property
+    def ratio(self) -> float:
+        """Direct over cross (inf for a cross path that does not move)."""
+        return self.direct_gain / self.cross_gain if self.cross_gain > 0 else float("inf")
+
+    @property
+    def passed(self) -> bool:
+        """Not shown to have moved the other axis: the own coil moved more than the other,
+        and the cross output did not move more than the direct one with a direct path's gain
+        (coherent, at least the model's direct gain / :data:`SWAP_GAIN_FACTOR`)."""
+        coil_ok = self.coil is None or self.coil[1] > self.coil[3]
+        other_moved = (self.ratio <= AXIS_RATIO_MIN and self.cross_coherence >= MIN_COHERENCE
+                       and self.cross_gain >= self.model_direct_gain / SWAP_GAIN_FACTOR)
+        return bool(coil_ok and not other_moved)
+
+
+@dataclass(frozen=True, eq=False)
+class Screening:
+    """What :func:`screen_recordings` found.
+
+    Attributes
+    ----------
+    checks : tuple of Check
+        Every check, once, in order.
+    by_experiment : dict of str to tuple of Check
+        The checks each record answers for (a failed one makes every step
+        that uses the record fall back, naming it).
+    notices : tuple of Notice
+        4QD offsets removed; huddle tests left out of the noise model.
+    recordings : mapping of str to Dataset
+        The recordings less the open-loop huddle tests whose own checks failed.
+    """
+
+    checks: tuple[Check, ...]
+    by_experiment: dict[str, tuple[Check, ...]]
+    notices: tuple[Notice, ...]
+    recordings: Mapping[str, xr.Dataset] = field(default_factory=dict)
+
+
+def _values(ds: xr.Dataset, name: str) -> np.ndarray:
+    return np.asarray(ds[name].values, dtype=np.float64)
+
+
+def _welch_h1(u: np.ndarray, ys: list[np.ndarray], fs: float
+              ) -> tuple[np.ndarray, list[np.ndarray], list[np.ndarray]]:
+    """Frequencies [Hz], the H1 estimate and γ² of each output (1 s Hann, means removed)."""
+    n = min(round(fs), u.size // 2)
+    kw = {"fs": fs, "window": "hann", "nperseg": n, "noverlap": n // 2, "detrend": "constant"}
+    f, puu = scipy.signal.welch(u, **kw)
+    puu = np.where(puu > 0, puu, np.inf)
+    h, coh = [], []
+    for y in ys:
+        _, puy = scipy.signal.csd(u, y, **kw)
+        _, pyy = scipy.signal.welch(y, **kw)
+        h.append(puy / puu)
+        coh.append(np.abs(puy) ** 2 / (puu * np.where(pyy > 0, pyy, np.inf)))
+    return f, h, coh
+
+
+def _projection(h: np.ndarray, model: np.ndarray, sign: float) -> tuple[float, float, float]:
+    """(measured in phase with the model, model, ρ) over the band's lines."""
+    phase = model / np.abs(model) * sign  # the model's phase less its static sign
+    measured = float(np.mean(np.real(h * np.conj(phase))))
+    norm = float(np.linalg.norm(model) * np.linalg.norm(h))
+    rho = float(np.real(np.vdot(model, h))) / norm if norm > 0 else 0.0
+    return measured, float(np.mean(np.abs(model))) * sign, rho
+
+
+def _measure_dynamic(run: _Run, ds: xr.Dataset, plant: PlantModel
+                     ) -> tuple[list[PathSign], AxisRatio, dict[str, float]]:
+    fs = float(ds.attrs["fs_hz"])
+    outs = [run.direct, run.cross]
+    coils = [c for c in (run.coil, run.other_coil) if c is not None and c in ds]
+    f, hs, cs = _welch_h1(_values(ds, run.command), [_values(ds, o) for o in outs + coils], fs)
+    band = (f >= SIGN_BAND_HZ[0]) & (f <= SIGN_BAND_HZ[1])
+    h = dict(zip(outs + coils, (x[band] for x in hs), strict=True))
+    coherence = {o: float(np.median(c[band])) for o, c in zip(outs + coils, cs, strict=True)}
+    names = outs + coils
+    model = plant.frequency_response(f[band], outputs=names, inputs=[run.command])
+    signs = []
+    for out in [run.coil, run.direct]:
+        if out is None or out not in h:
+            continue
+        hn = model.sel(output=out, input=run.command).values
+        sign = float(np.sign(plant.dc_gain(output=out, input=run.command)) or 1.0)
+        measured, m, rho = _projection(h[out], hn, sign)
+        signs.append(PathSign(run.experiment, run.command, out, measured, m, rho))
+    rms = {k: float(np.sqrt(np.mean(np.abs(v) ** 2))) for k, v in h.items()}
+    mod = {k: float(np.sqrt(np.mean(np.abs(model.sel(output=k).values) ** 2))) for k in names}
+    coil = None
+    if run.coil in rms and run.other_coil in rms and run.coil and run.other_coil:
+        coil = (run.coil, rms[run.coil], run.other_coil, rms[run.other_coil])
+    axis = AxisRatio(run.experiment, run.command, run.direct, run.cross, rms[run.direct],
+                     rms[run.cross], mod[run.direct] / mod[run.cross] if mod[run.cross] > 0
+                     else float("inf"), coherence[run.direct], coherence[run.cross],
+                     mod[run.direct], coil)
+    offsets = {o: float(np.mean(_values(ds, o))) for o in outs}
+    return signs, axis, offsets
+
+
+def _measure_calibration(run: _Run, ds: xr.Dataset, params: BenchParams
+                         ) -> tuple[list[PathSign], AxisRatio, dict[str, float]]:
+    x = _values(ds, run.command)
+    x = x - x.mean()
+    gd = params.quad_diode.gain_v_per_rad.as_array()
+    mn = newport_beam_matrix(params)
+    gn0 = params.newport.metrology_gain_rad_per_v
+    model = {run.direct: gd[run.axis] * mn[run.axis, run.axis] * gn0,
+             run.cross: gd[1 - run.axis] * mn[1 - run.axis, run.axis] * gn0}
+    sxx = float(x @ x)
+    raw_mean = float(np.mean(_values(ds, run.command)))
+    slopes, offsets, corr = {}, {}, {}
+    for out in (run.direct, run.cross):
+        y = _values(ds, out)
+        yc = y - y.mean()
+        slopes[out] = float(x @ yc) / sxx if sxx > 0 else 0.0
+        # The 4QD's offset where the metrology reads 0: the line's intercept.
+        offsets[out] = float(y.mean()) - slopes[out] * raw_mean
+        sy = float(np.linalg.norm(yc))
+        corr[out] = float(x @ yc) / (np.sqrt(sxx) * sy) if sxx > 0 and sy > 0 else 0.0
+    rho = corr[run.direct] * float(np.sign(model[run.direct]) or 1.0)
+    sign = PathSign(run.experiment, run.command, run.direct, slopes[run.direct],
+                    model[run.direct], rho)
+    cross_model = abs(model[run.cross])
+    axis = AxisRatio(run.experiment, run.command, run.direct, run.cross,
+                     abs(slopes[run.direct]), abs(slopes[run.cross]),
+                     abs(model[run.direct]) / cross_model if cross_model > 0 else float("inf"),
+                     corr[run.direct] ** 2, corr[run.cross] ** 2, abs(model[run.direct]))
+    return [sign], axis, offsets
+
+
+_BY_NAME: Final = {r.experiment: r for r in _RUNS}
+_PARTNER: Final = {"data_cal_pd_h": "data_cal_pd_v", "data_cal_pd_v": "data_cal_pd_h",
+                   "data_uch": "data_ucv", "data_ucv": "data_uch",
+                   "data_unh": "data_unv", "data_unv": "data_unh"}
+
+
+def _band_words() -> str:
+    return f"{SIGN_BAND_HZ[0]:g}–{SIGN_BAND_HZ[1]:g} Hz"
+
+
+def _ratio_words(r: float) -> str:
+    return "no cross path" if not np.isfinite(r) else f"{r:.3g}×"
+
+
+def _axis_check(a: AxisRatio, axes: Mapping[str, AxisRatio]) -> Check:
+    run = _BY_NAME[a.experiment]
+    subject = f"{a.experiment}.mat: {a.input}"
+    limit = (f"> {AXIS_RATIO_MIN:g} ({a.direct} over {a.cross}) if {a.cross} moves with a "
+             f"direct path's gain (≥ {a.model_direct_gain / SWAP_GAIN_FACTOR:.3g} V/V); the bench "
+             f"file's model: {_ratio_words(a.model_ratio)}")
+    if a.passed:
+        return Check("excited_axis", True, a.ratio, limit, subject)
+    moved = [f"{a.input} moves {a.cross} ({a.cross_gain:.3g} V/V) more than {a.direct} "
+             f"({a.direct_gain:.3g} V/V)"]
+    if a.coil is not None and a.coil[3] >= a.coil[1]:
+        moved.append(f"the {a.coil[2]} coil ({a.coil[3]:.3g} V/V) more than its own {a.coil[0]} "
+                     f"({a.coil[1]:.3g} V/V)")
+    partner = axes.get(_PARTNER[a.experiment])
+    if partner is not None and partner.judged and not partner.passed:
+        cause = (f"{_PARTNER[a.experiment]}.mat's {partner.input} moves {partner.cross} too: the "
+                 f"two runs drive each other's axis, so the {a.input} and {partner.input} "
+                 "DAC cables are swapped (or the two files): swap them back")
+    elif run.experiment in _CAL:
+        cause = ("the Newport swept the other axis: the metrology cables (Vnh, Vnv) or the two "
+                 "calibration files are swapped")
+    else:
+        cause = (f"the excitation drove the other axis: a swapped DAC cable, or the other "
+                 f"axis's run saved as {a.experiment}.mat")
+    return Check("excited_axis", False, a.ratio, limit, subject,
+                 f"{' and '.join(moved)} ({_band_words()}), where the bench file's model "
+                 + (f"moves only {a.direct}" if not np.isfinite(a.model_ratio) else
+                    f"has {a.direct} {a.model_ratio:.3g}× above {a.cross}")
+                 + f"; likely a swap: "
+                 f"{cause}; this file's identification steps use the nominal model")
+
+
+def _sign_limit(p: PathSign) -> str:
+    where = "the calibration's slope" if p.experiment in _CAL else _band_words()
+    return (f"the sign of the bench file's model: {p.model:+.3g} V/V ({p.input} → {p.output}, "
+            f"{where})")
+
+
+def _agreeing(exp: str, judged: Mapping[str, list[PathSign]]) -> str:
+    paths = judged.get(exp, [])
+    if paths and all(p.verdict == 1 for p in paths):
+        return (f", while {exp}.mat's {' and '.join(f'{p.input} → {p.output}' for p in paths)} "
+                f"agree{'s' if len(paths) == 1 else ''} with it")
+    return ""
+
+
+def _sign_checks(judged: Mapping[str, list[PathSign]], params: BenchParams
+                 ) -> list[tuple[Check, list[str]]]:
+    """The sign checks with the experiments each answers for (module notes)."""
+    out: list[tuple[Check, list[str]]] = []
+    explained: set[tuple[str, str]] = set()
+    for axis, vp in enumerate(("Vph", "Vpv")):
+        paths = [p for exp in judged for p in judged[exp] if p.output == vp]
+        if len(paths) < 2 or any(p.verdict != -1 for p in paths):
+            continue
+        files = [p.experiment for p in paths]
+        coils = [p for exp in files for p in judged[exp] if p.output != vp and p.verdict == 1]
+        gain = params.quad_diode.gain_v_per_rad.as_array()[axis]
+        also = (f", while {' and '.join(f'{p.input} → {p.output}' for p in coils)} "
+                "agree{}".format("s" if len(coils) == 1 else "") if coils else "")
+        out.append((Check(
+            "sign_vs_bench", False, paths[0].measured, _sign_limit(paths[0]),
+            f"{', '.join(f'{e}.mat' for e in files)}: {vp}",
+            f"{vp} reads with the opposite sign of the bench file's model in every file that "
+            f"drives it: {'; '.join(p.words() for p in paths)}{also}; likely a sign: the 4QD's "
+            f"{'horizontal' if axis == 0 else 'vertical'} output is reversed (its cable or "
+            f"amplifier), or the bench file's quad_diode.gain_v_per_rad.{'hv'[axis]} "
+            f"({gain:+.4g}) has the wrong sign; the 4QD gain, the Sercalo and the Newport all "
+            "use the nominal model rather than mixing a reversed 4QD with a nominal one: fix "
+            "the wiring, or if the bench is built so, give the gain the other sign in the "
+            "bench file"), files))
+        explained |= {(p.experiment, vp) for p in paths}
+    for exp, paths in judged.items():
+        run = _BY_NAME[exp]
+        rev = [p for p in paths if p.verdict == -1 and (exp, p.output) not in explained]
+        if not rev:
+            continue
+        key = next((p for p in rev if p.output == run.direct), rev[0])
+        coil_path = next((p for p in paths if p.output == run.coil), None)
+        other = _agreeing(_PARTNER[exp], judged)
+        if len(rev) == 2:
+            signal, cause = run.command, (
+                f"both paths from {run.command} are reversed{other}, so {run.command} is "
+                "recorded with its sign flipped (a sign in the real-time model, or the DAC "
+                "output's polarity)")
+        elif coil_path is not None and key is coil_path:
+            signal, cause = str(run.coil), (
+                f"{run.command} → {run.direct} agrees, so {run.coil} is recorded with its sign "
+                "flipped (the coil-voltage amplifier's cable)")
+        elif coil_path is not None and coil_path.verdict == 1:
+            signal, cause = run.direct, (
+                f"{run.command} → {run.coil} agrees, so {run.direct} in this file is recorded "
+                f"with its sign flipped (a sign applied to this file only){other}")
+        else:
+            signal, cause = f"{run.command}, {run.direct}", (
+                f"one of the two is recorded with its sign flipped in this file{other}")
+        explained.add((exp, key.output))
+        out.append((Check(
+            "sign_vs_bench", False, key.measured, _sign_limit(key), f"{exp}.mat: {signal}",
+            f"{'; '.join(p.words() for p in rev)} (in phase with the model); likely a sign: "
+            f"{cause}; this file's identification steps use the nominal model"), [exp]))
+    failed = {e for _, es in out for e in es}
+    for exp, paths in judged.items():
+        if exp in failed or not paths:
+            continue
+        run = _BY_NAME[exp]
+        main = next((p for p in paths if p.output == run.direct), paths[0])
+        out.append((Check("sign_vs_bench", True, main.measured, _sign_limit(main),
+                          f"{exp}.mat: {run.command}"), [exp]))
+    return out
+
+
+def _offset_notices(offsets: Mapping[str, Mapping[str, float]], params: BenchParams
+                    ) -> list[Notice]:
+    qd = params.quad_diode
+    out = []
+    for axis, vp in enumerate(("Vph", "Vpv")):
+        span = abs(qd.gain_v_per_rad.as_array()[axis]) * qd.nonlinearity_full_swing_rad
+        far = {exp: off[vp] for exp, off in offsets.items()
+               if vp in off and abs(off[vp]) > OFFSET_SPAN_FACTOR * span}
+        if not far or span <= 0:
+            continue
+        gain = qd.gain_v_per_rad.as_array()[axis]
+        worst = max(far.values(), key=abs)
+        same = max(far.values()) - min(far.values()) <= 0.1 * abs(worst)  # one offset, 10 %
+        values = (f"{worst:+.3g} V in {'each of the ' if len(far) > 1 else ''}"
+                  f"{len(far)} file{'s' if len(far) > 1 else ''}" if same
+                  else ", ".join(f"{v:+.3g} V ({e}.mat)" for e, v in far.items()))
+        out.append(Notice(
+            "other", f"{', '.join(f'{e}.mat' for e in far)}: {vp}",
+            f"4QD offset: {vp} is centred at {values}, beyond the 4QD's linear span of "
+            f"±{span:.3g} V (±{1e3 * qd.nonlinearity_full_swing_rad:.3g} mrad at {gain:+.4g} "
+            f"V/rad in the bench file): the beam is {1e3 * abs(worst / gain):.3g} mrad off the "
+            "detector's centre. Removed: the calibration fits its intercept and every FRF "
+            "estimate works on the signals less their means; but off centre the 4QD's gain is "
+            "not the calibrated one: centre the beam on the 4QD"))
+    return out
+
+
+def screen_recordings(recordings: Mapping[str, xr.Dataset], *, params: BenchParams,
+                      trims_s: Mapping[str, float], failure: Callable[[str], Check | None]
+                      ) -> Screening:
+    """Check the identification records against each other and the bench file.
+
+    Parameters
+    ----------
+    recordings : mapping of str to Dataset
+        The records by experiment name; those of the six identification runs
+        present are read (``t`` [s], signals [V]).
+    params : BenchParams
+        The bench file's nominal parameters (the model the signs and axes are
+        compared with; the 4QD's linear span for the offsets).
+    trims_s : mapping of str to float
+        Seconds removed at the start of each run (the steps' own).
+    failure : callable
+        The first failed plausibility check of a record, or None
+        (``check_recording``'s): a record that fails one is not read here.
+
+    Returns
+    -------
+    Screening
+        The checks (each once), the experiments they answer for, the offset
+        notices and the recordings for the noise model.
+    """
+    plant = physical_plant(params, source="nominal")
+    signs: dict[str, list[PathSign]] = {}
+    axes: dict[str, AxisRatio] = {}
+    offsets: dict[str, dict[str, float]] = {}
+    for run in _RUNS:
+        if run.experiment not in recordings or failure(run.experiment) is not None:
+            continue
+        try:
+            ds = trim_recording(recordings[run.experiment],
+                                t0_s=trims_s.get(run.experiment, 0.0))
+            if any(v not in ds for v in (run.command, run.direct, run.cross)):
+                continue
+            found = (_measure_calibration(run, ds, params) if run.experiment in _CAL
+                     else _measure_dynamic(run, ds, plant))
+        except ValueError:
+            continue  # too short to read: the step says so itself
+        signs[run.experiment], axes[run.experiment], offsets[run.experiment] = found
+    pairs = [(_axis_check(a, axes), [exp]) for exp, a in axes.items() if a.judged]
+    judged = {exp: [p for p in signs[exp] if p.verdict != 0] for exp in signs
+              if axes[exp].passed}
+    pairs += _sign_checks(judged, params)
+    by_experiment: dict[str, tuple[Check, ...]] = {}
+    for check, exps in pairs:
+        for exp in exps:
+            by_experiment[exp] = (*by_experiment.get(exp, ()), check)
+    notices = _offset_notices(offsets, params)
+    checks = [c for c, _ in pairs]
+    kept = dict(recordings)
+    conv = params.converter
+    for name in _NOISE_RUNS:
+        if name not in recordings:
+            continue
+        found_checks, _ = check_recording(recordings[name], name=name, fs_hz=conv.fs_hz,
+                                          adc_range_v=conv.range_v, adc_bits=conv.bits)
+        bad = first_failure(found_checks)
+        if bad is not None:
+            del kept[name]
+            checks += [c for c in found_checks if not c.passed]
+            notices.append(Notice("other", f"{name}.mat", f"left out of the noise model: check "
+                                  f"{bad.name} failed ({bad.sentence()})"))
+    return Screening(checks=tuple(checks), by_experiment=by_experiment,
+                     notices=tuple(notices), recordings=kept)
