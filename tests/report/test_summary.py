@@ -231,3 +231,20 @@ def test_data_contradicting_itself_is_never_a_pass_but_a_device_finding_is() -> 
     finding = Check(name="newport_amplitude_bandwidth", passed=False, value=815.8,
                     limit="within 25% of the datasheet's 600 Hz", subject="Newport h")
     assert _summary(checks=(finding,)).verdict_status == "meets"
+
+
+def test_the_next_step_names_the_file_to_rename_correct_or_record() -> None:
+    """A row left unjudged for want of a file: the file the loader nearly matched, or the
+    one it refused with its reason, or the one absent, whichever the row needs."""
+    skipped = {
+        "data_uch": "no data_uch.mat (or .h5/.nxs) in D; found DATA_UCH.mat: rename it "
+                    "data_uch.mat (file names are case-sensitive)",
+        "data_ucv": "D/data_ucv.mat: Ucv holds 3 NaN values",
+        "data_unh": "no data_unh.mat (or .h5/.nxs) in D",
+    }
+    s = _summary(skipped=skipped, simulated=False)
+    assert s.verdict_status == "not_verified"
+    assert s.next_step == (
+        "Next: rename the files the study did not recognise (DATA_UCH.mat: rename it "
+        "data_uch.mat (file names are case-sensitive)), correct data_ucv (D/data_ucv.mat: "
+        "Ucv holds 3 NaN values), record data_unh, then run the study again.")

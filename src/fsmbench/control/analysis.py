@@ -306,7 +306,7 @@ class PlantAnalysis:
     Attributes
     ----------
     f_hz : array, shape (n,)
-        Frequencies [Hz].
+        Frequencies [Hz], up to ``nyquist_hz`` by default.
     g : array, complex, shape (n, 2, 2)
         ``Uch, Ucv -> Rh, Rv`` [rad/V], delays included.
     rga_number : array, shape (n,)
@@ -332,7 +332,8 @@ class PlantAnalysis:
         to hold Table 5's 1 V Newport perturbation within ``e_max``.
     inputs_suffice : bool
         ``sigma_min(Gs) >= sigma_max(Gds) - 1`` wherever ``sigma_max(Gds) > 1``
-        on the grid: a 10 V command can cancel a 1 V Newport disturbance.
+        on the grid up to ``nyquist_hz``: a 10 V command can cancel a 1 V
+        Newport disturbance (the sampled loop acts on nothing above).
     disturbance_rolloff_hz : float
         Lowest natural frequency of the Newport block ``Gn`` [Hz], where its
         response starts to fall; NaN when the model's Newport is a constant gain.
@@ -344,6 +345,8 @@ class PlantAnalysis:
     objective : ControlObjective
     checks : tuple of Check
         One per optional analysis: passed when computed, failed with the reason.
+    nyquist_hz : float
+        Half the sampling frequency of the converters and the controller [Hz].
     """
 
     f_hz: np.ndarray
@@ -363,6 +366,7 @@ class PlantAnalysis:
     objective: ControlObjective
     checks: tuple[Check, ...] = ()
     disturbance_rolloff_hz: float = float("nan")
+    nyquist_hz: float = float("inf")
 
     def to_json(self) -> dict[str, Any]:
         """Scalars and the static matrices; the curves are left out."""
@@ -398,11 +402,13 @@ def analyse_plant(plant: PlantModel, *, params: BenchParams,
     params : BenchParams
         Supplies Table 5 (``scaling``) and the Newport gain of the objective.
     f_hz : array, optional
-        Frequencies [Hz]; default 0.01 Hz–10 kHz refined at the plant's modes.
+        Frequencies [Hz]; default 0.01 Hz to the Nyquist frequency of
+        ``params.converter`` (5 kHz at 10 kHz), refined at the plant's modes.
     inputs, outputs, disturbances : sequence of str
         Command, measurement and disturbance signals.
     """
-    f = (frequency_grid(plant.sys.poles(), f_min_hz=1e-2, f_max_hz=1e4, per_decade=60)
+    nyquist_hz = 0.5 * params.converter.fs_hz
+    f = (frequency_grid(plant.sys.poles(), f_min_hz=1e-2, f_max_hz=nyquist_hz, per_decade=60)
          if f_hz is None else np.asarray(f_hz, dtype=float))
     s = 2j * np.pi * f
     g = plant_response(plant, s, outputs=outputs, inputs=inputs)
@@ -413,7 +419,8 @@ def analyse_plant(plant: PlantModel, *, params: BenchParams,
     sc = params.scaling
     gs_min = np.linalg.svd(g * sc.uc_max_v / sc.error_max_rad, compute_uv=False)[:, -1]
     gds_max = np.linalg.svd(gd * sc.un_max_v / sc.error_max_rad, compute_uv=False)[:, 0]
-    above = gds_max > 1.0
+    # Only where the sampled loop can act: a frequency above Nyquist is not in its band.
+    above = (gds_max > 1.0) & (f <= nyquist_hz)
     band = _disturbance_bandwidth(plant, outputs, disturbances, sc.un_max_v / sc.error_max_rad)
     gcgi = ct.series(plant.blocks["Gi"], plant.blocks["Gc"])
     gcgi = ct.ss(gcgi.A, gcgi.B, gcgi.C, gcgi.D, inputs=list(inputs),
@@ -435,7 +442,7 @@ def analyse_plant(plant: PlantModel, *, params: BenchParams,
         inputs_suffice=bool(np.all(gs_min[above] >= gds_max[above] - 1.0)),
         coprime=coprime, coprime_scaled=coprime_scaled,
         objective=control_objective(params), checks=(check_gcgi, check_scaled),
-        disturbance_rolloff_hz=_rolloff_hz(plant.blocks["Gn"]))
+        disturbance_rolloff_hz=_rolloff_hz(plant.blocks["Gn"]), nyquist_hz=nyquist_hz)
 
 
 

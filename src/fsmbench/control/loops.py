@@ -71,7 +71,9 @@ class LoopOptions:
     discrete_f_max_hz : float
         Upper frequency of the discrete/continuous comparison [Hz].
     f_min_hz, f_max_hz : float
-        Range of the loop curves [Hz].
+        Range of the loop curves [Hz]; the curves and every conclusion drawn from
+        them (margins, peaks) stop at the Nyquist frequency ``1 / (2 ts_s)`` of
+        the sampled loop, whatever ``f_max_hz``.
     per_decade : int
         Log-grid density of the loop curves.
     gain_margin_min_db, phase_margin_min_deg : float
@@ -211,6 +213,9 @@ class LoopAnalysis:
         ``L = G K``, ``S``, ``T`` on ``f_hz``.
     discrete : DiscreteComparison
     pade_order : int
+    nyquist_hz : float
+        Nyquist frequency of the sampled loop, ``1 / (2 ts_s)`` [Hz]: ``f_hz``
+        ends there.
     """
 
     name: str
@@ -233,6 +238,7 @@ class LoopAnalysis:
     complementary: np.ndarray = field(repr=False)
     discrete: DiscreteComparison | None = None
     pade_order: int = 6
+    nyquist_hz: float = 0.5 / SEED_TS_S
 
     def to_json(self) -> dict[str, Any]:
         """``{h,v}.{stable, gain_margin_db, ...}``, ``stable``, ``meets_objective`` and more."""
@@ -339,7 +345,8 @@ def analyse_loop(plant: PlantModel, k: ct.StateSpace, *, objective: ControlObjec
     """
     opts = options or LoopOptions()
     meas, cmds = list(k.input_labels), list(k.output_labels)
-    f = loop_grid(plant, k, f_min_hz=opts.f_min_hz, f_max_hz=opts.f_max_hz,
+    nyquist_hz = 0.5 / opts.ts_s  # the loop is sampled: nothing above this is its response
+    f = loop_grid(plant, k, f_min_hz=opts.f_min_hz, f_max_hz=min(opts.f_max_hz, nyquist_hz),
                   per_decade=opts.per_decade)
     s = 2j * np.pi * f
     lmat = loop_response(plant, k, s)
@@ -386,7 +393,7 @@ def analyse_loop(plant: PlantModel, k: ct.StateSpace, *, objective: ControlObjec
                           and a.margins.phase_margin_deg >= opts.phase_margin_min_deg
                           for a in axes.values()),
         objective=objective, f_hz=f, loop=lmat, sensitivity=sens, complementary=comp,
-        discrete=discrete, pade_order=opts.pade_order)
+        discrete=discrete, pade_order=opts.pade_order, nyquist_hz=nyquist_hz)
 
 
 def _channel(k: ct.StateSpace, i: int) -> ct.StateSpace:

@@ -155,8 +155,8 @@ def huddle_attocube_time_figure(h: HuddleAnalysis, recordings: Mapping[str, xr.D
                                       group="raw"),
                         envelope_line(lpf, scale=NM, offset=0.0, divisor=divisor,
                                       name="Va, 50 Hz first-order low pass (min/max per bin)",
-                                      color=_LPF_COLOR, group="lpf", width=1.2)),
-                x_label=x_label, y_label="Va, mean removed [nm]", title=title))
+                                      color=_LPF_COLOR, group="lpf")),
+                x_label=x_label, y_label="Va, mean removed [nm]", title=title, share_y="va"))
             continue
         sig = trim_huddle(recordings[rec.name], name=rec.name, duration_s=rec.duration_s)
         va = sig["Va"] - sig["Va"].mean()
@@ -166,14 +166,15 @@ def huddle_attocube_time_figure(h: HuddleAnalysis, recordings: Mapping[str, xr.D
                          group="raw", decimate=True),
                     Line(sig["t"], vaf * NM, name="Va, 50 Hz first-order low pass",
                          color=_LPF_COLOR, width=1.2, group="lpf", decimate=True)),
-            x_label="Time [s]", y_label="Va, mean removed [nm]", title=title))
+            x_label="Time [s]", y_label="Va, mean removed [nm]", title=title, share_y="va"))
     return Figure(
         key="fig29_huddle_attocube_time", title="Attocube distance during the huddle tests",
         caption="Va after the seed's trimming (t < 1 s dropped), mean "
                 "removed: light, as recorded; dark, after the seed's first-order low pass at "
-                "50 Hz (lsim from rest). One panel per test of Table 3; each panel has its "
-                "own vertical scale. Long records are drawn as the minimum and maximum of "
-                "each of their bins.",
+                "50 Hz (lsim from rest). One panel per test of Table 3, all on one vertical "
+                "scale so that the tests compare. Each record is drawn as a band, the "
+                "smallest and largest sample in each bin of time; zooming in draws finer "
+                "bins.",
         panels=tuple(panels), seed_ref="Fig. 29", share_x=True)
 
 
@@ -195,18 +196,22 @@ def huddle_qd_time_figure(h: HuddleAnalysis, recordings: Mapping[str, xr.Dataset
                     traces=(envelope_line(d, scale=gain * MV, offset=d.overall_mean,
                                           divisor=divisor, name=f"{v} (4QD {axis}, min/max "
                                           "per bin)", color=color, group=v),),
-                    x_label=x_label, y_label=f"{v}, mean removed [mV]", title=title))
+                    x_label=x_label, y_label=f"{v}, mean removed [mV]", title=title,
+                    share_y="qd"))
                 continue
             sig = trim_huddle(recordings[rec.name], name=rec.name, duration_s=rec.duration_s)
             panels.append(Panel(
                 traces=(Line(sig["t"], (sig[v] - sig[v].mean()) * MV,
                              name=f"{v} (4QD {axis})", color=color, width=1.0, group=v,
                              decimate=True),),
-                x_label="Time [s]", y_label=f"{v}, mean removed [mV]", title=title))
+                x_label="Time [s]", y_label=f"{v}, mean removed [mV]", title=title,
+                share_y="qd"))
     return Figure(
         key="fig30_huddle_qd_time", title="4QD signals during the huddle tests",
         caption="Vph (horizontal, left) and Vpv (vertical, right) after the seed's trimming, "
-                "mean removed, one row per test of Table 3.",
+                "mean removed, one row per test of Table 3, all on one vertical scale; each "
+                "record drawn as the band of the smallest and largest sample in each bin of "
+                "time (finer bins on zoom).",
         panels=tuple(panels), seed_ref="Fig. 30", columns=2, share_x=True)
 
 
@@ -219,7 +224,8 @@ def huddle_attocube_asd_figure(h: HuddleAnalysis) -> Figure:
               "width": 1.0}
         panels.append(Panel((asd_line(rec.f_hz, rec.psd_va_m2_per_hz, scale=NM, **kw),),
                             "Frequency [Hz]", "ASD of Va [nm/√Hz]", x_log=True, y_log=True,
-                            title=f"Test {rec.number}: {huddle_config_words(rec)}"))
+                            title=f"Test {rec.number}: {huddle_config_words(rec)}",
+                            share_y="asd"))
         cum.append(cumulative_line(rec.f_hz, rec.psd_va_m2_per_hz, scale=NM, **kw))
     panels.append(Panel(tuple(cum), "Frequency [Hz]", "Cumulative rms of Va [nm]", x_log=True,
                         title="Cumulative rms, every test"))
@@ -227,8 +233,9 @@ def huddle_attocube_asd_figure(h: HuddleAnalysis) -> Figure:
         key="fig31_huddle_attocube_asd", title="Spectrum of the Attocube distance in the "
                                                "huddle tests",
         caption="Welch estimate with the seed's 1 s Hann window (mean removed), one panel per "
-                "test, and the cumulative rms from 0 Hz of every test (last panel); the end of "
-                "each curve is the test's Va rms.",
+                "test, all on one vertical scale so that the tests compare, and the cumulative "
+                "rms from 0 Hz of every test (last panel); the end of each curve is the test's "
+                "Va rms.",
         panels=tuple(panels), seed_ref="Fig. 31", columns=2, share_x=True)
 
 
@@ -244,14 +251,14 @@ def huddle_qd_asd_figure(h: HuddleAnalysis) -> Figure:
                 (asd_line(rec.f_hz, getattr(rec, attr), scale=UM, name=f"{v} (4QD {axis})",
                           color=H_COLOR if v == "Vph" else V_COLOR, group=v, width=1.0),),
                 "Frequency [Hz]", f"ASD of {v} [µV/√Hz]", x_log=True, y_log=True,
-                title=f"Test {rec.number}: {huddle_config_words(rec)}: {v}"))
+                title=f"Test {rec.number}: {huddle_config_words(rec)}: {v}", share_y="asd"))
     for v, attr, _axis in signals:
         panels.append(Panel(
             tuple(cumulative_line(rec.f_hz, getattr(rec, attr), scale=MV,
                                   name=huddle_test_label(rec), color=_test_color(rec),
                                   group=rec.name, width=1.0) for rec in recs),
             "Frequency [Hz]", f"Cumulative rms of {v} [mV]", x_log=True,
-            title=f"Cumulative rms of {v}, every test"))
+            title=f"Cumulative rms of {v}, every test", share_y="cumulative"))
     closed = [r for r in recs if r.closed_loop]
     peak = ""
     if closed:
@@ -264,7 +271,8 @@ def huddle_qd_asd_figure(h: HuddleAnalysis) -> Figure:
     return Figure(
         key="fig32_huddle_qd_asd", title="Spectrum of the 4QD signals in the huddle tests",
         caption="Welch estimate with the seed's 1 s Hann window, Vph left and Vpv right, one "
-                "row per test; last row: the cumulative rms from 0 Hz of every test." + peak,
+                "row per test, every spectrum on one vertical scale so that open and closed "
+                "loop compare; last row: the cumulative rms from 0 Hz of every test." + peak,
         panels=tuple(panels), seed_ref="Fig. 32", columns=2, share_x=True)
 
 
@@ -337,10 +345,11 @@ def angle_asd_figure(b: ErrorBudget) -> Figure:
                 panels.append(Panel(tuple(lines), "Frequency [Hz]",
                                     f"Beam-angle ASD, {axis} [µrad/√Hz]", x_log=True,
                                     y_log=True, height=2.0,
-                                    title=f"Beam angle {ax} ({axis})"))
+                                    title=f"Beam angle {ax} ({axis})", share_y="asd"))
             else:
                 panels.append(Panel(tuple(lines), "Frequency [Hz]",
-                                    f"Cumulative rms, {axis} [µrad]", x_log=True))
+                                    f"Cumulative rms, {axis} [µrad]", x_log=True,
+                                    share_y="cumulative"))
     return Figure(
         key="budget_beam_angle_per_source", title="Beam-angle error per noise source",
         caption=f"Each of the {len(names)} sources of 4.5 through the plant and the loop "

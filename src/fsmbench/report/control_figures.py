@@ -4,6 +4,13 @@ Each function turns a result of :mod:`fsmbench.control` into a
 :class:`~fsmbench.report.figure.Figure`: frequency responses with labels in
 words and units, h in blue and v in orange. Nothing here computes a design
 or draws; the report's renderers draw.
+
+The loops are sampled: their curves end at the Nyquist frequency the
+results carry (``LoopAnalysis.nyquist_hz``, ``PlantAnalysis.nyquist_hz``).
+A loop's phase is drawn unwrapped, placed at the crossover, over the band
+where the margins are read (a decade around the crossovers, and the gain
+margin's frequency). Panels of one quantity share their y axis, so h and v
+compare at a glance.
 """
 
 from __future__ import annotations
@@ -17,6 +24,7 @@ import numpy as np
 from fsmbench.bench.blocks import ss_frequency_response
 from fsmbench.control.analysis import PlantAnalysis
 from fsmbench.control.design import Robustness
+from fsmbench.control.freq import Margins
 from fsmbench.control.iff import IffAnalysis
 from fsmbench.control.loops import AXES, LoopAnalysis
 from fsmbench.control.study import NewportToBeam
@@ -33,6 +41,7 @@ __all__ = [
     "newport_to_beam_figure",
     "nyquist_figure",
     "perturbation_factors",
+    "phase_band_hz",
     "plant_figure",
     "robustness_figure",
     "scaled_plant_figure",
@@ -81,11 +90,28 @@ def _fmt_margin(x: float, spec: str) -> str:
     return format(x, spec) if np.isfinite(x) else "∞"
 
 
+def phase_band_hz(m: Margins, f_hz: np.ndarray, *, nyquist_hz: float) -> tuple[float, float]:
+    """Where a loop's phase is read [Hz]: a decade below its first gain crossover to a decade
+    above its last, and past the gain margin's frequency, within the grid and Nyquist."""
+    f_lo, f_hi = float(f_hz[0]), min(float(f_hz[-1]), nyquist_hz)
+    cross = [c for c in (*m.crossovers_hz, m.crossover_hz) if np.isfinite(c)]
+    if not cross:
+        return f_lo, f_hi
+    hi = 10.0 * max(cross)
+    if np.isfinite(m.phase_crossover_hz):
+        hi = max(hi, 1.5 * m.phase_crossover_hz)  # the −180° crossing and a little beyond
+    return max(f_lo, 0.1 * min(cross)), min(f_hi, hi)
+
+
 def loop_gain_figure(lp: LoopAnalysis, *, key: str, title: str, caption: str,
                      seed_ref: str = "", note: str = "") -> Figure:
     """Bode plot of the diagonal loop gains ``L_ii = (G K)_ii``: one column per axis.
 
-    The legend holds each axis' margins (the figure's only statement of them).
+    Up to the loop's Nyquist frequency. The phase is unwrapped, placed in
+    (−360°, 0] at the crossover, and drawn over the band where the margins
+    are read (:func:`phase_band_hz`), so its axis spans what matters; a
+    dotted line marks the crossover on both panels. The legend holds each
+    axis' margins (the figure's only statement of them).
 
     Parameters
     ----------
@@ -95,22 +121,29 @@ def loop_gain_figure(lp: LoopAnalysis, *, key: str, title: str, caption: str,
         As for :class:`~fsmbench.report.figure.Figure`.
     """
     mags, phases = [], []
+    inband = lp.f_hz <= lp.nyquist_hz
+    f = lp.f_hz[inband]
     for i, axis in enumerate(AXES):
-        li = lp.loop[:, i, i]
+        li = lp.loop[inband, i, i]
         m = lp.axes[axis].margins
         legend = (f"{axis}: gain margin {_fmt_margin(m.gain_margin_db, '.1f')} dB, "
                   f"phase margin {m.phase_margin_deg:.1f}°, crossover {m.crossover_hz:.1f} Hz")
-        mags.append(Panel(traces=(Line(lp.f_hz, np.abs(li), name=legend,
-                                       color=_AXIS_COLOR[axis]),),
+        marks: tuple[Rule, ...] = ()
+        if np.isfinite(m.crossover_hz):
+            marks = (Rule(m.crossover_hz, axis="x", dash="dot", color="#555555"),)
+        lo, hi = phase_band_hz(m, f, nyquist_hz=lp.nyquist_hz)
+        band = (f >= lo) & (f <= hi)
+        phase = bode_phase_deg(li, f_hz=f, anchor_hz=m.crossover_hz)
+        mags.append(Panel(traces=(Line(f, np.abs(li), name=legend, color=_AXIS_COLOR[axis]),),
                           x_label=FREQ, y_label=f"|L{axis}| [1]", x_log=True, y_log=True,
                           title=f"Loop gain, {AXIS_WORDS[axis]}",
-                          rules=(Rule(1.0, name="|L| = 1", dash="dash"),), height=2.0))
-        phases.append(Panel(traces=(Line(lp.f_hz, bode_phase_deg(li, f_hz=lp.f_hz,
-                                                                 anchor_hz=m.crossover_hz),
-                                         name=legend, color=_AXIS_COLOR[axis],
-                                         legend=False),),
+                          rules=(Rule(1.0, name="|L| = 1", dash="dash"), *marks), height=2.0,
+                          share_y="gain"))
+        phases.append(Panel(traces=(Line(f[band], phase[band], name=legend,
+                                         color=_AXIS_COLOR[axis], legend=False),),
                             x_label=FREQ, y_label=f"Phase of L{axis} [deg]", x_log=True,
-                            rules=(Rule(-180.0, name="−180°", dash="dash"),)))
+                            rules=(Rule(-180.0, name="−180°", dash="dash"), *marks),
+                            share_y="phase"))
     return Figure(key=key, title=title, caption=caption, seed_ref=seed_ref, note=note,
                   panels=(mags[0], mags[1], phases[0], phases[1]), columns=2, share_x=True)
 
@@ -132,7 +165,7 @@ def controllers_figure(controllers: Sequence[tuple[str, ct.StateSpace, str]], *,
         Panel(traces=tuple(Line(f_hz, np.abs(r[:, i, i]), name=name, color=color)
                            for name, r, color in resp),
               x_label=FREQ, y_label=f"|K{axis}| [V/rad]", x_log=True, y_log=True,
-              title=f"Controller, {AXIS_WORDS[axis]}")
+              title=f"Controller, {AXIS_WORDS[axis]}", share_y="controller")
         for i, axis in enumerate(AXES))
     return Figure(key=key, title=title, caption=caption, panels=panels, columns=2,
                   height_px=440)
@@ -152,9 +185,10 @@ def nyquist_figure(lp: LoopAnalysis, *, key: str, title: str, caption: str,
     """
     panels = []
     w = _NYQUIST_HALF_WIDTH
+    inband = lp.f_hz <= lp.nyquist_hz
     for i, axis in enumerate(AXES):
         ax = lp.axes[axis]
-        li = lp.loop[:, i, i]
+        li = lp.loop[inband, i, i]
         keep = np.abs(li) <= _NYQUIST_MAX_ABS
         li = np.where(keep, li, np.nan)
         mm = ax.margins.modulus_margin
@@ -162,7 +196,8 @@ def nyquist_figure(lp: LoopAnalysis, *, key: str, title: str, caption: str,
                  else "closed alone: UNSTABLE (−1 encircled)")
         panels.append(Panel(
             traces=(
-                Line(li.real, li.imag, name="L(j2πf), f > 0", color=_AXIS_COLOR[axis]),
+                Line(li.real, li.imag, name=f"L(j2πf), 0 < f ≤ {lp.nyquist_hz:g} Hz (Nyquist)",
+                     color=_AXIS_COLOR[axis]),
                 Line(li.real, -li.imag, name="mirror image, f < 0", color=_AXIS_COLOR[axis],
                      dash="dot", opacity=0.6),
                 Line(*_circle(0j, 1.0), name="|L| = 1", color="#555555", dash="dot",
@@ -184,21 +219,24 @@ def sensitivity_figure(lp: LoopAnalysis, *, key: str, title: str, caption: str,
     """``|S_ii|`` and ``|T_ii|`` per axis with the 6.1 bound at its frequency."""
     obj = lp.objective
     panels = []
+    inband = lp.f_hz <= lp.nyquist_hz
+    f = lp.f_hz[inband]
     for i, axis in enumerate(AXES):
         panels.append(Panel(
             traces=(
-                Line(lp.f_hz, np.abs(lp.sensitivity[:, i, i]), name="sensitivity |S|",
-                     color=_AXIS_COLOR[axis], group=f"S {axis}"),
-                Line(lp.f_hz, np.abs(lp.complementary[:, i, i]),
+                Line(f, np.abs(lp.sensitivity[inband, i, i]), name="sensitivity |S|",
+                     color=_AXIS_COLOR[axis], group="S"),
+                Line(f, np.abs(lp.complementary[inband, i, i]),
                      name="complementary sensitivity |T|", color=_AXIS_COLOR[axis],
-                     dash="dash", group=f"T {axis}"),
+                     dash="dash", group="T"),
                 Line(np.array([obj.frequency_hz]), np.array([obj.sensitivity_bound]),
                      name=(f"objective of 6.1: |S({obj.frequency_hz:g} Hz)| ≤ "
                            f"{obj.sensitivity_bound:.0e}"),
                      color=_UNSTABLE_COLOR, markers=True, group="objective"),
             ),
             x_label=FREQ, y_label=f"|S{axis}|, |T{axis}| [1]", x_log=True, y_log=True,
-            title=AXIS_WORDS[axis], rules=(Rule(1.0, dash="dot", color="#888888"),)))
+            title=AXIS_WORDS[axis], rules=(Rule(1.0, dash="dot", color="#888888"),),
+            share_y="sensitivity"))
     return Figure(key=key, title=title, caption=caption, note=note, panels=tuple(panels),
                   columns=2, height_px=460)
 
@@ -263,7 +301,8 @@ def robustness_figure(rob: Robustness, *, factors: Sequence[tuple[float, float]]
                 name = f"damping ×{d_s:g}"
                 if not stable:
                     name = f"resonance ×{f_s:g}, damping ×{d_s:g}: closed loop UNSTABLE"
-                sel = (lp.f_hz >= band_hz[0]) & (lp.f_hz <= band_hz[1])
+                sel = ((lp.f_hz >= band_hz[0]) & (lp.f_hz <= band_hz[1])
+                       & (lp.f_hz <= lp.nyquist_hz))
                 traces.append(Line(lp.f_hz[sel], np.abs(lp.loop[sel, i, i]), name=name,
                                    color=ds_color[d_s] if stable else _UNSTABLE_COLOR,
                                    width=1.2 if stable else 2.4,
@@ -271,7 +310,8 @@ def robustness_figure(rob: Robustness, *, factors: Sequence[tuple[float, float]]
             panels.append(Panel(traces=tuple(traces), x_label=FREQ,
                                 y_label=f"|L{axis}| [1]", x_log=True, y_log=True,
                                 title=f"{axis}, resonances ×{fs:g}",
-                                rules=(Rule(1.0, dash="dot", color="#555555"),)))
+                                rules=(Rule(1.0, dash="dot", color="#555555"),),
+                                share_y="gain"))
     return Figure(key=key, title=title, caption=caption, note=note, panels=tuple(panels),
                   columns=len(fs_values), share_x=True, height_px=640)
 
@@ -290,18 +330,22 @@ def newport_to_beam_figure(n2b: NewportToBeam, *, key: str, title: str, caption:
             traces.append(Line(n2b.f_hz, np.abs(resp[:, i, i]), name=label, color=color))
         panels.append(Panel(traces=tuple(traces), x_label=FREQ,
                             y_label=f"|R{axis} / Un{axis}| [rad/V]", x_log=True, y_log=True,
-                            title=f"Newport command Un{axis} to beam angle R{axis}"))
+                            title=f"Newport command Un{axis} to beam angle R{axis}",
+                            share_y="gain"))
     return Figure(key=key, title=title, caption=caption, seed_ref=seed_ref,
                   panels=tuple(panels), columns=2, height_px=460)
 
 
 def scaled_plant_figure(pa: PlantAnalysis, *, key: str, title: str, caption: str) -> Figure:
-    """Smallest singular value of the scaled plant and largest of the scaled disturbance."""
+    """Smallest singular value of the scaled plant and largest of the scaled disturbance,
+    up to the Nyquist frequency."""
+    sel = pa.f_hz <= pa.nyquist_hz
+    f = pa.f_hz[sel]
     panel = Panel(
-        traces=(Line(pa.f_hz, pa.scaled_min_singular_value,
+        traces=(Line(f, pa.scaled_min_singular_value[sel],
                      name="smallest singular value of the scaled plant (Uc / 10 V → R / 10 µrad)",
                      color=PALETTE[0]),
-                Line(pa.f_hz, pa.scaled_disturbance_gain,
+                Line(f, pa.scaled_disturbance_gain[sel],
                      name="largest singular value of the scaled Newport path (Un / 1 V → R / "
                           "10 µrad)", color=PALETTE[3])),
         x_label=FREQ, y_label="Scaled gain [1]", x_log=True, y_log=True,
@@ -311,13 +355,15 @@ def scaled_plant_figure(pa: PlantAnalysis, *, key: str, title: str, caption: str
 
 def plant_figure(pa: PlantAnalysis, *, key: str, title: str, caption: str,
                  note: str = "") -> Figure:
-    """RGA number and singular values of ``Uch, Ucv → Rh, Rv`` (seed 7.2)."""
-    rga = Panel(traces=(Line(pa.f_hz, pa.rga_number, name="RGA number", color=PALETTE[2]),),
+    """RGA number and singular values of ``Uch, Ucv → Rh, Rv`` (seed 7.2), up to Nyquist."""
+    sel = pa.f_hz <= pa.nyquist_hz
+    f = pa.f_hz[sel]
+    rga = Panel(traces=(Line(f, pa.rga_number[sel], name="RGA number", color=PALETTE[2]),),
                 x_label=FREQ, y_label="RGA number Σ|Λ − I| [1]", x_log=True, y_log=True,
                 title="Relative gain array number")
-    sv = Panel(traces=(Line(pa.f_hz, pa.singular_values[:, 0], name="largest singular value",
+    sv = Panel(traces=(Line(f, pa.singular_values[sel, 0], name="largest singular value",
                             color=PALETTE[0]),
-                       Line(pa.f_hz, pa.singular_values[:, 1], name="smallest singular value",
+                       Line(f, pa.singular_values[sel, 1], name="smallest singular value",
                             color=PALETTE[1], dash="dash")),
                x_label=FREQ, y_label="Singular value of G [rad/V]", x_log=True, y_log=True,
                title="Singular values", height=1.5)
@@ -340,13 +386,14 @@ def iff_figure(iff: IffAnalysis, *, key: str, title: str, caption: str,
                     Line(iff.f_hz, np.abs(closed_i), name=closed_name, color="#000000",
                          dash="dash", group="closed")),
             x_label=FREQ, y_label=f"|Vp{axis} / Uc{axis}| [V/V]", x_log=True, y_log=True,
-            title=f"Uc{axis} → Vp{axis}, {AXIS_WORDS[axis]}", height=2.0))
+            title=f"Uc{axis} → Vp{axis}, {AXIS_WORDS[axis]}", height=2.0, share_y="gain"))
         phases.append(Panel(
             traces=(Line(iff.f_hz, np.degrees(np.unwrap(np.angle(open_i))),
                          name=f"without IFF, {axis}",
                          color=_AXIS_COLOR[axis], group=f"open {axis}", legend=False),
                     Line(iff.f_hz, np.degrees(np.unwrap(np.angle(closed_i))), name=closed_name,
                          color="#000000", dash="dash", group="closed", legend=False)),
-            x_label=FREQ, y_label=f"Phase of Vp{axis} / Uc{axis} [deg]", x_log=True))
+            x_label=FREQ, y_label=f"Phase of Vp{axis} / Uc{axis} [deg]", x_log=True,
+            share_y="phase"))
     return Figure(key=key, title=title, caption=caption, note=note,
                   panels=(mags[0], mags[1], phases[0], phases[1]), columns=2, share_x=True)

@@ -1,20 +1,26 @@
 """Figures as data: what a figure shows, not how it is drawn.
 
 A :class:`Figure` is a grid of :class:`Panel` objects, each holding traces
-(:class:`Line`, :class:`Bars`), reference lines (:class:`Rule`), text
-(:class:`Label`) and axis settings, with labels in words and units. The
+(:class:`Line`, which may be a filled band, and :class:`Bars`), reference lines
+(:class:`Rule`), text (:class:`Label`) and axis settings, with labels in words
+and units. The
 report draws it interactively (:mod:`fsmbench.report.interactive`, plotly.js
 in the page) and, on request, as PNG/PDF (:mod:`fsmbench.report.static`,
 matplotlib), so the two can never disagree about what is shown.
 
 Axes autoscale to the data unless a panel fixes a range on purpose (the
-Nyquist plot's window around −1): nothing is clipped. Long time series are
-marked ``decimate=True``; the renderers reduce them to a min/max envelope
-per pixel column (:func:`envelope`), which keeps every extreme.
+Nyquist plot's window around −1): nothing is clipped. Panels meant to be
+compared share an axis (``Panel.share_y``, ``Figure.share_x``). Long time
+series are marked ``decimate=True``; the renderers draw them as a band, the
+minimum and maximum of the samples in each bin (:func:`minmax_bins`), which
+keeps every extreme and never invents a value; the page stores a pyramid of
+finer bins (:func:`pyramid_samples_per_bin`) and swaps in a finer level on
+zoom.
 """
 
 from __future__ import annotations
 
+import textwrap
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 from typing import Literal
@@ -34,7 +40,10 @@ __all__ = [
     "Rule",
     "Trace",
     "envelope",
+    "minmax_bins",
+    "pyramid_samples_per_bin",
     "rows_of",
+    "wrap_words",
 ]
 
 Dash = Literal["solid", "dash", "dot", "dashdot"]
@@ -68,12 +77,22 @@ class Line:
     group : str
         Legend group: traces of one group toggle together and the legend
         shows the group's first trace only (e.g. the same signal on several
-        panels).
+        panels). Empty: the name is the group, so traces of one name toggle
+        together in every panel.
     legend : bool
         Whether this trace may appear in the legend.
     opacity : float
     decimate : bool
-        A long time series: draw its min/max envelope per pixel column.
+        A long time series on a uniform ``x``: drawn as a band, the minimum and
+        maximum of the samples in each bin (one bin per pixel column; finer
+        bins on zoom in the page). With ``upper``, the bins merge the band's
+        own (minimum of ``y``, maximum of ``upper``).
+    upper : numpy.ndarray, shape (n,), optional
+        Makes the line a band: filled between ``y`` (its lower edge) and
+        ``upper``, each value held over the half-way points to its
+        neighbours (a bin centred on ``x``), so that it claims no value at a
+        time it does not cover. For envelopes (each bin's minimum and
+        maximum) and ranges (over periods); ``opacity`` scales the fill.
     """
 
     x: np.ndarray
@@ -87,6 +106,7 @@ class Line:
     legend: bool = True
     opacity: float = 1.0
     decimate: bool = False
+    upper: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         x = np.asarray(self.x, dtype=float).ravel()
@@ -95,6 +115,11 @@ class Line:
             raise ValueError(f"line '{self.name}': x has {x.size} points, y has {y.size}")
         object.__setattr__(self, "x", x)
         object.__setattr__(self, "y", y)
+        if self.upper is not None:
+            hi = np.asarray(self.upper, dtype=float).ravel()
+            if hi.shape != y.shape:
+                raise ValueError(f"band '{self.name}': y has {y.size} points, upper {hi.size}")
+            object.__setattr__(self, "upper", hi)
 
 
 @dataclass(frozen=True, eq=False)
@@ -122,7 +147,6 @@ class Bars:
             raise ValueError(f"bars '{self.name}': {v.size} values for "
                              f"{len(self.categories)} categories")
         object.__setattr__(self, "values", v)
-
 
 Trace = Line | Bars
 
@@ -176,6 +200,10 @@ class Panel:
         processing removes).
     height : float
         Relative height of this panel's row (Bode: magnitude 2, phase 1).
+    share_y : str
+        Panels of a figure with the same non-empty key share one y axis: the
+        same range, zoomed together (rows of spectra meant to be compared).
+        They must have the same ``y_log``.
     """
 
     traces: tuple[Trace, ...]
@@ -191,6 +219,7 @@ class Panel:
     equal_aspect: bool = False
     shade: tuple[float, float] | None = None
     height: float = 1.0
+    share_y: str = ""
 
 
 @dataclass(frozen=True, eq=False)
@@ -218,6 +247,9 @@ class Figure:
     note : str
         Why a result looks the way it does when it differs from the seed or
         looks odd (the errata entry, in short); shown under the caption.
+    number : int, optional
+        Its number in the report ("Figure 12"), set by
+        :func:`fsmbench.report.html.iter_figures`; exported files are named by it.
     """
 
     key: str
@@ -229,6 +261,7 @@ class Figure:
     share_x: bool = False
     height_px: int | None = None
     note: str = ""
+    number: int | None = None
 
     def __post_init__(self) -> None:
         if not self.key or not all(c.islower() or c.isdigit() or c == "_" for c in self.key):
@@ -237,6 +270,11 @@ class Figure:
             raise ValueError(f"figure {self.key}: no panel")
         if self.columns < 1:
             raise ValueError(f"figure {self.key}: columns must be ≥ 1")
+        logs: dict[str, bool] = {}
+        for p in self.panels:
+            if p.share_y and logs.setdefault(p.share_y, p.y_log) != p.y_log:
+                raise ValueError(f"figure {self.key}: panels sharing y axis {p.share_y!r} mix "
+                                 "linear and log scales")
 
     @property
     def n_rows(self) -> int:
@@ -291,3 +329,63 @@ def envelope(x: np.ndarray, y: np.ndarray, *, columns: int = 2000
         xx = np.concatenate([xx, x[m:]])
         yy = np.concatenate([yy, y[m:]])
     return xx, yy
+
+
+def minmax_bins(lower: np.ndarray, upper: np.ndarray, per: int
+                ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Minimum of ``lower`` and maximum of ``upper`` in consecutive bins of ``per`` samples.
+
+    Parameters
+    ----------
+    lower, upper : numpy.ndarray, shape (n,)
+        The samples (the same array twice for a record) or a range.
+    per : int
+        Samples per bin (≥ 1); the last bin holds the remainder.
+
+    Returns
+    -------
+    first : numpy.ndarray of int, shape (m,)
+        Index of each bin's first sample.
+    lo, hi : numpy.ndarray, shape (m,)
+        Each bin's minimum and maximum; NaN where the bin has no finite sample.
+    """
+    lo_in = np.asarray(lower, dtype=float)
+    hi_in = np.asarray(upper, dtype=float)
+    n = lo_in.size
+    per = max(1, int(per))
+    first = np.arange(0, n, per)
+    if per == 1:
+        return first, lo_in.copy(), hi_in.copy()
+    with np.errstate(invalid="ignore"):
+        lo = np.fmin.reduceat(lo_in, first)
+        hi = np.fmax.reduceat(hi_in, first)
+    return first, lo, hi
+
+
+# Zoom factor down to which the page's pyramid still draws a bin per pixel column, in
+# levels of LEVEL_FACTOR times the bins of the one above: zoomed 16 times (100 s to 6 s),
+# a long record is still drawn at full resolution, for 21 bins per pixel column stored.
+ZOOM_DEPTH = 16
+LEVEL_FACTOR = 4
+
+
+def pyramid_samples_per_bin(n: int, columns: int) -> list[int]:
+    """Samples per bin of each level of a record's pyramid, coarsest first.
+
+    Level 0 has about ``columns`` bins (one per pixel column); each finer
+    level has :data:`LEVEL_FACTOR` times as many, down to :data:`ZOOM_DEPTH`
+    times as many as level 0, or to one sample per bin.
+    """
+    levels = [max(1, -(-n // max(1, columns)))]
+    depth = 1
+    while levels[-1] > 1 and depth < ZOOM_DEPTH:
+        levels.append(-(-levels[-1] // LEVEL_FACTOR))
+        depth *= LEVEL_FACTOR
+    return levels
+
+
+def wrap_words(text: str, width: int) -> list[str]:
+    """``text`` in lines of at most ``width`` characters, broken between words (a word
+    longer than that stays whole): a title that fits its panel."""
+    return textwrap.wrap(text, width=max(1, width), break_long_words=False,
+                         break_on_hyphens=False) or [text]

@@ -13,17 +13,18 @@ from __future__ import annotations
 
 import html
 import json
+import re
 from collections.abc import Iterator, Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
 from fsmbench.io.atomic import atomic_write_text
 from fsmbench.report.figure import Figure
-from fsmbench.report.interactive import figure_json, plotly_js
+from fsmbench.report.interactive import ZOOM_JS, figure_json, plotly_js
 
-__all__ = ["Block", "Note", "Section", "Table", "iter_figures", "render_report", "visible_text",
-           "write_report"]
+__all__ = ["Block", "Note", "Section", "Table", "export_stem", "iter_figures", "render_report",
+           "visible_text", "write_report"]
 
 
 @dataclass(frozen=True)
@@ -70,13 +71,43 @@ class Section:
     anchor: str = ""
 
 
-def iter_figures(sections: Sequence[Section]) -> Iterator[Figure]:
-    """Every figure of the report, in reading order."""
+def _figures(sections: Sequence[Section]) -> Iterator[Figure]:
     for sec in sections:
         for block in sec.blocks:
             if isinstance(block, Figure):
                 yield block
-        yield from iter_figures(sec.subsections)
+        yield from _figures(sec.subsections)
+
+
+def iter_figures(sections: Sequence[Section]) -> Iterator[Figure]:
+    """Every figure of the report, in reading order, each with its number in the report.
+
+    The numbers are the page's ("Figure 12"): figures are counted in this
+    order by :func:`render_report` too. Each figure comes back as a copy
+    whose ``number`` is set (exported files are named by it,
+    :func:`export_stem`).
+    """
+    for number, fig in enumerate(_figures(sections), start=1):
+        yield fig if fig.number == number else replace(fig, number=number)
+
+
+_SEED_PREFIX = re.compile(r"^fig\d+(?:_\d+)*_")
+
+
+def export_stem(fig: Figure, *, total: int = 99) -> str:
+    """File stem of an exported figure: its number in the report, then what it shows.
+
+    ``fig10_qd_regression`` (the seed's Fig. 10), Figure 3 of the report,
+    gives ``fig03_qd_regression``: numbers have two digits at least (more when
+    ``total``, the report's count, needs them) so that the files list in
+    reading order. A figure without a number (not from :func:`iter_figures`)
+    keeps its key.
+    """
+    if fig.number is None:
+        return fig.key
+    what = _SEED_PREFIX.sub("", fig.key) or fig.key
+    width = max(2, len(str(total)), len(str(fig.number)))
+    return f"fig{fig.number:0{width}d}_{what}"
 
 
 def visible_text(sections: Sequence[Section]) -> Iterator[str]:
@@ -155,6 +186,7 @@ _SCRIPT = """
       });
     });
     return Plotly.newPlot(div, spec.data, spec.layout, config).then(function () {
+      if (window.fsmbenchZoom) { window.fsmbenchZoom(div, spec); }
       div.classList.remove('pending'); div.dataset.rendered = '1'; state.rendered += 1;
     }, function (e) { fail(div, e); });
   }
@@ -249,7 +281,7 @@ def render_report(*, title: str, sections: Sequence[Section], verdict_html: str 
     meta : sequence of str
         Lines under the title (source, version).
     """
-    keys = [f.key for f in iter_figures(sections)]
+    keys = [f.key for f in _figures(sections)]
     dup = sorted({k for k in keys if keys.count(k) > 1})
     if dup:
         raise ValueError(f"figure keys used twice: {', '.join(dup)}")
@@ -273,6 +305,7 @@ def render_report(*, title: str, sections: Sequence[Section], verdict_html: str 
         _section(sec, 2, out, counter)
     if counter[0]:
         out.append(f"<script>{plotly_js()}</script>")
+        out.append(f"<script>{ZOOM_JS}</script>")
         out.append(f"<script>{_SCRIPT}</script>")
     out.extend(["</body>", "</html>"])
     return "\n".join(out) + "\n"

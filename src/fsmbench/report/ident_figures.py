@@ -4,10 +4,15 @@ Each function turns an identification result into a
 :class:`~fsmbench.report.figure.Figure`; nothing is drawn here. FRF matrices
 are small multiples, one panel per element (magnitude over phase), coloured
 by the input's axis (h blue, v orange); fitted models are dashed black.
-Every frequency line of a Welch estimate is kept. When the FRF estimator
-gives the variance of each line (periodic averaging, the local polynomial
-method) the matrix figure draws its confidence bounds around the measured
-curve; a Welch estimate has none drawn (:func:`estimator_description`).
+Every frequency line of a Welch estimate is kept in the magnitude. The phase
+is drawn as control engineers read it: unwrapped along the line, the delay
+removed, and only where the measurement knows it (a standard deviation of at
+most :data:`PHASE_STD_MAX_DEG`, from the coherence and the number of
+averages); runs of such lines are placed on the model's branch
+(:func:`unwrapped_phase_deg`). When the FRF estimator gives the variance of
+each line (periodic averaging, the local polynomial method) the matrix
+figure draws its confidence bounds around the measured curve; a Welch
+estimate has none drawn (:func:`estimator_description`).
 """
 
 from __future__ import annotations
@@ -33,6 +38,8 @@ from fsmbench.ident.welch import hanning
 from fsmbench.report.figure import H_COLOR, V_COLOR, Figure, Line, Panel
 
 __all__ = [
+    "PHASE_MIN_RUN",
+    "PHASE_STD_MAX_DEG",
     "amplifier_frfs",
     "axis_color",
     "coherence_figure",
@@ -43,6 +50,7 @@ __all__ = [
     "newport_model",
     "qd_regression_figure",
     "sercalo_model",
+    "unwrapped_phase_deg",
     "weights_figure",
 ]
 
@@ -53,6 +61,13 @@ _MODEL_COLOR = "#000000"
 # Scatter points drawn per axis in the regression plot: enough to show the
 # cloud's width, few enough to stay light (the fit uses every sample).
 _SCATTER_POINTS = 3000
+# A measured line's phase is drawn when its standard deviation is at most this [deg]:
+# noise of ±10° still reads as a curve, and a step of 180° between two such lines is a
+# change of the response, not of the noise.
+PHASE_STD_MAX_DEG = 10.0
+# ... and when at least this many neighbouring lines are: where the coherence is low a
+# few lines pass by chance (a coherence estimate scatters), and alone they say nothing.
+PHASE_MIN_RUN = 5
 
 
 def axis_color(signal: str) -> str:
@@ -147,7 +162,7 @@ def current_amplifier_figure(gi: Mapping[str, CurrentAmplifierGain],
                          color=_MODEL_COLOR, width=1.0, group="identified")),
             x_label="Frequency [Hz]", y_label=f"|{v}/{u}| [V/V]", x_log=True, y_log=True,
             title=f"{_AXIS_WORD[axis].capitalize()}: Gi = {1e3 * g.gain_a_per_v:.3f} mA/V",
-            height=2.0))
+            height=2.0, share_y="gain"))
         fb = np.asarray(g.frequency_hz)
         bottom.append(Panel(
             traces=(Line(fb, 1e3 * np.asarray(g.gi_response_a_per_v), name=f"|Ga Zc Gi| / |Ga Zc|"
@@ -166,6 +181,7 @@ def current_amplifier_figure(gi: Mapping[str, CurrentAmplifierGain],
 
 def _element_panels(frf: FrequencyResponse, values: xr.DataArray, *, y_label: str,
                     name: str, y_log: bool = False) -> tuple[Panel, ...]:
+    """One panel per element, all on one y axis (the elements are compared)."""
     f = frf.frequency_hz
     sel = f > 0
     panels = []
@@ -175,7 +191,7 @@ def _element_panels(frf: FrequencyResponse, values: xr.DataArray, *, y_label: st
                 traces=(Line(f[sel], values.sel(output=out, input=inp).values[sel],
                              name=f"{name}, from {inp}", color=axis_color(inp), width=1.0),),
                 x_label="Frequency [Hz]", y_label=y_label, x_log=True, y_log=y_log,
-                title=f"{inp} → {out}"))
+                title=f"{inp} → {out}", share_y="element"))
     return tuple(panels)
 
 
@@ -183,7 +199,7 @@ def coherence_figure(frf: FrequencyResponse, *, key: str, title: str, caption: s
                      seed_ref: str) -> Figure:
     """Figs. 17, 25: coherence of every element of an FRF matrix, one panel each."""
     return Figure(key=key, title=title, caption=caption, seed_ref=seed_ref,
-                  panels=_element_panels(frf, frf.coherence, y_label="Coherence [–]",
+                  panels=_element_panels(frf, frf.coherence, y_label="Coherence [1]",
                                          name="coherence"),
                   columns=len(frf.input_names), share_x=True)
 
@@ -199,7 +215,7 @@ def weights_figure(sercalo: SercaloIdentification) -> Figure:
         caption = ("The seed's weights: the coherence, 10 within ±10 % of the column's "
                    "resonance, 0 above 1 kHz; the fit divides them by |H| so that it "
                    "minimises the relative error.")
-        label = "Weight [–]"
+        label = "Weight [1]"
     return Figure(key="fig20_fit_weights", title="Sercalo: weights of the rational fit",
                   caption=caption,
                   panels=_element_panels(sercalo.frf, sercalo.weights, y_label=label,
@@ -220,20 +236,59 @@ def estimator_description(frf: FrequencyResponse) -> str:
     return f"Welch H1, {frf.window_length / frf.fs_hz:g} s Hann window"
 
 
-def _bound_lines(h: np.ndarray, var: np.ndarray, f: np.ndarray, *, color: str,
-                 confidence: float) -> tuple[list[Line], list[Line]]:
+def _runs(keep: np.ndarray) -> list[tuple[int, int]]:
+    """(start, stop) of each run of True in ``keep``."""
+    edges = np.flatnonzero(np.diff(np.r_[0, keep.astype(np.int8), 0]))
+    return list(zip(edges[0::2].tolist(), edges[1::2].tolist(), strict=True))
+
+
+def unwrapped_phase_deg(h: np.ndarray, *, keep: np.ndarray | None = None,
+                        reference_deg: np.ndarray | None = None) -> np.ndarray:
+    """Phase [deg] unwrapped along the line where ``keep``, NaN elsewhere.
+
+    Each run of kept lines is unwrapped (consecutive lines never differ by
+    more than 180°) and then moved by whole turns: onto the branch of
+    ``reference_deg`` (the model's unwrapped phase) where the run has one,
+    else to continue the run before it; the first run starts in (−180°, 180°].
+
+    Parameters
+    ----------
+    h : numpy.ndarray, complex, shape (n,)
+        Response on increasing frequencies.
+    keep : numpy.ndarray of bool, shape (n,), optional
+        Lines to draw (default: every finite one).
+    reference_deg : numpy.ndarray, shape (n,), optional
+        Unwrapped phase to follow [deg]; NaN where there is none.
+    """
+    h = np.asarray(h, dtype=complex)
+    ok = np.isfinite(h) if keep is None else (np.asarray(keep, dtype=bool) & np.isfinite(h))
+    out = np.full(h.shape, np.nan)
+    previous: float | None = None
+    for a, b in _runs(ok):
+        run = np.degrees(np.unwrap(np.angle(h[a:b])))
+        ref = None if reference_deg is None else reference_deg[a:b]
+        if ref is not None and np.isfinite(ref).any():
+            run += 360.0 * np.round(np.nanmedian(ref - run) / 360.0)
+        elif previous is not None:
+            run += 360.0 * np.round((previous - run[0]) / 360.0)
+        out[a:b] = run
+        previous = float(run[-1])
+    return out
+
+
+def _bound_lines(h: np.ndarray, var: np.ndarray, f: np.ndarray, phase_deg: np.ndarray, *,
+                 color: str, confidence: float) -> tuple[list[Line], list[Line]]:
     """Magnitude and phase confidence bounds of a circular error of variance ``var``.
 
     The region ``|H_hat - H| <= r`` with ``r = sqrt(-ln(1 - c)) std``; its magnitude
     range is ``|H| -/+ r`` and its phase range ``+/- asin(r / |H|)`` (all phases when
-    ``r >= |H|``).
+    ``r >= |H|``), around the drawn (unwrapped) phase.
     """
     r = circular_bound_factor(confidence) * np.sqrt(var)
     mag = np.abs(h)
     with np.errstate(invalid="ignore", divide="ignore"):
         half = np.degrees(np.where(r < mag, np.arcsin(np.minimum(r / mag, 1.0)), np.pi))
     lo = np.where(mag - r > 0, mag - r, np.nan)  # a gap on the log axis where it reaches 0
-    ph = np.degrees(np.angle(h))
     name = f"{100 * confidence:g} % confidence bounds"
 
     def bound(y: np.ndarray, legend: bool) -> Line:
@@ -241,7 +296,18 @@ def _bound_lines(h: np.ndarray, var: np.ndarray, f: np.ndarray, *, color: str,
                     legend=legend)
 
     return ([bound(lo, True), bound(mag + r, False)],
-            [bound(ph - half, True), bound(ph + half, False)])
+            [bound(phase_deg - half, True), bound(phase_deg + half, False)])
+
+
+def _phase_std_deg(frf: FrequencyResponse, out: str, inp: str) -> np.ndarray:
+    """Standard deviation of each line's phase [deg]: the estimator's variance where it
+    gives one, else Bendat & Piersol's random error (coherence and averages)."""
+    if frf.frf_variance is not None:
+        var = frf.frf_variance.sel(output=out, input=inp).values
+        mag = np.abs(frf.frf.sel(output=out, input=inp).values)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            return np.degrees(np.sqrt(var / 2.0) / mag)
+    return np.degrees(np.asarray(frf.random_error.sel(output=out, input=inp).values))
 
 
 def frf_matrix_figure(frf: FrequencyResponse, *, delay_s: float, model: np.ndarray | None,
@@ -255,15 +321,20 @@ def frf_matrix_figure(frf: FrequencyResponse, *, delay_s: float, model: np.ndarr
         Measured matrix (delay included), F frequencies.
     delay_s : float
         Delay removed from the measurement before drawing [s], as the seed
-        removes it before fitting.
+        removes it before fitting (said in the phase axes' labels).
     model : numpy.ndarray, shape (F, outputs, inputs), optional
         Delay-free model on ``frf``'s grid [V/V]; NaN where there is none.
     key, title, caption, seed_ref, model_name : str
 
-    Each element gets a magnitude panel over a phase panel (wrapped to
-    ±180°); the matrix keeps the seed's layout (rows: outputs, columns:
-    inputs). With ``frf.frf_variance`` (periodic, LPM) each measured curve
-    has its confidence bounds at ``frf.confidence`` (thin lines).
+    Each element gets a magnitude panel over a phase panel; the matrix keeps
+    the seed's layout (rows: outputs, columns: inputs). The phase is
+    unwrapped and drawn where its standard deviation is at most
+    :data:`PHASE_STD_MAX_DEG` (:func:`unwrapped_phase_deg`, on the model's
+    branch), in runs of at least five lines; an element with no such run
+    shows the model's phase alone, or without a model its measured phase as
+    faint dots, wrapped. With
+    ``frf.frf_variance`` (periodic, LPM) each measured curve has its
+    confidence bounds at ``frf.confidence`` (thin lines).
     """
     clean = remove_delay(frf, delay_s)
     f = clean.frequency_hz
@@ -271,29 +342,44 @@ def frf_matrix_figure(frf: FrequencyResponse, *, delay_s: float, model: np.ndarr
     n_in = len(frf.input_names)
     mags: list[Panel] = []
     phases: list[Panel] = []
+    phase_label = "Phase, delay removed [deg]" if delay_s else "Phase [deg]"
     for i, out in enumerate(frf.output_names):
         for j, inp in enumerate(frf.input_names):
             h = clean.frf.sel(output=out, input=inp).values[sel]
             color = axis_color(inp)
             label = f"measured, from {inp}"
-            mag_tr = [Line(f[sel], np.abs(h), name=label, color=color, width=1.0)]
-            ph_tr = [Line(f[sel], np.degrees(np.angle(h)), name=label, color=color, width=1.0)]
-            if clean.frf_variance is not None:
+            m = model[sel, i, j] if model is not None else np.full(h.shape, np.nan, complex)
+            has_model = bool(np.isfinite(m).any())
+            m_phase = unwrapped_phase_deg(m) if has_model else None
+            known = _phase_std_deg(clean, out, inp)[sel] <= PHASE_STD_MAX_DEG
+            for a, b in _runs(known):
+                if b - a < PHASE_MIN_RUN:
+                    known[a:b] = False
+            ph = unwrapped_phase_deg(h, keep=known, reference_deg=m_phase)
+            mag_tr: list[Line] = [Line(f[sel], np.abs(h), name=label, color=color, width=1.0,
+                                       group=label)]
+            ph_tr: list[Line] = []
+            if known.any():
+                ph_tr = [Line(f[sel], ph, name=label, color=color, width=1.0, group=label)]
+            elif not has_model:  # nothing known, nothing to follow: the phase of noise
+                ph_tr = [Line(f[sel], np.degrees(np.angle(h)), name=label, color=color,
+                              markers=True, opacity=0.15, group=label, legend=False)]
+            if clean.frf_variance is not None and known.any():
                 var = clean.frf_variance.sel(output=out, input=inp).values[sel]
-                mb, pb = _bound_lines(h, var, f[sel], color=color, confidence=frf.confidence)
+                mb, pb = _bound_lines(h, var, f[sel], ph, color=color,
+                                      confidence=frf.confidence)
                 mag_tr += mb
                 ph_tr += pb
-            if model is not None and np.isfinite(model[sel, i, j]).any():
-                m = model[sel, i, j]
+            if has_model and m_phase is not None:
                 mag_tr.append(Line(f[sel], np.abs(m), name=model_name, color=_MODEL_COLOR,
                                    dash="dash", width=1.2, group="model"))
-                ph_tr.append(Line(f[sel], np.degrees(np.angle(m)), name=model_name,
-                                  color=_MODEL_COLOR, dash="dash", width=1.2, group="model"))
+                ph_tr.append(Line(f[sel], m_phase, name=model_name, color=_MODEL_COLOR,
+                                  dash="dash", width=1.2, group="model"))
             mags.append(Panel(traces=tuple(mag_tr), x_label="Frequency [Hz]",
                               y_label=f"|{out}/{inp}| [V/V]", x_log=True, y_log=True,
                               title=f"{inp} → {out}", height=2.0))
             phases.append(Panel(traces=tuple(ph_tr), x_label="Frequency [Hz]",
-                                y_label="Phase [deg]", x_log=True))
+                                y_label=phase_label, x_log=True, height=1.3))
     # Rows: magnitude of output 1, its phase, magnitude of output 2, its phase.
     panels: list[Panel] = []
     for r in range(len(frf.output_names)):
@@ -351,7 +437,7 @@ def newport_delay_figure(newport: NewportIdentification, *, f_max_hz: float = 20
                     Line(f[sel], np.degrees(fixed), name=f"delay {ms:.3f} ms removed",
                          color=_MODEL_COLOR, width=1.0, group="clean")),
             x_label="Frequency [Hz]", y_label="Phase, unwrapped [deg]", x_log=True,
-            title=f"{inp} → {out}"))
+            title=f"{inp} → {out}", share_y="phase"))
     return Figure(key="fig28_newport_delay", title="Newport: phase with and without the delay",
                   caption=(f"Unwrapped phase of the direct paths up to {f_max_hz:g} Hz, before "
                            f"and after removing the delay estimated from the phase ({ms:.3f} ms; "

@@ -29,6 +29,8 @@ from fsmbench.report.delay_tables import sensor_note, sercalo_delay_blocks
 from fsmbench.report.figure import Figure
 from fsmbench.report.html import Block, Note, Section, Table
 from fsmbench.report.ident_figures import (
+    PHASE_MIN_RUN,
+    PHASE_STD_MAX_DEG,
     amplifier_frfs,
     coherence_figure,
     current_amplifier_figure,
@@ -41,7 +43,14 @@ from fsmbench.report.ident_figures import (
     weights_figure,
 )
 from fsmbench.report.time_figures import SEED_TIME_FIGURES, experiment_figure
-from fsmbench.twin.compare import TARGETS, ComparisonRow, comparison_rows
+from fsmbench.twin.compare import TARGETS, ComparisonRow, comparison_rows, quantity
+
+# How the FRF figures draw the phase, for their captions.
+PHASE_WORDS = (f"The phase is unwrapped along the line and drawn only where it is known to "
+               f"±{PHASE_STD_MAX_DEG:g}° (one standard deviation: from the coherence and the "
+               "number of averages, or the estimator's noise variance) on at least "
+               f"{PHASE_MIN_RUN} neighbouring lines; elsewhere it is left out, and an "
+               "element with no such lines and no model to follow shows it as faint dots")
 
 __all__ = ["comparison_table", "identification_section", "quantity"]
 
@@ -56,41 +65,6 @@ _BLOCK_SOURCE = {"Gi": "2.2", "Gc": "2.3", "Gn": "2.4", "Gd": "2.1"}
 _INPUTS = {"Uch": "Sercalo command, h (Uch)", "Ucv": "Sercalo command, v (Ucv)",
            "Unh": "Newport command, h (Unh)", "Unv": "Newport command, v (Unv)"}
 _DIRECT = {"h": ("Ich", "Vph"), "v": ("Icv", "Vpv")}
-
-
-def quantity(key: str) -> tuple[str, str, float]:
-    """A comparison key in words: (name with unit, unit, display units per SI unit).
-
-    ``"qd_gain_v_per_rad.h"`` → ``("4QD gain, h [V/rad]", "V/rad", 1.0)``.
-    """
-    parts = key.split(".")
-    if parts[0] == "qd_gain_v_per_rad":
-        return f"4QD gain, {parts[1]} [V/rad]", "V/rad", 1.0
-    if parts[0] == "current_amp_gain_a_per_v":
-        return f"Current-amplifier gain, {parts[1]} [mA/V]", "mA/V", 1e3
-    if parts[0] == "newport_gain_v_per_v":
-        out, inp = ("Vph", "Unh") if parts[1] == "h" else ("Vpv", "Unv")
-        return f"Newport gain {inp} → {out} [V/V]", "V/V", 1.0
-    if parts[0] == "delay_s":
-        return f"Delay of the {parts[1].capitalize()} path [ms]", "ms", 1e3
-    if parts[0] == "newport" and len(parts) == 3:
-        axis, what = parts[1], parts[2]
-        if what == "natural_freq_hz":
-            return f"Newport natural frequency, {axis} [Hz]", "Hz", 1.0
-        if what == "damping_ratio":
-            return f"Newport damping ratio, {axis} [–]", "", 1.0
-        if what == "internal_delay_s":
-            return f"Newport internal delay, {axis} [ms]", "ms", 1e3
-    if parts[0] == "sercalo" and len(parts) == 3:
-        axis, what = parts[1], parts[2]
-        if what == "resonance_hz":
-            return f"Sercalo resonance, {axis} [Hz]", "Hz", 1.0
-        if what == "damping_ratio":
-            return f"Sercalo damping ratio, {axis} [–]", "", 1.0
-        if what == "dc_gain_v_per_a":
-            inp, out = _DIRECT[axis]
-            return f"Sercalo static gain {inp} → {out} [V/A]", "V/A", 1.0
-    return key.replace("_", " ").replace(".", ", "), "", 1.0
 
 
 def _target(row: ComparisonRow) -> tuple[str, str]:
@@ -190,7 +164,7 @@ def _qd(result: Identification | None, *, recordings: Mapping[str, xr.Dataset], 
         blocks.append(Table(
             caption="4QD gains from the linear regression (seed Table 2)",
             header=("axis", "gain [V/rad]", "± [V/rad]", "sensitivity [µrad/mV]",
-                    "offset [mV]", "R² [–]", "residual rms [mV]", "beam-angle range [mrad]",
+                    "offset [mV]", "R² [1]", "residual rms [mV]", "beam-angle range [mrad]",
                     "samples"),
             rows=tuple((_AXIS[a], f"{c.gain_v_per_rad:.4f}", f"{c.gain_std_v_per_rad:.2g}",
                         f"{c.sensitivity_urad_per_mv:.2f}", f"{1e3 * c.offset_v:.3f}",
@@ -228,7 +202,7 @@ def _current_amp(result: Identification | None, *, recordings: Mapping[str, xr.D
         blocks.append(Table(
             caption="Current-amplifier gains",
             header=("axis", "identified Gi [mA/V]", "± [mA/V]", "1/(R + Rc) [mA/V]",
-                    "identified / theoretical [–]", "averaging band [Hz]"),
+                    "identified / theoretical [1]", "averaging band [Hz]"),
             rows=tuple((_AXIS[a], f"{1e3 * g.gain_a_per_v:.4f}",
                         f"{1e3 * g.gain_std_a_per_v:.2g}", f"{1e3 * g.theoretical_a_per_v:.4f}",
                         f"{g.ratio_to_theoretical:.4f}", f"{g.band_hz[0]:g}–{g.band_hz[1]:g}")
@@ -277,15 +251,15 @@ def _modes_table(result: Identification) -> Table:
         return Table(
             caption=("Sercalo modes, re-estimated on the full records (frequency-domain output "
                      f"error), against the vector fit of {fit}; ± is one standard error"),
-            header=("axis", "resonance [Hz]", "± [Hz]", "damping ratio [–]", "± [–]",
-                    "damping ratio from the fit [–]", "fit / re-estimated [–]"),
+            header=("axis", "resonance [Hz]", "± [Hz]", "damping ratio [1]", "± [1]",
+                    "damping ratio from the fit [1]", "fit / re-estimated [1]"),
             rows=tuple((_AXIS[a], f"{m['resonance_hz']:.4f}", f"{m['resonance_hz_std']:.2g}",
                         f"{m['damping_ratio']:.4e}", f"{m['damping_ratio_std']:.2g}",
                         f"{initial[a][1]:.4e}", f"{initial[a][1] / m['damping_ratio']:.2f}")
                        for a, m in modes.items()))
     return Table(caption=f"Sercalo modes from the vector fit of {fit} (not re-estimated on the "
                          "full records); ± is one standard error",
-                 header=("axis", "resonance [Hz]", "± [Hz]", "damping ratio [–]", "± [–]"),
+                 header=("axis", "resonance [Hz]", "± [Hz]", "damping ratio [1]", "± [1]"),
                  rows=tuple((_AXIS[a], f"{m['resonance_hz']:.4f}", f"{m['resonance_hz_std']:.2g}",
                              f"{m['damping_ratio']:.4e}", f"{m['damping_ratio_std']:.2g}")
                             for a, m in modes.items()))
@@ -311,7 +285,7 @@ def _parameter_std_table(result: Identification) -> Table | None:
                  "each line; ± is one standard deviation propagated from the lines' variances "
                  f"(reduced chi-square of the fit {ps.chi2_per_dof:.2f}; the current-amplifier "
                  "gain and the delay taken as known)." + held),
-        header=("axis", "resonance [Hz]", "damping ratio [–]", "static gain [V/A]"),
+        header=("axis", "resonance [Hz]", "damping ratio [1]", "static gain [V/A]"),
         rows=rows)
 
 
@@ -346,7 +320,7 @@ def _sercalo(result: Identification | None, *, recordings: Mapping[str, xr.Datas
         caption=(f"Measured (colour; {how}) with the delay of {1e3 * s.delay_s:.4f} ms removed, "
                  f"and the fitted model (dashed, {s.fit.n_poles} poles"
                  + (", modes re-estimated on the full records" if result.modes is not None
-                    else "") + "); magnitude above phase for each element"
+                    else "") + "); magnitude above phase for each element. " + PHASE_WORDS
                  + (f"; thin lines: the {100 * s.frf.confidence:g} % confidence bounds of each "
                     "line" if s.frf.frf_variance is not None else
                     "; no per-line variance with this estimator, so no bounds drawn") + "."),
@@ -415,7 +389,7 @@ def _newport(result: Identification | None, *, recordings: Mapping[str, xr.Datas
         n.frf, delay_s=n.delay_s, model=newport_model(n), key="fig26_27_newport_frf",
         title="Newport: frequency-response matrix Un → Vp",
         caption=(f"Measured ({nhow}) with the delay of {1e3 * n.delay_s:.4f} ms removed; "
-                 + model_words
+                 + model_words + ". " + PHASE_WORDS
                  + (f"; thin lines: {100 * n.frf.confidence:g} % confidence bounds"
                     if n.frf.frf_variance is not None else "") + "."),
         seed_ref="Figs. 26, 27",

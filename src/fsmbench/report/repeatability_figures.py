@@ -6,9 +6,10 @@ filtering): one figure, with Fig. 49 (the non-repeatable part) below. Fig. 52
 (the non-repeatable part after the low pass) separates the filter's
 start-up transient (first period) from the settled periods (errata E32).
 Periods are drawn as their range (smallest and largest value at each
-instant), which stays readable for any number of periods; time plots draw
-each signal's min/max envelope over the record (a few thousand points
-whatever its length). Both come folded or binned from the analysis
+instant, a filled band), which stays readable for any number of periods;
+time plots draw each signal's min/max envelope over the record as a band (a
+few thousand bins whatever its length). Panels of one quantity share their
+vertical axis. Both come folded or binned from the analysis
 (:class:`~fsmbench.budget.repeatability.RepeatabilityRecord`), so a night-long
 record is drawn without reading it again.
 """
@@ -24,7 +25,15 @@ from fsmbench.budget.repeatability import ENVELOPE_BINS, RepeatabilityRecord
 from fsmbench.budget.signals import trim_record
 from fsmbench.budget.study import NonRepeatability
 from fsmbench.report.budget_figures import asd_line, cumulative_line
-from fsmbench.report.figure import H_COLOR, PALETTE, V_COLOR, Figure, Line, Panel, Rule
+from fsmbench.report.figure import (
+    H_COLOR,
+    PALETTE,
+    V_COLOR,
+    Figure,
+    Line,
+    Panel,
+    Rule,
+)
 from fsmbench.report.stability_figures import time_axis
 from fsmbench.scale.envelope import Envelope
 from fsmbench.scale.streaming import EnvelopeStream, SumStream, read_blocks
@@ -58,12 +67,10 @@ def _axis_color(direction: str) -> str:
 
 
 def _envelope_line(env: Envelope, *, divisor: float, scale: float, name: str, color: str,
-                   group: str = "", width: float = 1.0) -> Line:
-    """A min/max envelope as one line: each bin's minimum then maximum at its centre."""
-    t = np.repeat(env.t_s / divisor, 2)
-    y = np.empty(2 * env.minimum.size)
-    y[0::2], y[1::2] = env.minimum, env.maximum
-    return Line(t, y * scale, name=name, color=color, width=width, group=group)
+                   group: str = "") -> Line:
+    """A min/max envelope as a band: each bin's minimum and maximum over the bin."""
+    return Line(env.t_s / divisor, env.minimum * scale, upper=env.maximum * scale, name=name,
+                color=color, group=group)
 
 
 def _aligned_axis(reps: Mapping[str, RepeatabilityRecord]) -> tuple[float, str]:
@@ -105,22 +112,23 @@ def repeatability_time_figure(reps: Mapping[str, RepeatabilityRecord]) -> Figure
         rows[0].append(Panel(
             (_envelope_line(env["command"], divisor=div, scale=1.0,
                             name=f"Newport command {r.channel}", color=_axis_color(r.direction)),),
-            x_label, f"Newport command {r.channel} [V]", title=title))
+            x_label, f"Newport command {r.channel} [V]", title=title, share_y="command"))
         for k, (v, color) in enumerate((("Vph", H_COLOR), ("Vpv", V_COLOR))):
             rows[1 + k].append(Panel(
                 (_envelope_line(env[v], divisor=div, scale=MV, color=color, group=v,
                                 name=f"{v} (4QD {'horizontal' if v == 'Vph' else 'vertical'})"),),
-                x_label, f"{v} [mV]"))
+                x_label, f"{v} [mV]", share_y="qd"))
         rows[3].append(Panel(
             (_envelope_line(env["Va"], divisor=div, scale=NM, name="Va, mean removed",
                             color="#333333", group="Va"),),
-            x_label, "Va, mean removed [nm]"))
+            x_label, "Va, mean removed [nm]", share_y="va"))
     return Figure(
         key="fig44_repeatability_time", title="Signals of the repeatability measurement",
         caption="From one second after the first Newport command, whole 1 s periods only "
                 "(seed 11.1): the Newport command, the 4QD (horizontal and vertical in separate "
-                "rows) and the Attocube distance; one column per record. Each line is the "
-                "smallest and largest value in each of a few thousand consecutive intervals.",
+                "rows) and the Attocube distance; one column per record, each row on one "
+                "vertical scale. Each band is the smallest and largest value in each of a few "
+                "thousand consecutive intervals.",
         panels=tuple(p for row in rows for p in row), seed_ref="Fig. 44", columns=len(recs),
         share_x=True)
 
@@ -135,7 +143,7 @@ def tracking_distance_figure(reps: Mapping[str, RepeatabilityRecord]) -> Figure:
             (_envelope_line(r.envelopes["tracking_distance"], divisor=div, scale=NM,
                             name="tracking error as distance, traced law (6H + 4L)/16·α²",
                             color=PALETTE[2], group="traced"),),
-            x_label, "Distance equivalent [nm]",
+            x_label, "Distance equivalent [nm]", share_y="distance",
             title=f"{direction_words(r)}: beam angle {r.tracking_rms_rad[0] * UM:.3g} µrad rms "
                   f"(h), {r.tracking_rms_rad[1] * UM:.3g} µrad rms (v); distance "
                   f"{r.tracking_distance_std_m * NM:.3g} nm std (seed's law "
@@ -167,10 +175,12 @@ def tracking_asd_figure(reps: Mapping[str, RepeatabilityRecord]) -> Figure:
             if kind == "asd":
                 panels.append(Panel(tuple(lines), "Frequency [Hz]",
                                     f"ASD of the tracking error {ax} [µrad/√Hz]", x_log=True,
-                                    y_log=True, height=2.0, title=f"{ax} ({axis})"))
+                                    y_log=True, height=2.0, title=f"{ax} ({axis})",
+                                    share_y="asd"))
             else:
                 panels.append(Panel(tuple(lines), "Frequency [Hz]",
-                                    f"Cumulative rms of {ax} [µrad]", x_log=True))
+                                    f"Cumulative rms of {ax} [µrad]", x_log=True,
+                                    share_y="cumulative"))
     return Figure(
         key="fig46_tracking_error_asd", title="Spectrum of the tracking errors",
         caption="Welch estimate of α = Vp/Gd(0) with the seed's 1 s Hann window and its "
@@ -193,7 +203,7 @@ def tracking_vs_distance_figure(reps: Mapping[str, RepeatabilityRecord]) -> Figu
                       name="tracking error as distance, seed's L·α²/2 (both axes)",
                       color=PALETTE[7], group="seed", width=1.0, dash="dash")),
             "Frequency [Hz]", "ASD [nm/√Hz]", x_log=True, y_log=True,
-            title=direction_words(r)))
+            title=direction_words(r), share_y="asd"))
     return Figure(
         key="fig47_tracking_vs_distance_asd",
         title="Tracking error as distance against the measured distance",
@@ -204,12 +214,10 @@ def tracking_vs_distance_figure(reps: Mapping[str, RepeatabilityRecord]) -> Figu
 
 
 def _range_lines(tp: np.ndarray, lo: np.ndarray, hi: np.ndarray, *,
-                 name: str) -> tuple[Line, Line]:
-    """Minimum and maximum over periods at each instant (grey), one legend entry."""
-    return (Line(tp, lo * NM, name=name, color=_PERIOD_COLOR, width=1.0, group="range",
-                 decimate=True),
-            Line(tp, hi * NM, name=name, color=_PERIOD_COLOR, width=1.0, group="range",
-                 decimate=True))
+                 name: str) -> tuple[Line]:
+    """Minimum and maximum over periods at each instant: a grey band."""
+    return (Line(tp, lo * NM, upper=hi * NM, name=name, color=_PERIOD_COLOR, group="range",
+                 decimate=True),)
 
 
 def _rms_rules(rms: float | None) -> tuple[Rule, ...]:
@@ -235,21 +243,21 @@ def periods_figure(reps: Mapping[str, RepeatabilityRecord]) -> Figure:
             (*_range_lines(tp, r.va_min_m, r.va_max_m, name="range over the periods"),
              Line(tp, (r.repeatable_m - off) * NM, name="mean over periods (repeatable part)",
                   color="#000000", width=1.2, dash="dash", group="mean")),
-            "Time in the period [s]", "Va, record mean removed [nm]",
+            "Time in the period [s]", "Va, record mean removed [nm]", share_y="va",
             title=f"{direction_words(r)}: {r.n_periods} periods, repeatable part "
                   f"{r.repeatable_ptp_m * NM:.4g} nm peak to peak"))
         bottom.append(Panel(
             _range_lines(tp, r.va_nonrep_min_m, r.va_nonrep_max_m,
                          name="range over the periods"),
-            "Time in the period [s]", "Non-repeatable Va [nm]",
+            "Time in the period [s]", "Non-repeatable Va [nm]", share_y="nonrep",
             rules=_rms_rules(r.nonrep_rms_m),
             title=f"Non-repeatable part: {r.nonrep_rms_m * NM:.3g} nm rms"))
     return Figure(
         key="fig48_49_repeatability_periods",
         title="Repeatable and non-repeatable parts of the measured distance",
         caption="Va cut into the Newport's 1 s periods (seed 11.4). Top (seed Fig. 48): the "
-                "smallest and largest value over the periods at each instant (grey, the two "
-                "lines nearly coincide at this scale) and their mean, the repeatable part. "
+                "smallest and largest value over the periods at each instant (a grey band, "
+                "thin at this scale) and their mean, the repeatable part. "
                 "Bottom (seed Fig. 49): Va less that mean, the non-repeatable part, with its "
                 "rms. The seed's Fig. 51 (the top after the 10 Hz low pass) is not repeated: "
                 "it cannot be told apart; the low pass's effect is in the next figure.",
@@ -272,13 +280,14 @@ def nonrep_part_figure(reps: Mapping[str, RepeatabilityRecord]) -> Figure:
             _range_lines(tp, r.va_lpf_settled_nonrep_min_m, r.va_lpf_settled_nonrep_max_m,
                          name="range over the periods"),
             "Time in the period [s]", "Non-repeatable Va [nm]", rules=_rms_rules(rms),
+            share_y="nonrep",
             title=f"{direction_words(r)}: periods 2 to {r.n_periods} (settled)"
                   + ("" if rms is None else f", {rms * NM:.3g} nm rms")))
         bottom.append(Panel(
             (Line(tp, r.va_lpf_first_nonrep_m * NM,
                   name="first period (the filter's start-up transient)",
                   color=_TRANSIENT_COLOR, width=1.2, group="transient"),),
-            "Time in the period [s]", "First period [nm]",
+            "Time in the period [s]", "First period [nm]", share_y="first",
             title=f"First period; all periods as the seed: {r.nonrep_rms_lpf_m * NM:.3g} nm rms"))
     return Figure(
         key="fig52_lowpass_nonrepeatable",
@@ -314,7 +323,7 @@ def nonrep_contributions_figure(reps: Mapping[str, RepeatabilityRecord],
              _envelope_line(r.envelopes["tracking_distance_nonrep"], divisor=div, scale=NM,
                             name="tracking error as distance, non-repeatable part",
                             color=PALETTE[2], group="tracking")),
-            x_label, "Distance [nm]",
+            x_label, "Distance [nm]", share_y="distance",
             title=f"{direction_words(r)}: Va {r.nonrep_rms_m * NM:.3g} nm rms, tracking error "
                   f"{r.tracking_distance_nonrep_rms_m * NM:.3g} nm rms"))
     huddles = {nr.huddle_test for nr in nonrep.values()
@@ -331,7 +340,7 @@ def nonrep_contributions_figure(reps: Mapping[str, RepeatabilityRecord],
         panels.append(Panel(
             (_envelope_line(env, divisor=div, scale=NM, color=PALETTE[0], group="huddle",
                             name=f"Va in huddle test {number} (nothing moves)"),),
-            x_label.replace("Time after alignment", "Time"), "Distance [nm]",
+            x_label.replace("Time after alignment", "Time"), "Distance [nm]", share_y="distance",
             title=f"Huddle test {number}{what}, nothing moves: "
                   f"{rms * NM:.3g} nm rms over "
                   f"{n / float(recordings[name].attrs['fs_hz']):g} s"))

@@ -1,8 +1,8 @@
 """Figures of the long-term view of the huddle tests: Allan deviation, drift, envelopes.
 
 The time plots of a long record draw the per-bin minimum and maximum (the
-envelope :mod:`fsmbench.budget.stability` computed out of core), never the
-samples: a day at 10 kHz is 864 million of them.
+envelope :mod:`fsmbench.budget.stability` computed out of core) as a filled
+band, never the samples: a day at 10 kHz is 864 million of them.
 """
 
 from __future__ import annotations
@@ -37,12 +37,10 @@ def time_axis(duration_s: float) -> tuple[float, str]:
 
 
 def envelope_line(d: SignalDrift, *, scale: float, offset: float, divisor: float, name: str,
-                  color: str, group: str = "", width: float = 1.0) -> Line:
-    """The min/max envelope as one line: each bin's minimum then maximum at its centre."""
-    t = np.repeat(d.t_s / divisor, 2)
-    y = np.empty(2 * d.minimum.size)
-    y[0::2], y[1::2] = d.minimum, d.maximum
-    return Line(t, (y - offset) * scale, name=name, color=color, width=width, group=group)
+                  color: str, group: str = "") -> Line:
+    """The min/max envelope as a band: each bin's minimum and maximum over the bin."""
+    return Line(d.t_s / divisor, (d.minimum - offset) * scale,
+                upper=(d.maximum - offset) * scale, name=name, color=color, group=group)
 
 
 def allan_figure(stability: Mapping[int, StabilityRecord]) -> Figure:

@@ -1,14 +1,15 @@
 """A :class:`~fsmbench.report.figure.Figure` as a static PNG/PDF, drawn by matplotlib (Agg).
 
 ``fsmbench study --figures png,pdf`` writes every figure of the report to
-``OUT/figures/<key>.png`` (150 dpi) and/or ``<key>.pdf`` (vector), in the
-seed's manner, for papers. The spec is drawn exactly as the interactive
-renderer (:mod:`fsmbench.report.interactive`) draws it: the same grid of
-panels with relative row heights, shared x per column, log axes that leave
-values ≤ 0 out, fixed ranges only where the panel gives one (everything
-else autoscales, so nothing is clipped), equal aspect, rules, labels, shaded
-intervals, the same colours and legend (one entry per group), and long
-records reduced to the same min/max envelope (:func:`~fsmbench.report.figure.envelope`).
+``OUT/figures/figNN_<what>.png`` (150 dpi) and/or ``.pdf`` (vector), ``NN`` its
+number in the report (:func:`fsmbench.report.html.export_stem`). The spec is
+drawn as the interactive renderer (:mod:`fsmbench.report.interactive`) draws
+it: the same grid of panels, shared x per column and y per ``share_y`` key,
+log axes that leave values ≤ 0 out, fixed ranges only where the panel gives
+one (nothing is clipped), equal aspect (the box shrinks to the data), rules,
+labels, shaded intervals, colours, legend (one entry per group), wrapped
+titles, bands filled as steps, and long records reduced to their min/max per
+pixel column (:func:`~fsmbench.report.figure.envelope`).
 
 matplotlib is imported inside the functions only, so importing
 :mod:`fsmbench.report` does not import it. Figures are built on
@@ -32,7 +33,19 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from fsmbench.io.atomic import atomic_path
-from fsmbench.report.figure import PALETTE, Bars, Figure, Line, Panel, Trace, envelope, rows_of
+from fsmbench.report.figure import (
+    PALETTE,
+    Bars,
+    Figure,
+    Line,
+    Panel,
+    Trace,
+    envelope,
+    minmax_bins,
+    rows_of,
+    wrap_words,
+)
+from fsmbench.report.html import export_stem
 
 if TYPE_CHECKING:
     import matplotlib.axes
@@ -203,6 +216,27 @@ def _draw_line(ax: matplotlib.axes.Axes, line: Line, panel: Panel, color: str,
                 **style)
 
 
+def _band_bins(band: Line, columns: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A band's centres and edges, merged into at most ``columns`` bins when decimated."""
+    n, upper = band.x.size, band.y if band.upper is None else band.upper
+    if not band.decimate or n <= 2 * columns:
+        return band.x, band.y, upper
+    first, lo, hi = minmax_bins(band.y, upper, -(-n // columns))
+    return 0.5 * (band.x[first] + band.x[np.r_[first[1:], n] - 1]), lo, hi
+
+
+def _draw_band(ax: matplotlib.axes.Axes, band: Line, panel: Panel, color: str, label: str,
+               columns: int, gid: str) -> None:
+    """A band filled as steps over its bins, its edges drawn thin in the full colour."""
+    x, lo, hi = _band_bins(band, columns)
+    x = _finite(x, log=panel.x_log)
+    lo, hi = (_finite(v, log=panel.y_log) for v in (lo, hi))
+    ax.fill_between(x, lo, hi, step="mid", color=color, alpha=0.5 * band.opacity,
+                    linewidth=0, label=label, gid=gid)
+    for edge in (lo, hi):
+        ax.step(x, edge, where="mid", color=color, linewidth=0.45, label="_nolegend_")
+
+
 def _draw_bars(ax: matplotlib.axes.Axes, panel: Panel,
                bars: Sequence[tuple[Bars, str, str]]) -> None:
     """All bar series of a panel, side by side within each category (plotly's "group" mode)."""
@@ -267,7 +301,9 @@ def _draw_panel(ax: matplotlib.axes.Axes, fig: Figure, panel_no: int, *,
         shown.add(key)
         # matplotlib leaves labels starting with "_" out of the legend.
         label = trace.name if show else "_nolegend_"
-        if isinstance(trace, Line):
+        if isinstance(trace, Line) and trace.upper is not None:
+            _draw_band(ax, trace, panel, color, label, columns, f"p{panel_no}t{k}")
+        elif isinstance(trace, Line):
             # The gid names the trace (panel, trace index) for tests and SVG ids.
             _draw_line(ax, trace, panel, color, label, columns, f"p{panel_no}t{k}")
         else:
@@ -301,16 +337,23 @@ def _draw_panel(ax: matplotlib.axes.Axes, fig: Figure, panel_no: int, *,
     _set_range(ax, fig, panel_no, "x", panel.x_range, panel.x_log)
     _set_range(ax, fig, panel_no, "y", panel.y_range, panel.y_log)
     if panel.equal_aspect:
-        fixed = panel.x_range is not None or panel.y_range is not None
-        # A fixed window is kept as given (the box adapts); otherwise the limits widen.
-        ax.set_aspect("equal", adjustable="box" if fixed else "datalim")
+        # The box shrinks to the data's aspect (as the page's "constrain: domain"), so no
+        # axis is padded with empty range and a fixed window is kept as given.
+        ax.set_aspect("equal", adjustable="box")
     ax.grid(True, which="major", color=_GRID_COLOR, linewidth=0.6)
-    ax.set_ylabel(panel.y_label)
+    # Titles longer than their panel are wrapped (average glyph widths of the 9 pt labels
+    # and the 9.5 pt bold titles: 5.2 and 5.7 pt), as the page wraps its own.
+    box = ax.get_position(original=True)
+    fig_w, fig_h = _size_in(fig)
+    ax.set_ylabel("\n".join(wrap_words(panel.y_label, int(box.height * fig_h * 72 / 5.2))))
     ax.set_xlabel(panel.x_label if show_x else "")
     if not show_x:
         ax.tick_params(axis="x", labelbottom=False)
     if panel.title:
-        ax.set_title(panel.title, fontweight="bold")
+        # The panel's width once laid out: the figure less ~1 in of labels, per column.
+        width_in = (fig_w - 1.0) / fig.columns - 0.3 * (fig.columns > 1)
+        ax.set_title("\n".join(wrap_words(panel.title, int(width_in * 72 / 5.7))),
+                     fontweight="bold")
 
 
 def _legend(mfig: matplotlib.figure.Figure, per_row: int) -> Any:
@@ -410,17 +453,21 @@ def render_matplotlib(fig: Figure) -> matplotlib.figure.Figure:
         color_of: dict[str, str] = {}
         shown: set[str] = set()
         column_top: dict[int, matplotlib.axes.Axes] = {}
+        y_owner: dict[str, matplotlib.axes.Axes] = {}
         # Share x within a column (plotly's "matches"), only between axes of one scale.
         shared = [fig.share_x and p.x_log == fig.panels[i % fig.columns].x_log
                   for i, p in enumerate(fig.panels)]
-        for i, _panel in enumerate(fig.panels):
+        for i, panel in enumerate(fig.panels):
             row, col = divmod(i, fig.columns)
             below = i + fig.columns
             # The x ticks and label are shown once per column, under its last shared panel.
             hide_x = shared[i] and below < n and shared[below]
             ax = mfig.add_subplot(grid[row, col],
-                                  sharex=column_top.get(col) if shared[i] else None)
+                                  sharex=column_top.get(col) if shared[i] else None,
+                                  sharey=y_owner.get(panel.share_y) if panel.share_y else None)
             column_top.setdefault(col, ax)
+            if panel.share_y:
+                y_owner.setdefault(panel.share_y, ax)
             _draw_panel(ax, fig, i, color_of=color_of, shown=shown, show_x=not hide_x)
         for ax, panel in zip(mfig.axes, fig.panels, strict=True):
             if not panel.equal_aspect:  # equal aspect may still widen the limits when drawn
@@ -462,6 +509,9 @@ def _decimated(fig: Figure) -> Figure:
     columns = _envelope_columns(fig)
 
     def light(trace: Trace) -> Trace:
+        if isinstance(trace, Line) and trace.upper is not None and trace.decimate:
+            x, lo, hi = _band_bins(trace, columns)
+            return replace(trace, x=x, y=lo, upper=hi, decimate=False)
         if not isinstance(trace, Line) or not trace.decimate:
             return trace
         x, y = envelope(trace.x, trace.y, columns=columns)
@@ -472,15 +522,15 @@ def _decimated(fig: Figure) -> Figure:
     return replace(fig, panels=panels)
 
 
-def _export_one(fig: Figure, out: Path, fmts: tuple[str, ...]) -> list[Path]:
-    """Draw one figure and write it in every format; the files written."""
+def _export_one(fig: Figure, out: Path, fmts: tuple[str, ...], stem: str) -> list[Path]:
+    """Draw one figure and write it in every format as ``stem.<fmt>``; the files written."""
     import matplotlib as mpl
 
     mfig = render_matplotlib(fig)
     written = []
     with mpl.rc_context(_STYLE):
         for fmt in fmts:
-            dest = out / f"{fig.key}.{fmt}"
+            dest = out / f"{stem}.{fmt}"
             with atomic_path(dest) as tmp:
                 if fmt == "png":
                     _write_png(mfig, tmp)
@@ -493,12 +543,15 @@ def _export_one(fig: Figure, out: Path, fmts: tuple[str, ...]) -> list[Path]:
 
 def export_figures(figures: Iterable[Figure], out_dir: Path, *,
                    formats: Sequence[str], workers: int | None = None) -> list[Path]:
-    """Write every figure as ``<key>.png`` (150 dpi) and/or ``<key>.pdf`` (vector).
+    """Write every figure as ``<stem>.png`` (150 dpi) and/or ``<stem>.pdf`` (vector).
+
+    The stem is the figure's number in the report and what it shows
+    (:func:`fsmbench.report.html.export_stem`); without a number, its key.
 
     Parameters
     ----------
     figures : iterable of Figure
-        The report's figures (e.g. :func:`fsmbench.report.html.iter_figures`).
+        The report's figures, numbered (:func:`fsmbench.report.html.iter_figures`).
     out_dir : Path
         Folder of the files, created if missing.
     formats : sequence of str
@@ -530,21 +583,24 @@ def export_figures(figures: Iterable[Figure], out_dir: Path, *,
     fmts = _check_formats(formats)
     out = Path(out_dir)
     figs = list(figures)
+    stems = [export_stem(fig, total=len(figs)) for fig in figs]
     seen: set[str] = set()
-    for fig in figs:
-        if fig.key in seen:
-            raise ValueError(f"figure key {fig.key!r} used twice: {out / fig.key}.* "
+    for fig, stem in zip(figs, stems, strict=True):
+        if fig.key in seen or stem in seen:
+            raise ValueError(f"figure key {fig.key!r} used twice: {out / stem}.* "
                              "would be overwritten")
-        seen.add(fig.key)
+        seen.update((fig.key, stem))
     out.mkdir(parents=True, exist_ok=True)
     n_workers = min(4, os.cpu_count() or 1) if workers is None else max(1, workers)
     n_workers = min(n_workers, len(figs))
     if n_workers <= 1:
-        return [path for fig in figs for path in _export_one(fig, out, fmts)]
+        return [path for fig, stem in zip(figs, stems, strict=True)
+                for path in _export_one(fig, out, fmts, stem)]
     # forkserver/spawn, not fork: the caller may hold threads (BLAS, numba) a fork would copy.
     method = "forkserver" if "forkserver" in mp.get_all_start_methods() else "spawn"
     with ProcessPoolExecutor(n_workers, mp_context=mp.get_context(method)) as pool:
-        jobs = [pool.submit(_export_one, _decimated(fig), out, fmts) for fig in figs]
+        jobs = [pool.submit(_export_one, _decimated(fig), out, fmts, stem)
+                for fig, stem in zip(figs, stems, strict=True)]
         try:
             return [path for job in jobs for path in job.result()]
         except BaseException:

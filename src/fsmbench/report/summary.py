@@ -525,7 +525,8 @@ def build_summary(*, source: str, is_twin: bool, spec: Specification,
         verdict = (f"Not verified: {len(contradictions)} check(s) of the recordings failed (first: "
                    f"{first.subject}, {first.name}); a verdict on data that contradict "
                    "themselves or the bench file would not be one.")
-    step = next_step(status=status, requirements=reqs, budget=budget, limiting_row=top)
+    step = next_step(status=status, requirements=reqs, budget=budget, limiting_row=top,
+                     skipped=skipped)
     return Summary(source=source, is_twin=is_twin,
                    meets_specifications={"meets": True, "does_not_meet": False}.get(status),
                    verdict=verdict, limiting=limiting, requirements=tuple(reqs),

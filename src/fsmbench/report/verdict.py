@@ -10,7 +10,7 @@ measurement that would replace it. :func:`verdict_html` draws the summary.
 from __future__ import annotations
 
 import html
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from typing import TYPE_CHECKING, Any
 
 from fsmbench.budget.provenance import remedies
@@ -38,9 +38,39 @@ def _budget_step(budget: Any, row: Any) -> str:
     return head + (": " + "; ".join(parts) if parts else "") + "."
 
 
+_IDENT = ("data_cal_pd_h", "data_cal_pd_v", "data_uch", "data_ucv", "data_unh", "data_unv")
+#: The recordings each verdict row is judged from (the study's sections 2, 3, 11).
+_NEEDS: Mapping[str, tuple[str, ...]] = {
+    "control_objective": _IDENT, "gain_margin": _IDENT, "phase_margin": _IDENT,
+    "robust_stability": _IDENT, "closed_loop_simulation": _IDENT,
+    "model_validation": (*_IDENT, "data_rep_h", "data_rep_v"),
+    "distance_error_budget": tuple(f"data_huddle_test_{i}" for i in range(1, 6)),
+}
+
+
+def _files_step(open_: Sequence[Requirement], skipped: Mapping[str, str]) -> str:
+    """What to do with the files the unjudged rows need: rename, correct, or record them."""
+    needed = [e for e in dict.fromkeys(e for r in open_ for e in _NEEDS.get(r.name, ()))
+              if e in skipped]
+    renames = [skipped[e].split("; found ", 1)[1] for e in needed if "; found " in skipped[e]]
+    absent = [e for e in needed if skipped[e].startswith(f"no {e}.")
+              and "; found " not in skipped[e]]
+    broken = [f"{e} ({skipped[e]})" for e in needed if not skipped[e].startswith(f"no {e}.")]
+    parts = ([f"rename the files the study did not recognise ({'; '.join(renames)})"]
+             if renames else [])
+    parts += [f"correct {'; '.join(broken)}"] if broken else []
+    parts += [f"record {', '.join(absent)}"] if absent else []
+    return ", ".join(parts)
+
+
 def next_step(*, status: str, requirements: Sequence[Requirement], budget: Any | None,
-              limiting_row: Any | None) -> str:
-    """One or two sentences: what to do next, from the results (see the module notes)."""
+              limiting_row: Any | None, skipped: Mapping[str, str] | None = None) -> str:
+    """One or two sentences: what to do next, from the results (see the module notes).
+
+    ``skipped``: the recordings the loader could not use (experiment → reason, with the
+    near-miss file names it found), so that an unjudged row names the file to rename,
+    correct or record.
+    """
     model = next((r for r in requirements if r.name == "model_validation"), None)
     if model is not None and model.passed is False:
         return ("Next: find why the model misses the recorded loop before trusting any "
@@ -58,6 +88,9 @@ def next_step(*, status: str, requirements: Sequence[Requirement], budget: Any |
                 "identified plant.")
     open_ = [r for r in requirements if r.passed is None]
     if open_:
+        files = _files_step(open_, skipped or {})
+        if files:
+            return f"Next: {files}, then run the study again."
         missing = sorted({r.missing for r in open_ if r.missing})
         return "Next: record " + "; ".join(missing) + ", then run the study again."
     if status == "not_verified":
