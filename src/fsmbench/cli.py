@@ -369,7 +369,8 @@ def _stage_input(args: argparse.Namespace, *,
     loaded = load_recordings(data, progress=say, fs_hz=conv.fs_hz, adc_range_v=conv.range_v,
                              adc_bits=conv.bits)
     for name, why in loaded.skipped.items():
-        absent = why.startswith(f"no {name}.mat")
+        # Simply absent: not mentioned; a near miss ("found DATA_UCH.mat: rename it …") is.
+        absent = why.startswith(f"no {name}.mat") and "; found " not in why
         if not absent and (uses is None or name in uses):
             say(f"skipped {name}: {why}")
     # What the user must know about the files it uses, once each, one line each.

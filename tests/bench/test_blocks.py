@@ -7,6 +7,9 @@ import math
 import control as ct
 import numpy as np
 import pytest
+import scipy.linalg
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from fsmbench.bench.blocks import (
     PLANT_INPUTS,
@@ -19,6 +22,7 @@ from fsmbench.bench.blocks import (
     physical_plant,
     sercalo,
     ss_frequency_response,
+    ss_response,
     voltage_amplifier,
 )
 from fsmbench.bench.params import Bench
@@ -164,3 +168,47 @@ def test_summary_is_json_ready(true_plant: PlantModel) -> None:
 
     text = json.dumps(true_plant.summary())
     assert "Uch->Vph" in text
+
+
+# ---------------------------------------------------------------- frequency response paths
+
+
+def _random_plant(seed: int, *, n_modes: int, n_real: int) -> ct.StateSpace:
+    """A stable MIMO system of lightly damped modes (0.1 Hz–3 kHz) and real poles."""
+    rng = np.random.default_rng(seed)
+    blocks = []
+    for _ in range(n_modes):
+        w0 = 2 * np.pi * 10 ** rng.uniform(-1, 3.5)
+        xi = 10 ** rng.uniform(-4, -0.5)
+        blocks.append(np.array([[0.0, w0], [-w0, -2 * xi * w0]]))
+    blocks += [np.array([[-2 * np.pi * 10 ** rng.uniform(-1, 4)]]) for _ in range(n_real)]
+    a = scipy.linalg.block_diag(*blocks)
+    n = a.shape[0]
+    return ct.ss(a, rng.standard_normal((n, 2)), rng.standard_normal((3, n)),
+                 rng.standard_normal((3, 2)))
+
+
+@settings(max_examples=25, deadline=None)
+@given(seed=st.integers(0, 2**31), n_modes=st.integers(1, 8), n_real=st.integers(0, 4))
+def test_the_modal_sum_equals_the_direct_solve(seed: int, n_modes: int, n_real: int) -> None:
+    """Every point of a long grid, not only the points the modal path checks itself on."""
+    from fsmbench.bench.blocks import _solve_response
+
+    sys = _random_plant(seed, n_modes=n_modes, n_real=n_real)
+    s = 2j * np.pi * np.geomspace(1e-3, 5e3, 2000)
+    a, b, c, d = (np.asarray(x, dtype=float) for x in (sys.A, sys.B, sys.C, sys.D))
+    exact = _solve_response(a, b, c, d, s)
+    h = ss_response(sys, s)
+    # 1e-8: the modal path's own acceptance is 1e-10 at its probes; allow 100x between them,
+    # relative to each element's value or 1e-6 of its peak (below that, nothing reads it).
+    scale = np.maximum(np.abs(exact), 1e-6 * np.max(np.abs(exact), axis=0, keepdims=True))
+    assert np.max(np.abs(h - exact) / scale) < 1e-8
+
+
+def test_a_defective_system_falls_back_to_the_solve() -> None:
+    """A Jordan block (a double integrator in a row) has no eigenvector basis."""
+    a = np.array([[-1.0, 1.0, 0.0], [0.0, -1.0, 1.0], [0.0, 0.0, -1.0]])
+    sys = ct.ss(a, np.array([[0.0], [0.0], [1.0]]), np.array([[1.0, 0.0, 0.0]]), 0.0)
+    s = 2j * np.pi * np.geomspace(1e-3, 1e3, 500)
+    # Closed form: 1 / (s + 1)^3.
+    assert np.allclose(ss_response(sys, s)[:, 0, 0], 1 / (s + 1) ** 3, rtol=1e-12, atol=0)

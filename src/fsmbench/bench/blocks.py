@@ -291,20 +291,67 @@ def input_delays_s(p: BenchParams) -> dict[str, float]:
             "Unv": dac + p.newport.internal_delay_s}
 
 
+#: Below this many points one batched solve is cheaper than diagonalising ``A``.
+_MODAL_MIN_POINTS = 64
+#: The modal sum is kept only if it agrees with the direct solve to this relative
+#: error at its check points (the direct solve is backward stable; the modal sum
+#: loses ``cond(V)`` and cancellation between residues far above the poles).
+_MODAL_RTOL = 1e-10
+
+
+def _solve_response(a: np.ndarray, b: np.ndarray, c: np.ndarray, d: np.ndarray,
+                    s: np.ndarray) -> np.ndarray:
+    n = a.shape[0]
+    lhs = s[:, None, None] * np.eye(n)[None] - a[None]
+    x = np.linalg.solve(lhs, np.broadcast_to(b, (s.size, *b.shape)).astype(complex))
+    return np.einsum("pn,fnm->fpm", c, x) + d[None]
+
+
+def _modal_response(a: np.ndarray, b: np.ndarray, c: np.ndarray, d: np.ndarray,
+                    s: np.ndarray) -> np.ndarray | None:
+    """``sum_i (C v_i)(w_i B) / (s - lambda_i) + D``, or None when not accurate.
+
+    O(n) per point instead of an O(n^3) solve: the budget's 0.1 Hz grids (50 000
+    points) cost 60x less. Checked against the solve at the grid's extremes and
+    a few points between, where cancellation and ill-conditioning show first.
+    """
+    try:
+        lam, v = np.linalg.eig(a)
+        wb = np.linalg.solve(v, b.astype(complex))
+    except np.linalg.LinAlgError:
+        return None
+    if not np.all(np.isfinite(wb)):
+        return None
+    cv = c @ v
+    h = (cv[None, :, :] / (s[:, None] - lam[None, :])[:, None, :]) @ wb + d[None]
+    order = np.argsort(np.abs(s))
+    probe = np.unique(np.concatenate([order[:2], order[-2:],
+                                      order[np.linspace(0, s.size - 1, 8).astype(int)]]))
+    exact = _solve_response(a, b, c, d, s[probe])
+    scale = np.maximum(np.abs(exact), np.max(np.abs(exact), axis=(1, 2), keepdims=True) * 1e-6)
+    if not np.all(np.abs(h[probe] - exact) <= _MODAL_RTOL * scale):
+        return None
+    h[probe] = exact
+    return h
+
+
 def ss_response(sys: ct.StateSpace, s: np.ndarray) -> np.ndarray:
     """``C (sI - A)^-1 B + D`` at complex ``s`` [rad/s] (or ``z`` for a discrete
     system), shape (n, p, m); ``s`` must not hit a pole of ``sys``.
 
-    One batched solve over all points instead of a Python loop.
+    Many points: the modal sum when it matches the direct solve (see
+    :func:`_modal_response`); otherwise one batched solve over all points.
     """
     s = np.asarray(s, dtype=complex).ravel()
     a, b, c, d = (np.asarray(x, dtype=float) for x in (sys.A, sys.B, sys.C, sys.D))
     n = a.shape[0]
     if n == 0:
         return np.broadcast_to(d, (s.size, *d.shape)).astype(complex)
-    lhs = s[:, None, None] * np.eye(n)[None] - a[None]
-    x = np.linalg.solve(lhs, np.broadcast_to(b, (s.size, *b.shape)).astype(complex))
-    return np.einsum("pn,fnm->fpm", c, x) + d[None]
+    if s.size >= _MODAL_MIN_POINTS:
+        h = _modal_response(a, b, c, d, s)
+        if h is not None:
+            return h
+    return _solve_response(a, b, c, d, s)
 
 
 def ss_frequency_response(sys: ct.StateSpace, f_hz: np.ndarray) -> np.ndarray:

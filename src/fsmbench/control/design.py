@@ -298,11 +298,22 @@ class _AxisProblem:
         self.bound = objective.sensitivity_bound * opts.objective_factor
         self.opts = opts
         self.evaluations = 0
+        # The design path once as arrays: normalised() evaluates it at one point per call
+        # (thousands of calls), where building the sub-system each time cost more than
+        # the solve.
+        path = design.subsystem(outputs=[self.out], inputs=[self.inp])
+        self._path = tuple(np.asarray(x, dtype=float) for x in (path.A, path.B, path.C, path.D))
+        self._path_delay_s = float(design.input_delay_s.get(self.inp, 0.0))
+
+    def design_response(self, s: complex) -> complex:
+        """The design plant's path (with its input delay) at one complex ``s`` [rad/s]."""
+        a, b, c, d = self._path
+        x = np.linalg.solve(s * np.eye(a.shape[0]) - a, b.astype(complex))
+        return complex((c @ x + d)[0, 0] * np.exp(-s * self._path_delay_s))
 
     def normalised(self, shape: AxisShape) -> AxisShape:
         sc = 2j * np.pi * shape.crossover_hz
-        gc = plant_response(self.design, np.array([sc]), outputs=[self.out],
-                            inputs=[self.inp])[0, 0, 0]
+        gc = self.design_response(sc)
         unit = replace(shape, gain=1.0)
         return replace(shape, gain=self.sign / abs(gc * complex(unit.response(np.array([sc]))[0])))
 

@@ -469,16 +469,79 @@ OUT_OF_CORE_EXPERIMENTS: Final = frozenset({*(f"data_huddle_test_{i}" for i in r
                                             "data_rep_h", "data_rep_v"})
 
 
+#: Peak memory of the analyses of a record read whole, per byte of its float64 samples
+#: (the budget on 60 s and 600 s huddle tests: 0.41 and 1.05 GB RSS for 19 and 192 MB of
+#: samples, a slope of 3.7; rounded up).
+IN_MEMORY_FACTOR: Final = 4.0
+#: Files smaller than this are never too large to read whole (their samples are at most
+#: ~10x the file, a few hundred MB).
+_MEMORY_CHECK_BYTES: Final = 32 << 20
+
+
+def _sample_bytes(path: Path, fmt: str) -> int:
+    """The float64 samples a recording holds [bytes], from its headers (nothing read)."""
+    if fmt == "mat5":
+        from fsmbench.io.lazy import _v5_vectors
+
+        return sum(8 * n for _name, n in _v5_vectors(path))
+    import h5py
+
+    total = 0
+
+    def visit(_name: str, obj: Any) -> None:
+        nonlocal total
+        if isinstance(obj, h5py.Dataset) and obj.dtype.kind in "fiu":
+            total += 8 * int(obj.size)
+
+    with h5py.File(path, "r") as f:
+        f.visititems(visit)
+    return total
+
+
+def _refuse_if_too_large(path: Path, name: str, fmt: str, *, out_of_core: bool) -> None:
+    """A record whose analysis in memory would not fit: one line, before any allocation."""
+    from fsmbench.io.matfile import available_memory_bytes
+
+    if path.stat().st_size <= _MEMORY_CHECK_BYTES:
+        return
+    need = _sample_bytes(path, fmt)
+    have = available_memory_bytes()
+    if IN_MEMORY_FACTOR * need <= have:
+        return
+    gib = 2.0**30
+    head = (f"is {need / gib:.1f} GiB of samples: analysing it in memory takes about "
+            f"{IN_MEMORY_FACTOR * need / gib:.0f} GiB and this machine has {have / gib:.1f} GiB "
+            "available")
+    if name not in OUT_OF_CORE_EXPERIMENTS:
+        raise RecordingError(path, f"{head}; only the huddle tests and the repeatability "
+                                   "records run out of core: cut it to the seed's length")
+    if fmt == "mat5":
+        raise RecordingError(path, f"{head}; a MATLAB v5 file cannot be read in pieces: convert "
+                                   f"it once (fsmbench convert {path} {path.with_suffix('.h5')} "
+                                   "--format nexus)" + ("" if out_of_core else
+                                                        ", with the dask extra installed "
+                                                        "(pip install 'fsmbench[dask]')"))
+    raise RecordingError(path, f"{head}; install the dask extra (pip install "
+                               "'fsmbench[dask]') to analyse it block by block, out of core")
+
+
 def _read(path: Path, name: str, *, adc_range_v: float, adc_bits: int,
           lazy_bytes: int) -> xr.Dataset:
-    """The recording, lazily (Dask) when it is a large HDF5 file (see :data:`LAZY_BYTES`)."""
+    """The recording, lazily (Dask) when it is a large HDF5 file (see :data:`LAZY_BYTES`).
+
+    Read whole, a record too large to analyse in memory (:data:`IN_MEMORY_FACTOR`) is
+    refused in one line before anything is allocated, with the way to analyse it.
+    """
     from fsmbench.io.matfile import detect_format
 
-    if path.stat().st_size <= lazy_bytes or detect_format(path) not in ("hdf5", "mat73"):
-        return read_recording(path, experiment=name, adc_range_v=adc_range_v, adc_bits=adc_bits)
+    fmt = detect_format(path)
     try:
         import dask  # noqa: F401
-    except ImportError:  # the fsmbench[dask] extra is not installed: read it whole
+        out_of_core = True
+    except ImportError:  # the fsmbench[dask] extra is not installed: read whole, if it fits
+        out_of_core = False
+    if path.stat().st_size <= lazy_bytes or fmt not in ("hdf5", "mat73") or not out_of_core:
+        _refuse_if_too_large(path, name, fmt, out_of_core=out_of_core)
         return read_recording(path, experiment=name, adc_range_v=adc_range_v, adc_bits=adc_bits)
     from fsmbench.io.lazy import available_memory_bytes, open_recording
 
