@@ -72,6 +72,9 @@ __all__ = [
 #: Newport's 600 Hz bandwidth, where every direct path is near its static gain and the
 #: model's phase (delays, poles) is known to a few degrees; the seed's Newport band.
 SIGN_BAND_HZ: Final = (10.0, 100.0)
+#: A Welch bin is excited when its input PSD is above this fraction of the band's median
+#: (30 dB: a Hann window's leakage from a line two bins away is 1/6 of it in amplitude).
+_EXCITED_OF_TOP: Final = 1e-3
 #: ``|ρ|`` at which a path's sign is judged: cos 60°. The model's phase is within a few
 #: degrees in the band and a reversed sign is 180° off (ρ ≈ −1); noise or a dead path
 #: leaves ρ near 0 and no verdict.
@@ -234,11 +237,19 @@ def _values(ds: xr.Dataset, name: str) -> np.ndarray:
 
 
 def _welch_h1(u: np.ndarray, ys: list[np.ndarray], fs: float
-              ) -> tuple[np.ndarray, list[np.ndarray], list[np.ndarray]]:
-    """Frequencies [Hz], the H1 estimate and γ² of each output (1 s Hann, means removed)."""
+              ) -> tuple[np.ndarray, list[np.ndarray], list[np.ndarray], np.ndarray]:
+    """Frequencies [Hz], the H1 estimate and γ² of each output (1 s Hann, means removed),
+    and the bins the input excites (its PSD within 30 dB of its band median's; a multisine
+    on a coarser grid than 1 Hz leaves bins with round-off for input, whose ratio means
+    nothing)."""
     n = min(round(fs), u.size // 2)
     kw = {"fs": fs, "window": "hann", "nperseg": n, "noverlap": n // 2, "detrend": "constant"}
     f, puu = scipy.signal.welch(u, **kw)
+    band = (f >= SIGN_BAND_HZ[0]) & (f <= SIGN_BAND_HZ[1])
+    typical = float(np.median(puu[band])) if band.any() else 0.0
+    top = float(np.max(puu[band])) if band.any() else 0.0
+    # A flat (noise) input: every bin; lines of a multisine: the bins at and beside them.
+    excited = puu > _EXCITED_OF_TOP * max(typical, top * _EXCITED_OF_TOP)
     puu = np.where(puu > 0, puu, np.inf)
     h, coh = [], []
     for y in ys:
@@ -246,7 +257,7 @@ def _welch_h1(u: np.ndarray, ys: list[np.ndarray], fs: float
         _, pyy = scipy.signal.welch(y, **kw)
         h.append(puy / puu)
         coh.append(np.abs(puy) ** 2 / (puu * np.where(pyy > 0, pyy, np.inf)))
-    return f, h, coh
+    return f, h, coh, excited
 
 
 def _projection(h: np.ndarray, model: np.ndarray, sign: float) -> tuple[float, float, float]:
@@ -263,8 +274,9 @@ def _measure_dynamic(run: _Run, ds: xr.Dataset, plant: PlantModel
     fs = float(ds.attrs["fs_hz"])
     outs = [run.direct, run.cross]
     coils = [c for c in (run.coil, run.other_coil) if c is not None and c in ds]
-    f, hs, cs = _welch_h1(_values(ds, run.command), [_values(ds, o) for o in outs + coils], fs)
-    band = (f >= SIGN_BAND_HZ[0]) & (f <= SIGN_BAND_HZ[1])
+    f, hs, cs, excited = _welch_h1(_values(ds, run.command),
+                                   [_values(ds, o) for o in outs + coils], fs)
+    band = (f >= SIGN_BAND_HZ[0]) & (f <= SIGN_BAND_HZ[1]) & excited
     h = dict(zip(outs + coils, (x[band] for x in hs), strict=True))
     coherence = {o: float(np.median(c[band])) for o, c in zip(outs + coils, cs, strict=True)}
     names = outs + coils
