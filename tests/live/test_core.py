@@ -138,7 +138,7 @@ def test_close_loop_is_bumpless_and_open_holds(tmp_path) -> None:
 ])
 def test_bad_excitations_are_refused(doc: dict, message: str) -> None:
     with pytest.raises(ValueError, match=message):
-        parse_excitation(json.dumps(doc), start_s=0.0, half_range_v=CONV.range_v / 2)
+        parse_excitation(json.dumps(doc), start_s=0.0, half_range_v=CONV.range_v / 2, fs_hz=FS)
 
 
 def test_experiment_restores_the_loop(tmp_path) -> None:
@@ -146,9 +146,9 @@ def test_experiment_restores_the_loop(tmp_path) -> None:
     live.close_loop()
     path = live.run_experiment("data_huddle_test_1")  # open loop, compensation unit off
     assert live.state == "MOVING" and not live.loop_closed
-    with pytest.raises(ValueError, match="is running"):
+    with pytest.raises(ValueError, match="Record refused: Experiment data_huddle_test_1 running"):
         live.record(json.dumps({"signals": ["Vph"], "duration_s": 1}))
-    while live.state == "MOVING":
+    while live.state == "MOVING":  # until the file is written (the writer's thread)
         live.advance(5000)
     assert live.loop_closed and live.state == "RUNNING"
     from fsmbench.io.recording import read_recording

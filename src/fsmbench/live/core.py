@@ -1,94 +1,137 @@
-"""The live bench without Tango: a paced loop over a backend, its commands and its views.
+"""The live bench without a control system: a paced loop over a backend, its commands, views.
 
-:class:`LiveBench` runs the backend in a thread, block by block, paced to
-``speed`` × the wall clock (the simulated loop itself is always exact at
-its sampling rate). Commands act between blocks, under one lock. Every
-view the device publishes is computed here from the blocks: scalars by
-:class:`~fsmbench.live.monitor.LiveMonitor`, spectra by
-:mod:`fsmbench.live.spectra`, once per second of bench time.
+:class:`LiveBench` runs the backend block by block in a paced thread
+(:class:`~fsmbench.live.loop.PacedLoop`, with a heartbeat and a watchdog);
+commands act between blocks under one lock. The Tango device
+(:mod:`fsmbench.live.device`) and the EPICS IOC (:mod:`fsmbench.live.epics`)
+are thin layers over it and read its views through one attribute table
+(:mod:`fsmbench.live.attributes`).
 
-States (Tango's names): ``ON`` loop open, ``RUNNING`` loop closed,
-``MOVING`` an experiment or a recording runs, ``ALARM`` a converter
-saturates, ``FAULT`` the protection opened the loop (until :meth:`reset`).
+The state is computed from facts (:mod:`fsmbench.live.states`) and every
+loop transition has a cause: a command, the end of an experiment (which
+restores the loop it found, part of ``RunExperiment``) or a protection
+trip. Each is logged, and ``on_change`` is told of every changed view, outside
+the lock (a Tango event push takes the device's monitor, which a client call
+may hold while it waits for this lock). Recordings stream to disk in their
+own thread (:mod:`fsmbench.live.jobs`); long work runs off the client's call
+(:mod:`fsmbench.live.tasks`).
 """
 
 from __future__ import annotations
 
+import contextlib
 import json
+import logging
 import threading
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import Any
+from typing import Any, Protocol, TypeVar
 
 import numpy as np
 
 from fsmbench.bench.params import Bench
-from fsmbench.control.load import load_controllers, select_controller
-from fsmbench.io.recording import make_recording, write_recording
-from fsmbench.io.signals import EXPERIMENTS
-from fsmbench.live.arguments import parse_excitation, parse_record
 from fsmbench.live.backend import LiveBlock, PlaybackBackend, TwinBackend
-from fsmbench.live.monitor import LiveMonitor, Trip
+from fsmbench.live.commands import BenchCommands, Job
+from fsmbench.live.loop import PacedLoop
+from fsmbench.live.monitor import LiveMonitor
 from fsmbench.live.spectra import AccumulatingFrf, FrfSnapshot, RollingAsd
-from fsmbench.sim.controller import sercalo_feedback
+from fsmbench.live.states import AlarmHysteresis, Refused, Ringdown
+from fsmbench.live.tasks import Task
 from fsmbench.sim.engine import DiscreteController
-from fsmbench.twin.experiments import seed_experiments, seed_feedback
 
-__all__ = ["ASD_SIGNALS", "LiveBench", "LiveJob"]
+__all__ = ["ASD_SIGNALS", "MAX_SPEED", "MIN_SPEED", "ControllerMemory", "FileMemory",
+           "LiveBench"]
 
 #: Signals whose amplitude spectral density the device publishes.
 ASD_SIGNALS = ("Vph", "Vpv", "Va")
-_FRF_OUTPUTS = ("Vph", "Vpv")
+FRF_OUTPUTS = ("Vph", "Vpv")
+#: Bounds of the speed factor (bench seconds per wall-clock second).
+MIN_SPEED = 0.01
+MAX_SPEED = 100.0
+#: Longest wait of a view read for the loop's lock [s] (a stuck loop: the value is stale).
+_READ_WAIT_S = 0.5
+
+T = TypeVar("T")
+_log = logging.getLogger("fsmbench.live")
 
 
-@dataclass(frozen=True)
-class LiveJob:
-    """A recording or an experiment in progress.
+class ControllerMemory(Protocol):
+    """Where the loaded controller is remembered across restarts."""
 
-    Attributes
+    where: str  #: in words, for Status
+
+    def load(self) -> dict[str, str] | None:
+        """The remembered ``{"path": ..., "controller": ...}``, or None."""
+
+    def save(self, doc: dict[str, str] | None) -> None:
+        """Remember ``doc`` (None: forget)."""
+
+
+class FileMemory:
+    """A :class:`ControllerMemory` in a small JSON file (the EPICS IOC's).
+
+    Parameters
     ----------
-    kind : {"experiment", "record"}
-    name : str
     path : Path
-        Where the file will be.
-    signals : tuple of str
-    n_samples : int
-    start_sample : int
     """
 
-    kind: str
-    name: str
-    path: Path
-    signals: tuple[str, ...]
-    n_samples: int
-    start_sample: int
+    def __init__(self, path: Path) -> None:
+        self.path = Path(path)
+        self.where = f"the file {self.path}"
+
+    def load(self) -> dict[str, str] | None:
+        try:
+            doc = json.loads(self.path.read_text())
+        except (OSError, ValueError):
+            return None
+        return {str(k): str(v) for k, v in doc.items()} if isinstance(doc, dict) and doc \
+            else None
+
+    def save(self, doc: dict[str, str] | None) -> None:
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        tmp = self.path.with_suffix(".tmp")
+        tmp.write_text(json.dumps(doc or {}))
+        tmp.replace(self.path)
 
 
-class LiveBench:
+class LiveBench(BenchCommands):
     """The live bench (see the module notes).
 
     Parameters
     ----------
     bench : Bench
-        The bench model (twin backend: simulated; both: calibrated 4QD gains, converters).
+        The bench model (twin: simulated; both: calibrated 4QD gains, converters).
     backend : {"twin", "playback"}
     playback_folder : str or Path, optional
         Folder of recordings (playback backend).
     seed : int
     speed : float
-        Bench seconds per wall-clock second (> 0).
+        Bench seconds per wall-clock second, in [:data:`MIN_SPEED`, :data:`MAX_SPEED`].
     output_folder : str or Path
         Where experiments and recordings are written (created when needed).
-    on_state : callable, optional
-        Called with the new state name whenever it changes (the device pushes events).
+    watchdog_s : float
+        Wall-clock time without a block that makes the loop count as stalled [s].
+    log : callable, optional
+        ``log(level, message)``, level ``DEBUG``/``INFO``/``WARNING``/``ERROR``
+        (default: the ``fsmbench.live`` Python logger).
+    on_change : callable, optional
+        ``on_change(view)`` when a view changes: ``State``, ``Status``,
+        ``LoopClosed``, ``Controller``, ``Excitation``, ``SpeedFactor``, ``Task``,
+        ``Progress``. Called outside the lock, from any of the bench's threads.
+    memory : ControllerMemory, optional
+        Where the loaded controller is remembered (:meth:`restore_controller`).
+    thread_init : callable, optional
+        Context manager factory entered in each of the bench's threads.
     """
 
     def __init__(self, bench: Bench, *, backend: str = "twin",
                  playback_folder: str | Path | None = None, seed: int = 0, speed: float = 1.0,
-                 output_folder: str | Path = "fsmbench-live",
-                 on_state: Callable[[str], None] | None = None) -> None:
+                 output_folder: str | Path = "fsmbench-live", watchdog_s: float = 5.0,
+                 log: Callable[[str, str], None] | None = None,
+                 on_change: Callable[[str], None] | None = None,
+                 memory: ControllerMemory | None = None,
+                 thread_init: Callable[[], Any] | None = None) -> None:
         self.bench = bench
         conv = bench.nominal.converter
         if backend == "twin":
@@ -101,15 +144,26 @@ class LiveBench:
         else:
             raise ValueError(f"unknown backend {backend!r}; known: twin, playback")
         self.fs_hz = self.backend.fs_hz
+        self.half_range_v = conv.range_v / 2
         gd = bench.nominal.quad_diode.gain_v_per_rad
         self.qd_gain_v_per_rad = (float(gd.h), float(gd.v))
         self.monitor = LiveMonitor(fs_hz=self.fs_hz, qd_gain_v_per_rad=self.qd_gain_v_per_rad,
-                                   half_range_v=conv.range_v / 2, lsb_v=conv.lsb_v)
+                                   half_range_v=self.half_range_v, lsb_v=conv.lsb_v)
+        s = bench.nominal.sercalo
+        self.ringdown = Ringdown(decay_time_s=tuple(  # type: ignore[arg-type]
+            1.0 / (float(z) * 2 * np.pi * float(f))
+            for z, f in ((s.damping_ratio.h, s.resonance_hz.h),
+                         (s.damping_ratio.v, s.resonance_hz.v))))
+        self.alarm_rule = AlarmHysteresis()
         self.output_folder = Path(output_folder)
-        self._on_state = on_state
-        self._pending_states: list[str] = []
+        self.memory = memory
+        self.thread_init = thread_init
+        self._log_fn = log
+        self._on_change = on_change
         self._lock = threading.RLock()
-        self._speed = self._check_speed(speed)
+        self._publish_lock = threading.Lock()
+        self._published: dict[str, Any] = {}
+        self._speed = self.check_speed(speed)
         self._asd = {name: RollingAsd(fs_hz=self.fs_hz, channels=(name,)) for name in ASD_SIGNALS}
         self._asd_cache: dict[str, np.ndarray] = {}
         self._frf: AccumulatingFrf | None = None
@@ -117,24 +171,65 @@ class LiveBench:
         self._excitation: dict[str, Any] | None = None
         self._next_second = 1
         self._loaded: DiscreteController | None = None
-        self._trip: Trip | None = None
-        self._job: LiveJob | None = None
-        self._job_parts: list[dict[str, np.ndarray]] = []
-        self._job_restore: Callable[[], None] | None = None
-        self._last_job: str = ""
-        self._alarm = False
-        self._state = "ON"
-        self._status = "Loop open."
-        self._stop = threading.Event()
-        self._thread: threading.Thread | None = None
-        self._error: BaseException | None = None
+        self._loaded_doc: dict[str, str] | None = None
+        #: Loaded controllers that have not tripped, oldest first, with their source.
+        self._good: list[tuple[DiscreteController, dict[str, str]]] = []
+        self._fault: tuple[str, str] | None = None  # (kind, sentence)
+        self._ringing = False
+        self._alarm = (False, 0.0)  # (active, since bench time)
+        self._job: Job | None = None
+        self._task: Task | None = None
+        self._notice = ""
+        self.loop = PacedLoop(step=self._step, speed=lambda: self._speed,
+                              block_s=lambda: self.block_samples / self.fs_hz,
+                              watchdog_s=watchdog_s, on_stall=self._stalled,
+                              on_death=self._died, thread_init=thread_init)
+
+    # -- logging and events --------------------------------------------------------
+
+    def log(self, level: str, message: str) -> None:
+        """Log ``message`` at ``level`` (DEBUG, INFO, WARNING, ERROR)."""
+        if self._log_fn is not None:
+            self._log_fn(level, message)
+        else:
+            _log.log(getattr(logging, level), message)
+
+    def _views(self) -> dict[str, Any]:
+        ex = self._excitation
+        return {"State": self.state, "Status": self._status_key(),
+                "LoopClosed": self.loop_closed, "Controller": self.controller_name,
+                "Excitation": None if ex is None else tuple(sorted(ex.items())),
+                "SpeedFactor": self._speed, "Task": self.task_text,
+                "Progress": round(self.progress_percent)}
+
+    def publish(self) -> None:
+        """Tell ``on_change`` of every view changed since the last call (never under the lock).
+
+        Every thread calls it after acting: the loop after a block, a client
+        after a command, a writer or task when it ends, the watchdog on a stall.
+        """
+        with self._publish_lock:
+            views = self._views()
+            changed = [k for k, v in views.items() if self._published.get(k, ...) != v]
+            if "State" in changed:
+                state = views["State"]
+                level = {"FAULT": "ERROR", "ALARM": "WARNING"}.get(state, "INFO")
+                self.log(level, f"State {self._published.get('State', 'none')} -> {state}: "
+                                f"{self.status}")
+            self._published = views
+            if self._on_change is not None:
+                for name in changed:
+                    self._on_change(name)
 
     # -- running -------------------------------------------------------------------
 
     @staticmethod
-    def _check_speed(speed: float) -> float:
-        if not (np.isfinite(speed) and speed > 0):
-            raise ValueError(f"speed must be a positive factor of real time, got {speed!r}")
+    def check_speed(speed: float) -> float:
+        """``speed`` if it is a factor of real time in [MIN_SPEED, MAX_SPEED], else Refused."""
+        if isinstance(speed, bool) or not isinstance(speed, (int, float, np.floating)) or \
+                not (np.isfinite(speed) and MIN_SPEED <= speed <= MAX_SPEED):
+            raise Refused("FSM_BadArgument", f"SpeedFactor refused: {speed!r} is not a factor "
+                                             f"of real time in [{MIN_SPEED:g}, {MAX_SPEED:g}]")
         return float(speed)
 
     @property
@@ -142,82 +237,132 @@ class LiveBench:
         """Samples per block: 10 ms of bench time, 50 ms when running faster than 10×."""
         return round(self.fs_hz * (0.01 if self._speed <= 10 else 0.05))
 
-    def start(self, *, thread_init: Callable[[], Any] | None = None) -> None:
-        """Start the loop thread (``thread_init`` is entered in it, e.g. Tango's omni thread)."""
-        self._stop.clear()
-        self._thread = threading.Thread(target=self._run, args=(thread_init,),
-                                        name="fsmbench-live", daemon=True)
-        self._thread.start()
+    def start(self) -> None:
+        """Start the loop thread and its watchdog (after one block here: the compiled loop
+        loads on the first, which would hold the lock for a second in the thread)."""
+        self.advance(self.block_samples)
+        self.loop.start()
+        self.log("INFO", f"bench loop started ({self.backend.kind}, speed {self._speed:g})")
+        self.publish()
 
     def stop(self) -> None:
-        """Stop the loop thread."""
-        self._stop.set()
-        if self._thread is not None:
-            self._thread.join(timeout=10)
+        """Stop the loop thread and its watchdog; end a running job, keeping its samples."""
+        self.loop.stop()
+        with self._lock:
+            job = self._job
+            if job is not None and job.collecting:
+                self._end_collection(job, aborted="the server's stop")
+        if job is not None:
+            job.writer.join(30.0)
 
-    def _run(self, thread_init: Callable[[], Any] | None) -> None:
-        ctx = thread_init() if thread_init is not None else None
-        try:
-            if ctx is not None:
-                ctx.__enter__()
-            wall0, bench0 = time.monotonic(), self.backend.time_s
-            speed = self._speed
-            while not self._stop.is_set():
-                self.advance(self.block_samples)
-                with self._lock:
-                    if self._speed != speed:
-                        speed = self._speed
-                        wall0, bench0 = time.monotonic(), self.backend.time_s
-                    ahead = wall0 + (self.backend.time_s - bench0) / speed - time.monotonic()
-                if ahead > 0:
-                    self._stop.wait(ahead)
-                elif ahead < -1.0:
-                    # Slower than asked (a loaded machine): do not try to catch up.
-                    wall0, bench0 = time.monotonic(), self.backend.time_s
-        except BaseException as exc:
-            self._error = exc
-            self._set_state("FAULT", f"The bench loop stopped: {exc}")
-            self._flush_states()
-        finally:
-            if ctx is not None:
-                ctx.__exit__(None, None, None)
+    def _step(self) -> float:
+        self.advance(self.block_samples)
+        return self.backend.time_s
+
+    def _stalled(self, lag_s: float) -> None:
+        # From the watchdog, without the lock (a stuck loop may hold it): the loop opens
+        # the loop itself if it runs again (_advance).
+        self._fault = ("stall", f"The bench loop has not advanced for {lag_s:.1f} s of wall "
+                                f"clock (limit {self.loop.stall_limit_s():.1f} s; last block "
+                                f"ending at bench time {self.bench_time_s:.3f} s).")
+        self.log("ERROR", self._fault[1])
+        self.publish()
+
+    def _died(self, exc: BaseException) -> None:
+        self._fault = ("died", f"The bench loop stopped: {type(exc).__name__}: {exc}.")
+        self.log("ERROR", self._fault[1])
+        self.publish()
 
     def advance(self, n: int) -> LiveBlock:
         """Run ``n`` samples now (the loop thread calls this; tests may too, without it)."""
         with self._lock:
             block = self._advance(n)
-        self._flush_states()
+        self.loop.beat()
+        self.publish()
         return block
 
     def _advance(self, n: int) -> LiveBlock:
-        with self._lock:
-            block = self.backend.step(n)
-            closed = self.backend.controller is not None
-            trip = self.monitor.push(block, loop_closed=closed)
-            if trip is not None:
-                self.backend.set_controller(None, hold=False)
-                self.backend.stop_excitation()
-                self._excitation = None
-                self._trip = trip
-                self._set_state("FAULT", f"Protection opened the loop at bench time "
-                                         f"{trip.bench_time_s:.3f} s: {trip.reason}. "
-                                         "Reset to return to ON.")
-            for name, asd in self._asd.items():
-                if name in block.signals:
-                    asd.push(block.signals[name][:, None])
-            if self._frf is not None and self._excitation is not None:
-                ch = self._excitation["input"]
-                if ch in block.signals and all(o in block.signals for o in _FRF_OUTPUTS):
-                    self._frf.push(block.signals[ch],
-                                   np.column_stack([block.signals[o] for o in _FRF_OUTPUTS]))
-            if self._job is not None:
-                self._collect(block)
-            end = block.start_sample + block.n
-            if end >= self._next_second * self.fs_hz:
-                self._next_second = int(end // self.fs_hz) + 1
-                self._refresh_spectra()
-            self._update_state()
-            return block
+        if self._fault is not None and self.backend.controller is not None:
+            # A stall's FAULT opens the loop as soon as the loop runs again.
+            self._set_loop(None, hold=False, cause=f"FAULT ({self._fault[0]})")
+        block = self.backend.step(n)
+        closed = self.backend.controller is not None
+        trip = self.monitor.push(block, loop_closed=closed)
+        end_s = (block.start_sample + block.n) / self.fs_hz
+        if trip is not None:
+            self._tripped(trip.reason, trip.bench_time_s)
+        for name, asd in self._asd.items():
+            x = block.signals.get(name)
+            if x is not None and np.all(np.isfinite(x)):
+                asd.push(x[:, None])
+        if self._frf is not None and self._excitation is not None:
+            ch = self._excitation["input"]
+            if ch in block.signals and all(o in block.signals for o in FRF_OUTPUTS):
+                u = block.signals[ch]
+                y = np.column_stack([block.signals[o] for o in FRF_OUTPUTS])
+                if np.all(np.isfinite(u)) and np.all(np.isfinite(y)):
+                    self._frf.push(u, y)
+        if self._job is not None and self._job.collecting:
+            self._collect(block)
+        end = block.start_sample + block.n
+        if end >= self._next_second * self.fs_hz:
+            self._next_second = int(end // self.fs_hz) + 1
+            self._refresh_spectra()
+        m = self.monitor
+        self._alarm = self.alarm_rule.next(
+            active=self._alarm[0], since_s=self._alarm[1], now_s=end_s,
+            enter_measure=m.rail_fraction(self.alarm_rule.enter_window_s),
+            leave_measure=m.rail_fraction(self.alarm_rule.leave_window_s))
+        if self._ringing and self.backend.controller is None and \
+                self.ringdown.time_left_s(m.qd_deviation_v(self.ringdown.window_s)) == 0:
+            self._ringing = False
+            self.log("INFO", f"the mirror has settled (bench time {end_s:.3f} s)")
+        return block
+
+    def _tripped(self, reason: str, bench_time_s: float) -> None:
+        tripped = self.backend.controller
+        self._set_loop(None, hold=False, cause="the protection trip")
+        self.backend.stop_excitation()
+        self._stop_frf()
+        self._excitation = None
+        self._ringing = True
+        revert = ""
+        if tripped is not None and tripped is self._loaded:
+            self._good = [g for g in self._good if g[0] is not tripped]
+            self._loaded, self._loaded_doc = self._good[-1] if self._good else (None, None)
+            self._remember()
+            revert = (f" The controller {tripped.name} tripped: "
+                      + (f"{self._loaded.name} is loaded again (the last that did not trip)."
+                         if self._loaded is not None else
+                         "none is loaded now (CloseLoop would use the seed's)."))
+        self._notice = ""  # the trip's sentence carries the news
+        self._fault = ("trip", f"Protection opened the loop at bench time {bench_time_s:.3f} "
+                               f"s: {reason}.{revert}")
+        self.log("ERROR", self._fault[1])
+        job = self._job
+        if job is not None and job.collecting:
+            self._end_collection(job, aborted="the protection trip", restore_loop=False)
+
+    def _set_loop(self, controller: DiscreteController | None, *, hold: bool,
+                  cause: str) -> None:
+        """Close, swap or open the loop, saying why (every transition has a cause)."""
+        before = self.backend.controller
+        self.backend.set_controller(controller, hold=hold)
+        if controller is None and before is not None:
+            self.log("INFO", f"loop opened (cause: {cause})")
+        elif controller is not None and before is None:
+            self.log("INFO", f"loop closed with {controller.name} (cause: {cause})")
+        elif controller is not None and controller is not before:
+            self.log("INFO", f"controller {controller.name} took over (cause: {cause})")
+
+    def _remember(self) -> None:
+        if self.memory is None:
+            return
+        try:
+            self.memory.save(self._loaded_doc)
+        except Exception as exc:  # a database or disk refusing must not stop the bench
+            self.log("WARNING", f"the loaded controller could not be remembered in "
+                                f"{self.memory.where}: {exc}")
 
     def _refresh_spectra(self) -> None:
         for name, asd in self._asd.items():
@@ -226,57 +371,95 @@ class LiveBench:
                 self._asd_cache["frequency"] = snap.frequency_hz
                 self._asd_cache[name] = snap.asd[0]
         if self._frf is not None and self._frf.n_segments:
-            self._frf_cache = self._frf.result()
+            with contextlib.suppress(ValueError):  # a constant signal: no FRF yet
+                self._frf_cache = self._frf.result()
 
-    def _set_state(self, state: str, status: str) -> None:
-        changed = state != self._state
-        self._state, self._status = state, status
-        if changed:
-            self._pending_states.append(state)
+    def _stop_frf(self) -> None:
+        if self._frf is not None and self._frf.n_segments:
+            with contextlib.suppress(ValueError):
+                self._frf_cache = self._frf.result()
+        self._frf = None
 
-    def _flush_states(self) -> None:
-        """Tell ``on_state`` of the state changes, outside the lock.
-
-        The device's event push takes Tango's device monitor, which a client
-        call (a command, an attribute read) holds while it waits for this lock:
-        pushing with the lock held would deadlock the loop thread.
-        """
-        with self._lock:
-            pending, self._pending_states = self._pending_states, []
-        if self._on_state is not None:
-            for state in pending:
-                self._on_state(state)
-
-    def _update_state(self) -> None:
-        if self._state == "FAULT":
-            return
-        closed = self.backend.controller is not None
-        self._alarm = self.monitor.saturating_now()
-        if self._job is not None:
-            job = self._job
-            self._set_state("MOVING", f"{job.kind.capitalize()} {job.name} running: "
-                                      f"{self._job_done() / self.fs_hz:.1f} of "
-                                      f"{job.n_samples / self.fs_hz:.1f} s, into {job.path}.")
-        elif self._alarm:
-            self._set_state("ALARM", "A converter saturates (DAC command or 4QD reading on a "
-                                     "rail in the last 10 ms).")
-        elif closed:
-            self._set_state("RUNNING", f"Loop closed with {self.controller_name}.")
-        else:
-            self._set_state("ON", "Loop open." + (f" Last file: {self._last_job}."
-                                                  if self._last_job else ""))
-
-    # -- views ---------------------------------------------------------------------
+    # -- state ---------------------------------------------------------------------
 
     @property
     def state(self) -> str:
-        """ON, RUNNING, MOVING, ALARM or FAULT."""
-        return self._state
+        """ON, RUNNING, MOVING, ALARM or FAULT, from the facts (see the module notes)."""
+        if self._fault is not None or self.loop.stalled:
+            return "FAULT"
+        if self._job is not None or self._task is not None:
+            return "MOVING"
+        if self._alarm[0] or self._ringing:
+            return "ALARM"
+        return "RUNNING" if self.backend.controller is not None else "ON"
+
+    def _fault_sentence(self) -> str:
+        if self._fault is not None:
+            return self._fault[1]
+        if self.loop.dead or not self.loop.running:
+            return f"The bench loop stopped: {self.loop.error}."
+        return (f"The bench loop has not advanced for {self.loop.lag_s:.1f} s of wall clock "
+                f"(limit {self.loop.stall_limit_s():.1f} s).")
+
+    def _ringing_sentence(self) -> str:
+        amp = self.monitor.qd_deviation_v(self.ringdown.window_s)
+        left = self.ringdown.time_left_s(amp)
+        return (f"The mirror still rings after the trip (4QD {max(amp):.2f} V, settled below "
+                f"{self.ringdown.settled_v:g} V): about {left:.1f} s of bench time left.")
+
+    def _state_line(self, state: str, *, with_numbers: bool) -> str:
+        if state == "FAULT":
+            ring = f" {self._ringing_sentence()}" if self._ringing and with_numbers else ""
+            return f"{self._fault_sentence()}{ring} Reset to return to ON."
+        if state == "MOVING":
+            parts = []
+            job, task = self._job, self._task
+            if job is not None:
+                p = job.plan
+                done = (f"{job.writer.taken / self.fs_hz:.1f} of {p.duration_s:.1f} s, "
+                        if with_numbers and job.collecting else "")
+                phase = "running" if job.collecting else "writing its file"
+                parts.append(f"{p.kind.capitalize()} {p.name} {phase}: {done}into {p.path}.")
+            if task is not None:
+                pct = f" ({self.progress_percent:.0f} %)" if with_numbers else ""
+                parts.append(f"{task.what[0].upper()}{task.what[1:]}{pct}; Abort cancels it.")
+            return " ".join(parts)
+        if state == "ALARM":
+            if not self._ringing:
+                return ("A converter saturates (a DAC command or a 4QD reading on a rail; ALARM "
+                        f"until under {self.alarm_rule.leave_fraction:.1%} of "
+                        f"{self.alarm_rule.leave_window_s:g} s, at least "
+                        f"{self.alarm_rule.min_dwell_s:g} s).")
+            # The ringing is the cause of the rails after a trip: say that one.
+            return self._ringing_sentence() if with_numbers else "The mirror still rings."
+        if state == "RUNNING":
+            return f"Loop closed with {self.controller_name}."
+        return "Loop open."
+
+    def _status_key(self) -> str:
+        """Status without the numbers that change every block (what Status events carry)."""
+        state = self.state
+        return f"{state}|{self._state_line(state, with_numbers=False)}|{self._notice}"
 
     @property
     def status(self) -> str:
-        """The state in words (why, since when)."""
-        return self._status
+        """The state in words: why, since when, what runs, and the last outcome."""
+        line = self._state_line(self.state, with_numbers=True)
+        return f"{line} {self._notice}".strip()
+
+    # -- views ---------------------------------------------------------------------
+
+    def read(self, getter: Callable[[LiveBench], T]) -> tuple[T | None, bool]:
+        """``(getter(self), current)`` under the lock; ``(None, False)`` when the loop holds
+        it too long. ``current`` is False when the loop has stalled or died."""
+        if not self._lock.acquire(timeout=_READ_WAIT_S):
+            return None, False
+        try:
+            value = getter(self)
+        finally:
+            self._lock.release()
+        return value, not (self.loop.stalled or
+                           (self._fault is not None and self._fault[0] != "trip"))
 
     @property
     def speed(self) -> float:
@@ -285,13 +468,26 @@ class LiveBench:
 
     @speed.setter
     def speed(self, value: float) -> None:
-        with self._lock:
-            self._speed = self._check_speed(value)
+        speed = self.check_speed(value)
+        with self._locked("SpeedFactor"):
+            self._speed = speed
+        self.log("INFO", f"SpeedFactor set to {speed:g}")
+        self.publish()
 
     @property
     def bench_time_s(self) -> float:
         """Bench time of the next sample [s]."""
         return self.backend.time_s
+
+    @property
+    def heartbeat(self) -> int:
+        """Blocks run since the start."""
+        return self.loop.heartbeat
+
+    @property
+    def loop_lag_s(self) -> float:
+        """Wall-clock time since the last block [s]."""
+        return self.loop.lag_s
 
     @property
     def loop_closed(self) -> bool:
@@ -315,6 +511,22 @@ class LiveBench:
                 doc["frf_samples"] = int(self._frf_cache.n_samples)
             return json.dumps(doc)
 
+    @property
+    def task_text(self) -> str:
+        """What runs off the client's call ("" when nothing)."""
+        task = self._task
+        return "" if task is None else task.what
+
+    @property
+    def progress_percent(self) -> float:
+        """Progress of the running job or task [%] (100 when idle)."""
+        task, job = self._task, self._job
+        if task is not None:
+            return 100.0 * task.progress
+        if job is not None:
+            return 100.0 * min(1.0, job.writer.taken / job.plan.n_samples)
+        return 100.0
+
     def asd(self, name: str) -> np.ndarray:
         """Amplitude spectral density of ``name`` over the last 10 s (V or m per √Hz)."""
         with self._lock:
@@ -330,229 +542,11 @@ class LiveBench:
         with self._lock:
             return self._frf_cache
 
-    # -- commands ------------------------------------------------------------------
-
-    def _require_acting(self, what: str) -> None:
-        if self._state == "FAULT":
-            raise ValueError(f"{what} refused: the bench is in FAULT ({self._status}); "
-                             "Reset first")
-        if isinstance(self.backend, PlaybackBackend):
-            raise ValueError(f"{what} is not possible on a playback: the bench replays the "
-                             f"recorded files {', '.join(self.backend.files)}")
-
-    def _discrete(self, path: str, name: str | None) -> DiscreteController:
-        ts = 1.0 / self.fs_hz
-        chosen = select_controller(load_controllers(path, ts_s=ts), name)
-        return sercalo_feedback(a=chosen.a, b=chosen.b, c=chosen.c, d=chosen.d,
-                                gd_v_per_rad=chosen.qd_gain_v_per_rad or self.qd_gain_v_per_rad,
-                                name=f"{chosen.name} ({Path(chosen.source_path).name})")
-
-    def _seed_controller(self) -> DiscreteController:
-        return replace(seed_feedback(self.bench), name="seed controller (9.2)")
-
-    def load_controller(self, argument: str) -> str:
-        """Load a controller: ``path`` or JSON ``{"path": ..., "controller": name}``.
-
-        In closed loop the new controller takes over bumplessly at once;
-        otherwise it is used by the next :meth:`close_loop`. Returns its name.
-        """
-        text = argument.strip()
-        if text.startswith("{"):
-            try:
-                doc = json.loads(text)
-            except json.JSONDecodeError as exc:
-                raise ValueError(f"LoadController: the argument is not valid JSON ({exc})") \
-                    from None
-            if not isinstance(doc, dict) or "path" not in doc:
-                raise ValueError('LoadController: give a path, or {"path": ..., '
-                                 '"controller": name}')
-            path, name = str(doc["path"]), doc.get("controller")
-        else:
-            path, name = text, None
-        k = self._discrete(path, None if name is None else str(name))
-        with self._lock:
-            self._require_acting("LoadController")
-            self._loaded = k
-            if self.backend.controller is not None:
-                self.backend.set_controller(k, hold=True)
-            self._update_state()
-        self._flush_states()
-        return k.name
-
-    def close_loop(self) -> None:
-        """Close the loop with the loaded controller (the seed's if none), bumplessly."""
-        with self._lock:
-            self._require_acting("CloseLoop")
-            if self._job is not None:
-                raise ValueError(f"CloseLoop refused: {self._job.kind} {self._job.name} runs")
-            k = self._loaded or self._seed_controller()
-            self.backend.set_controller(k, hold=True)
-            self._update_state()
-        self._flush_states()
-
-    def open_loop(self) -> None:
-        """Open the loop, holding the last command (bumpless)."""
-        with self._lock:
-            self._require_acting("OpenLoop")
-            if self._job is not None:
-                raise ValueError(f"OpenLoop refused: {self._job.kind} {self._job.name} runs")
-            self.backend.set_controller(None, hold=True)
-            self._update_state()
-        self._flush_states()
-
-    def reset(self) -> None:
-        """Leave FAULT (loop open, command zero, excitations stopped)."""
-        with self._lock:
-            if self.backend.acts:
-                self.backend.set_controller(None, hold=False)
-                self.backend.stop_excitation()
-            self._excitation = None
-            self._trip = None
-            self._job = None
-            self._job_parts = []
-            self._state = "ON"
-            self._update_state()
-            self._pending_states.append(self._state)
-        self._flush_states()
-
-    def start_excitation(self, argument: str) -> None:
-        """Start an excitation from JSON (see :func:`parse_excitation`)."""
-        with self._lock:
-            self._require_acting("StartExcitation")
-            ex = parse_excitation(argument, start_s=self.backend.time_s,
-                                  half_range_v=self.bench.nominal.converter.range_v / 2)
-            self.backend.stop_excitation()
-            peak = self.backend.start_excitation(ex)
-            self._excitation = {"input": ex.channel, "kind": ex.kind,
-                                "amplitude_v": ex.amplitude_v, "band_hz": ex.band_hz,
-                                "frequency_hz": ex.freq_hz or None, "peak_v": peak,
-                                "start_time_s": ex.start_s}
-            self._frf = AccumulatingFrf(fs_hz=self.fs_hz, input_name=ex.channel,
-                                        output_names=_FRF_OUTPUTS)
-            self._frf_cache = None
-
-    def stop_excitation(self) -> None:
-        """Stop the excitation; the FRF keeps its last estimate (over every excited sample)."""
-        with self._lock:
-            self.backend.stop_excitation()
-            if self._frf is not None and self._frf.n_segments:
-                self._frf_cache = self._frf.result()
-            self._frf = None
-            self._excitation = None
-
-    # -- experiments and recordings ------------------------------------------------
-
-    def _busy(self, what: str) -> None:
-        if self._job is not None:
-            raise ValueError(f"{what} refused: {self._job.kind} {self._job.name} is running "
-                             f"(into {self._job.path})")
-        if self._state == "FAULT":
-            raise ValueError(f"{what} refused: the bench is in FAULT; Reset first")
-
-    def _begin(self, job: LiveJob) -> None:
-        self.output_folder.mkdir(parents=True, exist_ok=True)
-        self._job = job
-        self._job_parts = []
-        self._update_state()
-
-    def _job_done(self) -> int:
-        return sum(len(next(iter(p.values()))) for p in self._job_parts) if self._job_parts \
-            else 0
-
-    def _collect(self, block: LiveBlock) -> None:
-        job = self._job
-        assert job is not None
-        need = job.n_samples - self._job_done()
-        take = min(need, block.n)
-        missing = [s for s in job.signals if s not in block.signals]
-        if missing:
-            self._finish_job(error=f"signals {', '.join(missing)} are not in the played file "
-                                   f"{block.source}")
-            return
-        self._job_parts.append({s: block.signals[s][:take].copy() for s in job.signals})
-        if self._job_done() >= job.n_samples:
-            self._finish_job()
-
-    def _finish_job(self, *, error: str | None = None) -> None:
-        job = self._job
-        assert job is not None
-        self._job = None
-        parts, self._job_parts = self._job_parts, []
-        if self._job_restore is not None:
-            self._job_restore()
-            self._job_restore = None
-        if error is not None:
-            self._last_job = f"{job.name} failed: {error}"
-            return
-        signals = {s: np.concatenate([p[s] for p in parts]) for s in job.signals}
-        conv = self.bench.nominal.converter
-        if job.kind == "experiment":
-            ds = make_recording(signals, fs_hz=self.fs_hz, experiment=job.name,
-                                source=f"fsmbench live ({self.backend.kind})",
-                                adc_range_v=conv.range_v, adc_bits=conv.bits)
-        else:
-            t = np.arange(job.start_sample, job.start_sample + job.n_samples) / self.fs_hz
-            ds = make_recording(signals, t=t, experiment=job.name,
-                                source=f"fsmbench live ({self.backend.kind})",
-                                adc_range_v=conv.range_v, adc_bits=conv.bits)
-        write_recording(ds, job.path,
-                        format="nexus" if job.path.suffix in (".h5", ".nxs") else "mat5")
-        self._last_job = str(job.path)
-
-    def run_experiment(self, name: str) -> str:
-        """Start one of the study's 13 experiments with the seed's protocol; returns its path.
-
-        The file (``<output folder>/<name>.mat``, the seed's layout) is
-        complete when the state leaves MOVING. Closed-loop experiments use
-        the loaded controller (the seed's if none); the loop and the
-        environment are restored afterwards.
-        """
-        specs = {s.name: s for s in seed_experiments()}
-        if name not in specs:
-            raise ValueError(f"RunExperiment: unknown experiment {name!r}; known: "
-                             f"{', '.join(specs)}")
-        spec = specs[name]
-        with self._lock:
-            self._busy("RunExperiment")
-            self._require_acting("RunExperiment")
-            backend = self.backend
-            assert isinstance(backend, TwinBackend)
-            before = backend.controller
-            t0 = backend.time_s
-            backend.stop_excitation()
-            self._excitation = None
-            self._frf = None
-            backend.set_controller((self._loaded or self._seed_controller())
-                                   if spec.closed_loop else None, hold=False)
-            backend.set_environment(compensation_unit=spec.compensation_unit,
-                                    shielding=spec.shielding)
-            for ex in spec.excitations:
-                backend.start_excitation(replace(ex, start_s=t0 + ex.start_s))
-
-            def restore() -> None:
-                backend.stop_excitation()
-                backend.set_controller(before, hold=False)
-                backend.set_environment(compensation_unit=True, shielding=True)
-
-            self._job_restore = restore
-            path = self.output_folder / f"{name}.mat"
-            signals = tuple(s for s in EXPERIMENTS[name].required if s != "t")
-            self._begin(LiveJob(kind="experiment", name=name, path=path, signals=signals,
-                                n_samples=round(spec.duration_s * self.fs_hz),
-                                start_sample=round(t0 * self.fs_hz)))
-        self._flush_states()
-        return str(path)
-
-    def record(self, argument: str) -> str:
-        """Record signals from now: JSON ``{"signals": [...], "duration_s": s, "name": ...,
-        "format": "mat"|"nexus"}``; returns the file's path (complete when MOVING ends)."""
-        request = parse_record(argument)
-        with self._lock:
-            self._busy("Record")
-            path = self.output_folder / f"{request.name}{request.suffix}"
-            self._begin(LiveJob(kind="record", name=request.name, path=path,
-                                signals=request.signals,
-                                n_samples=max(1, round(request.duration_s * self.fs_hz)),
-                                start_sample=round(self.backend.time_s * self.fs_hz)))
-        self._flush_states()
-        return str(path)
+    def wait_idle(self, timeout_s: float = 60.0) -> bool:
+        """Wait (wall clock) until no job or task runs; True if it happened."""
+        deadline = time.monotonic() + timeout_s
+        while self._job is not None or self._task is not None:
+            if time.monotonic() > deadline:
+                return False
+            time.sleep(0.01)
+        return True

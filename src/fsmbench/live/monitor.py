@@ -195,5 +195,19 @@ class LiveMonitor:
 
     def saturating_now(self) -> bool:
         """A controlled DAC command or a 4QD reading on a rail in the last 10 ms."""
-        w = self._window(0.01)
-        return bool(len(w) and (np.any(w[:, 3] > 0) or np.any(w[:, 4] > 0)))
+        return self.rail_fraction(0.01) > 0
+
+    def rail_fraction(self, seconds: float) -> float:
+        """Fraction of the last ``seconds`` with a controlled DAC command or a 4QD reading on
+        a rail [1] (0 before any sample)."""
+        w = self._window(seconds)
+        return float(np.mean(np.maximum(w[:, 3], w[:, 4]))) if len(w) else 0.0
+
+    def qd_deviation_v(self, seconds: float) -> tuple[float, float]:
+        """Largest deviation of ``Vph``, ``Vpv`` from their mean over the last ``seconds``
+        [V] (the mirror's ringing amplitude in open loop; NaN before any sample)."""
+        w = self._window(seconds)
+        if not len(w):
+            return (float("nan"), float("nan"))
+        dev = np.max(np.abs(w[:, :2] - np.mean(w[:, :2], axis=0)), axis=0)
+        return (float(dev[0]), float(dev[1]))

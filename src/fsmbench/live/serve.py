@@ -1,11 +1,23 @@
-"""``fsmbench serve``: run the ``FsmBench`` Tango device server.
+"""``fsmbench serve``: the live bench as a Tango device server or an EPICS IOC.
 
-Without a database (``--nodb``) the server reads its one device and its
-properties from a Tango *file database* written to a temporary folder, and
-listens on ``--port``; clients address it as
-``tango://<host>:<port>/fsmbench/bench/1#dbase=no``. With a database
-(``TANGO_HOST`` set) the device is registered if it is not yet, and the
-command line's options are stored as its properties.
+Tango (the default protocol):
+
+- with a database (``TANGO_HOST``): ``fsmbench serve INSTANCE [--device NAME]``
+  registers the device ``NAME`` (default ``fsmbench/bench/1``) of the server
+  ``FsmBench/INSTANCE`` if it is not registered yet, writes the properties
+  the database lacks (the command line's values, else the defaults) and
+  never overwrites one an administrator set: a command-line value that
+  differs from the database's is refused. A second start of a running
+  instance (or of a device another instance serves) is refused before the
+  database is touched. An unreachable database is one line and status 2.
+  Starter (Astor) launches the same server as ``FsmBench INSTANCE``
+  (:func:`starter_main`), reading everything from the database;
+- without one (``--nodb``): a Tango *file database* in a temporary folder holds
+  the one device and its properties; clients use
+  ``tango://<host>:<port>/<device>#dbase=no``.
+
+EPICS: ``fsmbench serve --protocol epics --prefix PREFIX`` serves the same
+bench as a Channel Access (and PV Access) IOC (:mod:`fsmbench.live.epics`).
 """
 
 from __future__ import annotations
@@ -13,17 +25,20 @@ from __future__ import annotations
 import argparse
 import os
 import socket
+import sys
 import tempfile
-from collections.abc import Callable
-from dataclasses import dataclass
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 from fsmbench import cli_args
 
-__all__ = ["ServeOptions", "add_serve_command", "file_database", "serve"]
+__all__ = ["SERVER", "ServeOptions", "add_serve_command", "file_database", "serve",
+           "starter_main"]
 
 SERVER = "FsmBench"
+_CONTACT_MS = 2000  # timeout of the database and ping calls before the server starts
 
 
 @dataclass(frozen=True)
@@ -33,10 +48,8 @@ class ServeOptions:
     Attributes
     ----------
     backend : {"twin", "playback"}
-    playback_folder : Path or None
-    params_file : Path or None
-    bench_folder : Path or None
-        An identification folder: the twin simulates the bench identified there.
+    playback_folder, params_file, bench_folder : Path or None
+        ``bench_folder``: an identification folder the twin simulates.
     seed : int
     speed : float
         Bench seconds per wall-clock second.
@@ -46,7 +59,14 @@ class ServeOptions:
     output_folder : Path
     device_name : str
     instance : str
-        Server instance name.
+        Tango server instance (``FsmBench/<instance>``).
+    protocol : {"tango", "epics"}
+    prefix : str
+        PV prefix (EPICS).
+    watchdog_s : float
+        Wall-clock seconds without a bench block that make the device FAULT.
+    given : frozenset of str
+        Properties the command line set explicitly (checked against the database).
     """
 
     backend: str
@@ -60,6 +80,10 @@ class ServeOptions:
     device_name: str = "fsmbench/bench/1"
     instance: str = "fsmbench"
     bench_folder: Path | None = None
+    protocol: str = "tango"
+    prefix: str = ""
+    watchdog_s: float = 5.0
+    given: frozenset[str] = field(default_factory=frozenset)
 
     def properties(self) -> dict[str, str]:
         """The device properties, as text."""
@@ -72,6 +96,7 @@ class ServeOptions:
             "Seed": str(self.seed),
             "Speed": repr(float(self.speed)),
             "OutputFolder": str(self.output_folder.resolve()),
+            "WatchdogSeconds": repr(float(self.watchdog_s)),
         }
 
 
@@ -100,14 +125,7 @@ def _check_port(port: int) -> None:
                              "--port") from None
 
 
-def serve(options: ServeOptions, *, ready: str = "") -> int:
-    """Run the device server until it is stopped (Ctrl-C); returns the exit status."""
-    try:
-        import tango
-    except ImportError:
-        raise ValueError("fsmbench serve needs PyTango: pip install 'fsmbench[tango]'") from None
-    from fsmbench.live.device import FsmBench
-
+def _check_inputs(options: ServeOptions) -> None:
     if options.backend == "playback" and not options.playback_folder:
         raise ValueError("--backend playback needs the folder to play: --backend playback DIR")
     if options.playback_folder is not None and not options.playback_folder.is_dir():
@@ -123,61 +141,249 @@ def serve(options: ServeOptions, *, ready: str = "") -> int:
 
         # Bad folders are one line here, before the server starts.
         identified_bench(options.bench_folder, bench=load_bench(options.params_file))
+    out = options.output_folder
+    if out.exists() and not out.is_dir():
+        raise ValueError(f"{out}: the output folder is a file")
+
+
+# ------------------------------------------------------------------ the Tango database
+
+
+def _database() -> Any:
+    """The Tango database of ``TANGO_HOST``, or one line saying why not."""
+    import tango
+
+    host = os.environ.get("TANGO_HOST", "")
+    if not host:
+        raise ValueError("no Tango database: set TANGO_HOST=host:port, or run without one "
+                         "with --nodb --port N")
+    try:
+        db = tango.Database()
+        db.set_timeout_millis(_CONTACT_MS)
+        db.get_info()
+    except tango.DevFailed as exc:
+        why = " ".join(str(exc.args[-1].desc).split())[:200]
+        raise ValueError(f"the Tango database at TANGO_HOST={host} does not answer ({why}); "
+                         "start it or correct TANGO_HOST") from None
+    return db
+
+
+def _alive(name: str) -> bool:
+    import tango
+
+    try:
+        proxy = tango.DeviceProxy(name)
+        proxy.set_timeout_millis(_CONTACT_MS)
+        proxy.ping()
+    except tango.DevFailed:
+        return False
+    return True
+
+
+def _refuse_second_start(db: Any, instance: str, device: str | None) -> None:
+    """Refuse, before writing anything, a server instance (or a device) already served."""
+    import tango
+
+    server = f"{SERVER}/{instance}"
+    admin = f"dserver/{server}"
+    try:
+        info = db.get_device_info(admin)
+    except tango.DevFailed:
+        info = None
+    if info is not None and info.exported and _alive(admin):
+        raise ValueError(f"{server} is already running (pid {info.pid} on {info.host}, "
+                         f"started {info.started_date}); stop it first, or start another "
+                         "instance")
+    if device is None:
+        return
+    try:
+        dev = db.get_device_info(device)
+    except tango.DevFailed:
+        return
+    if dev.ds_full_name.lower() != server.lower():
+        raise ValueError(f"{device} belongs to the server {dev.ds_full_name} (class "
+                         f"{dev.class_name}) in this database; choose another --device, or "
+                         f"start that instance")
+
+
+def _properties_to_write(db: Any, options: ServeOptions, *, registered: bool) -> dict[str, str]:
+    """The properties the database lacks; refuse a command-line value that differs."""
+    from fsmbench.live.device import PROPERTY_DEFAULTS
+
+    mine = options.properties()
+    have: dict[str, list[str]] = {}
+    if registered:
+        got = db.get_device_property(options.device_name, list(PROPERTY_DEFAULTS))
+        have = {k: list(got[k]) for k in PROPERTY_DEFAULTS}
+    conflicts = [f"{k} is {have[k][0]!r} there, the command line asks {mine[k]!r}"
+                 for k in sorted(options.given) if have.get(k) and have[k][0] != mine[k]]
+    if conflicts:
+        raise ValueError(f"{options.device_name} keeps the properties an administrator set in "
+                         f"the Tango database ({'; '.join(conflicts)}): drop those options, or "
+                         "change the properties (Jive, or Database.put_device_property)")
+    return {k: (mine[k] if k in options.given else PROPERTY_DEFAULTS[k])
+            for k in PROPERTY_DEFAULTS if not have.get(k)}
+
+
+def _serve_tango(options: ServeOptions, ready: str) -> int:
+    try:
+        import tango
+    except ImportError:
+        raise ValueError("fsmbench serve needs PyTango: pip install 'fsmbench[tango]'") from None
+    from fsmbench.live.device import FsmBench
+
     if options.nodb:
         _check_port(options.port)
         with tempfile.TemporaryDirectory(prefix="fsmbench-tango-") as tmp:
-            db = file_database(options, Path(tmp))
+            db_file = file_database(options, Path(tmp))
             where = f"tango://{socket.gethostname()}:{options.port}/{options.device_name}" \
                     "#dbase=no"
             print(f"fsmbench serve: {options.device_name} ({options.backend}, speed "
                   f"{options.speed:g}) at {where}{ready}", flush=True)
-            FsmBench.run_server(args=[SERVER, options.instance, f"-file={db}", "-ORBendPoint",
-                                      f"giop:tcp::{options.port}"])
+            FsmBench.run_server(args=[options.instance, f"-file={db_file}",
+                                      "-ORBendPoint", f"giop:tcp::{options.port}"])
         return 0
-    if not os.environ.get("TANGO_HOST"):
-        raise ValueError("no Tango database: set TANGO_HOST=host:port, or run without one "
-                         "with --nodb --port N")
-    db_api = tango.Database()
-    info = tango.DbDevInfo()
-    info.name, info._class, info.server = (options.device_name, SERVER,
-                                           f"{SERVER}/{options.instance}")
-    db_api.add_device(info)
-    db_api.put_device_property(options.device_name,
-                               {k: [v] for k, v in options.properties().items()})
-    print(f"fsmbench serve: {options.device_name} ({options.backend}, speed "
-          f"{options.speed:g}) registered in {os.environ['TANGO_HOST']}{ready}", flush=True)
-    FsmBench.run_server(args=[SERVER, options.instance])
+    db = _database()
+    _refuse_second_start(db, options.instance, options.device_name)
+    try:
+        registered = db.get_device_info(options.device_name) is not None
+    except tango.DevFailed:
+        registered = False
+    write = _properties_to_write(db, options, registered=registered)
+    if not registered:
+        info = tango.DbDevInfo()
+        info.name, info._class, info.server = (options.device_name, SERVER,
+                                               f"{SERVER}/{options.instance}")
+        db.add_device(info)
+    if write:
+        db.put_device_property(options.device_name, {k: [v] for k, v in write.items()})
+    print(f"fsmbench serve: {options.device_name} ({SERVER}/{options.instance}) "
+          f"{'registered' if not registered else 'found'} in {os.environ['TANGO_HOST']}"
+          f"{'; properties written: ' + ', '.join(sorted(write)) if write else ''}{ready}",
+          flush=True)
+    FsmBench.run_server(args=[options.instance])
     return 0
+
+
+def serve(options: ServeOptions, *, ready: str = "") -> int:
+    """Run the device server or the IOC until it is stopped; returns the exit status."""
+    _check_inputs(options)
+    if options.protocol == "epics":
+        from fsmbench.live.epics import serve_epics
+
+        return serve_epics(options, ready=ready)
+    return _serve_tango(options, ready)
+
+
+def starter_main(argv: Sequence[str] | None = None) -> int:
+    """``FsmBench INSTANCE [Tango options]``: the server as Starter (Astor) launches it.
+
+    Everything comes from the database; an instance with no device, a second
+    start or an unreachable database is one line on stderr and status 2.
+    """
+    args = list(sys.argv[1:] if argv is None else argv)
+    if not args or args[0].startswith("-"):
+        print(f"usage: {SERVER} INSTANCE [Tango server options]  (register the device with "
+              "`fsmbench serve INSTANCE --device NAME` or Jive)", file=sys.stderr)
+        return 2
+    instance = args[0]
+    try:
+        try:
+            import tango  # noqa: F401  (a missing extra is one line)
+        except ImportError:
+            raise ValueError("needs PyTango: pip install 'fsmbench[tango]'") from None
+        db = _database()
+        devices = list(db.get_device_class_list(f"{SERVER}/{instance}"))
+        if SERVER not in devices[1::2]:
+            raise ValueError(f"{SERVER}/{instance} has no {SERVER} device in the database at "
+                             f"{os.environ.get('TANGO_HOST')}: register one with `fsmbench "
+                             f"serve {instance} --device NAME` (or Jive)")
+        _refuse_second_start(db, instance, None)
+    except ValueError as exc:
+        print(f"{SERVER} {instance}: error: {' '.join(str(exc).split())}", file=sys.stderr)
+        return 2
+    from fsmbench.live.device import FsmBench
+
+    FsmBench.run_server(args=args)
+    return 0
+
+
+# ------------------------------------------------------------------ the command line
 
 
 def add_serve_command(sub: Any, *, factor: Callable[[str], float]) -> None:
     """Add ``serve`` to the CLI's sub-commands (``factor`` parses ``--speed``)."""
-    p = sub.add_parser("serve", help="the bench live as a Tango device (the twin by default)")
-    p.add_argument("--backend", nargs="+", metavar=("twin|playback", "DIR"), default=["twin"],
+    p = sub.add_parser("serve", help="the bench live as a Tango device or an EPICS IOC "
+                                     "(the twin by default)",
+                       description="Serve the live bench (the twin by default) as the Tango "
+                                   "device FsmBench, or as an EPICS IOC.")
+    p.add_argument("instance", nargs="?", default="fsmbench", metavar="INSTANCE",
+                   help="Tango server instance: the server is FsmBench/INSTANCE (default "
+                        "fsmbench)")
+    p.add_argument("--device", metavar="NAME", default="fsmbench/bench/1",
+                   help="Tango device name (default fsmbench/bench/1)")
+    p.add_argument("--protocol", choices=("tango", "epics"), default="tango",
+                   help="tango (default) or epics (a Channel Access IOC; the epics extra)")
+    p.add_argument("--prefix", metavar="PREFIX", default="",
+                   help="PV prefix with --protocol epics: PREFIX:BeamAngleH, ...")
+    p.add_argument("--backend", nargs="+", metavar=("twin|playback", "DIR"), default=None,
                    help="twin (default), or playback DIR: replay a folder of recordings")
     p.add_argument("--params", metavar="FILE", default=None,
                    help="bench parameters (TOML); default: the packaged Sercalo bench")
     p.add_argument("--bench", metavar="DIR", default=None, dest="bench_dir",
                    help="the twin simulates the bench identified in DIR (the output of "
                         "fsmbench identify or study) instead of the packaged one")
-    p.add_argument("--seed", metavar="N", type=cli_args.seed, default=0,
+    p.add_argument("--seed", metavar="N", type=cli_args.seed, default=None,
                    help="twin seed (default 0)")
-    p.add_argument("--speed", metavar="X", type=factor, default=1.0,
-                   help="bench seconds per wall-clock second (default 1: real time)")
-    p.add_argument("--nodb", action="store_true", help="run without a Tango database")
+    p.add_argument("--speed", metavar="X", type=factor, default=None,
+                   help="bench seconds per wall-clock second, 0.01 to 100 (default 1: real "
+                        "time)")
+    p.add_argument("--watchdog", metavar="S", type=factor, default=None,
+                   help="wall-clock seconds without a bench block that make the device FAULT "
+                        "(default 5)")
+    p.add_argument("--nodb", action="store_true", help="Tango without a database")
     p.add_argument("--port", metavar="N", type=cli_args.port, default=10000,
                    help="TCP port with --nodb (default 10000)")
-    p.add_argument("--out", metavar="DIR", default="fsmbench-live",
+    p.add_argument("--out", metavar="DIR", default=None,
                    help="where RunExperiment and Record write (default fsmbench-live)")
     p.set_defaults(func=_command)
 
 
+_OPTION_PROPERTY = {"backend": "Backend", "params": "ParamsFile", "bench_dir": "BenchFolder",
+                    "seed": "Seed", "speed": "Speed", "out": "OutputFolder",
+                    "watchdog": "WatchdogSeconds"}
+
+
 def _command(args: argparse.Namespace) -> int:
-    kind, *rest = args.backend
+    from fsmbench.live.core import MAX_SPEED, MIN_SPEED
+
+    kind, *rest = args.backend or ["twin"]
     if kind not in ("twin", "playback") or (kind == "twin" and rest) or len(rest) > 1:
         raise ValueError("--backend must be 'twin' or 'playback DIR'")
+    given = {prop for opt, prop in _OPTION_PROPERTY.items() if getattr(args, opt) is not None}
+    if kind == "playback":
+        given.add("PlaybackFolder")
+    speed = 1.0 if args.speed is None else args.speed
+    if not MIN_SPEED <= speed <= MAX_SPEED:
+        raise ValueError(f"--speed {speed:g} is outside [{MIN_SPEED:g}, {MAX_SPEED:g}]")
+    if args.protocol == "epics":
+        if not args.prefix:
+            raise ValueError("--protocol epics needs --prefix PREFIX (the PVs are "
+                             "PREFIX:BeamAngleH, ...)")
+        if args.nodb or args.device != "fsmbench/bench/1" or args.instance != "fsmbench":
+            raise ValueError("INSTANCE, --device and --nodb are Tango's; an IOC is named by "
+                             "--prefix")
+    elif args.prefix:
+        raise ValueError("--prefix is for --protocol epics")
+    if args.device.count("/") != 2 or not all(args.device.split("/")):
+        raise ValueError(f"--device {args.device!r} is not a Tango device name "
+                         "(domain/family/member)")
     return serve(ServeOptions(
         backend=kind, playback_folder=Path(rest[0]) if rest else None,
-        params_file=Path(args.params) if args.params else None, seed=args.seed,
-        speed=args.speed, nodb=args.nodb, port=args.port, output_folder=Path(args.out),
-        bench_folder=Path(args.bench_dir) if args.bench_dir else None))
+        params_file=Path(args.params) if args.params else None,
+        seed=0 if args.seed is None else args.seed, speed=speed, nodb=args.nodb,
+        port=args.port, output_folder=Path(args.out or "fsmbench-live"),
+        bench_folder=Path(args.bench_dir) if args.bench_dir else None,
+        device_name=args.device.lower(), instance=args.instance, protocol=args.protocol,
+        prefix=args.prefix, watchdog_s=5.0 if args.watchdog is None else args.watchdog,
+        given=frozenset(given)))

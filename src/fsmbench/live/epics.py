@@ -1,0 +1,357 @@
+"""The live bench as an EPICS IOC (pythonSoftIOC, on EPICS base): the same core as Tango.
+
+``fsmbench serve --protocol epics --prefix PREFIX`` serves one
+:class:`~fsmbench.live.core.LiveBench` over Channel Access (and PV Access).
+Its records come from the same table as the Tango attributes
+(:data:`fsmbench.live.attributes.ATTRIBUTES`):
+
+- a scalar is an ``ai`` (``longin``, ``bi``, a long string) ``PREFIX:<Name>``
+  with ``EGU``, ``PREC``, ``LOPR``/``HOPR``, ``HIHI``/``HIGH``/``LOW``/``LOLO``
+  (``MAJOR``/``MINOR``) with ``HYST``, and ``MDEL``/``ADEL`` from the change
+  and archive criteria; a value that is not current or not finite is
+  ``SEVR`` INVALID (``STAT`` TIMEOUT or UDF);
+- a spectrum is a waveform, an image one waveform per row
+  (``PREFIX:FrfMagnitudeVph``, ``…Vpv``);
+- ``PREFIX:State`` (mbbi: ON, RUNNING, MOVING, ALARM MINOR, FAULT MAJOR) and
+  ``PREFIX:Status``;
+- a command is a record that runs it when processed: ``PREFIX:CloseLoop.PROC``
+  (or a put of 1) for the commands without argument, a put of the JSON
+  argument to ``PREFIX:Record`` and the others. The put completes when the
+  command has run; ``PREFIX:Reply`` then says what it did, or why it was
+  refused, ``PREFIX:ReplyCode`` is ``OK`` or the refusal's reason
+  (``FSM_Settling``…, as Tango's), and ``PREFIX:Reply`` is in MINOR alarm
+  (``STAT`` WRITE) after a refusal, until the next command succeeds;
+  ``PREFIX:ReplyCount`` counts the replies.
+
+The loaded controller is remembered in ``<out>/.fsmbench-ioc-<PREFIX>.json``.
+This module imports softioc only when serving: it is the ``fsmbench[epics]`` extra.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import logging
+import math
+import os
+import re
+import signal
+import subprocess
+import sys
+import threading
+from collections.abc import Callable
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from fsmbench.live.attributes import ATTRIBUTES, AttributeSpec, QualityLatch, evaluate, precision
+from fsmbench.live.states import STATES, Refused, plain
+
+if TYPE_CHECKING:
+    from fsmbench.live.core import LiveBench
+    from fsmbench.live.serve import ServeOptions
+
+__all__ = ["ACTIONS", "ARGUMENT_COMMANDS", "MAX_ARRAY_BYTES", "BenchIoc", "check_prefix",
+           "serve_epics"]
+
+#: Commands without argument (an Action record each) and with one (a long string).
+ACTIONS = ("CloseLoop", "OpenLoop", "StopExcitation", "Abort", "Reset")
+ARGUMENT_COMMANDS = ("LoadController", "StartExcitation", "RunExperiment", "Record")
+#: Channel Access array size the IOC allows (a spectrum is 8193 doubles, 64 KiB, above
+#: the 16 KiB default); clients need the same EPICS_CA_MAX_ARRAY_BYTES.
+MAX_ARRAY_BYTES = 4_000_000
+_UPDATE_S = 0.1  # how often the records are refreshed [s]
+_STRING = 2048  # long-string records [bytes]
+_PREFIX = re.compile(r"[A-Za-z0-9_:-]{1,40}")
+
+
+def check_prefix(prefix: str) -> str:
+    """A PV prefix: 1 to 40 of ``A-Z a-z 0-9 _ : -`` (record names stay under EPICS' 60)."""
+    if not _PREFIX.fullmatch(prefix) or prefix.endswith(":"):
+        raise ValueError(f"--prefix {prefix!r}: use 1 to 40 letters, digits, _, - or : (not "
+                         "ending with :); the PVs are PREFIX:BeamAngleH, ...")
+    return prefix
+
+
+def _already_served(prefix: str) -> str:
+    """What answers for ``PREFIX:Heartbeat`` already ("" when nothing), by a CA client.
+
+    A separate process: pyepics' libca next to softioc's EPICS base in one
+    process is not supported. Without pyepics the check is skipped.
+    """
+    code = ("import sys, epics\n"
+            "pv = epics.PV(sys.argv[1], connection_timeout=1.5)\n"
+            "print(pv.host if pv.wait_for_connection(timeout=1.5) else '')\n")
+    try:
+        out = subprocess.run([sys.executable, "-c", code, f"{prefix}:Heartbeat"],
+                             capture_output=True, text=True, timeout=20, check=False)
+    except (OSError, subprocess.TimeoutExpired):
+        return ""
+    return out.stdout.strip() if out.returncode == 0 else ""
+
+
+class BenchIoc:
+    """The records of one bench (see the module notes); build before ``iocInit``.
+
+    Parameters
+    ----------
+    bench : LiveBench
+    prefix : str
+    """
+
+    def __init__(self, bench: LiveBench, prefix: str) -> None:
+        from softioc import builder
+
+        self.bench = bench
+        self.prefix = prefix
+        self._latch = QualityLatch()
+        self._records: dict[str, Any] = {}
+        self._last_arrays: dict[str, Any] = {}
+        self._lengths: dict[str, int] = {}
+        self._stop = threading.Event()
+        self._wake = threading.Event()
+        self._thread: threading.Thread | None = None
+        self._lock = threading.Lock()  # one command at a time
+        builder.SetDeviceName(prefix)
+        n_points = len(bench.asd_frequency()) or self._spectrum_points()
+        for spec in ATTRIBUTES:
+            self._make(builder, spec, n_points)
+        self._records["State"] = builder.mbbIn(
+            "State", *[(s, {"ALARM": "MINOR", "FAULT": "MAJOR"}.get(s, "NO_ALARM"))
+                       for s in STATES], DESC="ON RUNNING MOVING ALARM FAULT")
+        self._records["Status"] = builder.longStringIn("Status", length=_STRING)
+        self._records["Reply"] = builder.longStringIn("Reply", length=_STRING)
+        self._records["ReplyCode"] = builder.stringIn("ReplyCode", initial_value="OK")
+        self._records["ReplyCount"] = builder.longIn("ReplyCount", initial_value=0)
+        for name in ACTIONS:
+            self._records[name] = builder.Action(
+                name, on_update=self._action(name), blocking=True,
+                DESC=f"process to run {name}")
+        for name in ARGUMENT_COMMANDS:
+            self._records[name] = builder.longStringOut(
+                name, length=_STRING, always_update=True, blocking=True,
+                on_update=self._action(name), DESC=f"put the argument to run {name}")
+
+    def _spectrum_points(self) -> int:
+        from fsmbench.ident.welch import default_nfft
+
+        return default_nfft(math.ceil(self.bench.fs_hz)) // 2 + 1  # 1 s Hann window
+
+    def _make(self, builder: Any, spec: AttributeSpec, n_points: int) -> None:
+        lim, ev = spec.limits, spec.events
+        fields: dict[str, Any] = {"DESC": spec.doc[:40]}
+        if spec.kind in ("float", "int", "spectrum", "image"):
+            fields["EGU"] = spec.egu
+        if spec.display is not None:
+            fields.update(LOPR=spec.display[0], HOPR=spec.display[1])
+        if spec.kind == "float" and not spec.writable:
+            for field, value, sev in (("HIHI", lim.high_alarm, "MAJOR"),
+                                      ("HIGH", lim.high_warning, "MINOR"),
+                                      ("LOW", lim.low_warning, "MINOR"),
+                                      ("LOLO", lim.low_alarm, "MAJOR")):
+                if value is not None:
+                    fields[field] = value
+                    fields[{"HIHI": "HHSV", "HIGH": "HSV", "LOW": "LSV", "LOLO": "LLSV"}[field]] \
+                        = sev
+            fields["HYST"] = lim.hysteresis
+            fields["MDEL"] = ev.abs_change if ev.abs_change is not None else 0.0
+            fields["ADEL"] = ev.archive_abs_change if ev.archive_abs_change is not None else 0.0
+            self._records[spec.name] = builder.aIn(spec.name, PREC=precision(spec.fmt),
+                                                   initial_value=0.0, **fields)
+        elif spec.kind == "float":
+            self._records[spec.name] = builder.aOut(
+                spec.name, PREC=3, initial_value=float(self.bench.speed),
+                on_update=self._speed, blocking=True, always_update=True, **fields)
+        elif spec.kind == "int":
+            fields["MDEL"] = int(ev.abs_change or 0)
+            fields["ADEL"] = int(ev.archive_abs_change or 0)
+            self._records[spec.name] = builder.longIn(spec.name, initial_value=0, **fields)
+        elif spec.kind == "bool":
+            self._records[spec.name] = builder.boolIn(spec.name, ZNAM="Open", ONAM="Closed",
+                                                      initial_value=False, **fields)
+        elif spec.kind == "str":
+            self._records[spec.name] = builder.longStringIn(spec.name, length=_STRING,
+                                                            **fields)
+        else:
+            for row in spec.rows or ("",):
+                self._lengths[spec.name + row] = n_points
+                self._records[spec.name + row] = builder.WaveformIn(
+                    spec.name + row, length=n_points, datatype=float,
+                    PREC=precision(spec.fmt), **fields)
+
+    # -- commands ------------------------------------------------------------------
+
+    def _reply(self, code: str, text: str) -> None:
+        from softioc import alarm
+
+        rec = self._records
+        refused = code != "OK"
+        # The Reply record carries the refusal's alarm (never the command record: setting an
+        # alarm processes an output record, which would run the command again).
+        rec["Reply"].set(plain(text)[:_STRING - 1],
+                         severity=alarm.MINOR_ALARM if refused else alarm.NO_ALARM,
+                         alarm=alarm.WRITE_ALARM if refused else alarm.NO_ALARM)
+        rec["ReplyCode"].set(code[:39])
+        rec["ReplyCount"].set(rec["ReplyCount"].get() + 1)
+        self._wake.set()
+
+    def _run(self, name: str, fn: Callable[[], str]) -> None:
+        with self._lock:
+            try:
+                reply = fn()
+            except Refused as refused:
+                text = refused.sentence if refused.sentence.startswith(name) else \
+                    f"{name} refused: {refused.sentence}"
+                self._reply(refused.reason, text)
+                return
+            except Exception as exc:
+                self.bench.log("ERROR", f"{name} failed: {type(exc).__name__}: {exc}")
+                self._reply("FSM_Internal", f"{name} failed: {type(exc).__name__}: {exc} (a "
+                                            "bug; the bench runs on)")
+                return
+            self._reply("OK", f"{name}: {reply}")
+
+    def _action(self, name: str) -> Callable[[Any], None]:
+        method = {"CloseLoop": "close_loop", "OpenLoop": "open_loop",
+                  "StopExcitation": "stop_excitation", "Abort": "abort", "Reset": "reset",
+                  "LoadController": "load_controller", "StartExcitation": "start_excitation",
+                  "RunExperiment": "run_experiment", "Record": "record"}[name]
+
+        def run(value: Any) -> None:
+            fn = getattr(self.bench, method)
+            if name in ARGUMENT_COMMANDS:
+                self._run(name, lambda: fn(str(value)))
+            else:
+                self._run(name, fn)
+
+        return run
+
+    def _speed(self, value: float) -> None:
+        def set_speed() -> str:
+            self.bench.speed = float(value)
+            return f"SpeedFactor set to {self.bench.speed:g}"
+
+        self._run("SpeedFactor", set_speed)
+        if self.bench.speed != value:  # refused: show the speed in force
+            self._records["SpeedFactor"].set(self.bench.speed, process=False)
+
+    # -- updates -------------------------------------------------------------------
+
+    def start(self) -> None:
+        """Refresh the records from the bench, in a thread, until :meth:`stop`."""
+        self._thread = threading.Thread(target=self._updates, name="fsmbench-ioc", daemon=True)
+        self._thread.start()
+
+    def stop(self) -> None:
+        """Stop refreshing."""
+        self._stop.set()
+        self._wake.set()
+        if self._thread is not None:
+            self._thread.join(5.0)
+
+    def changed(self, view: str) -> None:
+        """The bench's ``on_change``: refresh at once."""
+        self._wake.set()
+
+    def _updates(self) -> None:
+        while not self._stop.is_set():
+            self._wake.wait(_UPDATE_S)
+            self._wake.clear()
+            try:
+                self.update()
+            except Exception as exc:  # a record refusing a value must not stop the updates
+                self.bench.log("WARNING", f"IOC update failed: {type(exc).__name__}: {exc}")
+
+    def update(self) -> None:
+        """Put the bench's views into the records (their severity with them)."""
+        from softioc import alarm
+
+        rec = self._records
+        for spec in ATTRIBUTES:
+            value, quality = evaluate(spec, self.bench, self._latch)
+            if spec.kind in ("spectrum", "image"):
+                if quality == "INVALID" or value is None:
+                    continue
+                rows = [value] if spec.kind == "spectrum" else list(value)
+                for i, row in enumerate(spec.rows or ("",)):
+                    data = np.asarray(rows[i] if i < len(rows) else [], dtype=float)
+                    key = spec.name + row
+                    last = self._last_arrays.get(key)
+                    if last is None or last.shape != data.shape or not np.array_equal(last, data):
+                        self._last_arrays[key] = data
+                        rec[key].set(data[:self._lengths[key]])
+                continue
+            if spec.writable:
+                continue  # SpeedFactor: its own record
+            if spec.kind == "str":
+                rec[spec.name].set(plain(str(value))[:_STRING - 1])
+            elif spec.kind == "bool":
+                rec[spec.name].set(bool(value))
+            elif quality == "INVALID":
+                stale = value is not None and math.isfinite(float(value))
+                rec[spec.name].set(float(value) if stale else 0.0,
+                                   severity=alarm.INVALID_ALARM,
+                                   alarm=alarm.TIMEOUT_ALARM if stale else alarm.UDF_ALARM)
+            else:
+                rec[spec.name].set(value)
+        state = self.bench.state
+        severity = {"ALARM": alarm.MINOR_ALARM, "FAULT": alarm.MAJOR_ALARM}.get(state, 0)
+        rec["State"].set(STATES.index(state), severity=severity,
+                         alarm=alarm.STATE_ALARM if severity else alarm.NO_ALARM)
+        rec["Status"].set(plain(self.bench.status)[:_STRING - 1])
+
+
+def serve_epics(options: ServeOptions, *, ready: str = "") -> int:
+    """Run the IOC until SIGTERM or Ctrl-C; returns the exit status."""
+    try:
+        from softioc import asyncio_dispatcher, builder, softioc
+    except ImportError:
+        raise ValueError("--protocol epics needs pythonSoftIOC: pip install "
+                         "'fsmbench[epics]'") from None
+    from fsmbench.bench.params import default_bench, load_bench
+    from fsmbench.live.core import FileMemory, LiveBench
+
+    prefix = check_prefix(options.prefix)
+    if not logging.getLogger().handlers:
+        logging.basicConfig(level=logging.INFO, stream=sys.stderr,
+                            format="%(asctime)s %(levelname)s %(name)s: %(message)s")
+    os.environ.setdefault("EPICS_CA_MAX_ARRAY_BYTES", str(MAX_ARRAY_BYTES))
+    host = _already_served(prefix)
+    if host:
+        raise ValueError(f"{prefix}:Heartbeat already answers (an IOC at {host}): stop it, or "
+                         "choose another --prefix")
+    bench = load_bench(options.params_file) if options.params_file else default_bench()
+    if options.bench_folder is not None:
+        from fsmbench.sim.identified import identified_bench
+
+        bench = identified_bench(options.bench_folder, bench=bench)
+    out = options.output_folder.resolve()
+    memory = FileMemory(out / f".fsmbench-ioc-{prefix.replace(':', '_')}.json")
+    ioc: BenchIoc | None = None
+    live = LiveBench(bench, backend=options.backend, playback_folder=options.playback_folder,
+                     seed=options.seed, speed=options.speed, output_folder=out,
+                     watchdog_s=options.watchdog_s, memory=memory,
+                     on_change=lambda view: ioc.changed(view) if ioc is not None else None)
+    ioc = BenchIoc(live, prefix)
+    builder.LoadDatabase()
+    dispatcher = asyncio_dispatcher.AsyncioDispatcher()
+    softioc.iocInit(dispatcher)
+    stop = threading.Event()
+    handlers = {sig: signal.signal(sig, lambda *_: stop.set())
+                for sig in (signal.SIGTERM, signal.SIGINT)}
+    try:
+        live.start()
+        live.log("INFO", live.restore_controller())
+        ioc.update()
+        ioc.start()
+        print(f"fsmbench serve: IOC {prefix} ({options.backend}, speed {options.speed:g}): "
+              f"{prefix}:BeamAngleH, {prefix}:State, {prefix}:CloseLoop ...{ready}",
+              flush=True)
+        stop.wait()
+    finally:
+        for sig, handler in handlers.items():
+            with contextlib.suppress(ValueError):
+                signal.signal(sig, handler)
+        ioc.stop()
+        live.stop()
+        dispatcher.close()
+    return 0
