@@ -38,7 +38,7 @@ def short_twin() -> TwinRun:
 
 @pytest.fixture(scope="session")
 def ident_twin() -> TwinRun:
-    """The six identification experiments at the seed's lengths (11–33 s)."""
+    """The six identification experiments at the ESRF study's lengths (11–33 s)."""
     return simulate_bench(seed=0, experiments=["data_cal_pd_h", "data_cal_pd_v", "data_uch",
                                                "data_ucv", "data_unh", "data_unv"])
 

@@ -15,7 +15,7 @@ def test_params_table_has_units_and_sources(capsys: pytest.CaptureFixture[str]) 
     assert main(["params"]) == 0
     out = capsys.readouterr().out
     line = next(x for x in out.splitlines() if x.startswith("converter.fs_hz"))
-    assert "10000" in line and "Hz" in line and "seed 1.6" in line
+    assert "10000" in line and "Hz" in line and "ESRF study 1.6" in line
 
 
 def test_params_json_and_roundtrip(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
@@ -60,9 +60,9 @@ def test_bad_params_file_names_the_problem(tmp_path: Path,
     assert main(["params", "--out", str(tmp_path)]) == 0
     bad = tmp_path / "bench.toml"
     text = bad.read_text()
-    good = "(seed 1.6)\nfs_hz = 10000.0"
+    good = "(ESRF study 1.6)\nfs_hz = 10000.0"
     assert text.count(good) >= 1
-    bad.write_text(text.replace(good, "(seed 1.6)\nfs_hz = 'fast'", 1))
+    bad.write_text(text.replace(good, "(ESRF study 1.6)\nfs_hz = 'fast'", 1))
     assert main(["params", "--params", str(bad)]) == 2
     err = capsys.readouterr().err
     assert "bench.toml" in err and "fs_hz" in err

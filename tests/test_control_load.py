@@ -59,7 +59,7 @@ CONTROLLERS = {
     "static_gain": ct.ss([], [], [], [[-2.0, 0.0], [0.0, 3.0]], inputs=["Rh", "Rv"],
                          outputs=["Uch", "Ucv"]),
 }
-DESCRIPTIONS = {"seed_controller": "the seed's controller", "static_gain": "a plain gain"}
+DESCRIPTIONS = {"seed_controller": "the ESRF study's controller", "static_gain": "a plain gain"}
 SCALING = InputScaling(qd_gain_v_per_rad=(-31.0, 36.3), plant_source="physical (nominal)")
 
 

@@ -77,6 +77,7 @@ def test_study_on_the_twin_writes_its_data_and_report(twin_study: StudyResult) -
     assert (out / "twin-data" / "twin_truth.json").is_file()
     report = Path(twin_study.report).read_text()
     assert "true value (twin)" in report  # the twin's truth is beside its data
-    assert report.count("<script>") == 2  # plotly.js once, the drawing script once
+    # plotly.js once, the zoom pyramid's script once, the drawing script once.
+    assert report.count("<script>") == 3
     ident = json.loads((out / "identification.json").read_text())
     assert set(ident["sercalo"]) == {"h", "v"}

@@ -282,7 +282,7 @@ def _check_simulation_memory(args: argparse.Namespace, bench: Bench) -> None:
     if need <= have:
         return
     length = (f"--duration {args.duration:g} s" if args.duration is not None
-              else "the seed's record lengths")
+              else "the ESRF study's record lengths")
     if args.excitation is not None:
         what, fix = ("--excitation", "an excitation is played in memory whatever the format: "
                                      "shorten --duration")
@@ -293,6 +293,22 @@ def _check_simulation_memory(args: argparse.Namespace, bench: Bench) -> None:
     raise ValueError(f"{what}: {length} needs about {need / 1e9:.1f} GB of memory (every "
                      f"record is simulated whole before it is written) and this machine has "
                      f"{have / 1e9:.1f} GB available; {fix}")
+
+
+def _check_study_memory(args: argparse.Namespace, bench: Bench) -> None:
+    """The study simulates every record whole and analyses it in memory: refuse what won't fit."""
+    from fsmbench.io.matfile import available_memory_bytes
+
+    need = _simulation_memory_bytes(argparse.Namespace(
+        experiments=None, excitation=None, duration=args.duration), bench)
+    have = available_memory_bytes()
+    if need > have:
+        raise ValueError(
+            f"--duration {args.duration:g} s needs about {need / 1e9:.1f} GB of memory (the "
+            f"study simulates every record whole, then analyses it in memory) and this machine "
+            f"has {have / 1e9:.1f} GB available: shorten --duration, or for long records run "
+            "fsmbench simulate OUT --format nexus --duration S, then fsmbench budget OUT, which "
+            "reads them block by block")
 
 
 def _cmd_simulate(args: argparse.Namespace) -> int:
@@ -420,8 +436,28 @@ def _cmd_identify(args: argparse.Namespace) -> int:
     else:
         print("\n".join(readable_table(js, reference=reference, bench=inp.bench)))
         for step, why in result.skipped.items():
-            print(f"not identified: {step}: {why}")
+            fix = _skip_fix(why, frf=getattr(args, "frf", "auto"))
+            print(f"not identified: {_STEP_WORDS.get(step, step)}: "
+                  + (why.removesuffix("; use the LPM or Welch") if fix else why) + fix)
     return 0
+
+
+#: Identification steps in words (the ESRF study's section of each).
+_STEP_WORDS = {"qd": "4QD calibration (2.1)", "current_amp": "current amplifiers (2.2)",
+               "sercalo": "Sercalo (2.3)", "newport": "Newport (2.4)",
+               "newport_dynamics": "Newport's dynamics (2.4)",
+               "mode_refinement": "Sercalo modes on the full records (2.3)",
+               "noise_model": "noise model of the huddle tests"}
+
+
+def _skip_fix(why: str, *, frf: str) -> str:
+    """What the user does about a skipped step, where the reason says it."""
+    if "not periodic" in why and frf == "periodic":
+        return ("; to identify it, run identify with --frf auto (periods averaged where the "
+                "input repeats, the LPM elsewhere)")
+    if why.startswith("missing "):
+        return f"; record {why.removeprefix('missing ')} to identify it"
+    return ""
 
 
 def _plant(args: argparse.Namespace, inp: _StageInput) -> Any:
@@ -462,7 +498,8 @@ def _cmd_budget(args: argparse.Namespace) -> int:
     with _stage_folder(args, _SMALL_BYTES) as run:
         inp = _stage_input(args)
         plant = _plant(args, inp)
-        inp.say("noise and error budget, huddle tests, repeatability (seed sections 3, 4, 11)")
+        inp.say("noise and error budget, huddle tests, repeatability (ESRF study sections 3, 4, "
+                "11)")
         result, paths = budget_stage(inp.recordings, bench=inp.bench, out_dir=run.staging,
                                      plant=plant, progress=inp.say)
     for path in paths:
@@ -492,7 +529,7 @@ def _num(value: Any, fmt: str, unit: str = "") -> str:
 def design_table(payload: dict[str, Any]) -> list[str]:
     """What ``fsmbench design`` prints: each loop's margins in words and units, the verdicts.
 
-    The 1 Hz objective of seed 6.1 (|S| ≤ e_max / y_max) is the Sercalo loop's: the
+    The 1 Hz objective of ESRF study 6.1 (|S| ≤ e_max / y_max) is the Sercalo loop's: the
     Newport's alignment loop (10.2) is shown with its margins only.
     """
     bound = payload.get("objective", {}).get("sensitivity_bound_at_1hz")
@@ -565,6 +602,7 @@ def _cmd_study(args: argparse.Namespace) -> int:
     need = _STUDY_BYTES + _FIGURE_BYTES * len(args.figures)
     if data is None:
         need += _twin_bytes(args, "mat5")
+        _check_study_memory(args, bench)
     say = _progress()
     with _run_folder(args, args.out, data=data, need_bytes=need) as run:
         result = run_study(out_dir=run.staging, data_dir=data, bench=bench, seed=args.seed,
@@ -605,12 +643,13 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--json", action="store_true", help="print JSON instead of a table")
     p.set_defaults(func=_cmd_params)
 
-    p = sub.add_parser("simulate", help="run the seed's 13 experiments on the digital twin")
+    p = sub.add_parser("simulate", help="run the ESRF study's 13 experiments on the digital twin")
     common(p)
     p.add_argument("out_pos", metavar="OUT", nargs="?", default=None, help="output folder")
     p.add_argument("--out", metavar="DIR", default=None, help="output folder (same as OUT)")
     p.add_argument("--duration", metavar="S", type=seconds, default=None,
-                   help="length of every record [s] (default: the seed's, 100 s huddle tests)")
+                   help="length of every record [s] (default: the ESRF study's, 100 s huddle "
+                        "tests)")
     p.add_argument("--seed", metavar="N", type=seed, default=0, help="random seed (default 0)")
     p.add_argument("--format", choices=("mat5", "mat73", "nexus"), default="mat5",
                    help="file format (default: MATLAB v5)")
@@ -618,17 +657,17 @@ def _parser() -> argparse.ArgumentParser:
                    help="only these experiments (e.g. data_uch data_ucv)")
     p.add_argument("--excitation", metavar="FILE", default=None, nargs="+",
                    help="play these designed excitations (fsmbench excite: folder, .json or "
-                        ".mat) each in its input's experiment instead of the seed's noise; "
-                        "--experiments adds the seed's own")
+                        ".mat) each in its input's experiment instead of the ESRF study's noise; "
+                        "--experiments adds the ESRF study's own")
     add_bench_option(p)
     p.set_defaults(func=_cmd_simulate)
 
     stage_commands = (
-        ("identify", "seed section 2: 4QD, amplifiers, Sercalo, Newport, the full plant",
+        ("identify", "ESRF study section 2: 4QD, amplifiers, Sercalo, Newport, the full plant",
          _cmd_identify),
-        ("budget", "seed sections 3, 4, 11: huddle tests, error budget, repeatability",
+        ("budget", "ESRF study sections 3, 4, 11: huddle tests, error budget, repeatability",
          _cmd_budget),
-        ("design", "seed sections 5-10: plant analysis, controllers, verification on the "
+        ("design", "ESRF study sections 5-10: plant analysis, controllers, verification on the "
                    "twin, export", _cmd_design),
     )
     for name, text, func in stage_commands:
@@ -645,7 +684,7 @@ def _parser() -> argparse.ArgumentParser:
                            help="print the design (design.json's content) as JSON on stdout "
                                 "instead of the table")
             p.add_argument("--seed", metavar="N", type=seed, default=0,
-                           help="twin seed of the closed-loop verification (default 0)")
+                           help="random seed of the closed-loop verification's twin (default 0)")
         if name in ("budget", "design"):
             p.add_argument("--bench", "--identification", metavar="DIR", default=None,
                            dest="bench_dir",
@@ -662,9 +701,10 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--data", metavar="DIR", default=None,
                    help="folder of recordings (.mat, .h5, .nxs)")
     p.add_argument("--out", metavar="DIR", required=True, help="output folder")
-    p.add_argument("--seed", metavar="N", type=seed, default=0, help="twin seed (default 0)")
+    p.add_argument("--seed", metavar="N", type=seed, default=0,
+                   help="random seed of the twin's noise (default 0)")
     p.add_argument("--duration", metavar="S", type=seconds, default=None,
-                   help="twin record length [s] (default: the seed's)")
+                   help="twin record length [s] (default: the ESRF study's)")
     p.add_argument("--figures", metavar="FORMATS", type=figure_formats, default=(),
                    help="also write every figure as png and/or pdf into OUT/figures "
                         "(comma list: png, pdf, png,pdf; default none)")

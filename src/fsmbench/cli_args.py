@@ -110,10 +110,10 @@ def add_identify_options(p: argparse.ArgumentParser) -> None:
     """``--frf`` and ``--weights`` of the identification (``identify`` and ``study``)."""
     p.add_argument("--frf", choices=("auto", "welch", "lpm", "periodic"), default="auto",
                    help="frequency-response estimator: auto (averaging over periods when every "
-                        "excitation repeats, else Welch as the seed), welch, lpm (local "
+                        "excitation repeats, else Welch as the ESRF study), welch, lpm (local "
                         "polynomial method), periodic (default auto)")
     p.add_argument("--weights", choices=("seed", "variance"), default="seed",
-                   help="vector-fit weights: the seed's coherence recipe, or the inverse "
+                   help="vector-fit weights: the ESRF study's coherence recipe, or the inverse "
                         "standard deviation of each line, which also gives the Sercalo's "
                         "parameters standard deviations (default seed)")
 

@@ -3,7 +3,7 @@
 Each stage is a function of the recordings (and the bench) that writes its
 files atomically into an output folder and returns its result:
 
-``identify_stage``  seed section 2 → ``identification.json``, ``plant.mat``, ``frf.mat``
+``identify_stage``  ESRF study section 2 → ``identification.json``, ``plant.mat``, ``frf.mat``
 ``budget_stage``    sections 3, 4, 11 → ``budget.json``
 ``design_stage``    sections 5–10 → ``design.json``, ``controllers.mat``,
                     ``controllers_sos.json``; fsmbench's controller is then run on the
@@ -94,7 +94,7 @@ def identify_stage(recordings: Mapping[str, xr.Dataset], *, bench: Bench, out_di
                    source: str, progress: Progress | None = None,
                    options: IdentifyOptions | None = None
                    ) -> tuple[Identification, list[Path]]:
-    """Run seed section 2 and write its files (``options``: the estimator and weights)."""
+    """Run ESRF study section 2 and write its files (``options``: the estimator and weights)."""
     result = identify(recordings, bench=bench, options=options, source=source,
                       progress=progress)
     return result, write_identification(result, out_dir)
@@ -114,7 +114,7 @@ def choose_plant(recordings: Mapping[str, xr.Dataset], *, bench: Bench,
     say = progress or _quiet
     ident = identification
     if ident is None and all(n in recordings for n in ("data_uch", "data_ucv")):
-        say("identifying the plant first (seed section 2)")
+        say("identifying the plant first (ESRF study section 2)")
         ident = identify(recordings, bench=bench, progress=say, source=source or "recordings")
     if ident is not None and ident.plant is not None and ident.sercalo is not None \
             and not ident.warnings:
@@ -154,10 +154,10 @@ def _write_json(path: Path, payload: Mapping[str, Any]) -> Path:
 def budget_stage(recordings: Mapping[str, xr.Dataset], *, bench: Bench, out_dir: Path,
                  plant: PlantChoice, progress: Callable[[str], None] | None = None,
                  recommended: Any = None) -> tuple[Any, list[Path]]:
-    """Seed sections 3, 4, 11: ``budget.json`` (``progress`` hears of long records' reads).
+    """ESRF study sections 3, 4, 11: ``budget.json`` (``progress`` hears of long records' reads).
 
     ``recommended``: fsmbench's controller (continuous), whose budget is computed
-    beside the recorded loop's (the seed's controller of 9.2).
+    beside the recorded loop's (the ESRF study's controller of 9.2).
     """
     from fsmbench.budget.study import budget_study
 
@@ -239,7 +239,7 @@ class DesignStage:
 def design_stage(*, bench: Bench, out_dir: Path, plant: PlantChoice, seed: int = 0,
                  progress: Progress | None = None,
                  simulated: SimulationBench | None = None) -> tuple[DesignStage, list[Path]]:
-    """Seed sections 5–10 and the closed-loop proof on the simulated bench.
+    """ESRF study sections 5–10 and the closed-loop proof on the simulated bench.
 
     ``simulated``: the bench fsmbench's controller is run on (default: ``bench``
     itself, the packaged twin).
@@ -249,7 +249,7 @@ def design_stage(*, bench: Bench, out_dir: Path, plant: PlantChoice, seed: int =
 
     say = progress or _quiet
     sim = SimulationBench(bench) if simulated is None else simulated
-    say("designing and verifying the controllers (seed sections 5–10)")
+    say("designing and verifying the controllers (ESRF study sections 5–10)")
     result = design_study(plant.plant, bench=bench)
     paths = result.write(out_dir)
     check = None
@@ -293,7 +293,7 @@ def validation_stage(recordings: Mapping[str, xr.Dataset], *, bench: Bench,
         The study's records (``data_rep_h``, ``data_rep_v``).
     bench : Bench
         The bench file: the 4QD gains the recorded loop divided by (assumed: its
-        nominal ones, as the seed's real-time code used).
+        nominal ones, as the ESRF study's real-time code used).
     simulated : Bench or None
         The identified bench (or the twin); None: not run.
     plant : PlantModel or None
@@ -325,7 +325,7 @@ def validation_stage(recordings: Mapping[str, xr.Dataset], *, bench: Bench,
     try:
         result = validate_closed_loop(recordings, simulated=runs, plant=plant,
                                       params=simulated.true, controller=k,
-                                      controller_name="the seed's controller (9.2)",
+                                      controller_name="the ESRF study's controller (9.2)",
                                       gd_used_v_per_rad=(gd.h, gd.v),
                                       bench_label=simulated.label)
     except ValueError as exc:

@@ -1,4 +1,4 @@
-"""``fsmbench study``: the whole seed study on recorded data or on the twin.
+"""``fsmbench study``: the whole ESRF study on recorded data or on the twin.
 
 Stages run left to right (docs/architecture.md): recordings (simulated by
 the twin when no data folder is given) → identification → budget → design
@@ -159,7 +159,7 @@ def _sections(*, bench: Bench, loaded: RecordingSet, source: str, is_twin: bool,
               ident: Identification | None, truth: Mapping[str, Any] | None,
               budget: Any, design: Any, plant_source: str, validation: Any = None,
               validation_skipped: str = "") -> list[Section]:
-    """Every chapter in the seed's order (1–11), then the parameters appendix."""
+    """Every chapter in the ESRF study's order (1–11), then the parameters appendix."""
     from fsmbench.report.bench_section import bench_section, parameters_appendix
     from fsmbench.report.budget_section import budget_section
     from fsmbench.report.control_sections import control_sections
@@ -202,22 +202,22 @@ def run_study(*, out_dir: str | Path, data_dir: str | Path | None = None,
     out_dir : path
         Output folder (created; must not be inside ``data_dir``).
     data_dir : path, optional
-        Folder of recordings in the seed's layout. Without it the twin
+        Folder of recordings in the ESRF study's layout. Without it the twin
         simulates the bench and its records are written to ``out_dir/twin-data``.
     bench : Bench, optional
         Bench parameters (default: the packaged bench).
     seed : int
-        Twin seed.
+        Random seed of the twin's noise.
     duration_s : float, optional
-        Twin record length in s (default: the seed's lengths).
+        Twin record length in s (default: the ESRF study's lengths).
     progress : callable, optional
         Receives progress messages.
     figures : sequence of {"png", "pdf"}
         Also write every figure to ``out_dir/figures`` in these formats.
     spec : Specification, optional
-        The requirements of the verdict (default: the seed's, 5 nm distance error).
+        The requirements of the verdict (default: the ESRF study's, 5 nm distance error).
     identify_options : IdentifyOptions, optional
-        FRF estimator and fit weights of the identification (default: ``auto``, the seed's).
+        FRF estimator and fit weights of the identification (default: ``auto``, the ESRF study's).
     """
     say = progress or (lambda _msg: None)
     bench = default_bench() if bench is None else bench
@@ -251,7 +251,7 @@ def run_study(*, out_dir: str | Path, data_dir: str | Path | None = None,
         say(f"writing the twin's records to {data}")
         written = write_twin(run, data)
         stages.append(StageStatus("simulate", True, outputs=tuple(str(p) for p in written)))
-        source = f"digital twin, seed {seed}"
+        source = f"digital twin, random seed {seed}"
         lap("simulate")
     else:
         source = f"recorded data in {data}"
@@ -266,7 +266,7 @@ def run_study(*, out_dir: str | Path, data_dir: str | Path | None = None,
 
     ident = None
     if any(n in recordings for n in IDENT_EXPERIMENTS):
-        say("identification (seed section 2)")
+        say("identification (ESRF study section 2)")
         ident, written = identify_stage(recordings, bench=bench, out_dir=out, source=source,
                                         progress=say, options=identify_options)
         stages.append(StageStatus(
@@ -294,7 +294,7 @@ def run_study(*, out_dir: str | Path, data_dir: str | Path | None = None,
                               reason=design.skipped))
     lap("design")
 
-    say("noise and error budget, huddle tests, repeatability (seed sections 3, 4, 11)")
+    say("noise and error budget, huddle tests, repeatability (ESRF study sections 3, 4, 11)")
     # The recorded loop's budget (the seed's controller ran in the huddle tests) and the
     # one the verdict recommends (fsmbench's), side by side.
     budget, written = budget_stage(recordings, bench=bench, out_dir=out, plant=plant,
@@ -352,8 +352,9 @@ def run_study(*, out_dir: str | Path, data_dir: str | Path | None = None,
     report_path = write_report(
         out / "report.html", title="Sercalo test bench study", sections=sections,
         verdict_html=verdict_html(summary), summary=summary_json,
-        meta=(f"fsmbench {__version__}. Data: {source}. Chapters follow the seed study "
-              "(ESRF, Sercalo test bench, 2020).",))
+        meta=(f"fsmbench {__version__}. Data: {source}. The chapters follow the ESRF Sercalo "
+              "test bench study (ESRF, 2020), called \"the ESRF study\" below; its sections, "
+              "figures and tables are cited as (ESRF study 2.1), (ESRF study Fig. 8).",))
     atomic_write_text(out / "summary.json",
                       json.dumps(summary_json, indent=2, allow_nan=False) + "\n")
     lap("report")

@@ -1,4 +1,4 @@
-"""Refractive index of air (seed 4.3): published check values, model agreement, sensitivities.
+"""Refractive index of air (ESRF study 4.3): published check values, model agreement, sensitivities.
 
 Reference data used below (the README of each source, in short):
 
@@ -206,7 +206,7 @@ def test_sensitivities_match_analytic_edlen_derivatives(t, p, rh, lam) -> None:
 
 
 def test_sensitivities_at_the_seed_operating_point() -> None:
-    """Derived at 1530 nm, 20 °C, 101 325 Pa, 50 %RH (Ciddor), with the seed's rounded values."""
+    """Derived at 1530 nm, 20 °C, 101 325 Pa, 50 %RH (Ciddor), with the study's rounded values."""
     sens = sensitivities(**SEED_POINT, wavelength_m=LAMBDA_ATTOCUBE_M)
     edlen = sensitivities(**SEED_POINT, wavelength_m=LAMBDA_ATTOCUBE_M, model="edlen")
     # The two models' derivatives agree: T and P within 0.1 %, RH (water term) within 1 %.

@@ -105,7 +105,7 @@ def test_newport_meets_its_datasheet(bench: Bench) -> None:
 
 
 def test_full_system_is_the_seed_connect(true_plant: PlantModel) -> None:
-    """Vph = Gc Gi Uc + Gn Un, R = Gd^-1 Vp, Vch = Ga Zc Gi Uc (seed 2.5), at a few frequencies."""
+    """Vph = Gc Gi Uc + Gn Un, R = Gd^-1 Vp, Vch = Ga Zc Gi Uc (ESRF study 2.5), at 4 points."""
     f = np.array([3.0, 100.0, 411.0, 900.0])
     b = true_plant.blocks
     gi, zc, ga = (ss_frequency_response(b[k], f) for k in ("Gi", "Zc", "Ga"))
@@ -155,7 +155,7 @@ def test_pade_model_follows_the_delay(true_plant: PlantModel) -> None:
 
 
 def test_seed_controller_sign_convention(true_plant: PlantModel) -> None:
-    """The seed's -K loop needs K(0) G(0) > 0: Kh < 0 needs Uch -> Rh < 0, Kv > 0 needs > 0."""
+    """The study's -K loop needs K(0) G(0) > 0: Kh < 0 needs Uch -> Rh < 0, Kv > 0 needs > 0."""
     assert true_plant.dc_gain(output="Rh", input="Uch") < 0
     assert true_plant.dc_gain(output="Rv", input="Ucv") > 0
     # R is the beam angle the Newport calibrates: positive for a positive Newport command.

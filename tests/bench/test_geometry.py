@@ -1,4 +1,4 @@
-"""Beam-path geometry (seed 4.1, 4.2, 11.3): exact ray trace, small-angle law, seed errata."""
+"""Beam-path geometry (ESRF study 4.1, 4.2, 11.3): exact ray trace, small-angle law, errata."""
 
 from __future__ import annotations
 
@@ -75,7 +75,7 @@ def test_trace_matches_an_independent_naive_tracer(theta, alpha, dc, dn) -> None
 # ---------------------------------------------------------------- the seed's closed forms
 @pytest.mark.parametrize(("h", "length"), GEOMETRIES)
 def test_trace_reproduces_seed_closed_form_points(h, length) -> None:
-    """Seed 4.1 formulas for Y, M, T agree with the trace (relative to each point's size)."""
+    """ESRF study 4.1 formulas for Y, M, T agree with the trace (relative to each point's size)."""
     theta = np.concatenate([seed_theta_range(), [1e-3, 1e-2, math.radians(2.0)]])
     bp = trace_bench(theta, h_m=h, l_m=length)
     seed = seed_beam_path(theta, h_m=h, l_m=length)
@@ -90,7 +90,7 @@ def test_trace_reproduces_seed_closed_form_points(h, length) -> None:
 
 @pytest.mark.parametrize(("h", "length"), GEOMETRIES)
 def test_seed_path_error_only_differs_by_its_float_floor(h, length) -> None:
-    """The seed's norm-sum path error equals the trace up to float64 rounding of a 0.4 m sum."""
+    """The study's norm-sum path error equals the trace up to float64 rounding of a 0.4 m sum."""
     theta = seed_theta_range()
     bp = trace_bench(theta, h_m=h, l_m=length)
     seed = seed_beam_path(theta, h_m=h, l_m=length)
@@ -182,7 +182,7 @@ def test_measured_error_is_half_the_round_trip() -> None:
 
 
 def test_fit_over_the_seed_range() -> None:
-    """Seed Fig. 34: quadratic over logspace(-7, -4, 100); k = 1.0 m/rad² for H = L = 5 cm."""
+    """ESRF study Fig. 34: quadratic over logspace(-7, -4, 100); k = 1.0 m/rad² for H = L = 5 cm."""
     fit = fit_quadratic_law(h_m=SEED_H, l_m=SEED_L)
     assert fit.n_points == 100
     assert fit.k_derived_m_per_rad2 == pytest.approx(1.0, rel=1e-15)
@@ -196,7 +196,7 @@ def test_fit_over_the_seed_range() -> None:
 
 
 def test_table_4_recomputed_and_the_seed_unit_slip() -> None:
-    """Seed Table 4 says 1, 25, 100 nm for 1, 5, 10 µrad; the law gives pm (×1e-3)."""
+    """ESRF study Table 4 says 1, 25, 100 nm for 1, 5, 10 µrad; the law gives pm (×1e-3)."""
     table = angle_error_table(h_m=SEED_H, l_m=SEED_L)
     expected_path_m = np.array([1e-12, 25e-12, 100e-12])
     np.testing.assert_allclose(table.path_error_m, expected_path_m, rtol=1e-9)  # quartic ≤ 6.5e-10
@@ -207,7 +207,7 @@ def test_table_4_recomputed_and_the_seed_unit_slip() -> None:
 
 
 def test_return_beam_is_tilted_by_four_theta_and_11_3_law() -> None:
-    """Two reflections on the Sercalo: return beam at 4θ; its leg obeys seed 11.3's L/cos α − L."""
+    """Two reflections on the Sercalo: return beam at 4θ; its leg obeys the study's L/cos α − L."""
     theta = np.array([1e-3, 1e-2, 0.1])
     bp = trace_bench(theta, h_m=SEED_H, l_m=SEED_L)
     np.testing.assert_allclose(bp.return_angle_rad, 4 * theta, rtol=1e-14)  # exact angle sums
@@ -310,7 +310,7 @@ def test_results_are_frozen_and_json_plain() -> None:
 
 
 def test_figure_data_at_two_degrees() -> None:
-    """Seed Fig. 35: θ = 2°; the polyline is the seed's O, S, Y, M, T."""
+    """ESRF study Fig. 35: θ = 2°; the polyline is the ESRF study's O, S, Y, M, T."""
     fig = beam_path_figure_data(math.radians(2.0), h_m=0.05, l_m=0.05)
     seed = seed_beam_path(math.radians(2.0), h_m=0.05, l_m=0.05)
     want = np.stack([seed.O, seed.S, seed.Y, seed.M, seed.T])

@@ -36,7 +36,7 @@ def test_nominal_sercalo_follows_from_datasheet(bench: Bench) -> None:
 
 
 def test_numbers_the_seed_states(bench: Bench) -> None:
-    """Converter step and the seed's eq. 13 PSD; the Newport gain 26.2 mrad / 10 V."""
+    """Converter step and the ESRF study's eq. 13 PSD; the Newport gain 26.2 mrad / 10 V."""
     conv = bench.nominal.converter
     assert conv.lsb_v == pytest.approx(20.0 / 65536)  # definition, exact
     # Seed 1.6 and eq. 13: 7.76e-13 V^2/Hz, printed to 3 digits.
@@ -46,7 +46,7 @@ def test_numbers_the_seed_states(bench: Bench) -> None:
 
 
 def test_true_current_amplifier_is_the_seeds_identified_one(bench: Bench) -> None:
-    """Seed 2.2 prints Gi = 0.01275 and 0.01382 A/V; the twin's circuit reproduces them."""
+    """ESRF study 2.2 prints Gi = 0.01275 and 0.01382 A/V; the twin's circuit reproduces them."""
     g = bench.true.current_amp_gain_a_per_v()
     assert g.h == pytest.approx(0.01275, rel=1e-12)
     assert g.v == pytest.approx(0.01382, rel=1e-12)

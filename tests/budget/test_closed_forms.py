@@ -1,4 +1,4 @@
-"""Closed forms of seed 1.6, 4.1–4.5: quantisation, Newport noise, geometry, air, frame, filters."""
+"""ESRF study 1.6, 4.1–4.5: quantisation, Newport noise, geometry, air, frame, filters."""
 
 from __future__ import annotations
 

@@ -1,8 +1,10 @@
-"""Huddle and repeatability processing on synthetic records: the seed's semantics, bad input."""
+"""Huddle and repeatability processing on synthetic records: the study's semantics, bad input."""
 
 from __future__ import annotations
 
 import math
+from types import SimpleNamespace
+from typing import Any
 
 import numpy as np
 import pytest
@@ -119,8 +121,9 @@ def test_huddle_comparison_sentence(nominal):
     assert c.ratios["total"] == pytest.approx(3.0, rel=0.05)  # two 5000-sample rms: ~1.5 %
     assert c.significant["50–500 Hz"]  # white noise ×3 in a band of ~450 Hz × 5 s
     assert "test 2 / test 1" in c.sentence
-    assert f"total ×{c.ratios['total']:.2f} (significant)" in c.sentence
-    assert "seed (3.6)" in h.conclusion
+    assert (f"increases the total rms by {100 * (c.ratios['total'] - 1):.0f} % "
+            f"(×{c.ratios['total']:.2f}, significant)") in c.sentence
+    assert "ESRF study (3.6)" in h.conclusion
 
 
 @pytest.mark.parametrize(("name", "n", "match"), [
@@ -140,3 +143,31 @@ def test_huddle_missing_signal():
     assert huddle_number("data_huddle_test_5") == 5
     with pytest.raises(ValueError, match="no huddle test"):
         analyse_huddle({}, params=default_bench().nominal)
+
+
+# ------------------------------------------------ huddle comparisons: significance and practice
+@pytest.mark.parametrize(("ratio", "rel_std", "words", "practical"), [
+    # 1 % spread each: ×1.05 is significant (log 0.049 > 2·0.014) but within ±10 %.
+    (1.05, 0.01, "no change in practice in the 50–5000 Hz rms (×1.05: statistically "
+                 "significant, but within ±10 %)", False),
+    (1.40, 0.02, "increases the 50–5000 Hz rms by 40 % (×1.40, significant)", True),
+    (0.60, 0.02, "reduces the 50–5000 Hz rms by 40 % (×0.60, significant)", True),
+    # 30 % spread each: ×1.4 is within the noise (log 0.34 < 2·0.42).
+    (1.40, 0.30, "no significant change in the 50–5000 Hz rms (×1.40)", True),
+])
+def test_a_huddle_comparison_says_significance_and_practice(
+        ratio: float, rel_std: float, words: str, practical: bool) -> None:
+    from fsmbench.budget.huddle import BandRms, _compare
+
+    def record(number: int, rms: float) -> Any:
+        band = BandRms(band="50–5000 Hz", f_lo_hz=50.0, f_hi_hz=5000.0, rms=rms,
+                       rel_std=rel_std)
+        return SimpleNamespace(number=number, name=f"data_huddle_test_{number}", bands=(band,),
+                               band=lambda name, b=band: b)
+
+    c = _compare("closed loop", record(3, ratio * 1e-9), record(2, 1e-9))
+    assert words in c.sentence
+    assert c.practical["50–5000 Hz"] is practical
+    changed = c.significant["50–5000 Hz"] and practical
+    assert ("changes Va in practice in 50–5000 Hz" in c.sentence) is changed
+    assert "-fold" not in c.sentence

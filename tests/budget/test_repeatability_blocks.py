@@ -1,4 +1,4 @@
-"""Seed 11 read in blocks: lazy (Dask) = in memory = any block size = the former in-memory code.
+"""Section 11 read in blocks: lazy (Dask) = in memory = any block size = the former in-memory code.
 
 ``_reference`` is the in-memory analysis as it was before the block reads
 (commit 62bb1c5: the periods reshaped to (n, P), then reduced), kept here as
@@ -304,7 +304,7 @@ def test_progress_reports_both_reads(params):
 
 
 def test_records_in_memory_need_no_dask() -> None:
-    """The core installs without the dask extra: seed 11 on a record in memory runs."""
+    """The core installs without the dask extra: ESRF study 11 on a record in memory runs."""
     import subprocess
     import sys
 

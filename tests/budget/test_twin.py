@@ -101,7 +101,7 @@ def test_closed_loop_propagation_predicts_the_twin(run, bench, result):
 def clean_rep(bench):
     """rep_h/rep_v with no Sercalo piston, and the same noise streams without the sine.
 
-    The twin keys every noise stream on (seed, experiment, source): removing the
+    The twin keys every noise stream on (ESRF study, experiment, source): removing the
     excitation keeps them. The Sercalo's resonance is driven by its DAC's
     rounding, which differs between the two runs; with its spot offset at 0 that
     part leaves Va and the noise-only run is the exact non-repeatable reference.

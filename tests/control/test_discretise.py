@@ -97,7 +97,7 @@ def test_state_space_cascade_equals_the_sections(prewarp: bool) -> None:
 
 
 def test_zero_channel_and_real_roots_only() -> None:
-    """IFF (seed 8.2): -1e4/s and a zero channel; no complex roots, so the default equals
+    """IFF (ESRF study 8.2): -1e4/s and a zero channel; no complex roots, so the default equals
     plain Tustin."""
     k = iff_controller()
     kd = discretise(k)

@@ -1,4 +1,4 @@
-"""Integral force feedback (seed 8): why it cannot damp this bench, and that it can damp a
+"""Integral force feedback (ESRF study 8): why it cannot damp this bench, and that it can damp a
 plant whose coil voltage carries the mirror's back-EMF."""
 
 from __future__ import annotations
@@ -15,7 +15,7 @@ from fsmbench.control.iff import iff_analysis
 
 
 def _iff(gain: float) -> ct.StateSpace:
-    """``blkdiag(-gain/s, 0)``, Vch, Vcv -> Uch, Ucv (added to the command, as the seed's)."""
+    """``blkdiag(-gain/s, 0)``, Vch, Vcv -> Uch, Ucv (added to the command, as the ESRF study's)."""
     return ct.ss([[0.0]], [[1.0, 0.0]], [[-gain], [0.0]], np.zeros((2, 2)),
                  inputs=["Vch", "Vcv"], outputs=["Uch", "Ucv"])
 
@@ -42,7 +42,7 @@ def _with_back_emf(plant: PlantModel, bench: Bench) -> PlantModel:
 
 
 def test_iff_cannot_damp_the_bench(true_plant: PlantModel) -> None:
-    """Vc = Ga Zc Gi Uc with a static Zc: the modes never reach the sensor (seed 8.3)."""
+    """Vc = Ga Zc Gi Uc with a static Zc: the modes never reach the sensor (ESRF study 8.3)."""
     r = iff_analysis(true_plant)
     for axis in "hv":
         m = r.modes[axis]

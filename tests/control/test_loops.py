@@ -1,4 +1,4 @@
-"""Closed-loop verification of the seed's controllers on the bench's plants."""
+"""Closed-loop verification of the ESRF study's controllers on the bench's plants."""
 
 from __future__ import annotations
 
@@ -83,7 +83,7 @@ def test_closed_loop_poles_match_python_control(true_plant: PlantModel) -> None:
 def test_nyquist_count_agrees_with_closed_loop_poles(nominal_plant: PlantModel,
                                                      objective: ControlObjective,
                                                      label: str, unstable: int) -> None:
-    """The seed's notch leaves the nominal plant's mode 5 % up unstable; both methods agree."""
+    """The study's notch leaves the nominal plant's mode 5 % up unstable; both methods agree."""
     plant = dict(perturbed_plants(nominal_plant))[label]
     la = analyse_loop(plant, seed_decentralised_controller(), objective=objective)
     assert int(np.sum(la.poles.real > 0)) == la.nyquist.closed_loop_unstable == unstable

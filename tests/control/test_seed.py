@@ -1,4 +1,4 @@
-"""The seed's controllers: restored expressions, loops on the bench's plant, Tustin."""
+"""The ESRF study's controllers: restored expressions, loops on the bench's plant, Tustin."""
 
 from __future__ import annotations
 
@@ -39,9 +39,9 @@ def _loop_gain(plant: PlantModel, f: np.ndarray) -> np.ndarray:
 
 
 def test_restored_controller_crosses_over_near_27_hz(true_plant: PlantModel) -> None:
-    """Both restored loops cross over at 20-35 Hz on the plant with the seed's identified Gi.
+    """Both restored loops cross over at 20-35 Hz on the plant with the ESRF study's identified Gi.
 
-    (The nominal Gi = 1/(R + Rc) is 56 % above the identified one the seed designed
+    (The nominal Gi = 1/(R + Rc) is 56 % above the identified one the ESRF study designed
     with, which moves the h crossover to 36 Hz; the true plant is the fair check.)
     """
     plant = true_plant

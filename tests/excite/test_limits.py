@@ -46,7 +46,7 @@ def test_response_from_rest_equals_the_state_recursion() -> None:
 
 
 def test_coil_voltage_gain_is_ga_zc_gi() -> None:
-    """A 10 Hz sine on Uch: Vch peaks at |Ga Zc Gi| times its amplitude (seed 2.2)."""
+    """A 10 Hz sine on Uch: Vch peaks at |Ga Zc Gi| times its amplitude (ESRF study 2.2)."""
     n = 1000  # one period of 10 Hz
     x = 0.01 * np.cos(2 * np.pi * 10.0 * np.arange(n) / FS)
     y = response_from_rest(x, input="Uch", plant=PLANT, periodic=True)
@@ -68,7 +68,7 @@ OVER_RANGE = re.compile(r"Uch: an excitation of 0\.05 V rms drives ADC Vch to (?
 
 @pytest.fixture(scope="module")
 def seed_noise() -> ExcitationDesign:
-    """The seed's level: 15 mV rms, 1-2000 Hz band noise on Uch, 30 s."""
+    """The ESRF study's level: 15 mV rms, 1-2000 Hz band noise on Uch, 30 s."""
     return design_noise(input="Uch", band_hz=(1.0, 2000.0), amplitude_rms_v=0.015, fs_hz=FS,
                         duration_s=30.0, seed=0)
 

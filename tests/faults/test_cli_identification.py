@@ -142,3 +142,15 @@ def test_design_prints_rounded_values_with_units() -> None:
     assert rows[1][2:] == ["v", "yes", "∞", "none", "36.9", "Hz", "3.00e-04", "missed"]
     assert rows[2][-1] == "–" and rows[3][-1] == "–"
     assert lines[-1] == "fsmbench's controller not simulated: no bench"
+
+
+def test_a_step_the_estimator_cannot_do_says_the_fix(run_cli: Callable[..., Any],
+                                                     data_copy: Path, tmp_path: Path) -> None:
+    """``--frf periodic`` on records whose input does not repeat (the twin's noise): the
+    table names the step in words, why, and the option that identifies it."""
+    r = run_cli("identify", data_copy, "--out", tmp_path / "out", "--frf", "periodic")
+    assert r.status == 0, r.err
+    lines = [x for x in r.out.splitlines() if x.startswith("not identified: Newport (2.4)")]
+    assert len(lines) == 1 and "is not periodic" in lines[0]
+    assert lines[0].endswith("run identify with --frf auto (periods averaged where the input "
+                             "repeats, the LPM elsewhere)")

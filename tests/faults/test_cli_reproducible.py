@@ -103,7 +103,7 @@ def test_design(kit: SimpleNamespace, run_cli: Callable[..., Any], tmp_path: Pat
 
 def test_study_cli_equals_the_library_run(kit: SimpleNamespace, run_cli: Callable[..., Any],
                                           tmp_path: Path, twin_study: Any) -> None:
-    """``study --duration 5`` (seed 0) writes the same bytes as ``run_study`` did."""
+    """``study --duration 5`` (random seed 0) writes the same bytes as ``run_study`` did."""
     out = tmp_path / "study"
     r = run_cli("study", "--out", out, "--duration", "5")
     assert r.status == 0, r.err

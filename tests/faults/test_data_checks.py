@@ -36,7 +36,7 @@ LSB_V = 20.0 / 2**16  # the bench's 16-bit, ±10 V converter
 
 @pytest.fixture(scope="module")
 def twin(bench: Bench) -> TwinRun:
-    """Every experiment, 5 s (the shortest every protocol accepts), seed 0."""
+    """Every experiment, 5 s (the shortest every protocol accepts), random seed 0."""
     return simulate_bench(bench, seed=0, duration_s=5.0)
 
 
@@ -314,7 +314,7 @@ def test_empty_folder_is_an_error_not_a_nominal_run(tmp_path: Path) -> None:
     (tmp_path / "data").mkdir()
     with pytest.raises(RecordingError, match="empty folder") as err:
         load_recordings(tmp_path / "data", fs_hz=FS_HZ)
-    assert "looked for the seed's recordings" in str(err.value)
+    assert "looked for the ESRF study's recordings" in str(err.value)
     (tmp_path / "data" / "notes.txt").write_text("bench log\n")
     with pytest.raises(RecordingError, match=r"found notes\.txt"):
         load_recordings(tmp_path / "data", fs_hz=FS_HZ)

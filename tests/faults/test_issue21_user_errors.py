@@ -88,6 +88,19 @@ def test_simulate_longer_than_memory(kit: SimpleNamespace, run_cli: Callable[...
     _one_line(kit, r, "simulate", "--format mat73")
 
 
+def test_study_longer_than_memory(kit: SimpleNamespace, run_cli: Callable[..., Any],
+                                  tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+                                  no_computation: None) -> None:
+    """``study --duration`` simulates and analyses in memory: refused with the size and the
+    streamed way (simulate --format nexus, then budget), before anything runs."""
+    monkeypatch.setattr("fsmbench.io.matfile.available_memory_bytes", lambda: 16_000_000_000)
+    out = tmp_path / "out"
+    r = run_cli("study", "--out", out, "--duration", "3600")
+    _one_line(kit, r, "study", "--duration 3600 s", "GB of memory", "16.0 GB available",
+              "--format nexus")
+    assert not out.exists() and kit.leftovers(tmp_path) == []
+
+
 def test_simulate_size_estimate_fits_a_short_run(monkeypatch: pytest.MonkeyPatch) -> None:
     """What fits is not refused: the estimate of the default run (1.78 GB) is within 20 %
     of the measured peak (1.52 GB), and 5 s records need well under 1 GB."""

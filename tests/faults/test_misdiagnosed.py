@@ -49,7 +49,7 @@ BENCHES: dict[str, Callable[[], Bench]] = {
 
 @pytest.fixture(scope="module")
 def runs() -> TwinRun:
-    """The six identification runs, 6 s each (every protocol's minimum fits), seed 4."""
+    """The six identification runs, 6 s each (every protocol's minimum fits), random seed 4."""
     return simulate_bench(seed=4, duration_s=6.0, experiments=IDENT)
 
 

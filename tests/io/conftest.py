@@ -69,7 +69,7 @@ def time_s() -> np.ndarray:
 
 @pytest.fixture
 def all_signals(rng: np.random.Generator) -> dict[str, np.ndarray]:
-    """Every signal of the seed's table, N samples each (V; Va in m)."""
+    """Every signal of the ESRF study's table, N samples each (V; Va in m)."""
     out = {name: quantised(rng, N) for name in SIGNALS}
     out["Va"] = rng.standard_normal(N) * 1e-9
     return out

@@ -66,7 +66,7 @@ def test_make_recording_orders_and_notes_unknown_signals(
                         t=time_s, experiment="x")
     assert list(ds.data_vars) == ["Uch", "Vpv", "extra"]
     assert ds["extra"].attrs["units"] == ""
-    assert "not in the seed's signal table" in ds["extra"].attrs["note"]
+    assert "not in the ESRF study's signal table" in ds["extra"].attrs["note"]
 
 
 @pytest.mark.parametrize("shape", [(-1,), (-1, 1), (1, -1)])
@@ -232,7 +232,7 @@ def test_extra_variables(
         ds = read_recording(path)
     assert list(ds.data_vars) == ["Vph", "temp"]
     assert ds["temp"].attrs["units"] == ""
-    assert "not in the seed's signal table" in ds["temp"].attrs["note"]
+    assert "not in the ESRF study's signal table" in ds["temp"].attrs["note"]
     messages = sorted(str(w.message) for w in caught)
     assert messages == [
         f"{path}: variable 'cfg' left out: holds a struct (fields: a), not samples",

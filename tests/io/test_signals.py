@@ -1,4 +1,4 @@
-"""fsmbench.io.signals: the seed's signal table and experiments."""
+"""fsmbench.io.signals: the ESRF study's signal table and experiments."""
 
 from __future__ import annotations
 
@@ -103,9 +103,9 @@ def test_records_are_frozen(obj: SignalInfo | ExperimentInfo, field: str) -> Non
         setattr(obj, field, "x")
 
 
-@pytest.mark.skipif(not SEED.is_file(), reason="seed study text not beside the repository")
+@pytest.mark.skipif(not SEED.is_file(), reason="ESRF study text not beside the repository")
 def test_required_variables_match_the_seed_text() -> None:
-    """Parse every load('...data_*.mat', ...) of the seed, commented ones included."""
+    """Parse every load('...data_*.mat', ...) of the ESRF study, commented ones included."""
     text = re.sub(r"\.\.\.\s*\n\s*", "", SEED.read_text(encoding="utf-8"))
     found: dict[str, list[str]] = {}
     for file, args in re.findall(r"load\('[^']*?(data_\w+)\.mat',([^)]*)\)", text):

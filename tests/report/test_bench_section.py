@@ -47,7 +47,7 @@ def test_recordings_table_lists_records_and_skipped_experiments(bench: Bench,
     assert float(cal[2]) == round(ds.sizes["t"] / 1e4, 2)
     assert cal[5] == "Vph, Vpv, Vnh"
     assert ucv[5] == "not loaded: no data_ucv.mat in the folder"
-    assert "seed 2.4" in unh[1]
+    assert "ESRF study 2.4" in unh[1]
 
 
 def test_recorded_data_get_no_twin_wording(bench: Bench, ident_twin: TwinRun) -> None:

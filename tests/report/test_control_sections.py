@@ -1,4 +1,4 @@
-"""The control chapters (seed sections 5–10) as report sections: order, words, units, figures."""
+"""The control chapters (ESRF study 5–10) as report sections: order, words, units, figures."""
 
 from __future__ import annotations
 
@@ -134,7 +134,7 @@ def test_margins_tables_give_the_objective_verdict(sections: list[Section],
                                                   stage: DesignStage) -> None:
     res: DesignResult = stage.result
     sec9 = sections[4]
-    for who, lp in (("the seed's controller", res.seed), ("fsmbench's controller",
+    for who, lp in (("the ESRF study's controller", res.seed), ("fsmbench's controller",
                                                            res.fsmbench)):
         tab = _table(sec9, f"Margins of {who}")
         assert tab.header == ("quantity", "h", "v")
@@ -145,7 +145,7 @@ def test_margins_tables_give_the_objective_verdict(sections: list[Section],
         assert [float(x) for x in pm] == pytest.approx(
             [lp.axes[a].margins.phase_margin_deg for a in "hv"], abs=0.051)  # printed to 0.1°
     text = " ".join(b for b in sec9.blocks if isinstance(b, str))
-    assert "the seed's controller does NOT meet it" in text  # E27 on this plant
+    assert "the ESRF study's controller does NOT meet it" in text  # E27 on this plant
     assert "fsmbench's controller meets it" in text
     # every erratum of the control chapters is cited next to its result
     cited = " ".join([b.ref for s in sections for b in s.blocks if isinstance(b, Note)]
@@ -173,7 +173,7 @@ def test_robustness_small_multiples_mark_the_unstable_cases(sections: list[Secti
     assert res.seed_robustness is not None
     assert not res.seed_robustness.all_stable  # the seed's notch is not robust (E27)
     text = " ".join(b for b in sections[4].blocks if isinstance(b, str))
-    assert "perturbed plants are unstable with the seed's controller" in text
+    assert "perturbed plants are unstable with the ESRF study's controller" in text
 
 
 def test_twin_table_matches_the_check(sections: list[Section], stage: DesignStage) -> None:

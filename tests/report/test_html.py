@@ -37,15 +37,17 @@ def test_report_is_self_contained_escaped_and_in_reading_order(tmp_path: Path) -
     assert "a &lt; b" in text and "&lt;k&gt;" in text and "Results &amp; &lt;more&gt;" in text
     # Blocks keep their order: paragraph, table, figure, note, paragraph.
     order = [text.index(s) for s in ("a &lt; b", "<caption>t</caption>", 'id="fig-fig8_test"',
-                                     "odd &amp; explained (errata E1)", "after the figure")]
+                                     "odd &amp; explained (errata <a "
+                                     "href=\"#erratum-E1\">E1</a>)", "after the figure")]
     assert order == sorted(order)
-    assert "<h3" in text and "(seed Fig. 8)" in text and "Figure 2. A &lt;figure&gt;" in text
+    assert "<h3" in text and "(ESRF study Fig. 8)" in text and "Figure 2. A &lt;figure&gt;" in text
     # JSON inside <script> cannot close it early: "</" is escaped, and it parses back.
     for payload in re.findall(r'<script type="application/json" id="[^"]+">(.*?)</script>', text,
                               flags=re.S):
         assert "</" not in payload
         json.loads(payload)
-    assert text.count("<thead>") == 1  # header rows repeat across printed pages
+    # One table, and the appendix of the errata it cites: header rows repeat across pages.
+    assert text.count("<thead>") == 2
 
 
 def test_plotly_is_embedded_once_and_only_with_figures() -> None:

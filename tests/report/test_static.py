@@ -184,7 +184,7 @@ def test_log_axes_and_fixed_ranges(drawn: list[tuple[Figure, object]]) -> None:
     y = next(ln for ln in mag.get_lines() if ln.get_gid() == "p0t0").get_ydata()
     assert np.isnan(y[:3]).all() and np.isfinite(y[3:]).all()  # zeros left out on log y
     assert nyq.axes[0].get_aspect() == 1.0
-    assert bode.get_suptitle() == "Plant frequency response (seed Fig. 5)"
+    assert bode.get_suptitle() == "Plant frequency response (ESRF study Fig. 5)"
 
 
 def test_legend_has_one_entry_per_group(drawn: list[tuple[Figure, object]]) -> None:

@@ -52,7 +52,7 @@ def _budget(total_m: float, *, huddle: bool = True) -> SimpleNamespace:
     quoted = SimpleNamespace(controller="fsmbench's controller", budget=table,
                              stationary_total_rms_m=3 * total_m)
     return SimpleNamespace(
-        quoted=quoted, recommended=quoted, controller="seed 9.2 K", budget=table, skipped={},
+        quoted=quoted, recommended=quoted, controller="ESRF study 9.2 K", budget=table, skipped={},
         huddle=SimpleNamespace(qd_noise=object()) if huddle else None,
         frame=SimpleNamespace(expansion_per_k=23e-6), noise=SimpleNamespace(bits=16))
 
@@ -63,7 +63,7 @@ def _validation(ratio: float = 1.02) -> SimpleNamespace:
         predicted_rms_rad={"h": 4.0e-5, "v": 4.1e-5}, ratio={"h": ratio, "v": ratio},
         limits=(0.8, 1.25), passed=0.8 <= ratio <= 1.25, n_periods=40,
         experiments=("data_rep_h", "data_rep_v"), bench="the identified bench",
-        controller="the seed's controller", reason="" if 0.8 <= ratio <= 1.25
+        controller="the ESRF study's controller", reason="" if 0.8 <= ratio <= 1.25
         else "h: recorded more than the model gives")
 
 
@@ -173,6 +173,27 @@ def test_skips_failed_checks_and_fallbacks_are_listed_first() -> None:
     assert "calibration_r2 FAILED" in page and "check the 4QD cable" in page
     assert "nominal physical model" in page
     assert "NOT VERIFIED" in page and s.next_step in page
+    # The fallback says what to do about it: the refused file, corrected.
+    assert s.fallbacks[0].endswith("What to do: correct data_uch (data_uch.mat: Vph: holds NaN "
+                                   "at sample 12), then run the study again.")
+
+
+@pytest.mark.parametrize(("skipped", "plant_source", "advice"), [
+    ({"data_ucv": "no data_ucv.mat (or .h5/.nxs) in D"}, "nominal physical model (data_ucv "
+     "missing)", "record data_ucv (noise on each coil command"),
+    ({"data_uch": "no data_uch.mat (or .h5/.nxs) in D; found Data_Uch.mat: rename it "
+                  "data_uch.mat (file names are case-sensitive)"}, "nominal physical model",
+     "rename Data_Uch.mat: rename it data_uch.mat"),
+    ({}, "nominal physical model (the identification raised warnings: x)",
+     "the failed checks listed below name each file"),
+])
+def test_a_fallback_says_what_to_do(skipped: dict[str, str], plant_source: str,
+                                    advice: str) -> None:
+    s = build_summary(source="t", is_twin=False, spec=Specification(), skipped=skipped,
+                      n_experiments=13, n_read=13 - len(skipped), identification=None,
+                      plant_source=plant_source, plant_identified=False, budget=None,
+                      design=None)
+    assert f"What to do: {advice}" in s.fallbacks[0]
 
 
 def test_no_stage_no_verdict() -> None:

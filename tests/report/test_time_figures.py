@@ -67,7 +67,7 @@ def test_attocube_drawn_in_nm_mean_removed_and_order_fixed() -> None:
 def test_a_record_without_known_signals_is_named() -> None:
     ds = xr.Dataset({"foo": ("t", np.zeros(4))}, coords={"t": np.arange(4.0)},
                     attrs={"experiment": "data_odd"})
-    with pytest.raises(ValueError, match=r"data_odd: none of the seed's signals .*foo"):
+    with pytest.raises(ValueError, match=r"data_odd: none of the ESRF study's signals .*foo"):
         experiment_figure(ds, key="k", title="t", caption="c", seed_ref="", gn0_rad_per_v=GN0,
                           trim_s=0.0)
 

@@ -266,7 +266,7 @@ def test_cli_writes_json_and_prints_table(tmp_path: Path, client: Any,
         assert all(r["factors"]["dac_delay_offset_s"] == 0.0 for r in doc["draws"])
         assert (out / "run.json").is_file()
         printed = capsys.readouterr().out
-        assert "3 draws, seed 2" in printed and "tracking error h" in printed
+        assert "3 draws, random seed 2" in printed and "tracking error h" in printed
         assert "worst draws" in printed
         docs.append(doc)
     # The running scheduler gives the file the process gives.

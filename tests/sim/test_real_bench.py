@@ -339,7 +339,7 @@ def _every_feature_switched_off(p: BenchParams) -> BenchParams:
 
 
 def _records(bench: Bench) -> dict[str, BenchBlock]:
-    """The thirteen experiments of ``bench``'s twin, 5 s each, seed 1."""
+    """The thirteen experiments of ``bench``'s twin, 5 s each, random seed 1."""
     out = {}
     for spec in seed_experiments(duration_s=_SECONDS):
         s = experiment_stream(bench, spec, seed=_SEED)

@@ -1,4 +1,4 @@
-"""The seed's experiment protocols."""
+"""The ESRF study's experiment protocols."""
 
 from __future__ import annotations
 
@@ -28,7 +28,7 @@ def test_table_3_configurations() -> None:
 
 
 def test_start_times_are_the_seeds_trims() -> None:
-    """Excitations begin where the seed's scripts cut (t0 = 1, 1, 3, 1.5 s)."""
+    """Excitations begin where the ESRF study's scripts cut (t0 = 1, 1, 3, 1.5 s)."""
     start = {s.name: s.excitations[0].start_s for s in seed_experiments() if s.excitations}
     assert start["data_uch"] == 1.0 and start["data_ucv"] == 1.0
     assert start["data_unh"] == 3.0 and start["data_unv"] == 1.5
@@ -38,7 +38,7 @@ def test_start_times_are_the_seeds_trims() -> None:
 
 
 def test_huddle_tests_last_the_seeds_101_s() -> None:
-    """Seed 3.2 trims t < 1 s and keeps 100 s: the raw record needs 101 s."""
+    """ESRF study 3.2 trims t < 1 s and keeps 100 s: the raw record needs 101 s."""
     for s in seed_experiments():
         if s.name.startswith("data_huddle"):
             assert s.duration_s == 101.0

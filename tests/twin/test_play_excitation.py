@@ -142,7 +142,7 @@ def test_a_file_at_another_rate_is_refused(tmp_path: Path) -> None:
 
 
 def test_a_whole_identification_set_from_designed_excitations(tmp_path: Path) -> None:
-    """Uch and Ucv multisines plus the seed's other experiments: one folder, identified."""
+    """Uch and Ucv multisines plus the ESRF study's other experiments: one folder, identified."""
     import json
 
     from fsmbench.ident.pipeline import IdentifyOptions, identify

@@ -1,7 +1,7 @@
 """A designed excitation resolves the 4QD amplifier; the bench file then keeps it out of the delays.
 
 The real-bench twin at 20 kHz has a 10 kHz second-order (Butterworth) 4QD
-amplifier that its bench model does not know. With the seed's white noise the
+amplifier that its bench model does not know. With the ESRF study's white noise the
 Newport's lines stay coherent to ~2 kHz, where the amplifier is a lag like
 22.5 us of delay and nothing else. Odd multisines on Unh and Unv up to 8 kHz
 keep the lines coherent to 0.4 fs, where the amplifier's droop (16 % at

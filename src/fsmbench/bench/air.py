@@ -1,6 +1,6 @@
-"""Refractive index of air along the Attocube beam (seed 4.3).
+"""Refractive index of air along the Attocube beam (ESRF study 4.3).
 
-The seed quotes rounded sensitivities (1 ppm/K, 0.27 ppm/hPa, 0.01 ppm/%RH).
+The ESRF study quotes rounded sensitivities (1 ppm/K, 0.27 ppm/hPa, 0.01 ppm/%RH).
 This module computes the phase refractive index of moist air from standard
 models at the interferometer wavelength (1530 nm on this bench, a parameter
 here), and its sensitivities at an operating point.
@@ -30,7 +30,7 @@ the tests). Saturation vapour pressure: IAPWS (Wagner & Pruß) over water for
 t ≥ 0 °C, the IAPWS sublimation formula over ice below (NIST A-I).
 
 The interferometer measures ``n·D`` (D the one-way distance), so a change
-``δn`` reads as a distance error ``δn·D``; the seed's "beam path of 100 mm"
+``δn`` reads as a distance error ``δn·D``; the ESRF study's "beam path of 100 mm"
 is D = L + H.
 """
 
@@ -252,17 +252,17 @@ class AirSensitivity:
 
     @property
     def ppm_per_k(self) -> float:
-        """∂n/∂T in ppm/K (seed 4.3: K_T ≈ 1 ppm/K)."""
+        """∂n/∂T in ppm/K (ESRF study 4.3: K_T ≈ 1 ppm/K)."""
         return 1e6 * self.dn_dt_per_k
 
     @property
     def ppm_per_hpa(self) -> float:
-        """∂n/∂P in ppm/hPa (seed 4.3: K_P ≈ 0.27 ppm/hPa)."""
+        """∂n/∂P in ppm/hPa (ESRF study 4.3: K_P ≈ 0.27 ppm/hPa)."""
         return 1e6 * 100.0 * self.dn_dp_per_pa
 
     @property
     def ppm_per_pct_rh(self) -> float:
-        """∂n/∂RH in ppm/%RH (seed 4.3: K_HR ≈ 0.01 ppm/%RH)."""
+        """∂n/∂RH in ppm/%RH (ESRF study 4.3: K_HR ≈ 0.01 ppm/%RH)."""
         return 1e6 * self.dn_drh_per_pct
 
     def distance_error_m(self, *, path_m: float, delta_t_k: float = 0.0, delta_p_pa: float = 0.0,
@@ -332,7 +332,7 @@ def sensitivities(
 
 @dataclass(frozen=True)
 class AirPathBudget:
-    """Distance errors for given air-property changes over a one-way distance (seed 4.3)."""
+    """Distance errors for given air-property changes over a one-way distance (ESRF study 4.3)."""
 
     path_m: float
     delta_t_k: float
@@ -364,7 +364,7 @@ def air_path_budget(
     sensitivity : AirSensitivity
         Operating point and derivatives from :func:`sensitivities`.
     path_m : float
-        One-way measured distance D [m] (seed 4.3: 0.1 m).
+        One-way measured distance D [m] (ESRF study 4.3: 0.1 m).
     delta_t_k, delta_p_pa, delta_rh_pct : float
         Changes of temperature [K], pressure [Pa] and relative humidity [%RH].
 

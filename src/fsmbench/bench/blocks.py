@@ -1,6 +1,6 @@
 """The bench's transfer-function blocks from physics, and the assembled plant.
 
-Blocks and signal names follow the seed (sections 1.1, 2.2, 2.5):
+Blocks and signal names follow the ESRF study (sections 1.1, 2.2, 2.5):
 
 ====  ===========================  ==========================  =======
 name  from                         to                          unit
@@ -15,7 +15,7 @@ Gd    Rh, Rv    (beam angle)       Vph, Vpv  (4QD output)      V/rad
 
 The full system has inputs ``Uch, Ucv, Unh, Unv`` and outputs
 ``Vch, Vcv, Ich, Icv, Rh, Rv, Vph, Vpv`` and is assembled exactly as the
-seed's ``connect(Gi, Zc, Ga, Gc, Gn, inv(Gd), Sh, Sv, inputs, outputs)``.
+ESRF study's ``connect(Gi, Zc, Ga, Gc, Gn, inv(Gd), Sh, Sv, inputs, outputs)``.
 
 Every dynamic block is realised in modal (block-diagonal) form with states
 scaled to the block's output unit: a lightly damped mode with
@@ -98,7 +98,7 @@ def rotation(angle_rad: float) -> np.ndarray:
 
 
 def current_amplifier(p: BenchParams) -> ct.StateSpace:
-    """Gi: ``Ic/Uc = 1 / (R + R_buffer + Rc + Lc s)`` per axis [A/V] (seed 2.2 eq. 2)."""
+    """Gi: ``Ic/Uc = 1 / (R + R_buffer + Rc + Lc s)`` per axis [A/V] (ESRF study 2.2 eq. 2)."""
     r_tot = (p.current_amplifier.r_ohm.as_array() + p.current_amplifier.r_buffer_ohm.as_array()
              + p.sercalo.r_coil_ohm.as_array())
     l_h = p.sercalo.l_coil_h.as_array()
@@ -109,7 +109,7 @@ def current_amplifier(p: BenchParams) -> ct.StateSpace:
 
 
 def coil_impedance(p: BenchParams) -> ct.StateSpace:
-    """Zc: static coil resistance Rc [V/A] (seed 2.2, "Important 2").
+    """Zc: static coil resistance Rc [V/A] (ESRF study 2.2, "Important 2").
 
     The inductive term ``Lc s`` has its zero at Rc/Lc (14.8 kHz for the h axis),
     above the 5 kHz Nyquist frequency: |1 + j w Lc/Rc| - 1 < 0.25 % below 1 kHz.
@@ -121,7 +121,7 @@ def coil_impedance(p: BenchParams) -> ct.StateSpace:
 
 
 def voltage_amplifier(p: BenchParams) -> ct.StateSpace:
-    """Ga: ``Ga0 / (1 + s/wc)`` per axis [V/V] (seed 2.2 eq. 7)."""
+    """Ga: ``Ga0 / (1 + s/wc)`` per axis [V/V] (ESRF study 2.2 eq. 7)."""
     wc = 2.0 * np.pi * p.voltage_amplifier.cutoff_hz
     g = p.voltage_amplifier.gain
     return ct.ss(-wc * np.eye(2), wc * g * np.eye(2), np.eye(2), np.zeros((2, 2)),
@@ -140,7 +140,7 @@ def mode_shape(axis_index: int, angle_rad: float) -> np.ndarray:
 
 
 def sercalo_angles(p: BenchParams) -> ct.StateSpace:
-    """Coil currents to Sercalo mirror angles ``theta_ch, theta_cv`` [rad/A] (seed 1.2).
+    """Coil currents to Sercalo mirror angles ``theta_ch, theta_cv`` [rad/A] (ESRF study 1.2).
 
     Per axis a mass-spring-damper ``theta/I = g0 / (1 + 2 xi s/w0 + s**2/w0**2)``;
     the coils' torques couple the axes through ``coupling_*``. A real bench
@@ -152,7 +152,7 @@ def sercalo_angles(p: BenchParams) -> ct.StateSpace:
       coupling is symmetric and strongest at each resonance, ``tan a``);
     - a second, weaker mode per axis (``second_mode_*``), with its own shape
       and DC gain relative to the first mode's; its two states follow the
-      first four, so a bench without it has exactly the seed's states.
+      first four, so a bench without it has exactly the ESRF study's states.
     """
     s = p.sercalo
     axes = ("h", "v")
@@ -191,7 +191,7 @@ def sercalo_angles(p: BenchParams) -> ct.StateSpace:
 
 
 def newport_angles(p: BenchParams) -> ct.StateSpace:
-    """Newport commands to mirror angles ``theta_nh, theta_nv`` [rad/V] (seed 1.4).
+    """Newport commands to mirror angles ``theta_nh, theta_nv`` [rad/V] (ESRF study 1.4).
 
     ``theta_n = gn * wn**2 / (s**2 + 2 zeta wn s + wn**2) * Un``, the datasheet
     fit of ``docs/model.md``; the internal lag is a pure delay (:func:`input_delays_s`).
@@ -226,7 +226,7 @@ def newport_beam_matrix(p: BenchParams) -> np.ndarray:
 
 
 def sercalo(p: BenchParams) -> ct.StateSpace:
-    """Gc: coil currents to the Sercalo's share of the 4QD outputs [V/A] (seed 1.2, 2.3).
+    """Gc: coil currents to the Sercalo's share of the 4QD outputs [V/A] (ESRF study 1.2, 2.3).
 
     Mirror angles (:func:`sercalo_angles`), two reflections and the 4QD
     rotation (:func:`sercalo_beam_matrix`), then the 4QD gain.
@@ -238,10 +238,10 @@ def sercalo(p: BenchParams) -> ct.StateSpace:
 
 
 def newport(p: BenchParams) -> ct.StateSpace:
-    """Gn: Newport commands to the Newport's share of the 4QD outputs [V/V] (seed 1.4, 2.4).
+    """Gn: Newport commands to the Newport's share of the 4QD outputs [V/V] (ESRF study 1.4, 2.4).
 
     Mirror angles (:func:`newport_angles`), beam angle twice the mirror angle
-    (seed 2.1) in the 4QD frame, then the 4QD gain.
+    (ESRF study 2.1) in the 4QD frame, then the 4QD gain.
     """
     m = newport_angles(p)
     c = np.diag(p.quad_diode.gain_v_per_rad.as_array()) @ newport_beam_matrix(p) @ m.C
@@ -250,7 +250,7 @@ def newport(p: BenchParams) -> ct.StateSpace:
 
 
 def quad_diode(p: BenchParams) -> ct.StateSpace:
-    """Gd: beam angle to 4QD output, static diagonal [V/rad] (seed 2.1, Table 2)."""
+    """Gd: beam angle to 4QD output, static diagonal [V/rad] (ESRF study 2.1, Table 2)."""
     return ct.ss([], [], [], np.diag(p.quad_diode.gain_v_per_rad.as_array()),
                  inputs=["Rh", "Rv"], outputs=["Vph", "Vpv"], name="Gd")
 
@@ -283,7 +283,7 @@ def input_delays_s(p: BenchParams) -> dict[str, float]:
     DAC commands reach the plant ``dac_delay_samples`` (plus any fractional
     ``dac_extra_delay_s``) later and are then held for one sample; a
     zero-order hold looks like a delay of half a sample below Nyquist. The
-    Newport adds its internal lag (seed 2.4: 0.5 ms in total).
+    Newport adds its internal lag (ESRF study 2.4: 0.5 ms in total).
     """
     ts = p.converter.ts_s
     dac = (p.converter.dac_delay_samples + 0.5) * ts + p.converter.dac_extra_delay_s
@@ -366,7 +366,7 @@ class PlantModel:
     Attributes
     ----------
     blocks : mapping of str to control.StateSpace
-        ``Gi, Zc, Ga, Gc, Gn, Gd`` with the seed's signal names.
+        ``Gi, Zc, Ga, Gc, Gn, Gd`` with the ESRF study's signal names.
     sys : control.StateSpace
         Delay-free full system, inputs :data:`PLANT_INPUTS`, outputs :data:`PLANT_OUTPUTS`.
     input_delay_s : mapping of str to float
@@ -379,6 +379,11 @@ class PlantModel:
     sys: ct.StateSpace
     input_delay_s: Mapping[str, float]
     source: str
+    # Sub-systems already built, by (outputs, inputs): the loop analyses ask for the same
+    # path thousands of times (root finding, contour counts) and building the python-control
+    # object cost more than evaluating it. The model is frozen, so they never go stale.
+    _subsystems: dict[tuple[tuple[str, ...], tuple[str, ...]], ct.StateSpace] = \
+        dataclasses.field(default_factory=dict, init=False, compare=False, repr=False)
 
     def frequency_response(self, f_hz: np.ndarray, *, outputs: Sequence[str] | None = None,
                            inputs: Sequence[str] | None = None,
@@ -411,12 +416,16 @@ class PlantModel:
                             attrs={"units_frequency": "Hz", "source": self.source})
 
     def subsystem(self, *, outputs: Sequence[str], inputs: Sequence[str]) -> ct.StateSpace:
-        """The delay-free sub-system between named inputs and outputs."""
-        out_idx = [_index(self.sys.output_labels, n, "output") for n in outputs]
-        in_idx = [_index(self.sys.input_labels, n, "input") for n in inputs]
-        return ct.ss(self.sys.A, self.sys.B[:, in_idx], self.sys.C[out_idx, :],
-                     self.sys.D[np.ix_(out_idx, in_idx)], inputs=list(inputs),
-                     outputs=list(outputs), states=self.sys.state_labels)
+        """The delay-free sub-system between named inputs and outputs (built once)."""
+        key = (tuple(outputs), tuple(inputs))
+        if key not in self._subsystems:
+            out_idx = [_index(self.sys.output_labels, n, "output") for n in outputs]
+            in_idx = [_index(self.sys.input_labels, n, "input") for n in inputs]
+            self._subsystems[key] = ct.ss(
+                self.sys.A, self.sys.B[:, in_idx], self.sys.C[out_idx, :],
+                self.sys.D[np.ix_(out_idx, in_idx)], inputs=list(inputs),
+                outputs=list(outputs), states=self.sys.state_labels)
+        return self._subsystems[key]
 
     def dc_gain(self, *, output: str, input: str) -> float:
         """Static gain from ``input`` to ``output`` [output unit / input unit]."""
@@ -470,7 +479,7 @@ def _index(labels: Sequence[str], name: str, kind: str) -> int:
 def assemble_plant(*, gi: ct.StateSpace, zc: ct.StateSpace, ga: ct.StateSpace,
                    gc: ct.StateSpace, gn: ct.StateSpace, gd: ct.StateSpace,
                    input_delay_s: Mapping[str, float], source: str) -> PlantModel:
-    """Connect the blocks as the seed's 2.5 ``connect`` does and return the plant.
+    """Connect the blocks as the ESRF study's 2.5 ``connect`` does and return the plant.
 
     ``Vph = Vpch + Vpnh``, ``Vpv = Vpcv + Vpnv`` and ``[Rh, Rv] = inv(Gd) [Vph, Vpv]``.
     Used for the physical model and for the identified one alike, so the two

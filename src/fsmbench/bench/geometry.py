@@ -1,11 +1,11 @@
-"""Beam path of the Attocube measurement: an exact 2-D ray trace (seed 4.1, 4.2, 11.3).
+"""Beam path of the Attocube measurement: an exact 2-D ray trace (ESRF study 4.1, 4.2, 11.3).
 
-Geometry (seed 4.1, Fig. 33). The Attocube reference surface is the plane
+Geometry (ESRF study 4.1, Fig. 33). The Attocube reference surface is the plane
 ``x = -L`` through ``O = (-L, 0)``. The beam leaves ``O`` along ``+x``, hits
 the Sercalo mirror at ``S = (0, 0)`` (nominally at 45°), goes up to the Newport
 mirror at ``X = (0, H)`` (flat, perpendicular to the beam), comes back to the
 Sercalo and returns to the plane ``x = -L``. With a Sercalo angle error
-``δθc`` (mirror line at ``π/4 - δθc``, the seed's sign) the beam goes
+``δθc`` (mirror line at ``π/4 - δθc``, the ESRF study's sign) the beam goes
 ``O → S → Y → M → T`` and the round-trip path is
 ``|S-O| + |Y-S| + |M-Y| + |T-M|``; the path error is that minus ``2(L + H)``.
 
@@ -14,12 +14,12 @@ The tracer
 Rays are a point and a unit direction (complex numbers), mirrors and the
 Attocube plane are lines through a pivot with a normal, reflection is
 specular; nothing is linearised. At 1e-7 rad the path error is 1e-14 m on a
-0.2 m path, so a plain ``path − 2(L+H)`` in float64 (the seed's MATLAB code)
+0.2 m path, so a plain ``path − 2(L+H)`` in float64 (the ESRF study's MATLAB code)
 is off by ~1e-16 m, 0.5 %. Here everything is *nominal + deviation*: the
 nominal bench is axis-aligned (exact), directions are ``i**q·exp(i·dev)``
 (quarter turns are exact) and each segment's length change is computed from
 small quantities only; what rounding is left (~1e-23 m, in the ±4Hθ terms
-that cancel, below) is < 1e-9 relative over the seed's range.
+that cancel, below) is < 1e-9 relative over the ESRF study's range.
 
 Derivation of the small-angle law (flat Newport, no translation)
 -----------------------------------------------------------------
@@ -51,16 +51,16 @@ and the power series (``sin 2θ = 2θ − 4θ³/3``, ``1/c2 = 1 + 2θ²``,
     k4 = 76·H + 160·L/3        [m/rad⁴]
 
 (k4 from exact rational power-series arithmetic). The quadratic law's relative
-error is ``(k4/k)·θ²`` (6.47·θ² for H = L): 6.5e-8 at the seed's largest angle
-1e-4 rad. The Attocube reports half the round-trip change (seed 4.2), so the
+error is ``(k4/k)·θ²`` (6.47·θ² for H = L): 6.5e-8 at the ESRF study's largest angle
+1e-4 rad. The Attocube reports half the round-trip change (ESRF study 4.2), so the
 *measured* distance error is ``k/2·θ² = (6H + 4L)·θ²``.
 
-For H = L = 0.05 m, ``k = 1.0 m/rad²``: that is why the seed's eq. (8)
+For H = L = 0.05 m, ``k = 1.0 m/rad²``: that is why the ESRF study's eq. (8)
 ``δL = δθc²`` looks right, but the coefficient carries units (m/rad²) and
 depends on H and L, and 1 µrad gives 1e-12 m = 1 pm of path (0.5 pm
-measured), not the 1 nm of the seed's Table 4.
+measured), not the 1 nm of the ESRF study's Table 4.
 
-Relation to seed 11.3 (``ΔL = L/cos α − L ≈ Lα²/2``): that is the excess of
+Relation to ESRF study 11.3 (``ΔL = L/cos α − L ≈ Lα²/2``): that is the excess of
 *one straight leg* of length L tilted by α (:func:`tilted_leg_excess`). In
 the trace the return leg M→T is tilted by exactly α = 4θ and contributes
 ``8Lθ² = Lα²/2``; the two H legs add ``12Hθ²``, not ``H·(2θ)²``, because the
@@ -69,7 +69,7 @@ angle α = 4δθc (what the 4QD sees), the measured error is
 ``(6H + 4L)/16 · α²`` = 0.031 α² for H = L = 0.05 m, against 0.05 α² from
 11.3 with L = 0.1 m.
 
-Perpendicular motion (seed 4.2): translating a mirror by δd along its
+Perpendicular motion (ESRF study 4.2): translating a mirror by δd along its
 reflecting-side normal shortens each reflection's path by ``2δd·cos(i)``
 (i the incidence angle). The Sercalo is hit twice at 45°: ``−2√2·δd`` round
 trip (``−√2·δd`` measured); the Newport once at normal incidence: ``−2δd``
@@ -111,7 +111,7 @@ _QUARTER_TURNS = (1.0 + 0.0j, 1.0j, -1.0 + 0.0j, -1.0j)
 
 
 def seed_theta_range() -> FloatArray:
-    """The seed's Sercalo angle-error range ``logspace(-7, -4, 100)`` [rad], shape (100,)."""
+    """The ESRF study's Sercalo angle-error range ``logspace(-7, -4, 100)`` [rad], shape (100,)."""
     return np.logspace(-7.0, -4.0, 100)
 
 
@@ -224,7 +224,7 @@ def _reflect(ray: _Ray, line: _Line) -> _Ray:
 
 @dataclass(frozen=True)
 class BeamPath:
-    """Points and length of the Attocube beam path for each input (seed 4.1, Fig. 33).
+    """Points and length of the Attocube beam path for each input (ESRF study 4.1, Fig. 33).
 
     Arrays have the broadcast shape ``(...)`` of the inputs; points have shape
     ``(..., 2)`` holding (x, y) in m. ``path_error_m`` is the round-trip change;
@@ -254,7 +254,7 @@ class BeamPath:
 
     @property
     def measured_error_m(self) -> FloatArray:
-        """Distance error the Attocube reports: half the round-trip change [m] (seed 4.2)."""
+        """Distance error the Attocube reports: half the round-trip change [m] (ESRF study 4.2)."""
         return _frozen(0.5 * self.path_error_m)
 
     def to_json(self) -> dict[str, object]:
@@ -279,7 +279,7 @@ def trace_bench(
     ----------
     theta_rad : array_like, shape (...)
         Sercalo angle error δθc [rad] about S; positive turns the mirror line
-        to ``π/4 − δθc`` (the seed's sign: Y moves to ``x > 0``).
+        to ``π/4 − δθc`` (the ESRF study's sign: Y moves to ``x > 0``).
     h_m, l_m : float
         H (Sercalo to Newport) and L (Attocube plane to Sercalo) [m].
     newport_angle_rad : array_like, broadcastable
@@ -332,17 +332,18 @@ def trace_bench(
 
 
 def seed_beam_path(theta_rad: ArrayLike, *, h_m: float, l_m: float) -> BeamPath:
-    """The seed's closed-form points Y, M, T (4.1 MATLAB code), for comparison.
+    """The ESRF study's closed-form points Y, M, T (4.1 MATLAB code), for comparison.
 
-    Same formulas and the same ``norm`` sum as the seed; ``theta_rad`` must be
-    non-zero (the seed divides by ``tan(2θ)``). The return angle is the seed's
+    Same formulas and the same ``norm`` sum as the ESRF study; ``theta_rad`` must be
+    non-zero (the ESRF study divides by ``tan(2θ)``). The return angle is the ESRF study's
     assumed ``4θ``.
     """
     h = _check_length("h_m", h_m)
     length = _check_length("l_m", l_m)
     th = np.array(theta_rad, dtype=float)
     if np.any(th == 0.0):
-        raise ValueError("seed_beam_path: theta_rad must be non-zero (the seed divides by tan 2θ)")
+        raise ValueError("seed_beam_path: theta_rad must be non-zero (the ESRF study divides by "
+                         "tan 2θ)")
     one = np.ones_like(th)
     o = np.stack([-length * one, 0.0 * one], axis=-1)
     s = np.zeros_like(o)
@@ -383,7 +384,7 @@ def closed_form_path_error(theta_rad: ArrayLike, *, h_m: float, l_m: float) -> F
 
 
 def tilted_leg_excess(alpha_rad: ArrayLike, *, length_m: float) -> FloatArray:
-    """Seed 11.3 law, exact: ``L/cos α − L`` [m] for a straight leg tilted by α [rad]."""
+    """ESRF study 11.3 law, exact: ``L/cos α − L`` [m] for a straight leg tilted by α [rad]."""
     length = _check_length("length_m", length_m)
     a = np.asarray(alpha_rad, dtype=float)
     return np.asarray(2 * length * np.sin(a / 2) ** 2 / np.cos(a), dtype=float)
@@ -427,7 +428,7 @@ def small_angle_law(*, h_m: float, l_m: float) -> SmallAngleLaw:
 
 @dataclass(frozen=True)
 class QuadraticLawFit:
-    """Least-squares fit ``ΔP = k_fit·θ²`` to the ray trace (seed Fig. 34)."""
+    """Least-squares fit ``ΔP = k_fit·θ²`` to the ray trace (ESRF study Fig. 34)."""
 
     h_m: float
     l_m: float
@@ -453,7 +454,7 @@ class QuadraticLawFit:
 def fit_quadratic_law(
     theta_rad: ArrayLike | None = None, *, h_m: float, l_m: float
 ) -> QuadraticLawFit:
-    """Fit ``ΔP = k·θ²`` to the ray trace over ``theta_rad`` (default: the seed's range).
+    """Fit ``ΔP = k·θ²`` to the ray trace over ``theta_rad`` (default: the ESRF study's range).
 
     Each point is weighted by ``1/θ²`` (a fit of ``ΔP/θ²``), i.e. equal
     relative weight across the four decades; the trace is exact enough for it.
@@ -477,7 +478,7 @@ def fit_quadratic_law(
 
 @dataclass(frozen=True)
 class AngleErrorTable:
-    """Seed Table 4 recomputed: path and measured error for given Sercalo angle errors."""
+    """ESRF study Table 4 recomputed: path and measured error for given Sercalo angle errors."""
 
     h_m: float
     l_m: float
@@ -494,7 +495,7 @@ class AngleErrorTable:
 def angle_error_table(
     theta_rad: ArrayLike = (1e-6, 5e-6, 10e-6), *, h_m: float, l_m: float
 ) -> AngleErrorTable:
-    """Seed Table 4 from the ray trace; default angles are the seed's 1, 5, 10 µrad.
+    """ESRF study Table 4 from the ray trace; default angles are the ESRF study's 1, 5, 10 µrad.
 
     ``theta_rad`` : array_like, shape (n,) [rad]. Errors are in m.
     """
@@ -509,7 +510,7 @@ def angle_error_table(
 
 @dataclass(frozen=True)
 class PerpendicularMotion:
-    """Path change for a mirror translated along its normal (seed 4.2, eqs. 9–10)."""
+    """Path change for a mirror translated along its normal (ESRF study 4.2, eqs. 9–10)."""
 
     mirror: str
     shift_m: FloatArray
@@ -526,7 +527,7 @@ class PerpendicularMotion:
 
     @property
     def path_per_shift(self) -> float:
-        """Round-trip path change per unit translation, ``−2·Σ cos(i)`` (seed: 2)."""
+        """Round-trip path change per unit translation, ``−2·Σ cos(i)`` (ESRF study: 2)."""
         return -2.0 * float(sum(self.cos_incidence))
 
     def to_json(self) -> dict[str, object]:
@@ -583,7 +584,7 @@ def perpendicular_motion(
 
 @dataclass(frozen=True)
 class BeamPathFigure:
-    """Polylines for drawing the beam path (seed Fig. 35), all (x, y) in m."""
+    """Polylines for drawing the beam path (ESRF study Fig. 35), all (x, y) in m."""
 
     theta_rad: float
     labels: tuple[str, ...]
@@ -601,7 +602,7 @@ class BeamPathFigure:
 def beam_path_figure_data(
     theta_rad: float = 2 * np.pi / 180, *, h_m: float, l_m: float
 ) -> BeamPathFigure:
-    """Points to plot the traced path at a large angle (seed Fig. 35 uses θ = 2°).
+    """Points to plot the traced path at a large angle (ESRF study Fig. 35 uses θ = 2°).
 
     Returns the beam polyline O, S, Y, M, T (shape (5, 2)), the nominal
     O, S, X, S, O, and segments (shape (2, 2)) for the tilted Sercalo, the

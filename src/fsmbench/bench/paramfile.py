@@ -260,7 +260,7 @@ def check_ranges(p: BenchParams, where: str, origin: str) -> None:
                           f"number from 1 to {BITS_MAX} (the converters' resolution)")
     if conv.fs_hz > FS_MAX_HZ:
         raise ParamsError(f"{origin}: '{where}.converter.fs_hz' = {conv.fs_hz:g} Hz is above "
-                          f"{FS_MAX_HZ:g} Hz, 100x the seed's real-time target")
+                          f"{FS_MAX_HZ:g} Hz, 100x the ESRF study's real-time target")
     if not 0 <= conv.dac_delay_samples <= DELAY_MAX_SAMPLES:
         raise ParamsError(f"{origin}: '{where}.converter.dac_delay_samples' = "
                           f"{conv.dac_delay_samples} must be from 0 to {DELAY_MAX_SAMPLES}")

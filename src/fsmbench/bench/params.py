@@ -3,16 +3,16 @@
 Three views of the bench are kept apart (see ``docs/model.md``):
 
 ``datasheet``
-    Numbers as the vendors document them (seed Table 1, Figure 4). They are
+    Numbers as the vendors document them (ESRF study Table 1, Figure 4). They are
     not used by the model directly; ``docs/model.md`` derives the nominal
     model parameters from them.
 ``nominal``
     The model parameters an engineer would use before identifying anything:
-    datasheet derivations, measured component values and the seed's own
-    identified values where the seed gives them (Table 2).
+    datasheet derivations, measured component values and the ESRF study's own
+    identified values where the ESRF study gives them (Table 2).
 ``true``
     What the digital twin simulates. It differs from ``nominal`` where the
-    real bench did (the seed's section 2.2 finds a current-amplifier gain far
+    real bench did (the ESRF study's section 2.2 finds a current-amplifier gain far
     from ``1/(R+Rc)``) and, on purpose, by a few per cent elsewhere, so that an
     identification that merely echoes the nominal values fails its tests.
 
@@ -72,7 +72,7 @@ __all__ = [
 
 
 def _p(unit: str, source: str, doc: str, default: Any = dataclasses.MISSING) -> Any:
-    """A parameter field: its unit, the seed section it comes from and what it is.
+    """A parameter field: its unit, the ESRF study section it comes from and what it is.
 
     A ``default`` makes the key optional in a bench file: the real-bench
     features (docs/model.md) default to "off", so older files keep their meaning.
@@ -88,41 +88,42 @@ _OFF = PerAxis(h=0.0, v=0.0)
 
 @dataclass(frozen=True)
 class SercaloDatasheet:
-    """Sercalo mirror as documented by its vendor (seed Table 1)."""
+    """Sercalo mirror as documented by its vendor (ESRF study Table 1)."""
 
-    max_stroke_deg: PerAxis = _p("deg", "seed 1.2 Table 1", "maximum mechanical stroke")
-    resonance_hz: PerAxis = _p("Hz", "seed 1.2 Table 1", "resonance frequency")
+    max_stroke_deg: PerAxis = _p("deg", "ESRF study 1.2 Table 1", "maximum mechanical stroke")
+    resonance_hz: PerAxis = _p("Hz", "ESRF study 1.2 Table 1", "resonance frequency")
     dc_gain_ma_per_deg: PerAxis = _p(
-        "mA/deg", "seed 1.2 Table 1", "coil current per mirror angle at DC"
+        "mA/deg", "ESRF study 1.2 Table 1", "coil current per mirror angle at DC"
     )
     gain_at_resonance_deg_per_v: PerAxis = _p(
-        "deg/V", "seed 1.2 Table 1", "mirror angle per volt at the resonance"
+        "deg/V", "ESRF study 1.2 Table 1", "mirror angle per volt at the resonance"
     )
-    r_coil_ohm: float = _p("Ohm", "seed 1.2 Table 1", "coil resistance (AX1; AX2 is blank)")
+    r_coil_ohm: float = _p("Ohm", "ESRF study 1.2 Table 1", "coil resistance (AX1; AX2 is blank)")
 
 
 @dataclass(frozen=True)
 class NewportDatasheet:
-    """Newport FSM-300 as documented by its vendor (seed Figure 4)."""
+    """Newport FSM-300 as documented by its vendor (ESRF study Figure 4)."""
 
-    range_rad: float = _p("rad", "seed Fig. 4", "mechanical angular range for the full command")
-    range_v: float = _p("V", "seed Fig. 4", "command giving the full angular range")
+    range_rad: float = _p("rad", "ESRF study Fig. 4", "mechanical angular range for the full "
+                                                      "command")
+    range_v: float = _p("V", "ESRF study Fig. 4", "command giving the full angular range")
     amplitude_bandwidth_hz: float = _p(
-        "Hz", "seed Fig. 4", "closed-loop amplitude bandwidth (-3 dB, 10 mV)"
+        "Hz", "ESRF study Fig. 4", "closed-loop amplitude bandwidth (-3 dB, 10 mV)"
     )
-    phase_bandwidth_hz: float = _p("Hz", "seed Fig. 4", "closed-loop phase bandwidth")
+    phase_bandwidth_hz: float = _p("Hz", "ESRF study Fig. 4", "closed-loop phase bandwidth")
     phase_bandwidth_lag_deg: float = _p(
-        "deg", "seed Fig. 4", "phase lag defining the phase bandwidth"
+        "deg", "ESRF study Fig. 4", "phase lag defining the phase bandwidth"
     )
-    peaking_max_db: float = _p("dB", "seed Fig. 4", "maximum response peaking")
+    peaking_max_db: float = _p("dB", "ESRF study Fig. 4", "maximum response peaking")
     noise_equivalent_angle_rad: float = _p(
-        "rad rms", "seed Fig. 4", "noise-equivalent angle, 1 Hz to 10 kHz, mechanical"
+        "rad rms", "ESRF study Fig. 4", "noise-equivalent angle, 1 Hz to 10 kHz, mechanical"
     )
     local_sensor_resolution_rad: float = _p(
-        "rad", "seed Fig. 4", "resolution of the local position sensor"
+        "rad", "ESRF study Fig. 4", "resolution of the local position sensor"
     )
-    repeatability_rad: float = _p("rad rms", "seed Fig. 4", "repeatability, mechanical")
-    thermal_drift_rad_per_k: float = _p("rad/K", "seed Fig. 4", "mirror thermal drift")
+    repeatability_rad: float = _p("rad rms", "ESRF study Fig. 4", "repeatability, mechanical")
+    thermal_drift_rad_per_k: float = _p("rad/K", "ESRF study Fig. 4", "mirror thermal drift")
 
 
 @dataclass(frozen=True)
@@ -138,14 +139,14 @@ class Datasheet:
 
 @dataclass(frozen=True)
 class ConverterParams:
-    """ADC and DAC of the real-time target (seed 1.6 and 4.5a)."""
+    """ADC and DAC of the real-time target (ESRF study 1.6 and 4.5a)."""
 
-    fs_hz: float = _p("Hz", "seed 1.6", "sampling frequency of ADC, DAC and controller")
-    range_v: float = _p("V", "seed 1.6", "full span of ADC and DAC (-10 V to +10 V)")
-    bits: int = _p("bit", "seed 1.6", "resolution of ADC and DAC")
+    fs_hz: float = _p("Hz", "ESRF study 1.6", "sampling frequency of ADC, DAC and controller")
+    range_v: float = _p("V", "ESRF study 1.6", "full span of ADC and DAC (-10 V to +10 V)")
+    bits: int = _p("bit", "ESRF study 1.6", "resolution of ADC and DAC")
     dac_delay_samples: int = _p(
         "sample",
-        "seed 2.3d",
+        "ESRF study 2.3d",
         "samples between a command being computed and the DAC applying it",
     )
     dac_extra_delay_s: float = _p(
@@ -166,21 +167,22 @@ class ConverterParams:
 
     @property
     def quantisation_psd_v2_per_hz(self) -> float:
-        """One-sided-equivalent PSD used by the seed, q**2 / (12 fs) [V**2/Hz] (seed eq. 12)."""
+        """One-sided-equivalent PSD, q**2 / (12 fs) [V**2/Hz] (ESRF study eq. 12)."""
         return self.lsb_v**2 / (12.0 * self.fs_hz)
 
 
 @dataclass(frozen=True)
 class SercaloParams:
-    """Sercalo voice-coil mirror: one mass-spring-damper per axis (seed 1.2)."""
+    """Sercalo voice-coil mirror: one mass-spring-damper per axis (ESRF study 1.2)."""
 
-    resonance_hz: PerAxis = _p("Hz", "seed 1.2, 9.2", "undamped natural frequency of each axis")
-    damping_ratio: PerAxis = _p("1", "seed 1.2", "modal damping ratio of each axis")
+    resonance_hz: PerAxis = _p("Hz", "ESRF study 1.2, 9.2", "undamped natural frequency of each "
+                                                            "axis")
+    damping_ratio: PerAxis = _p("1", "ESRF study 1.2", "modal damping ratio of each axis")
     dc_gain_rad_per_a: PerAxis = _p(
-        "rad/A", "seed 1.2 Table 1", "mechanical mirror angle per coil current at DC"
+        "rad/A", "ESRF study 1.2 Table 1", "mechanical mirror angle per coil current at DC"
     )
-    r_coil_ohm: PerAxis = _p("Ohm", "seed 1.2, 2.2", "coil DC resistance Rc (measured)")
-    l_coil_h: PerAxis = _p("H", "seed 1.2, 2.2", "coil inductance Lc (measured)")
+    r_coil_ohm: PerAxis = _p("Ohm", "ESRF study 1.2, 2.2", "coil DC resistance Rc (measured)")
+    l_coil_h: PerAxis = _p("H", "ESRF study 1.2, 2.2", "coil inductance Lc (measured)")
     coupling_h_to_v: float = _p(
         "1", "fsmbench", "torque on the v axis per h-coil current, relative to the v coil"
     )
@@ -189,10 +191,10 @@ class SercaloParams:
     )
     beam_angle_per_mirror_angle: PerAxis = _p(
         "rad/rad",
-        "seed 4.1, 4.5c",
+        "ESRF study 4.1, 4.5c",
         "beam angle at the 4QD per Sercalo mirror angle (two reflections: 4, signed)",
     )
-    max_stroke_rad: float = _p("rad", "seed 1.2 Table 1", "maximum mechanical stroke")
+    max_stroke_rad: float = _p("rad", "ESRF study 1.2 Table 1", "maximum mechanical stroke")
     mode_shape_angle_rad: PerAxis = _p(
         "rad", "fsmbench (real bench)",
         "rotation of each axis's mode shape in the mirror plane (coupling through the modes)",
@@ -216,34 +218,34 @@ class SercaloParams:
 
 @dataclass(frozen=True)
 class CurrentAmplifierParams:
-    """Buffer and series resistor that drive the Sercalo coils (seed 2.2, Fig. 11)."""
+    """Buffer and series resistor that drive the Sercalo coils (ESRF study 2.2, Fig. 11)."""
 
-    r_ohm: PerAxis = _p("Ohm", "seed 2.2", "series resistor R that sets the gain")
+    r_ohm: PerAxis = _p("Ohm", "ESRF study 2.2", "series resistor R that sets the gain")
     r_buffer_ohm: PerAxis = _p(
         "Ohm",
-        "seed 2.2",
+        "ESRF study 2.2",
         "buffer output and wiring resistance in series with R and Rc (zero in the schematic)",
     )
 
 
 @dataclass(frozen=True)
 class VoltageAmplifierParams:
-    """Amplifier of the voltage across the Sercalo coil (seed 2.2)."""
+    """Amplifier of the voltage across the Sercalo coil (ESRF study 2.2)."""
 
-    gain: float = _p("V/V", "seed 2.2", "DC gain Ga0 (60 dB)")
-    cutoff_hz: float = _p("Hz", "seed 2.2", "first-order cut-off frequency")
+    gain: float = _p("V/V", "ESRF study 2.2", "DC gain Ga0 (60 dB)")
+    cutoff_hz: float = _p("Hz", "ESRF study 2.2", "first-order cut-off frequency")
     noise_rms_v: float = _p("V rms", "fsmbench", "white noise at the amplifier output")
 
 
 @dataclass(frozen=True)
 class NewportParams:
-    """Newport FSM-300 used as a disturbance generator (seed 1.4, 2.1, 2.4, 4.5)."""
+    """Newport FSM-300 used as a disturbance generator (ESRF study 1.4, 2.1, 2.4, 4.5)."""
 
     gain_rad_per_v: PerAxis = _p(
-        "rad/V", "seed 1.4, Fig. 4", "mechanical mirror angle per command volt"
+        "rad/V", "ESRF study 1.4, Fig. 4", "mechanical mirror angle per command volt"
     )
     metrology_gain_rad_per_v: float = _p(
-        "rad/V", "seed 2.1 (gn0)", "mirror angle per volt of the metrology outputs Vnh, Vnv"
+        "rad/V", "ESRF study 2.1 (gn0)", "mirror angle per volt of the metrology outputs Vnh, Vnv"
     )
     natural_freq_hz: float = _p(
         "Hz", "docs/model.md from Fig. 4", "natural frequency of the second-order response"
@@ -253,33 +255,34 @@ class NewportParams:
     )
     internal_delay_s: float = _p(
         "s",
-        "seed 2.4 and Fig. 4",
-        "transport lag inside the FSM electronics (path total with DAC and hold: seed's 0.5 ms)",
+        "ESRF study 2.4 and Fig. 4",
+        "transport lag inside the FSM electronics (path total with DAC and hold: ESRF study's 0.5 "
+        "ms)",
     )
     beam_angle_per_mirror_angle: float = _p(
-        "rad/rad", "seed 2.1", "beam angle at the 4QD per Newport mirror angle"
+        "rad/rad", "ESRF study 2.1", "beam angle at the 4QD per Newport mirror angle"
     )
     angle_noise_rms_rad: float = _p(
-        "rad rms", "seed Fig. 4, 4.5a", "mechanical angle noise (noise-equivalent angle)"
+        "rad rms", "ESRF study Fig. 4, 4.5a", "mechanical angle noise (noise-equivalent angle)"
     )
     metrology_noise_rms_rad: float = _p(
-        "rad rms", "seed Fig. 4", "noise of the local position sensor behind Vnh, Vnv"
+        "rad rms", "ESRF study Fig. 4", "noise of the local position sensor behind Vnh, Vnv"
     )
-    concave_radius_m: float = _p("m", "seed 4.5a", "radius of the concave Newport mirror")
+    concave_radius_m: float = _p("m", "ESRF study 4.5a", "radius of the concave Newport mirror")
 
 
 @dataclass(frozen=True)
 class QuadDiodeParams:
-    """Four-quadrant photodiode and its amplifier (seed 1.5, 2.1 Table 2, 4.5b)."""
+    """Four-quadrant photodiode and its amplifier (ESRF study 1.5, 2.1 Table 2, 4.5b)."""
 
     gain_v_per_rad: PerAxis = _p(
-        "V/rad", "seed 2.1 Table 2", "4QD output voltage per beam angle (signed)"
+        "V/rad", "ESRF study 2.1 Table 2", "4QD output voltage per beam angle (signed)"
     )
     rotation_rad: float = _p(
         "rad", "fsmbench", "rotation of the 4QD axes relative to the mirror axes"
     )
     noise_rms_v: PerAxis = _p(
-        "V rms", "seed 4.5b", "white electronic noise of the 4QD outputs Vph, Vpv"
+        "V rms", "ESRF study 4.5b", "white electronic noise of the 4QD outputs Vph, Vpv"
     )
     bandwidth_hz: float = _p(
         "Hz", "fsmbench (real bench)", "-3 dB bandwidth of the 4QD amplifier (0: unlimited)", 0.0,
@@ -324,7 +327,7 @@ class QuadDiodeParams:
 
 @dataclass(frozen=True)
 class AttocubeParams:
-    """Attocube interferometer measuring the beam path (seed 2, 3, 4)."""
+    """Attocube interferometer measuring the beam path (ESRF study 2, 3, 4)."""
 
     noise_rms_m: float = _p("m rms", "fsmbench", "white noise of the displacement output Va")
     resolution_m: float = _p("m", "fsmbench", "output resolution of Va")
@@ -333,78 +336,80 @@ class AttocubeParams:
 
 @dataclass(frozen=True)
 class GeometryParams:
-    """Beam-path geometry (seed 4.1, 4.2, 4.4, 11.3)."""
+    """Beam-path geometry (ESRF study 4.1, 4.2, 4.4, 11.3)."""
 
-    h_m: float = _p("m", "seed 4.1", "distance Sercalo to Newport (H)")
-    l_m: float = _p("m", "seed 4.1", "distance Attocube to Sercalo (L)")
+    h_m: float = _p("m", "ESRF study 4.1", "distance Sercalo to Newport (H)")
+    l_m: float = _p("m", "ESRF study 4.1", "distance Attocube to Sercalo (L)")
     sercalo_spot_offset_m: float = _p(
-        "m", "seed 4.2", "beam spot offset from the Sercalo rotation axis (piston per angle)"
+        "m", "ESRF study 4.2", "beam spot offset from the Sercalo rotation axis (piston per angle)"
     )
     newport_spot_offset_m: float = _p(
-        "m", "seed 4.2", "beam spot offset from the Newport rotation axis (piston per angle)"
+        "m", "ESRF study 4.2", "beam spot offset from the Newport rotation axis (piston per angle)"
     )
-    frame_length_m: float = _p("m", "seed 4.4", "metrology-frame length Attocube head to target")
+    frame_length_m: float = _p("m", "ESRF study 4.4", "metrology-frame length Attocube head to "
+                                                      "target")
     frame_expansion_per_k: float = _p(
-        "1/K", "seed 4.4", "linear thermal expansion of the frame (aluminium)"
+        "1/K", "ESRF study 4.4", "linear thermal expansion of the frame (aluminium)"
     )
 
     @property
     def measured_distance_m(self) -> float:
-        """One-way distance the Attocube measures, L + H [m] (seed 4.3: 100 mm)."""
+        """One-way distance the Attocube measures, L + H [m] (ESRF study 4.3: 100 mm)."""
         return self.l_m + self.h_m
 
 
 @dataclass(frozen=True)
 class EnvironmentParams:
-    """Air and temperature disturbances of the huddle-test configurations (seed 3, 4.3, 4.4).
+    """Air and temperature disturbances of the huddle-test configurations (ESRF study 3, 4.3, 4.4).
 
     Each drift is a stationary first-order Gauss-Markov process with the given
     standard deviation and correlation time, so its rms is well defined.
     """
 
-    room_temperature_rms_k: float = _p("K", "seed 4.3", "room air temperature drift")
+    room_temperature_rms_k: float = _p("K", "ESRF study 4.3", "room air temperature drift")
     room_temperature_tau_s: float = _p("s", "fsmbench", "correlation time of the room drift")
-    room_pressure_rms_pa: float = _p("Pa", "seed 4.3", "room pressure drift")
+    room_pressure_rms_pa: float = _p("Pa", "ESRF study 4.3", "room pressure drift")
     room_pressure_tau_s: float = _p("s", "fsmbench", "correlation time of the pressure drift")
-    room_humidity_rms_pct: float = _p("%RH", "seed 4.3", "room relative-humidity drift")
+    room_humidity_rms_pct: float = _p("%RH", "ESRF study 4.3", "room relative-humidity drift")
     room_humidity_tau_s: float = _p("s", "fsmbench", "correlation time of the humidity drift")
     beam_path_temperature_rms_k: float = _p(
-        "K", "seed 3, 4.3", "local air-temperature fluctuation along the beam (convection)"
+        "K", "ESRF study 3, 4.3", "local air-temperature fluctuation along the beam (convection)"
     )
     beam_path_temperature_tau_s: float = _p(
         "s", "fsmbench", "correlation time of the local fluctuation"
     )
     shielding_attenuation: float = _p(
-        "1", "seed 3 Table 3", "factor by which the aluminium shield reduces the local fluctuation"
+        "1", "ESRF study 3 Table 3", "factor by which the aluminium shield reduces the local "
+                                     "fluctuation"
     )
     ecu_temperature_error_k: float = _p(
-        "K", "seed 4.3", "error of the compensation unit's temperature reading"
+        "K", "ESRF study 4.3", "error of the compensation unit's temperature reading"
     )
     ecu_pressure_error_pa: float = _p(
-        "Pa", "seed 4.3", "error of the compensation unit's pressure reading"
+        "Pa", "ESRF study 4.3", "error of the compensation unit's pressure reading"
     )
     ecu_humidity_error_pct: float = _p(
-        "%RH", "seed 4.3", "error of the compensation unit's humidity reading"
+        "%RH", "ESRF study 4.3", "error of the compensation unit's humidity reading"
     )
     ecu_error_tau_s: float = _p("s", "fsmbench", "correlation time of the sensor errors")
     frame_time_constant_s: float = _p(
-        "s", "seed 4.4", "thermal time constant of the metrology frame"
+        "s", "ESRF study 4.4", "thermal time constant of the metrology frame"
     )
-    reference_temperature_c: float = _p("degC", "seed 4.3", "mean air temperature")
-    reference_pressure_pa: float = _p("Pa", "seed 4.3", "mean air pressure")
-    reference_humidity_pct: float = _p("%RH", "seed 4.3", "mean relative humidity")
+    reference_temperature_c: float = _p("degC", "ESRF study 4.3", "mean air temperature")
+    reference_pressure_pa: float = _p("Pa", "ESRF study 4.3", "mean air pressure")
+    reference_humidity_pct: float = _p("%RH", "ESRF study 4.3", "mean relative humidity")
 
 
 @dataclass(frozen=True)
 class ScalingParams:
-    """Plant scaling and control objective (seed Table 5 and 6.1)."""
+    """Plant scaling and control objective (ESRF study Table 5 and 6.1)."""
 
-    un_max_v: float = _p("V", "seed Table 5", "expected Newport perturbation command")
-    uc_max_v: float = _p("V", "seed Table 5", "maximum Sercalo command")
-    error_max_rad: float = _p("rad", "seed Table 5, 6.1", "maximum wanted beam-angle error")
-    noise_rad: float = _p("rad", "seed Table 5", "measured beam-angle noise")
-    stroke_max_rad: float = _p("rad", "seed 6.1", "maximum expected beam stroke at f0")
-    objective_freq_hz: float = _p("Hz", "seed 6.1", "frequency of the stroke, f0")
+    un_max_v: float = _p("V", "ESRF study Table 5", "expected Newport perturbation command")
+    uc_max_v: float = _p("V", "ESRF study Table 5", "maximum Sercalo command")
+    error_max_rad: float = _p("rad", "ESRF study Table 5, 6.1", "maximum wanted beam-angle error")
+    noise_rad: float = _p("rad", "ESRF study Table 5", "measured beam-angle noise")
+    stroke_max_rad: float = _p("rad", "ESRF study 6.1", "maximum expected beam stroke at f0")
+    objective_freq_hz: float = _p("Hz", "ESRF study 6.1", "frequency of the stroke, f0")
 
 
 @dataclass(frozen=True)
@@ -423,7 +428,7 @@ class BenchParams:
     scaling: ScalingParams
 
     def current_amp_gain_a_per_v(self) -> PerAxis:
-        """Static current-amplifier gain 1/(R + R_buffer + Rc) [A/V] (seed 2.2 eq. 3)."""
+        """Static current-amplifier gain 1/(R + R_buffer + Rc) [A/V] (ESRF study 2.2 eq. 3)."""
         r_total = (
             self.current_amplifier.r_ohm.as_array()
             + self.current_amplifier.r_buffer_ohm.as_array()
@@ -507,7 +512,7 @@ PACKAGED_BENCHES = ("default_bench.toml", "real_bench.toml")
 
 
 def default_bench() -> Bench:
-    """The Sercalo test bench of the seed, from the packaged ``default_bench.toml``."""
+    """The Sercalo test bench of the ESRF study, from the packaged ``default_bench.toml``."""
     return _bench_from_mapping(packaged_mapping("default_bench.toml"), "default_bench.toml")
 
 

@@ -1,4 +1,4 @@
-"""Noise, error budget, huddle tests and repeatability (seed sections 3, 4 and 11).
+"""Noise, error budget, huddle tests and repeatability (ESRF study sections 3, 4 and 11).
 
 Entry point: :func:`budget_study` (everything on the recordings present). The
 numerics draw nothing: the report's figures are built in

@@ -1,8 +1,8 @@
-"""Air index (seed 4.3) and metrology-frame expansion (4.4) as distance errors.
+"""Air index (ESRF study 4.3) and metrology-frame expansion (4.4) as distance errors.
 
 Two views of each:
 
-* the seed's *variations* (ΔT = 1 K, ΔP = 1 hPa, Δ10 %RH without the
+* the ESRF study's *variations* (ΔT = 1 K, ΔP = 1 hPa, Δ10 %RH without the
   compensation unit; ±0.1 K, ±1 hPa, ±2 %RH with it; eq. (11)) through the
   Ciddor sensitivities of :mod:`fsmbench.bench.air` over the measured
   distance ``D = L + H`` (0.1 m);
@@ -58,7 +58,7 @@ def ou_window_factor(window_s: float | None, tau_s: float) -> float:
 
 @dataclass(frozen=True)
 class AirVariation:
-    """One row of the seed's 4.3 tables: a change, our distance error, the seed's [m]."""
+    """One row of the ESRF study's 4.3 tables: a change, our distance error, the study's [m]."""
 
     label: str
     delta_t_k: float
@@ -82,7 +82,7 @@ class DriftTerm:
 
 @dataclass(frozen=True)
 class AirBudget:
-    """Seed 4.3 recomputed, and the model's air term for one configuration."""
+    """ESRF study 4.3 recomputed, and the model's air term for one configuration."""
 
     path_m: float
     sensitivity: AirSensitivity
@@ -140,14 +140,14 @@ def air_drift_terms(params: BenchParams, sens: AirSensitivity, *, compensation_u
 
 def air_budget(params: BenchParams, *, compensation_unit: bool = True, shielding: bool = True,
                window_s: float | None = 100.0) -> AirBudget:
-    """Seed 4.3 with Ciddor sensitivities, and the model's air term.
+    """ESRF study 4.3 with Ciddor sensitivities, and the model's air term.
 
     Parameters
     ----------
     params : BenchParams
         Environment (reference conditions, drifts), Attocube wavelength, geometry.
     compensation_unit, shielding : bool
-        Configuration (seed Table 3) of the model term.
+        Configuration (ESRF study Table 3) of the model term.
     window_s : float or None
         Record length T [s] over which the mean is removed; None: stationary.
     """
@@ -182,7 +182,7 @@ def air_budget(params: BenchParams, *, compensation_unit: bool = True, shielding
 
 @dataclass(frozen=True)
 class FrameBudget:
-    """Seed 4.4 recomputed, and the model's frame term (room temperature through the frame lag)."""
+    """ESRF study 4.4 recomputed, and the frame term (room temperature through the frame lag)."""
 
     frame_length_m: float
     expansion_per_k: float

@@ -1,13 +1,13 @@
-"""Huddle tests (seed 3): noise of the 4QD and of the Attocube in the five configurations.
+"""Huddle tests (ESRF study 3): noise of the 4QD and of the Attocube in the five configurations.
 
-Processing as the seed's 3.2–3.5: samples with ``t < t0`` (1 s) are removed,
-the first ``tend·fs`` (100 s) kept; the mean is removed (the seed removes it
+Processing as the ESRF study's 3.2–3.5: samples with ``t < t0`` (1 s) are removed,
+the first ``tend·fs`` (100 s) kept; the mean is removed (the ESRF study removes it
 from ``Va`` only; removing it from ``Vph``, ``Vpv`` changes nothing but the
 0 Hz and first Welch bins); ``Va`` is low-passed at 50 Hz
 (:func:`~fsmbench.budget.spectra.first_order_lowpass`); PSDs with
 ``pwelch(x, hanning(ceil(1*fs)), [], [], fs)``.
 
-The seed's conclusion (3.6) is a comparison of configurations (Table 3). It
+The ESRF study's conclusion (3.6) is a comparison of configurations (Table 3). It
 is computed here as rms ratios in stated bands of ``Va``:
 
 * ``drift``: the rms of the 1 s means (content below ~0.5 Hz);
@@ -29,8 +29,8 @@ from __future__ import annotations
 import math
 import re
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, fields
-from typing import Any
+from dataclasses import dataclass, field, fields
+from typing import Any, Final
 
 import control as ct
 import numpy as np
@@ -49,6 +49,7 @@ from fsmbench.jsonutil import hv
 
 __all__ = [
     "HUDDLE_CONFIGS",
+    "PRACTICAL_CHANGE",
     "BandRms",
     "ConfigComparison",
     "DacNoiseEstimate",
@@ -88,27 +89,28 @@ def band_id(name: str) -> str:
 
 
 def huddle_number(name: str) -> int:
-    """Test number of ``data_huddle_test_<n>`` (1–5, seed Table 3); ValueError otherwise."""
+    """Test number of ``data_huddle_test_<n>`` (1–5, ESRF study Table 3); ValueError otherwise."""
     m = _NAME.match(name)
     if m is None or int(m.group(1)) not in HUDDLE_CONFIGS:
-        raise ValueError(f"{name!r} is not a huddle test of seed Table 3 (data_huddle_test_1..5)")
+        raise ValueError(f"{name!r} is not a huddle test of ESRF study Table 3 "
+                         "(data_huddle_test_1..5)")
     return int(m.group(1))
 
 
 def trim_huddle(ds: xr.Dataset, *, name: str, t0_s: float = 1.0,
                 duration_s: float | None = None) -> dict[str, FloatArray]:
-    """The seed's 3.2 trimming: drop ``t < t0``, restart t at 0, keep ``tend·fs`` samples.
+    """The ESRF study's 3.2 trimming: drop ``t < t0``, restart t at 0, keep ``tend·fs`` samples.
 
-    ``duration_s`` None keeps the whole rest of the record (the seed's
+    ``duration_s`` None keeps the whole rest of the record (the ESRF study's
     records hold 100 s after the trim, its ``tend``).
 
     Returns ``t`` [s], ``Vph``, ``Vpv`` [V] and ``Va`` [m] (not mean-removed),
     each shape (N,). ValueError (naming ``name``) if a signal is missing or
-    fewer than two seconds remain (two of the seed's 1 s Welch windows).
+    fewer than two seconds remain (two of the ESRF study's 1 s Welch windows).
     """
     missing = [v for v in ("Vph", "Vpv", "Va") if v not in ds]
     if missing:
-        raise ValueError(f"{name}: missing {missing} (seed 3.1 loads t, Vph, Vpv, Va)")
+        raise ValueError(f"{name}: missing {missing} (ESRF study 3.1 loads t, Vph, Vpv, Va)")
     fs = float(ds.attrs["fs_hz"])
     t = np.asarray(ds["t"].values, dtype=float)
     keep = t >= t0_s
@@ -187,7 +189,7 @@ def _trimmed(ds: xr.Dataset, *, name: str, t0_s: float, duration_s: float | None
 
 @dataclass(frozen=True)
 class HuddleRecord:
-    """One huddle test after the seed's processing.
+    """One huddle test after the ESRF study's processing.
 
     ``f_hz`` (F,) and the one-sided PSDs ``psd_va_m2_per_hz``,
     ``psd_vph_v2_per_hz``, ``psd_vpv_v2_per_hz`` (F,) of the mean-removed
@@ -239,7 +241,7 @@ class HuddleRecord:
 def analyse_huddle_record(ds: xr.Dataset, *, name: str | None = None, t0_s: float = 1.0,
                           duration_s: float | None = None, lpf_hz: float = 50.0,
                           summary: LongRecordSummary | None = None) -> HuddleRecord:
-    """Seed 3.2–3.5 on one record: trim, remove means, low-pass Va, Welch PSDs, band rms.
+    """ESRF study 3.2–3.5 on one record: trim, remove means, low-pass Va, Welch PSDs, band rms.
 
     Parameters
     ----------
@@ -248,11 +250,11 @@ def analyse_huddle_record(ds: xr.Dataset, *, name: str | None = None, t0_s: floa
     name : str, optional
         ``data_huddle_test_<n>`` (default: the ``experiment`` attribute).
     t0_s, duration_s : float
-        The seed's trim: drop ``t < t0``, keep ``duration`` [s] (None: the
+        The ESRF study's trim: drop ``t < t0``, keep ``duration`` [s] (None: the
         whole rest of the record, however long; out of core when ``ds`` holds
         Dask arrays).
     lpf_hz : float
-        Corner of the low pass applied to Va [Hz] (seed 3.3: 50 Hz).
+        Corner of the low pass applied to Va [Hz] (ESRF study 3.3: 50 Hz).
     summary : LongRecordSummary, optional
         The record reduced out of core (:func:`~fsmbench.budget.long_record.summarise_long_record`
         with the same trim); computed here when ``ds`` holds Dask arrays and none is given.
@@ -428,7 +430,7 @@ def estimate_dac_noise(recordings: Mapping[str, xr.Dataset], *, controller: ct.S
         Records; the closed-loop huddle tests holding ``Uch, Ucv`` are used.
     controller : control.StateSpace
         ``K: Rh, Rv → Uch, Ucv`` as it ran (discrete at ``1/fs``, or continuous:
-        then Tustin at ``1/fs`` as the seed's 9.3), closed as ``U = −K R``.
+        then Tustin at ``1/fs`` as the ESRF study's 9.3), closed as ``U = −K R``.
     params : BenchParams
         4QD gains the real-time code divides by (nominal), converter.
     band_hz : (float, float)
@@ -491,9 +493,19 @@ def estimate_dac_noise(recordings: Mapping[str, xr.Dataset], *, controller: ct.S
         white_ratio=(float(ratio[0]), float(ratio[1]))), skipped
 
 
+#: A ratio of rms within ±10 % is "no change" in practice, whatever its statistical
+#: significance: the budget's terms are known to no better than that.
+PRACTICAL_CHANGE: Final = 0.10
+
+
 @dataclass(frozen=True)
 class ConfigComparison:
-    """Ratio of Va rms per band between two configurations (numerator / denominator)."""
+    """Ratio of Va rms per band between two configurations (numerator / denominator).
+
+    ``significant``: beyond twice the two estimates' combined relative spread;
+    ``practical``: beyond ±:data:`PRACTICAL_CHANGE`. A change is reported only when
+    both hold; the sentence says which of the two a band misses.
+    """
 
     effect: str
     numerator: str
@@ -501,13 +513,16 @@ class ConfigComparison:
     ratios: Mapping[str, float]
     significant: Mapping[str, bool]
     sentence: str
+    practical: Mapping[str, bool] = field(default_factory=dict)
 
     def to_json(self) -> dict[str, object]:
         """Plain values; ``bands``: one entry per band, ids of :func:`band_id`."""
         return {"effect": self.effect, "numerator": self.numerator,
-                "denominator": self.denominator,
+                "denominator": self.denominator, "practical_change": PRACTICAL_CHANGE,
                 "bands": [{"id": band_id(b), "name": b, "ratio": r,
-                           "significant": self.significant[b]} for b, r in self.ratios.items()],
+                           "significant": self.significant[b],
+                           "practical": self.practical.get(b, False)}
+                          for b, r in self.ratios.items()],
                 "sentence": self.sentence}
 
 
@@ -516,8 +531,18 @@ _COMPARISONS = (("compensation unit", 2, 1), ("aluminium shielding in open loop"
                 ("aluminium shielding in closed loop", 5, 3), ("closed loop", 3, 2))
 
 
+def _ratio_words(band: str, r: float, *, significant: bool, practical: bool) -> str:
+    change = f"{'reduces' if r < 1 else 'increases'} the {band} rms by {100 * abs(r - 1):.0f} %"
+    if significant and practical:
+        return f"{change} (×{r:.2f}, significant)"
+    if significant:
+        return (f"no change in practice in the {band} rms (×{r:.2f}: statistically "
+                f"significant, but within ±{100 * PRACTICAL_CHANGE:.0f} %)")
+    return f"no significant change in the {band} rms (×{r:.2f})"
+
+
 def _compare(effect: str, a: HuddleRecord, b: HuddleRecord) -> ConfigComparison:
-    ratios, sig = {}, {}
+    ratios, sig, practical = {}, {}, {}
     parts = []
     for ba in a.bands:
         bb = b.band(ba.band)
@@ -527,16 +552,17 @@ def _compare(effect: str, a: HuddleRecord, b: HuddleRecord) -> ConfigComparison:
         spread = 2.0 * math.hypot(ba.rel_std, bb.rel_std)
         ratios[ba.band] = r
         sig[ba.band] = bool(comparable and abs(math.log(r)) > spread)
-        parts.append((f"{ba.band} ×{r:.2f}" if comparable else f"{ba.band} not comparable "
-                      "(zero or non-finite rms)") + (" (significant)" if sig[ba.band] else ""))
-    changes = [f"{'reduces' if ratios[k] < 1 else 'increases'} the {k} rms "
-               f"{max(ratios[k], 1 / ratios[k]):.1f}-fold" for k in ratios
-               if sig[k] and k != "total"]
-    verdict = ("has no significant effect on Va in any band" if not changes
-               else "; ".join(changes))
-    sentence = (f"{effect[0].upper()}{effect[1:]} (test {a.number} / test {b.number}): Va rms "
-                + ", ".join(parts) + f". The {effect} {verdict}.")
-    return ConfigComparison(effect, a.name, b.name, ratios, sig, sentence)
+        practical[ba.band] = bool(comparable and abs(math.log(r)) > math.log1p(PRACTICAL_CHANGE))
+        parts.append(_ratio_words(ba.band, r, significant=sig[ba.band],
+                                  practical=practical[ba.band]) if comparable
+                     else f"{ba.band}: not comparable (zero or non-finite rms)")
+    changes = [k for k in ratios if sig[k] and practical[k] and k != "total"]
+    verdict = (f"changes Va in practice in {', '.join(changes)}" if changes else
+               f"makes no practical change to Va in any band (none both significant and "
+               f"beyond ±{100 * PRACTICAL_CHANGE:.0f} %)")
+    sentence = (f"{effect[0].upper()}{effect[1:]} (test {a.number} / test {b.number}): "
+                + "; ".join(parts) + f". The {effect} {verdict}.")
+    return ConfigComparison(effect, a.name, b.name, ratios, sig, sentence, practical)
 
 
 @dataclass(frozen=True)
@@ -560,7 +586,7 @@ def analyse_huddle(recordings: Mapping[str, xr.Dataset], *, params: BenchParams,
                    t0_s: float = 1.0, duration_s: float | None = None,
                    lpf_hz: float = 50.0,
                    summaries: Mapping[str, LongRecordSummary] | None = None) -> HuddleAnalysis:
-    """Seed section 3 on every ``data_huddle_test_<n>`` in ``recordings``.
+    """ESRF study section 3 on every ``data_huddle_test_<n>`` in ``recordings``.
 
     Parameters
     ----------
@@ -592,7 +618,7 @@ def analyse_huddle(recordings: Mapping[str, xr.Dataset], *, params: BenchParams,
         ecu = next((c for c in comps if c.effect == "compensation unit"), None)
         if ecu is not None:
             agree = not (ecu.significant["drift"] or ecu.significant["total"])
-            conclusion += (" The seed (3.6) found no significant effect of the compensation "
+            conclusion += (" The ESRF study (3.6) found no significant effect of the compensation "
                            "unit on the stability of the measurement; on the drift and the "
                            f"total rms these records {'agree' if agree else 'disagree'}.")
     else:

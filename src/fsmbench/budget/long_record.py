@@ -1,14 +1,14 @@
 """Everything the budget needs from a long huddle test, in two sequential reads.
 
 A huddle test read out of core (Dask arrays, e.g. 24 h = 864 M samples per
-signal) is analysed by the seed's processing (section 3: mean removal, the
+signal) is analysed by the ESRF study's processing (section 3: mean removal, the
 50 Hz low pass of ``Va``, Welch PSDs, rms) and by the long-term view
 (:mod:`fsmbench.budget.stability`: Allan deviations, drift, envelopes). Done
 estimate by estimate, that is some twenty reads of the record, and Dask
 graphs over its tens of thousands of chunks. Here the record is read twice,
 block after block (:mod:`fsmbench.scale.streaming`):
 
-1. the raw ``Va``, ``Vph``, ``Vpv``: their means (needed by everything the seed
+1. the raw ``Va``, ``Vph``, ``Vpv``: their means (needed by everything the ESRF study
    computes on mean-removed signals), Allan deviations up to 10 s, 0.1 s and
    1 s means, min/max envelopes;
 2. the mean-removed signals: Welch PSDs, rms, and ``Va`` through the 50 Hz low
@@ -85,7 +85,7 @@ class LongRecordSummary:
     rms : dict
         Rms about those means, same units.
     psd : dict
-        The seed's Welch PSD (1 s Hann) of each mean-removed signal.
+        The ESRF study's Welch PSD (1 s Hann) of each mean-removed signal.
     lpf_hz : float
         Corner of the low pass applied to ``Va`` [Hz].
     va_lowpass_rms_m : float
@@ -135,10 +135,10 @@ def summarise_long_record(ds: xr.Dataset, *, name: str, t0_s: float = 1.0,
     name : str
         Experiment name, for messages.
     t0_s, duration_s : float
-        The seed's trim: samples before ``t0_s`` [s] are dropped; at most
+        The ESRF study's trim: samples before ``t0_s`` [s] are dropped; at most
         ``duration_s`` [s] are kept (None: the rest of the record).
     lpf_hz : float
-        Corner of the seed's low pass on ``Va`` [Hz].
+        Corner of the ESRF study's low pass on ``Va`` [Hz].
     n_bins : int
         Bins of the envelopes (at most the number of samples).
     block_samples : int
@@ -154,7 +154,7 @@ def summarise_long_record(ds: xr.Dataset, *, name: str, t0_s: float = 1.0,
     """
     missing = [v for v in SIGNALS if v not in ds]
     if missing:
-        raise ValueError(f"{name}: missing {missing} (seed 3.1 loads t, Vph, Vpv, Va)")
+        raise ValueError(f"{name}: missing {missing} (ESRF study 3.1 loads t, Vph, Vpv, Va)")
     fs = float(ds.attrs["fs_hz"])
     trim = trim_record(ds, t0_s=t0_s, duration_s=duration_s, fs_hz=fs)
     n = trim.n

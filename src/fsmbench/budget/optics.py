@@ -1,10 +1,10 @@
-"""Seed 4.1–4.2 and 11.3 recomputed from the exact ray trace of :mod:`fsmbench.bench.geometry`.
+"""ESRF study 4.1–4.2 and 11.3 recomputed from the exact ray trace (:mod:`fsmbench.bench.geometry`).
 
-* 4.1: the quadratic law fitted to the trace over the seed's range (Fig. 34),
+* 4.1: the quadratic law fitted to the trace over the ESRF study's range (Fig. 34),
   checked against the derived ``k = 12H + 8L`` at several angles and
   geometries, and Table 4 recomputed (errata E15);
 * 4.2: perpendicular motion of each mirror (eqs. 9–10, errata E18);
-* 11.3: the seed's ``ΔL = L α²/2`` against the traced law in terms of the
+* 11.3: the ESRF study's ``ΔL = L α²/2`` against the traced law in terms of the
   beam angle α = 4δθc (errata E17).
 """
 
@@ -74,12 +74,12 @@ def law_checks(*, sizes_m: tuple[float, ...] = (0.02, 0.05, 0.1),
 
 @dataclass(frozen=True)
 class GeometryBudget:
-    """The beam-path geometry of the bench, seed 4.1, 4.2 and 11.3 recomputed.
+    """The beam-path geometry of the bench, ESRF study 4.1, 4.2 and 11.3 recomputed.
 
     ``path_error_m_per_rad2``: round-trip path per squared Sercalo angle error
     (k); ``measured_error_m_per_rad2``: what the Attocube reports (k/2);
     ``measured_error_m_per_beam_rad2``: per squared beam angle α = 4δθc,
-    ``(k/2)/16``; ``seed_11_3_m_per_beam_rad2``: the seed's ``L/2`` (L = 0.1 m).
+    ``(k/2)/16``; ``seed_11_3_m_per_beam_rad2``: the ESRF study's ``L/2`` (L = 0.1 m).
     """
 
     h_m: float
@@ -98,7 +98,7 @@ class GeometryBudget:
     figure: BeamPathFigure
 
     def to_json(self) -> dict[str, object]:
-        """Plain floats, lists and dicts, SI units; the seed's numbers under ``seed``."""
+        """Plain floats, lists and dicts, SI units; the ESRF study's numbers under ``seed``."""
         out: dict[str, object] = {}
         for f in fields(self):
             v = getattr(self, f.name)
@@ -113,7 +113,7 @@ class GeometryBudget:
 
 
 def geometry_budget(params: BenchParams) -> GeometryBudget:
-    """Seed 4.1, 4.2 and the 11.3 law for the bench's H and L."""
+    """ESRF study 4.1, 4.2 and the 11.3 law for the bench's H and L."""
     h, length = params.geometry.h_m, params.geometry.l_m
     law = small_angle_law(h_m=h, l_m=length)
     checks = law_checks()

@@ -1,6 +1,6 @@
 """Noise through the plant and the closed loop to the beam angle, then to the distance (4.5).
 
-The loop (seed Fig. 38, 9.2): the controller reads the measured beam angle
+The loop (ESRF study Fig. 38, 9.2): the controller reads the measured beam angle
 ``Rm = R + n`` and commands ``Uc = −K·Rm + d_u`` (``U = −K R``, docs/model.md).
 With ``G = ∂R/∂Uc`` (``Rh, Rv ← Uch, Ucv`` of the plant, delays included),
 ``S = (I + GK)⁻¹``, ``T = I − S`` and ``Si = (I + KG)⁻¹``:
@@ -103,7 +103,7 @@ def _inv2(m: ComplexArray) -> ComplexArray:
 def controller_response(k: ct.StateSpace, f_hz: FloatArray) -> ComplexArray:
     """``K`` at ``s = j2πf`` (continuous) or ``z = exp(j2πf·dt)`` (discrete), shape (F, p, m).
 
-    The seed runs ``Kd = c2d(K, 1e-4, 'tustin')`` (9.3): Tustin warps the
+    The ESRF study runs ``Kd = c2d(K, 1e-4, 'tustin')`` (9.3): Tustin warps the
     notches of K (411.5 Hz → 409.3 Hz at 10 kHz), which matters next to a mode
     1 Hz wide, so the discrete controller is evaluated as such.
     """

@@ -1,21 +1,21 @@
-"""Noise sources of the feedback loop (seed 1.6, 4.5a–c) as closed forms.
+"""Noise sources of the feedback loop (ESRF study 1.6, 4.5a–c) as closed forms.
 
 ADC/DAC quantisation (eqs. 12–15)
     ``Γ = q²/(12 fs)`` with ``q = ΔV/2ⁿ`` [V²/Hz], a *two-sided* density (the
     seed integrates it over ``±fs/2``); one-sided ``2Γ``. With 20 V, 16 bit,
-    10 kHz: ``q = 305.2 µV``, ``Γ = 7.76·10⁻¹³ V²/Hz`` (the seed names fs
+    10 kHz: ``q = 305.2 µV``, ``Γ = 7.76·10⁻¹³ V²/Hz`` (the ESRF study names fs
     ``f_N``, erratum E9), rms ``q/√12 = 88.1 µV``.
 Newport angle from its DAC (4.5a)
-    ``Γθn = gn0²·Γ = 5.33·10⁻¹⁸ rad²/Hz`` (the seed prints 3.96·10⁻¹⁸, E10);
+    ``Γθn = gn0²·Γ = 5.33·10⁻¹⁸ rad²/Hz`` (the ESRF study prints 3.96·10⁻¹⁸, E10);
     over ``±fs/2``: ``gn0·q/√12 = 0.231 µrad`` rms.
 Newport angle noise (4.5a, "Important 8")
     datasheet noise-equivalent angle 3 µrad rms, 6 µrad of beam angle (one
     reflection); white over ``±fs/2``: ``Γd = (6 µrad)²/fs = 3.6·10⁻¹⁵ rad²/Hz``.
 4QD noise (4.5b)
-    the seed's estimate ``δθ = G·δVi/ΣV`` and our reading through Table 2
+    the ESRF study's estimate ``δθ = G·δVi/ΣV`` and our reading through Table 2
     (``δθ = δV/|Gd|``), see :class:`NoiseSources`.
 Sercalo DAC (4.5c)
-    one LSB through the static plant gain, and the seed's procedure (white DAC
+    one LSB through the static plant gain, and the ESRF study's procedure (white DAC
     ASD through ``|G(1,1)|`` over 10 Hz–1 kHz, then its linear law
     ``δL = 10⁻⁶·δθ``) repeated on the given plant.
 """
@@ -61,7 +61,7 @@ _SEED_LINEAR_M_PER_RAD = 1e-6
 class NoiseSources:
     """The loop's noise sources, closed forms, SI units (key names carry them).
 
-    ``*_psd_*`` without ``one_sided`` are the seed's two-sided densities;
+    ``*_psd_*`` without ``one_sided`` are the ESRF study's two-sided densities;
     ``qd_angle_per_volt_rad_per_v`` is ``1/|Gd|`` per axis (h, v).
     """
 
@@ -94,7 +94,7 @@ class NoiseSources:
     seed_method_sercalo_dac_distance_rms_m: float
 
     def to_json(self) -> dict[str, object]:
-        """Plain floats, (h, v) pairs as ``{"h", "v"}``; ``seed``: the seed's printed numbers."""
+        """Plain floats, (h, v) pairs as ``{"h", "v"}``; ``seed``: the study's printed numbers."""
         out: dict[str, object] = {}
         for f in fields(self):
             v = getattr(self, f.name)
@@ -104,7 +104,7 @@ class NoiseSources:
 
 
 def _seed_dac_procedure(plant: PlantModel, *, lsb_v: float, fs_hz: float) -> float:
-    """The seed's 4.5c code on ``plant``: white DAC ASD × |Rh/Uch|, 10 Hz–1 kHz, × 1e-6 m/rad."""
+    """ESRF study 4.5c on ``plant``: white DAC ASD × |Rh/Uch|, 10 Hz–1 kHz, × 1e-6 m/rad."""
     freqs = np.logspace(1.0, 3.0, 1000)
     g11 = plant.frequency_response(freqs, outputs=["Rh"], inputs=["Uch"], with_delay=False)
     asd_uc = lsb_v / math.sqrt(12.0 * fs_hz)
@@ -115,7 +115,7 @@ def _seed_dac_procedure(plant: PlantModel, *, lsb_v: float, fs_hz: float) -> flo
 
 def noise_sources(params: BenchParams, *, plant: PlantModel | None = None,
                   qd_noise_v: tuple[float, float] | None = None) -> NoiseSources:
-    """Closed-form noise levels of seed 1.6 and 4.5a–c for one parameter set.
+    """Closed-form noise levels of ESRF study 1.6 and 4.5a–c for one parameter set.
 
     Parameters
     ----------
@@ -123,7 +123,7 @@ def noise_sources(params: BenchParams, *, plant: PlantModel | None = None,
         Usually ``bench.nominal``: converter, Newport gain and angle noise,
         4QD gains, Sercalo beam factor, geometry (H, concave radius).
     plant : PlantModel, optional
-        Plant for the static Sercalo gain ``Rh,Rv/Uch,Ucv`` and the seed's
+        Plant for the static Sercalo gain ``Rh,Rv/Uch,Ucv`` and the ESRF study's
         4.5c procedure; default ``physical_plant(params)``.
     qd_noise_v : (float, float), optional
         4QD output noise rms (h, v) [V], e.g. measured in the huddle tests;

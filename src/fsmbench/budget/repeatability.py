@@ -1,4 +1,4 @@
-"""Non-repeatability of the measured distance (seed 11), on records of any length.
+"""Non-repeatability of the measured distance (ESRF study 11), on records of any length.
 
 Alignment (11.1): the record starts ``align_s`` (1 s) after the first
 non-zero Newport command (``Unh`` for ``data_rep_h``, ``Unv`` for
@@ -10,19 +10,19 @@ The command is read block by block from the start until it moves.
 
 Repeatable part (11.4): the mean over periods at each position in the
 period (``mean(reshape(Va, [fs n]), 2)``); non-repeatable part: the rest.
-Its rms is the seed's number (19.6 nm h, 13.9 nm v). That estimate is biased
+Its rms is the ESRF study's number (19.6 nm h, 13.9 nm v). That estimate is biased
 low by ``√((n−1)/n)`` for noise that is independent between periods (the mean
 was taken from the same periods); ``nonrep_rms_unbiased_m`` corrects it.
 11.6 repeats it after a 10 Hz first-order low pass (``lsim``, zero initial
 state; :func:`~fsmbench.budget.spectra.first_order_lowpass`). The filter's
 start-up transient (τ = 16 ms) on a signal that moves by ~1 µm per period
 lands in the first period only, so it is *non-repeatable by construction*
-and can make the filtered rms exceed the unfiltered one (the seed's 22.9 nm
+and can make the filtered rms exceed the unfiltered one (the ESRF study's 22.9 nm
 against 19.6 nm, horizontal). ``nonrep_rms_lpf_settled_m`` drops the first
 period after filtering (mean over the remaining periods).
 
 Tracking error (11.3): the beam angle measured by the 4QD, ``R = Vp/Gd(0)``,
-its PSD, and its distance-error equivalent. The seed's law is
+its PSD, and its distance-error equivalent. The ESRF study's law is
 ``ΔL = L·α²/2`` with L = 0.1 m per axis; the traced law is ``Σ cᵢ αᵢ²``
 with ``c = (6H + 4L)/16`` m/rad² (errata E15, E17). ``R`` includes the 4QD's
 own noise, so this equivalent is an upper bound of the true geometric term.
@@ -110,13 +110,13 @@ def command_channel(name: str, ds: xr.Dataset, *, block_samples: int = BLOCK_SAM
     moving = _first_nonzero(ds, tuple(c for c in ("Unh", "Unv") if c in ds), block_samples)
     if not moving:
         raise ValueError(f"{name}: no Newport command (Unh, Unv are zero or absent); the "
-                         f"repeatability analysis aligns on the first command (seed 11.1)")
+                         f"repeatability analysis aligns on the first command (ESRF study 11.1)")
     return min(moving, key=lambda c: moving[c])
 
 
 @dataclass(frozen=True)
 class PeriodAlignment:
-    """Where seed 11.1 cuts a record: samples ``start_index … stop_index − 1``, whole periods."""
+    """Where ESRF study 11.1 cuts a record: samples ``start_index … stop_index − 1``."""
 
     name: str
     channel: str
@@ -134,14 +134,14 @@ class PeriodAlignment:
 
 @dataclass(frozen=True)
 class AlignedRecord(PeriodAlignment):
-    """The record cut as the seed's 11.1: signals of shape (N,) from ``start`` on (in memory)."""
+    """The record cut as ESRF study 11.1 does: signals of shape (N,) from ``start`` (in memory)."""
 
     signals: dict[str, FloatArray]
 
 
 def find_alignment(ds: xr.Dataset, *, name: str | None = None, align_s: float = 1.0,
                    period_s: float = 1.0, block_samples: int = BLOCK_SAMPLES) -> PeriodAlignment:
-    """Seed 11.1 without reading the signals: start ``align_s`` after the first Newport
+    """ESRF study 11.1 without reading the signals: start ``align_s`` after the first Newport
     command (read block by block until it moves), keep whole periods.
 
     Raises
@@ -153,14 +153,15 @@ def find_alignment(ds: xr.Dataset, *, name: str | None = None, align_s: float = 
     name = str(ds.attrs.get("experiment", "")) if name is None else name
     missing = [s for s in _SIGNALS if s not in ds]
     if missing:
-        raise ValueError(f"{name}: missing {missing} (seed 11.1 loads t, Uch, Ucv, Unh, Unv, "
+        raise ValueError(f"{name}: missing {missing} (ESRF study 11.1 loads t, Uch, Ucv, Unh, Unv, "
                          f"Vph, Vpv, Vnh, Vnv, Va)")
     fs = float(ds.attrs["fs_hz"])
     channel = command_channel(name, ds, block_samples=block_samples)
     nz = _first_nonzero(ds, (channel,), block_samples)
     if not nz:
         raise ValueError(f"{name}: the Newport command {channel} is zero throughout; the "
-                         f"repeatability analysis aligns on its first non-zero sample (seed 11.1)")
+                         "repeatability analysis aligns on its first non-zero sample (ESRF study "
+                         "11.1)")
     per = round(period_s * fs)
     n = ds.sizes["t"]
     first = nz[channel]
@@ -192,7 +193,7 @@ def align_periods(ds: xr.Dataset, *, name: str | None = None, align_s: float = 1
 
 @dataclass(frozen=True, eq=False)
 class RepeatabilityRecord:
-    """Seed 11.3–11.7 on one record (SI units).
+    """ESRF study 11.3–11.7 on one record (SI units).
 
     Folded over the periods, shape (P,) whatever the record's length:
     ``repeatable_m``, ``repeatable_lpf_m`` (mean over periods of ``Va`` and of
@@ -208,7 +209,7 @@ class RepeatabilityRecord:
     ``tracking_distance_nonrep`` [m], time from the alignment. Spectra on
     ``f_hz`` (F,): ``psd_tracking_rad2_per_hz`` (F, 2),
     ``psd_distance_m2_per_hz`` (F,) (traced law, both axes),
-    ``psd_distance_seed_m2_per_hz`` (F, 2) (seed's ``L α²/2`` per axis),
+    ``psd_distance_seed_m2_per_hz`` (F, 2) (ESRF study's ``L α²/2`` per axis),
     ``psd_va_m2_per_hz`` (F,).
     """
 
@@ -252,7 +253,7 @@ class RepeatabilityRecord:
         return int(self.repeatable_m.size)
 
     def to_json(self) -> dict[str, object]:
-        """Scalars, (h, v) pairs as ``{"h", "v"}``; the seed's numbers for this direction
+        """Scalars, (h, v) pairs as ``{"h", "v"}``; the ESRF study's numbers for this direction
         under ``seed`` (arrays and envelopes are left out)."""
         out: dict[str, object] = {}
         for f in fields(self):
@@ -337,7 +338,7 @@ def analyse_repeatability(ds: xr.Dataset, *, params: BenchParams, name: str | No
                           align_s: float = 1.0, period_s: float = 1.0, lpf_hz: float = 10.0,
                           n_bins: int = ENVELOPE_BINS, block_samples: int = BLOCK_SAMPLES,
                           progress: Callable[[str], None] | None = None) -> RepeatabilityRecord:
-    """Seed 11 on one record (``data_rep_h`` or ``data_rep_v``), read twice in blocks.
+    """ESRF study 11 on one record (``data_rep_h`` or ``data_rep_v``), read twice in blocks.
 
     Parameters
     ----------
@@ -349,7 +350,7 @@ def analyse_repeatability(ds: xr.Dataset, *, params: BenchParams, name: str | No
     name : str, optional
         Experiment name (default: the dataset's ``experiment`` attribute).
     align_s, period_s : float
-        Delay after the first command and period [s] (seed: 1 s, 1 s).
+        Delay after the first command and period [s] (ESRF study: 1 s, 1 s).
     lpf_hz : float
         Corner of the low pass of 11.6 [Hz].
     n_bins : int

@@ -3,7 +3,7 @@
 A recording read with :func:`fsmbench.io.lazy.open_recording` holds Dask
 arrays; one read with :func:`~fsmbench.io.recording.read_recording` holds
 numpy arrays. :func:`is_lazy` tells them apart and :func:`trim_record` finds
-the seed's trim in either (reading only the first samples of a lazy ``t``).
+the ESRF study's trim in either (reading only the first samples of a lazy ``t``).
 The filters and means here work on records in memory; a record out of core
 is reduced by :mod:`fsmbench.budget.long_record` in two sequential reads.
 """
@@ -80,7 +80,7 @@ def trim_record(ds: xr.Dataset, *, t0_s: float, duration_s: float | None,
 
 
 def lowpass(x: Any, *, cutoff_hz: float, fs_hz: float) -> FloatArray:
-    """The seed's first-order low pass (from rest) of a record in memory.
+    """The ESRF study's first-order low pass (from rest) of a record in memory.
 
     Records out of core go through :class:`fsmbench.scale.streaming.LowpassStream`
     (:mod:`fsmbench.budget.long_record`), the same recursion block by block.
@@ -89,7 +89,7 @@ def lowpass(x: Any, *, cutoff_hz: float, fs_hz: float) -> FloatArray:
 
 
 def lowpass_rms(x: Any, *, cutoff_hz: float, fs_hz: float) -> float:
-    """Rms about the mean of ``x`` after the seed's first-order low pass (from rest)."""
+    """Rms about the mean of ``x`` after the ESRF study's first-order low pass (from rest)."""
     y = lowpass(x, cutoff_hz=cutoff_hz, fs_hz=fs_hz)
     return float(np.sqrt(np.mean((y - y.mean()) ** 2)))
 

@@ -1,12 +1,12 @@
-"""Spectral helpers of the budget: the seed's Welch estimate, low-pass filter, cumulative power.
+"""The budget's spectral helpers: the ESRF study's Welch estimate, low pass, cumulative power.
 
 Conventions (used by every module of :mod:`fsmbench.budget`):
 
 * A *one-sided* PSD ``S1(f)`` [U²/Hz] integrates over ``0 ≤ f ≤ fs/2`` to the
-  variance; it is what MATLAB's ``pwelch`` returns. The seed's quantisation
+  variance; it is what MATLAB's ``pwelch`` returns. The ESRF study's quantisation
   density ``Γ = q²/(12 fs)`` (eqs. 12–15) is *two-sided*: it integrates over
-  ``−fs/2 … fs/2`` (seed 4.5a), so ``S1 = 2Γ``.
-* The seed's cumulative power ``cps = 1/π ∫ asd² dω = 2 ∫ asd² df`` (4.5c) is
+  ``−fs/2 … fs/2`` (ESRF study 4.5a), so ``S1 = 2Γ``.
+* The ESRF study's cumulative power ``cps = 1/π ∫ asd² dω = 2 ∫ asd² df`` (4.5c) is
   the cumulative power of the one-sided density ``2·asd²``.
 * Drifts seen over a record of length T with its mean removed: the expected
   variance is ``∫ S1(f)·(1 − sinc²(f T)) df`` (the mean over T is a filter
@@ -37,7 +37,7 @@ FloatArray = NDArray[np.float64]
 
 
 def seed_welch(x: ArrayLike, *, fs_hz: float, name: str = "x") -> SpectrumResult:
-    """The seed's ``pwelch(x, hanning(ceil(1*fs)), [], [], fs)`` (3.5, 11.3).
+    """The ESRF study's ``pwelch(x, hanning(ceil(1*fs)), [], [], fs)`` (3.5, 11.3).
 
     Parameters
     ----------
@@ -65,7 +65,7 @@ def seed_welch(x: ArrayLike, *, fs_hz: float, name: str = "x") -> SpectrumResult
 
 
 def cumulative_power(f_hz: ArrayLike, psd: ArrayLike) -> FloatArray:
-    """Cumulative power ``∫_{f0}^{f} S1 df`` (trapezoid, the seed's ``cumtrapz``).
+    """Cumulative power ``∫_{f0}^{f} S1 df`` (trapezoid, the ESRF study's ``cumtrapz``).
 
     ``f_hz`` shape (F,), ``psd`` shape (F,) one-sided [U²/Hz]; returns shape
     (F,) [U²], starting at 0. Its square root is the cumulative rms.

@@ -1,6 +1,6 @@
 """What a long record shows that a 100 s one cannot: drift and Allan deviation.
 
-For each huddle test, over the whole record after the seed's trim (any
+For each huddle test, over the whole record after the ESRF study's trim (any
 length, out of core for records read lazily):
 
 - the **Allan deviation** (overlapping, :func:`fsmbench.scale.allan.allan_deviation`)
@@ -12,7 +12,7 @@ length, out of core for records read lazily):
   plots draw instead of every sample — the 4QD's offset and the distance as
   they wander over hours.
 
-The seed (section 3) shows PSDs of 100 s records; these views sit next to them.
+The ESRF study (section 3) shows PSDs of 100 s records; these views sit next to them.
 """
 
 from __future__ import annotations
@@ -113,7 +113,7 @@ class StabilityRecord:
     allan : dict of str to AllanResult
         ``Va`` [m], ``Rh``, ``Rv`` [rad].
     drift : dict of str to SignalDrift
-        ``Va``, ``Va_lowpass`` (50 Hz, the seed's filter), ``Rh``, ``Rv``.
+        ``Va``, ``Va_lowpass`` (50 Hz, the ESRF study's filter), ``Rh``, ``Rv``.
     qd_gain_v_per_rad : (float, float)
         The gains the angles were computed with [V/rad].
     out_of_core : bool
@@ -249,9 +249,9 @@ def analyse_stability(ds: xr.Dataset, *, name: str, qd_gain_v_per_rad: tuple[flo
     qd_gain_v_per_rad : (float, float)
         Calibrated 4QD gains (h, v) [V/rad]: the angle is the reading over the gain.
     t0_s : float
-        The seed's trim: samples before ``t0_s`` [s] are left out.
+        The ESRF study's trim: samples before ``t0_s`` [s] are left out.
     lpf_hz : float
-        Corner of the seed's low pass applied to ``Va`` [Hz].
+        Corner of the ESRF study's low pass applied to ``Va`` [Hz].
     n_bins : int
         Bins of the drift curves.
     summary : LongRecordSummary, optional

@@ -1,4 +1,4 @@
-"""Seed sections 3, 4 and 11 on whatever recordings are present: :func:`budget_study`.
+"""ESRF study sections 3, 4 and 11 on whatever recordings are present: :func:`budget_study`.
 
 What always runs (it needs no data): the geometry of 4.1–4.2, the noise
 closed forms of 1.6/4.5, the air and frame terms of 4.3–4.4 and the error
@@ -58,7 +58,7 @@ _REP = {"data_rep_h": "h", "data_rep_v": "v"}
 class NonRepeatability:
     """Fig. 50 in numbers, one direction [m]: what the non-repeatability is made of.
 
-    ``va_nonrep_rms_m``: measured (seed's estimate); ``va_nonrep_unbiased_m``:
+    ``va_nonrep_rms_m``: measured (ESRF study's estimate); ``va_nonrep_unbiased_m``:
     corrected for the periods' own mean; ``tracking_nonrep_rms_m``: the
     non-repeatable part of the distance-error equivalent of the 4QD tracking
     error; ``huddle_va_rms_m``: the huddle test of ``huddle_test`` (the same
@@ -208,7 +208,7 @@ def _valid_huddles(recordings: Mapping[str, xr.Dataset],
         if name in skipped:
             continue
         if name not in recordings:
-            skipped[name] = "not in the recordings (seed 3)"
+            skipped[name] = "not in the recordings (ESRF study 3)"
             continue
         try:
             check_trim(recordings[name], name=name)
@@ -226,7 +226,7 @@ def budget_study(recordings: Mapping[str, xr.Dataset], *, bench: Bench,
                  recommended: ct.StateSpace | None = None,
                  recommended_name: str = "fsmbench's controller",
                  noise_model: Any = None) -> BudgetResult:
-    """Seed sections 3, 4 and 11 on the recordings present.
+    """ESRF study sections 3, 4 and 11 on the recordings present.
 
     Parameters
     ----------
@@ -240,7 +240,7 @@ def budget_study(recordings: Mapping[str, xr.Dataset], *, bench: Bench,
         Plant with outputs ``Rh, Rv`` (e.g. the identified one); default
         ``physical_plant(bench.nominal)``.
     controller : control.StateSpace, optional
-        Loop controller ``Rh, Rv → Uch, Ucv`` (``U = −K R``); default the seed's
+        Loop controller ``Rh, Rv → Uch, Ucv`` (``U = −K R``); default the ESRF study's
         9.2 controller discretised as its 9.3 (Tustin at ``1/fs``).
     window_s : float
         Record length of the budget's rms [s] (the huddle tests' 100 s).
@@ -282,7 +282,7 @@ def _budget_study(recordings: Mapping[str, xr.Dataset], *, bench: Bench,
     plant = physical_plant(params, source="physical (nominal)") if plant is None else plant
     if controller is None:
         controller = tustin(seed_decentralised_controller(), ts_s=params.converter.ts_s)
-        controller_name = "seed 9.2 K, Tustin at 1/fs (9.3)"
+        controller_name = "ESRF study 9.2 K, Tustin at 1/fs (9.3)"
     else:
         controller_name = str(controller.name or "given controller")
     skipped: dict[str, str] = {}
@@ -296,7 +296,7 @@ def _budget_study(recordings: Mapping[str, xr.Dataset], *, bench: Bench,
                  for name, ds in valid.items() if is_lazy(ds["Va"].data)}
     say = progress or (lambda _msg: None)
     if valid:
-        say(f"huddle tests: spectra and rms of {', '.join(sorted(valid))} (seed 3)")
+        say(f"huddle tests: spectra and rms of {', '.join(sorted(valid))} (ESRF study 3)")
     huddle = analyse_huddle(valid, params=params, summaries=summaries) if valid else None
     if valid:
         say("huddle tests: drift and Allan deviation over each whole record")
@@ -322,7 +322,7 @@ def _budget_study(recordings: Mapping[str, xr.Dataset], *, bench: Bench,
         return cache[closed]
 
     say(f"error budget: every source through the plant and the loop with {controller_name} "
-        "(seed 4)")
+        "(ESRF study 4)")
     budget = budget_table(params, angles(True), window_s=window_s)
     stationary = budget_table(params, angles(True), window_s=None).total_rms_m
     rec_budget = None
@@ -361,9 +361,9 @@ def _budget_study(recordings: Mapping[str, xr.Dataset], *, bench: Bench,
         if name in skipped:
             continue
         if name not in usable:
-            skipped[name] = "not in the recordings (seed 11)"
+            skipped[name] = "not in the recordings (ESRF study 11)"
             continue
-        say(f"repeatability: {name} (seed 11)")
+        say(f"repeatability: {name} (ESRF study 11)")
         try:
             reps[direction] = analyse_repeatability(usable[name], params=params, name=name,
                                                     progress=progress)

@@ -1,4 +1,4 @@
-"""The error budget (seed 4): every source's contribution to the measured distance.
+"""The error budget (ESRF study 4): every source's contribution to the measured distance.
 
 Sources and mechanisms
 ----------------------
@@ -87,10 +87,10 @@ def source_id(name: str) -> str:
 
 @dataclass(frozen=True)
 class BudgetRow:
-    """One source: fluctuation rms and bias of the measured distance [m], and the seed's figure.
+    """One source: fluctuation rms and bias of the measured distance [m], and the study's figure.
 
     ``angle_rms_rad``: beam-angle rms (both axes in quadrature) for angle
-    sources, else None. ``seed_m``: the seed's own number where it gives one.
+    sources, else None. ``seed_m``: the ESRF study's own number where it gives one.
     ``perpendicular_rms_m`` and ``quadratic_rms_m``: an angle source's piston
     and geometric parts (``rms_m`` is their root sum of squares), None for a
     linear row. ``provenance``: ``measured``, ``derived`` or ``assumed``
@@ -189,7 +189,7 @@ def noise_inputs(params: BenchParams, f_hz: FloatArray, *, closed_loop: bool,
         origin = "huddle tests " + ", ".join(qd_noise.tests)
     if dac_noise is None:
         dac_v2 = one * quant
-        dac_origin = "white q²/(12 fs) (seed 4.5c)"
+        dac_origin = "white q²/(12 fs) (ESRF study 4.5c)"
     else:
         dac_v2 = np.stack([np.interp(f_hz, dac_noise.f_hz, dac_noise.psd_v2_per_hz[:, i])
                            for i in range(2)], axis=1)
@@ -287,10 +287,10 @@ def budget_table(params: BenchParams, angles: AngleSources, *, compensation_unit
         BudgetRow("metrology frame expansion", "4.4", "linear", frame.window_rms_m, 0.0, None,
                   None, "≈1 µm/K (aluminium), 60 nm/K (invar); frame within 0.1 K"),
         BudgetRow("Attocube noise", "—", "linear", att.noise_rms_m * math.sqrt(white_w), 0.0,
-                  None, None, "not in the seed's budget"),
+                  None, None, "not in the ESRF study's budget"),
         BudgetRow("Attocube resolution", "—", "linear",
                   att.resolution_m / math.sqrt(12.0) * math.sqrt(white_w), 0.0, None, None,
-                  "not in the seed's budget"),
+                  "not in the ESRF study's budget"),
     ]
     expansion = params.geometry.frame_expansion_per_k
     rows = [dataclasses.replace(r, provenance=prov.kind, provenance_detail=prov.detail,
@@ -321,10 +321,10 @@ def error_budget(params: BenchParams, *, plant: PlantModel, controller: ct.State
     plant : PlantModel
         Plant with outputs ``Rh, Rv`` (physical or identified).
     controller : control.StateSpace or None
-        ``K: Rh, Rv → Uch, Ucv`` closed as ``U = −K R`` (seed 9.2; continuous,
-        or discrete as the seed's 9.3 ``Kd``); needed in closed loop.
+        ``K: Rh, Rv → Uch, Ucv`` closed as ``U = −K R`` (ESRF study 9.2; continuous,
+        or discrete as the ESRF study's 9.3 ``Kd``); needed in closed loop.
     closed_loop, compensation_unit, shielding : bool
-        Configuration (seed Table 3; default: the repeatability measurement's).
+        Configuration (ESRF study Table 3; default: the repeatability measurement's).
     window_s : float or None
         Record length T [s] (mean removed); None: stationary values.
     qd_noise : QdNoiseEstimate, optional

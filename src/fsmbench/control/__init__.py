@@ -1,7 +1,7 @@
-"""Plant analysis, controllers (the seed's and fsmbench's), discretisation and export.
+"""Plant analysis, controllers (the ESRF study's and fsmbench's), discretisation and export.
 
-Entry point: :func:`design_study` (seed sections 5–10 on a plant model); the
-seed's controllers are in :mod:`fsmbench.control.seed`. The report's figures
+Entry point: :func:`design_study` (ESRF study sections 5–10 on a plant model); the
+ESRF study's controllers are in :mod:`fsmbench.control.seed`. The report's figures
 of these results are built in :mod:`fsmbench.report.control_figures`.
 """
 

@@ -1,4 +1,4 @@
-"""Plant analysis before control design (seed sections 5, 6 and 7).
+"""Plant analysis before control design (ESRF study sections 5, 6 and 7).
 
 * :func:`control_objective`: the 6.1 requirement, ``|S(j 2 pi f0)| < e_max / y_max``,
   and the loop gain it needs.
@@ -8,7 +8,7 @@
 * :func:`analyse_plant`: RGA number and singular values over frequency (7.2),
   the static gain and its rotation (7.3), the Table 5 scaling (6).
 
-The seed's 6.1 text has slips (see ``ControlObjective``): the stroke
+The ESRF study's 6.1 text has slips (see ``ControlObjective``): the stroke
 "3 mm ≈ 5e-2 rad" is an angle (3° = 5.24e-2 rad, the beam swing of the
 Newport's full ±10 V command, 2 × 26.2 mrad), "``< 2e-4``" is an equality,
 and ``|L| > 5e3`` is the ``|L| >> 1`` approximation of ``|1 + L| > 1/|S|``.
@@ -48,7 +48,7 @@ SEED_LOOP_GAIN_AT_F0 = 5e3  # seed 6.1: "|L(j w0)| > 5e3"
 
 @dataclass(frozen=True)
 class ControlObjective:
-    """The control objective of seed 6.1 from the Table 5 values.
+    """The control objective of ESRF study 6.1 from the Table 5 values.
 
     Attributes
     ----------
@@ -65,7 +65,7 @@ class ControlObjective:
     loop_gain_necessary : float
         ``1/b - 1``: no loop with ``|L| <`` this meets it.
     seed_loop_gain : float
-        The seed's rounded requirement, 5e3.
+        The ESRF study's rounded requirement, 5e3.
     table5_stroke_rad : float
         Beam stroke of Table 5's "expected perturbation" ``Un = 1 V``:
         ``2 gn un_max`` [rad] (5.24e-3 rad, ten times below 6.1's stroke).
@@ -117,7 +117,7 @@ def rga(g: np.ndarray) -> np.ndarray:
 
 
 def rga_number(g: np.ndarray) -> np.ndarray:
-    """``sum |RGA - I|`` (seed 7.2), shape (...)."""
+    """``sum |RGA - I|`` (ESRF study 7.2), shape (...)."""
     lam = rga(g)
     return np.sum(np.abs(lam - np.eye(lam.shape[-1])), axis=(-1, -2))
 
@@ -127,7 +127,7 @@ def rga_number(g: np.ndarray) -> np.ndarray:
 
 @dataclass(frozen=True, eq=False)
 class CoprimeFactors:
-    """Left normalised coprime factorisation ``G = M^-1 N`` (seed 5.1, MATLAB ``lncf``).
+    """Left normalised coprime factorisation ``G = M^-1 N`` (ESRF study 5.1, MATLAB ``lncf``).
 
     Attributes
     ----------
@@ -301,7 +301,7 @@ def normalized_coprime_factors(sys: ct.StateSpace) -> CoprimeFactors:
 
 @dataclass(frozen=True, eq=False)
 class PlantAnalysis:
-    """Seed sections 5 to 7 on one plant.
+    """ESRF study sections 5 to 7 on one plant.
 
     Attributes
     ----------
@@ -338,7 +338,7 @@ class PlantAnalysis:
         Lowest natural frequency of the Newport block ``Gn`` [Hz], where its
         response starts to fall; NaN when the model's Newport is a constant gain.
     coprime : CoprimeFactors or None
-        Of ``Gc Gi`` (``Uch, Ucv -> Vpch, Vpcv``, V/V), as seed 5.1; None when
+        Of ``Gc Gi`` (``Uch, Ucv -> Vpch, Vpcv``, V/V), as ESRF study 5.1; None when
         it cannot be computed (``checks`` says why).
     coprime_scaled : CoprimeFactors or None
         Of the scaled plant ``Uc/uc_max -> R/e_max``; None likewise.
@@ -347,6 +347,8 @@ class PlantAnalysis:
         One per optional analysis: passed when computed, failed with the reason.
     nyquist_hz : float
         Half the sampling frequency of the converters and the controller [Hz].
+    inputs_short_from_hz : float
+        Lowest grid frequency [Hz] where ``inputs_suffice`` fails; NaN when it holds.
     """
 
     f_hz: np.ndarray
@@ -367,6 +369,7 @@ class PlantAnalysis:
     checks: tuple[Check, ...] = ()
     disturbance_rolloff_hz: float = float("nan")
     nyquist_hz: float = float("inf")
+    inputs_short_from_hz: float = float("nan")
 
     def to_json(self) -> dict[str, Any]:
         """Scalars and the static matrices; the curves are left out."""
@@ -381,6 +384,7 @@ class PlantAnalysis:
             "disturbance_bandwidth_hz": self.disturbance_bandwidth_hz,
             "disturbance_rolloff_hz": self.disturbance_rolloff_hz,
             "inputs_suffice": self.inputs_suffice,
+            "inputs_short_from_hz": self.inputs_short_from_hz,
             "coprime": None if self.coprime is None else self.coprime.to_json(),
             "coprime_scaled": None if self.coprime_scaled is None
             else self.coprime_scaled.to_json(),
@@ -421,6 +425,7 @@ def analyse_plant(plant: PlantModel, *, params: BenchParams,
     gds_max = np.linalg.svd(gd * sc.un_max_v / sc.error_max_rad, compute_uv=False)[:, 0]
     # Only where the sampled loop can act: a frequency above Nyquist is not in its band.
     above = (gds_max > 1.0) & (f <= nyquist_hz)
+    short = above & (gs_min < gds_max - 1.0)
     band = _disturbance_bandwidth(plant, outputs, disturbances, sc.un_max_v / sc.error_max_rad)
     gcgi = ct.series(plant.blocks["Gi"], plant.blocks["Gc"])
     gcgi = ct.ss(gcgi.A, gcgi.B, gcgi.C, gcgi.D, inputs=list(inputs),
@@ -439,7 +444,8 @@ def analyse_plant(plant: PlantModel, *, params: BenchParams,
         rotation_rad=float(np.arctan2(u_polar[1, 0], u_polar[0, 0])),
         coupling=norm - np.eye(2), scaled_min_singular_value=gs_min,
         scaled_disturbance_gain=gds_max, disturbance_bandwidth_hz=band,
-        inputs_suffice=bool(np.all(gs_min[above] >= gds_max[above] - 1.0)),
+        inputs_suffice=not bool(np.any(short)),
+        inputs_short_from_hz=float(f[short][0]) if np.any(short) else float("nan"),
         coprime=coprime, coprime_scaled=coprime_scaled,
         objective=control_objective(params), checks=(check_gcgi, check_scaled),
         disturbance_rolloff_hz=_rolloff_hz(plant.blocks["Gn"]), nyquist_hz=nyquist_hz)

@@ -10,7 +10,7 @@ Each axis gets (``u = -K y``, ``K`` from ``Rh, Rv`` to ``Uch, Ucv``)
 * slope -1 and a lead around the crossover for the phase margin;
 * a second-order roll-off that **phase-stabilises** the lightly damped mirror
   mode: its Nyquist circle must point into the right half-plane. A notch
-  (the seed's "inversion" of 9.2) cannot stay robust here: with ξ ≈ 1e-3 a
+  (the ESRF study's "inversion" of 9.2) cannot stay robust here: with ξ ≈ 1e-3 a
   ±5 % shift of the resonance leaves a residue ~0.1/(2ξ) = 50 times the
   baseline loop gain on one side or the other of the notch.
 

@@ -1,9 +1,9 @@
-"""Controllers for MATLAB and for a real-time target (seed 9.3, 10.3).
+"""Controllers for MATLAB and for a real-time target (ESRF study 9.3, 10.3).
 
 * :func:`write_controllers_mat`: ``controllers.mat`` with one struct per
   controller, each holding the continuous ``K`` and the discrete ``Kd`` as
   structs of state-space matrices (``A, B, C, D, InputName, OutputName, Ts``),
-  as the seed's ``save('mat/K_diag.mat', 'K', 'Kd')`` keeps them, plus an
+  as the ESRF study's ``save('mat/K_diag.mat', 'K', 'Kd')`` keeps them, plus an
   ``fsmbench`` struct saying how ``Kd`` was made and the 4QD gain.
   ``fsmbench_load.m`` (shipped with the package) turns them into ``ss``.
 * :func:`sos_document` / :func:`write_sos_json`: each diagonal channel as
@@ -15,11 +15,11 @@
 Discretisation (:data:`DISCRETISATIONS`): by default ``"tustin_prewarp"``:
 each continuous section (:func:`fsmbench.control.realize.sections_from_zpk`)
 is discretised by Tustin prewarped at its own notch (or resonance) frequency,
-so every notch stays exactly in place; plain Tustin (the seed's
-``c2d(K, 1e-4, 'tustin')``) moves the seed's 411.5 Hz notch to 409.3 Hz
-(errata E26). ``"tustin"`` gives the seed's version.
+so every notch stays exactly in place; plain Tustin (the ESRF study's
+``c2d(K, 1e-4, 'tustin')``) moves the ESRF study's 411.5 Hz notch to 409.3 Hz
+(errata E26). ``"tustin"`` gives the ESRF study's version.
 
-Sign: every controller here is closed as ``u = -K y`` (the seed's
+Sign: every controller here is closed as ``u = -K y`` (the ESRF study's
 ``connect(sys, -K, ...)``); a target computes the sections' output and
 applies its negative.
 """
@@ -80,7 +80,7 @@ DISCRETISATIONS: dict[str, str] = {
                       "or else resonance frequency (lightly damped complex pole pair), so the "
                       "section's discrete response equals its continuous one exactly there and "
                       "every notch stays in place; other sections: plain Tustin",
-    "tustin": "Tustin (bilinear), no prewarping (the seed's c2d(K, Ts, 'tustin')); "
+    "tustin": "Tustin (bilinear), no prewarping (the ESRF study's c2d(K, Ts, 'tustin')); "
               "notches move down in frequency (errata E26)",
 }
 

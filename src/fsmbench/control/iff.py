@@ -1,6 +1,6 @@
-"""Active damping by integral force feedback (seed section 8).
+"""Active damping by integral force feedback (ESRF study section 8).
 
-The seed closes ``Kppf = blkdiag(-10000/s, 0)`` from the amplified coil
+The ESRF study closes ``Kppf = blkdiag(-10000/s, 0)`` from the amplified coil
 voltages ``Vch, Vcv`` to the commands ``Uch, Ucv`` with MATLAB's ``connect``,
 which adds the controller output to the command: ``Uc = Uc_ext + Kppf Vc``,
 i.e. ``u = -K y`` with ``K = -Kppf``.
@@ -9,9 +9,9 @@ i.e. ``u = -K y`` with ``K = -Kppf``.
 and after from the closed-loop poles (delays as Padé approximants), the IFF
 loop's own stability (poles, and a Nyquist count with exact delays), the
 largest stable gain, and how much of the mode the sensor sees at all: in the
-seed's block diagram ``Vc = Ga Zc Gi Uc`` with a static ``Zc = Rc`` ("Important
+ESRF study's block diagram ``Vc = Ga Zc Gi Uc`` with a static ``Zc = Rc`` ("Important
 2"), so the mirror's motion never reaches ``Vc``, the modes are unobservable
-from it and IFF cannot move them. That is the seed's conclusion of 8.3
+from it and IFF cannot move them. That is the ESRF study's conclusion of 8.3
 ("Active damping does not seem to be applicable here") derived from the model.
 """
 
@@ -53,7 +53,7 @@ class ModeDamping:
     frequency_hz_closed, damping_ratio_closed : float
         Nearest closed-loop pole with the plant's delays (Padé) [Hz], [1].
     damping_ratio_closed_without_delay : float
-        Same without the input delays (the seed's delay-free model).
+        Same without the input delays (the ESRF study's delay-free model).
     sensor_peak_ratio : float
         ``|r| / (|Re λ| |Vc_i/Uc_i(0)|)``: height of the mode's resonance in
         the IFF sensor's path relative to that path's static gain [1] (for the
@@ -93,7 +93,7 @@ class IffAnalysis:
         [1/s] (NaN for an inactive channel).
     f_hz : array, shape (n,)
     open_loop, closed_loop : arrays, complex, shape (n, 2, 2)
-        ``Uch, Ucv -> Vph, Vpv`` without and with IFF (the seed's Bode plot of 8.2).
+        ``Uch, Ucv -> Vph, Vpv`` without and with IFF (the ESRF study's Bode plot of 8.2).
     """
 
     controller: ct.StateSpace
@@ -134,13 +134,13 @@ def _damping(p: complex) -> float:
 
 def iff_analysis(plant: PlantModel, *, controller: ct.StateSpace | None = None,
                  pade_order: int = 6, f_hz: np.ndarray | None = None) -> IffAnalysis:
-    """Damping of the Sercalo modes with IFF (seed 8.2).
+    """Damping of the Sercalo modes with IFF (ESRF study 8.2).
 
     Parameters
     ----------
     plant : PlantModel
     controller : control.StateSpace, optional
-        ``Vch, Vcv -> Uch, Ucv``, added to the commands; default the seed's ``Kppf``.
+        ``Vch, Vcv -> Uch, Ucv``, added to the commands; default the ESRF study's ``Kppf``.
     pade_order : int
         Padé order of the delays for the closed-loop poles.
     f_hz : array, optional

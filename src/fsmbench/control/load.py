@@ -70,7 +70,7 @@ class LoadedController:
     feedback controllers ``r = [Rh, Rv]`` is the 4QD beam angle [rad] and
     ``v = [Uch, Ucv]`` the Sercalo commands [V] (see ``input_names`` and
     ``output_names``). The matrices are ``K``'s: the loop is closed as
-    ``u = -K y`` (the seed's ``connect(sys, -K, ...)``), so the command applied
+    ``u = -K y`` (the ESRF study's ``connect(sys, -K, ...)``), so the command applied
     is ``-v``; that sign is the user's to apply. Arrays are read-only.
 
     Attributes

@@ -1,4 +1,4 @@
-"""Closed-loop verification of a controller on a plant with delays (seed 9.2, 10.2).
+"""Closed-loop verification of a controller on a plant with delays (ESRF study 9.2, 10.2).
 
 :func:`analyse_loop` closes ``u = -K y`` around the plant path from the
 controller's outputs to its inputs (``Uch, Ucv -> Rh, Rv`` for the Sercalo
@@ -7,14 +7,14 @@ loop, ``Unh, Unv -> Rh, Rv`` for the Newport loop of 10.2) and reports:
 * closed-loop poles with the delays replaced by Padé approximants (the only
   place a rational model is needed), and as a second opinion the generalised
   Nyquist count of ``det(I + L)`` with the exact delays;
-* per axis (``L_ii``, the loop the seed draws in Fig. 41): gain, phase and
+* per axis (``L_ii``, the loop the ESRF study draws in Fig. 41): gain, phase and
   modulus margins, crossover, ``|S(j 2 pi f0)|`` and the 6.1 objective;
 * the MIMO sensitivity and complementary sensitivity, ``S + T = I``;
 * the generalised stability margin ``b(G, K)`` on the Table 5-scaled loop;
 * the Tustin-discretised controller against the continuous one below 1 kHz.
 
 :func:`newport_to_beam` gives the Newport command to beam angle transfer with
-the Sercalo loop closed (seed Fig. 42).
+the Sercalo loop closed (ESRF study Fig. 42).
 """
 
 from __future__ import annotations
@@ -67,7 +67,7 @@ class LoopOptions:
     pade_order : int
         Order of the Padé approximant of each input delay for the closed-loop poles.
     ts_s : float
-        Sample time of the Tustin controller [s] (seed 9.3: 1e-4 s).
+        Sample time of the Tustin controller [s] (ESRF study 9.3: 1e-4 s).
     discrete_f_max_hz : float
         Upper frequency of the discrete/continuous comparison [Hz].
     f_min_hz, f_max_hz : float
@@ -446,7 +446,7 @@ def _discrete(plant: PlantModel, k: ct.StateSpace, f: np.ndarray,
 
 def newport_to_beam(plant: PlantModel, k: ct.StateSpace | None, f_hz: np.ndarray, *,
                     disturbances: Sequence[str] = ("Unh", "Unv")) -> np.ndarray:
-    """Newport command to beam angle [rad/V], shape (n, 2, 2) (seed Fig. 42).
+    """Newport command to beam angle [rad/V], shape (n, 2, 2) (ESRF study Fig. 42).
 
     ``S Gn`` with ``S = (I + G K)^-1`` when ``k`` (``Rh, Rv -> Uch, Ucv``) is
     given, the open-loop ``Gn`` when it is None; exact delays.

@@ -10,7 +10,7 @@ are cascaded: the A matrix is block lower-triangular with O(w) entries.
 The same sections are what a real-time target runs: :func:`tustin_section`
 discretises one section by Tustin, by default prewarped at the section's own
 notch (or resonance) frequency so that the discrete response there equals the
-continuous one exactly (plain Tustin moves the seed's 411.5 Hz notch to
+continuous one exactly (plain Tustin moves the ESRF study's 411.5 Hz notch to
 409.3 Hz, errata E26); :func:`tustin_cascade` does the same on the sections'
 scaled state-space realisations.
 """

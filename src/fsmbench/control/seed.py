@@ -1,4 +1,4 @@
-"""The seed's controllers (sections 8, 9.2 and 10.2), restored and realised.
+"""The ESRF study's controllers (sections 8, 9.2 and 10.2), restored and realised.
 
 The decentralised controller of 9.2 is printed with an unbalanced parenthesis
 in ``Kh`` (``/((s^2*(s+352.5)*(1+s/2/pi/2000))``); the intended expression,
@@ -9,7 +9,7 @@ the only one that parses with the same factors, is
 
 (errata E-K1). Both loops then cross over near 27 Hz on the bench's plant,
 which supports the restoration (see tests/control/test_seed.py).
-The seed closes the loop with ``-K``: ``[Uch, Ucv] = -K [Rh, Rv]``.
+The ESRF study closes the loop with ``-K``: ``[Uch, Ucv] = -K [Rh, Rv]``.
 """
 
 from __future__ import annotations
@@ -35,7 +35,7 @@ def _quadratic_roots(b1: float, b0: float) -> list[complex]:
 
 
 def seed_decentralised_controller() -> ct.StateSpace:
-    """``K = blkdiag(Kh, Kv)`` of seed 9.2, inputs ``Rh, Rv`` [rad], outputs ``Uch, Ucv`` [V]."""
+    """``K = blkdiag(Kh, Kv)`` (ESRF study 9.2), inputs ``Rh, Rv`` [rad], outputs ``Uch, Ucv``."""
     w_lp = 2.0 * np.pi * 2000.0
     kh = zpk_cascade([-112.0, *_quadratic_roots(15.93, 6.686e6)],
                      [0.0, 0.0, -352.5, -w_lp], -0.25598 * w_lp,
@@ -49,7 +49,7 @@ def seed_decentralised_controller() -> ct.StateSpace:
 
 def newport_controller(*, gn0_rad_per_v: tuple[float, float], crossover_hz: float = 10.0,
                        lead_ratio: float = 2.0) -> ct.StateSpace:
-    """Newport alignment controller of seed 10.2, inputs ``Rh, Rv``, outputs ``Unh, Unv``.
+    """Newport alignment controller of ESRF study 10.2, inputs ``Rh, Rv``, outputs ``Unh, Unv``.
 
     ``Kn = 1/Gn0 (w0/s)^2 (1 + s h/w0) / (1 + s/(w0 h)) / h`` per axis, with
     ``Gn0`` the static beam angle per Newport volt (``inv(Gd) Gn`` at DC).
@@ -67,7 +67,7 @@ def newport_controller(*, gn0_rad_per_v: tuple[float, float], crossover_hz: floa
 
 
 def iff_controller() -> ct.StateSpace:
-    """Integral force feedback of seed 8.2: ``Kppf = blkdiag(-10000/s, 0)``, Vch,Vcv to Uch,Ucv."""
+    """Integral force feedback (ESRF study 8.2): ``blkdiag(-10000/s, 0)``, Vch,Vcv to Uch,Ucv."""
     a = np.array([[0.0]])
     b = np.array([[1.0, 0.0]])
     c = np.array([[-10000.0], [0.0]])
@@ -76,7 +76,7 @@ def iff_controller() -> ct.StateSpace:
 
 
 def tustin(k: ct.StateSpace, *, ts_s: float = SEED_TS_S) -> ct.StateSpace:
-    """Bilinear (Tustin) discretisation keeping the signal names (seed 9.3)."""
+    """Bilinear (Tustin) discretisation keeping the signal names (ESRF study 9.3)."""
     kd = ct.sample_system(k, ts_s, method="tustin")
     return ct.ss(kd.A, kd.B, kd.C, kd.D, ts_s, inputs=list(k.input_labels),
                  outputs=list(k.output_labels), name=f"{k.name}d" if k.name else None)

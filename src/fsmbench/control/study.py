@@ -1,13 +1,13 @@
-"""The control study of the seed (sections 5 to 10) in one call.
+"""The control study of the ESRF study (sections 5 to 10) in one call.
 
 :func:`design_study` runs, on one plant (physical or identified):
 
 1. the plant analysis (5.1 coprime factors, 6 scaling and the 6.1 objective,
    7.2 RGA and singular values, 7.3 static gain);
-2. the seed's decentralised controller of 9.2, verified;
+2. the ESRF study's decentralised controller of 9.2, verified;
 3. fsmbench's own controller, designed on the plant with its delay and
    verified, then checked over the perturbed set (resonance ±5 %, damping
-   ×0.5 and ×2); the seed's controller goes through the same set;
+   ×0.5 and ×2); the ESRF study's controller goes through the same set;
 4. the Newport alignment loop of 10.2 on the Newport path ``Un -> R``;
 5. integral force feedback of 8.2;
 6. the Newport command to beam angle transfer with each Sercalo loop closed
@@ -71,10 +71,11 @@ CONTROLLERS_SOS_JSON = "controllers_sos.json"
 MATLAB_LOADER = "fsmbench_load.m"
 
 _DESCRIPTIONS = {
-    "seed_controller": "seed 9.2 decentralised controller (restored Kh, Kv); Rh,Rv -> Uch,Ucv",
+    "seed_controller": "ESRF study 9.2 decentralised controller (restored Kh, Kv); Rh,Rv -> "
+                       "Uch,Ucv",
     "fsmbench_controller": "fsmbench loop-shaped controller; Rh,Rv -> Uch,Ucv",
-    "newport_controller": "seed 10.2 Newport alignment controller; Rh,Rv -> Unh,Unv",
-    "iff_controller": "seed 8.2 integral force feedback Kppf; Vch,Vcv -> Uch,Ucv, ADDED "
+    "newport_controller": "ESRF study 10.2 Newport alignment controller; Rh,Rv -> Unh,Unv",
+    "iff_controller": "ESRF study 8.2 integral force feedback Kppf; Vch,Vcv -> Uch,Ucv, ADDED "
                       "to the command (u = +Kppf y); unstable on this bench, kept for reference",
 }
 
@@ -90,11 +91,11 @@ class StudyOptions:
     loop : LoopOptions
         Verification settings (Padé order, Tustin sample time, grids).
     newport_crossover_hz : float
-        Crossover of the Newport loop (seed 10.2: 10 Hz).
+        Crossover of the Newport loop (ESRF study 10.2: 10 Hz).
     newport_lead_ratio : float
-        Lead ratio ``h`` of the Newport loop (seed: 2).
+        Lead ratio ``h`` of the Newport loop (ESRF study: 2).
     with_seed_robustness : bool
-        Also run the seed's controller over the perturbed set.
+        Also run the ESRF study's controller over the perturbed set.
     """
 
     design: DesignOptions = field(default_factory=DesignOptions)
@@ -147,7 +148,7 @@ class DesignResult:
     objective : ControlObjective
     plant : PlantAnalysis
     seed : LoopAnalysis
-        The seed's controller of 9.2 on the plant.
+        The ESRF study's controller of 9.2 on the plant.
     fsmbench : LoopAnalysis
         fsmbench's controller on the plant it was designed on.
     design : FsmDesign
@@ -235,7 +236,7 @@ class DesignResult:
         method : {"tustin_prewarp", "tustin"}
             Discretisation of ``Kd`` and of the sections
             (:data:`fsmbench.control.export.DISCRETISATIONS`): by default Tustin
-            prewarped at each section's notch, ``"tustin"`` for the seed's plain Tustin.
+            prewarped at each section's notch, ``"tustin"`` for the ESRF study's plain Tustin.
 
         Returns
         -------
@@ -278,7 +279,7 @@ def _gd_scaling(plant: PlantModel) -> tuple[list[float], list[float]]:
 
 def design_study(plant: PlantModel, *, bench: Bench,
                  options: StudyOptions | None = None) -> DesignResult:
-    """Analyse ``plant``, verify the seed's controllers, design and verify fsmbench's.
+    """Analyse ``plant``, verify the ESRF study's controllers, design and verify fsmbench's.
 
     Parameters
     ----------

@@ -1,7 +1,7 @@
 """The model checked on the user's own closed loop: recorded tracking error against its prediction.
 
-``data_rep_h`` and ``data_rep_v`` (seed 11) were recorded with the loop
-closed by the seed's controller of 9.2, while the Newport repeated a 1 Hz
+``data_rep_h`` and ``data_rep_v`` (ESRF study 11) were recorded with the loop
+closed by the ESRF study's controller of 9.2, while the Newport repeated a 1 Hz
 sine. What the 4QD reads in them, less the motion that repeats every period,
 is the loop's response to every noise of the bench. The same quantity is
 predicted from a bench model and that controller; the two must agree before
@@ -20,7 +20,7 @@ Predicted
     ``Vp / gd_used`` as the real-time code did (the gains it was given, the
     bench file's when nothing else is known), analysed exactly as the records.
     A simulation, not a linear prediction, because the DAC's quantisation error
-    behind the seed's notched controller is not white (its PSD is 5–30 times
+    behind the ESRF study's notched controller is not white (its PSD is 5–30 times
     ``q²/12`` around the resonances when the command moves by less than a step
     per sample): a white model under-predicts the loop by up to 15 %.
 

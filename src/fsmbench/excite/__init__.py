@@ -5,7 +5,7 @@ without loading numpy's and scipy's heavier parts); import from the modules:
 
 - :mod:`fsmbench.excite.design`: random-phase and crest-factor-minimised
   multisines (full, odd, odd-odd, linear or log grids), band-limited noise as
-  the seed injects it, chirps;
+  the ESRF study injects it, chirps;
 - :mod:`fsmbench.excite.limits`: the peak at the DAC and at every ADC channel
   the bench model carries the excitation to, and the 4QD's compression at the
   beam's peak, checked before anything is written;

@@ -75,7 +75,7 @@ def add_excite_command(sub: Any) -> None:
                                       "real-time target or the twin can play")
     p.add_argument("out", metavar="OUT", help="output folder")
     p.add_argument("--input", required=True, choices=_CHANNELS,
-                   help="DAC channel to excite (the seed's signal name)")
+                   help="DAC channel to excite (the ESRF study's signal name)")
     p.add_argument("--kind", choices=("multisine", "noise", "chirp"), default="multisine",
                    help="signal (default multisine)")
     p.add_argument("--band", metavar=("LOW", "HIGH"), nargs=2, type=hz, default=(1.0, 2000.0),
@@ -104,7 +104,7 @@ def add_excite_command(sub: Any) -> None:
                    help="multisine phases: crest factor minimised (default), Schroeder's, or "
                         "plain random from --seed")
     p.add_argument("--duration", metavar="S", type=seconds, default=30.0,
-                   help="noise or chirp period [s] (default 30, the seed's noise records)")
+                   help="noise or chirp period [s] (default 30, the ESRF study's noise records)")
     p.add_argument("--sweep", choices=("linear", "log"), default="linear",
                    help="chirp sweep (default linear)")
     p.add_argument("--seed", metavar="N", type=seed, default=0,
@@ -216,7 +216,7 @@ def summary(design: Any, report: Any) -> list[str]:
     cf = f"crest factor {d.crest_factor:.3f}"
     if d.crest_factor_random_phase is not None:
         cf += (f" ({d.phase_method} phases; random phases: {d.crest_factor_random_phase:.3f}, "
-               f"median of {N_RANDOM_REFERENCE} draws from seed {d.seed})")
+               f"median of {N_RANDOM_REFERENCE} draws from random seed {d.seed})")
     lines.append(cf)
     lines.append(f"peaks through the {report.model_words}:")
     lines += [f"  {c.line()}" for c in report.peaks]

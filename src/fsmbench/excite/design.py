@@ -12,7 +12,7 @@ ones (``odd``: even lines stay free to show even nonlinear distortions) or
 distortions), linearly or log-spaced (the grid lines nearest a geometric
 sequence, without duplicates).
 
-Phases are random (uniform, from the seed), Schroeder's or the crest factor
+Phases are random (uniform, from the ESRF study), Schroeder's or the crest factor
 minimised: Schroeder's phases as start, then the time-frequency swapping of
 van der Ouderaa, Schoukens and Renneboog (1988: clip the peaks, keep the
 phases the clipped signal has on the grid lines), then Guillaume's L_p
@@ -20,7 +20,7 @@ minimisation (1991) for increasing p (a smooth path to the L_inf norm, i.e.
 the peak). The crest factor is ``max|x| / rms(x)`` over the samples played.
 Lines on mains harmonics can be left out (``skip_mains``, :mod:`fsmbench.excite.mains`).
 
-*Noise* is the seed's: Gaussian, 4th-order Butterworth band-pass
+*Noise* is the ESRF study's: Gaussian, 4th-order Butterworth band-pass
 (:class:`fsmbench.sim.excitation.ExcitationStream`), scaled to the rms asked.
 *Chirps* sweep the band once per period, linearly or logarithmically.
 """
@@ -78,7 +78,7 @@ class ExcitationDesign:
     Attributes
     ----------
     input : str
-        DAC channel, the seed's signal name (``Uch``, ``Ucv``, ``Unh``, ``Unv``).
+        DAC channel, the ESRF study's signal name (``Uch``, ``Ucv``, ``Unh``, ``Unv``).
     kind : {"multisine", "noise", "chirp"}
     fs_hz : float
         Sampling rate of the samples [Hz].
@@ -109,7 +109,7 @@ class ExcitationDesign:
     phase_method : {"random", "schroeder", "minimised"}
     crest_factor_random_phase : float or None
         Median crest factor of plain random-phase multisines on the same lines
-        (:data:`N_RANDOM_REFERENCE` draws from the seed) [1]; None for noise and chirps.
+        (:data:`N_RANDOM_REFERENCE` draws from the ESRF study) [1]; None for noise and chirps.
     chirp_method : {"linear", "log"} or None
     after_end : {"zero", "repeat"}
         What a player does after the last sample: stop (zero) or repeat the
@@ -502,11 +502,11 @@ def _periodic(*, input: str, kind: SignalKind, one: np.ndarray, fs_hz: float,
 def design_noise(*, input: str, band_hz: tuple[float, float], amplitude_rms_v: float,
                  fs_hz: float, duration_s: float, seed: int = 0, periods: int = 1,
                  transient_periods: int = 0) -> ExcitationDesign:
-    """Band-limited Gaussian noise as the seed injects it, ``duration_s`` per period.
+    """Band-limited Gaussian noise as the ESRF study injects it, ``duration_s`` per period.
 
     The twin's own noise excitation (:class:`~fsmbench.sim.excitation.ExcitationStream`,
     4th-order Butterworth band-pass of white Gaussian noise from
-    ``numpy.random.default_rng(seed)``), scaled so that one period's rms is
+    ``numpy.random.default_rng(ESRF study)``), scaled so that one period's rms is
     ``amplitude_rms_v`` exactly [V]. ``periods > 1`` repeats the same record
     (periodic noise).
     """

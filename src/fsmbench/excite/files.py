@@ -1,7 +1,7 @@
 """Excitation files: a MAT-file a real-time target plays and a JSON that describes it.
 
 ``<stem>.mat`` (MATLAB v5) holds two column vectors at the bench's sampling
-rate: ``t`` [s] from 0 and the command under the seed's signal name
+rate: ``t`` [s] from 0 and the command under the ESRF study's signal name
 (``Uch``, ``Ucv``, ``Unh`` or ``Unv``) [V]; transient periods first, then the
 steady-state periods, nothing else. ``<stem>.json`` (format
 ``fsmbench.excitation`` version 1, :data:`EXCITATION_FORMAT`) says how it was

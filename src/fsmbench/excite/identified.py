@@ -2,7 +2,7 @@
 
 A real bench's 4QD compresses away from its centre, and the packaged bench
 model's 4QD is linear: ``fsmbench excite --identification DIR`` takes the 4QD
-that ``identify`` measured (seed 2.1, ``DIR/identification.json``): each
+that ``identify`` measured (ESRF study 2.1, ``DIR/identification.json``): each
 axis's small-signal gain ``a`` and cubic term ``c`` of ``V = b + a θ + c θ³``
 over the calibration's swing. The bench model's single compression is the
 larger of the two axes' at the wider half-swing ``θ_fs``,

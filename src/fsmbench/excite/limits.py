@@ -3,7 +3,7 @@
 An excitation on one DAC channel must fit the DAC itself and every ADC
 channel the bench carries it to. For ``Uch`` the coil-voltage channel
 ``Vch = Ga Zc Gi Uch`` (about 185 V/V at DC in the nominal model, a 1 kHz
-low pass) is the tight one: it is why the seed injects only tens of mV.
+low pass) is the tight one: it is why the ESRF study injects only tens of mV.
 The 4QD outputs ``Vph, Vpv`` see the Sercalo's lightly damped modes.
 
 The peak is taken on the samples the ADCs would read: the designed samples
@@ -76,7 +76,7 @@ class ConverterPeak:
     converter : str
         ``"DAC"`` or ``"ADC"``.
     signal : str
-        The channel, the seed's name (``Uch``, ``Vch`` ...).
+        The channel, the ESRF study's name (``Uch``, ``Vch`` ...).
     peak_v : float
         Largest absolute value [V].
     limit_v : float

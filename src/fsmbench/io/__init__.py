@@ -2,7 +2,7 @@
 
 A recording is an ``xarray.Dataset`` with one float64 variable per signal on
 the dimension ``"t"`` (see :mod:`fsmbench.io.recording`); the signals and the
-seed's experiments are described in :mod:`fsmbench.io.signals`. Every write
+ESRF study's experiments are described in :mod:`fsmbench.io.signals`. Every write
 is atomic (:mod:`fsmbench.io.atomic`); every bad input raises a
 :class:`RecordingError` naming the file and the variable.
 """

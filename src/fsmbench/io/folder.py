@@ -1,4 +1,4 @@
-"""A folder of recordings in the seed's layout, read as one set, and its plausibility checks.
+"""A folder of recordings in the ESRF study's layout, read as one set, and its plausibility checks.
 
 :func:`load_recordings` reads every seed experiment a folder holds and says,
 for every experiment it does not use, why; what a user should know about the
@@ -87,7 +87,7 @@ class RecordingSet:
     ----------
     folder : str
     recordings : dict of str to xarray.Dataset
-        Experiment name to recording, in the seed's order (also those that
+        Experiment name to recording, in the ESRF study's order (also those that
         fail a check: the stage that needs them skips them, naming the check).
     skipped : dict of str to str
         Experiment name to the reason it is not used (missing file, with
@@ -514,7 +514,7 @@ def _refuse_if_too_large(path: Path, name: str, fmt: str, *, out_of_core: bool) 
             "available")
     if name not in OUT_OF_CORE_EXPERIMENTS:
         raise RecordingError(path, f"{head}; only the huddle tests and the repeatability "
-                                   "records run out of core: cut it to the seed's length")
+                                   "records run out of core: cut it to the ESRF study's length")
     if fmt == "mat5":
         raise RecordingError(path, f"{head}; a MATLAB v5 file cannot be read in pieces: convert "
                                    f"it once (fsmbench convert {path} {path.with_suffix('.h5')} "
@@ -557,7 +557,7 @@ def _read(path: Path, name: str, *, adc_range_v: float, adc_bits: int,
     if need > 0.5 * available_memory_bytes():
         raise RecordingError(path, f"is {need / 2**30:.1f} GiB of samples: too long to analyse "
                              "in memory, and only the huddle tests and the repeatability "
-                             "records run out of core; cut it to the seed's length")
+                             "records run out of core; cut it to the ESRF study's length")
     return ds.compute()
 
 
@@ -639,7 +639,7 @@ def _empty_problem(root: Path, found: dict[str, Path], skipped: dict[str, str],
     if found or odd:
         bad = "; ".join(skipped[n] for n in EXPERIMENTS if n in found or n in odd)
         return f"no recording in this folder can be used: {bad}"
-    looked = (f"looked for the seed's recordings ({', '.join(list(EXPERIMENTS)[:2])} … "
+    looked = (f"looked for the ESRF study's recordings ({', '.join(list(EXPERIMENTS)[:2])} … "
               f"{list(EXPERIMENTS)[-1]}, {len(EXPERIMENTS)} names, as .mat, .h5 or .nxs)")
     near = "; ".join(hints.values())
     return (f"holds none of them: {looked}; found {shown or 'nothing (empty folder)'}"

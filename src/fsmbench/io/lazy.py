@@ -142,7 +142,7 @@ def open_recording(path: str | os.PathLike[str], *, chunk_samples: int = DEFAULT
     Parameters
     ----------
     path : str or os.PathLike
-        NeXus archive, MATLAB v7.3 or v5 file in the seed's layout.
+        NeXus archive, MATLAB v7.3 or v5 file in the ESRF study's layout.
     chunk_samples : int
         Dask chunk length along time (samples).
     memory_fraction : float
@@ -362,7 +362,7 @@ def convert_recording(source: str | os.PathLike[str], dest: str | os.PathLike[st
     Parameters
     ----------
     source : str or os.PathLike
-        MATLAB v5 (compressed or not), v7.3, or NeXus, in the seed's layout
+        MATLAB v5 (compressed or not), v7.3, or NeXus, in the ESRF study's layout
         (real double column vectors, ``t`` among them).
     dest : str or os.PathLike
         The NeXus archive to write (atomically). Its root records the source's

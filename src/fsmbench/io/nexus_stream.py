@@ -41,7 +41,7 @@ class NexusAppender:
     path : str or os.PathLike
         Destination; its folder must exist.
     signals : sequence of str
-        Signal names, in the order they are stored (seed names: units and
+        Signal names, in the order they are stored (ESRF study names: units and
         long names come from :mod:`fsmbench.io.signals`).
     fs_hz : float
         Sampling rate [Hz]; the time axis is ``k / fs_hz`` [s] from ``t0_s``.

@@ -4,12 +4,12 @@ A recording holds one float64 variable per signal on the dimension ``"t"``:
 
 * coordinate ``t``, in s (attrs ``units="s"``, ``long_name="Time"``);
 * each signal: attrs ``units`` and ``long_name`` from
-  :data:`fsmbench.io.signals.SIGNALS`; a variable the seed does not know is
+  :data:`fsmbench.io.signals.SIGNALS`; a variable the ESRF study does not know is
   kept with ``units=""`` and a ``note`` saying so;
 * dataset attrs ``fs_hz`` (sampling frequency, Hz, float), ``experiment``
   (e.g. ``"data_uch"``) and ``source`` (the file read, or ``""``).
 
-Files are MATLAB v5/v7 or v7.3 MAT-files (what the seed's ``load`` reads) or
+Files are MATLAB v5/v7 or v7.3 MAT-files (what the ESRF study's ``load`` reads) or
 the NeXus archive of :mod:`fsmbench.io.nexus`; the format is told from the
 content. Every problem is a :class:`~fsmbench.io.errors.RecordingError` that
 names the file and the variable.
@@ -48,7 +48,7 @@ RecordingFormat = Literal["mat5", "mat73", "nexus"]
 # above float64 rounding of t = (0:N-1)/fs (~1e-12 relative, even summed over
 # millions of samples) yet far below a dropped or doubled sample (100 %).
 _STEP_TOLERANCE: Final = 1e-3
-_UNKNOWN_NOTE: Final = "not in the seed's signal table (fsmbench.io.signals.SIGNALS)"
+_UNKNOWN_NOTE: Final = "not in the ESRF study's signal table (fsmbench.io.signals.SIGNALS)"
 _SUFFIXES: Final = (".mat", ".h5", ".nxs")  # find_experiments' preference order
 
 
@@ -178,7 +178,7 @@ def _signal_attrs(name: str) -> dict[str, str]:
 
 
 def _ordered(names: Iterable[str]) -> list[str]:
-    """Signals in the seed's table order, then the others as given."""
+    """Signals in the ESRF study's table order, then the others as given."""
     names = [n for n in names if n != TIME]
     return [n for n in SIGNALS if n in names] + [n for n in names if n not in SIGNALS]
 
@@ -279,7 +279,7 @@ def validate_recording(
     require : iterable of str, default ()
         Variables that must be present (``t`` always is).
     adc_range_v : float, default 20.0
-        Full input range ΔV of the ADC, in V (±10 V: 20 V, seed section 1.6).
+        Full input range ΔV of the ADC, in V (±10 V: 20 V, ESRF study section 1.6).
     adc_bits : int, default 16
         ADC resolution n, in bits.
 
@@ -336,7 +336,7 @@ def make_recording(
     Returns
     -------
     xarray.Dataset
-        The recording; signals in the seed's table order, then the others.
+        The recording; signals in the ESRF study's table order, then the others.
 
     Raises
     ------
@@ -396,7 +396,7 @@ def read_recording(
     experiment : str, optional
         Experiment name; default the archive's own (NeXus) or the file stem.
     require : iterable of str, optional
-        Variables that must be present. Default: the seed's ``load`` list
+        Variables that must be present. Default: the ESRF study's ``load`` list
         (:data:`~fsmbench.io.signals.EXPERIMENTS`) when the experiment or the
         stem is known, else only ``t``.
     adc_range_v : float, default 20.0
@@ -567,7 +567,7 @@ def write_recording(
 
 
 def find_experiments(folder: str | os.PathLike[str]) -> dict[str, Path]:
-    """Which of the seed's experiments a folder holds.
+    """Which of the ESRF study's experiments a folder holds.
 
     Parameters
     ----------

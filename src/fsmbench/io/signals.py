@@ -1,6 +1,6 @@
-"""The bench's signals and experiments, as the seed study names them.
+"""The bench's signals and experiments, as the ESRF study names them.
 
-``SIGNALS`` is the signal table of the seed's section 2 ("Signal / Name /
+``SIGNALS`` is the signal table of the ESRF study's section 2 ("Signal / Name /
 Unit"); ``EXPERIMENTS`` lists the recordings the study loads, each with exactly
 the variables its ``load(...)`` lines ask for (sections 2, 3 and 11). A file
 that is named after an experiment must hold those variables; anything else in
@@ -28,14 +28,14 @@ TIME: Final = "t"
 
 @dataclass(frozen=True)
 class SignalInfo:
-    """One row of the seed's signal table.
+    """One row of the ESRF study's signal table.
 
     Parameters
     ----------
     name : str
         Variable name in the MAT-files (e.g. ``"Vph"``).
     long_name : str
-        The seed's description (e.g. ``"4Q Photodiode Measurement - Horizontal"``).
+        The ESRF study's description (e.g. ``"4Q Photodiode Measurement - Horizontal"``).
     units : str
         Physical unit of the samples, ``"V"`` or ``"m"``.
     """
@@ -47,7 +47,7 @@ class SignalInfo:
 
 @dataclass(frozen=True)
 class ExperimentInfo:
-    """One recording the seed study loads.
+    """One recording the ESRF study loads.
 
     Parameters
     ----------
@@ -56,10 +56,10 @@ class ExperimentInfo:
     description : str
         What was done during the recording.
     required : tuple of str
-        The variables the seed's ``load(...)`` lines ask for, ``"t"`` first,
-        in the seed's order (union over all the seed's loads of that file).
+        The variables the ESRF study's ``load(...)`` lines ask for, ``"t"`` first,
+        in the ESRF study's order (union over all the ESRF study's loads of that file).
     section : str
-        Seed section(s) that load the file, e.g. ``"2.2, 2.3"``.
+        ESRF study section(s) that load the file, e.g. ``"2.2, 2.3"``.
     """
 
     name: str
@@ -160,19 +160,21 @@ EXPERIMENTS: Final[dict[str, ExperimentInfo]] = _experiment_table(
     (
         "data_huddle_test_5",
         "Huddle test 5: closed loop, compensation unit, aluminium "
-        "(its load line is commented out in the seed)",
+        "(its load line is commented out in the ESRF study)",
         _HUDDLE_CL,
         "3.1",
     ),
     (
         "data_rep_h",
-        "Non-repeatability, horizontal: repeated Newport steps with all signals recorded",
+        "Non-repeatability, horizontal: the Newport moves the beam in a 1 Hz sine, loop "
+        "closed, all signals recorded",
         _REPEAT,
         "11.1",
     ),
     (
         "data_rep_v",
-        "Non-repeatability, vertical: repeated Newport steps with all signals recorded",
+        "Non-repeatability, vertical: the Newport moves the beam in a 1 Hz sine, loop "
+        "closed, all signals recorded",
         _REPEAT,
         "11.1",
     ),

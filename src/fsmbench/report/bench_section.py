@@ -20,7 +20,7 @@ _GROUPS = {
     "converter": "ADC and DAC", "sercalo": "Sercalo", "current_amplifier": "current amplifier",
     "voltage_amplifier": "voltage amplifier", "newport": "Newport", "quad_diode": "4QD",
     "attocube": "Attocube", "geometry": "geometry", "environment": "environment",
-    "scaling": "scaling (seed 6)",
+    "scaling": "scaling (ESRF study 6)",
 }
 
 
@@ -65,8 +65,8 @@ def bench_section(bench: Bench, *, recordings: Mapping[str, xr.Dataset],
         "not disturb. A real-time target samples every signal at "
         f"{conv.fs_hz:g} Hz with {conv.bits}-bit converters over ±{conv.range_v / 2:g} V: one "
         f"step is {conv.lsb_v * 1e6:.1f} µV, and rounding adds white noise of "
-        f"{conv.quantisation_psd_v2_per_hz:.3g} V²/Hz (seed 1.6).",
-        "Signal chain (seed Figs. 1 and 2): the DAC voltage Uc drives a current amplifier, "
+        f"{conv.quantisation_psd_v2_per_hz:.3g} V²/Hz (ESRF study 1.6).",
+        "Signal chain (ESRF study Figs. 1 and 2): the DAC voltage Uc drives a current amplifier, "
         f"Gi = 1/(R + Rc + Lc·s), nominally {gi.h * 1e3:.2f} mA/V (h) and {gi.v * 1e3:.2f} "
         "mA/V (v). The coil current tilts the Sercalo, a mass-spring-damper per axis with "
         f"resonances at {ser.resonance_hz.h:g} Hz (h) and {ser.resonance_hz.v:g} Hz (v) and "
@@ -74,7 +74,7 @@ def bench_section(bench: Bench, *, recordings: Mapping[str, xr.Dataset],
         "its datasheet. The beam reflects twice on the Sercalo and once on the Newport, whose "
         f"metrology reads {nom.newport.metrology_gain_rad_per_v * 1e3:.2f} mrad of mirror "
         "angle per volt. The 4QD converts the beam angle to volts (Gd, nominally "
-        f"{qd.h:g} V/rad (h) and {qd.v:g} V/rad (v), seed Table 2). The voltage across the "
+        f"{qd.h:g} V/rad (h) and {qd.v:g} V/rad (v), ESRF study Table 2). The voltage across the "
         f"coil is amplified {nom.voltage_amplifier.gain:g} times (Ga, "
         f"{nom.voltage_amplifier.cutoff_hz:g} Hz low pass).",
         f"Nominal static gains: {g_uc * 1e3:.2f} mrad of beam angle per volt on the Sercalo's "
@@ -82,7 +82,7 @@ def bench_section(bench: Bench, *, recordings: Mapping[str, xr.Dataset],
         f"{plant.input_delay_s['Uch'] * 1e3:.2f} ms on the Sercalo path (one sample of "
         "computation and half a sample of hold) and "
         f"{plant.input_delay_s['Unh'] * 1e3:.2f} ms on the Newport path.",
-        Note("The seed's 1.2 derives a damping ratio of 0.33 % from the datasheet with "
+        Note("The ESRF study's 1.2 derives a damping ratio of 0.33 % from the datasheet with "
              "two slips (28.4 mA/deg is a current per angle, and 282.9 deg/V is not in its "
              "Table 1); the datasheet itself gives the ratios above.", ref="errata E1–E3"),
     ]
@@ -93,11 +93,11 @@ def bench_section(bench: Bench, *, recordings: Mapping[str, xr.Dataset],
             "parameters, which differ from the nominal ones as the real bench did: for "
             f"example its current-amplifier gain is {true.current_amp_gain_a_per_v().h * 1e3:.2f}"
             " mA/V (h) where the components give "
-            f"{gi.h * 1e3:.2f} mA/V (seed 2.2), and its Sercalo resonates at "
+            f"{gi.h * 1e3:.2f} mA/V (ESRF study 2.2), and its Sercalo resonates at "
             f"{true.sercalo.resonance_hz.h:g} Hz and {true.sercalo.resonance_hz.v:g} Hz. "
             "Appendix A lists both sets.")
     blocks.append(Table(
-        caption="Signals of the recordings (seed section 2)",
+        caption="Signals of the recordings (ESRF study section 2)",
         header=("signal", "what it is", "unit"),
         rows=tuple((s.name, s.long_name.replace(" - ", ", "), s.units)
                    for s in SIGNALS.values())))
@@ -116,14 +116,14 @@ def recordings_table(recordings: Mapping[str, xr.Dataset], *, skipped: Mapping[s
     """One row per experiment: what it is, length [s], sampling rate [Hz], samples, signals.
 
     Experiments not loaded get a row saying why. Known experiments come in
-    the seed's order, others after them.
+    the ESRF study's order, others after them.
     """
     names = [n for n in EXPERIMENTS if n in recordings or n in skipped]
     names += [n for n in (*recordings, *skipped) if n not in names]
     rows = []
     for name in names:
         info = EXPERIMENTS.get(name)
-        what = f"{info.description} (seed {info.section})" if info else ""
+        what = f"{info.description} (ESRF study {info.section})" if info else ""
         if name in recordings:
             ds = recordings[name]
             signals = ", ".join(str(v) for v in ds.data_vars)
@@ -154,7 +154,7 @@ def parameters_appendix(bench: Bench, *, is_twin: bool) -> Section:
     header = ("block", "parameter", "nominal", *(("true (twin)",) if is_twin else ()), "unit",
               "source", "name in the bench file")
     text = ("Nominal: what is known before identification (datasheets, measured components, "
-            "the seed's Table 2). docs/model.md derives each value. Values with h and v are "
+            "the ESRF study's Table 2). docs/model.md derives each value. Values with h and v are "
             "per axis.")
     if is_twin:
         text += (" True: what the digital twin simulates; datasheet rows have no true value.")

@@ -1,4 +1,4 @@
-"""Figures of seed sections 3 (huddle test) and 4 (error budget) as data.
+"""Figures of ESRF study sections 3 (huddle test) and 4 (error budget) as data.
 
 Builders return :class:`~fsmbench.report.figure.Figure` objects; the
 sections (:mod:`fsmbench.report.huddle_section`,
@@ -53,7 +53,7 @@ _LPF_COLOR = "#08519c"
 
 
 def huddle_config_words(rec: HuddleRecord) -> str:
-    """The test's configuration (seed Table 3) in words."""
+    """The test's configuration (ESRF study Table 3) in words."""
     parts = ["closed loop" if rec.closed_loop else "open loop",
              "compensation unit on" if rec.compensation_unit else "no compensation unit"]
     if rec.shielding:
@@ -111,7 +111,7 @@ def asd_line(f_hz: FloatArray, psd: FloatArray, *, scale: float, **kw: object) -
 
 
 def cumulative_line(f_hz: FloatArray, psd: FloatArray, *, scale: float, **kw: object) -> Line:
-    """Cumulative rms from 0 Hz (trapezoid, the seed's ``cumtrapz``), 0 Hz left out."""
+    """Cumulative rms from 0 Hz (trapezoid, the ESRF study's ``cumtrapz``), 0 Hz left out."""
     cum = np.sqrt(cumulative_power(f_hz, np.maximum(psd, 0.0))) * scale
     sel = f_hz > 0
     x, y = log_envelope(f_hz[sel], cum[sel])
@@ -135,7 +135,7 @@ def _test_color(rec: HuddleRecord) -> str:
 def huddle_attocube_time_figure(h: HuddleAnalysis, recordings: Mapping[str, xr.Dataset], *,
                                 stability: Mapping[int, StabilityRecord] | None = None
                                 ) -> Figure:
-    """Seed Fig. 29: Va of every test, one panel per test, raw and 50 Hz low pass.
+    """ESRF study Fig. 29: Va of every test, one panel per test, raw and 50 Hz low pass.
 
     A record analysed out of core is drawn from its min/max envelope
     (``stability``), never sample by sample.
@@ -169,8 +169,8 @@ def huddle_attocube_time_figure(h: HuddleAnalysis, recordings: Mapping[str, xr.D
             x_label="Time [s]", y_label="Va, mean removed [nm]", title=title, share_y="va"))
     return Figure(
         key="fig29_huddle_attocube_time", title="Attocube distance during the huddle tests",
-        caption="Va after the seed's trimming (t < 1 s dropped), mean "
-                "removed: light, as recorded; dark, after the seed's first-order low pass at "
+        caption="Va after the ESRF study's trimming (t < 1 s dropped), mean "
+                "removed: light, as recorded; dark, after the ESRF study's first-order low pass at "
                 "50 Hz (lsim from rest). One panel per test of Table 3, all on one vertical "
                 "scale so that the tests compare. Each record is drawn as a band, the "
                 "smallest and largest sample in each bin of time; zooming in draws finer "
@@ -180,7 +180,7 @@ def huddle_attocube_time_figure(h: HuddleAnalysis, recordings: Mapping[str, xr.D
 
 def huddle_qd_time_figure(h: HuddleAnalysis, recordings: Mapping[str, xr.Dataset], *,
                           stability: Mapping[int, StabilityRecord] | None = None) -> Figure:
-    """Seed Fig. 30: Vph (left, blue) and Vpv (right, orange) of every test."""
+    """ESRF study Fig. 30: Vph (left, blue) and Vpv (right, orange) of every test."""
     panels = []
     for rec in _records(h):
         stab = (stability or {}).get(rec.number)
@@ -208,7 +208,7 @@ def huddle_qd_time_figure(h: HuddleAnalysis, recordings: Mapping[str, xr.Dataset
                 share_y="qd"))
     return Figure(
         key="fig30_huddle_qd_time", title="4QD signals during the huddle tests",
-        caption="Vph (horizontal, left) and Vpv (vertical, right) after the seed's trimming, "
+        caption="Vph (horizontal, left) and Vpv (vertical, right) after the ESRF study's trimming, "
                 "mean removed, one row per test of Table 3, all on one vertical scale; each "
                 "record drawn as the band of the smallest and largest sample in each bin of "
                 "time (finer bins on zoom).",
@@ -216,7 +216,7 @@ def huddle_qd_time_figure(h: HuddleAnalysis, recordings: Mapping[str, xr.Dataset
 
 
 def huddle_attocube_asd_figure(h: HuddleAnalysis) -> Figure:
-    """Seed Fig. 31: ASD of Va, one panel per test, and the cumulative rms of all tests."""
+    """ESRF study Fig. 31: ASD of Va, one panel per test, and the cumulative rms of all tests."""
     panels = []
     cum = []
     for rec in _records(h):
@@ -232,7 +232,8 @@ def huddle_attocube_asd_figure(h: HuddleAnalysis) -> Figure:
     return Figure(
         key="fig31_huddle_attocube_asd", title="Spectrum of the Attocube distance in the "
                                                "huddle tests",
-        caption="Welch estimate with the seed's 1 s Hann window (mean removed), one panel per "
+        caption="Welch estimate with the ESRF study's 1 s Hann window (mean removed), one panel "
+                "per "
                 "test, all on one vertical scale so that the tests compare, and the cumulative "
                 "rms from 0 Hz of every test (last panel); the end of each curve is the test's "
                 "Va rms.",
@@ -240,7 +241,7 @@ def huddle_attocube_asd_figure(h: HuddleAnalysis) -> Figure:
 
 
 def huddle_qd_asd_figure(h: HuddleAnalysis) -> Figure:
-    """Seed Fig. 32: ASD of Vph (left) and Vpv (right) per test; cumulative rms of all tests."""
+    """ESRF study Fig. 32: ASD of Vph (left) and Vpv (right) per test; cumulative rms of all."""
     recs = _records(h)
     signals = (("Vph", "psd_vph_v2_per_hz", "horizontal"), ("Vpv", "psd_vpv_v2_per_hz",
                                                              "vertical"))
@@ -270,14 +271,14 @@ def huddle_qd_asd_figure(h: HuddleAnalysis) -> Figure:
                 f"{r.f_hz[i]:.0f} Hz on Vph (errata E30).")
     return Figure(
         key="fig32_huddle_qd_asd", title="Spectrum of the 4QD signals in the huddle tests",
-        caption="Welch estimate with the seed's 1 s Hann window, Vph left and Vpv right, one "
+        caption="Welch estimate with the ESRF study's 1 s Hann window, Vph left and Vpv right, one "
                 "row per test, every spectrum on one vertical scale so that open and closed "
                 "loop compare; last row: the cumulative rms from 0 Hz of every test." + peak,
         panels=tuple(panels), seed_ref="Fig. 32", columns=2, share_x=True)
 
 
 def path_error_figure(g: GeometryBudget) -> Figure:
-    """Seed Fig. 34: distance error against the Sercalo angle error, trace and law."""
+    """ESRF study Fig. 34: distance error against the Sercalo angle error, trace and law."""
     th = seed_theta_range()
     trace = trace_bench(th, h_m=g.h_m, l_m=g.l_m).path_error_m
     law = small_angle_law(h_m=g.h_m, l_m=g.l_m)
@@ -291,7 +292,8 @@ def path_error_figure(g: GeometryBudget) -> Figure:
                      color="#000000", width=1.0),
                 Line(th * UM, 0.5 * trace, name="measured by the Attocube (half the round trip)",
                      color=PALETTE[2], dash="dash"),
-                Line(seed_th * UM, seed_err, name="seed Table 4 (1000× too large, errata E15)",
+                Line(seed_th * UM, seed_err, name="ESRF study Table 4 (1000× too large, errata "
+                                                  "E15)",
                      markers=True, color=PALETTE[3])),
         x_label="Sercalo angle error δθc [µrad]", y_label="Distance error [m]",
         x_log=True, y_log=True)
@@ -299,14 +301,15 @@ def path_error_figure(g: GeometryBudget) -> Figure:
         key="fig34_angle_error_distance",
         title="Distance error against the Sercalo angle error",
         caption=f"Ray trace O → S → Y → M → T for H = {g.h_m * 1e3:g} mm, L = {g.l_m * 1e3:g} mm "
-                f"over the seed's range. Fitted k = {g.fit.k_fit_m_per_rad2:.6g} m/rad² against "
+                f"over the ESRF study's range. Fitted k = {g.fit.k_fit_m_per_rad2:.6g} m/rad² "
+                "against "
                 f"the derived 12H + 8L = {law.k_m_per_rad2:.6g} m/rad² (log-log slope "
                 f"{g.fit.loglog_slope:.4f}).",
         panels=(panel,), seed_ref="Fig. 34")
 
 
 def beam_path_figure(g: GeometryBudget) -> Figure:
-    """Seed Fig. 35: the traced beam path at a large angle error."""
+    """ESRF study Fig. 35: the traced beam path at a large angle error."""
     d = g.figure
     mm = 1e3
     traces = [Line(d.nominal_beam[:, 0] * mm, d.nominal_beam[:, 1] * mm,

@@ -1,4 +1,4 @@
-"""Report section 4: the error budget (seed section 4, 4.1–4.5)."""
+"""Report section 4: the error budget (ESRF study section 4, 4.1–4.5)."""
 
 from __future__ import annotations
 
@@ -24,7 +24,7 @@ _ROW_NOTE = {
     "ADC quantisation (4QD channels)":
         "E28–E29: one LSB is 9.8 µrad (h) of beam angle, not 0.46; the law is quadratic",
     "4QD electronic noise":
-        "E28–E29: 1 mV is 32 µrad (h); the seed's 1.5 nm uses a linear 10⁻⁶ gain",
+        "E28–E29: 1 mV is 32 µrad (h); the ESRF study's 1.5 nm uses a linear 10⁻⁶ gain",
     "Sercalo DAC quantisation":
         "E30: in closed loop the rounding drives the notched modes; mirror piston",
     "geometric cross terms between angle sources": "(Σ α)² has cross products (4.1)",
@@ -39,11 +39,11 @@ def _nm(x: float | None) -> str:
 
 
 def _section_words(s: str) -> str:
-    return "not in the seed" if s in ("—", "") else s
+    return "not in the ESRF study" if s in ("—", "") else s
 
 
 def budget_table(b: ErrorBudget) -> Table:
-    """The budget table: every source in nm rms, bias, the seed's number and a short note."""
+    """The budget table: every source in nm rms, bias, the ESRF study's number and a short note."""
     def row(r: BudgetRow) -> tuple[str, ...]:
         note = _ROW_NOTE.get(r.name, "")
         seed = "; ".join(x for x in dict.fromkeys((r.seed_note, note)) if x)
@@ -56,8 +56,8 @@ def budget_table(b: ErrorBudget) -> Table:
               else f"over a {b.window_s:g} s record with its mean removed")
     return Table(
         caption=f"Error budget of the Attocube distance, {b.configuration}, {window}",
-        header=("source", "seed section", "mechanism", "rms [nm]", "bias [nm]",
-                "seed's value [nm]", "seed's number and note"),
+        header=("source", "ESRF study section", "mechanism", "rms [nm]", "bias [nm]",
+                "ESRF study's value [nm]", "ESRF study's number and note"),
         rows=rows,
         note="Bias: the mean shift the quadratic (geometric) term adds; it is not in the rms. "
              "Rows sorted by rms; the rows add in quadrature to the total exactly.")
@@ -71,7 +71,7 @@ def _geometry(result: BudgetResult) -> Section:
                                         [1e-9, 25e-9, 100e-9], strict=True))
     blocks: tuple[Block, ...] = (
         "An angle error δθc of the Sercalo (from its ideal 45°) lengthens the beam path. The "
-        "seed traces the path O → S → Y → M → T for H = L = 50 mm; the same exact trace is "
+        "ESRF study traces the path O → S → Y → M → T for H = L = 50 mm; the same exact trace is "
         f"done here for the bench's H = {g.h_m * 1e3:g} mm, L = {g.l_m * 1e3:g} mm.",
         f"The round-trip path grows as k·δθc² with k = 12H + 8L = "
         f"{g.path_error_m_per_rad2:.4g} m/rad² (fit to the trace: {g.fit.k_fit_m_per_rad2:.6g}; "
@@ -82,10 +82,10 @@ def _geometry(result: BudgetResult) -> Section:
         path_error_figure(g),
         Table(caption="Table 4 recomputed: distance error for a Sercalo angle error",
               header=("angle error δθc [µrad]", "round-trip path [pm]",
-                      "measured by the Attocube [pm]", "seed's Table 4 [nm]"),
+                      "measured by the Attocube [pm]", "ESRF study's Table 4 [nm]"),
               rows=rows),
         Note("Eq. (8) δL = δθc² holds only for H = L = 50 mm and its coefficient has units "
-             "(m/rad²); 1 µrad gives 1 pm of path, 0.5 pm measured: the seed's Table 4 is "
+             "(m/rad²); 1 µrad gives 1 pm of path, 0.5 pm measured: the ESRF study's Table 4 is "
              "1000× too large.", ref="errata E15"),
         "Figure 35 checks the trace at a large angle, where the deviation is visible.",
         beam_path_figure(g),
@@ -124,13 +124,13 @@ def _term_row(t: DriftTerm) -> tuple[str, ...]:
 def _air(result: BudgetResult) -> Section:
     a = result.air
     s = a.sensitivity
-    header = ("variation", "error, Ciddor [nm]", "seed [nm]")
+    header = ("variation", "error, Ciddor [nm]", "ESRF study [nm]")
     blocks: tuple[Block, ...] = (
         f"The Attocube measures {a.path_m * 1e3:g} mm of air at {s.wavelength_m * 1e9:g} nm. "
         f"Ciddor's refractive index at {s.temperature_c:g} °C, {s.pressure_pa / 100:g} hPa and "
         f"{s.humidity_pct:g} %RH gives ∂n/∂T = {s.ppm_per_k:.4g} ppm/K, ∂n/∂P = "
         f"{s.ppm_per_hpa:.4g} ppm/hPa and ∂n/∂RH = {s.dn_drh_per_pct * 1e6:.3g} ppm/%RH "
-        f"(seed: {SEED_4_3['k_t_ppm_per_k']:g}, {SEED_4_3['k_p_ppm_per_hpa']:g} and "
+        f"(ESRF study: {SEED_4_3['k_t_ppm_per_k']:g}, {SEED_4_3['k_p_ppm_per_hpa']:g} and "
         f"{SEED_4_3['k_rh_ppm_per_pct']:g}, signs not given).",
         Table(caption="Air variations without the compensation unit",
               header=header,
@@ -140,11 +140,11 @@ def _air(result: BudgetResult) -> Section:
               header=header,
               rows=tuple((v.label, f"±{abs(v.error_m) * NM:.3g}", f"±{v.seed_m * NM:g}")
                          for v in a.with_compensation)),
-        f"The seed's eq. (11) combines the compensated full ranges to 54 nm; with Ciddor "
+        f"The ESRF study's eq. (11) combines the compensated full ranges to 54 nm; with Ciddor "
         f"that is {a.eq11_full_range_rss_m * NM:.3g} nm (half ranges: "
         f"{a.eq11_half_range_rss_m * NM:.3g} nm).",
-        Note("The seed's ±25 nm for ±1 hPa contradicts its own 0.27 ppm/hPa (±27 nm); Ciddor "
-             "gives 94.5 nm/K (seed 100), 26.5 nm/hPa (27) and 8.7 nm per 10 %RH (10).",
+        Note("The ESRF study's ±25 nm for ±1 hPa contradicts its own 0.27 ppm/hPa (±27 nm); Ciddor "
+             "gives 94.5 nm/K (the ESRF study: 100), 26.5 nm/hPa (27) and 8.7 nm per 10 %RH (10).",
              ref="errata E16, E31"),
         "Eq. (11) is a range, not what a record sees. The budget uses drifts: each residual "
         "error of the compensation unit (and the beam-path temperature under the shielding) "
@@ -169,10 +169,10 @@ def _frame(result: BudgetResult) -> Section:
         f"The {f.frame_length_m * 1e3:g} mm of aluminium frame between the Attocube head and "
         f"its reflector expand by {f.aluminium_m_per_k * 1e6:.3g} µm/K "
         f"(α = {f.expansion_per_k * 1e6:g}·10⁻⁶/K); invar would give "
-        f"{f.invar_m_per_k * NM:.3g} nm/K. Within the seed's 0.1 K: "
+        f"{f.invar_m_per_k * NM:.3g} nm/K. Within the ESRF study's 0.1 K: "
         f"{f.aluminium_at_max_dt_m * NM:.3g} nm (aluminium), {f.invar_at_max_dt_m * NM:.3g} nm "
         "(invar).",
-        Note("0.05 m × 23·10⁻⁶/K is 1.15 µm/K, 13 % more than the seed's ≈1 µm/K.",
+        Note("0.05 m × 23·10⁻⁶/K is 1.15 µm/K, 13 % more than the ESRF study's ≈1 µm/K.",
              ref="errata E34"),
         f"The budget takes the frame temperature as a slow drift of "
         f"{f.frame_temperature_stationary_rms_k * 1e3:.3g} mK rms: "
@@ -190,7 +190,7 @@ def _noise(result: BudgetResult) -> Section:
     share = (limiting.rms_m / b.total_rms_m) ** 2
     origin = b.spectra_origin
     blocks: list[Block] = [
-        f"Sources (seed 4.5a): the converters' quantisation, {n.lsb_v * 1e3:.3g} mV per step "
+        f"Sources (ESRF study 4.5a): the converters' quantisation, {n.lsb_v * 1e3:.3g} mV per step "
         f"({n.bits} bits over {n.range_v:g} V), white at q²/(12 fs) = "
         f"{n.adc_psd_v2_per_hz:.3g} V²/Hz two-sided; the Newport's DAC, "
         f"{n.newport_dac_angle_rms_rad * UM:.2g} µrad rms of mirror angle; the Newport's own "
@@ -199,9 +199,10 @@ def _noise(result: BudgetResult) -> Section:
         f"and in closed loop the Sercalo's DAC. 4QD noise: {origin.get('qd', '-')}; Sercalo "
         f"DAC: {origin.get('sercalo_dac', '-')}.".replace("data_huddle_test_", ""),
         f"One step on Vph is {n.qd_lsb_angle_rad[0] * UM:.3g} µrad of beam angle (h), "
-        f"{n.qd_lsb_angle_rad[1] * UM:.3g} µrad (v) (seed: {n.seed_qd_lsb_angle_rad * UM:.2g}); "
+        f"{n.qd_lsb_angle_rad[1] * UM:.3g} µrad (v) (ESRF study: "
+        f"{n.seed_qd_lsb_angle_rad * UM:.2g}); "
         f"1 mV is {n.qd_angle_per_volt_rad_per_v[0] * 1e-3 * UM:.3g} µrad (h) "
-        f"(seed: {n.seed_qd_angle_rad * UM:.2g} µrad).",
+        f"(ESRF study: {n.seed_qd_angle_rad * UM:.2g} µrad).",
         Note("G = 0.03 rad/V is already 1/|Gd|; dividing again by ΣV = 20 V makes the angle "
              "21× too small.", ref="errata E28"),
         Note("No fixed gain turns an angle error into a distance error: the law is quadratic "
@@ -214,11 +215,12 @@ def _noise(result: BudgetResult) -> Section:
         angle_asd_figure(b),
         "and from the angle to the Attocube distance, piston plus geometric term:",
         distance_cumulative_figure(b),
-        Note(f"The seed's procedure (open loop, 10 Hz–1 kHz, linear 10⁻⁶ gain) gives "
-             f"{n.seed_method_sercalo_dac_distance_rms_m:.3g} m here (seed 1.647·10⁻¹¹ m): it is "
-             "set by the 411 Hz mode's damping. In closed loop the 9.2 controller notches the "
-             "modes, the DAC's rounding drives them, and as mirror piston this becomes the "
-             "largest angle source: the seed's Important 9 (\"does not limit\") does not hold.",
+        Note(f"The ESRF study's procedure (open loop, 10 Hz–1 kHz, linear 10⁻⁶ gain) gives "
+             f"{n.seed_method_sercalo_dac_distance_rms_m:.3g} m here (the ESRF study: "
+             "1.647·10⁻¹¹ m): it is set by the 411 Hz mode's damping. In closed loop the 9.2 "
+             "controller notches the modes, the DAC's rounding drives them, and as mirror "
+             "piston this becomes the largest angle source: the ESRF study's Important 9 "
+             "(\"does not limit\") does not hold.",
              ref="errata E30"),
         budget_table(b),
         f"Total {b.total_rms_m * NM:.3g} nm rms ({b.configuration}); the limiting source is "
@@ -238,7 +240,7 @@ def _second(b: ErrorBudget) -> str:
 
 
 def budget_section(result: BudgetResult, *, plant_source: str) -> Section:
-    """Seed section 4: the sources of error and the budget table.
+    """ESRF study section 4: the sources of error and the budget table.
 
     Parameters
     ----------

@@ -1,4 +1,4 @@
-"""Figures of the control chapters (seed sections 5–10) as data.
+"""Figures of the control chapters (ESRF study sections 5–10) as data.
 
 Each function turns a result of :mod:`fsmbench.control` into a
 :class:`~fsmbench.report.figure.Figure`: frequency responses with labels in
@@ -318,8 +318,8 @@ def robustness_figure(rob: Robustness, *, factors: Sequence[tuple[float, float]]
 
 def newport_to_beam_figure(n2b: NewportToBeam, *, key: str, title: str, caption: str,
                            seed_ref: str = "") -> Figure:
-    """``|Un_i → R_i|`` open loop and with each Sercalo controller closed (seed Fig. 42)."""
-    words = {"seed_controller": ("with the seed's controller", SEED_COLOR),
+    """``|Un_i → R_i|`` open loop and with each Sercalo controller closed (ESRF study Fig. 42)."""
+    words = {"seed_controller": ("with the ESRF study's controller", SEED_COLOR),
              "fsmbench_controller": ("with fsmbench's controller", FSM_COLOR)}
     panels = []
     for i, axis in enumerate(AXES):
@@ -355,7 +355,7 @@ def scaled_plant_figure(pa: PlantAnalysis, *, key: str, title: str, caption: str
 
 def plant_figure(pa: PlantAnalysis, *, key: str, title: str, caption: str,
                  note: str = "") -> Figure:
-    """RGA number and singular values of ``Uch, Ucv → Rh, Rv`` (seed 7.2), up to Nyquist."""
+    """RGA number and singular values of ``Uch, Ucv → Rh, Rv`` (ESRF study 7.2), up to Nyquist."""
     sel = pa.f_hz <= pa.nyquist_hz
     f = pa.f_hz[sel]
     rga = Panel(traces=(Line(f, pa.rga_number[sel], name="RGA number", color=PALETTE[2]),),
@@ -373,12 +373,12 @@ def plant_figure(pa: PlantAnalysis, *, key: str, title: str, caption: str,
 
 def iff_figure(iff: IffAnalysis, *, key: str, title: str, caption: str,
                note: str = "") -> Figure:
-    """``Uc_i → Vp_i`` without and with the seed's IFF: one column per axis."""
+    """``Uc_i → Vp_i`` without and with the ESRF study's IFF: one column per axis."""
     mags, phases = [], []
     for i, axis in enumerate(AXES):
         open_i, closed_i = iff.open_loop[:, i, i], iff.closed_loop[:, i, i]
-        closed_name = ("with the seed's IFF (closed loop stable)" if iff.loop_stable else
-                       "with the seed's IFF (closed loop unstable: not a steady state)")
+        closed_name = ("with the ESRF study's IFF (closed loop stable)" if iff.loop_stable else
+                       "with the ESRF study's IFF (closed loop unstable: not a steady state)")
         mags.append(Panel(
             traces=(Line(iff.f_hz, np.abs(open_i), name=f"without IFF, {axis}",
                          color=_AXIS_COLOR[axis],

@@ -1,10 +1,10 @@
-"""The report's control chapters (seed sections 5–10), text, tables and figures in reading order.
+"""The report's control chapters (ESRF study 5–10): text, tables and figures in reading order.
 
 Entry point: :func:`control_sections`, from the design stage
 (:class:`fsmbench.stages.DesignStage`): its ``result`` (a
 :class:`~fsmbench.control.study.DesignResult`) and ``twin_check`` (a
 :class:`~fsmbench.twin.verify.TrackingCheck`). Numbers in the text come from
-the run; where they differ from the seed, a note names the errata entry
+the run; where they differ from the ESRF study, a note names the errata entry
 (docs/seed-errata.md).
 """
 
@@ -181,8 +181,8 @@ def _section5(res: DesignResult) -> Section:
     pa = res.plant
     k_seed, k_fsm = res.seed.generalized_stability_margin, res.fsmbench.generalized_stability_margin
     # b(G, K) is 0 for a loop that is unstable
-    ratio = (f"fsmbench's {k_fsm / k_seed:.0f} times the seed's" if k_seed > 0
-             else "the seed's loop is unstable (b = 0)")
+    ratio = (f"fsmbench's {k_fsm / k_seed:.0f} times the ESRF study's" if k_seed > 0
+             else "the ESRF study's loop is unstable (b = 0)")
     def margin(factors: CoprimeFactors | None, field: str) -> str:
         return "not computed" if factors is None else f"{getattr(factors, field):.3f}"
 
@@ -195,14 +195,15 @@ def _section5(res: DesignResult) -> Section:
                margin(pa.coprime, "b_max_riccati")),
               ("b_max of the scaled plant (Uc / 10 V → R / 10 µrad)",
                margin(pa.coprime_scaled, "b_max")),
-              ("stability margin b(G, K) of the seed's controller (units of 5.1: Uc → Vp)",
+              ("stability margin b(G, K) of the ESRF study's controller (units of 5.1: Uc → Vp)",
                f"{k_seed:.2e}"),
               ("stability margin b(G, K) of fsmbench's controller (units of 5.1: Uc → Vp)",
                f"{k_fsm:.2e}")))
     failed = [c for c in pa.checks if not c.passed]
     if pa.coprime is None:
         comparison = (f"b(G, K) is the coprime-factor uncertainty a given loop tolerates: "
-                      f"{k_seed:.1e} for the seed's controller and {k_fsm:.1e} for fsmbench's "
+                      f"{k_seed:.1e} for the ESRF study's controller and {k_fsm:.1e} for "
+                      "fsmbench's "
                       f"({ratio}); b_max itself could not be computed on this plant.")
     else:
         comparison = (f"b(G, K) is the coprime-factor uncertainty a given loop tolerates. Both "
@@ -210,7 +211,7 @@ def _section5(res: DesignResult) -> Section:
                       f"{pa.coprime.b_max:.2f}), {ratio}: measured this way, neither loop "
                       f"tolerates much unstructured uncertainty.")
     return Section(title="5. Plant uncertainty", anchor="plant-uncertainty", blocks=(
-        "The seed factorises the Sercalo's electrical-to-mechanical path Gc Gi with MATLAB's "
+        "The ESRF study factorises the Sercalo's electrical-to-mechanical path Gc Gi with MATLAB's "
         "lncf (5.1) and stops there. fsmbench computes the same normalised left coprime factors "
         "(Zhou, Doyle & Glover, 13.6) on a balanced minimal realisation of the plant, and the "
         "largest coprime-factor uncertainty any controller could stabilise, "
@@ -231,11 +232,18 @@ def _disturbance_sentence(pa: Any, bw_text: str) -> str:
                f"but Table 5's scaling (1 V of command against 10 µrad of error) puts its "
                f"low-frequency gain so high that the roll-off reaches 1 only there")
     else:
-        why = ("the model's Newport path is a constant gain with a delay (seed 2.4), so it "
+        why = ("the model's Newport path is a constant gain with a delay (ESRF study 2.4), so it "
                "does not roll off")
-    return (f"The scaled Newport path exceeds 1 up to {bw_text}: {why}. The commands suffice "
-            f"to cancel the perturbation at every frequency of the grid: "
-            f"{_yes(pa.inputs_suffice)}.")
+    nyq = (f"the Nyquist frequency ({pa.nyquist_hz:g} Hz), above which the sampled loop acts "
+           "on nothing")
+    if pa.inputs_suffice:
+        verdict = f"yes, at every frequency up to {nyq}"
+    else:
+        verdict = (f"no, from {pa.inputs_short_from_hz:.3g} Hz up to {nyq}: there the "
+                   "smallest singular value of the scaled plant falls below the scaled "
+                   "Newport gain minus 1")
+    return (f"The scaled Newport path exceeds 1 up to {bw_text}: {why}. Do the commands "
+            f"suffice to cancel the perturbation? {verdict}.")
 
 
 def _section6(res: DesignResult) -> Section:
@@ -251,7 +259,7 @@ def _section6(res: DesignResult) -> Section:
                f"{obj.loop_gain_sufficient:.0f}"),
               ("|L(f0)| below which the bound cannot be met, 1/bound − 1 [1]",
                f"{obj.loop_gain_necessary:.0f}"),
-              ("the seed's rounded requirement on |L(f0)| [1]", f"{obj.seed_loop_gain:.0f}"),
+              ("the ESRF study's rounded requirement on |L(f0)| [1]", f"{obj.seed_loop_gain:.0f}"),
               ("beam stroke of Table 5's 1 V Newport perturbation [rad]",
                f"{obj.table5_stroke_rad:.3g}"),
               ("bound on |S(f0)| with that stroke [1]", f"{obj.table5_sensitivity_bound:.2e}")))
@@ -314,12 +322,12 @@ def _section7(res: DesignResult) -> Section:
                      f"{pa.f_hz[k]:.4g} Hz" + (
                          ": values this small are rounding, the axes do not interact."
                          if pa.rga_number[k] < _RGA_ROUNDING else ".")),
-            note=("The seed computes Λ with G.*inv(G)' — MATLAB's ' is the conjugate "
+            note=("The ESRF study computes Λ with G.*inv(G)' — MATLAB's ' is the conjugate "
                   "transpose; the RGA needs .' (errata E24). fsmbench uses the transpose.")),
         f"The rotation of the 4QD frame that would explain the static coupling (7.3) is "
         f"{1e3 * pa.rotation_rad:.3g} mrad; the static condition number is "
         f"{np.linalg.cond(g0):.3g}. A diagonal (decentralised) controller is therefore "
-        f"appropriate, as the seed concludes in section 9.",
+        f"appropriate, as the ESRF study concludes in section 9.",
         table))
 
 
@@ -333,7 +341,7 @@ def _section8(res: DesignResult) -> Section:
     limit = tuple(f"{iff.gain_limit[a]:.3g}" if np.isfinite(iff.gain_limit.get(a, np.nan))
                   else "— (no IFF on this axis)" for a in AXES)
     table = Table(
-        caption="The Sercalo's modes without and with the seed's IFF Kppf = −10000/s on h",
+        caption="The Sercalo's modes without and with the ESRF study's IFF Kppf = −10000/s on h",
         header=("quantity", "h", "v"),
         rows=(("resonance frequency [Hz]", *per_axis(lambda m: f"{m.frequency_hz_open:.2f}")),
               ("damping ratio without IFF [1]",
@@ -352,12 +360,13 @@ def _section8(res: DesignResult) -> Section:
     unchanged = all(np.isclose(m.damping_ratio_closed, m.damping_ratio_open, rtol=1e-6)
                     for m in modes.values())
     blocks: list[Block] = [
-        "The seed tries integral force feedback (8.2): the coil voltage Vc is fed back to the "
+        "The ESRF study tries integral force feedback (8.2): the coil voltage Vc is fed back to "
+        "the "
         "command through Kppf = −10000/s on the h axis, and the Bode plots of Uc → Vp with and "
-        "without it are compared. The seed concludes that active damping does not seem "
+        "without it are compared. The ESRF study concludes that active damping does not seem "
         "applicable (8.3). fsmbench computes why.",
         table,
-        f"With the seed's gain the IFF loop itself is {stable}.",
+        f"With the ESRF study's gain the IFF loop itself is {stable}.",
     ]
     if unchanged:
         blocks.append(
@@ -365,7 +374,8 @@ def _section8(res: DesignResult) -> Section:
             "computed from the closed-loop poles): IFF cannot move these modes, because the "
             "force sensor does not see them (relative resonance height 0 in its path).")
     blocks += [
-        Note("With the seed's static coil impedance Zc (no back-EMF term) the Sercalo's modes "
+        Note("With the ESRF study's static coil impedance Zc (no back-EMF term) the Sercalo's "
+             "modes "
              "are unobservable from Vc, so no IFF gain changes their damping; and −10000/s is "
              "far above the sensor loop's stable limit (the amplifier's 1 kHz pole, the coil "
              "inductance and the 0.15 ms delay), so it destabilises the loop it closes. With a "
@@ -373,10 +383,11 @@ def _section8(res: DesignResult) -> Section:
              ref="errata E25"),
         iff_figure(
             iff, key="iff_uc_to_vp", title="Integral force feedback: Uc → Vp without and with IFF",
-            caption=("The seed's Bode plot of 8.2, one column per axis: the command-to-4QD "
-                     "response without IFF and with the seed's IFF closed. On h the sensor "
+            caption=("The ESRF study's Bode plot of 8.2, one column per axis: the command-to-4QD "
+                     "response without IFF and with the ESRF study's IFF closed. On h the sensor "
                      "loop changes the level and slope of the response, but the resonance "
-                     "stays as sharp: its damping is unchanged. On v the seed's Kppf is zero, "
+                     "stays as sharp: its damping is unchanged. On v the ESRF study's Kppf is "
+                     "zero, "
                      "so the two curves coincide."),
             note=("With IFF the closed loop is unstable, so its frequency response is a "
                   "formal one: no steady state follows it on the bench (errata E25)."
@@ -416,7 +427,8 @@ def _controller_blocks(lp: LoopAnalysis, *, who: str, prefix: str, seed_ref: str
 
 def _discrete_table(res: DesignResult) -> Table:
     rows = []
-    for who, lp in (("the seed's controller", res.seed), ("fsmbench's controller", res.fsmbench),
+    for who, lp in (("the ESRF study's controller", res.seed), ("fsmbench's "
+                                                                "controller", res.fsmbench),
                     ("the Newport controller", res.newport)):
         d = lp.discrete
         if d is None:
@@ -429,7 +441,7 @@ def _discrete_table(res: DesignResult) -> Table:
     ts = res.options.loop.ts_s
     return Table(
         caption=(f"Continuous controller K against its plain Tustin discretisation at "
-                 f"{1e3 * ts:g} ms (the seed's c2d)"),
+                 f"{1e3 * ts:g} ms (the ESRF study's c2d)"),
         header=("controller", "axis", "gain margin with K [dB]", "gain margin with Kd [dB]",
                 "phase margin with K [deg]", "phase margin with Kd [deg]",
                 "largest |Kd − K| / |K| below 1 kHz [%]"),
@@ -452,21 +464,21 @@ def _section9(res: DesignResult, check: Any, *, skipped: str = "") -> Section:
     shift = "; ".join(f"{a:.1f} Hz → {b:.1f} Hz" for a, b in
                       (seed.discrete.notch_shifts_hz if seed.discrete else ()))
     blocks: list[Block] = [
-        "The seed designs a diagonal controller with SISOTOOL (9.2): on each axis two "
+        "The ESRF study designs a diagonal controller with SISOTOOL (9.2): on each axis two "
         "integrators, a lead and a notch on the Sercalo's resonance. fsmbench closes it around "
         "the plant with the plant's delays and verifies it.",
-        *_controller_blocks(seed, who="the seed's controller", prefix="seed_controller",
+        *_controller_blocks(seed, who="the ESRF study's controller", prefix="seed_controller",
                             seed_ref="Fig. 41", bode_key="fig41_seed_loop_gain"),
         Note(_seed_verdict(seed, seed_rob), ref="errata E27"),
     ]
     if seed_rob is not None:
         blocks += [
-            "Is the seed's controller robust? The Sercalo's resonances move with temperature "
+            "Is the ESRF study's controller robust? The Sercalo's resonances move with temperature "
             "and mounting and their damping is poorly known (errata E21): fsmbench closes the "
             "same controller around nine perturbed plants.",
-            *_robustness_blocks(seed_rob, res, who="the seed's controller",
+            *_robustness_blocks(seed_rob, res, who="the ESRF study's controller",
                                 key="seed_controller_robustness",
-                                title="The seed's controller over the perturbed plants"),
+                                title="The ESRF study's controller over the perturbed plants"),
         ]
     blocks += [
         "fsmbench's own controller: on each axis a loop shape with "
@@ -484,12 +496,12 @@ def _section9(res: DesignResult, check: Any, *, skipped: str = "") -> Section:
         Table(caption="fsmbench's controller: the loop shape of each axis",
               header=("quantity", "h", "v"), rows=shape_rows),
         controllers_figure(
-            (("the seed's controller", res.controllers["seed_controller"], SEED_COLOR),
+            (("the ESRF study's controller", res.controllers["seed_controller"], SEED_COLOR),
              ("fsmbench's controller", res.controllers["fsmbench_controller"], FSM_COLOR)),
             f_hz=np.union1d(seed.f_hz, fsm.f_hz), key="controllers_compared",
             title="The two controllers",
             caption=("Magnitude of each axis' controller, beam angle to Sercalo command. The "
-                     "seed's controller inverts the resonance with a notch; fsmbench's has "
+                     "ESRF study's controller inverts the resonance with a notch; fsmbench's has "
                      "more gain at low frequency (the objective of 6.1) and rolls off smoothly "
                      "instead, leaving the resonance in the loop.")),
         *_controller_blocks(fsm, who="fsmbench's controller", prefix="fsmbench_controller",
@@ -498,13 +510,14 @@ def _section9(res: DesignResult, check: Any, *, skipped: str = "") -> Section:
                             key="fsmbench_controller_robustness",
                             title="fsmbench's controller over the perturbed plants"),
         "Both controllers are implemented at 10 kHz (9.3). The table compares the margins of the "
-        "loop sampled with the seed's plain Tustin c2d with the continuous ones; the Kd that "
+        "loop sampled with the ESRF study's plain Tustin c2d with the continuous ones; the Kd that "
         "fsmbench exports (controllers.mat, controllers_sos.json) is instead Tustin prewarped "
         "at each notch, section by section.",
         _discrete_table(res),
     ]
     if shift:
-        blocks.append(Note(f"Without prewarping Tustin moves the seed's notches ({shift}); at "
+        blocks.append(Note(f"Without prewarping Tustin moves the ESRF study's notches ({shift}); "
+                           "at "
                            f"the h notch that is about two notch half-bandwidths, which is the "
                            f"large relative difference above. Prewarping at the notch keeps it "
                            f"in place: the exported Kd has its notches at the continuous "
@@ -515,7 +528,7 @@ def _section9(res: DesignResult, check: Any, *, skipped: str = "") -> Section:
 
 
 def _seed_verdict(seed: LoopAnalysis, seed_rob: Robustness | None) -> str:
-    """What the seed's controller misses, each claim from its own result."""
+    """What the ESRF study's controller misses, each claim from its own result."""
     claims = []
     s = {a: seed.axes[a].sensitivity_at_f0 for a in AXES}
     bound = seed.objective.sensitivity_bound
@@ -535,8 +548,8 @@ def _seed_verdict(seed: LoopAnalysis, seed_rob: Robustness | None) -> str:
             claims.append(f"it stays stable over all {n} perturbed plants, but with a worst "
                           f"gain margin of {seed_rob.worst_gain_margin_db:.1f} dB (below)")
     if not claims:
-        return "The seed's controller meets the objective of 6.1 with these margins."
-    return "The seed's controller is not the answer to 6.1: " + "; ".join(claims) + "."
+        return "The ESRF study's controller meets the objective of 6.1 with these margins."
+    return "The ESRF study's controller is not the answer to 6.1: " + "; ".join(claims) + "."
 
 
 def _twin_blocks(check: Any, *, skipped: str = "") -> list[Block]:
@@ -583,14 +596,14 @@ def _section10(res: DesignResult) -> Section:
     n2b, newport = res.newport_to_beam, res.newport
     f0 = res.objective.frequency_hz
     att = {name: n2b.attenuation_at(f0, name) for name in n2b.closed}
-    words = {"seed_controller": "the seed's controller",
+    words = {"seed_controller": "the ESRF study's controller",
              "fsmbench_controller": "fsmbench's controller"}
     att_text = "; ".join(f"with {words.get(n, n)}: {h:.2e} (h), {v:.2e} (v)"
                          for n, (h, v) in att.items())
     opts = res.options
     return Section(title="10. Newport control", anchor="newport-control", blocks=(
         "The Newport's rotation is the disturbance of the Sercalo loop. With the Sercalo loop "
-        "closed, the Newport command reaches the beam through S Gn (seed Fig. 42).",
+        "closed, the Newport command reaches the beam through S Gn (ESRF study Fig. 42).",
         newport_to_beam_figure(
             n2b, key="fig42_newport_to_beam", seed_ref="Fig. 42",
             title="Newport command to beam angle, Sercalo loop open and closed",
@@ -598,14 +611,14 @@ def _section10(res: DesignResult) -> Section:
                      "controller: the closed-loop curve is the open one times |S|.")),
         f"Attenuation of the Newport's motion at {f0:g} Hz, closed over open: {att_text}.",
         f"The Newport loop (10) aligns the 4QD: the Newport is driven from the beam angle so "
-        f"that the beam hits the 4QD's centre. The seed's controller has two integrators and "
+        f"that the beam hits the 4QD's centre. The ESRF study's controller has two integrators and "
         f"a lead of ratio {opts.newport_lead_ratio:g} at a crossover of "
         f"{opts.newport_crossover_hz:g} Hz, scaled by the inverse static gain of the Newport "
         f"path.",
         loop_gain_figure(
             newport, key="fig43_newport_loop_gain", seed_ref="Fig. 43",
             title="Loop gains of the Newport alignment loop",
-            caption=(f"Bode plot of L = Gn Kn on each axis with the seed's Newport controller"
+            caption=(f"Bode plot of L = Gn Kn on each axis with the ESRF study's Newport controller"
                      f"; plant: {newport.plant_source}, the Newport's 0.5 ms delay "
                      f"exact; phase unwrapped and placed in (−360°, 0] at the crossover.")),
         _stability(newport),
@@ -627,7 +640,7 @@ def control_sections(stage: DesignStage, *, plant_source: str) -> list[Section]:
     Returns
     -------
     list of Section
-        In the seed's order, each a sequence of text, tables and figures.
+        In the ESRF study's order, each a sequence of text, tables and figures.
     """
     res: DesignResult = stage.result
     sec5 = _section5(res)

@@ -1,4 +1,4 @@
-"""The delay tables of seed 2.3 and 2.4: phase-only and joint estimates, and the 4QD amplifier."""
+"""The delay tables of ESRF study 2.3 and 2.4: phase-only and joint estimates, the 4QD amplifier."""
 
 from __future__ import annotations
 

@@ -196,7 +196,7 @@ class Panel:
     equal_aspect : bool
         Same scale on x and y (Nyquist, beam path).
     shade : (float, float), optional
-        An x interval drawn grey (e.g. the part of a record the seed's
+        An x interval drawn grey (e.g. the part of a record the ESRF study's
         processing removes).
     height : float
         Relative height of this panel's row (Bode: magnitude 2, phase 1).
@@ -238,14 +238,14 @@ class Figure:
     panels : tuple of Panel
         Laid out row by row in ``columns`` columns.
     seed_ref : str
-        The seed's figure (``"Fig. 31"``), or "".
+        The ESRF study's figure (``"Fig. 31"``), or "".
     columns : int
     share_x : bool
         Panels of one column share their x axis (zoom one, all follow).
     height_px : int, optional
         Height of the whole figure; default from the number of rows.
     note : str
-        Why a result looks the way it does when it differs from the seed or
+        Why a result looks the way it does when it differs from the ESRF study or
         looks odd (the errata entry, in short); shown under the caption.
     number : int, optional
         Its number in the report ("Figure 12"), set by

@@ -2,7 +2,7 @@
 
 A :class:`Section` is a sequence of blocks in reading order: paragraphs
 (``str``), :class:`Table`, :class:`~fsmbench.report.figure.Figure` and
-:class:`Note` (why a result differs from the seed or looks odd). Figures are
+:class:`Note` (why a result differs from the ESRF study or looks odd). Figures are
 drawn in the browser by plotly.js, embedded once; each figure's data sits in
 its own ``<script type="application/json">`` and is plotted when it nears the
 screen, the rest in idle time, so the first screen is up at once. The file
@@ -20,11 +20,15 @@ from pathlib import Path
 from typing import Any
 
 from fsmbench.io.atomic import atomic_write_text
+from fsmbench.report.errata import cited_errata, errata_appendix, link_citations
 from fsmbench.report.figure import Figure
 from fsmbench.report.interactive import ZOOM_JS, figure_json, plotly_js
 
-__all__ = ["Block", "Note", "Section", "Table", "export_stem", "iter_figures", "render_report",
-           "visible_text", "write_report"]
+__all__ = ["ERRATA_TITLE", "Block", "Note", "Section", "Table", "export_stem", "iter_figures",
+           "render_report", "visible_text", "write_report"]
+
+#: The errata appendix's title (after the report's own Appendix A).
+ERRATA_TITLE = "Appendix B. Errata of the ESRF study"
 
 
 @dataclass(frozen=True)
@@ -49,7 +53,7 @@ class Table:
 
 @dataclass(frozen=True)
 class Note:
-    """An explanation next to a result: why it differs from the seed or looks odd.
+    """An explanation next to a result: why it differs from the ESRF study or looks odd.
 
     ``ref`` names the source (``"errata E25"``), shown with the text.
     """
@@ -97,7 +101,7 @@ _SEED_PREFIX = re.compile(r"^fig\d+(?:_\d+)*_")
 def export_stem(fig: Figure, *, total: int = 99) -> str:
     """File stem of an exported figure: its number in the report, then what it shows.
 
-    ``fig10_qd_regression`` (the seed's Fig. 10), Figure 3 of the report,
+    ``fig10_qd_regression`` (the ESRF study's Fig. 10), Figure 3 of the report,
     gives ``fig03_qd_regression``: numbers have two digits at least (more when
     ``total``, the report's count, needs them) so that the files list in
     reading order. A figure without a number (not from :func:`iter_figures`)
@@ -160,7 +164,7 @@ figcaption { font-size: 0.9em; color: #333; margin-top: .4em; }
 .fail { color: #b00020; font-weight: bold; }
 .info { color: #555; font-weight: bold; }
 .skips li { margin: .15em 0; }
-nav ol { columns: 2; font-size: .92em; }
+nav ul.toc { columns: 2; font-size: .92em; list-style: none; padding-left: 0; }
 @media print { nav, .modebar-container { display: none !important; }
                body { max-width: none; } h2 { page-break-before: auto; } }
 """
@@ -220,30 +224,35 @@ def _script_json(payload: Any) -> str:
     return json.dumps(payload, separators=(",", ":"), allow_nan=False).replace("</", "<\\/")
 
 
+def _text(text: str) -> str:
+    """Escaped text, with each cited erratum linked to the appendix."""
+    return link_citations(html.escape(text))
+
+
 def _table(tab: Table, out: list[str]) -> None:
     out.append("<table>")
-    out.append(f"<caption>{html.escape(tab.caption)}</caption>")
+    out.append(f"<caption>{_text(tab.caption)}</caption>")
     out.append("<thead><tr>" + "".join(f"<th>{html.escape(h)}</th>" for h in tab.header)
                + "</tr></thead><tbody>")
     for row in tab.rows:
-        out.append("<tr>" + "".join(f"<td>{html.escape(c)}</td>" for c in row) + "</tr>")
+        out.append("<tr>" + "".join(f"<td>{_text(c)}</td>" for c in row) + "</tr>")
     out.append("</tbody></table>")
     if tab.note:
-        out.append(f'<div class="note">{html.escape(tab.note)}</div>')
+        out.append(f'<div class="note">{_text(tab.note)}</div>')
 
 
 def _figure(fig: Figure, number: int, out: list[str]) -> None:
     spec = figure_json(fig)
-    ref = f" (seed {fig.seed_ref})" if fig.seed_ref else ""
+    ref = f" (ESRF study {fig.seed_ref})" if fig.seed_ref else ""
     out.append(f'<figure id="fig-{fig.key}">')
     out.append(f'<div class="fsm-plot pending" id="plot-{fig.key}" data-spec="spec-{fig.key}" '
                f'style="height:{spec["layout"]["height"]}px"></div>')
     out.append(f'<script type="application/json" id="spec-{fig.key}">{_script_json(spec)}'
                "</script>")
     out.append(f"<figcaption><b>Figure {number}. {html.escape(fig.title)}</b>"
-               f"{html.escape(ref)}. {html.escape(fig.caption)}</figcaption>")
+               f"{html.escape(ref)}. {_text(fig.caption)}</figcaption>")
     if fig.note:
-        out.append(f'<div class="note">{html.escape(fig.note)}</div>')
+        out.append(f'<div class="note">{_text(fig.note)}</div>')
     out.append("</figure>")
 
 
@@ -252,12 +261,12 @@ def _section(sec: Section, level: int, out: list[str], counter: list[int]) -> No
     out.append(f'<h{level} id="{html.escape(anchor)}">{html.escape(sec.title)}</h{level}>')
     for block in sec.blocks:
         if isinstance(block, str):
-            out.append(f"<p>{html.escape(block)}</p>")
+            out.append(f"<p>{_text(block)}</p>")
         elif isinstance(block, Table):
             _table(block, out)
         elif isinstance(block, Note):
             ref = f" ({block.ref})" if block.ref else ""
-            out.append(f'<div class="note">{html.escape(block.text)}{html.escape(ref)}</div>')
+            out.append(f'<div class="note">{_text(block.text)}{_text(ref)}</div>')
         else:
             counter[0] += 1
             _figure(block, counter[0], out)
@@ -294,15 +303,24 @@ def render_report(*, title: str, sections: Sequence[Section], verdict_html: str 
     if summary is not None:
         out.append(f'<script type="application/json" id="fsmbench-summary">'
                    f"{_script_json(summary)}</script>")
-    out.append(verdict_html)
-    out.append('<nav><b>Contents</b><ol>')
-    for sec in sections:
-        out.append(f'<li><a href="#{html.escape(sec.anchor or _slug(sec.title))}">'
-                   f"{html.escape(sec.title)}</a></li>")
-    out.append("</ol></nav>")
+    verdict = link_citations(verdict_html)
+    out.append(verdict)
     counter = [0]
+    body: list[str] = []
     for sec in sections:
-        _section(sec, 2, out, counter)
+        _section(sec, 2, body, counter)
+    # The appendix of the errata the report cites (each citation links to its entry).
+    cited = cited_errata([re.sub(r"<[^>]+>", "", "".join([verdict, *body]))])
+    toc = [(sec.anchor or _slug(sec.title), sec.title) for sec in sections]
+    if cited:
+        toc.append(("errata", ERRATA_TITLE))
+        body += [f'<h2 id="errata">{ERRATA_TITLE}</h2>', errata_appendix(cited)]
+    # The titles carry their own numbers ("1. The bench"): an unnumbered list.
+    out.append('<nav><b>Contents</b><ul class="toc">')
+    for anchor, text in toc:
+        out.append(f'<li><a href="#{html.escape(anchor)}">{html.escape(text)}</a></li>')
+    out.append("</ul></nav>")
+    out.extend(body)
     if counter[0]:
         out.append(f"<script>{plotly_js()}</script>")
         out.append(f"<script>{ZOOM_JS}</script>")

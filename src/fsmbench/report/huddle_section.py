@@ -1,4 +1,4 @@
-"""Report section 3: the huddle tests (seed section 3)."""
+"""Report section 3: the huddle tests (ESRF study section 3)."""
 
 from __future__ import annotations
 
@@ -59,7 +59,7 @@ def _lengths(recs: list[HuddleRecord]) -> str:
 
 
 def _stability_blocks(result: BudgetResult, recs: list[HuddleRecord]) -> list[Block]:
-    """Beyond the seed: drift and Allan deviation over the whole of each record."""
+    """Beyond the ESRF study: drift and Allan deviation over the whole of each record."""
     stab = result.stability
     if not stab:
         why = next((v for k, v in result.skipped.items() if "Allan" in k), "")
@@ -68,7 +68,7 @@ def _stability_blocks(result: BudgetResult, recs: list[HuddleRecord]) -> list[Bl
     divisor, label = time_axis(longest)
     unit = label.split("[")[1].rstrip("]")
     out: list[Block] = [
-        f"Beyond the seed: what the records show over their whole length "
+        f"Beyond the ESRF study: what the records show over their whole length "
         f"({longest / divisor:.3g} {unit} for the longest). A long record is analysed out of "
         "core, chunk by chunk, and its time plots show the minimum and maximum of each bin. "
         "The Allan deviation separates white noise, flicker, random walk and drift by their "
@@ -95,7 +95,7 @@ def _stability_blocks(result: BudgetResult, recs: list[HuddleRecord]) -> list[Bl
 
 
 def huddle_section(result: BudgetResult, *, recordings: Mapping[str, xr.Dataset]) -> Section:
-    """Seed section 3: configurations, time plots, spectra, the table and the conclusion.
+    """ESRF study section 3: configurations, time plots, spectra, the table and the conclusion.
 
     Parameters
     ----------
@@ -107,7 +107,8 @@ def huddle_section(result: BudgetResult, *, recordings: Mapping[str, xr.Dataset]
     h = result.huddle
     intro = ("The huddle tests measure the noise of the 4QD and of the Attocube "
              "interferometer while nothing is commanded: the Newport is at rest and, in closed "
-             "loop, the Sercalo holds the beam on the 4QD. Five configurations (seed Table 3) vary "
+             "loop, the Sercalo holds the beam on the 4QD. Five configurations (ESRF study Table "
+             "3) vary "
              "the loop, the Attocube's environmental compensation unit and an aluminium "
              "shielding of the beam path.")
     if h is None:
@@ -120,18 +121,18 @@ def huddle_section(result: BudgetResult, *, recordings: Mapping[str, xr.Dataset]
     if missing:
         blocks.append("Not analysed: " + "; ".join(f"{n} ({result.skipped[n]})"
                                                    for n in missing) + ".")
-    blocks.append(Note("The seed analyses tests 1 to 4 only (test 5 is commented out in its "
+    blocks.append(Note("The ESRF study analyses tests 1 to 4 only (test 5 is commented out in its "
                        "3.1); here every test present is analysed the same way.",
-                       ref="seed 3.1"))
+                       ref="ESRF study 3.1"))
     blocks += [
-        f"Processing as the seed's 3.2–3.3: samples before t = 1 s are dropped and the rest "
-        f"is kept (the seed's records hold 100 s; {_lengths(recs)} here, at {fs:g} Hz), the "
+        f"Processing as the ESRF study's 3.2–3.3: samples before t = 1 s are dropped and the rest "
+        f"is kept (the ESRF study's records hold 100 s; {_lengths(recs)} here, at {fs:g} Hz), the "
         "mean is removed, and Va is low-passed by a first-order filter at 50 Hz. Figure 29 "
         "shows Va of each test on its own scale; Figure 30 the 4QD signals, horizontal and "
         "vertical apart.",
         huddle_attocube_time_figure(h, recordings, stability=result.stability),
         huddle_qd_time_figure(h, recordings, stability=result.stability),
-        "Spectra (seed 3.5): Welch estimates with a 1 s Hann window. The cumulative rms from "
+        "Spectra (ESRF study 3.5): Welch estimates with a 1 s Hann window. The cumulative rms from "
         "0 Hz shows which band makes the rms.",
         huddle_attocube_asd_figure(h),
         huddle_qd_asd_figure(h),
@@ -149,7 +150,7 @@ def huddle_section(result: BudgetResult, *, recordings: Mapping[str, xr.Dataset]
                      f"{r.va_lpf_rms_m * NM:.3g}", f"{r.vph_rms_v * MV:.3g}",
                      f"{r.vpv_rms_v * MV:.3g}", "-" if pred is None else f"{pred * NM:.3g}"))
     blocks.append(Table(
-        caption="Huddle tests: rms after the seed's processing (mean removed)",
+        caption="Huddle tests: rms after the ESRF study's processing (mean removed)",
         header=("test", "configuration", "Va rms [nm]", "Va rms, 50 Hz low pass [nm]",
                 "Vph rms [mV]", "Vpv rms [mV]", "Va rms predicted by the budget [nm]"),
         rows=tuple(rows),
@@ -165,7 +166,7 @@ def huddle_section(result: BudgetResult, *, recordings: Mapping[str, xr.Dataset]
                                   f"{c.denominator.rsplit('_', 1)[-1]}",
                         *(f"{c.ratios[b]:.2f}{' *' if c.significant.get(b) else ''}"
                           for b in bands)) for c in h.comparisons)))
-    blocks.append("Conclusion (seed 3.6). " + h.conclusion)
+    blocks.append("Conclusion (ESRF study 3.6). " + h.conclusion)
     blocks += _stability_blocks(result, recs)
     if h.qd_noise is not None:
         q = h.qd_noise

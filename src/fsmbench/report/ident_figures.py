@@ -1,4 +1,4 @@
-"""Figures of the identification as data (seed Figs. 10, 12–14, 17–22, 25–28).
+"""Figures of the identification as data (ESRF study Figs. 10, 12–14, 17–22, 25–28).
 
 Each function turns an identification result into a
 :class:`~fsmbench.report.figure.Figure`; nothing is drawn here. FRF matrices
@@ -205,14 +205,14 @@ def coherence_figure(frf: FrequencyResponse, *, key: str, title: str, caption: s
 
 
 def weights_figure(sercalo: SercaloIdentification) -> Figure:
-    """Fig. 20: the fit weights of each element of the Sercalo FRF matrix (seed's or 1/std)."""
+    """Fig. 20: the fit weights of each element of the Sercalo FRF matrix (the study's or 1/std)."""
     if sercalo.options.weights == "variance":
         caption = ("Inverse standard deviation of each line of the measured response (from the "
                    "estimator's noise variance), 0 above 1 kHz: the fit's residuals have unit "
                    "variance and the identified parameters carry standard deviations.")
         label = "Weight 1/std [V/V]⁻¹"
     else:
-        caption = ("The seed's weights: the coherence, 10 within ±10 % of the column's "
+        caption = ("The ESRF study's weights: the coherence, 10 within ±10 % of the column's "
                    "resonance, 0 above 1 kHz; the fit divides them by |H| so that it "
                    "minimises the relative error.")
         label = "Weight [1]"
@@ -320,14 +320,14 @@ def frf_matrix_figure(frf: FrequencyResponse, *, delay_s: float, model: np.ndarr
     frf : FrequencyResponse
         Measured matrix (delay included), F frequencies.
     delay_s : float
-        Delay removed from the measurement before drawing [s], as the seed
+        Delay removed from the measurement before drawing [s], as the ESRF study
         removes it before fitting (said in the phase axes' labels).
     model : numpy.ndarray, shape (F, outputs, inputs), optional
         Delay-free model on ``frf``'s grid [V/V]; NaN where there is none.
     key, title, caption, seed_ref, model_name : str
 
     Each element gets a magnitude panel over a phase panel; the matrix keeps
-    the seed's layout (rows: outputs, columns: inputs). The phase is
+    the ESRF study's layout (rows: outputs, columns: inputs). The phase is
     unwrapped and drawn where its standard deviation is at most
     :data:`PHASE_STD_MAX_DEG` (:func:`unwrapped_phase_deg`, on the model's
     branch), in runs of at least five lines; an element with no such run
@@ -403,7 +403,7 @@ def newport_model(newport: NewportIdentification) -> np.ndarray:
     """The identified Newport on the grid, delay-free, shape (F, 2, 2).
 
     With its dynamics: each axis's second order (with the hold's droop, as
-    measured) over the band it was fitted on. Otherwise the seed's signed
+    measured) over the band it was fitted on. Otherwise the ESRF study's signed
     constant gains over their averaging band. NaN off the diagonal (``Gn`` is
     diagonal) and outside the band, so the figure shows where the model holds.
     """
@@ -441,5 +441,5 @@ def newport_delay_figure(newport: NewportIdentification, *, f_max_hz: float = 20
     return Figure(key="fig28_newport_delay", title="Newport: phase with and without the delay",
                   caption=(f"Unwrapped phase of the direct paths up to {f_max_hz:g} Hz, before "
                            f"and after removing the delay estimated from the phase ({ms:.3f} ms; "
-                           "the seed assumes 0.5 ms)."),
+                           "the ESRF study assumes 0.5 ms)."),
                   panels=tuple(panels), seed_ref="Fig. 28", columns=len(panels))

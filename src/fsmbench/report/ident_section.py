@@ -1,6 +1,6 @@
-"""Chapter 2 of the report: identification of the system dynamics (seed section 2).
+"""Chapter 2 of the report: identification of the system dynamics (ESRF study section 2).
 
-Subsections follow the seed: 2.1 4QD calibration, 2.2 current amplifier,
+Subsections follow the ESRF study: 2.1 4QD calibration, 2.2 current amplifier,
 2.3 Sercalo, 2.4 Newport, 2.5 full system. Each shows the recordings it
 uses (time plots), then what was identified from them; a step that did not
 run says why in words and still shows the recordings that exist.
@@ -104,7 +104,8 @@ def comparison_table(result: Identification, *, bench: Bench,
                  header=("quantity", "identified", "nominal value", "difference"),
                  rows=tuple(out),
                  note=("The nominal values come from datasheets, measured components and the "
-                       "seed's Table 2: the difference is how far this bench is from them, not "
+                       "ESRF study's Table 2: the difference is how far this bench is from them, "
+                       "not "
                        "an error of the identification."))
 
 
@@ -121,7 +122,7 @@ def _time_figure(name: str, recordings: Mapping[str, xr.Dataset], *, bench: Benc
     info = EXPERIMENTS[name]
     caption = f"Record {name}. {info.description}; the whole record."
     if trim > 0:
-        caption += f" Grey: the first {trim:g} s, which the seed's processing removes."
+        caption += f" Grey: the first {trim:g} s, which the ESRF study's processing removes."
     return [experiment_figure(recordings[name], key=key, title=title,
                               caption=caption, seed_ref=ref,
                               gn0_rad_per_v=bench.nominal.newport.metrology_gain_rad_per_v,
@@ -162,7 +163,7 @@ def _qd(result: Identification | None, *, recordings: Mapping[str, xr.Dataset], 
         if all(c.experiment in recordings for c in result.qd.values()):
             blocks.append(qd_regression_figure(result.qd, recordings))
         blocks.append(Table(
-            caption="4QD gains from the linear regression (seed Table 2)",
+            caption="4QD gains from the linear regression (ESRF study Table 2)",
             header=("axis", "gain [V/rad]", "± [V/rad]", "sensitivity [µrad/mV]",
                     "offset [mV]", "R² [1]", "residual rms [mV]", "beam-angle range [mrad]",
                     "samples"),
@@ -171,7 +172,7 @@ def _qd(result: Identification | None, *, recordings: Mapping[str, xr.Dataset], 
                         f"{c.r_squared:.6f}", f"{1e3 * c.residual_rms_v:.3f}",
                         f"{1e3 * c.beam_angle_range_rad:.3f}", str(c.n_samples))
                        for a, c in result.qd.items())))
-        blocks.append(Note("The seed calls the slope a gain in rad/V and quotes 0.032 rad/V; "
+        blocks.append(Note("The ESRF study calls the slope a gain in rad/V and quotes 0.032 rad/V; "
                            "the slope is in V/rad (its Table 2), and its inverse is the "
                            "sensitivity in µrad/mV (1/36.3 V/rad is 27.5 µrad/mV, not 27.6).",
                            ref="errata E6, E7"))
@@ -207,9 +208,11 @@ def _current_amp(result: Identification | None, *, recordings: Mapping[str, xr.D
                         f"{1e3 * g.gain_std_a_per_v:.2g}", f"{1e3 * g.theoretical_a_per_v:.4f}",
                         f"{g.ratio_to_theoretical:.4f}", f"{g.band_hz[0]:g}–{g.band_hz[1]:g}")
                        for a, g in result.current_amp.items())))
-        blocks.append("The seed finds the same kind of mismatch with the theoretical gain and "
+        blocks.append("The ESRF study finds the same kind of mismatch with the theoretical gain "
+                      "and "
                       "keeps the identified one, the voltage amplifier being accurately known.")
-        blocks.append(Note("The seed says it removes the first seconds of these records but its "
+        blocks.append(Note("The ESRF study says it removes the first seconds of these records but "
+                           "its "
                            "code estimates on the whole record; fsmbench removes the first "
                            "second, when the Sercalo is off, as in 2.1 and 2.3.",
                            ref="errata E13"))
@@ -326,7 +329,7 @@ def _sercalo(result: Identification | None, *, recordings: Mapping[str, xr.Datas
                     "; no per-line variance with this estimator, so no bounds drawn") + "."),
         seed_ref="Figs. 18, 19, 21, 22"))
     blocks.extend(sercalo_delay_blocks(s))
-    blocks.append(Note("The seed removes one sample (0.1 ms). The DAC applies a command one "
+    blocks.append(Note("The ESRF study removes one sample (0.1 ms). The DAC applies a command one "
                        "sample after it is computed and holds it for a sample, which adds half "
                        "a sample: the path's delay is 1.5 samples (0.15 ms), as estimated here.",
                        ref="errata E20"))
@@ -363,7 +366,7 @@ def _newport(result: Identification | None, *, recordings: Mapping[str, xr.Datas
     blocks: list[Block] = [
         "Noise on the Newport's commands Un, one axis after the other, with the 4QD outputs "
         "recorded. The frequency-response matrix Un → Vp is nearly diagonal and flat up to "
-        "a few hundred hertz; the seed models it as a constant gain per axis (mean over "
+        "a few hundred hertz; the ESRF study models it as a constant gain per axis (mean over "
         "10–100 Hz) after removing the delay, fsmbench fits each axis's second order and "
         "delay together and compares them with the FSM-300 datasheet.",
     ]
@@ -416,14 +419,14 @@ def _newport(result: Identification | None, *, recordings: Mapping[str, xr.Datas
                      f"bandwidth is where the poles' lag and the internal lag reach "
                      f"{dyn.phase_lag_deg:g}°, after removing the converter's share of the delay "
                      f"(the Sercalo path's, {1e3 * dyn.converter_delay_s:.3f} ms)"),
-            header=("path", "static gain [V/V]", "seed's constant gain [V/V]",
+            header=("path", "static gain [V/V]", "ESRF study's constant gain [V/V]",
                     "natural frequency [Hz]", "damping ratio", "delay [ms]",
                     "internal lag [ms]", "−3 dB bandwidth [Hz]", "60° phase bandwidth [Hz]",
                     "peaking [dB]"),
             rows=tuple(rows)))
         at_1k = {a: abs(dyn.axes[a].response(np.array([1000.0]), delay=False)[0]) for a in "hv"}
         blocks.append(Note(
-            "The seed models the Newport as a constant gain (its mean over 10–100 Hz); the "
+            "The ESRF study models the Newport as a constant gain (its mean over 10–100 Hz); the "
             f"fitted response at 1 kHz is {at_1k['h'] / abs(n.gain_v_per_v['h']):.2f} (h) and "
             f"{at_1k['v'] / abs(n.gain_v_per_v['v']):.2f} (v) of the static gain, so the "
             "identified plant carries the Newport's dynamics instead.", ref="errata E19"))
@@ -439,16 +442,17 @@ def _newport(result: Identification | None, *, recordings: Mapping[str, xr.Datas
         blocks.append(sensor_note(dyn))
     blocks.append(_delay_table(n, caption="Newport delays estimated from the phase alone "
                                           "(cross-check)"))
-    blocks.append(Note("The seed averages |H| and so drops the sign; with a negative 4QD gain "
+    blocks.append(Note("The ESRF study averages |H| and so drops the sign; with a negative 4QD "
+                       "gain "
                        "the path Unh → Vph is negative, and fsmbench keeps the sign. The "
-                       "seed's assumed 0.5 ms delay is confirmed by the phase.",
+                       "ESRF study's assumed 0.5 ms delay is confirmed by the phase.",
                        ref="errata E19, E20"))
     return Section(title="2.4 Newport dynamics", blocks=tuple(blocks))
 
 
 def _system(result: Identification | None) -> Section:
     blocks: list[Block] = [
-        "The blocks are assembled as the seed's connect does: inputs Uch, Ucv, Unh, Unv; "
+        "The blocks are assembled as the ESRF study's connect does: inputs Uch, Ucv, Unh, Unv; "
         "outputs the coil voltages, coil currents, beam angles and 4QD voltages. A block "
         "that could not be identified from the data is the nominal one.",
     ]
@@ -462,7 +466,7 @@ def _system(result: Identification | None) -> Section:
         if status == "identified":
             rows.append((name, f"identified ({_BLOCK_SOURCE.get(block, 'section 2')})"))
         elif block in ("Zc", "Ga"):
-            rows.append((name, "known: the bench's parameters, as the seed takes it (2.2)"))
+            rows.append((name, "known: the bench's parameters, as the ESRF study takes it (2.2)"))
         else:
             rows.append((name, "nominal (the bench's parameters)"))
     blocks.append(Table(caption="Blocks of the assembled system", header=("block", "source"),
@@ -537,7 +541,7 @@ def identification_section(result: Identification | None, *,
         Experiments not loaded, with the reason in words.
     """
     blocks: list[Block] = [
-        "Every block of the signal chain is identified from the recordings, as in the seed's "
+        "Every block of the signal chain is identified from the recordings, as in the ESRF study's "
         "section 2: the 4QD against the Newport's metrology (2.1), the current amplifier from "
         "Uc → Vc with Ga and Zc known (2.2), the Sercalo from Uc → Vp by weighted vector "
         "fitting after removing the delay (2.3), the Newport's gains and delay (2.4); the "

@@ -1,6 +1,6 @@
-"""Figures of seed section 11 (non-repeatability) as data.
+"""Figures of ESRF study section 11 (non-repeatability) as data.
 
-Seed Figs. 48 and 51 (Va over every period, without and with the 10 Hz low
+ESRF study Figs. 48 and 51 (Va over every period, without and with the 10 Hz low
 pass) cannot be told apart at their scale (µm per period against nm of
 filtering): one figure, with Fig. 49 (the non-repeatable part) below. Fig. 52
 (the non-repeatable part after the low pass) separates the filter's
@@ -81,7 +81,7 @@ def _aligned_axis(reps: Mapping[str, RepeatabilityRecord]) -> tuple[float, str]:
 
 def _huddle_va(ds: xr.Dataset, *, name: str, n_max: int,
                n_bins: int) -> tuple[Envelope, float, int]:
-    """Va of a huddle test after the seed's trim, its first ``n_max`` samples at most:
+    """Va of a huddle test after the ESRF study's trim, its first ``n_max`` samples at most:
     envelope less its mean [m], rms about the mean [m], samples (read twice in blocks)."""
     fs = float(ds.attrs["fs_hz"])
     trim = trim_record(ds, t0_s=1.0, duration_s=None, fs_hz=fs)
@@ -102,7 +102,7 @@ def _huddle_va(ds: xr.Dataset, *, name: str, n_max: int,
 
 
 def repeatability_time_figure(reps: Mapping[str, RepeatabilityRecord]) -> Figure:
-    """Seed Fig. 44: command, Vph, Vpv and Va after the alignment; one column per record."""
+    """ESRF study Fig. 44: command, Vph, Vpv and Va after the alignment; one column per record."""
     recs = list(reps.values())
     rows: list[list[Panel]] = [[], [], [], []]
     div, x_label = _aligned_axis(reps)
@@ -125,7 +125,8 @@ def repeatability_time_figure(reps: Mapping[str, RepeatabilityRecord]) -> Figure
     return Figure(
         key="fig44_repeatability_time", title="Signals of the repeatability measurement",
         caption="From one second after the first Newport command, whole 1 s periods only "
-                "(seed 11.1): the Newport command, the 4QD (horizontal and vertical in separate "
+                "(ESRF study 11.1): the Newport command, the 4QD (horizontal and vertical in "
+                "separate "
                 "rows) and the Attocube distance; one column per record, each row on one "
                 "vertical scale. Each band is the smallest and largest value in each of a few "
                 "thousand consecutive intervals.",
@@ -134,7 +135,7 @@ def repeatability_time_figure(reps: Mapping[str, RepeatabilityRecord]) -> Figure
 
 
 def tracking_distance_figure(reps: Mapping[str, RepeatabilityRecord]) -> Figure:
-    """Seed Fig. 45: the tracking error's distance equivalent over time (traced law)."""
+    """ESRF study Fig. 45: the tracking error's distance equivalent over time (traced law)."""
     panels = []
     div, x_label = _aligned_axis(reps)
     for r in reps.values():
@@ -146,13 +147,14 @@ def tracking_distance_figure(reps: Mapping[str, RepeatabilityRecord]) -> Figure:
             x_label, "Distance equivalent [nm]", share_y="distance",
             title=f"{direction_words(r)}: beam angle {r.tracking_rms_rad[0] * UM:.3g} µrad rms "
                   f"(h), {r.tracking_rms_rad[1] * UM:.3g} µrad rms (v); distance "
-                  f"{r.tracking_distance_std_m * NM:.3g} nm std (seed's law "
+                  f"{r.tracking_distance_std_m * NM:.3g} nm std (ESRF study's law "
                   f"{seed_std * NM:.3g} nm)"))
     return Figure(
         key="fig45_tracking_error_distance", title="Tracking error as a distance",
-        caption="The beam angle measured by the 4QD, α = Vp/Gd(0) (seed 11.3; the 4QD signals "
+        caption="The beam angle measured by the 4QD, α = Vp/Gd(0) (ESRF study 11.3; the 4QD "
+                "signals "
                 "themselves are in Fig. 44), turned into the distance the Attocube would read "
-                "with the traced law. The seed's L·α²/2 per axis (L = 0.1 m) has nearly the "
+                "with the traced law. The ESRF study's L·α²/2 per axis (L = 0.1 m) has nearly the "
                 "same shape, about 0.05/0.031 times larger; its standard deviation is in each "
                 "title. Vp "
                 "includes the 4QD's own noise, so this is an upper bound (errata E33).",
@@ -160,7 +162,7 @@ def tracking_distance_figure(reps: Mapping[str, RepeatabilityRecord]) -> Figure:
 
 
 def tracking_asd_figure(reps: Mapping[str, RepeatabilityRecord]) -> Figure:
-    """Seed Fig. 46: ASD and cumulative rms of Rh (left) and Rv (right), per record."""
+    """ESRF study Fig. 46: ASD and cumulative rms of Rh (left) and Rv (right), per record."""
     panels = []
     for kind in ("asd", "cum"):
         for i, (ax, axis) in enumerate((("Rh", "horizontal"), ("Rv", "vertical"))):
@@ -183,14 +185,14 @@ def tracking_asd_figure(reps: Mapping[str, RepeatabilityRecord]) -> Figure:
                                     share_y="cumulative"))
     return Figure(
         key="fig46_tracking_error_asd", title="Spectrum of the tracking errors",
-        caption="Welch estimate of α = Vp/Gd(0) with the seed's 1 s Hann window and its "
+        caption="Welch estimate of α = Vp/Gd(0) with the ESRF study's 1 s Hann window and its "
                 "cumulative rms; horizontal left, vertical right; solid: Newport moving "
                 "horizontally, dashed: vertically.",
         panels=tuple(panels), seed_ref="Fig. 46", columns=2, share_x=True)
 
 
 def tracking_vs_distance_figure(reps: Mapping[str, RepeatabilityRecord]) -> Figure:
-    """Seed Fig. 47: ASD of Va against that of the tracking error's distance equivalent."""
+    """ESRF study Fig. 47: ASD of Va against that of the tracking error's distance equivalent."""
     panels = []
     for r in reps.values():
         panels.append(Panel(
@@ -200,14 +202,14 @@ def tracking_vs_distance_figure(reps: Mapping[str, RepeatabilityRecord]) -> Figu
                       name="tracking error as distance, traced law (6H + 4L)/16·α²",
                       color=PALETTE[2], group="traced", width=1.0),
              asd_line(r.f_hz, r.psd_distance_seed_m2_per_hz.sum(axis=1), scale=NM,
-                      name="tracking error as distance, seed's L·α²/2 (both axes)",
+                      name="tracking error as distance, ESRF study's L·α²/2 (both axes)",
                       color=PALETTE[7], group="seed", width=1.0, dash="dash")),
             "Frequency [Hz]", "ASD [nm/√Hz]", x_log=True, y_log=True,
             title=direction_words(r), share_y="asd"))
     return Figure(
         key="fig47_tracking_vs_distance_asd",
         title="Tracking error as distance against the measured distance",
-        caption="Welch estimates (1 s Hann window). The two laws (the seed's and the traced "
+        caption="Welch estimates (1 s Hann window). The two laws (the ESRF study's and the traced "
                 "one, errata E17) are in terms of the 4QD's beam angle, noise included: an "
                 "upper bound of the geometric term.",
         panels=tuple(panels), seed_ref="Fig. 47", columns=len(panels))
@@ -228,7 +230,7 @@ def _rms_rules(rms: float | None) -> tuple[Rule, ...]:
 
 
 def periods_figure(reps: Mapping[str, RepeatabilityRecord]) -> Figure:
-    """Seed Figs. 48, 49 (and 51): Va over the period, repeatable and non-repeatable parts.
+    """ESRF study Figs. 48, 49 (and 51): Va over the period, repeatable and non-repeatable parts.
 
     Top: the range of Va over the periods at each instant and its mean (the
     repeatable part); bottom: the range of the non-repeatable part (Va less
@@ -255,21 +257,22 @@ def periods_figure(reps: Mapping[str, RepeatabilityRecord]) -> Figure:
     return Figure(
         key="fig48_49_repeatability_periods",
         title="Repeatable and non-repeatable parts of the measured distance",
-        caption="Va cut into the Newport's 1 s periods (seed 11.4). Top (seed Fig. 48): the "
+        caption="Va cut into the Newport's 1 s periods (ESRF study 11.4). Top (ESRF study Fig. "
+                "48): the "
                 "smallest and largest value over the periods at each instant (a grey band, "
                 "thin at this scale) and their mean, the repeatable part. "
-                "Bottom (seed Fig. 49): Va less that mean, the non-repeatable part, with its "
-                "rms. The seed's Fig. 51 (the top after the 10 Hz low pass) is not repeated: "
+                "Bottom (ESRF study Fig. 49): Va less that mean, the non-repeatable part, with its "
+                "rms. The ESRF study's Fig. 51 (the top after the 10 Hz low pass) is not repeated: "
                 "it cannot be told apart; the low pass's effect is in the next figure.",
         panels=(*top, *bottom), seed_ref="Figs. 48, 49, 51", columns=len(recs), share_x=True)
 
 
 def nonrep_part_figure(reps: Mapping[str, RepeatabilityRecord]) -> Figure:
-    """Seed Fig. 52: the non-repeatable part after the 10 Hz low pass, transient apart.
+    """ESRF study Fig. 52: the non-repeatable part after the 10 Hz low pass, transient apart.
 
     Top: the settled periods (2 … n, less their own mean, as
     ``nonrep_rms_lpf_settled_m``); bottom: the first period (the ``lsim``
-    start-up transient) less the mean over all periods, as the seed computes.
+    start-up transient) less the mean over all periods, as the ESRF study computes.
     """
     recs = list(reps.values())
     top, bottom = [], []
@@ -288,15 +291,17 @@ def nonrep_part_figure(reps: Mapping[str, RepeatabilityRecord]) -> Figure:
                   name="first period (the filter's start-up transient)",
                   color=_TRANSIENT_COLOR, width=1.2, group="transient"),),
             "Time in the period [s]", "First period [nm]", share_y="first",
-            title=f"First period; all periods as the seed: {r.nonrep_rms_lpf_m * NM:.3g} nm rms"))
+            title=f"First period; all periods as the ESRF study: {r.nonrep_rms_lpf_m * NM:.3g} nm "
+                  "rms"))
     return Figure(
         key="fig52_lowpass_nonrepeatable",
         title="Non-repeatable part after the 10 Hz low pass",
-        caption="Va after the seed's 10 Hz first-order low pass (lsim from rest), less the mean "
+        caption="Va after the ESRF study's 10 Hz first-order low pass (lsim from rest), less the "
+                "mean "
                 "over periods. Top: periods 2 to n less their own mean (range over the periods "
                 "and rms): the steady state. Bottom: the first period less the mean over all "
                 "periods: the filter starts from rest on a Va that is not mean-removed, and "
-                "its start-up transient lands there and raises the seed's value above the "
+                "its start-up transient lands there and raises the ESRF study's value above the "
                 "settled one.",
         panels=(*top, *bottom), seed_ref="Fig. 52", columns=len(recs), share_x=True)
 
@@ -305,7 +310,7 @@ def nonrep_contributions_figure(reps: Mapping[str, RepeatabilityRecord],
                                 nonrep: Mapping[str, NonRepeatability],
                                 recordings: Mapping[str, xr.Dataset], *,
                                 huddle_configs: Mapping[str, str] | None = None) -> Figure:
-    """Seed Fig. 50: non-repeatable Va and the tracking error's share; the huddle-test noise.
+    """ESRF study Fig. 50: non-repeatable Va and the tracking error's share; the huddle-test noise.
 
     One panel per record (Va's non-repeatable part, and on top the tracking
     error's), then one panel with Va of the huddle test the study compares

@@ -63,7 +63,7 @@ def allan_figure(stability: Mapping[int, StabilityRecord]) -> Figure:
     return Figure(
         key="huddle_allan", title="Allan deviation of the distance and of the beam angle",
         caption=("Overlapping Allan deviation (IEEE Std 1139) over the whole of each huddle "
-                 "test after the seed's trim, the longest "
+                 "test after the ESRF study's trim, the longest "
                  f"{longest / time_axis(longest)[0]:.3g} {unit}. A slope of −1 is a bounded "
                  "quantity (one the loop holds, like the beam angle in closed loop), −1/2 "
                  "white noise, 0 flicker, +1/2 random walk, +1 drift; the table below names each "
@@ -105,7 +105,7 @@ def drift_figure(stability: Mapping[int, StabilityRecord]) -> Figure:
         caption=(f"Means over consecutive bins of at least 1 s ({t_longest.size} bins of "
                  f"{bin_s:.3g} s for the longest record), from the record's mean: how the "
                  "distance and the beam angle the 4QD reads wander over the record. The "
-                 "seed's 100 s records show seconds of this; long records show the hours."),
+                 "ESRF study's 100 s records show seconds of this; long records show the hours."),
         panels=(Panel(traces=tuple(va), x_label=x_label,
                       y_label="Va, from its mean [nm]", title="Attocube distance"),
                 Panel(traces=tuple(qd), x_label=x_label, y_label="Beam angle, from its mean "

@@ -437,7 +437,7 @@ def render_matplotlib(fig: Figure) -> matplotlib.figure.Figure:
         An Agg-backed figure (no pyplot state), ``8 in`` wide (``11 in``
         for three or more columns), its height from
         :meth:`Figure.default_height_px`, laid out (panel positions final).
-        Its title is the figure's title with the seed's figure number; the
+        Its title is the figure's title with the ESRF study's figure number; the
         legend (one entry per group) sits below the panels.
     """
     import matplotlib as mpl
@@ -472,7 +472,7 @@ def render_matplotlib(fig: Figure) -> matplotlib.figure.Figure:
         for ax, panel in zip(mfig.axes, fig.panels, strict=True):
             if not panel.equal_aspect:  # equal aspect may still widen the limits when drawn
                 _cheap_minor_ticks(ax)
-        ref = f" (seed {fig.seed_ref})" if fig.seed_ref else ""
+        ref = f" (ESRF study {fig.seed_ref})" if fig.seed_ref else ""
         title = mfig.suptitle(fig.title + ref, fontweight="bold", va="top",
                               y=1 - _PAD_IN / mfig.get_figheight())
         _layout(mfig, fig, grid, title)

@@ -1,7 +1,7 @@
 """The verdict a reader acts on: does the bench meet its specifications, and why.
 
 :func:`build_summary` reads the stages' results and states, for each of the
-bench's requirements (seed Table 5 and §6.1, margins, robust stability, a
+bench's requirements (ESRF study Table 5 and §6.1, margins, robust stability, a
 distance target, the closed loop simulated on the bench, and the model's own
 check on the recorded closed loop):
 
@@ -58,14 +58,14 @@ class Specification:
     Attributes
     ----------
     sensitivity_bound : float
-        Largest |S| at ``objective_frequency_hz`` (seed §6.1: e_max / y_max =
+        Largest |S| at ``objective_frequency_hz`` (ESRF study §6.1: e_max / y_max =
         10 µrad / 0.05 rad = 2e-4).
     objective_frequency_hz : float
-        Frequency of the sample motion (seed §6.1: 1 Hz).
+        Frequency of the sample motion (ESRF study §6.1: 1 Hz).
     gain_margin_min_db, phase_margin_min_deg : float
         Robustness requirements of the design (6 dB, 30°).
     distance_error_max_m : float
-        Largest acceptable Attocube distance error, rms, in m. The seed sets
+        Largest acceptable Attocube distance error, rms, in m. The ESRF study sets
         none; 5 nm is a few nanometres, the scale the study aims for, and is
         configurable.
     """
@@ -253,11 +253,11 @@ def _loop_requirements(design: Mapping[str, Any], spec: Specification, *,
     out.append(Requirement(
         name="control_objective",
         description=(f"Sample motion rejected at {spec.objective_frequency_hz:g} Hz: |S| "
-                     "with fsmbench's controller, h / v (seed §6.1)"),
+                     "with fsmbench's controller, h / v (ESRF study §6.1)"),
         value=_pair(s1, ".2e"), limit=f"≤ {spec.sensitivity_bound:.0e}",
         passed=judged(worst <= spec.sensitivity_bound),
         explanation=(f"The 0.05 rad stroke at 1 Hz leaves {worst * 0.05 * 1e6:.1f} µrad of "
-                     "beam-angle error (the seed's maximum wanted error is 10 µrad)."),
+                     "beam-angle error (the ESRF study's maximum wanted error is 10 µrad)."),
         link="#decentralised-control", values=_hv(s1), unit="1",
         limits={"max": spec.sensitivity_bound}, provenance=prov, provenance_detail=detail,
         missing=missing))
@@ -342,7 +342,8 @@ def _closed_loop_requirement(design: Mapping[str, Any], *, is_twin: bool) -> Req
 
 def _validation_requirement(validation: Any, skipped: str) -> Requirement:
     description = ("The model predicts your own closed loop: data_rep_h/v tracking error "
-                   "(seed's controller, periodic motion removed), recorded against predicted, "
+                   "(ESRF study's controller, periodic motion removed), recorded against "
+                   "predicted, "
                    "h / v")
     if validation is None:
         return Requirement(
@@ -414,6 +415,24 @@ def _distance_requirement(budget: Any, spec: Specification) -> tuple[Requirement
     return req, limiting, top
 
 
+def _plant_advice(plant_source: str, skipped: Mapping[str, str]) -> str:
+    """What the user does so that the next run identifies the plant (a fallback's fix)."""
+    sercalo = [n for n in ("data_uch", "data_ucv") if n in skipped]
+    near = [skipped[n].split("; found ", 1)[1] for n in sercalo if "; found " in skipped[n]]
+    if near:
+        return "rename " + "; ".join(near) + ", then run the study again."
+    refused = [f"{n} ({skipped[n]})" for n in sercalo if not skipped[n].startswith(f"no {n}.")]
+    if refused:
+        return "correct " + "; ".join(refused) + ", then run the study again."
+    if sercalo:
+        return ("record " + " and ".join(sercalo) + " (noise on each coil command with the "
+                "4QD outputs, ESRF study 2.2–2.3), then run the study again.")
+    if "warnings" in plant_source:
+        return ("the failed checks listed below name each file and the likely cause: correct "
+                "those files or record them again.")
+    return "chapter 2 (identification) names the step that failed and why."
+
+
 def build_summary(*, source: str, is_twin: bool, spec: Specification,
                   skipped: Mapping[str, str], n_experiments: int, n_read: int,
                   parts_skipped: Sequence[PartSkipped] = (),
@@ -482,7 +501,8 @@ def build_summary(*, source: str, is_twin: bool, spec: Specification,
             text += f"; {len(warn)} quality warning(s)"
         stages.append(StageLine("identification", status, text, "#identification"))
     if not plant_identified:
-        fallbacks.append(f"The budget and the design used the {plant_source}.")
+        fallbacks.append(f"The budget and the design used the {plant_source}. What to do: "
+                         + _plant_advice(plant_source, skipped))
     top = None
     if budget is not None:
         req, limiting, top = _distance_requirement(budget, spec)
@@ -502,7 +522,8 @@ def build_summary(*, source: str, is_twin: bool, spec: Specification,
         s_seed = {a: float(seed[a]["sensitivity_at_1hz"]) for a in ("h", "v")}
         if not seed.get("meets_objective"):
             findings.append(
-                f"The seed's decentralised controller (9.2) misses its own objective: |S(1 Hz)| "
+                "The ESRF study's decentralised controller (9.2) misses its own objective: |S(1 "
+                "Hz)| "
                 f"= {_pair(s_seed, '.1e')} against {spec.sensitivity_bound:.0e} (errata E27); "
                 "fsmbench's controller meets it.")
         fsm = design["fsmbench_controller"]

@@ -1,10 +1,10 @@
-"""Time-domain figures of one experiment, as the seed draws them (Figs. 8, 9, 15, 16, 23, 24 …).
+"""Time-domain figures of one experiment, as the ESRF study draws them (Figs. 8, 9, 15, 16, 23 …).
 
 One panel per recorded signal, all sharing the time axis, so no signal hides
 another (``Vph`` and ``Vpv`` each get their own); horizontal signals are
 blue, vertical orange. Records are long (10^5–10^6 samples): every line is
 marked ``decimate=True`` and drawn as a min/max envelope, which keeps every
-extreme. The part of the record the seed's processing removes (its ``t0``)
+extreme. The part of the record the ESRF study's processing removes (its ``t0``)
 is shaded.
 """
 
@@ -27,7 +27,7 @@ class SignalPanel:
     Attributes
     ----------
     signal : str
-        Variable name in the recording (the seed's name, e.g. ``"Vph"``).
+        Variable name in the recording (the ESRF study's name, e.g. ``"Vph"``).
     title : str
         What the signal is, in words (panel title).
     y_label : str
@@ -50,12 +50,12 @@ class SignalPanel:
 
 
 def signal_panels(gn0_rad_per_v: float) -> tuple[SignalPanel, ...]:
-    """Every signal the seed records, in the order the figures stack them.
+    """Every signal the ESRF study records, in the order the figures stack them.
 
     Parameters
     ----------
     gn0_rad_per_v : float
-        Newport metrology gain [rad/V] (seed 2.1: 2.62e-3): ``Vnh``/``Vnv``
+        Newport metrology gain [rad/V] (ESRF study 2.1: 2.62e-3): ``Vnh``/``Vnv``
         are drawn as the beam angle ``2·gn0·Vn`` (one reflection doubles the
         mirror angle) in mrad.
     """
@@ -100,24 +100,24 @@ SEED_TIME_FIGURES: dict[str, tuple[str, str, str]] = {
 
 def experiment_figure(ds: xr.Dataset, *, key: str, title: str, caption: str, seed_ref: str,
                       gn0_rad_per_v: float, trim_s: float) -> Figure:
-    """The seed's time-domain figure of one experiment: one panel per signal.
+    """The ESRF study's time-domain figure of one experiment: one panel per signal.
 
     Parameters
     ----------
     ds : xarray.Dataset
-        A recording: coordinate ``t`` [s], shape (n,), and any of the seed's
+        A recording: coordinate ``t`` [s], shape (n,), and any of the ESRF study's
         signals (``Uch … Va``, V or m); other variables are not drawn.
     key, title, caption, seed_ref : str
         As for :class:`~fsmbench.report.figure.Figure`.
     gn0_rad_per_v : float
         Newport metrology gain [rad/V], to draw ``Vnh``/``Vnv`` as beam angles.
     trim_s : float
-        The seed's ``t0`` [s]: ``t < trim_s`` is shaded (0: nothing shaded).
+        The ESRF study's ``t0`` [s]: ``t < trim_s`` is shaded (0: nothing shaded).
 
     Raises
     ------
     ValueError
-        The recording holds none of the seed's signals (the message names it).
+        The recording holds none of the ESRF study's signals (the message names it).
     """
     t = np.asarray(ds["t"].values, dtype=float)
     panels = []
@@ -134,7 +134,7 @@ def experiment_figure(ds: xr.Dataset, *, key: str, title: str, caption: str, see
             x_label="Time [s]", y_label=spec.y_label, title=spec.title, shade=shade))
     if not panels:
         name = ds.attrs.get("experiment", "recording")
-        raise ValueError(f"{name}: none of the seed's signals to plot (has "
+        raise ValueError(f"{name}: none of the ESRF study's signals to plot (has "
                          f"{', '.join(str(v) for v in ds.data_vars) or 'nothing'})")
     return Figure(key=key, title=title, caption=caption, panels=tuple(panels),
                   seed_ref=seed_ref, share_x=True, height_px=max(360, 100 + 165 * len(panels)))

@@ -55,7 +55,7 @@ def validation_subsection(v: Any | None, *, skipped: str) -> Section:
     if v is None:
         return Section(title=title, anchor="validation", blocks=(
             "The bench model's predictions are checked against a closed loop it did not see: "
-            "the repeatability records, taken with the seed's controller. Not done here: "
+            "the repeatability records, taken with the ESRF study's controller. Not done here: "
             f"{skipped}.",))
     rows = tuple((words, f"{v.measured_rms_rad[a] * UM:.3g}", f"{v.predicted_rms_rad[a] * UM:.3g}",
                   f"{v.ratio[a]:.2f}")

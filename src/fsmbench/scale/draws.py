@@ -3,7 +3,7 @@
 Each draw perturbs the twin's plant (``bench.true``) within its uncertainty
 (:class:`Ranges`: resonance and damping from the design's robustness check,
 gains and delays from the identification's targets). Draw ``i`` depends on the
-run's seed and ``i`` only (``SeedSequence(seed).spawn(n)[i]``), so the draws are
+run's seed and ``i`` only (``SeedSequence(ESRF study).spawn(n)[i]``), so the draws are
 the same whatever the number of workers.
 """
 
@@ -120,7 +120,7 @@ class Draw:
 
 
 def draw_parameters(*, seed: int, n: int, ranges: Ranges) -> list[Draw]:
-    """The ``n`` draws of a run: draw ``i`` from ``SeedSequence(seed).spawn(n)[i]`` alone.
+    """The ``n`` draws of a run: draw ``i`` from ``SeedSequence(ESRF study).spawn(n)[i]`` alone.
 
     Each child sequence spawns two: one seeds the generator of the factors
     (drawn in the order of :data:`PARAMETERS`), the other gives the twin's

@@ -289,7 +289,7 @@ def format_table(result: Any) -> str:
 
     s = summarise(result)
     n = len(result.draws)
-    lines = [f"{n} draws, seed {result.seed}, controller {result.setup.controller.name}, "
+    lines = [f"{n} draws, random seed {result.seed}, controller {result.setup.controller.name}, "
              f"around {result.setup.bench.label}; not settled before the metrics: "
              f"{s['unsettled_draws']}",
              "requirements over the draws (a draw passes when both axes do):"]

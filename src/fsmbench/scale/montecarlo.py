@@ -1,7 +1,7 @@
 """Monte Carlo of the closed-loop repeatability experiment over the plant's uncertainty.
 
 Each *draw* perturbs the twin's plant (``bench.true``) within its uncertainty,
-runs the seed's repeatability experiments (section 11: ``data_rep_h`` and
+runs the ESRF study's repeatability experiments (section 11: ``data_rep_h`` and
 ``data_rep_v``, a 1 V 1 Hz Newport sine from 1 s) in closed loop with one
 controller, and measures
 
@@ -9,7 +9,7 @@ controller, and measures
   :func:`fsmbench.twin.verify.measure_tracking` (the axis moved by its experiment);
 * the distance error: rms of ``Va`` about its mean [m], per experiment (it
   holds the ~1 µm the Newport's sine moves the path, repeatable), and the
-  seed's non-repeatable part (11.4): ``Va`` minus its mean over the whole
+  ESRF study's non-repeatable part (11.4): ``Va`` minus its mean over the whole
   1 s periods after settling, rms, times ``√(n/(n−1))`` for the mean taken
   from the same ``n`` periods (``nonrep_rms_unbiased_m`` of
   :mod:`fsmbench.budget.repeatability`);
@@ -37,7 +37,7 @@ What is drawn (:class:`Ranges`, overridable by a TOML file)
 
 Reproducibility
     Draw ``i``'s parameters and noise seed come from
-    ``np.random.SeedSequence(seed).spawn(n)[i]`` alone, never from a shared
+    ``np.random.SeedSequence(ESRF study).spawn(n)[i]`` alone, never from a shared
     generator; the results are sorted by draw index. The same ``seed`` gives
     the same rows whatever the number of workers or the batch size, and the
     first ``m`` draws of a run of ``n > m`` are those of a run of ``m``.

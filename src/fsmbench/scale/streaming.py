@@ -251,7 +251,7 @@ class BlockMeanStream:
 
 
 class LowpassStream:
-    """The seed's first-order low pass from rest (:func:`fsmbench.filters.first_order_lowpass`)
+    """The study's first-order low pass from rest (:func:`fsmbench.filters.first_order_lowpass`)
     applied block after block, its state handed from each block to the next."""
 
     def __init__(self, *, cutoff_hz: float, fs_hz: float) -> None:

@@ -1,8 +1,8 @@
 """What the Attocube measures: the distance signal ``Va`` and its error sources.
 
 ``Va`` [m] is the one-way distance the interferometer reports (half the
-round-trip optical path change, seed 4.2). The twin builds it from the
-sources of the seed's error budget (section 4):
+round-trip optical path change, ESRF study 4.2). The twin builds it from the
+sources of the ESRF study's error budget (section 4):
 
 geometric (4.1)
     the exact ray trace of :mod:`fsmbench.bench.geometry` for the Sercalo's

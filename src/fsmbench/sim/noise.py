@@ -39,7 +39,7 @@ __all__ = [
 def source_rng(seed: int, experiment: str, source: str) -> np.random.Generator:
     """Independent generator for one noise source of one experiment.
 
-    The (experiment, source) names are hashed into the seed sequence's spawn
+    The (experiment, source) names are hashed into the ESRF study sequence's spawn
     key; the hash (not Python's salted ``hash``) keeps runs reproducible
     across processes.
     """

@@ -1,6 +1,6 @@
 """The twin's plant: the physical blocks with the exact coil circuit, discretised.
 
-Unlike :func:`fsmbench.bench.blocks.physical_plant` (the seed's block
+Unlike :func:`fsmbench.bench.blocks.physical_plant` (the ESRF study's block
 diagram, with a static ``Zc``), the twin computes the coil voltage from the
 circuit itself, ``Vt = Rc Ic + Lc dIc/dt = Uc - (R + R_buffer) Ic``, so the
 inductance acts where physics puts it.

@@ -144,7 +144,7 @@ class BenchStream:
         Names the noise streams (the twin uses the experiment's name, so an
         experiment's record is the same whatever else runs).
     compensation_unit, shielding : bool
-        Attocube environment (seed Table 3).
+        Attocube environment (ESRF study Table 3).
     controller : DiscreteController, optional
         Closed loop from the first sample, controller state zero.
     excitations : sequence of Excitation
