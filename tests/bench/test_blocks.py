@@ -212,3 +212,22 @@ def test_a_defective_system_falls_back_to_the_solve() -> None:
     s = 2j * np.pi * np.geomspace(1e-3, 1e3, 500)
     # Closed form: 1 / (s + 1)^3.
     assert np.allclose(ss_response(sys, s)[:, 0, 0], 1 / (s + 1) ** 3, rtol=1e-12, atol=0)
+
+
+@settings(max_examples=15, deadline=None)
+@given(seed=st.integers(0, 2**31), n_modes=st.integers(1, 6), n_real=st.integers(0, 3))
+def test_an_evaluator_equals_the_direct_solve_point_by_point(seed: int, n_modes: int,
+                                                            n_real: int) -> None:
+    """Checked on 24 points, used on others: one at a time, as a root finder asks."""
+    from fsmbench.bench.blocks import ResponseEvaluator, _solve_response
+
+    sys = _random_plant(seed, n_modes=n_modes, n_real=n_real)
+    ev = ResponseEvaluator(sys, check_points=2j * np.pi * np.geomspace(1e-3, 1e4, 24))
+    a, b, c, d = (np.asarray(x, dtype=float) for x in (sys.A, sys.B, sys.C, sys.D))
+    rng = np.random.default_rng(seed)
+    for f in 10 ** rng.uniform(-3, 4, 20):
+        s = np.array([2j * np.pi * f])
+        exact = _solve_response(a, b, c, d, s)
+        # As the modal path's acceptance, 100x: relative to each element or 1e-6 of the peak.
+        scale = np.maximum(np.abs(exact), 1e-6 * np.max(np.abs(exact)))
+        assert np.max(np.abs(ev(s) - exact) / scale) < 1e-8

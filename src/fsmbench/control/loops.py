@@ -27,7 +27,7 @@ import control as ct
 import numpy as np
 from scipy.linalg import eigvals
 
-from fsmbench.bench.blocks import PlantModel
+from fsmbench.bench.blocks import PlantModel, ResponseEvaluator
 from fsmbench.control.analysis import ControlObjective
 from fsmbench.control.freq import (
     Margins,
@@ -309,15 +309,25 @@ def _zeros(k: ct.StateSpace) -> np.ndarray:
     return np.concatenate(out) if out else np.zeros(0, dtype=complex)
 
 
+#: Where the margin functions are evaluated [Hz]: the loop grids' span (and beyond).
+_CHECK_HZ = np.geomspace(1e-4, 1e5, 24)
+
+
 def _axis_margins_fn(plant: PlantModel, k: ct.StateSpace, i: int,
                      kd: ct.StateSpace | None = None) -> Any:
     g_sub = plant.subsystem(outputs=list(k.input_labels), inputs=list(k.output_labels))
     tau = np.array([plant.input_delay_s.get(n, 0.0) for n in k.output_labels])
+    s_check = 2j * np.pi * _CHECK_HZ
+    # The root finders call this one frequency at a time: evaluators built once.
+    g_eval = ResponseEvaluator(g_sub, check_points=s_check)
+    k_eval = (ResponseEvaluator(k, check_points=s_check) if kd is None else
+              ResponseEvaluator(kd, check_points=np.exp(s_check[0.5 / kd.dt > _CHECK_HZ]
+                                                        * kd.dt)))
 
     def loop(f: np.ndarray) -> np.ndarray:
         s = 2j * np.pi * np.asarray(f, dtype=float).ravel()
-        g = evaluate_ss(g_sub, s) * np.exp(-s[:, None, None] * tau[None, None, :])
-        kk = evaluate_ss(k, s) if kd is None else evaluate_ss(kd, np.exp(s * kd.dt))
+        g = g_eval(s) * np.exp(-s[:, None, None] * tau[None, None, :])
+        kk = k_eval(s) if kd is None else k_eval(np.exp(s * kd.dt))
         return np.einsum("fj,fj->f", g[:, i, :], kk[:, :, i])
 
     return loop
