@@ -46,6 +46,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
@@ -160,14 +161,26 @@ def _noise_checks(noise: Any, params: BenchParams) -> list[Check]:
     band = (1 / NOISE_FACTOR, NOISE_FACTOR)
     tests = ", ".join(noise["tests"])
     out = []
+    sig = noise.get("newport_noise_rad") or {}
+    # A Newport angle noise measured far above its datasheet through the 4QD–Va
+    # cross-spectrum takes the 4QD's own noise with it: the slip is then Va's scale
+    # (mm for m …), not the 4QD; say so where the 4QD's fitted noise collapses.
+    newport_ratio = (float(sig["value"]) / params.newport.angle_noise_rms_rad
+                     if sig.get("significant") and params.newport.angle_noise_rms_rad > 0
+                     else 1.0)
     for axis, vp in (("h", "Vph"), ("v", "Vpv")):
         fitted = float(noise["noise_rms_v"][axis]["value"])
         model = params.quad_diode.noise_rms_v[axis]
-        out.append(_ratio_check(
+        check = _ratio_check(
             "qd_noise_vs_model", fitted / model, band, f"{tests}: {vp}",
             f"the 4QD's fitted white noise {fitted * 1e3:.4g} mV rms against the bench file's "
-            f"{model * 1e3:.3g} mV", between="the huddle tests against the bench file"))
-    sig = noise.get("newport_noise_rad") or {}
+            f"{model * 1e3:.3g} mV", between="the huddle tests against the bench file")
+        if not check.passed and fitted < model / NOISE_FACTOR and newport_ratio > NOISE_FACTOR:
+            check = replace(check, advice=(
+                f"{check.advice.split('; likely ')[0]}; likely Va's unit: the Newport's angle "
+                f"noise measured through Va is {newport_ratio:.3g}× its datasheet's and "
+                "leaves the 4QD none of its own (Va in mm or µm instead of m?)"))
+        out.append(check)
     if sig.get("significant"):
         value, model = float(sig["value"]), params.newport.angle_noise_rms_rad
         out.append(_ratio_check(
