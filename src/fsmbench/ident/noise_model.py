@@ -379,13 +379,15 @@ def _newport(s1: Spectrum, vsel: NDArray[np.intp], params: BenchParams, gd: Floa
     used = bool(sth > _NEWPORT_RESOLVED * sd)
     if used and abs(sth - sig) > Z_TERM * sd:
         notices.append(Notice("other", "Vph, Vpv, Va", f"the 4QD–Va cross-spectrum gives a "
-                              f"Newport angle noise of {sth:.3g} ± {sd:.2g} rad rms (with the "
-                              f"file's spot offset), the bench file assumes {sig:.3g} rad: the "
-                              "measured value is used for the 4QD and Va floors and the engine"))
+                              f"Newport angle noise of {1e6 * sth:.3g} ± {1e6 * sd:.2g} µrad rms "
+                              f"(with the file's spot offset), the bench file assumes "
+                              f"{1e6 * sig:.3g} µrad: the measured value is used for the 4QD and "
+                              "Va floors and the engine"))
     elif not used:
         notices.append(Notice("other", "Vph, Vpv, Va", f"the Newport angle noise is not resolved "
-                              f"by the 4QD–Va cross-spectrum ({sth:.3g} ± {sd:.2g} rad rms): the "
-                              f"bench file's {sig:.3g} rad is used (assumed)"))
+                              f"by the 4QD–Va cross-spectrum ({1e6 * sth:.3g} ± {1e6 * sd:.2g} "
+                              f"µrad rms): the bench file's {1e6 * sig:.3g} µrad is used "
+                              "(assumed)"))
     return Estimate(sth if used else sig, sth, sd, used)
 
 
@@ -405,12 +407,13 @@ def _attocube(s1: Spectrum, vsel: NDArray[np.intp], params: BenchParams, sigma_r
     va = Estimate(rms, rms, math.sqrt(cov[0, 0]) * fs_eng / (4 * rms) if rms else math.nan)
     if own <= 0:
         notices.append(Notice("other", "Va", f"the Va floor {th[0]:.3g} m²/Hz is not above the "
-                              "Newport piston and the resolution: noise_rms_m set to 0"))
+                              "Newport piston and the resolution: the Attocube's own noise is "
+                              "set to 0"))
     elif piston > 0.5 * th[0]:
         notices.append(Notice("other", "Va", f"{100 * piston / th[0]:.0f} % of the Va floor is "
-                              f"the Newport angle noise's piston ({sigma_rad:.3g} rad, spot "
-                              f"offset {s_off:.3g} m, the bench file's): noise_rms_m rests on "
-                              "that offset"))
+                              f"the Newport angle noise's piston ({1e6 * sigma_rad:.3g} µrad, "
+                              f"spot offset {1e3 * s_off:.3g} mm, the bench file's): the "
+                              "Attocube's own noise rests on that offset"))
     return va, float(th[0]), piston, xv @ th
 
 
