@@ -44,6 +44,7 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
+from numba import njit
 from numpy.typing import ArrayLike, NDArray
 
 __all__ = ["AllanRegion", "AllanResult", "allan_deviation", "allan_regions"]
@@ -368,9 +369,12 @@ def _allan_in_memory(x: NDArray[np.float64], *, fs: float, taus_s: ArrayLike | N
     The m-sample averages come from a cumulative sum of ``x - x[0]`` (the
     offset removed first, so nanometre noise is not lost under a metre-scale
     distance); the Dask path sums the same terms in cells. The squares are
-    positive, so a dot product sums them to ~1e-15 relative (blocked pairwise
-    accumulation): ``math.fsum``'s exactness cost ~1 s per million terms per tau
-    (11 s of the study's budget stage) for digits no comparison uses.
+    positive, so blocked accumulation sums them to ~1e-15 relative:
+    ``math.fsum``'s exactness cost ~1 s per million terms per tau (11 s of the
+    study's budget stage) for digits no comparison uses. The sums run compiled
+    (:func:`_second_difference_energies`): one pass per tau and no temporaries,
+    where NumPy's slices made three arrays of N per tau
+    (``benchmarks/bench_allan.py``).
     """
     if x.ndim != 1:
         raise ValueError(f"{name} must be a 1-D array of samples, got shape {x.shape}")
@@ -385,17 +389,44 @@ def _allan_in_memory(x: NDArray[np.float64], *, fs: float, taus_s: ArrayLike | N
         )
     factors = _factors(taus_s, fs, n)
     c = np.concatenate([[0.0], np.cumsum(x - x[0])])
-    sums = np.empty(factors.size)
-    for i, m in enumerate(int(v) for v in factors):
-        block = c[m:] - c[:-m]  # sums of m samples starting at each k, N - m + 1 of them
-        d = block[m:] - block[:-m]
-        sums[i] = float(np.dot(d, d))
+    sums = _second_difference_energies(c, factors)
     n_terms_all = n - 2 * factors + 1
     avar = sums / (2.0 * factors.astype(np.float64) ** 2 * n_terms_all)
     out = AllanResult(tau_s=factors / fs, adev=np.sqrt(avar), n_terms=n_terms_all.astype(np.int64),
                       m=factors.astype(np.int64), fs_hz=fs, n_samples=n, unit=unit)
     for a in (out.tau_s, out.adev, out.n_terms, out.m):
         a.setflags(write=False)
+    return out
+
+
+#: Terms summed into one partial sum before it joins the total: rounding grows
+#: with ~(block + N/block)·eps instead of N·eps for a plain running sum.
+_SUM_BLOCK = 1024
+
+
+@njit(cache=True)
+def _second_difference_energies(c: NDArray[np.float64],
+                                factors: NDArray[np.int64]) -> NDArray[np.float64]:
+    """``sum_k (c[k+2m] - 2 c[k+m] + c[k])**2`` for each ``m`` of ``factors``, (M,).
+
+    ``c`` is the cumulative sum of the record with a leading 0, so each term is
+    the difference of two adjacent m-sample sums (pragma: compiled, numba).
+    """
+    out = np.empty(factors.size)
+    for i in range(factors.size):
+        m = factors[i]
+        n_terms = c.size - 2 * m
+        total = 0.0
+        k = 0
+        while k < n_terms:
+            stop = min(k + _SUM_BLOCK, n_terms)
+            part = 0.0
+            for j in range(k, stop):
+                d = (c[j + 2 * m] - c[j + m]) - (c[j + m] - c[j])
+                part += d * d
+            total += part
+            k = stop
+        out[i] = total
     return out
 
 
