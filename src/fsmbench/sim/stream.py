@@ -175,6 +175,7 @@ class BenchStream:
         self._hold = np.zeros(len(DAC_CHANNELS))
         self._last_adc = np.zeros(len(ADC_CHANNELS))
         self._excitations: list[ExcitationStream] = []
+        self._references: list[ExcitationStream] = []
         self._n_added: dict[str, int] = {}
         for ex in excitations:
             self.add_excitation(ex)
@@ -267,8 +268,9 @@ class BenchStream:
         """Constant command added to every DAC channel since the loop was opened [V], (4,)."""
         return self._hold.copy()
 
-    def add_excitation(self, excitation: Excitation, *, source: str | None = None) -> float:
-        """Play ``excitation`` from its start time; returns its peak command [V].
+    def add_excitation(self, excitation: Excitation, *, source: str | None = None,
+                       at: str = "output") -> float:
+        """Play ``excitation`` from its start time; returns its peak [V].
 
         Parameters
         ----------
@@ -277,15 +279,26 @@ class BenchStream:
             Name of its noise stream; default ``excitation_<channel>`` for the
             channel's first excitation (the twin's experiments), then
             ``excitation_<channel>_<i>``.
+        at : {"output", "reference"}
+            ``"output"``: added to the DAC command of its channel (the
+            controller's output in closed loop). ``"reference"``: added to the
+            loop's reference on the ADC channel the controller pairs with that
+            DAC channel (``Vph`` for ``Uch`` with the Sercalo controllers), in
+            4QD volts: the controller acts on ``reading - r``. In open loop a
+            reference does nothing. The block's ADC samples stay the sensor's
+            readings (see :meth:`step`).
 
         Raises
         ------
         ValueError
-            Unknown channel, or an excitation whose peak leaves the DAC's range.
+            Unknown channel or place, or an excitation whose peak leaves the
+            DAC's range (the ADC's for a reference).
         """
         if excitation.channel not in DAC_CHANNELS:
             raise ValueError(f"unknown excitation channel {excitation.channel!r}; "
                              f"the DAC drives {', '.join(DAC_CHANNELS)}")
+        if at not in ("output", "reference"):
+            raise ValueError(f"an excitation is added at the output or the reference, not {at!r}")
         i = self._n_added.get(excitation.channel, 0)
         self._n_added[excitation.channel] = i + 1
         if source is None:
@@ -294,9 +307,10 @@ class BenchStream:
         peak = stream.peak_v()
         limit = self.params.converter.range_v / 2
         if peak > limit:
+            where = "DAC" if at == "output" else "ADC"
             raise ValueError(f"excitation on {excitation.channel} peaks at {peak:.3g} V, beyond "
-                             f"the DAC's ±{limit:g} V range")
-        self._excitations.append(stream)
+                             f"the {where}'s ±{limit:g} V range")
+        (self._excitations if at == "output" else self._references).append(stream)
         return peak
 
     def set_environment(self, *, compensation_unit: bool, shielding: bool) -> None:
@@ -304,8 +318,28 @@ class BenchStream:
         self._attocube.set_environment(compensation_unit=compensation_unit, shielding=shielding)
 
     def clear_excitations(self) -> None:
-        """Stop every excitation from the next sample."""
+        """Stop every excitation (and reference) from the next sample."""
         self._excitations.clear()
+        self._references.clear()
+
+    def _reference_samples(self, k0: int, n: int) -> np.ndarray | None:
+        """The references on the ADC channels the controller reads, (n, n_adc) [V], or None.
+
+        Every reference stream advances each block (its noise and filter state stay
+        those of one run); it acts only while a controller pairs its channel.
+        """
+        if not self._references:
+            return None
+        ref = np.zeros((n, len(ADC_CHANNELS)))
+        ctrl = self._controller
+        for ex in self._references:
+            samples = ex.next(k0, n)
+            if ctrl is None:
+                continue
+            j = DAC_CHANNELS.index(ex.excitation.channel)
+            if j in ctrl.dac_outputs:
+                ref[:, ctrl.adc_inputs[list(ctrl.dac_outputs).index(j)]] += samples
+        return ref
 
     def _controller_command(self, controller: DiscreteController | None,
                             xk: np.ndarray) -> np.ndarray:
@@ -383,6 +417,10 @@ class BenchStream:
             u_ext[:, DAC_CHANNELS.index(ex.excitation.channel)] += ex.next(k0, n)
         if np.any(self._hold != 0.0):
             u_ext += self._hold[None, :]
+        ref = self._reference_samples(k0, n)
+        if ref is not None:
+            # The controller reads reading - r: the reference enters where the ADC noise does.
+            adc_noise = adc_noise - ref
         loop = run_loop(self.plant, u_ext=u_ext, adc_noise=adc_noise, adc=self.converter,
                         dac=self.converter, controller=self._controller,
                         n_adc=len(ADC_CHANNELS), z0=self._z,
@@ -393,6 +431,10 @@ class BenchStream:
             self._xk = loop.controller_state
         if n:
             self._last_adc = loop.adc[-1].copy()
+        adc = loop.adc
+        if ref is not None:
+            # What the sensor read (the controller saw it less the reference), on the ADC's grid.
+            adc = self.converter.apply(loop.adc + ref)
         internal = loop.internal
         theta_c = internal[:, [INTERNAL_SIGNALS.index("theta_ch"),
                                INTERNAL_SIGNALS.index("theta_cv")]]
@@ -400,7 +442,7 @@ class BenchStream:
                                INTERNAL_SIGNALS.index("theta_nv")]] + n_theta
         va = self._attocube.next(theta_c_rad=theta_c, theta_n_rad=theta_n)
         self._k += n
-        return BenchBlock(start_sample=k0, fs_hz=self.fs_hz, dac=loop.dac, adc=loop.adc,
+        return BenchBlock(start_sample=k0, fs_hz=self.fs_hz, dac=loop.dac, adc=adc,
                           internal=internal, va=va,
                           noise={"newport_angle": n_theta, "metrology": n_metro, "qd": n_qd,
                                  "vc": n_vc, "qd_slow": n_slow})
