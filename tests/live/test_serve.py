@@ -155,3 +155,60 @@ def test_a_busy_port_is_refused(capsys: pytest.CaptureFixture[str]) -> None:
         port = busy.getsockname()[1]
         line = _serve_error(capsys, "--nodb", "--port", str(port))
     assert f"port {port} is not free" in line and "--port" in line
+
+
+def test_an_unreachable_database_is_one_line(capsys: pytest.CaptureFixture[str],
+                                             monkeypatch: pytest.MonkeyPatch) -> None:
+    # Case 2.4: an unreachable TANGO_HOST ended in a traceback reported as a bug.
+    monkeypatch.setenv("TANGO_HOST", f"127.0.0.1:{_free_port()}")  # nothing listens there
+    line = _serve_error(capsys, "bench1", "--device", "test/fsm/1")
+    assert "the Tango database at TANGO_HOST=127.0.0.1:" in line and "does not answer" in line
+    from fsmbench.live.serve import starter_main
+
+    assert starter_main(["bench1"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("FsmBench bench1: error:") and \
+        "does not answer" in err[0], err
+
+
+def test_starter_entry_point_needs_an_instance(capsys: pytest.CaptureFixture[str]) -> None:
+    from fsmbench.live.serve import starter_main
+
+    assert starter_main([]) == 2
+    assert "usage: FsmBench INSTANCE" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize(("args", "words"), [
+    (("--protocol", "epics"), "needs --prefix PREFIX"),
+    (("--prefix", "BL1"), "--prefix is for --protocol epics"),
+    (("--protocol", "epics", "--prefix", "BL1", "--nodb"), "INSTANCE, --device and --nodb"),
+    (("--protocol", "epics", "--prefix", "BL 1"), "--prefix 'BL 1'"),
+    (("--device", "nodomain"), "not a Tango device name"),
+    (("--speed", "1e-6", "--nodb", "--port", "0"), "outside [0.01, 100]"),
+])
+def test_option_mistakes_are_one_line(capsys: pytest.CaptureFixture[str], args: tuple[str, ...],
+                                      words: str) -> None:
+    assert words in _serve_error(capsys, *args)
+
+
+def test_sigterm_stops_the_server_while_it_designs(tmp_path: Path) -> None:
+    # Case 6.1: a multisine of period 1e5 s took the server to 15 GB and it ignored SIGTERM.
+    # The longest period allowed (100 s, full band) is designed off the call; SIGTERM during
+    # the design ends the server cleanly.
+    port = _free_port()
+    proc = subprocess.Popen([*SERVE, "--nodb", "--port", str(port), "--out",
+                             str(tmp_path / "out")], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True, cwd=tmp_path)
+    try:
+        _ready_line(_lines(proc.stdout), proc)
+        proxy = _connect(f"tango://localhost:{port}/fsmbench/bench/1#dbase=no")
+        reply = proxy.StartExcitation(json.dumps({"input": "Uch", "kind": "multisine",
+                                                  "amplitude_v": 0.1, "period_s": 100}))
+        assert "designing" in reply
+        assert proxy.Task.startswith("designing") or json.loads(proxy.Excitation)
+        proc.terminate()
+        assert proc.wait(timeout=WAIT_S) == 0
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait(timeout=WAIT_S)

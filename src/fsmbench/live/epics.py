@@ -30,6 +30,7 @@ This module imports softioc only when serving: it is the ``fsmbench[epics]`` ext
 from __future__ import annotations
 
 import contextlib
+import faulthandler
 import logging
 import math
 import os
@@ -38,6 +39,7 @@ import signal
 import subprocess
 import sys
 import threading
+import time
 from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
 
@@ -60,8 +62,11 @@ ARGUMENT_COMMANDS = ("LoadController", "StartExcitation", "RunExperiment", "Reco
 #: the 16 KiB default); clients need the same EPICS_CA_MAX_ARRAY_BYTES.
 MAX_ARRAY_BYTES = 4_000_000
 _UPDATE_S = 0.1  # how often the records are refreshed [s]
+_SPECTRUM_S = 1.0  # least wall-clock time between two updates of a spectrum [s]
 _STRING = 2048  # long-string records [bytes]
 _PREFIX = re.compile(r"[A-Za-z0-9_:-]{1,40}")
+#: Views refreshed with State before a command's put completes.
+_WITH_STATE = tuple(s for s in ATTRIBUTES if s.name in ("LoopClosed", "Controller", "Task"))
 
 
 def check_prefix(prefix: str) -> str:
@@ -111,6 +116,7 @@ class BenchIoc:
         self._wake = threading.Event()
         self._thread: threading.Thread | None = None
         self._lock = threading.Lock()  # one command at a time
+        self._state_lock = threading.Lock()
         builder.SetDeviceName(prefix)
         n_points = len(bench.asd_frequency()) or self._spectrum_points()
         for spec in ATTRIBUTES:
@@ -191,6 +197,7 @@ class BenchIoc:
                          severity=alarm.MINOR_ALARM if refused else alarm.NO_ALARM,
                          alarm=alarm.WRITE_ALARM if refused else alarm.NO_ALARM)
         rec["ReplyCode"].set(code[:39])
+        self._update_state()  # before the put completes: a client then reads the new state
         rec["ReplyCount"].set(rec["ReplyCount"].get() + 1)
         self._wake.set()
 
@@ -275,9 +282,13 @@ class BenchIoc:
                 for i, row in enumerate(spec.rows or ("",)):
                     data = np.asarray(rows[i] if i < len(rows) else [], dtype=float)
                     key = spec.name + row
-                    last = self._last_arrays.get(key)
-                    if last is None or last.shape != data.shape or not np.array_equal(last, data):
-                        self._last_arrays[key] = data
+                    last, when = self._last_arrays.get(key, (None, -np.inf))
+                    # At most once a wall-clock second: at 50x the estimators renew 50 times
+                    # a second, and 64 KiB monitors that fast stall a client's event queue.
+                    if (last is None or last.shape != data.shape or
+                            not np.array_equal(last, data)) and \
+                            time.monotonic() - when >= _SPECTRUM_S:
+                        self._last_arrays[key] = (data, time.monotonic())
                         rec[key].set(data[:self._lengths[key]])
                 continue
             if spec.writable:
@@ -293,11 +304,22 @@ class BenchIoc:
                                    alarm=alarm.TIMEOUT_ALARM if stale else alarm.UDF_ALARM)
             else:
                 rec[spec.name].set(value)
-        state = self.bench.state
-        severity = {"ALARM": alarm.MINOR_ALARM, "FAULT": alarm.MAJOR_ALARM}.get(state, 0)
-        rec["State"].set(STATES.index(state), severity=severity,
-                         alarm=alarm.STATE_ALARM if severity else alarm.NO_ALARM)
-        rec["Status"].set(plain(self.bench.status)[:_STRING - 1])
+        self._update_state()
+
+    def _update_state(self) -> None:
+        from softioc import alarm
+
+        with self._state_lock:
+            state = self.bench.state
+            severity = {"ALARM": alarm.MINOR_ALARM, "FAULT": alarm.MAJOR_ALARM}.get(state, 0)
+            self._records["State"].set(STATES.index(state), severity=severity,
+                                       alarm=alarm.STATE_ALARM if severity else alarm.NO_ALARM)
+            self._records["Status"].set(plain(self.bench.status)[:_STRING - 1])
+            for spec in _WITH_STATE:
+                value, _ = evaluate(spec, self.bench, self._latch)
+                if value is not None:
+                    self._records[spec.name].set(value if spec.kind == "bool"
+                                                 else plain(str(value))[:_STRING - 1])
 
 
 def serve_epics(options: ServeOptions, *, ready: str = "") -> int:
@@ -336,6 +358,8 @@ def serve_epics(options: ServeOptions, *, ready: str = "") -> int:
     dispatcher = asyncio_dispatcher.AsyncioDispatcher()
     softioc.iocInit(dispatcher)
     stop = threading.Event()
+    # kill -USR1 <pid>: every thread's stack on stderr (what a stuck IOC is doing).
+    faulthandler.register(signal.SIGUSR1, all_threads=True)
     handlers = {sig: signal.signal(sig, lambda *_: stop.set())
                 for sig in (signal.SIGTERM, signal.SIGINT)}
     try:

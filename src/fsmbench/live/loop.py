@@ -23,6 +23,8 @@ __all__ = ["PacedLoop"]
 
 #: Longest single sleep of the loop [s]: how fast a new speed or a stop acts.
 _SLICE_S = 0.05
+#: Pause after a block when the loop is behind [s] (hands the lock to waiting readers).
+_YIELD_S = 0.001
 #: How often the watchdog looks [s].
 _WATCH_S = 0.1
 
@@ -148,6 +150,10 @@ class PacedLoop:
                     while ahead > 0 and not self._stop.is_set() and self._speed() == speed:
                         self._stop.wait(min(ahead, _SLICE_S))
                         ahead = wall0 + (now_bench - bench0) / speed - time.monotonic()
+                    if ahead <= 0:
+                        # Behind: no sleep above, so let the threads waiting for the bench's
+                        # lock (clients' reads) in; a lock is not fair, a sleep hands it over.
+                        time.sleep(_YIELD_S)
                     if ahead < -1.0:
                         # Slower than asked (a loaded machine): do not try to catch up.
                         wall0, bench0 = time.monotonic(), now_bench
