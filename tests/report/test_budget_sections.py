@@ -253,3 +253,25 @@ def test_budget_package_draws_nothing():
     budget_dir = Path(fsmbench.budget.__file__).parent
     for path in budget_dir.glob("*.py"):
         assert "matplotlib" not in path.read_text(encoding="utf-8"), path.name
+
+
+def test_the_huddle_time_figure_draws_the_budget_stages_low_pass(result, figures, run):
+    """The report draws the low-passed Va the budget stage computed (it filters nothing),
+    and that array is the ESRF study's lsim: y[k+1] = a y[k] + (1 - a) x[k] from rest."""
+    from scipy.signal import lfilter
+
+    from fsmbench.budget.huddle import trim_huddle
+
+    fig = next(f for f in figures if f.key == "fig29_huddle_attocube_time")
+    for panel, rec in zip(fig.panels, sorted(result.huddle.records.values(),
+                                             key=lambda r: r.name), strict=True):
+        lowpassed = next(t for t in panel.traces if "low pass" in t.name)
+        assert rec.va_lowpass_m is not None
+        np.testing.assert_array_equal(lowpassed.y, rec.va_lowpass_m * 1e9)  # the same array
+        sig = trim_huddle(run.recordings[rec.name], name=rec.name, duration_s=rec.duration_s)
+        x = sig["Va"] - sig["Va"].mean()
+        a = np.exp(-2 * np.pi * 50.0 / rec.fs_hz)
+        ref = lfilter([0.0, 1.0 - a], [1.0, -a], x)  # one-sample delay: y[0] = 0
+        # One recursion against another on nanometre signals: rounding only.
+        np.testing.assert_allclose(rec.va_lowpass_m, ref, rtol=0, atol=1e-12 * np.abs(x).max())
+        assert "va_lowpass_m" not in rec.to_json()

@@ -41,7 +41,7 @@ from numpy.typing import NDArray
 from fsmbench.bench.blocks import newport_beam_matrix
 from fsmbench.bench.params import BenchParams
 from fsmbench.budget.long_record import LongRecordSummary, summarise_long_record
-from fsmbench.budget.signals import block_means, is_lazy, lowpass_rms, trim_record
+from fsmbench.budget.signals import block_means, is_lazy, lowpass, trim_record
 from fsmbench.budget.spectra import cumulative_power, seed_welch
 from fsmbench.control.seed import tustin
 from fsmbench.ident import hanning
@@ -193,7 +193,10 @@ class HuddleRecord:
 
     ``f_hz`` (F,) and the one-sided PSDs ``psd_va_m2_per_hz``,
     ``psd_vph_v2_per_hz``, ``psd_vpv_v2_per_hz`` (F,) of the mean-removed
-    signals; ``bands``: Va rms per band (drift, 3–50 Hz, 50 Hz–fs/2, total).
+    signals; ``bands``: Va rms per band (drift, 3–50 Hz, 50 Hz–fs/2, total);
+    ``va_lowpass_m`` (N,) [m]: the trimmed, mean-removed ``Va`` through the ESRF
+    study's 50 Hz low pass, for the report's time figure (None out of core, where
+    the figure draws the stability analysis's envelope).
     """
 
     name: str
@@ -213,6 +216,7 @@ class HuddleRecord:
     psd_vpv_v2_per_hz: FloatArray
     welch_averages: float
     bands: tuple[BandRms, ...]
+    va_lowpass_m: FloatArray | None = field(default=None, repr=False)
 
     def cumulative_rms(self, signal: str) -> FloatArray:
         """Cumulative rms from 0 Hz of ``"Va"`` [m], ``"Vph"`` or ``"Vpv"`` [V], shape (F,)."""
@@ -231,7 +235,7 @@ class HuddleRecord:
         """Scalars and bands (the spectra stay in memory for the figures)."""
         out: dict[str, object] = {f.name: getattr(self, f.name) for f in fields(self)
                                   if not f.name.startswith("psd") and f.name not in
-                                  ("f_hz", "bands")}
+                                  ("f_hz", "bands", "va_lowpass_m")}
         out["bands"] = [{"id": band_id(b.band), "name": b.band, "low_hz": b.f_lo_hz,
                          "high_hz": b.f_hi_hz, "va_rms_m": b.rms, "rel_std": b.rel_std}
                         for b in self.bands]
@@ -277,10 +281,12 @@ def analyse_huddle_record(ds: xr.Dataset, *, name: str | None = None, t0_s: floa
         va_rms, vph_rms, vpv_rms = (summary.rms[k] for k in ("Va", "Vph", "Vpv"))
         drift = _drift_of_means(summary.va_second_means_m)
         n_samples = summary.n_samples
+        va_lowpass = None
     else:
         sig = _trimmed(ds, name=name, t0_s=t0_s, duration_s=duration_s, fs=fs)
         va, vph, vpv = sig["Va"], sig["Vph"], sig["Vpv"]
-        va_lpf_rms = lowpass_rms(va, cutoff_hz=lpf_hz, fs_hz=fs)
+        va_lowpass = lowpass(va, cutoff_hz=lpf_hz, fs_hz=fs)
+        va_lpf_rms = float(np.sqrt(np.mean((va_lowpass - va_lowpass.mean()) ** 2)))
         s_va = seed_welch(va, fs_hz=fs, name=f"{name}.Va")
         s_ph = seed_welch(vph, fs_hz=fs, name=f"{name}.Vph")
         s_pv = seed_welch(vpv, fs_hz=fs, name=f"{name}.Vpv")
@@ -310,7 +316,8 @@ def analyse_huddle_record(ds: xr.Dataset, *, name: str | None = None, t0_s: floa
         f_hz=f, psd_va_m2_per_hz=psd_va,
         psd_vph_v2_per_hz=np.asarray(s_ph.values, dtype=float),
         psd_vpv_v2_per_hz=np.asarray(s_pv.values, dtype=float),
-        welch_averages=float(s_va.effective_averages), bands=tuple(bands))
+        welch_averages=float(s_va.effective_averages), bands=tuple(bands),
+        va_lowpass_m=va_lowpass)
 
 
 @dataclass(frozen=True)

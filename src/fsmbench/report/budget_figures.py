@@ -19,7 +19,7 @@ from numpy.typing import NDArray
 from fsmbench.bench.geometry import seed_theta_range, small_angle_law, trace_bench
 from fsmbench.budget.huddle import HuddleAnalysis, HuddleRecord, trim_huddle
 from fsmbench.budget.optics import SEED_4_1, GeometryBudget
-from fsmbench.budget.spectra import cumulative_power, first_order_lowpass, window_weight
+from fsmbench.budget.spectra import cumulative_power, window_weight
 from fsmbench.budget.stability import StabilityRecord
 from fsmbench.budget.table import ErrorBudget
 from fsmbench.report.figure import H_COLOR, PALETTE, V_COLOR, Figure, Label, Line, Panel
@@ -160,12 +160,15 @@ def huddle_attocube_time_figure(h: HuddleAnalysis, recordings: Mapping[str, xr.D
             continue
         sig = trim_huddle(recordings[rec.name], name=rec.name, duration_s=rec.duration_s)
         va = sig["Va"] - sig["Va"].mean()
-        vaf = first_order_lowpass(va, cutoff_hz=50.0, fs_hz=rec.fs_hz)
+        # The low pass comes from the budget stage (the report draws, it does not filter).
+        vaf = rec.va_lowpass_m
+        raw_line = Line(sig["t"], va * NM, name="Va, raw", color=_RAW_COLOR, width=1.0,
+                        group="raw", decimate=True)
+        lines = (raw_line,) if vaf is None else (
+            raw_line, Line(sig["t"], vaf * NM, name="Va, 50 Hz first-order low pass",
+                           color=_LPF_COLOR, width=1.2, group="lpf", decimate=True))
         panels.append(Panel(
-            traces=(Line(sig["t"], va * NM, name="Va, raw", color=_RAW_COLOR, width=1.0,
-                         group="raw", decimate=True),
-                    Line(sig["t"], vaf * NM, name="Va, 50 Hz first-order low pass",
-                         color=_LPF_COLOR, width=1.2, group="lpf", decimate=True)),
+            traces=lines,
             x_label="Time [s]", y_label="Va, mean removed [nm]", title=title, share_y="va"))
     return Figure(
         key="fig29_huddle_attocube_time", title="Attocube distance during the huddle tests",
