@@ -172,7 +172,7 @@ def _sections(*, bench: Bench, loaded: RecordingSet, source: str, is_twin: bool,
     rec = loaded.recordings
     chapter2 = identification_section(ident, recordings=rec, bench=bench, truth=truth,
                                       skipped=loaded.skipped)
-    chapter11 = repeatability_section(budget, recordings=rec)
+    chapter11 = repeatability_section(budget)
     sections = [
         bench_section(bench, recordings=rec, skipped=loaded.skipped, source=source,
                       is_twin=is_twin),

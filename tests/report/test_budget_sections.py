@@ -52,7 +52,7 @@ def result(run, bench) -> BudgetResult:
 def sections(result, run) -> list[Section]:
     return [huddle_section(result, recordings=run.recordings),
             budget_section(result, plant_source="physical (nominal)"),
-            repeatability_section(result, recordings=run.recordings)]
+            repeatability_section(result)]
 
 
 @pytest.fixture(scope="module")
@@ -209,7 +209,7 @@ def test_sections_without_data(run, bench):
     text = " ".join(b for b in huddle.blocks if isinstance(b, str))
     for name in HUDDLES:
         assert f"{name}.mat" in text
-    rep = repeatability_section(res, recordings=recs)
+    rep = repeatability_section(res)
     assert [f.key for f in iter_figures([rep])][:1] == ["fig44_repeatability_time"]
     assert "data_rep_v" in " ".join(b for b in _blocks(rep) if isinstance(b, str))
     budget = budget_section(res, plant_source="physical (nominal)")
@@ -217,7 +217,7 @@ def test_sections_without_data(run, bench):
         "fig34_angle_error_distance", "fig35_beam_path", "budget_beam_angle_per_source",
         "budget_distance_per_source"}
     res_none = budget_study({}, bench=bench, df_hz=1.0)
-    rep_none = repeatability_section(res_none, recordings={})
+    rep_none = repeatability_section(res_none)
     assert not list(iter_figures([rep_none]))
     assert "data_rep_h.mat" in " ".join(b for b in rep_none.blocks if isinstance(b, str))
 
@@ -275,3 +275,22 @@ def test_the_huddle_time_figure_draws_the_budget_stages_low_pass(result, figures
         # One recursion against another on nanometre signals: rounding only.
         np.testing.assert_allclose(rec.va_lowpass_m, ref, rtol=0, atol=1e-12 * np.abs(x).max())
         assert "va_lowpass_m" not in rec.to_json()
+
+
+def test_fig50_draws_the_huddle_window_the_budget_stage_read(result, figures, run):
+    """Fig. 50's huddle panel comes from the budget stage (the report reads no recording):
+    its rms is the definition on the trimmed record over the repeatability length."""
+    windows = {nr.huddle_window.name: nr.huddle_window for nr in result.nonrep.values()
+               if nr.huddle_window is not None}
+    assert len(windows) == 1
+    (name, win), = windows.items()
+    longest = max(r.n_periods * r.period_samples for r in result.repeatability.values())
+    ds = run.recordings[name]
+    t = ds["t"].values
+    va = ds["Va"].values[t >= 1.0][:longest]
+    assert win.n_samples == va.size
+    # Two streamed passes against one in-memory pass over the same samples: rounding only.
+    np.testing.assert_allclose(win.va_rms_m, np.std(va), rtol=1e-9)
+    fig = next(f for f in figures if f.key == "fig50_nonrepeatable_contributions")
+    assert f"{win.va_rms_m * 1e9:.3g} nm rms over {win.duration_s:g} s" in fig.panels[-1].title
+    assert result.nonrep[next(iter(result.nonrep))].to_json()["huddle_window"]["name"] == name

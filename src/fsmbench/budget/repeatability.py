@@ -43,7 +43,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Iterator, Mapping
-from dataclasses import dataclass, fields
+from dataclasses import dataclass, field, fields
 
 import numpy as np
 import xarray as xr
@@ -52,6 +52,7 @@ from numpy.typing import NDArray
 from fsmbench.bench.blocks import rotation
 from fsmbench.bench.params import BenchParams
 from fsmbench.budget.propagation import distance_coefficients
+from fsmbench.budget.signals import trim_record
 from fsmbench.ident.welch import WelchOptions, hanning
 from fsmbench.jsonutil import hv
 from fsmbench.progress import advance
@@ -69,12 +70,14 @@ __all__ = [
     "ENVELOPE_BINS",
     "SEED_11",
     "AlignedRecord",
+    "HuddleWindow",
     "PeriodAlignment",
     "RepeatabilityRecord",
     "align_periods",
     "analyse_repeatability",
     "command_channel",
     "find_alignment",
+    "huddle_window",
 ]
 
 FloatArray = NDArray[np.float64]
@@ -472,3 +475,70 @@ def analyse_repeatability(ds: xr.Dataset, *, params: BenchParams, name: str | No
         psd_distance_m2_per_hz=psd["dist"],
         psd_distance_seed_m2_per_hz=np.stack([psd["seed_h"], psd["seed_v"]], axis=1),
         psd_va_m2_per_hz=psd["va"])
+
+
+@dataclass(frozen=True)
+class HuddleWindow:
+    """``Va`` of a huddle test over the repeatability records' length (Fig. 50's last panel).
+
+    ``envelope``: min/max per bin of ``Va`` less its mean over the window [m];
+    ``va_rms_m``: its rms about that mean [m]; ``n_samples`` at ``fs_hz``.
+    """
+
+    name: str
+    envelope: Envelope = field(repr=False)
+    va_rms_m: float
+    n_samples: int
+    fs_hz: float
+
+    @property
+    def duration_s(self) -> float:
+        """Length of the window [s]."""
+        return self.n_samples / self.fs_hz
+
+    def to_json(self) -> dict[str, object]:
+        """The scalars (the envelope stays for the figure)."""
+        return {"name": self.name, "va_rms_m": self.va_rms_m, "n_samples": self.n_samples,
+                "fs_hz": self.fs_hz}
+
+
+def huddle_window(ds: xr.Dataset, *, name: str, n_max: int,
+                  n_bins: int = ENVELOPE_BINS) -> HuddleWindow:
+    """``Va`` of a huddle test after the ESRF study's trim, its first ``n_max`` samples at most.
+
+    Read twice in blocks (the record may be out of core): the mean, then the
+    envelope and the rms about it.
+
+    Parameters
+    ----------
+    ds : xarray.Dataset
+        The huddle test (``Va`` [m] on ``t`` [s], attribute ``fs_hz``).
+    name : str
+        Its experiment name, for messages.
+    n_max : int
+        Most samples to use (the longest repeatability record's aligned length).
+    n_bins : int
+        Bins of the envelope.
+
+    Raises
+    ------
+    ValueError
+        Naming the record, when nothing is left after removing ``t < 1 s``.
+    """
+    fs = float(ds.attrs["fs_hz"])
+    trim = trim_record(ds, t0_s=1.0, duration_s=None, fs_hz=fs)
+    n = min(n_max, trim.n)
+    if n < 1:
+        raise ValueError(f"{name}: no sample left after removing t < 1 s")
+    va = {"Va": ds["Va"].data}
+    stop = trim.start + n
+    sums = SumStream(shift=float(np.asarray(va["Va"][trim.start])))  # nm under an offset
+    for _, block in read_blocks(va, start=trim.start, stop=stop):
+        sums.update(block["Va"])
+    mean, centred = sums.mean, SumStream()
+    env = EnvelopeStream(n_samples=n, n_bins=min(n_bins, n), fs_hz=fs)
+    for _, block in read_blocks(va, start=trim.start, stop=stop):
+        centred.update(block["Va"] - mean)
+        env.update(block["Va"] - mean)
+    return HuddleWindow(name=name, envelope=env.result(), va_rms_m=centred.rms, n_samples=n,
+                        fs_hz=fs)

@@ -38,7 +38,12 @@ from fsmbench.budget.huddle import (
 from fsmbench.budget.long_record import LongRecordSummary, summarise_long_record
 from fsmbench.budget.optics import GeometryBudget, geometry_budget
 from fsmbench.budget.quantisation import NoiseSources, noise_sources
-from fsmbench.budget.repeatability import RepeatabilityRecord, analyse_repeatability
+from fsmbench.budget.repeatability import (
+    HuddleWindow,
+    RepeatabilityRecord,
+    analyse_repeatability,
+    huddle_window,
+)
 from fsmbench.budget.signals import is_lazy
 from fsmbench.budget.stability import DRIFT_BINS, StabilityRecord, analyse_stability
 from fsmbench.budget.table import AngleSources, ErrorBudget, angle_sources, budget_table
@@ -63,7 +68,8 @@ class NonRepeatability:
     non-repeatable part of the distance-error equivalent of the 4QD tracking
     error; ``huddle_va_rms_m``: the huddle test of ``huddle_test`` (the same
     configuration when present); ``predicted_rms_m``: the budget over the
-    record's length.
+    record's length; ``huddle_window``: that huddle test's ``Va`` over the
+    repeatability records' length, for Fig. 50 (None without a huddle test).
     """
 
     direction: str
@@ -73,10 +79,14 @@ class NonRepeatability:
     huddle_test: str | None
     huddle_va_rms_m: float | None
     predicted_rms_m: float
+    huddle_window: HuddleWindow | None = field(default=None, repr=False)
 
     def to_json(self) -> dict[str, object]:
         """Plain values."""
-        return dict(self.__dict__)
+        out = {k: v for k, v in self.__dict__.items() if k != "huddle_window"}
+        out["huddle_window"] = (None if self.huddle_window is None
+                                else self.huddle_window.to_json())
+        return out
 
 
 @dataclass(frozen=True)
@@ -373,6 +383,14 @@ def _budget_study(recordings: Mapping[str, xr.Dataset], *, bench: Bench,
     ref = None
     if huddle is not None:
         ref = huddle.records.get(5) or huddle.records[max(huddle.records)]
+    window = None
+    if ref is not None and reps and ref.name in usable:
+        # Fig. 50's last panel: the huddle test over the longest record's aligned length.
+        longest = max(r.n_periods * r.period_samples for r in reps.values())
+        try:
+            window = huddle_window(usable[ref.name], name=ref.name, n_max=longest)
+        except ValueError as exc:
+            notices.append(Notice("other", f"{ref.name}: Va", str(exc)))
     for d, r in reps.items():
         pred = budget_table(params, angles(True), window_s=r.n_periods * r.period_s)
         nonrep[d] = NonRepeatability(
@@ -381,7 +399,7 @@ def _budget_study(recordings: Mapping[str, xr.Dataset], *, bench: Bench,
             tracking_nonrep_rms_m=r.tracking_distance_nonrep_rms_m,
             huddle_test=None if ref is None else ref.name,
             huddle_va_rms_m=None if ref is None else ref.va_rms_m,
-            predicted_rms_m=pred.total_rms_m)
+            predicted_rms_m=pred.total_rms_m, huddle_window=window)
     return BudgetResult(
         plant_source=plant.source, controller=controller_name,
         noise=noise_sources(params, plant=plant,

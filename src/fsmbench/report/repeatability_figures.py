@@ -19,10 +19,8 @@ from __future__ import annotations
 from collections.abc import Mapping
 
 import numpy as np
-import xarray as xr
 
-from fsmbench.budget.repeatability import ENVELOPE_BINS, RepeatabilityRecord
-from fsmbench.budget.signals import trim_record
+from fsmbench.budget.repeatability import RepeatabilityRecord
 from fsmbench.budget.study import NonRepeatability
 from fsmbench.report.budget_figures import asd_line, cumulative_line
 from fsmbench.report.figure import (
@@ -36,7 +34,6 @@ from fsmbench.report.figure import (
 )
 from fsmbench.report.stability_figures import time_axis
 from fsmbench.scale.envelope import Envelope
-from fsmbench.scale.streaming import EnvelopeStream, SumStream, read_blocks
 
 __all__ = [
     "direction_words",
@@ -77,28 +74,6 @@ def _aligned_axis(reps: Mapping[str, RepeatabilityRecord]) -> tuple[float, str]:
     """Divisor and label of the time after the alignment (s, min or h by the longest)."""
     divisor, label = time_axis(max(r.n_periods * r.period_s for r in reps.values()))
     return divisor, label.replace("Time", "Time after alignment")
-
-
-def _huddle_va(ds: xr.Dataset, *, name: str, n_max: int,
-               n_bins: int) -> tuple[Envelope, float, int]:
-    """Va of a huddle test after the ESRF study's trim, its first ``n_max`` samples at most:
-    envelope less its mean [m], rms about the mean [m], samples (read twice in blocks)."""
-    fs = float(ds.attrs["fs_hz"])
-    trim = trim_record(ds, t0_s=1.0, duration_s=None, fs_hz=fs)
-    n = min(n_max, trim.n)
-    if n < 1:
-        raise ValueError(f"{name}: no sample left after removing t < 1 s")
-    va = {"Va": ds["Va"].data}
-    stop = trim.start + n
-    sums = SumStream(shift=float(np.asarray(va["Va"][trim.start])))  # nm under an offset
-    for _, block in read_blocks(va, start=trim.start, stop=stop):
-        sums.update(block["Va"])
-    mean, centred = sums.mean, SumStream()
-    env = EnvelopeStream(n_samples=n, n_bins=min(n_bins, n), fs_hz=fs)
-    for _, block in read_blocks(va, start=trim.start, stop=stop):
-        centred.update(block["Va"] - mean)
-        env.update(block["Va"] - mean)
-    return env.result(), centred.rms, n
 
 
 def repeatability_time_figure(reps: Mapping[str, RepeatabilityRecord]) -> Figure:
@@ -307,21 +282,19 @@ def nonrep_part_figure(reps: Mapping[str, RepeatabilityRecord]) -> Figure:
 
 
 def nonrep_contributions_figure(reps: Mapping[str, RepeatabilityRecord],
-                                nonrep: Mapping[str, NonRepeatability],
-                                recordings: Mapping[str, xr.Dataset], *,
+                                nonrep: Mapping[str, NonRepeatability], *,
                                 huddle_configs: Mapping[str, str] | None = None) -> Figure:
     """ESRF study Fig. 50: non-repeatable Va and the tracking error's share; the huddle-test noise.
 
     One panel per record (Va's non-repeatable part, and on top the tracking
     error's), then one panel with Va of the huddle test the study compares
-    with (``nonrep[d].huddle_test``) over the longest record's length.
+    with (``nonrep[d].huddle_window``: the budget stage read it over the longest
+    record's length).
     ``huddle_configs`` maps that test's name to its configuration in words.
     """
     panels = []
-    longest = 0
     div, x_label = _aligned_axis(reps)
     for r in reps.values():
-        longest = max(longest, r.n_periods * r.period_samples)
         panels.append(Panel(
             (_envelope_line(r.envelopes["Va_nonrep"], divisor=div, scale=NM,
                             name="Va, non-repeatable part", color="#333333", group="va"),
@@ -331,24 +304,21 @@ def nonrep_contributions_figure(reps: Mapping[str, RepeatabilityRecord],
             x_label, "Distance [nm]", share_y="distance",
             title=f"{direction_words(r)}: Va {r.nonrep_rms_m * NM:.3g} nm rms, tracking error "
                   f"{r.tracking_distance_nonrep_rms_m * NM:.3g} nm rms"))
-    huddles = {nr.huddle_test for nr in nonrep.values()
-               if nr.huddle_test is not None and nr.huddle_test in recordings}
+    windows = {nr.huddle_window.name: nr.huddle_window for nr in nonrep.values()
+               if nr.huddle_window is not None}
     caption = ("The non-repeatable part of Va and, on top, the non-repeatable part of the "
                "tracking error's distance equivalent (traced law), one panel per record")
-    for name in sorted(huddles):
-        ds = recordings[name]
-        # Its start, as long as the longest record, read in blocks (it may be out of core).
-        env, rms, n = _huddle_va(ds, name=name, n_max=longest, n_bins=ENVELOPE_BINS)
+    for name, win in sorted(windows.items()):
+        # The budget stage read it over the longest record's length (it may be out of core).
         number = name.rsplit("_", 1)[-1]
         config = (huddle_configs or {}).get(name, "")
         what = f" ({config})" if config else ""
         panels.append(Panel(
-            (_envelope_line(env, divisor=div, scale=NM, color=PALETTE[0], group="huddle",
-                            name=f"Va in huddle test {number} (nothing moves)"),),
+            (_envelope_line(win.envelope, divisor=div, scale=NM, color=PALETTE[0],
+                            group="huddle", name=f"Va in huddle test {number} (nothing moves)"),),
             x_label.replace("Time after alignment", "Time"), "Distance [nm]", share_y="distance",
             title=f"Huddle test {number}{what}, nothing moves: "
-                  f"{rms * NM:.3g} nm rms over "
-                  f"{n / float(recordings[name].attrs['fs_hz']):g} s"))
+                  f"{win.va_rms_m * NM:.3g} nm rms over {win.duration_s:g} s"))
         caption += f"; last panel: Va in huddle test {number}{what} over the same length"
     return Figure(
         key="fig50_nonrepeatable_contributions", title="Where the non-repeatability comes from",

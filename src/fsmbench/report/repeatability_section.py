@@ -2,10 +2,6 @@
 
 from __future__ import annotations
 
-from collections.abc import Mapping
-
-import xarray as xr
-
 from fsmbench.budget.repeatability import SEED_11
 from fsmbench.budget.study import BudgetResult
 from fsmbench.report.budget_figures import huddle_config_words
@@ -32,16 +28,14 @@ def _nm(x: float | None) -> str:
     return "-" if x is None else f"{x * NM:.3g}"
 
 
-def repeatability_section(result: BudgetResult, *,
-                          recordings: Mapping[str, xr.Dataset]) -> Section:
+def repeatability_section(result: BudgetResult) -> Section:
     """ESRF study section 11: alignment, tracking error, non-repeatable part, with the low pass.
 
     Parameters
     ----------
     result : BudgetResult
-        From :func:`fsmbench.budget.study.budget_study`.
-    recordings : mapping of str to xarray.Dataset
-        The same recordings (the time plots are drawn from them).
+        From :func:`fsmbench.budget.study.budget_study`: every array the chapter
+        draws (the periods' envelopes, the huddle test's window).
     """
     reps = result.repeatability
     intro = ("The Newport moves the beam in a 1 Hz sine (a 1 s period repeated), emulating "
@@ -108,8 +102,7 @@ def repeatability_section(result: BudgetResult, *,
                   f"budget predicts {nr.predicted_rms_m * NM:.3g} nm over the record's length.")
     configs = ({} if result.huddle is None else
                {r.name: huddle_config_words(r) for r in result.huddle.records.values()})
-    s5.append(nonrep_contributions_figure(reps, result.nonrep, recordings,
-                                          huddle_configs=configs))
+    s5.append(nonrep_contributions_figure(reps, result.nonrep, huddle_configs=configs))
     shares = [nr.tracking_nonrep_rms_m / nr.va_nonrep_rms_m for nr in result.nonrep.values()
               if nr.va_nonrep_rms_m > 0]
     if shares:
