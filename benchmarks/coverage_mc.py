@@ -177,6 +177,16 @@ def _legacy_stds(js: Mapping[str, Any]) -> dict[str, float]:
     return out
 
 
+def _leaves(tree: Mapping[str, Any], prefix: str = "") -> Iterable[tuple[str, Mapping[str, Any]]]:
+    """``(dotted key, item)`` of every ``{value, std, ...}`` in a nested tree."""
+    for key, node in tree.items():
+        name = f"{prefix}{key}"
+        if isinstance(node, Mapping) and "value" in node and "std" in node:
+            yield name, node
+        elif isinstance(node, Mapping):
+            yield from _leaves(node, name + ".")
+
+
 def reported(js: Mapping[str, Any]) -> dict[str, tuple[float, float]]:
     """Every identified value with its std (NaN when none), by truth key.
 
@@ -185,7 +195,7 @@ def reported(js: Mapping[str, Any]) -> dict[str, tuple[float, float]]:
     unc = js.get("uncertainty")
     out: dict[str, tuple[float, float]] = {}
     if isinstance(unc, Mapping):
-        for key, item in unc.items():
+        for key, item in _leaves(unc):
             out[key] = (float(item["value"]), float(item["std"]))
         return out
     stds = _legacy_stds(js)

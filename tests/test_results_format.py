@@ -118,12 +118,12 @@ def test_every_file_names_its_format_and_version(out: Path) -> None:
 
 def test_stamped_formats(out: Path) -> None:
     """The stamped files with their versions (bumped where the shape changed)."""
-    expected = {"identification.json": ("fsmbench.identification", 3),
+    expected = {"identification.json": ("fsmbench.identification", 4),
                 "budget.json": ("fsmbench.budget", 4),
                 "design.json": ("fsmbench.design", 2),
                 "summary.json": ("fsmbench.summary", 2),
                 "validation.json": ("fsmbench.validation", 1),
-                "twin-data/twin_truth.json": ("fsmbench.twin_truth", 2)}
+                "twin-data/twin_truth.json": ("fsmbench.twin_truth", 3)}
     for name, stamp in expected.items():
         data = _load(out / name)
         assert (data["format"], data["format_version"]) == stamp, name

@@ -18,6 +18,11 @@ def _resonance(f0_hz: float, radius: float) -> tuple[np.ndarray, np.ndarray]:
     return np.array([a.sum()]), a
 
 
+def pytest_configure(config: pytest.Config) -> None:
+    """The ``slow`` mark: minutes-long Monte Carlo runs (tests/ident/test_coverage.py)."""
+    config.addinivalue_line("markers", "slow: a Monte Carlo run of minutes (-m 'not slow' skips)")
+
+
 FILTERS = {
     "first-order low-pass": (np.array([0.1]), np.array([1.0, -0.9])),
     "second-order resonance": _resonance(411.0, 0.95),

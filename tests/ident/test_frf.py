@@ -4,11 +4,11 @@ from __future__ import annotations
 
 import dataclasses
 import json
-from statistics import NormalDist
 
 import numpy as np
 import pytest
 import scipy.signal as ss
+import scipy.stats as st
 
 from fsmbench.ident.frf import FrequencyResponse, combine_columns, spectral_matrix
 from fsmbench.ident.welch import cpsd, hanning, mscohere, pwelch, tfestimate
@@ -68,7 +68,8 @@ def test_random_error_is_bendat_piersol_and_bounds_scale_with_z(seed_experiments
     expected = np.sqrt(1 - g2) / (np.sqrt(g2) * np.sqrt(2 * n_d))  # B&P, independent evaluation
     np.testing.assert_allclose(r95.random_error.values, expected, rtol=1e-9)  # sqrt(1-g2) rounding
     mag = np.abs(r95.frf.values)
-    z95, z99 = NormalDist().inv_cdf(0.975), NormalDist().inv_cdf(0.995)
+    # The variance is estimated on n_d - 1 complex dof: Student's t on twice that.
+    z95, z99 = (float(st.t.ppf(q, 2 * (n_d - 1))) for q in (0.975, 0.995))
     np.testing.assert_allclose(r95.magnitude_upper.values, mag * (1 + z95 * expected), rtol=1e-9)
     width = lambda r: r.phase_upper_rad.values - r.phase_lower_rad.values  # noqa: E731
     narrow = expected < 0.5  # below the pi cap on the phase half-width

@@ -56,8 +56,9 @@ def test_twin_section_has_every_seed_figure_and_the_truth_table(
         "Fig. 28"]
     assert [s.title[:3] for s in sec.subsections] == ["2.1", "2.2", "2.3", "2.4", "2.5"]
     table = _tables(sec)[0]
-    assert table.header == ("quantity", "identified", "true value (twin)", "difference",
-                            "accuracy target", "within target")
+    assert table.header == ("quantity", "identified", "± total",
+                            "largest part of the uncertainty (share of the variance)",
+                            "true value (twin)", "difference", "accuracy target", "within target")
     rows = comparison_rows(result.to_json(), reference=ident_twin.truth, bench=bench)
     assert len(table.rows) == len(rows) == len(TARGETS)
     for cells, row in zip(table.rows, rows, strict=True):
@@ -65,9 +66,14 @@ def test_twin_section_has_every_seed_figure_and_the_truth_table(
         assert cells[0] == name
         assert float(cells[1]) == pytest.approx(row.identified * scale, rel=1e-5)  # 6 digits
         assert cells[-1] == "yes"
+        # every compared value carries its total uncertainty and names its largest part
+        u = result.uncertain(row.key)
+        # (two significant digits: within 5 %)
+        assert u is not None and float(cells[2]) == pytest.approx(u.std * scale, rel=0.05)
+        assert cells[3] != "–" and cells[3].endswith("%)")
     by_name = {r[0]: r for r in table.rows}
-    assert by_name["Delay of the Sercalo path [ms]"][4] == "±0.1 ms (1 sample)"  # at 10 kHz
-    assert by_name["4QD gain, h [V/rad]"][4] == "±1 %"
+    assert by_name["Delay of the Sercalo path [ms]"][6] == "±0.1 ms (1 sample)"  # at 10 kHz
+    assert by_name["4QD gain, h [V/rad]"][6] == "±1 %"
     text = _joined(sec)
     assert PASSED in text and "identification issue" not in text
     assert "errata E21" in text
@@ -87,11 +93,13 @@ def test_recorded_data_are_compared_with_nominal_values(
     sec = identification_section(result, recordings=ident_twin.recordings, bench=bench,
                                  truth=None, skipped={})
     table = _tables(sec)[0]
-    assert table.header == ("quantity", "identified", "nominal value", "difference")
+    assert table.header == ("quantity", "identified", "± total",
+                            "largest part of the uncertainty (share of the variance)",
+                            "nominal value", "difference")
     text = _joined(sec).lower()
     assert "twin" not in text and "true value" not in text
     # The nominal 4QD gain of the seed's Table 2: −31.0 V/rad.
-    assert {r[0]: r[2] for r in table.rows}["4QD gain, h [V/rad]"] == "-31"
+    assert {r[0]: r[4] for r in table.rows}["4QD gain, h [V/rad]"] == "-31"
 
 
 def test_skipped_sercalo_fit_is_said_and_no_quality_claim(
@@ -197,8 +205,10 @@ def test_frf_figure_shows_the_measured_magnitude_and_the_model(
     fig = _figure(sec, "fig18_22_sercalo_frf")
     assert len(fig.panels) == 8 and fig.columns == 2  # 2x2 matrix, magnitude over phase
     mag = fig.panels[0]  # Uch -> Vph
-    measured, model = mag.traces
+    # measured, its two confidence bounds (the line variance, issue 20), the model
+    measured, model = mag.traces[0], mag.traces[-1]
     assert isinstance(measured, Line) and isinstance(model, Line)
+    assert [t.group for t in mag.traces[1:-1]] == ["bounds", "bounds"]
     raw = np.abs(s.frf.frf.sel(output="Vph", input="Uch").values[1:])
     # Removing a delay only turns the phase: the magnitude drawn is the measured one.
     np.testing.assert_allclose(measured.y, raw, rtol=1e-12)
@@ -206,7 +216,7 @@ def test_frf_figure_shows_the_measured_magnitude_and_the_model(
     n = result.newport
     assert n is not None
     nfig = _figure(sec, "fig26_27_newport_frf")
-    gain_line = nfig.panels[0].traces[1]
+    gain_line = nfig.panels[0].traces[-1]  # after the measured line and its bounds
     assert isinstance(gain_line, Line)
     # The fitted second order (with the hold's droop) over the band it was fitted on.
     dyn = n.dynamics

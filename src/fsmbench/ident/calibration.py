@@ -7,8 +7,10 @@ current-amplifier gains (2.2).
     (one reflection). A straight-line fit ``Vp = a·(2·gn0·Vn) + b`` gives the
     4QD gain ``a`` [V/rad], the seed's ``bh = [1 2*gn0*Vnh] \\ Vph``. The
     seed reads ``a`` as rad/V in its text (errata E6); it is V/rad, and its
-    inverse is reported in µrad/mV. Standard error, R² and residual rms come
-    from the ordinary least-squares fit. The metrology noise (0.5 µrad) is
+    inverse is reported in µrad/mV. R² and residual rms come from the ordinary
+    least-squares fit; the standard errors from the residual's spectrum near
+    the sweep's frequency (:mod:`fsmbench.ident.regression`: 1/f noise, drift
+    and mains are not white). The metrology noise (0.5 µrad) is
     errors-in-variables noise on the regressor, which biases ``a`` towards 0
     by ``var(noise)/var(x) < 1e-7`` here: negligible.
 
@@ -30,8 +32,7 @@ import xarray as xr
 
 from fsmbench.bench.params import BenchParams
 from fsmbench.checks import Check
-from fsmbench.ident.frf import spectral_matrix
-from fsmbench.ident.welch import hanning
+from fsmbench.ident.regression import spectral_sandwich
 
 __all__ = [
     "MAX_CALIBRATION_RESIDUAL",
@@ -93,6 +94,9 @@ class QdCalibration:
         The seed's straight-line slope over the whole swing [V/rad].
     cubic_v_per_rad3 : float
         ``c`` [V/rad³] (0 when the straight line is kept).
+    cubic_std_v_per_rad3 : float
+        Standard deviation of the cubic term [V/rad³] (when the line is kept: of
+        the cubic fit's, a bound on the compression left undetected).
     r_squared : float
         Coefficient of determination of the fit.
     residual_rms_v : float
@@ -104,6 +108,11 @@ class QdCalibration:
         Options used: first seconds removed, Newport metrology gain ``gn0``,
         beam angle per mirror angle (2).
     experiment : str
+    cross_slope_v_per_rad, cross_slope_std_v_per_rad : float
+        Slope of the *other* 4QD output against this axis's beam angle and its
+        standard deviation [V/rad] (NaN without that output): ``−g_v sin θ``
+        (h record, ``Vpv``) or ``g_h sin θ`` (v record, ``Vph``) for a 4QD
+        turned by ``θ``.
     """
 
     axis: str
@@ -120,6 +129,9 @@ class QdCalibration:
     metrology_gain_rad_per_v: float
     beam_factor: float
     experiment: str
+    cubic_std_v_per_rad3: float = 0.0
+    cross_slope_v_per_rad: float = math.nan
+    cross_slope_std_v_per_rad: float = math.nan
 
     @property
     def sensitivity_urad_per_mv(self) -> float:
@@ -168,8 +180,11 @@ def calibrate_qd(ds: xr.Dataset, *, axis: str, metrology_gain_rad_per_v: float,
     (b, a), *_ = np.linalg.lstsq(design, y, rcond=None)
     resid = y - (a * x + b)
     n = x.size
-    s2 = float(resid @ resid) / max(n - 2, 1)
-    seed_slope, gain, gain_std, cubic = float(a), float(a), float(np.sqrt(s2 / sxx)), 0.0
+    # Standard errors from the residual's spectrum near the sweep (ident.regression): the
+    # ordinary s²(XᵀX)⁻¹ assumes white residuals, 5x optimistic under 1/f noise and drift.
+    cov2 = spectral_sandwich(design, resid, columns=[1])
+    seed_slope, gain, gain_std, cubic = float(a), float(a), math.sqrt(cov2[1, 1]), 0.0
+    cubic_std = 0.0
     # A 4QD compresses towards the edges of its range (the spot leaves the quadrants): the
     # seed's straight line then averages the slope over the swing, ~1.5 % low for 2 %
     # compression. Fit y = b + a x + c x^3 as well, and take its small-signal slope a at the
@@ -179,8 +194,7 @@ def calibrate_qd(ds: xr.Dataset, *, axis: str, metrology_gain_rad_per_v: float,
     cub = np.column_stack([np.ones_like(u), u, u**3])
     coef, *_ = np.linalg.lstsq(cub, y, rcond=None)
     resid3 = y - cub @ coef
-    s2_3 = float(resid3 @ resid3) / max(n - 3, 1)
-    cov3 = s2_3 * np.linalg.inv(cub.T @ cub)
+    cov3 = spectral_sandwich(cub, resid3, columns=[1, 2])
     # ... and large enough to matter: 1e-4 of the line at full swing (a noise-free line's
     # rounding-level cubic is "significant" against a rounding-level residual).
     if (n > 3 and abs(coef[2]) > 5 * math.sqrt(max(cov3[2, 2], 0.0))
@@ -188,17 +202,30 @@ def calibrate_qd(ds: xr.Dataset, *, axis: str, metrology_gain_rad_per_v: float,
         b, gain, gain_std = float(coef[0]), float(coef[1]) / scale, \
             math.sqrt(cov3[1, 1]) / scale
         cubic = float(coef[2]) / scale**3
+        cubic_std = math.sqrt(cov3[2, 2]) / scale**3
         resid = resid3
+    else:
+        # Not significant: the line is kept; the cubic term's bound (its std) says how much
+        # compression the record leaves undetected.
+        cubic_std = math.sqrt(max(cov3[2, 2], 0.0)) / scale**3
     syy = float(np.sum((y - y.mean()) ** 2))
+    cross, cross_std = math.nan, math.nan
+    other = _AXES["v" if axis == "h" else "h"][0]
+    if other in rec:
+        yo = np.asarray(rec[other].values, dtype=float)
+        (_bo, cross), *_ = np.linalg.lstsq(design, yo, rcond=None)
+        cross_std = math.sqrt(spectral_sandwich(design, yo - design @ np.array([_bo, cross]),
+                                                columns=[1])[1, 1])
     return QdCalibration(
         axis=axis, gain_v_per_rad=gain, offset_v=float(b),
         gain_std_v_per_rad=gain_std, linear_slope_v_per_rad=seed_slope,
-        cubic_v_per_rad3=cubic,
+        cubic_v_per_rad3=cubic, cubic_std_v_per_rad3=cubic_std,
         r_squared=float(1.0 - float(resid @ resid) / syy) if syy > 0 else float("nan"),
         residual_rms_v=float(np.sqrt(np.mean(resid**2))), n_samples=int(n),
         beam_angle_range_rad=float(np.ptp(x)), trim_s=float(trim_s),
         metrology_gain_rad_per_v=float(metrology_gain_rad_per_v),
-        beam_factor=float(beam_factor), experiment=name)
+        beam_factor=float(beam_factor), experiment=name,
+        cross_slope_v_per_rad=float(cross), cross_slope_std_v_per_rad=float(cross_std))
 
 
 @dataclass(frozen=True)
@@ -209,16 +236,26 @@ class CurrentAmplifierGain:
     ----------
     axis : {"h", "v"}
     gain_a_per_v : float
-        Mean of ``|Ga Zc Gi| / |Ga Zc|`` over the band [A/V].
+        ``g`` of the sampled path fitted over the band [A/V]
+        (:mod:`fsmbench.ident.current_amp`).
     gain_std_a_per_v : float
-        Standard error of that mean (spread over the band's bins / sqrt(n)).
+        Its total standard deviation [A/V] (noise and misfit).
     theoretical_a_per_v : float
         ``1/(R + Rc)`` from the nominal components [A/V].
     band_hz : tuple of float
-        Averaging band [Hz] (seed: 20–200 Hz).
+        Band of the lines fitted [Hz] (seed: 20–200 Hz).
     frequency_hz, gi_response_a_per_v : tuple of float
-        The per-bin estimate over the band (the seed's ``Gi_resp``).
+        The per-line estimate ``Re(H/M)`` over the band (the seed's ``Gi_resp``,
+        against the sampled model).
     experiment : str
+    noise_std_a_per_v, misfit_std_a_per_v : float
+        The parts of ``gain_std_a_per_v`` [A/V].
+    delay_s, delay_std_s : float
+        The path's pure delay (DAC transport, hold, latency) and its std [s].
+    reduced_chi2 : float
+        Of the fit.
+    estimator : str
+        FRF estimator of the lines (``welch``, ``lpm``, ``periodic``).
     """
 
     axis: str
@@ -229,6 +266,12 @@ class CurrentAmplifierGain:
     frequency_hz: tuple[float, ...]
     gi_response_a_per_v: tuple[float, ...]
     experiment: str
+    noise_std_a_per_v: float = math.nan
+    misfit_std_a_per_v: float = 0.0
+    delay_s: float = math.nan
+    delay_std_s: float = math.nan
+    reduced_chi2: float = math.nan
+    estimator: str = "welch"
 
     @property
     def ratio_to_theoretical(self) -> float:
@@ -254,8 +297,14 @@ def known_ga_zc(p: BenchParams, *, axis: str, f_hz: np.ndarray) -> np.ndarray:
 def calibrate_current_amplifier(ds: xr.Dataset, *, axis: str, nominal: BenchParams,
                                 trim_s: float = 1.0,
                                 band_hz: tuple[float, float] = (20.0, 200.0),
-                                window_s: float = 1.0) -> CurrentAmplifierGain:
+                                window_s: float = 1.0,
+                                estimator: str = "welch") -> CurrentAmplifierGain:
     """Identify ``Gi`` of ``axis`` from ``data_uch``/``data_ucv`` (``Uc → Vc``).
+
+    The sampled path fitted to the estimator's lines
+    (:func:`fsmbench.ident.current_amp.identify_current_amplifier`): the
+    seed's ratio to the continuous ``|Ga Zc|`` is biased by the hold and the
+    delay by twenty times its noise.
 
     Parameters
     ----------
@@ -268,33 +317,16 @@ def calibrate_current_amplifier(ds: xr.Dataset, *, axis: str, nominal: BenchPara
     trim_s : float
         Seconds removed at the start (the Sercalo is off during the first one).
     band_hz : (float, float)
-        Averaging band [Hz], open interval as the seed's ``f>20 & f<200``.
+        Band of the lines [Hz], open interval as the seed's ``f>20 & f<200``.
     window_s : float
-        Hann window length [s] (seed: ``hanning(ceil(1*fs))``).
+        Hann window length [s] (seed: ``hanning(ceil(1*fs))``), Welch only.
+    estimator : {"welch", "lpm", "periodic"}
+        FRF estimator of the lines.
     """
-    if axis not in _CURRENT:
-        raise ValueError(f"axis must be 'h' or 'v', got {axis!r}")
-    u_name, v_name = _CURRENT[axis]
-    name = require_signals(ds, (u_name, v_name), purpose="the current amplifier")
-    rec = trim_recording(ds, t0_s=trim_s)
-    fs = float(rec.attrs["fs_hz"])
-    u, v = (np.asarray(rec[n].values, dtype=float) for n in (u_name, v_name))
-    # Offsets removed: a constant leaks through the window onto the band's lines.
-    est = spectral_matrix(u - u.mean(), v - v.mean(), input_names=[u_name],
-                          output_names=[v_name], window=hanning(int(np.ceil(window_s * fs))),
-                          fs_hz=fs)
-    f = est.frequency_hz
-    sel = (f > band_hz[0]) & (f < band_hz[1])
-    if not sel.any():
-        raise ValueError(f"{name}: no frequency bin in {band_hz} Hz")
-    gi = np.abs(est.frf.values[sel, 0, 0]) / known_ga_zc(nominal, axis=axis, f_hz=f[sel])
-    r_total = nominal.current_amplifier.r_ohm[axis] + nominal.sercalo.r_coil_ohm[axis]
-    return CurrentAmplifierGain(
-        axis=axis, gain_a_per_v=float(np.mean(gi)),
-        gain_std_a_per_v=float(np.std(gi, ddof=1) / np.sqrt(gi.size)) if gi.size > 1 else 0.0,
-        theoretical_a_per_v=float(1.0 / r_total), band_hz=(float(band_hz[0]), float(band_hz[1])),
-        frequency_hz=tuple(float(x) for x in f[sel]),
-        gi_response_a_per_v=tuple(float(x) for x in gi), experiment=name)
+    from fsmbench.ident.current_amp import identify_current_amplifier
+
+    return identify_current_amplifier(ds, axis=axis, nominal=nominal, trim_s=trim_s,
+                                      band_hz=band_hz, window_s=window_s, estimator=estimator)
 
 
 # A working 4QD channel swept over the Newport's ±10 mrad is linear to well under

@@ -34,8 +34,17 @@ damping standard deviations are NaN (the refinement gives its own).
 
 Lines must be nearly independent for this to hold: the periodic estimator's
 lines are; the LPM's are once strided by the window width (what the
-identification uses); adjacent Welch bins with a Hann window overlap, which
-makes these standard deviations somewhat optimistic for Welch.
+identification uses); adjacent Welch bins with a Hann window overlap: the
+variances are multiplied by the lines one window correlates
+(``correlated_lines``, 1.5 for Hann: its equivalent noise bandwidth in
+bins), as the Newport's fit does (the static gain's std was 1.6–1.8×
+optimistic without).
+
+When the weights are not the inverse standard deviations (the seed's
+coherence recipe), the covariance is the sandwich ``A⁻¹ Jᵀ Σ J A⁻¹`` with
+``A = JᵀJ`` of the weighted residuals and ``Σ`` their noise covariance from
+the lines' variances; ``variance_parts`` splits it into the parts of each
+line's variance (noise, distortion, leakage), each propagated alone.
 """
 
 from __future__ import annotations
@@ -78,6 +87,9 @@ class ParameterStd:
         Real residuals minus free real parameters.
     fixed_poles : bool
         Whether the poles were held fixed (resonance/damping std NaN).
+    parts : dict axis -> dict quantity -> dict part -> float
+        The standard deviation each part of the lines' variance contributes,
+        and ``misfit`` (same units as ``std``; they add in quadrature to it).
     """
 
     value: dict[str, dict[str, float]] = field(default_factory=dict)
@@ -85,6 +97,7 @@ class ParameterStd:
     chi2_per_dof: float = float("nan")
     dof: int = 0
     fixed_poles: bool = False
+    parts: dict[str, dict[str, dict[str, float]]] = field(default_factory=dict)
 
     def to_json(self) -> dict[str, object]:
         """Plain values: ``{h: {resonance_hz, resonance_hz_std, ...}, ..., chi2_per_dof}``."""
@@ -92,7 +105,8 @@ class ParameterStd:
             axis: {**{q: v for q, v in vals.items()},
                    **{f"{q}_std": s for q, s in self.std[axis].items()}}
             for axis, vals in self.value.items()}
-        out.update(chi2_per_dof=self.chi2_per_dof, dof=self.dof, fixed_poles=self.fixed_poles)
+        out.update(chi2_per_dof=self.chi2_per_dof, dof=self.dof, fixed_poles=self.fixed_poles,
+                   parts=self.parts)
         return out
 
 
@@ -127,6 +141,8 @@ def sercalo_parameter_std(
     resonances_hz: Mapping[str, float],
     gi_a_per_v: Sequence[float] | NDArray[np.float64],
     fixed_poles: bool = False,
+    variance_parts: Mapping[str, NDArray[np.float64]] | None = None,
+    correlated_lines: float = 1.0,
 ) -> ParameterStd:
     """Propagate the FRF's per-line variance to the Sercalo's resonance, damping and gain.
 
@@ -148,10 +164,20 @@ def sercalo_parameter_std(
         Current-amplifier gains ``(h, v)``, A/V.
     fixed_poles : bool
         Hold the poles fixed (only residues and ``D`` free).
+    variance_parts : mapping str -> ndarray (F, 2, 2), optional
+        What each line's error variance is made of [(V/V)²] (``noise``,
+        ``distortion``, ``leakage`` …). Default: ``{"noise": 1/weights²}`` (the
+        weights are the inverse std). With other weights (the seed's), the
+        covariance is the sandwich ``A⁻¹ Jᵀ Σ J A⁻¹`` of the weighted fit.
+    correlated_lines : float
+        Adjacent lines one estimate correlates (≥ 1; Welch's Hann window: 1.5):
+        every variance grows by it.
 
     Returns
     -------
     ParameterStd
+        ``std`` total; ``parts`` per quantity: each variance part's share and
+        ``misfit`` (the reduced chi-square's inflation above 1).
     """
     poles0 = np.asarray(fit.poles)
     coef0 = coefficients_from_residues(poles0, np.asarray(fit.residues))  # (n, p, m)
@@ -204,23 +230,41 @@ def sercalo_parameter_std(
     r0 = residual(theta0)
     j_mat = jac(residual, r0.size)
     dof = int(r0.size - theta0.size)
-    ssr = float(r0 @ r0)
+    if variance_parts is None:
+        with np.errstate(divide="ignore"):
+            variance_parts = {"noise": np.where(w > 0, 1.0 / np.where(w > 0, w, 1.0) ** 2, 0.0)}
+    # Variance of each real residual per part: (sqrt 2 w)^2 var / 2 = w^2 var.
+    part_var = {k: np.concatenate([np.where(w > 0, w**2 * np.nan_to_num(
+        np.asarray(v, dtype=float)), 0.0)[keep]] * 2) for k, v in variance_parts.items()}
+    total_var = np.sum(list(part_var.values()), axis=0)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        normalised = np.where(total_var > 0, r0 / np.sqrt(np.where(total_var > 0, total_var,
+                                                                    1.0)), 0.0)
+    ssr = float(normalised @ normalised)
     chi2 = ssr / dof if dof > 0 else float("nan")
     # columns normalised before the pseudo-inverse: parameters span many decades
     norm = np.linalg.norm(j_mat, axis=0)
     norm[norm == 0.0] = 1.0
     jn = j_mat / norm
-    cov = np.linalg.pinv(jn.T @ jn) / np.outer(norm, norm) * max(1.0, chi2)
+    bread = np.linalg.pinv(jn.T @ jn) / np.outer(norm, norm)
     q0 = quantities(theta0)
     g = jac(quantities, q0.size)
-    var = np.einsum("qi,ij,qj->q", g, cov, g)
-    sd = np.sqrt(np.maximum(var, 0.0))
+    gb = g @ bread @ j_mat.T  # (q, residuals): the quantities' sensitivity to each residual
+    part_sd = {k: np.sqrt(np.maximum(np.einsum("qr,r,qr->q", gb, v, gb), 0.0)
+                          * max(correlated_lines, 1.0))
+               for k, v in part_var.items()}
+    var = sum(sd**2 for sd in part_sd.values())
+    part_sd["misfit"] = np.sqrt(var * max(chi2 - 1.0, 0.0)) if np.isfinite(chi2) else 0 * var
+    sd = np.sqrt(var * max(1.0, chi2 if np.isfinite(chi2) else 1.0))
     value: dict[str, dict[str, float]] = {}
     std: dict[str, dict[str, float]] = {}
+    parts: dict[str, dict[str, dict[str, float]]] = {}
     for j, axis in enumerate(("h", "v")):
         value[axis] = {q: float(q0[3 * j + i]) for i, q in enumerate(QUANTITIES)}
         std[axis] = {q: float(sd[3 * j + i]) for i, q in enumerate(QUANTITIES)}
+        parts[axis] = {q: {k: float(v[3 * j + i]) for k, v in part_sd.items()}
+                       for i, q in enumerate(QUANTITIES)}
         if fixed_poles:
             std[axis].update(resonance_hz=float("nan"), damping_ratio=float("nan"))
     return ParameterStd(value=value, std=std, chi2_per_dof=chi2, dof=dof,
-                        fixed_poles=fixed_poles)
+                        fixed_poles=fixed_poles, parts=parts)

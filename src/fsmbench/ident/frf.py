@@ -12,15 +12,18 @@ see :mod:`fsmbench.ident.spectral`.
 from __future__ import annotations
 
 import json
+import math
 import warnings
-from collections.abc import Sequence
-from dataclasses import dataclass
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field, replace
 from statistics import NormalDist
 from typing import Any
 
 import numpy as np
 import xarray as xr
 from numpy.typing import ArrayLike, NDArray
+from scipy.stats import f as f_dist
+from scipy.stats import t as t_dist
 
 from fsmbench.ident.welch import (
     WelchOptions,
@@ -32,7 +35,8 @@ from fsmbench.ident.welch import (
     effective_averages,
 )
 
-__all__ = ["FrequencyResponse", "combine_columns", "spectral_matrix"]
+__all__ = ["FrequencyResponse", "bound_factor", "combine_columns", "spectral_matrix",
+           "with_variance_part"]
 
 DIMS = ("frequency", "output", "input")
 # Sxx is treated as singular where its condition number exceeds this: beyond
@@ -83,6 +87,19 @@ class FrequencyResponse:
         None for Welch, whose uncertainty is ``random_error``.
     estimator : str
         ``"welch"`` (H1, :func:`spectral_matrix`), ``"periodic"`` or ``"lpm"``.
+    variance_parts : mapping str -> xarray.DataArray
+        What ``frf_variance`` is made of, (U_out/U_in)^2 each: ``noise`` (the
+        estimator's own), then any of ``distortion`` (non-excited lines of an
+        odd grid), ``leakage`` (a Welch window's bias near the modes, a bound),
+        ``compression`` (the 4QD's correction); empty when ``frf_variance`` is
+        the noise alone (or None).
+    noise_dof : tuple of float
+        Complex degrees of freedom of the noise variance per column (``P − 1``
+        periods, the LPM's ``q``, Welch ``n_d − 1``); empty: from
+        ``effective_averages``.
+    column_options : mapping input -> mapping
+        The estimator's options and findings per column (plain values: the
+        periods averaged, the transient periods dropped, the distortion seen).
     """
 
     frf: xr.DataArray
@@ -104,6 +121,9 @@ class FrequencyResponse:
     effective_averages: tuple[float, ...]
     frf_variance: xr.DataArray | None = None
     estimator: str = "welch"
+    variance_parts: Mapping[str, xr.DataArray] = field(default_factory=dict)
+    noise_dof: tuple[float, ...] = ()
+    column_options: Mapping[str, Mapping[str, Any]] = field(default_factory=dict)
 
     _ARRAYS = (
         "frf", "coherence", "input_psd", "output_psd", "cross_psd", "random_error",
@@ -114,6 +134,47 @@ class FrequencyResponse:
     def frequency_hz(self) -> NDArray[np.float64]:
         """Frequency grid, Hz, shape (F,)."""
         return np.asarray(self.frf["frequency"].values)
+
+    def line_variance(self) -> xr.DataArray:
+        """``E|H_hat − H|²`` of every line [(U_out/U_in)²]: ``frf_variance``, else Bendat &
+        Piersol's ``2 (random_error |H|)²`` of a Welch estimate."""
+        if self.frf_variance is not None:
+            return self.frf_variance
+        out = 2.0 * (self.random_error * np.abs(self.frf)) ** 2
+        out.name = "frf_variance"
+        return out
+
+    def column_dof(self) -> NDArray[np.float64]:
+        """Complex degrees of freedom of each column's noise variance, shape (m,)."""
+        if self.noise_dof:
+            return np.asarray(self.noise_dof, dtype=float)
+        n_d = np.asarray(self.effective_averages, dtype=float)
+        return n_d - 1.0 if self.estimator == "welch" else n_d
+
+    def effective_dof(self) -> NDArray[np.float64]:
+        """Welch–Satterthwaite dof of each line's total variance, shape (F, p, m): the noise
+        part's dof, the other parts (bounds, model-based) as exactly known."""
+        total = np.asarray(self.line_variance().values, dtype=float)
+        noise = self.variance_parts.get("noise")
+        nv = total if noise is None else np.asarray(noise.values, dtype=float)
+        dof = self.column_dof()[None, None, :]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            eff = np.where(nv > 0, dof * (total / np.where(nv > 0, nv, 1.0)) ** 2, np.inf)
+        return np.asarray(eff, dtype=float)
+
+    def bound_radius(self, confidence: float | None = None) -> xr.DataArray:
+        """Radius of each line's circular confidence region [U_out/U_in], (F, p, m).
+
+        ``sqrt(F(2, 2ν; c) · var)``: the noise variance is itself estimated (ν
+        complex degrees of freedom), so the normalised error is F-distributed,
+        not exponential (:func:`bound_factor`; Hotelling's T² for a 2-vector).
+        """
+        c = self.confidence if confidence is None else float(confidence)
+        var = self.line_variance()
+        factor = bound_factor(c, self.effective_dof())
+        out = var.copy(data=factor * np.sqrt(np.asarray(var.values, dtype=float)))
+        out.name = "bound_radius"
+        return out
 
     @property
     def input_names(self) -> tuple[str, ...]:
@@ -183,15 +244,83 @@ def _names(names: Sequence[str], count: int, what: str) -> list[str]:
     return out
 
 
+def bound_factor(confidence: float, dof: float | ArrayLike | None = None) -> Any:
+    """Radius of the ``confidence`` region of a circular complex error, in std units.
+
+    With the variance known: ``sqrt(−ln(1 − c))`` (``|e|²/var`` is exponential;
+    1.731 for 95 %). Estimated with ``dof`` complex degrees of freedom:
+    ``|e|²/var_hat`` is ``F(2, 2 dof)`` and the radius ``sqrt(F⁻¹(c; 2, 2 dof))``
+    (1.93 at 7 dof, the LPM's). Vectorised over ``dof``; infinite dof is the
+    known-variance case.
+    """
+    if not 0.0 < confidence < 1.0:
+        raise ValueError(f"confidence must be in (0, 1), got {confidence!r}")
+    known = math.sqrt(-math.log1p(-confidence))
+    if dof is None:
+        return known
+    d = np.asarray(dof, dtype=float)
+    finite = np.isfinite(d) & (d > 0)
+    with np.errstate(invalid="ignore"):
+        f = np.sqrt(f_dist.ppf(confidence, 2.0, 2.0 * np.where(finite, d, 1.0)))
+    out = np.where(finite, f, known)
+    return float(out) if out.ndim == 0 else out
+
+
 def _bounds(
-    h: NDArray[np.complex128], eps: NDArray[np.float64], confidence: float
+    h: NDArray[np.complex128], eps: NDArray[np.float64], confidence: float,
+    dof: float | NDArray[np.float64] | None = None,
 ) -> tuple[NDArray[np.float64], ...]:
-    # Gaussian approximation of the estimation error (B&P ch. 9, valid for eps <~ 0.2).
-    z = NormalDist().inv_cdf(0.5 + confidence / 2.0)
+    # Gaussian approximation of the estimation error (B&P ch. 9, valid for eps <~ 0.2); with
+    # an estimated variance of `dof` complex degrees of freedom, Student's t on 2 dof.
+    if dof is None:
+        z: Any = NormalDist().inv_cdf(0.5 + confidence / 2.0)
+    else:
+        d = np.broadcast_to(np.asarray(dof, dtype=float), np.shape(eps))
+        finite = np.isfinite(d) & (d > 0)
+        z = np.where(finite, t_dist.ppf(0.5 + confidence / 2.0, 2.0 * np.where(finite, d, 1.0)),
+                     NormalDist().inv_cdf(0.5 + confidence / 2.0))
     mag = np.abs(h)
     half = np.minimum(z * eps, np.pi)  # a phase interval wider than +/-pi says nothing more
     phase = np.angle(h)
     return mag * np.maximum(1.0 - z * eps, 0.0), mag * (1.0 + z * eps), phase - half, phase + half
+
+
+def with_variance_part(frf: FrequencyResponse, name: str, variance: ArrayLike,
+                       ) -> FrequencyResponse:
+    """``frf`` with one more part in its line variance, its bounds recomputed.
+
+    Parameters
+    ----------
+    frf : FrequencyResponse
+    name : str
+        The part (``leakage``, ``compression``, ``distortion``; added to one of
+        that name already there).
+    variance : array_like, shape (F, p, m)
+        Its variance per line [(U_out/U_in)²] (NaN counts as 0).
+    """
+    add = np.nan_to_num(np.asarray(variance, dtype=float), nan=0.0)
+    base = frf.line_variance()
+    parts = dict(frf.variance_parts) or {"noise": base}
+    parts[name] = (parts[name] + add) if name in parts else base.copy(data=add)
+    total = base.copy(data=np.asarray(base.values, dtype=float) + add)
+    total.name = "frf_variance"
+    out = replace(frf, frf_variance=total, variance_parts=parts,
+                  noise_dof=tuple(float(x) for x in frf.column_dof()))
+    return _rebound(out)
+
+
+def _rebound(frf: FrequencyResponse) -> FrequencyResponse:
+    """The magnitude and phase bounds and ``random_error`` of the line variance."""
+    h = np.asarray(frf.frf.values)
+    var = np.asarray(frf.line_variance().values, dtype=float)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        eps = np.sqrt(var) / (math.sqrt(2.0) * np.abs(h))
+    lo, hi, plo, phi = _bounds(h, eps, frf.confidence, frf.effective_dof())
+    return replace(frf, random_error=frf.random_error.copy(data=eps),
+                   magnitude_lower=frf.magnitude_lower.copy(data=lo),
+                   magnitude_upper=frf.magnitude_upper.copy(data=hi),
+                   phase_lower_rad=frf.phase_lower_rad.copy(data=plo),
+                   phase_upper_rad=frf.phase_upper_rad.copy(data=phi))
 
 
 def spectral_matrix(
@@ -279,7 +408,7 @@ def spectral_matrix(
             eps = np.sqrt(np.clip(1.0 - coh, 0.0, None) / (coh * 2.0 * n_d))
         else:
             h, eps = _multi_input(sxx, syx, pyy, n_d, in_names)
-    bounds = _bounds(h, eps, float(confidence))
+    bounds = _bounds(h, eps, float(confidence), max(n_d - m, 1.0))
 
     f = options.frequencies_hz
     coords = {
@@ -405,11 +534,21 @@ def combine_columns(responses: Sequence[FrequencyResponse]) -> FrequencyResponse
         for name in FrequencyResponse._ARRAYS
     }
     variances = [r.frf_variance for r in items]
+    names = sorted({k for r in items for k in r.variance_parts})
+    parts = {}
+    for name in names:
+        cols = [(r.variance_parts[name] if name in r.variance_parts
+                 else (r.line_variance() if name == "noise" else r.line_variance() * 0.0)
+                 ).sel(output=order) for r in items]
+        parts[name] = xr.concat(cols, dim="input")
     return FrequencyResponse(
         **fields,
         frf_variance=(None if any(v is None for v in variances) else
                       xr.concat([v.sel(output=order) for v in variances if v is not None],
                                 dim="input")),
+        variance_parts=parts,
+        noise_dof=tuple(float(d) for r in items for d in r.column_dof()),
+        column_options={k: v for r in items for k, v in r.column_options.items()},
         estimator=first.estimator,
         confidence=first.confidence,
         window_length=first.window_length,

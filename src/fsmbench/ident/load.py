@@ -24,7 +24,8 @@ from fsmbench.io.errors import RecordingError
 if TYPE_CHECKING:
     from fsmbench.stages import PlantChoice
 
-__all__ = ["BLOCK_NAMES", "load_identified_plant", "read_identification_json", "read_plant_mat"]
+__all__ = ["BLOCK_NAMES", "excitation_transients", "load_identified_plant",
+           "read_identification_json", "read_plant_mat"]
 
 #: The blocks ``plant.mat`` holds besides the full system ``sys``.
 BLOCK_NAMES = ("Gi", "Zc", "Ga", "Gc", "Gn", "Gd")
@@ -185,3 +186,38 @@ def load_identified_plant(folder: str | Path) -> PlantChoice:
                                          "--identification")
     plant = read_plant_mat(d / "plant.mat")
     return PlantChoice(plant, source=f"identified (from {ident_path})", identification=None)
+
+
+#: The experiment each excitation input is recorded in.
+_EXPERIMENT_OF_INPUT = {"Uch": "data_uch", "Ucv": "data_ucv", "Unh": "data_unh",
+                        "Unv": "data_unv"}
+
+
+def excitation_transients(folder: str | Path) -> dict[str, int]:
+    """The transient periods of every excitation described in ``folder``, by experiment.
+
+    Reads each ``*.json`` of format ``fsmbench.excitation`` (what ``fsmbench
+    excite`` writes beside the file it plays) and maps its ``input`` to the
+    experiment that records it (``Uch`` → ``data_uch`` …): the value of
+    :class:`fsmbench.ident.pipeline.IdentifyOptions`'s ``transient_periods``.
+    Other JSON files are ignored; a description without ``input`` or
+    ``transient_periods`` is skipped.
+
+    Parameters
+    ----------
+    folder : str or Path
+        The recording folder.
+    """
+    out: dict[str, int] = {}
+    for path in sorted(Path(folder).glob("*.json")):
+        try:
+            meta = json.loads(path.read_text(encoding="utf-8"))
+        except (OSError, UnicodeDecodeError, json.JSONDecodeError):
+            continue
+        if not isinstance(meta, dict) or meta.get("format") != "fsmbench.excitation":
+            continue
+        experiment = _EXPERIMENT_OF_INPUT.get(str(meta.get("input")))
+        transient = meta.get("transient_periods")
+        if experiment is not None and isinstance(transient, int) and transient >= 0:
+            out[experiment] = max(out.get(experiment, 0), transient)
+    return out

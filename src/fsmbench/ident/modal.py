@@ -82,6 +82,9 @@ __all__ = ["ModalEstimate", "ModeEstimate", "estimate_modes", "fit_frf_modes"]
 _MAX_GRID = 401  # frequency grid points per mode in the initial search
 _DAMPING_GRID = (0.25, 0.5, 1.0, 2.0, 4.0)  # multiples of the initial damping searched
 _DAMPING_BOUNDS = (1e-7, 0.5)
+# Bins each side over which the residual's power is averaged for the covariance: 62 values
+# (real and imaginary parts), a relative std of 13 %, over 1 Hz of a 30 s record's DFT.
+_SMOOTH_BINS = 15
 
 
 @dataclass(frozen=True)
@@ -363,10 +366,40 @@ def _solve(problem: _Problem, guesses: list[tuple[float, float]], band: tuple[fl
         dm[j] -= h
         jac[:, j] = (flat(dp) - flat(dm)) / (2.0 * h)
     r = flat(theta)
-    dof = max(r.size - n_lin * n_out - theta.size, 1)
-    s2 = float(r @ r) / dof
-    cov = s2 * np.linalg.pinv(jac.T @ jac)
+    cov = _sandwich(problem, theta, r, jac)
     return theta, cov, weights, nfev, bool(success)
+
+
+def _sandwich(problem: _Problem, theta: NDArray[np.float64], r: NDArray[np.float64],
+              jac: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Covariance of ``theta`` with the residual's variance varying over the band.
+
+    ``(JᵀJ)⁻¹ Jᵀ diag(v) J (JᵀJ)⁻¹``, ``v`` each bin's residual power (real and
+    imaginary parts, less the fit's leverage) averaged over ±``_SMOOTH_BINS``
+    bins: the noise is white far from a mode, but a compressing sensor's
+    distortion peaks at it, where the bins that carry ``(f0, xi)`` are (the
+    real-bench twin's 1/f noise, mains and 4QD compression: a constant ``s²``
+    made the stds 1.6x optimistic). For a locally white residual it is
+    ``s² (JᵀJ)⁻¹``.
+    """
+    n_rows, n_out = problem.y.shape
+    k = n_rows // 2
+    res = r.reshape(n_rows, n_out)
+    design = np.column_stack([*(problem.variable(theta[2 * i], theta[2 * i + 1])
+                                for i in range(problem.n_modes)), problem.fixed])
+    qd, _ = np.linalg.qr(design)
+    lev = np.sum(qd**2, axis=1)
+    lev_bin = np.clip(0.5 * (lev[:k] + lev[k:]), 0.0, 0.9)
+    power = 0.5 * (res[:k] ** 2 + res[k:] ** 2) / (1.0 - lev_bin)[:, None]
+    width = min(2 * _SMOOTH_BINS + 1, k)
+    kernel = np.ones(width)
+    norm = np.convolve(np.ones(k), kernel, mode="same")
+    smooth = np.column_stack([np.convolve(power[:, o], kernel, mode="same") / norm
+                              for o in range(n_out)])
+    v = np.concatenate([smooth, smooth], axis=0).ravel()
+    bread = np.linalg.pinv(jac.T @ jac)
+    meat = jac.T @ (jac * v[:, None])
+    return np.asarray(bread @ meat @ bread, dtype=float)
 
 
 def _modes_from(theta: NDArray[np.float64], cov: NDArray[np.float64],

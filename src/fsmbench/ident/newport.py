@@ -276,7 +276,7 @@ def _fit_axis(frf: FrequencyResponse, axis: str, *, fs: float,
 
     # A Welch window of L samples zero-padded to nfft correlates ~1.5 nfft/L adjacent lines
     # (Hann's equivalent noise bandwidth): the fit has that many fewer independent lines.
-    correlated = 1.5 * frf.nfft / frf.window_length if frf.frf_variance is None else 1.0
+    correlated = 1.5 * frf.nfft / frf.window_length if frf.estimator == "welch" else 1.0
     joint = fit_jointly(fl, hl, sl, path=path, start=np.array([k0, 1000.0, 1.0]),
                         scale=np.array([abs(k0), 1000.0, 1.0]),
                         lower=np.array([-np.inf, 1.0, 0.01]), upper=np.array([np.inf, fs, 20.0]),

@@ -63,9 +63,16 @@ from fsmbench.ident.calibration import (
     current_amp_checks,
     qd_checks,
 )
+from fsmbench.ident.compression import (
+    CompressionFactors,
+    compression_factors,
+    correct_compression,
+)
 from fsmbench.ident.consistency import screen_recordings
 from fsmbench.ident.crosscheck import NOISE_CHECKS, cross_checks, floor_checks
 from fsmbench.ident.export import write_frf_mat, write_plant_mat
+from fsmbench.ident.frf import FrequencyResponse, with_variance_part
+from fsmbench.ident.leakage import welch_leakage_bias
 from fsmbench.ident.modes import ModeRefinement, refine_modes
 from fsmbench.ident.newport import (
     NewportIdentification,
@@ -77,14 +84,21 @@ from fsmbench.ident.newport import (
 from fsmbench.ident.noise_model import NoiseModelFit, fit_noise_model
 from fsmbench.ident.sampled import SensorLowpass
 from fsmbench.ident.sercalo import (
+    OUTPUTS,
     SercaloFitOptions,
     SercaloIdentification,
+    choose_estimator,
     experiment_frf,
     fit_sercalo,
     refit_with_poles,
+    with_frf,
 )
 from fsmbench.ident.sercalo_delay import with_sensor
+from fsmbench.ident.totals import uncertainty_tree
+from fsmbench.ident.truncation import TruncationCheck, truncation_checks
+from fsmbench.ident.uncertainty import Uncertain
 from fsmbench.ident.validate import PathValidation, validate_sercalo
+from fsmbench.ident.welch import hanning
 from fsmbench.io.atomic import atomic_write_text
 from fsmbench.io.folder import check_recording
 from fsmbench.jsonutil import plain_json, stamped
@@ -111,8 +125,13 @@ Progress = Callable[[str], None]
 
 #: ``identification.json``'s format and version (docs/results.md); 2: the keys of
 #: ``diagnostics.sercalo.fit_error_rms_relative`` are ``Uch_to_Vph``, not ``Vph/Uch``;
-#: 3: ``noise_model``, the noise fitted to the open-loop huddle tests.
-IDENTIFICATION_FORMAT = ("fsmbench.identification", 3)
+#: 3: ``noise_model``, the noise fitted to the open-loop huddle tests; 4: ``uncertainty``,
+#: every value with its total std and parts (issue 20), ``effective_delay_s`` and
+#: ``qd_diode_gain_v_per_rad``; ``delay_s.sercalo`` measured on ``Uc → Vc``.
+IDENTIFICATION_FORMAT = ("fsmbench.identification", 4)
+
+_SERCALO_COLUMNS = (("data_uch", "Uch"), ("data_ucv", "Ucv"))
+_NEWPORT_COLUMNS = (("data_unh", "Unh"), ("data_unv", "Unv"))
 
 
 @dataclass(frozen=True)
@@ -140,9 +159,14 @@ class IdentifyOptions:
         (:func:`fsmbench.ident.sercalo.choose_estimator`).
     weights : {"seed", "variance"}
         Vector-fit weights: the seed's coherence recipe, or the inverse
-        standard deviation of every line (then the Sercalo's parameters carry
-        standard deviations, :mod:`fsmbench.ident.fit_std`). Overrides
+        standard deviation of every line (:mod:`fsmbench.ident.fit_std`; the
+        parameters' standard deviations come with either). Overrides
         ``sercalo.weights``.
+    transient_periods : mapping of experiment name to int
+        The transient periods of each played excitation (``excitation.json``'s
+        ``transient_periods``, :func:`fsmbench.ident.load.excitation_transients`):
+        periodic averaging drops at least these, more when the data show a
+        transient (default: at least 1).
     """
 
     window_s: float = 1.0
@@ -153,12 +177,14 @@ class IdentifyOptions:
     refine_modes: bool = True
     frf: Literal["auto", "welch", "lpm", "periodic"] = "auto"
     weights: Literal["seed", "variance"] = "seed"
+    transient_periods: Mapping[str, int] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         if self.frf not in ("auto", "welch", "lpm", "periodic"):
             raise ValueError(f"frf must be auto, welch, lpm or periodic, got {self.frf!r}")
         if self.weights not in ("seed", "variance"):
-            raise ValueError(f"weights must be seed or variance, got {self.weights!r}")
+            raise ValueError(f"weights must be 'seed' (the ESRF study's coherence recipe) or "
+                             f"'variance', got {self.weights!r}")
 
     def to_json(self) -> dict[str, Any]:
         """Plain values."""
@@ -166,7 +192,8 @@ class IdentifyOptions:
                 "sercalo": {**self.sercalo.__dict__, "weights": self.weights},
                 "newport_band_hz": list(self.newport_band_hz),
                 "current_amp_band_hz": list(self.current_amp_band_hz),
-                "refine_modes": self.refine_modes, "frf": self.frf, "weights": self.weights}
+                "refine_modes": self.refine_modes, "frf": self.frf, "weights": self.weights,
+                "transient_periods": dict(self.transient_periods)}
 
 
 @dataclass(frozen=True, eq=False)
@@ -200,6 +227,14 @@ class Identification:
         ``skipped`` names it.
     notices : tuple of Notice
         Non-fatal findings (saturation, numerical warnings while computing).
+    noise_model : NoiseModelFit or None
+    compression : dict {"sercalo", "newport"} -> CompressionFactors
+        The 4QD's compression each FRF was corrected for.
+    truncation : dict axis -> TruncationCheck
+        The Sercalo's static gains over half the band (:mod:`fsmbench.ident.truncation`).
+    uncertainty : dict key -> Uncertain
+        Every identified value with its total std and its parts, keyed as
+        ``twin_truth.json`` (:mod:`fsmbench.ident.totals`).
     """
 
     qd: dict[str, QdCalibration]
@@ -217,6 +252,18 @@ class Identification:
     checks: tuple[Check, ...] = ()
     notices: tuple[Notice, ...] = ()
     noise_model: NoiseModelFit | None = None
+    compression: dict[str, CompressionFactors] = field(default_factory=dict)
+    truncation: dict[str, TruncationCheck] = field(default_factory=dict)
+    uncertainty: dict[str, Uncertain] = field(default_factory=dict)
+
+    def uncertain(self, key: str) -> Uncertain | None:
+        """The value of ``key`` (``"sercalo.h.dc_gain_v_per_a"``) with its std and parts."""
+        return self.uncertainty.get(key)
+
+    def largest_part(self, key: str) -> str:
+        """The largest part of the uncertainty of ``key`` ("" when not identified)."""
+        u = self.uncertainty.get(key)
+        return "" if u is None else u.largest_part
 
     def sercalo_modes(self) -> dict[str, dict[str, float]]:
         """Resonance and damping per axis: refined when available, else from the fit."""
@@ -231,6 +278,7 @@ class Identification:
         if self.sercalo is not None:
             modes = self.sercalo.fit.modes()
             res = self.sercalo.resonances_hz
+            pstd = self.sercalo.parameter_std
             for axis, inp in (("h", "Uch"), ("v", "Ucv")):
                 if inp in res and modes:
                     fr = res[inp]
@@ -239,6 +287,10 @@ class Identification:
                                  "damping_ratio": m.damping_ratio,
                                  "resonance_hz_std": m.resonance_hz_std,
                                  "damping_ratio_std": m.damping_ratio_std}
+                    if pstd is not None and not pstd.fixed_poles and axis in pstd.std:
+                        # The lines' own variances (noise, distortion), propagated.
+                        out[axis].update(resonance_hz_std=pstd.std[axis]["resonance_hz"],
+                                         damping_ratio_std=pstd.std[axis]["damping_ratio"])
         return out
 
     def to_json(self) -> dict[str, Any]:
@@ -271,6 +323,18 @@ class Identification:
             out["delay_s"] = delays
         if self.noise_model is not None:
             out["noise_model"] = self.noise_model.to_json()
+        # Values the uncertainty tree holds are its own (one value per key, with its std),
+        # nested as the values are (JSON keys are ids: no dots).
+        tree: dict[str, Any] = {}
+        for key, u in sorted(self.uncertainty.items()):
+            node, branch = out, tree
+            *stems, leaf = key.split(".")
+            for stem in stems:
+                node = node.setdefault(stem, {})
+                branch = branch.setdefault(stem, {})
+            node[leaf] = u.value
+            branch[leaf] = u.to_json()
+        out["uncertainty"] = tree
         out["checks"] = [c.to_json() for c in self.checks]
         out["notices"] = [n.to_json() for n in self.notices]
         out["diagnostics"] = {
@@ -284,6 +348,11 @@ class Identification:
             "frf_estimator": {name: part.frf.estimator
                               for name, part in (("sercalo", self.sercalo),
                                                  ("newport", self.newport)) if part is not None},
+            "frf_columns": {name: {k: dict(v) for k, v in part.frf.column_options.items()}
+                            for name, part in (("sercalo", self.sercalo),
+                                               ("newport", self.newport)) if part is not None},
+            "compression": {k: c.summary() for k, c in self.compression.items()},
+            "sercalo_truncation": {k: c.to_json() for k, c in self.truncation.items()},
             "plant_blocks": self.plant_blocks,
             "skipped": self.skipped,
             "warnings": list(self.warnings),
@@ -401,6 +470,8 @@ def _identify(recordings: Mapping[str, xr.Dataset], *, bench: Bench, opts: Ident
     # ---- end of issue 21
 
     qd: dict[str, QdCalibration] = {}
+    compression: dict[str, CompressionFactors] = {}
+    truncation: dict[str, TruncationCheck] = {}
     if gone := missing("data_cal_pd_h", "data_cal_pd_v"):
         skipped["qd"] = f"missing {', '.join(gone)}"
     elif bad := data_failure("data_cal_pd_h", "data_cal_pd_v"):
@@ -433,11 +504,14 @@ def _identify(recordings: Mapping[str, xr.Dataset], *, bench: Bench, opts: Ident
             bad, "the nominal current amplifier and Sercalo are used")
     else:
         say("2.2 identifying the current amplifiers")
+        amp_estimator = opts.frf if opts.frf != "auto" else choose_estimator(
+            recordings, columns=_SERCALO_COLUMNS, trims_s=opts.trims_s)
         try:
             for axis, exp in (("h", "data_uch"), ("v", "data_ucv")):
                 gi[axis] = calibrate_current_amplifier(
                     recordings[exp], axis=axis, nominal=nom, trim_s=opts.trims_s.get(exp, 1.0),
-                    band_hz=opts.current_amp_band_hz, window_s=opts.window_s)
+                    band_hz=opts.current_amp_band_hz, window_s=opts.window_s,
+                    estimator=amp_estimator)
                 checks.extend(current_amp_checks(gi[axis]))
         except ValueError as exc:
             gi = {}
@@ -451,20 +525,37 @@ def _identify(recordings: Mapping[str, xr.Dataset], *, bench: Bench, opts: Ident
     if gi:
         say("2.3 Sercalo: FRF matrix, delay, vector fitting")
         try:
-            frf = experiment_frf(recordings, columns=[("data_uch", "Uch"), ("data_ucv", "Ucv")],
+            frf = experiment_frf(recordings, columns=_SERCALO_COLUMNS,
                                  trims_s=opts.trims_s, window_s=opts.window_s,
-                                 estimator=opts.frf)
+                                 estimator=opts.frf, transient_periods=opts.transient_periods)
             say(f"2.3 Sercalo: FRF by {_ESTIMATOR_WORDS[frf.estimator]}")
+            if qd:
+                compression["sercalo"] = compression_factors(
+                    recordings, columns=_SERCALO_COLUMNS, outputs=OUTPUTS, qd=qd,
+                    trims_s=opts.trims_s)
+                frf = correct_compression(frf, compression["sercalo"], recordings=recordings,
+                                          columns=_SERCALO_COLUMNS, trims_s=opts.trims_s)
             sercalo_id = fit_sercalo(frf, gi_a_per_v={a: g.gain_a_per_v for a, g in gi.items()},
                                      options=replace(opts.sercalo, weights=opts.weights),
                                      sensor=sensor)
-            if opts.refine_modes:
+            if opts.refine_modes and frf.estimator == "periodic":
+                # Averaged periods have no leakage to remove: the fit's modes stand, with
+                # stds from every line's noise and distortion (ident.fit_std).
+                skipped["mode_refinement"] = ("periodic averaging: no leakage to remove; the "
+                                              "fit's modes and their stds are used")
+            elif opts.refine_modes:
                 say("2.3 Sercalo: refining the modes on the time records")
                 modes = refine_modes(recordings, sercalo=sercalo_id, trims_s=opts.trims_s)
                 sercalo_id = refit_with_poles(sercalo_id, poles=modes.poles_by_input())
             else:
                 skipped["mode_refinement"] = "disabled by option"
+            if frf.estimator == "welch":
+                say("2.3 Sercalo: the Welch window's leakage near the modes")
+                sercalo_id = with_frf(sercalo_id, _with_leakage(sercalo_id, opts.window_s),
+                                      poles=None if modes is None else modes.poles_by_input())
             validation = validate_sercalo(recordings, sercalo=sercalo_id, trims_s=opts.trims_s)
+            truncation = truncation_checks(
+                sercalo_id, poles=None if modes is None else modes.poles_by_input())
         except ValueError as exc:
             sercalo_id, modes, validation = None, None, ()
             skipped["sercalo"] = f"failed (data_uch, data_ucv): {exc}"
@@ -476,9 +567,16 @@ def _identify(recordings: Mapping[str, xr.Dataset], *, bench: Bench, opts: Ident
     elif not gone:
         say("2.4 Newport: FRF matrix, delay and gains")
         try:
-            nfrf = experiment_frf(recordings, columns=[("data_unh", "Unh"), ("data_unv", "Unv")],
+            nfrf = experiment_frf(recordings, columns=_NEWPORT_COLUMNS,
                                   trims_s=opts.trims_s, window_s=opts.window_s,
-                                  estimator=opts.frf)
+                                  estimator=opts.frf, transient_periods=opts.transient_periods)
+            if qd:
+                compression["newport"] = compression_factors(
+                    recordings, columns=_NEWPORT_COLUMNS, outputs=OUTPUTS, qd=qd,
+                    trims_s=opts.trims_s)
+                nfrf = correct_compression(nfrf, compression["newport"],
+                                           recordings=recordings, columns=_NEWPORT_COLUMNS,
+                                           trims_s=opts.trims_s)
             newport_id = identify_newport(
                 nfrf, band_hz=opts.newport_band_hz, dac_delay_samples=conv.dac_delay_samples,
                 converter_delay_s=None if sercalo_id is None else sercalo_id.delay_s,
@@ -533,15 +631,41 @@ def _identify(recordings: Mapping[str, xr.Dataset], *, bench: Bench, opts: Ident
                 (qd["h"].gain_v_per_rad, qd["v"].gain_v_per_rad) if qd else None))
         except ValueError as exc:
             skipped["noise_model"] = str(exc)
-    return Identification(qd=qd, current_amp=gi, sercalo=sercalo_id, modes=modes,
-                          validation=validation, newport=newport_id, plant=plant,
-                          plant_blocks={k: v[0] for k, v in blocks.items()}, skipped=skipped,
-                          options=opts, source=source, warnings=warnings,
-                          checks=tuple(checks), notices=tuple(notices), noise_model=noise)
+    result = Identification(qd=qd, current_amp=gi, sercalo=sercalo_id, modes=modes,
+                            validation=validation, newport=newport_id, plant=plant,
+                            plant_blocks={k: v[0] for k, v in blocks.items()}, skipped=skipped,
+                            options=opts, source=source, warnings=warnings,
+                            checks=tuple(checks), notices=tuple(notices), noise_model=noise,
+                            compression=compression, truncation=truncation)
+    return replace(result, uncertainty=uncertainty_tree(
+        qd=qd, current_amp=gi, sercalo=sercalo_id, modes=result.sercalo_modes(),
+        newport=newport_id, compression=compression, nominal=nom, truncation=truncation))
 
 
-_ESTIMATOR_WORDS = {"welch": "Welch H1 (the seed's)", "lpm": "the local polynomial method",
-                    "periodic": "averaging over periods"}
+def _with_leakage(sid: SercaloIdentification, window_s: float) -> FrequencyResponse:
+    """The Sercalo's Welch FRF with its leakage bias near the modes as a variance part
+    (:mod:`fsmbench.ident.leakage`), from the fitted model and its delay."""
+    frf = sid.frf
+    delay = sid.delay_s
+
+    def model(f_hz: np.ndarray) -> np.ndarray:
+        return sid.fit.response(f_hz) * np.exp(-2j * np.pi * f_hz * delay)[:, None, None]
+
+    f = frf.frequency_hz
+    bias = np.zeros(frf.frf.shape, dtype=complex)
+    sel = f > 0
+    fit_out = list(sid.fit.output_names)
+    fit_in = list(sid.fit.input_names)
+    b = welch_leakage_bias(model, f[sel], fs_hz=frf.fs_hz,
+                           window=hanning(int(np.ceil(window_s * frf.fs_hz))))
+    rows = [fit_out.index(o) for o in frf.output_names]
+    cols = [fit_in.index(i) for i in frf.input_names]
+    bias[sel] = b[:, rows][:, :, cols]
+    return with_variance_part(frf, "leakage", np.abs(bias) ** 2)
+
+
+_ESTIMATOR_WORDS = {"welch": "Welch H1 (the ESRF study's)",
+                    "lpm": "the local polynomial method", "periodic": "averaging over periods"}
 
 _QD_CHECKS = ("calibration_r2", "calibration_residual", "qd_gain_vs_nominal")
 

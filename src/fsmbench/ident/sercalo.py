@@ -54,6 +54,7 @@ __all__ = [
     "refit_with_poles",
     "seed_weights",
     "variance_weights",
+    "with_frf",
 ]
 
 FrfEstimator = Literal["auto", "welch", "lpm", "periodic"]
@@ -89,7 +90,8 @@ def choose_estimator(recordings: Mapping[str, xr.Dataset], *,
 
 def experiment_frf(recordings: Mapping[str, xr.Dataset], *, columns: Sequence[tuple[str, str]],
                    trims_s: Mapping[str, float], window_s: float = 1.0,
-                   estimator: FrfEstimator = "welch") -> FrequencyResponse:
+                   estimator: FrfEstimator = "welch",
+                   transient_periods: Mapping[str, int] | None = None) -> FrequencyResponse:
     """FRF matrix ``inputs → (Vph, Vpv)`` from single-input experiments.
 
     Parameters
@@ -106,8 +108,12 @@ def experiment_frf(recordings: Mapping[str, xr.Dataset], *, columns: Sequence[tu
         record (every experiment cut to the shortest one's length, kept from
         its end, so that all columns share their lines; lines strided by the
         window width, 13, so that they are nearly independent); periodic
-        averaging (one transient period dropped, the excited lines); or
-        :func:`choose_estimator`.
+        averaging (the transient periods detected in the data, at least the
+        excitation's own; the excited lines; the distortion of an odd grid
+        from its non-excited lines); or :func:`choose_estimator`.
+    transient_periods : mapping of experiment name to int, optional
+        The excitation's own transient periods (``excitation.json``): the
+        fewest the periodic average drops (default 1).
 
     Returns
     -------
@@ -150,10 +156,32 @@ def experiment_frf(recordings: Mapping[str, xr.Dataset], *, columns: Sequence[tu
                                       source=f"{exp}.mat")
                  for exp, signal, fs, u, y in data]
     else:
+        least = dict(transient_periods or {})
         parts = [periodic_frf(u, y, fs_hz=fs, input_name=signal, output_names=list(OUTPUTS),
-                              options=PeriodicOptions(), source=f"{exp}.mat")
+                              options=PeriodicOptions(
+                                  min_transient_periods=int(least.get(exp, 1))),
+                              source=f"{exp}.mat")
                  for exp, signal, fs, u, y in data]
+        # Columns on the lines they share (a line excited in one record only is dropped).
+        common = set(parts[0].frequency_hz.tolist())
+        for part in parts[1:]:
+            common &= set(part.frequency_hz.tolist())
+        parts = [_on_lines(part, common) for part in parts]
     return combine_estimates(parts).to_frequency_response()
+
+
+def _on_lines(est: FrfEstimate, keep: set[float]) -> FrfEstimate:
+    """The estimate on the lines of ``keep`` only [Hz]."""
+    sel = np.array([f in keep for f in est.frequency_hz.tolist()], dtype=bool)
+    if sel.all():
+        return est
+    return dataclasses.replace(
+        est, frequency_hz=est.frequency_hz[sel], frf=est.frf[sel],
+        frf_variance=est.frf_variance[sel], output_noise_psd=est.output_noise_psd[sel],
+        input_psd=est.input_psd[sel], snr=est.snr[sel],
+        transient=None if est.transient is None else est.transient[sel],
+        distortion_variance=(None if est.distortion_variance is None
+                             else est.distortion_variance[sel]))
 
 
 def path_delays(frf: FrequencyResponse, *, min_coherence: float) -> tuple[DelayEstimate, ...]:
@@ -281,7 +309,8 @@ class SercaloFitOptions:
 
     def __post_init__(self) -> None:
         if self.weights not in ("seed", "variance"):
-            raise ValueError(f"weights must be seed or variance, got {self.weights!r}")
+            raise ValueError(f"weights must be 'seed' (the ESRF study's coherence recipe) or "
+                             f"'variance', got {self.weights!r}")
 
 
 @dataclass(frozen=True, eq=False)
@@ -314,8 +343,8 @@ class SercaloIdentification:
     options : SercaloFitOptions
     parameter_std : ParameterStd or None
         Resonance, damping and static gain per axis with standard deviations
-        propagated from the lines' variances (:mod:`fsmbench.ident.fit_std`);
-        None with the seed's weights (not inverse variances).
+        propagated from the lines' variances (:mod:`fsmbench.ident.fit_std`;
+        with the seed's weights by the weighted fit's sandwich).
     joint_delays : tuple of JointFit
         Each direct path fitted with its poles, delay and the 4QD amplifier;
         ``delay_s`` is their combined effective delay (the sensor's lag in:
@@ -393,8 +422,9 @@ def relative_fit_error(frf: FrequencyResponse, model: np.ndarray, *,
             sel = (f >= band_hz[0]) & (f <= band_hz[1]) & (c > min_coherence)
             err = np.abs(model[sel, i, j]) / np.abs(h[sel]) - 1
             ms = float(np.mean(err**2)) if sel.any() else float("nan")
-            if frf.frf_variance is not None and sel.any():
-                var = frf.frf_variance.sel(output=o, input=inp).values[sel]
+            if frf.estimator != "welch" and sel.any():
+                noise = frf.variance_parts.get("noise", frf.line_variance())
+                var = noise.sel(output=o, input=inp).values[sel]
                 ms = max(0.0, ms - float(np.mean(var / (2.0 * np.abs(h[sel]) ** 2))))
             out[f"{o}/{inp}"] = float(np.sqrt(ms))
     return out
@@ -457,13 +487,39 @@ def fit_sercalo(frf: FrequencyResponse, *, gi_a_per_v: Mapping[str, float],
     model[keep] = fit.response(f[keep])
     model[~keep] = np.nan
     err = relative_fit_error(clean, model)
-    pstd = (sercalo_parameter_std(fit, f[keep], h[keep], w, resonances_hz=resonances,
-                                  gi_a_per_v=gi) if opts.weights == "variance" else None)
+    pstd = _parameter_std(fit, clean, keep, w, resonances=resonances, gi=gi, fixed_poles=False)
     return SercaloIdentification(frf=frf, delays=delays, delay_s=delay, delay_std_s=delay_std,
                                  resonances_hz=resonances, weights=weights, fit=fit,
                                  gi_a_per_v={"h": float(gi[0]), "v": float(gi[1])}, gc=gc,
                                  fit_error=err, options=opts, parameter_std=pstd,
                                  joint_delays=joint, joint_delay_skipped=joint_skipped)
+
+
+#: Adjacent lines one Welch estimate correlates with a Hann window: its equivalent noise
+#: bandwidth, 1.5 bins (the Newport's fit and the current amplifier use the same).
+WELCH_CORRELATED_LINES = 1.5
+
+
+def correlated_lines(frf: FrequencyResponse) -> float:
+    """Lines one estimate correlates: ``1.5 nfft / L`` for Welch, 1 for LPM (strided) and
+    periodic averaging."""
+    return (WELCH_CORRELATED_LINES * frf.nfft / frf.window_length if frf.estimator == "welch"
+            else 1.0)
+
+
+def _parameter_std(fit: VectorFit, clean: FrequencyResponse, keep: np.ndarray, w: np.ndarray,
+                   *, resonances: Mapping[str, float], gi: np.ndarray,
+                   fixed_poles: bool) -> ParameterStd:
+    """The fit's parameters with their stds from every part of the lines' variance but the
+    4QD compression's (a factor common to all lines of an element: added to the static
+    gain directly by the pipeline)."""
+    parts = dict(clean.variance_parts) or {"noise": clean.line_variance()}
+    arrays = {k: np.asarray(v.values, dtype=float)[keep] for k, v in parts.items()
+              if k != "compression"}
+    return sercalo_parameter_std(fit, clean.frequency_hz[keep], clean.frf.values[keep], w,
+                                 resonances_hz=resonances, gi_a_per_v=gi,
+                                 fixed_poles=fixed_poles, variance_parts=arrays,
+                                 correlated_lines=correlated_lines(clean))
 
 
 def _weights(clean: FrequencyResponse, resonances: Mapping[str, float],
@@ -596,8 +652,33 @@ def refit_with_poles(sid: SercaloIdentification, *, poles: Mapping[str, complex]
     full = np.full(sid.frf.frf.shape, np.nan, dtype=complex)
     full[sid.frf.frequency_hz > 0] = model
     clean = remove_delay(sid.frf, sid.delay_s)
-    pstd = (sercalo_parameter_std(new_fit, f, h, w, resonances_hz=sid.resonances_hz,
-                                  gi_a_per_v=gi, fixed_poles=True)
-            if sid.options.weights == "variance" else None)
+    pstd = _parameter_std(new_fit, clean, sid.frf.frequency_hz > 0, w,
+                          resonances=sid.resonances_hz, gi=gi, fixed_poles=True)
     return dataclasses.replace(sid, fit=new_fit, gc=gc, parameter_std=pstd,
                                fit_error=relative_fit_error(clean, full))
+
+
+def with_frf(sid: SercaloIdentification, frf: FrequencyResponse, *,
+             poles: Mapping[str, complex] | None = None) -> SercaloIdentification:
+    """The identification on ``frf`` (the same lines with more variance parts): weights,
+    residues, ``D`` and standard deviations again, the delay and the poles kept.
+
+    Parameters
+    ----------
+    sid : SercaloIdentification
+    frf : FrequencyResponse
+        Same lines as ``sid.frf`` (e.g. with a ``leakage`` part).
+    poles : mapping input -> complex, optional
+        The modes' poles to keep (the refined ones); None: the fit is made again
+        with the delay imposed.
+    """
+    if poles is None:
+        again = fit_sercalo(frf, gi_a_per_v=sid.gi_a_per_v,
+                            options=dataclasses.replace(sid.options, delay_s=sid.delay_s))
+        return dataclasses.replace(again, delays=sid.delays, delay_std_s=sid.delay_std_s,
+                                   joint_delays=sid.joint_delays,
+                                   joint_delay_skipped=sid.joint_delay_skipped,
+                                   options=sid.options)
+    clean = remove_delay(frf, sid.delay_s)
+    weights = _weights(clean, sid.resonances_hz, sid.options)
+    return refit_with_poles(dataclasses.replace(sid, frf=frf, weights=weights), poles=poles)

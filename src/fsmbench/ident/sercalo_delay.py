@@ -154,7 +154,7 @@ def sercalo_path_delay(frf: FrequencyResponse, *, output: str, input_: str, fit:
                          f"{lo:.0f}–{hi:.0f} Hz for {n_own + 3} parameters")
     # Welch lines are correlated over the window's noise bandwidth; LPM and periodic
     # estimates carry their variance per line (nearly independent).
-    correlated = (1.5 * frf.nfft / frf.window_length if frf.frf_variance is None else 1.0)
+    correlated = (1.5 * frf.nfft / frf.window_length if frf.estimator == "welch" else 1.0)
     common = dict(delay_start_s=start.delay_s, fs_hz=fs, sensor=sensor,
                   correlated_lines=correlated, resolve_sensor=resolve_sensor)
     constant = fit_jointly(f[sel], h[sel], sigma[sel], path=with_constant,

@@ -31,7 +31,6 @@ from fsmbench.ident.calibration import (
 )
 from fsmbench.ident.delay import remove_delay
 from fsmbench.ident.frf import FrequencyResponse, spectral_matrix
-from fsmbench.ident.frf_estimate import circular_bound_factor
 from fsmbench.ident.newport import NewportIdentification
 from fsmbench.ident.sercalo import SercaloIdentification
 from fsmbench.ident.welch import hanning
@@ -276,15 +275,15 @@ def unwrapped_phase_deg(h: np.ndarray, *, keep: np.ndarray | None = None,
     return out
 
 
-def _bound_lines(h: np.ndarray, var: np.ndarray, f: np.ndarray, phase_deg: np.ndarray, *,
+def _bound_lines(h: np.ndarray, r: np.ndarray, f: np.ndarray, phase_deg: np.ndarray, *,
                  color: str, confidence: float) -> tuple[list[Line], list[Line]]:
-    """Magnitude and phase confidence bounds of a circular error of variance ``var``.
+    """Magnitude and phase confidence bounds of a circular region of radius ``r``.
 
-    The region ``|H_hat - H| <= r`` with ``r = sqrt(-ln(1 - c)) std``; its magnitude
-    range is ``|H| -/+ r`` and its phase range ``+/- asin(r / |H|)`` (all phases when
+    The region ``|H_hat - H| <= r`` (``FrequencyResponse.bound_radius``: the F
+    quantile of an estimated variance, Hotelling); its magnitude range is
+    ``|H| -/+ r`` and its phase range ``+/- asin(r / |H|)`` (all phases when
     ``r >= |H|``), around the drawn (unwrapped) phase.
     """
-    r = circular_bound_factor(confidence) * np.sqrt(var)
     mag = np.abs(h)
     with np.errstate(invalid="ignore", divide="ignore"):
         half = np.degrees(np.where(r < mag, np.arcsin(np.minimum(r / mag, 1.0)), np.pi))
@@ -365,8 +364,8 @@ def frf_matrix_figure(frf: FrequencyResponse, *, delay_s: float, model: np.ndarr
                 ph_tr = [Line(f[sel], np.degrees(np.angle(h)), name=label, color=color,
                               markers=True, opacity=0.15, group=label, legend=False)]
             if clean.frf_variance is not None and known.any():
-                var = clean.frf_variance.sel(output=out, input=inp).values[sel]
-                mb, pb = _bound_lines(h, var, f[sel], ph, color=color,
+                radius = clean.bound_radius().sel(output=out, input=inp).values[sel]
+                mb, pb = _bound_lines(h, radius, f[sel], ph, color=color,
                                       confidence=frf.confidence)
                 mag_tr += mb
                 ph_tr += pb

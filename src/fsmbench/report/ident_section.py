@@ -42,6 +42,7 @@ from fsmbench.report.ident_figures import (
     sercalo_model,
     weights_figure,
 )
+from fsmbench.report.ident_uncertainty import total_cells, uncertainty_table
 from fsmbench.report.time_figures import SEED_TIME_FIGURES, experiment_figure
 from fsmbench.twin.compare import TARGETS, ComparisonRow, comparison_rows, quantity
 
@@ -89,19 +90,25 @@ def comparison_table(result: Identification, *, bench: Bench,
     for r in rows:
         name, _unit, scale = quantity(r.key)
         target, diff = _target(r)
-        cells = [name, f"{r.identified * scale:.6g}", f"{r.reference * scale:.6g}", diff]
+        total, largest = total_cells(result.uncertain(r.key), scale)
+        cells = [name, f"{r.identified * scale:.6g}", total, largest,
+                 f"{r.reference * scale:.6g}", diff]
         if truth is not None:
             cells += [target, {True: "yes", False: "no", None: "–"}[r.within_target]]
         out.append(tuple(cells))
+    uncertainty = ("± total", "largest part of the uncertainty (share of the variance)")
     if truth is not None:
         met = sum(1 for r in rows if r.within_target)
-        return Table(caption="Identified values against the twin's true values",
-                     header=("quantity", "identified", "true value (twin)", "difference",
-                             "accuracy target", "within target"),
+        return Table(caption=("Identified values against the twin's true values; ± is the "
+                              "total uncertainty (one standard deviation, every part)"),
+                     header=("quantity", "identified", *uncertainty, "true value (twin)",
+                             "difference", "accuracy target", "within target"),
                      rows=tuple(out),
                      note=f"{met} of {len(rows)} values within their accuracy targets.")
-    return Table(caption="Identified values against the nominal model",
-                 header=("quantity", "identified", "nominal value", "difference"),
+    return Table(caption=("Identified values against the nominal model; ± is the total "
+                          "uncertainty (one standard deviation, every part)"),
+                 header=("quantity", "identified", *uncertainty, "nominal value",
+                         "difference"),
                  rows=tuple(out),
                  note=("The nominal values come from datasheets, measured components and the "
                        "ESRF study's Table 2: the difference is how far this bench is from them, "
@@ -164,10 +171,11 @@ def _qd(result: Identification | None, *, recordings: Mapping[str, xr.Dataset], 
             blocks.append(qd_regression_figure(result.qd, recordings))
         blocks.append(Table(
             caption="4QD gains from the linear regression (ESRF study Table 2)",
-            header=("axis", "gain [V/rad]", "± [V/rad]", "sensitivity [µrad/mV]",
+            header=("axis", "gain [V/rad]", "± total [V/rad]", "sensitivity [µrad/mV]",
                     "offset [mV]", "R² [1]", "residual rms [mV]", "beam-angle range [mrad]",
                     "samples"),
-            rows=tuple((_AXIS[a], f"{c.gain_v_per_rad:.4f}", f"{c.gain_std_v_per_rad:.2g}",
+            rows=tuple((_AXIS[a], f"{c.gain_v_per_rad:.4f}",
+                        f"{_total(result, 'qd_gain_v_per_rad.' + a, c.gain_std_v_per_rad):.2g}",
                         f"{c.sensitivity_urad_per_mv:.2f}", f"{1e3 * c.offset_v:.3f}",
                         f"{c.r_squared:.6f}", f"{1e3 * c.residual_rms_v:.3f}",
                         f"{1e3 * c.beam_angle_range_rad:.3f}", str(c.n_samples))
@@ -187,7 +195,9 @@ def _current_amp(result: Identification | None, *, recordings: Mapping[str, xr.D
         "Noise on the Sercalo's commands Uc drives the current amplifier; the amplified coil "
         "voltage Vc is recorded with the 4QD outputs. The same records serve 2.3. From "
         "Uc → Vc = Ga·Zc·Gi, with the voltage amplifier Ga and the coil impedance Zc taken as "
-        f"known, Gi is the mean of |Ga Zc Gi| / |Ga Zc| over {band[0]:g}–{band[1]:g} Hz.",
+        f"known, Gi is fitted over {band[0]:g}–{band[1]:g} Hz with the path as the converters "
+        "sample it (the DAC's hold and the delay): the ESRF study's ratio to the continuous "
+        "|Ga Zc| is biased by the hold by twenty times its noise.",
     ]
     for name in exps:
         blocks += _time_figure(name, recordings, bench=bench, trims=_trims(result))
@@ -202,10 +212,12 @@ def _current_amp(result: Identification | None, *, recordings: Mapping[str, xr.D
             blocks.append(current_amplifier_figure(drawn, frfs, bench.nominal))
         blocks.append(Table(
             caption="Current-amplifier gains",
-            header=("axis", "identified Gi [mA/V]", "± [mA/V]", "1/(R + Rc) [mA/V]",
-                    "identified / theoretical [1]", "averaging band [Hz]"),
+            header=("axis", "identified Gi [mA/V]", "± total [mA/V]", "1/(R + Rc) [mA/V]",
+                    "identified / theoretical [1]", "fitted band [Hz]"),
             rows=tuple((_AXIS[a], f"{1e3 * g.gain_a_per_v:.4f}",
-                        f"{1e3 * g.gain_std_a_per_v:.2g}", f"{1e3 * g.theoretical_a_per_v:.4f}",
+                        "%.2g" % (1e3 * _total(result, "current_amp_gain_a_per_v." + a,
+                                               g.gain_std_a_per_v)),
+                        f"{1e3 * g.theoretical_a_per_v:.4f}",
                         f"{g.ratio_to_theoretical:.4f}", f"{g.band_hz[0]:g}–{g.band_hz[1]:g}")
                        for a, g in result.current_amp.items())))
         blocks.append("The ESRF study finds the same kind of mismatch with the theoretical gain "
@@ -246,14 +258,25 @@ def _fit_words(result: Identification) -> str:
             "periodic": "the period-averaged estimate"}.get(frf.estimator, "the estimate")
 
 
+def _total(result: Identification, key: str, fallback: float) -> float:
+    """The total std of ``key`` (every part), else ``fallback`` (a part alone)."""
+    u = result.uncertain(key)
+    return u.std if u is not None else float(fallback)
+
+
 def _modes_table(result: Identification) -> Table:
-    modes = result.sercalo_modes()
+    modes = {a: {**m, "resonance_hz_std": _total(result, f"sercalo.{a}.resonance_hz",
+                                                   m["resonance_hz_std"]),
+                 "damping_ratio_std": _total(result, f"sercalo.{a}.damping_ratio",
+                                             m["damping_ratio_std"])}
+             for a, m in result.sercalo_modes().items()}
     fit = _fit_words(result)
     if result.modes is not None:
         initial = result.modes.initial
         return Table(
             caption=("Sercalo modes, re-estimated on the full records (frequency-domain output "
-                     f"error), against the vector fit of {fit}; ± is one standard error"),
+                     f"error), against the vector fit of {fit}; ± is the total uncertainty, one "
+                     "standard deviation"),
             header=("axis", "resonance [Hz]", "± [Hz]", "damping ratio [1]", "± [1]",
                     "damping ratio from the fit [1]", "fit / re-estimated [1]"),
             rows=tuple((_AXIS[a], f"{m['resonance_hz']:.4f}", f"{m['resonance_hz_std']:.2g}",
@@ -261,7 +284,7 @@ def _modes_table(result: Identification) -> Table:
                         f"{initial[a][1]:.4e}", f"{initial[a][1] / m['damping_ratio']:.2f}")
                        for a, m in modes.items()))
     return Table(caption=f"Sercalo modes from the vector fit of {fit} (not re-estimated on the "
-                         "full records); ± is one standard error",
+                         "full records); ± is the total uncertainty, one standard deviation",
                  header=("axis", "resonance [Hz]", "± [Hz]", "damping ratio [1]", "± [1]"),
                  rows=tuple((_AXIS[a], f"{m['resonance_hz']:.4f}", f"{m['resonance_hz_std']:.2g}",
                              f"{m['damping_ratio']:.4e}", f"{m['damping_ratio_std']:.2g}")
@@ -550,6 +573,8 @@ def identification_section(result: Identification | None, *,
     ]
     if result is not None and (table := comparison_table(result, bench=bench, truth=truth)):
         blocks.append(table)
+    if result is not None and (every := uncertainty_table(result)) is not None:
+        blocks.append(every)
     subsections = (
         _qd(result, recordings=recordings, bench=bench, skipped=skipped),
         _current_amp(result, recordings=recordings, bench=bench, skipped=skipped),

@@ -3,10 +3,17 @@
 The keys are shared with ``identification.json`` so that a result can be
 compared with the truth key by key:
 
-``fs_hz``, ``qd_gain_v_per_rad.{h,v}``, ``current_amp_gain_a_per_v.{h,v}``,
+``fs_hz``, ``qd_gain_v_per_rad.{h,v}`` (``g cos θ``: the slope a
+single-axis calibration measures, θ the 4QD's rotation),
+``qd_diode_gain_v_per_rad.{h,v}`` (``g``, along the diode's own axes),
+``current_amp_gain_a_per_v.{h,v}``,
 ``sercalo.{h,v}.{resonance_hz, damping_ratio, dc_gain_v_per_a}`` (Ich → Vph,
 Icv → Vpv), ``newport_gain_v_per_v.{h,v}`` (Unh → Vph, Unv → Vpv at low
-frequency, signed), ``delay_s.{sercalo, newport}``; then ``noise_rms`` (every
+frequency, signed), ``delay_s.{sercalo, newport}`` (pure: DAC transport, the
+hold's half sample, latency; the Newport's lag), ``effective_delay_s.{sercalo,
+newport}`` (the pure delay with the group delays of the lags a delay fit
+cannot tell from it: the coil's on the Sercalo's path, the mean of the two
+axes, and the 4QD amplifier's); then ``noise_rms`` (every
 injected noise, stationary values), ``realized`` (the same, measured on each
 record; per-axis values as ``{"h", "v"}``), ``cross_coupling_dc_gain``
 (``Ich_to_Vpv_v_per_a`` …: input ``_to_`` output) and descriptive extras.
@@ -25,14 +32,17 @@ import numpy as np
 from fsmbench import __version__
 from fsmbench.bench.blocks import input_delays_s, physical_plant
 from fsmbench.bench.params import Bench, BenchParams
+from fsmbench.ident.sampled import SensorLowpass
 from fsmbench.twin.experiments import ExperimentSpec
 
 __all__ = ["TRUTH_FORMAT", "model_values", "twin_truth"]
 
 #: ``twin_truth.json``'s format and version (2: ``cross_coupling_dc_gain`` keys
 #: ``<input>_to_<output>_<unit>`` instead of ``<input>-><output>_<unit>``; ``realized``
-#: per-axis values as ``{"h", "v"}`` instead of flat ``"<name>.h"`` keys).
-TRUTH_FORMAT = ("fsmbench.twin_truth", 2)
+#: per-axis values as ``{"h", "v"}`` instead of flat ``"<name>.h"`` keys; 3: the
+#: identification's definitions: ``qd_gain_v_per_rad`` is ``g cos θ``,
+#: ``qd_diode_gain_v_per_rad`` and ``effective_delay_s`` added).
+TRUTH_FORMAT = ("fsmbench.twin_truth", 3)
 
 
 def _nest_axes(values: Mapping[str, float]) -> dict[str, Any]:
@@ -54,19 +64,29 @@ def _dc(sys: Any, out: int, inp: int) -> float:
 def model_values(p: BenchParams) -> dict[str, Any]:
     """The contracted keys computed from one parameter set (nominal or true).
 
-    ``fs_hz``, ``qd_gain_v_per_rad``, ``current_amp_gain_a_per_v``,
+    ``fs_hz``, ``qd_gain_v_per_rad`` (``g cos θ``), ``qd_diode_gain_v_per_rad``
+    (``g``), ``current_amp_gain_a_per_v``,
     ``sercalo.{h,v}.{resonance_hz, damping_ratio, dc_gain_v_per_a}``,
     ``newport_gain_v_per_v``, ``newport.{h,v}.{natural_freq_hz, damping_ratio,
-    internal_delay_s}``, ``delay_s`` — what an identification reports.
+    internal_delay_s}``, ``delay_s``, ``effective_delay_s`` — what an
+    identification reports (the module notes give the definitions).
     """
     plant = physical_plant(p, source="physical")
     gc, gn = plant.blocks["Gc"], plant.blocks["Gn"]
     gi = p.current_amp_gain_a_per_v()
     delays = input_delays_s(p)
+    cos = float(np.cos(p.quad_diode.rotation_rad))
+    # The lags a delay fit reads as delay: the coil's (L / (R + R_buffer + Rc), the mean of
+    # the two axes: the identification's is the two axes' mean) and the 4QD amplifier's.
+    coil = 0.5 * (p.sercalo.l_coil_h.h * gi.h + p.sercalo.l_coil_h.v * gi.v)
+    sensor = SensorLowpass(bandwidth_hz=float(p.quad_diode.bandwidth_hz),
+                           order=int(p.quad_diode.bandwidth_order)).group_delay_s
     return {
         "fs_hz": p.converter.fs_hz,
-        "qd_gain_v_per_rad": {"h": p.quad_diode.gain_v_per_rad.h,
-                              "v": p.quad_diode.gain_v_per_rad.v},
+        "qd_gain_v_per_rad": {"h": p.quad_diode.gain_v_per_rad.h * cos,
+                              "v": p.quad_diode.gain_v_per_rad.v * cos},
+        "qd_diode_gain_v_per_rad": {"h": p.quad_diode.gain_v_per_rad.h,
+                                    "v": p.quad_diode.gain_v_per_rad.v},
         "current_amp_gain_a_per_v": {"h": gi.h, "v": gi.v},
         "sercalo": {
             axis: {"resonance_hz": p.sercalo.resonance_hz[axis],
@@ -80,6 +100,8 @@ def model_values(p: BenchParams) -> dict[str, Any]:
                            "damping_ratio": p.newport.damping_ratio,
                            "internal_delay_s": p.newport.internal_delay_s} for axis in "hv"},
         "delay_s": {"sercalo": delays["Uch"], "newport": delays["Unh"]},
+        "effective_delay_s": {"sercalo": delays["Uch"] + coil + sensor,
+                              "newport": delays["Unh"] + sensor},
     }
 
 

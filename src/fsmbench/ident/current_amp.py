@@ -1,0 +1,243 @@
+"""Seed 2.2 without its bias: the current-amplifier gain from the sampled ``Uc → Vc`` path.
+
+``Uc → Vc`` measures ``Ga·Zc·Gi``. The seed divides the measured magnitude by
+the continuous ``|Ga(jω)·Zc(jω)|`` and averages over 20–200 Hz. The
+converters do not measure the continuous response: the DAC holds each command
+for a sample and the command reaches the plant a delay later (a whole number
+of samples plus a latency), and the ADC samples what comes out. The sampled
+response's magnitude differs from the continuous one by the hold's droop and
+by aliasing, which depends on the delay: +4.2e-4 and −2.5e-4 of bias on an
+exact, noise-free FRF of the default and real-bench twins, twenty times the
+estimate's noise (issue 20).
+
+Here the measured FRF (the identification's estimator: Welch, LPM or the
+periodic average, each with its per-line variance) is fitted, in the band, by
+
+    H(f) = g · M(f; τ),
+
+``M`` the path ``Uc → Vc`` with ``Gi = 1/(1/g + Lc s)`` — the coil circuit
+``Vt = Uc − (R + R_buffer) Ic`` and the voltage amplifier ``Ga`` — as the
+converters sample it (:func:`fsmbench.ident.sampled.sampled_response`: hold,
+fractional delay, exactly), per unit of ``g``. ``g`` (real) is linear: its
+weighted least-squares value for each delay; the delay ``τ`` (the hold's
+half sample included) minimises the weighted residual. ``M`` depends on
+``g`` only through the coil's pole (125 kHz): two passes. The delay is the
+*pure* delay of the converter's path (DAC transport, hold, latency): no
+sensor low pass lies on it, and the coil's lag is in ``M``.
+
+Standard deviations: weighted least squares with the lines' own variances,
+inflated by the reduced chi-square when above 1 (a misfit) and by the lines
+one Welch window correlates (1.5 for a Hann window). ``Ga`` (gain and
+cut-off) and ``Zc`` (``Rc``, ``Lc``) are the bench file's, taken as known:
+the gain is defined against them.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import xarray as xr
+from numpy.typing import NDArray
+from scipy.optimize import minimize_scalar
+
+from fsmbench.bench.params import BenchParams
+from fsmbench.ident.calibration import CurrentAmplifierGain, require_signals, trim_recording
+from fsmbench.ident.frf import spectral_matrix
+from fsmbench.ident.frf_estimate import FrfEstimate
+from fsmbench.ident.frf_periodic import PeriodicOptions, periodic_frf
+from fsmbench.ident.lpm import LpmOptions, local_polynomial_frf
+from fsmbench.ident.sampled import StateSpace3, sampled_response
+from fsmbench.ident.welch import hanning
+
+__all__ = ["AmplifierFit", "amplifier_path", "fit_amplifier", "identify_current_amplifier"]
+
+FloatArray = NDArray[np.float64]
+_CURRENT = {"h": ("Uch", "Vch"), "v": ("Ucv", "Vcv")}
+#: Lines one Welch estimate correlates with a Hann window (its equivalent noise bandwidth).
+WELCH_CORRELATED_LINES = 1.5
+#: Delays searched [samples of the rate], hold's half sample included.
+_DELAY_RANGE_SAMPLES = (0.5, 8.0)
+
+
+def amplifier_path(p: BenchParams, *, axis: str, gain_a_per_v: float) -> StateSpace3:
+    """``Uc → Vc`` per unit of ``g`` as ``(A, B, C)``: ``Ga · (Rc + Lc s) / (1 + g Lc s)``.
+
+    States: the coil current and ``Vc``. ``Vt = Uc − (1/g − Rc) Ic`` is the coil's
+    voltage (``1/g = R + R_buffer + Rc``), ``Vc = Ga Vt``; divided by ``g``.
+    """
+    lc = p.sercalo.l_coil_h[axis]
+    rc = p.sercalo.r_coil_ohm[axis]
+    wc = 2 * math.pi * p.voltage_amplifier.cutoff_hz
+    g0 = p.voltage_amplifier.gain
+    r_tot = 1.0 / gain_a_per_v
+    a = np.array([[-r_tot / lc, 0.0], [-wc * g0 * (r_tot - rc), -wc]])
+    b = np.array([1.0 / lc, wc * g0]) / gain_a_per_v
+    return a, b, np.array([0.0, 1.0])
+
+
+@dataclass(frozen=True)
+class AmplifierFit:
+    """``H = g M(τ)`` fitted to one path's lines.
+
+    Attributes
+    ----------
+    gain_a_per_v, delay_s : float
+        ``g`` [A/V] and ``τ`` [s] (hold's half sample included).
+    noise_std_a_per_v, misfit_std_a_per_v : float
+        The gain's standard deviation from the lines' noise, and what a reduced
+        chi-square above 1 adds [A/V].
+    delay_std_s : float
+        The delay's standard deviation (both parts) [s].
+    reduced_chi2 : float
+        Weighted squared residual per degree of freedom.
+    frequency_hz, gain_per_line_a_per_v : tuple of float
+        Each line's ``Re(H / M)`` [Hz], [A/V] (the seed's ``Gi_resp``, sampled).
+    """
+
+    gain_a_per_v: float
+    delay_s: float
+    noise_std_a_per_v: float
+    misfit_std_a_per_v: float
+    delay_std_s: float
+    reduced_chi2: float
+    frequency_hz: tuple[float, ...]
+    gain_per_line_a_per_v: tuple[float, ...]
+
+
+def fit_amplifier(f_hz: FloatArray, h: NDArray[np.complex128], var: FloatArray, *,
+                  nominal: BenchParams, axis: str, fs_hz: float, start_a_per_v: float,
+                  correlated_lines: float = 1.0) -> AmplifierFit:
+    """Fit ``g`` and ``τ`` to the lines (see the module).
+
+    Parameters
+    ----------
+    f_hz : array, shape (F,)
+        Lines [Hz] (> 0).
+    h : array, complex, shape (F,)
+        Measured ``Vc/Uc`` [V/V].
+    var : array, shape (F,)
+        ``E|H − H_true|²`` of each line [(V/V)²].
+    nominal : BenchParams
+        ``Ga`` and ``Zc``.
+    axis : {"h", "v"}
+    fs_hz : float
+        Converter rate [Hz].
+    start_a_per_v : float
+        A first value of ``g`` for the coil's pole [A/V].
+    correlated_lines : float
+        Adjacent lines one estimate correlates (≥ 1).
+    """
+    f = np.asarray(f_hz, dtype=float)
+    w = 1.0 / np.asarray(var, dtype=float)
+    ts = 1.0 / fs_hz
+    g = float(start_a_per_v)
+    for _ in range(2):
+        path = amplifier_path(nominal, axis=axis, gain_a_per_v=g)
+
+        def model(tau: float, path: StateSpace3 = path) -> NDArray[np.complex128]:
+            return sampled_response(path, f_hz=f, fs_hz=fs_hz, delay_s=tau)
+
+        def cost(tau: float, model=model) -> float:  # type: ignore[no-untyped-def]
+            m = model(tau)
+            gain = float(np.sum(w * np.real(h * np.conj(m))) / np.sum(w * np.abs(m) ** 2))
+            return float(np.sum(w * np.abs(h - gain * m) ** 2))
+
+        grid = np.arange(*_DELAY_RANGE_SAMPLES, 0.05) * ts
+        k = int(np.argmin([cost(t) for t in grid]))
+        lo, hi = grid[max(k - 1, 0)], grid[min(k + 1, grid.size - 1)]
+        tau = float(minimize_scalar(cost, bounds=(lo, hi), method="bounded",
+                                    options={"xatol": 1e-6 * ts}).x)
+        m = model(tau)
+        g = float(np.sum(w * np.real(h * np.conj(m))) / np.sum(w * np.abs(m) ** 2))
+    r = h - g * m
+    dof = max(2 * f.size - 2, 1)
+    # Real and imaginary parts each carry half a line's variance.
+    chi2 = float(np.sum(2.0 * w * np.abs(r) ** 2)) / dof
+    fisher_g = float(np.sum(2.0 * w * np.abs(m) ** 2))
+    dm = (model(tau + 1e-3 * ts) - model(tau - 1e-3 * ts)) / (2e-3 * ts)
+    fisher_tau = float(np.sum(2.0 * w * np.abs(g * dm) ** 2))
+    noise = math.sqrt(correlated_lines / fisher_g)
+    total = noise * math.sqrt(max(chi2, 1.0))
+    return AmplifierFit(
+        gain_a_per_v=g, delay_s=tau, noise_std_a_per_v=noise,
+        misfit_std_a_per_v=math.sqrt(max(total**2 - noise**2, 0.0)),
+        delay_std_s=math.sqrt(correlated_lines * max(chi2, 1.0) / fisher_tau),
+        reduced_chi2=chi2, frequency_hz=tuple(float(x) for x in f),
+        gain_per_line_a_per_v=tuple(float(x) for x in np.real(h / m)))
+
+
+def _estimate(u: FloatArray, v: FloatArray, *, fs: float, name: str, u_name: str,
+              v_name: str, estimator: str, window_s: float,
+              periodic: PeriodicOptions | None) -> tuple[FrfEstimate, float]:
+    """The path's FRF by the identification's estimator, and the lines it correlates."""
+    if estimator == "lpm":
+        est = local_polynomial_frf(u, v, fs_hz=fs, input_name=u_name, output_names=[v_name],
+                                   options=LpmOptions(stride=2 * LpmOptions().n + 1),
+                                   source=f"{name}.mat")
+        return est, 1.0
+    if estimator == "periodic":
+        return periodic_frf(u, v, fs_hz=fs, input_name=u_name, output_names=[v_name],
+                            options=periodic or PeriodicOptions(), source=f"{name}.mat"), 1.0
+    frf = spectral_matrix(u, v, input_names=[u_name], output_names=[v_name],
+                          window=hanning(int(np.ceil(window_s * fs))), fs_hz=fs)
+    return FrfEstimate.from_frequency_response(frf), WELCH_CORRELATED_LINES * frf.nfft \
+        / frf.window_length
+
+
+def identify_current_amplifier(ds: xr.Dataset, *, axis: str, nominal: BenchParams,
+                               trim_s: float = 1.0,
+                               band_hz: tuple[float, float] = (20.0, 200.0),
+                               window_s: float = 1.0, estimator: str = "welch",
+                               periodic: PeriodicOptions | None = None
+                               ) -> CurrentAmplifierGain:
+    """``Gi`` of ``axis`` from ``data_uch``/``data_ucv`` (``Uc → Vc``), see the module.
+
+    Parameters
+    ----------
+    ds : xarray.Dataset
+        Recording with ``Uch, Vch`` (h) or ``Ucv, Vcv`` (v) [V].
+    axis : {"h", "v"}
+    nominal : BenchParams
+        Known ``Ga`` and ``Zc``, the resistor ``R`` for the theoretical gain.
+    trim_s : float
+        Seconds removed at the start [s].
+    band_hz : (float, float)
+        Lines fitted [Hz], open interval (the seed's 20–200 Hz).
+    window_s : float
+        Welch's Hann window [s].
+    estimator : {"welch", "lpm", "periodic"}
+        The FRF estimator (the identification's).
+    periodic : PeriodicOptions, optional
+        Period and transient of a periodic record.
+    """
+    if axis not in _CURRENT:
+        raise ValueError(f"axis must be 'h' or 'v', got {axis!r}")
+    u_name, v_name = _CURRENT[axis]
+    name = require_signals(ds, (u_name, v_name), purpose="the current amplifier")
+    rec = trim_recording(ds, t0_s=trim_s)
+    fs = float(rec.attrs["fs_hz"])
+    u, v = (np.asarray(rec[n].values, dtype=float) for n in (u_name, v_name))
+    est, correlated = _estimate(u - u.mean(), v - v.mean(), fs=fs, name=name, u_name=u_name,
+                                v_name=v_name, estimator=estimator, window_s=window_s,
+                                periodic=periodic)
+    f = est.frequency_hz
+    h = est.frf[:, 0, 0]
+    var = est.total_variance[:, 0, 0]
+    sel = (f > band_hz[0]) & (f < band_hz[1]) & np.isfinite(h) & np.isfinite(var) & (var > 0)
+    if sel.sum() < 3:
+        raise ValueError(f"{name}: {int(sel.sum())} lines in {band_hz} Hz with a variance; the "
+                         "current amplifier needs 3")
+    r_total = nominal.current_amplifier.r_ohm[axis] + nominal.sercalo.r_coil_ohm[axis]
+    fit = fit_amplifier(f[sel], h[sel], var[sel], nominal=nominal, axis=axis, fs_hz=fs,
+                        start_a_per_v=1.0 / r_total, correlated_lines=correlated)
+    return CurrentAmplifierGain(
+        axis=axis, gain_a_per_v=fit.gain_a_per_v,
+        gain_std_a_per_v=math.hypot(fit.noise_std_a_per_v, fit.misfit_std_a_per_v),
+        theoretical_a_per_v=float(1.0 / r_total), band_hz=(float(band_hz[0]),
+                                                            float(band_hz[1])),
+        frequency_hz=fit.frequency_hz, gi_response_a_per_v=fit.gain_per_line_a_per_v,
+        experiment=name, noise_std_a_per_v=fit.noise_std_a_per_v,
+        misfit_std_a_per_v=fit.misfit_std_a_per_v, delay_s=fit.delay_s,
+        delay_std_s=fit.delay_std_s, reduced_chi2=fit.reduced_chi2, estimator=est.estimator)

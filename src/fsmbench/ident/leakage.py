@@ -1,0 +1,102 @@
+"""The leakage bias of a Welch estimate near sharp modes, from the fitted model.
+
+A Welch H1 estimate with a window ``w`` of ``L`` samples does not measure the
+response at a line ``f_k``: for a white input (the seed's noise records) its
+expectation is the response smoothed by the window's spectral kernel,
+
+    E[H_hat(f_k)] = ∫ H(f_k − ν) K(ν) dν,   K(ν) = |W(ν)|² / ∫ |W|²,
+
+``W`` the window's transform (Bendat & Piersol, ch. 8–9: the resolution bias
+of an averaged spectrum). Where ``H`` varies within the kernel's width (±2
+bins for Hann) the bias is large: a 1 s window on the twin's modes, whose
+half-power bandwidths are 1 and 0.5 Hz, smears the peak to a fraction of its
+height. Bendat & Piersol's variance does not see it: near the modes 57–69 %
+of the lines fell inside the "95 %" circle (issue 20).
+
+:func:`welch_leakage_bias` computes ``E[H_hat] − H`` for a model ``H`` (the
+fitted Sercalo, its modes from the leakage-free time-domain refinement) on a
+fine grid of the kernel (16 points per bin over ±8 bins, where Hann's kernel
+has fallen to 1e-8 of its peak). The identification adds ``|bias|²`` to
+each line's variance as its ``leakage`` part, a bias bound: it does not move
+the measured FRF, it says how far from the response it may be, and the
+variance weights of the fit give the smeared lines next to no weight.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+__all__ = ["welch_kernel", "welch_leakage_bias"]
+
+#: Kernel points per window bin, and bins each side (Hann's kernel at 8 bins: ~1e-8).
+OVERSAMPLING = 16
+HALF_WIDTH_BINS = 8
+
+
+def welch_kernel(window: ArrayLike, *, oversampling: int = OVERSAMPLING,
+                 half_width_bins: int = HALF_WIDTH_BINS
+                 ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """The window's normalised spectral kernel on a fine grid.
+
+    Parameters
+    ----------
+    window : array_like, shape (L,)
+        Window samples (dimensionless).
+    oversampling : int
+        Grid points per bin (``1/L`` cycles per sample).
+    half_width_bins : int
+        Bins each side of 0.
+
+    Returns
+    -------
+    offsets : ndarray, shape (G,)
+        Frequency offsets in bins (``ν L / fs``).
+    weights : ndarray, shape (G,)
+        ``K`` times the grid step: they sum to 1.
+    """
+    w = np.asarray(window, dtype=float)
+    n = w.size * oversampling
+    spec = np.abs(np.fft.fft(w, n)) ** 2
+    half = half_width_bins * oversampling
+    idx = np.arange(-half, half + 1)
+    k = spec[idx % n]
+    return idx / oversampling, k / k.sum()
+
+
+def welch_leakage_bias(model: Callable[[NDArray[np.float64]], NDArray[np.complex128]],
+                       frequency_hz: ArrayLike, *, fs_hz: float, window: ArrayLike
+                       ) -> NDArray[np.complex128]:
+    """``E[H_hat] − H`` at each line of a Welch estimate of ``model`` (see the module).
+
+    Parameters
+    ----------
+    model : callable
+        Frequencies [Hz], shape (G,) → response, complex, shape (G, ...) (any
+        trailing shape: outputs, inputs).
+    frequency_hz : array_like, shape (F,)
+        The estimate's lines [Hz].
+    fs_hz : float
+        Sampling rate [Hz].
+    window : array_like, shape (L,)
+        The Welch window.
+
+    Returns
+    -------
+    ndarray, complex, shape (F, ...)
+        The bias [unit of the model]. The input is white over the kernel's
+        width (flat input PSD): the H1 estimate's expectation is then the
+        smoothed cross-spectrum over the input's PSD.
+    """
+    f = np.asarray(frequency_hz, dtype=float)
+    w = np.asarray(window, dtype=float)
+    offsets, weights = welch_kernel(w)
+    bin_hz = fs_hz / w.size
+    grid = (f[:, None] + offsets[None, :] * bin_hz).ravel()
+    h = np.asarray(model(grid))
+    h = h.reshape(f.size, offsets.size, *h.shape[1:])
+    smoothed = np.tensordot(weights, np.moveaxis(h, 1, 0), axes=(0, 0))
+    at = np.asarray(model(f))
+    return np.asarray(smoothed - at, dtype=np.complex128)
