@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import json
 import os
+import signal
 import sys
 import threading
 import time
@@ -31,6 +32,7 @@ pytest.importorskip("softioc")
 pytest.importorskip("epics")
 
 from fsmbench.bench.params import default_bench
+from fsmbench.io.recording import read_recording
 from fsmbench.live.attributes import ATTRIBUTES, precision
 from fsmbench.live.epics import MAX_ARRAY_BYTES
 from fsmbench.twin.simulate import simulate_bench
@@ -345,7 +347,16 @@ def test_second_start_refused_and_a_restart_remembers(
     assert ioc.command("LoadController", str(controller_x1))[0] == "OK"
     parts.wait_until(lambda: ioc.text("Task") == "", "the controller to load")
     name = ioc.text("Controller")
-    assert ioc.server.stop() == 0
+    # SIGINT (Ctrl-C) during a Record: the server stops cleanly and keeps what was recorded.
+    code, reply = ioc.command("Record", json.dumps({"signals": ["Vph"], "duration_s": 600,
+                                                    "name": "interrupted", "format": "nexus"}))
+    assert code == "OK", reply
+    t0 = ioc.get("BenchTime")
+    parts.wait_until(lambda: ioc.get("BenchTime") > t0 + 1.0, "1 s of recording")
+    assert ioc.server.stop(signal.SIGINT) == 0
+    assert "stopping on SIGINT" in ioc.server.text()
+    n = read_recording(ioc.out / "interrupted.h5").sizes["t"]
+    assert 0 < n < 600 * FS, n
     ioc.server = start_ioc(parts, ca, ioc.folder, ioc.prefix, "ioc-again")
     parts.wait_until(lambda: ioc.try_get("Task", as_string=True) == "",
                      "the restarted IOC, its remembered controller loaded")

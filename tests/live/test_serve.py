@@ -212,3 +212,19 @@ def test_sigterm_stops_the_server_while_it_designs(tmp_path: Path) -> None:
         if proc.poll() is None:
             proc.kill()
             proc.wait(timeout=WAIT_S)
+
+
+def test_without_the_epics_extra_the_core_imports_and_epics_is_one_line(
+        tmp_path: Path) -> None:
+    # The epics extra is optional: without softioc and pyepics the package and serve import,
+    # and --protocol epics says what to install, in one line.
+    code = ("import sys\n"
+            "sys.modules['softioc'] = None; sys.modules['epics'] = None\n"
+            "import fsmbench.live.core, fsmbench.live.epics\n"
+            "from fsmbench.cli import main\n"
+            "sys.exit(main(['serve', '--protocol', 'epics', '--prefix', 'NOEXTRA']))\n")
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                          timeout=WAIT_S, cwd=tmp_path, check=False)
+    lines = done.stderr.strip().splitlines()
+    assert done.returncode == 2 and len(lines) == 1, done.stderr
+    assert "pip install 'fsmbench[epics]'" in lines[0], lines

@@ -445,3 +445,49 @@ def test_quality_from_limits_with_hysteresis_and_invalid_when_not_finite(
     # 144000: WARNING; 60000: WARNING; 10000: VALID; NaN: INVALID.
     got = [evaluate(spec, live, latch)[1] for _ in range(6)]
     assert got == ["ALARM", "ALARM", "WARNING", "WARNING", "VALID", "INVALID"]
+
+
+# -- An excitation in closed loop (for issue 24's loop that watches itself) -----------------
+
+
+def test_an_excitation_in_running_is_added_at_the_controller_output(tmp_path: Path) -> None:
+    # Two twins of one seed, closed alike; one gets a sine on Uch while RUNNING. What the
+    # controller added is K applied to the difference of the 4QD readings it read (linear,
+    # zero difference of state when the sine starts), so the DAC difference less that part
+    # is what was added after the controller: the sine itself, to DAC quantisation.
+    twins = [LiveBench(BENCH, seed=5, output_folder=tmp_path / name) for name in ("a", "b")]
+    for live in twins:
+        live.advance(1000)
+        live.close_loop()
+        live.advance(round(2 * FS))
+    excited = twins[0]
+    reply = excited.start_excitation(json.dumps({"input": "Uch", "kind": "sine",
+                                                 "amplitude_v": 0.2, "frequency_hz": 37}))
+    assert "sine on Uch started" in reply and excited.state == "RUNNING"
+    paths = [Path(live.record(json.dumps({"signals": ["Uch", "Ucv", "Vph", "Vpv"],
+                                          "duration_s": 1.0, "name": "x"}))) for live in twins]
+    for live in twins:
+        idle(live)
+    assert excited.state == "RUNNING" and excited.loop_closed, excited.status
+    a, b = (read_recording(p) for p in paths)
+    np.testing.assert_array_equal(a["t"].values, b["t"].values)
+    d_u = np.column_stack([a[s].values - b[s].values for s in ("Uch", "Ucv")])
+    d_y = np.column_stack([a[s].values - b[s].values for s in ("Vph", "Vpv")])
+    k = excited.backend.controller
+    assert k is not None
+    x = np.zeros(k.a.shape[0])
+    by_controller = np.zeros_like(d_u)
+    for i, e in enumerate(d_y):
+        by_controller[i] = k.c @ x + k.d @ e
+        x = k.a @ x + k.b @ e
+    added = d_u - by_controller
+    t = a["t"].values
+    basis = np.column_stack([np.sin(2 * np.pi * 37.0 * t), np.cos(2 * np.pi * 37.0 * t)])
+    coef = np.linalg.lstsq(basis, added[:, 0], rcond=None)[0]
+    lsb = BENCH.nominal.converter.lsb_v
+    # The controller's part is large (it must be removed for the check to mean anything).
+    assert np.abs(by_controller[:, 0]).max() > 100 * lsb
+    # Each run's DAC rounds by at most half an LSB: their difference by at most one.
+    assert np.abs(added[:, 0] - basis @ coef).max() <= 1.001 * lsb
+    assert np.abs(added[:, 1]).max() <= 1.001 * lsb  # nothing added to Ucv
+    assert abs(np.hypot(*coef) - 0.2) < lsb

@@ -15,6 +15,7 @@ from __future__ import annotations
 import gc
 import json
 import os
+import signal
 import sys
 import threading
 import time
@@ -140,7 +141,7 @@ def test_two_benches_and_the_starter_entry_point(parts: SimpleNamespace, tdb: _D
         assert props["Speed"] == ["20.0"] and props["Seed"] == ["0"]
         assert props["WatchdogSeconds"] == ["5.0"]
     finally:
-        assert starter.stop() == 0
+        assert starter.stop(signal.SIGINT) == 0  # Ctrl-C stops it cleanly, as SIGTERM does
     line = refused(parts, tdb, str(Path(sys.executable).parent / "FsmBench"), "nobody")
     assert "has no FsmBench device" in line
 

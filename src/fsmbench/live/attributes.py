@@ -321,17 +321,19 @@ def readme_table() -> str:
         if lim.high_alarm is not None or lim.low_alarm is not None:
             alarm = f"< {_num(lim.low_alarm)} or > {_num(lim.high_alarm)}" \
                 if lim.low_alarm is not None else f"> {_num(lim.high_alarm)}"
-        if lim.hysteresis:
-            alarm += f" (hysteresis {lim.hysteresis:g})"
+        u = f" {s.unit}" if s.unit else ""
+        warn += u if warn != "–" else ""
+        if alarm != "–":
+            alarm += u + (f" (hysteresis {lim.hysteresis:g}{u})" if lim.hysteresis else "")
         if s.kind in ("spectrum", "image"):
             change = archive = "– (read)"
         elif ev.polling_ms is None:
             change, archive = "pushed on change", "pushed on change"
         else:
-            parts = [f"±{ev.abs_change:g}" if ev.abs_change is not None else "",
+            parts = [f"±{ev.abs_change:g}{u}" if ev.abs_change is not None else "",
                      f"±{ev.rel_change:g} %" if ev.rel_change is not None else ""]
             change = " or ".join(p for p in parts if p) + f", polled {ev.polling_ms} ms"
-            parts = [f"±{ev.archive_abs_change:g}" if ev.archive_abs_change is not None
+            parts = [f"±{ev.archive_abs_change:g}{u}" if ev.archive_abs_change is not None
                      else "", f"±{ev.archive_rel_change:g} %" if ev.archive_rel_change
                      is not None else ""]
             archive = " or ".join(p for p in parts if p) + \
@@ -344,6 +346,8 @@ def readme_table() -> str:
         unit = s.unit or "–"
         if s.egu and s.egu != s.unit:
             unit += f" ({s.egu})"
-        lines.append(f"| `{s.name}` | {kind} | {unit} | `{s.fmt or '–'}` | {warn} | {alarm} "
-                     f"| {change} | {archive} | {s.doc} |")
+        fmt = f"`{s.fmt}`" if s.fmt else "–"
+        doc = s.doc.replace("|", "\\|")  # |H1| would end the cell
+        lines.append(f"| `{s.name}` | {kind} | {unit} | {fmt} | {warn} | {alarm} "
+                     f"| {change} | {archive} | {doc} |")
     return "\n".join(lines)

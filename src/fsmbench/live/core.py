@@ -168,6 +168,7 @@ class LiveBench(BenchCommands):
         self._asd_cache: dict[str, np.ndarray] = {}
         self._frf: AccumulatingFrf | None = None
         self._frf_cache: FrfSnapshot | None = None
+        self._spectra_due = False
         self._excitation: dict[str, Any] | None = None
         self._next_second = 1
         self._loaded: DiscreteController | None = None
@@ -277,6 +278,10 @@ class LiveBench(BenchCommands):
         """Run ``n`` samples now (the loop thread calls this; tests may too, without it)."""
         with self._lock:
             block = self._advance(n)
+            due, self._spectra_due = self._spectra_due, False
+            frf = self._frf
+        if due:
+            self._refresh_spectra(frf)
         self.loop.beat()
         self.publish()
         return block
@@ -307,7 +312,7 @@ class LiveBench(BenchCommands):
         end = block.start_sample + block.n
         if end >= self._next_second * self.fs_hz:
             self._next_second = int(end // self.fs_hz) + 1
-            self._refresh_spectra()
+            self._spectra_due = True  # computed after the lock is released (advance)
         m = self.monitor
         self._alarm = self.alarm_rule.next(
             active=self._alarm[0], since_s=self._alarm[1], now_s=end_s,
@@ -364,15 +369,26 @@ class LiveBench(BenchCommands):
             self.log("WARNING", f"the loaded controller could not be remembered in "
                                 f"{self.memory.where}: {exc}")
 
-    def _refresh_spectra(self) -> None:
-        for name, asd in self._asd.items():
-            snap = asd.spectrum()
-            if snap is not None:
-                self._asd_cache["frequency"] = snap.frequency_hz
-                self._asd_cache[name] = snap.asd[0]
-        if self._frf is not None and self._frf.n_segments:
+    def _refresh_spectra(self, frf: AccumulatingFrf | None) -> None:
+        """New spectra, computed outside the lock (the three 10 s Welch ASDs take 15-45 ms
+        on a busy machine: under the lock they were the p99 of every client's read).
+
+        Only the loop's thread pushes samples into the estimators, and it is here, so
+        they do not change meanwhile; a command may replace the FRF estimator: a result
+        of the one it replaced is dropped.
+        """
+        snaps = {name: asd.spectrum() for name, asd in self._asd.items()}
+        result = None
+        if frf is not None and frf.n_segments:
             with contextlib.suppress(ValueError):  # a constant signal: no FRF yet
-                self._frf_cache = self._frf.result()
+                result = frf.result()
+        with self._lock:
+            for name, snap in snaps.items():
+                if snap is not None:
+                    self._asd_cache["frequency"] = snap.frequency_hz
+                    self._asd_cache[name] = snap.asd[0]
+            if result is not None and self._frf is frf:
+                self._frf_cache = result
 
     def _stop_frf(self) -> None:
         if self._frf is not None and self._frf.n_segments:

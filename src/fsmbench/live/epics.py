@@ -53,7 +53,7 @@ if TYPE_CHECKING:
     from fsmbench.live.serve import ServeOptions
 
 __all__ = ["ACTIONS", "ARGUMENT_COMMANDS", "MAX_ARRAY_BYTES", "BenchIoc", "check_prefix",
-           "serve_epics"]
+           "pv_table", "serve_epics"]
 
 #: Commands without argument (an Action record each) and with one (a long string).
 ACTIONS = ("CloseLoop", "OpenLoop", "StopExcitation", "Abort", "Reset")
@@ -75,6 +75,47 @@ def check_prefix(prefix: str) -> str:
         raise ValueError(f"--prefix {prefix!r}: use 1 to 40 letters, digits, _, - or : (not "
                          "ending with :); the PVs are PREFIX:BeamAngleH, ...")
     return prefix
+
+
+def pv_table() -> str:
+    """The PV table of the README (Markdown), from the records :class:`BenchIoc` makes."""
+    lines = ["| PV | record | fields | does |", "|---|---|---|---|"]
+    for spec in ATTRIBUTES:
+        if spec.kind == "float" and not spec.writable:
+            kind, fields = "ai", "EGU, PREC, LOPR/HOPR, the table's limits as HIHI/HIGH/LOW/" \
+                                 "LOLO with HYST, change and archive criteria as MDEL/ADEL"
+        elif spec.kind == "float":
+            kind, fields = "ao (put to set)", "LOPR/HOPR 0.01/100; a put outside is refused " \
+                                              "in Reply"
+        else:
+            kind, fields = {"int": ("longin", "MDEL/ADEL"), "bool": ("bi", "ZNAM Open, ONAM "
+                                                                     "Closed"),
+                            "str": ("long string (lsi)", "read with caget -S"),
+                            "spectrum": ("waveform of double", "EGU, PREC, NELM"),
+                            "image": ("waveform of double per row", "EGU, PREC, NELM")
+                            }[spec.kind]
+        names = [f"`PREFIX:{spec.name}{row}`" for row in spec.rows] if spec.rows else \
+            [f"`PREFIX:{spec.name}`"]
+        doc = spec.doc.replace("|", "\\|")
+        lines.append(f"| {', '.join(names)} | {kind} | {fields} | {doc} |")
+    lines += [
+        "| `PREFIX:State` | mbbi | ON, RUNNING, MOVING, ALARM (MINOR), FAULT (MAJOR) | the "
+        "state, from the facts |",
+        "| `PREFIX:Status` | long string | – | the state in words: why, since when, what "
+        "runs, the last outcome |",
+        *(f"| `PREFIX:{name}`, `PREFIX:{name}.PROC` | Action (bo) | put 1, or process | runs "
+          f"{name}; the put completes when it has run or was refused |" for name in ACTIONS),
+        *(f"| `PREFIX:{name}` | long string out | put the argument (JSON or a name) | runs "
+          f"{name} with it; the put completes when it has started or was refused |"
+          for name in ARGUMENT_COMMANDS),
+        "| `PREFIX:Reply` | long string | SEVR MINOR, STAT WRITE after a refusal | what the "
+        "last command did, or why it was refused (the sentence of Tango's DevFailed) |",
+        "| `PREFIX:ReplyCode` | stringin | – | `OK`, or the refusal's reason code "
+        "(`FSM_Settling`, ...: Tango's DevFailed reason) |",
+        "| `PREFIX:ReplyCount` | longin | – | replies so far (a client sees its command's "
+        "reply when it has grown) |",
+    ]
+    return "\n".join(lines)
 
 
 def _already_served(prefix: str) -> str:
@@ -360,8 +401,13 @@ def serve_epics(options: ServeOptions, *, ready: str = "") -> int:
     stop = threading.Event()
     # kill -USR1 <pid>: every thread's stack on stderr (what a stuck IOC is doing).
     faulthandler.register(signal.SIGUSR1, all_threads=True)
-    handlers = {sig: signal.signal(sig, lambda *_: stop.set())
-                for sig in (signal.SIGTERM, signal.SIGINT)}
+    received: list[int] = []
+
+    def on_signal(sig: int, _frame: Any) -> None:
+        received.append(sig)
+        stop.set()
+
+    handlers = {sig: signal.signal(sig, on_signal) for sig in (signal.SIGTERM, signal.SIGINT)}
     try:
         live.start()
         live.log("INFO", live.restore_controller())
@@ -370,7 +416,11 @@ def serve_epics(options: ServeOptions, *, ready: str = "") -> int:
         print(f"fsmbench serve: IOC {prefix} ({options.backend}, speed {options.speed:g}): "
               f"{prefix}:BeamAngleH, {prefix}:State, {prefix}:CloseLoop ...{ready}",
               flush=True)
-        stop.wait()
+        # Short waits: the handler runs in this thread between them, whatever else blocks.
+        while not stop.wait(0.5):
+            pass
+        live.log("INFO", f"stopping on {signal.Signals(received[0]).name}: the records stop, "
+                         "a running recording keeps what it has")
     finally:
         for sig, handler in handlers.items():
             with contextlib.suppress(ValueError):
