@@ -231,3 +231,18 @@ def test_frf_figure_shows_the_measured_magnitude_and_the_model(
 
 def _joined(sec: Section) -> str:
     return "\n".join(visible_text([sec]))
+
+
+def test_every_identified_value_is_listed_with_its_total_and_largest_part(
+        result: Identification, ident_twin: TwinRun, bench: Bench) -> None:
+    sec = identification_section(result, recordings=ident_twin.recordings, bench=bench,
+                                 truth=None, skipped={})
+    table = next(t for t in _tables(sec) if t.header[2] == "± total"
+                 and t.header[1] == "value")
+    assert len(table.rows) == len(result.uncertainty) >= 20
+    words = {r[0].split(" [")[0].lower() for r in table.rows}
+    for u in result.uncertainty.values():
+        assert u.quantity.lower() in words
+        # the total is the root sum of squares of the parts, each a std
+        assert u.std == pytest.approx(float(np.sqrt(sum(v**2 for v in u.parts.values()))))
+    assert all(r[3].endswith("%)") and "_" not in r[3] for r in table.rows)  # words, no keys

@@ -56,12 +56,23 @@ def total_cells(u: Uncertain | None, scale: float) -> tuple[str, str]:
             f"{words} ({100 * share:.0f} %)" if math.isfinite(share) else words)
 
 
+#: Rows in the order of the ESRF study's section 2 (2.1 4QD ... 2.4 Newport), then delays.
+_SECTION_ORDER = ("qd_gain", "qd_diode_gain", "current_amp", "sercalo.", "newport_gain",
+                  "newport.", "delay_s", "effective_delay_s")
+
+
+def _order(key: str) -> tuple[int, str]:
+    rank = next((i for i, p in enumerate(_SECTION_ORDER) if key.startswith(p)),
+                len(_SECTION_ORDER))
+    return rank, key
+
+
 def uncertainty_table(result: Identification) -> Table | None:
     """Every identified value with its total std and its largest part (None when none)."""
     if not result.uncertainty:
         return None
     rows = []
-    for _key, u in sorted(result.uncertainty.items()):
+    for _key, u in sorted(result.uncertainty.items(), key=lambda kv: _order(kv[0])):
         unit, scale = display(u)
         total, largest = total_cells(u, scale)
         name = u.quantity[0].upper() + u.quantity[1:]
