@@ -352,7 +352,14 @@ class BenchCommands:
                 source["controller"] = str(doc["controller"])
         else:
             source = {"path": text}
-        if not Path(source["path"]).exists():
+        try:
+            exists = Path(source["path"]).exists()
+        except (OSError, ValueError) as exc:  # a name too long for the filesystem, a NUL
+            why = exc.strerror if isinstance(exc, OSError) and exc.strerror else str(exc)
+            raise Refused("FSM_BadArgument", f"LoadController refused: the path "
+                                             f"{source['path'][:80]!r}... is not one the "
+                                             f"filesystem takes ({why})") from None
+        if not exists:
             raise Refused("FSM_BadArgument",
                           f"LoadController refused: {source['path']}: does not exist")
         with self._locked("LoadController"):
