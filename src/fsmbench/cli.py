@@ -71,6 +71,7 @@ from fsmbench.excite.cli import add_excite_command
 from fsmbench.io.convert_cli import add_convert_command
 from fsmbench.live.serve import add_serve_command
 from fsmbench.scale.mc_cli import add_montecarlo_command
+from fsmbench.tune.cli import add_tune_command
 
 __all__ = ["EXIT_BUG", "EXIT_SIGINT", "EXIT_SIGTERM", "EXIT_USER_ERROR", "main"]
 
@@ -717,6 +718,7 @@ def _parser() -> argparse.ArgumentParser:
     add_serve_command(sub, factor=factor)
     add_montecarlo_command(sub)
     add_excite_command(sub)
+    add_tune_command(sub)
 
     add_convert_command(sub, progress=_progress)
     return parser

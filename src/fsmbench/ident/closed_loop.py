@@ -130,9 +130,12 @@ class TrackingDuringMeasurement:
     ----------
     record : str
     before_rms_rad, during_rms_rad, added_rms_rad : dict axis -> float
-        Rms (mean removed) before the excitation, while excited, and
-        ``sqrt(during² - before²)`` [rad]; ``before`` and ``added`` are NaN when
-        the record holds less than 0.5 s of loop before the excitation.
+        Rms (mean removed) before the excitation and while excited [rad]; what the
+        excitation added [rad]: for a repeated excitation the rms of the
+        synchronous average over its periods (noise share removed), else
+        ``sqrt(during² - before²)``. ``before`` is NaN when the record holds less
+        than 0.5 s of loop before the excitation (and then ``added`` too, for an
+        excitation that does not repeat).
     bound_rad : float or None
         The user's bound on the added rms.
     """
@@ -320,8 +323,29 @@ def _excitation(ds: xr.Dataset, name: str) -> tuple[str, str]:
     return have[0], "output" if have[0] == out_var else "reference"
 
 
+def _synchronous_added(e: np.ndarray, x: np.ndarray) -> float | None:
+    """Rms of the part of ``e`` that repeats with the excitation ``x`` [same unit as e].
+
+    The synchronous average over whole periods (the first dropped: the loop's transient)
+    keeps what the excitation causes and averages the rest down; its noise share, the
+    per-sample variance across periods over their number, is taken off. None when ``x``
+    does not repeat at least three times.
+    """
+    from fsmbench.ident.frf_periodic import detect_period
+
+    n = detect_period(x)
+    if n is None or x.size // n < 3:
+        return None
+    periods = x.size // n - 1
+    seg = e[n: n + periods * n].reshape(periods, n)
+    seg = seg - seg.mean()
+    mean = seg.mean(axis=0)
+    noise = float(np.mean(np.var(seg, axis=0, ddof=1))) / periods
+    return float(np.sqrt(max(0.0, float(np.mean(mean**2)) - noise)))
+
+
 def _tracking(ds: xr.Dataset, name: str, start: int, gd: tuple[float, float],
-              bound: float | None) -> TrackingDuringMeasurement:
+              bound: float | None, excitation: np.ndarray) -> TrackingDuringMeasurement:
     fs = float(ds.attrs["fs_hz"])
     before: dict[str, float] = {}
     during: dict[str, float] = {}
@@ -330,11 +354,15 @@ def _tracking(ds: xr.Dataset, name: str, start: int, gd: tuple[float, float],
     for i, (axis, sig) in enumerate((("h", "Vph"), ("v", "Vpv"))):
         e = np.asarray(ds[sig].values, dtype=float) / gd[i]
         during[axis] = float(np.std(e[start:]))
-        if start - first >= _MIN_BEFORE_S * fs:
-            before[axis] = float(np.std(e[first:start]))
-            added[axis] = float(np.sqrt(max(0.0, during[axis] ** 2 - before[axis] ** 2)))
-        else:
-            before[axis] = added[axis] = float("nan")
+        before[axis] = (float(np.std(e[first:start])) if start - first >= _MIN_BEFORE_S * fs
+                        else float("nan"))
+        # A repeated excitation's share is measured by the synchronous average (the loop's
+        # own error, 1/f and drift included, averages out); else the quadrature difference
+        # of the rms with and before it, which a short "before" window makes noisy.
+        sync = _synchronous_added(e[start:], excitation)
+        added[axis] = sync if sync is not None else (
+            float(np.sqrt(max(0.0, during[axis] ** 2 - before[axis] ** 2)))
+            if math.isfinite(before[axis]) else float("nan"))
     return TrackingDuringMeasurement(name, before, during, added, bound)
 
 
@@ -404,7 +432,8 @@ def identify_closed_loop(recordings: Mapping[str, xr.Dataset], *, bench: Bench,
             raise ValueError(f"{name}: the excitation {var} is zero throughout")
         start = int(on[0])
         starts[name] = start
-        tracking.append(_tracking(ds, name, start, (gd[0], gd[1]), opts.max_error_rad))
+        tracking.append(_tracking(ds, name, start, (gd[0], gd[1]), opts.max_error_rad,
+                                  x[start:]))
         records.append(ClosedLoopRecord(
             excitation=x[start:],
             commands=np.column_stack([ds["Uch"].values, ds["Ucv"].values])[start:],

@@ -313,6 +313,26 @@ class BenchStream:
         (self._excitations if at == "output" else self._references).append(stream)
         return peak
 
+    def set_plant(self, plant: DiscretePlant) -> None:
+        """Step ``plant`` from the next sample, from the state the bench is in.
+
+        The bench changing under a running loop (a resonance drifting): ``plant``
+        must have the same states, inputs and outputs (the twin's plant of other
+        parameters, :func:`~fsmbench.sim.plant.twin_discrete`), so that the state
+        carries over; the compiled loop is the generic one.
+
+        Raises
+        ------
+        ValueError
+            Another state dimension or other signals.
+        """
+        if (plant.a.shape != self.plant.a.shape or plant.input_names != self.plant.input_names
+                or plant.output_names != self.plant.output_names):
+            raise ValueError("the new plant must have the same states, inputs and outputs as the "
+                             f"running one ({self.plant.a.shape[0]} states)")
+        self.plant = plant
+        self._specialise = False
+
     def set_environment(self, *, compensation_unit: bool, shielding: bool) -> None:
         """Switch the Attocube's compensation unit and the beam path's shielding (Table 3)."""
         self._attocube.set_environment(compensation_unit=compensation_unit, shielding=shielding)

@@ -1,0 +1,146 @@
+"""``fsmbench tune``: one guarded tuning step with the loop closed.
+
+    fsmbench tune --twin --out DIR [--drift-resonance PCT] [--running seed|fsmbench]
+                  [--max-error-urad U] [--better-by-pct P] [--watch-s S]
+                  [--rollback-tolerance-pct P] [--periods N] [--seed N] [--params TOML]
+
+On the digital twin (:func:`fsmbench.tune.guarded.tune_twin`): measure the running
+controller, identify the Sercalo with the loop closed, design (the same study as
+``fsmbench design``), verify, compare, load only a better controller, watch it,
+roll back when it does worse than predicted. Writes ``DIR/tune.json``,
+``DIR/identification/`` (the closed-loop identification, a ``--bench DIR`` for
+other commands) and ``DIR/report.html``. The live device is not wired yet.
+"""
+
+from __future__ import annotations
+
+import argparse
+import functools
+import json
+import math
+import sys
+from pathlib import Path
+from typing import Any
+
+from fsmbench.cli_args import positive, seconds, seed
+
+__all__ = ["add_tune_command"]
+
+
+def _percent(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a percentage") from None
+    if not (math.isfinite(value) and -50.0 < value < 50.0):
+        raise argparse.ArgumentTypeError(f"{text!r}: give a drift between -50 and 50 %")
+    return value
+
+
+def _fraction_pct(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a percentage") from None
+    if not (math.isfinite(value) and 0.0 <= value < 100.0):
+        raise argparse.ArgumentTypeError(f"{text!r}: give a percentage in [0, 100)")
+    return value
+
+
+def add_tune_command(sub: Any) -> None:
+    """Add ``tune`` to the CLI's sub-commands (``sub`` from ``add_subparsers``)."""
+    p = sub.add_parser("tune", help="identify with the loop closed, design, and load a better "
+                                    "controller only if it is (on the twin)")
+    p.add_argument("--twin", action="store_true", required=True,
+                   help="tune the digital twin (the live device is not wired yet)")
+    p.add_argument("--out", metavar="DIR", required=True, help="output folder")
+    p.add_argument("--drift-resonance", metavar="PCT", type=_percent, default=0.0,
+                   dest="drift_pct", help="move the twin's Sercalo resonance (both axes) by "
+                                          "this much from the bench file [%%] (default 0)")
+    p.add_argument("--running", choices=("seed", "fsmbench"), default="seed",
+                   help="the controller running when tune starts: the ESRF study's (9.2, "
+                        "default) or fsmbench's designed on the bench file before the drift")
+    p.add_argument("--max-error-urad", metavar="U", dest="max_error_urad",
+                   type=functools.partial(positive, unit="µrad"), default=30.0,
+                   help="rms beam error the measurement may add [µrad] (default 30)")
+    p.add_argument("--better-by-pct", metavar="P", dest="better_by_pct", type=_fraction_pct,
+                   default=10.0, help="a candidate is loaded only if its predicted tracking "
+                                      "error is this much below the running one's measured "
+                                      "[%%] (default 10)")
+    p.add_argument("--rollback-tolerance-pct", metavar="P", dest="rollback_pct",
+                   type=functools.partial(positive, unit="percent"), default=25.0,
+                   help="roll back when the loaded controller's measured tracking error "
+                        "exceeds its prediction by more than this [%%] (default 25)")
+    p.add_argument("--watch-s", metavar="S", dest="watch_s", type=seconds, default=10.0,
+                   help="how long each controller is watched [s] (default 10)")
+    p.add_argument("--periods", metavar="N", type=functools.partial(positive, unit="periods"),
+                   default=6, help="measured periods of 4 s per command (default 6)")
+    p.add_argument("--seed", metavar="N", type=seed, default=0, help="random seed (default 0)")
+    p.add_argument("--params", metavar="TOML", default=None,
+                   help="bench parameters (TOML); default the packaged Sercalo bench")
+    p.set_defaults(func=_command)
+
+
+def _running(kind: str, bench: Any) -> Any:
+    from fsmbench.bench.blocks import physical_plant
+    from fsmbench.control.seed import seed_decentralised_controller
+    from fsmbench.tune.guarded import loop_of
+
+    ts = bench.true.converter.ts_s
+    gd = bench.nominal.quad_diode.gain_v_per_rad
+    if kind == "seed":
+        return loop_of(seed_decentralised_controller(), name="the ESRF study's controller (9.2)",
+                       ts_s=ts, gd_v_per_rad=(float(gd.h), float(gd.v)))
+    from fsmbench.control.study import design_study
+
+    study = design_study(physical_plant(bench.nominal, source="the bench file"), bench=bench)
+    return loop_of(study.controllers["fsmbench_controller"],
+                   name="fsmbench's controller (designed on the bench file)", ts_s=ts,
+                   gd_v_per_rad=(float(gd.h), float(gd.v)))
+
+
+def _command(args: argparse.Namespace) -> int:
+    from fsmbench.bench.params import load_bench
+    from fsmbench.ident.closed_loop import write_closed_loop_identification
+    from fsmbench.io.atomic import atomic_write_text
+    from fsmbench.io.outdir import check_inputs, output_transaction
+    from fsmbench.progress import Reporter
+    from fsmbench.report.html import write_report
+    from fsmbench.report.tune_section import tune_section
+    from fsmbench.tune.guarded import TuneOptions, tune_twin
+    from fsmbench.tune.measure import MeasurementOptions
+
+    inputs = [("--params", args.params)]
+    check_inputs(args.out, inputs)
+    bench = load_bench(args.params)
+    say = Reporter()
+    opts = TuneOptions(better_by=args.better_by_pct / 100.0, watch_s=args.watch_s,
+                       rollback_tolerance=args.rollback_pct / 100.0,
+                       measurement=MeasurementOptions(max_error_rad=args.max_error_urad * 1e-6,
+                                                      periods=int(args.periods)))
+    running = _running(args.running, bench)
+    result = tune_twin(bench=bench, running=running, drift_pct=args.drift_pct, options=opts,
+                       seed=args.seed, progress=say)
+    out = str(args.out)
+    argv = [("." if a == out else a) for a in getattr(args, "argv", [])]
+    with output_transaction(out, command="tune", arguments=argv, need_bytes=2**23,
+                            inputs=inputs) as run:
+        paths = [atomic_write_text(run.staging / "tune.json",
+                                   json.dumps(result.to_json(), indent=2, sort_keys=True,
+                                              allow_nan=False) + "\n")]
+        paths += write_closed_loop_identification(result.measurement.identification,
+                                                  run.staging / "identification")
+        paths.append(write_report(run.staging / "report.html",
+                                  title="fsmbench tune on the digital twin",
+                                  sections=[tune_section(result)],
+                                  meta=[f"bench: {bench.label}"]))
+    print(f"decision: {result.decision.replace('_', ' ')}: {result.reason}")
+    for label, fig in (("before", result.before), ("after", result.after)):
+        s1 = ", ".join(f"{a} {v:.3g}" for a, v in fig.sensitivity_at_1hz.items())
+        meas = ("" if fig.measured_rms_rad is None else "; measured tracking error " + ", ".join(
+            f"{a} {1e6 * v:.3g} µrad" for a, v in fig.measured_rms_rad.items()))
+        print(f"{label}: {fig.name}: |S(1 Hz)| {s1} (objective below "
+              f"{result.objective_bound:.3g}){meas}")
+    for path in paths:
+        print(f"wrote {run.final_path(Path(path))}", file=sys.stderr)
+    return 0
