@@ -71,7 +71,12 @@ from fsmbench.excite.cli import add_excite_command
 from fsmbench.io.convert_cli import add_convert_command
 from fsmbench.live.serve import add_serve_command
 from fsmbench.scale.mc_cli import add_montecarlo_command
-from fsmbench.tune.cli import add_tune_command
+from fsmbench.tune.cli import add_closed_loop_options, add_tune_command, closed_loop_simulation
+from fsmbench.tune.identify_cli import (
+    identify_closed_loop_folder,
+    is_closed_loop_folder,
+    summary_lines,
+)
 
 __all__ = ["EXIT_BUG", "EXIT_SIGINT", "EXIT_SIGTERM", "EXIT_USER_ERROR", "main"]
 
@@ -324,7 +329,9 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
     with _run_folder(args, out, data=None,
                      need_bytes=_twin_bytes(args, args.format) + _SMALL_BYTES) as run:
         say = _progress()
-        if args.excitation is not None:
+        if args.closed_loop is not None:
+            paths = closed_loop_simulation(args, bench, run.staging, say)
+        elif args.excitation is not None:
             paths = play_excitation(args.excitation, bench, out_dir=run.staging, seed=args.seed,
                                     duration_s=args.duration, experiments=args.experiments,
                                     format=args.format, progress=say)
@@ -414,6 +421,14 @@ def _cmd_identify(args: argparse.Namespace) -> int:
     from fsmbench.stages import identify_stage
     from fsmbench.twin.compare import comparison_rows, readable_table
 
+    if is_closed_loop_folder(args.data):  # data_cl_uch/ucv and no data_uch/ucv (issue 24)
+        with _stage_folder(args, _IDENT_BYTES) as run:
+            cl, paths = identify_closed_loop_folder(args.data, bench=_bench(args),
+                                                    out_dir=run.staging, progress=_progress())
+        print("\n".join(summary_lines(cl, read_twin_truth(Path(args.data)))))
+        for path in paths:
+            print(f"wrote {run.final_path(path)}", file=sys.stderr)
+        return 0
     with _stage_folder(args, _IDENT_BYTES) as run:
         reference = read_twin_truth(Path(args.data))
         inp = _stage_input(args)
@@ -660,6 +675,7 @@ def _parser() -> argparse.ArgumentParser:
                    help="play these designed excitations (fsmbench excite: folder, .json or "
                         ".mat) each in its input's experiment instead of the ESRF study's noise; "
                         "--experiments adds the ESRF study's own")
+    add_closed_loop_options(p)
     add_bench_option(p)
     p.set_defaults(func=_cmd_simulate)
 

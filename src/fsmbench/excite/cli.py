@@ -8,6 +8,8 @@
                         [--params TOML] [--model nominal|true] [--bench DIR]
                         [--max-4qd-compression PCT]
                         [--mains-hz F] [--skip-mains] [--timestamp]
+                        [--closed-loop CONTROLLER [--at output|reference]
+                         [--max-error-urad U]]
 
 Checks the peak at the DAC and at every ADC channel the bench model carries
 the input to, and the 4QD's compression at its peak
@@ -18,6 +20,12 @@ loses those lines with ``--skip-mains``. Then writes
 ``OUT/excitation.mat`` (``t`` and the input's column at the bench's rate) and
 ``OUT/excitation.json`` (:mod:`fsmbench.excite.files`) as one transaction with
 ``run.json``, and prints the lines, crest factors and converter peaks.
+
+With ``--closed-loop CONTROLLER`` the excitation is for a running loop: the peaks
+are taken through the closed loop (:mod:`fsmbench.excite.closed_loop`), with the
+beam error it adds against ``--max-error-urad``; without ``--amplitude-rms`` the
+multisine is shaped and scaled to that bound (:mod:`fsmbench.excite.shaped`).
+``excitation.json`` gets a ``closed_loop`` block.
 """
 
 from __future__ import annotations
@@ -82,8 +90,10 @@ def add_excite_command(sub: Any) -> None:
                    help="frequency band [Hz] (default 1 2000)")
     p.add_argument("--resolution", metavar="HZ", type=hz, default=1.0,
                    help="multisine line spacing = 1/period [Hz] (default 1)")
-    p.add_argument("--amplitude-rms", metavar="V", type=volts, required=True,
-                   dest="amplitude_rms", help="rms of the excitation [V]")
+    p.add_argument("--amplitude-rms", metavar="V", type=volts, default=None,
+                   dest="amplitude_rms", help="rms of the excitation [V] (required, except "
+                                              "with --closed-loop and --max-error-urad: then "
+                                              "the largest that keeps the beam within it)")
     p.add_argument("--periods", metavar="P", type=functools.partial(_count, least=1),
                    default=1, help="steady-state periods (default 1)")
     p.add_argument("--transient-periods", metavar="T", type=functools.partial(_count, least=0),
@@ -133,7 +143,53 @@ def add_excite_command(sub: Any) -> None:
     p.add_argument("--timestamp", action="store_true",
                    help="write the wall-clock time into the MAT-file header and run.json "
                         "(default: none, so that outputs are byte-identical)")
+    p.add_argument("--closed-loop", metavar="CONTROLLER", dest="closed_loop", default=None,
+                   help="the excitation is played with the loop closed by CONTROLLER (seed: "
+                        "the ESRF study's; or a controllers file or fsmbench design folder, "
+                        "PATH[::NAME]): its limits are checked through the closed loop")
+    p.add_argument("--at", choices=("output", "reference"), default="output",
+                   help="with --closed-loop: added to the controller's output (default) or to "
+                        "the loop's reference (4QD volts)")
+    p.add_argument("--max-error-urad", metavar="U", dest="max_error_urad",
+                   type=functools.partial(positive, unit="µrad"), default=None,
+                   help="with --closed-loop: the rms beam error a user tolerates during the "
+                        "measurement [µrad]; without --amplitude-rms, a multisine shaped to "
+                        "move the beam equally on every line within it (odd lines, log grid, "
+                        "dense around the resonances)")
     p.set_defaults(func=_command)
+
+
+def _closed_loop(args: argparse.Namespace, *, bench: Any, params: Any, plant: Any,
+                 model: str) -> tuple[Any, Any]:
+    """``--closed-loop``: the design (given or beam-bounded) and its closed-loop limits."""
+    from fsmbench.excite.closed_loop import check_closed_loop_limits
+    from fsmbench.excite.shaped import beam_bounded_measurement
+    from fsmbench.sim.loaded import running_controller
+    from fsmbench.sim.plant import bench_discrete
+
+    if args.input not in ("Uch", "Ucv"):
+        raise ValueError(f"--closed-loop: the Sercalo loop drives Uch and Ucv, not {args.input}")
+    ctrl = running_controller(args.closed_loop, bench=bench)
+    loop_plant = plant if plant is not None else bench_discrete(bench)
+    bound = None if args.max_error_urad is None else args.max_error_urad * 1e-6
+    qd = args.max_qd_compression / 100.0
+    if args.amplitude_rms is None:
+        if bound is None:
+            raise ValueError("--closed-loop without --amplitude-rms needs --max-error-urad (the "
+                             "amplitude is then the largest that keeps the beam within it)")
+        m = beam_bounded_measurement(
+            bench=bench, params=params, controller=ctrl.feedback, channel=args.input,
+            max_error_rad=bound, at=args.at, band_hz=tuple(args.band),
+            resolution_hz=args.resolution, periods=args.periods,
+            transient_periods=args.transient_periods, max_qd_compression=qd,
+            controller_name=ctrl.name, model=model)
+        return m.design, m.report
+    design = _design(args, params.converter.fs_hz)
+    report = check_closed_loop_limits(design, params=params, plant=loop_plant,
+                                      controller=ctrl.feedback, controller_name=ctrl.name,
+                                      at=args.at, model=model, max_qd_compression=qd,
+                                      max_error_rad=bound)
+    return design, report
 
 
 def _check_band(args: argparse.Namespace, fs_hz: float) -> None:
@@ -248,6 +304,7 @@ def _command(args: argparse.Namespace) -> int:
     params = bench.nominal if args.model == "nominal" else bench.true
     model = args.model
     plant = None
+    model_bench = bench  # what a closed-loop design is shaped on
     if args.bench_dir is not None:
         if Path(args.bench_dir).is_file():
             raise ValueError(f"{args.bench_dir}: is a file; --bench needs a folder written by "
@@ -261,6 +318,7 @@ def _command(args: argparse.Namespace) -> int:
         if "sercalo" in ident:
             identified = identified_bench(args.bench_dir, bench=bench)
             params, plant = identified.true, bench_discrete(identified)
+            model_bench = identified
             model = f"bench identified in {args.bench_dir} (4QD identified in it too)"
         else:
             # Before the Sercalo is identified (the excitation is for that), the calibration
@@ -270,9 +328,17 @@ def _command(args: argparse.Namespace) -> int:
                      "identified Sercalo there yet)")
     _check_band(args, params.converter.fs_hz)  # before the design, which may take long
     _check_length(args, params.converter.fs_hz)
-    design = _design(args, params.converter.fs_hz)
-    report = check_limits(design, params=params, model=model, plant=plant,  # before any output
-                          max_qd_compression=args.max_qd_compression / 100.0)
+    closed = None
+    if args.closed_loop is not None:
+        design, closed = _closed_loop(args, bench=model_bench, params=params, plant=plant,
+                                      model=model)
+        report = closed.limits
+    else:
+        if args.amplitude_rms is None:
+            raise ValueError("--amplitude-rms is required (the rms of the excitation in volts)")
+        design = _design(args, params.converter.fs_hz)
+        report = check_limits(design, params=params, model=model, plant=plant,  # before output
+                              max_qd_compression=args.max_qd_compression / 100.0)
     warning = mains_warning(design)
     if warning:
         print(f"fsmbench excite: warning: {warning}", file=sys.stderr)
@@ -284,7 +350,18 @@ def _command(args: argparse.Namespace) -> int:
                             timestamp=args.timestamp, inputs=inputs) as run, \
             wall_clock_headers(args.timestamp):
         paths = write_excitation(design, run.staging, limits=report)
+        if closed is not None:
+            # The closed loop's peaks and beam error beside the converter limits.
+            import json
+
+            from fsmbench.io.atomic import atomic_write_text
+
+            js = json.loads(paths[1].read_text())
+            js["closed_loop"] = closed.to_json()
+            atomic_write_text(paths[1], json.dumps(js, indent=2, allow_nan=False) + "\n")
     print("\n".join(summary(design, report)))
+    if closed is not None:
+        print("\n".join(closed.lines()[-2:]))
     for path in paths:
         print(f"wrote {run.final_path(path)}", file=sys.stderr)
     return 0

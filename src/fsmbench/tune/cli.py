@@ -24,7 +24,7 @@ from typing import Any
 
 from fsmbench.cli_args import positive, seconds, seed
 
-__all__ = ["add_tune_command"]
+__all__ = ["add_closed_loop_options", "add_tune_command", "closed_loop_simulation"]
 
 
 def _percent(text: str) -> float:
@@ -144,3 +144,36 @@ def _command(args: argparse.Namespace) -> int:
     for path in paths:
         print(f"wrote {run.final_path(Path(path))}", file=sys.stderr)
     return 0
+
+
+def add_closed_loop_options(p: argparse.ArgumentParser) -> None:
+    """``simulate --closed-loop CONTROLLER [--at output|reference] [--max-error-urad U]``."""
+    p.add_argument("--closed-loop", metavar="CONTROLLER", dest="closed_loop", default=None,
+                   help="play the excitations with the loop closed by CONTROLLER (seed: the "
+                        "ESRF study's; or a controllers file or fsmbench design folder, "
+                        "PATH[::NAME]) and write data_cl_uch, data_cl_ucv; without "
+                        "--excitation, beam-bounded multisines designed on the bench")
+    p.add_argument("--at", choices=("output", "reference"), default="output",
+                   help="with --closed-loop: add the excitation to the controller's output "
+                        "(default) or to the loop's reference")
+    p.add_argument("--max-error-urad", metavar="U", dest="max_error_urad",
+                   type=functools.partial(positive, unit="µrad"), default=30.0,
+                   help="with --closed-loop and no --excitation: the rms beam error the "
+                        "designed multisines may add [µrad] (default 30)")
+
+
+def closed_loop_simulation(args: argparse.Namespace, bench: Any, out_dir: Path,
+                           progress: Any) -> list[Path]:
+    """``simulate --closed-loop``: the records, written to ``out_dir``."""
+    from fsmbench.sim.loaded import running_controller
+    from fsmbench.twin.closed_loop import simulate_closed_loop
+    from fsmbench.twin.simulate import write_twin
+
+    if args.experiments:
+        raise ValueError("--closed-loop writes data_cl_uch and data_cl_ucv only; run the "
+                         "ESRF study's experiments (--experiments) in another simulate")
+    controller = running_controller(args.closed_loop, bench=bench)
+    run = simulate_closed_loop(bench=bench, controller=controller, sources=args.excitation,
+                               at=args.at, max_error_rad=args.max_error_urad * 1e-6,
+                               seed=args.seed, duration_s=args.duration, progress=progress)
+    return write_twin(run, out_dir, format=args.format)

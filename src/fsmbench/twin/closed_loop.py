@@ -48,7 +48,7 @@ from fsmbench.twin.simulate import TwinRun
 from fsmbench.twin.truth import twin_truth
 
 __all__ = ["CLOSED_LOOP_EXPERIMENTS", "CLOSED_LOOP_SIGNALS", "ClosedLoopPlay",
-           "drifted_bench", "excitation_variable", "play_closed_loop"]
+           "drifted_bench", "excitation_variable", "play_closed_loop", "simulate_closed_loop"]
 
 #: The closed-loop record of each excited command.
 CLOSED_LOOP_EXPERIMENTS = {"Uch": "data_cl_uch", "Ucv": "data_cl_ucv"}
@@ -236,3 +236,62 @@ def play_closed_loop(plays: Sequence[ClosedLoopPlay], *, bench: Bench,
                             "gd_used_v_per_rad": dict(zip("hv", controller.gd_v_per_rad,
                                                           strict=True))}
     return TwinRun(recordings=recordings, truth=truth, seed=seed, experiments=tuple(specs))
+
+
+def simulate_closed_loop(*, bench: Bench, controller: RunningController,
+                         sources: Sequence[str] | None = None, at: str = "output",
+                         max_error_rad: float = 30e-6, seed: int = 0, settle_s: float = 1.0,
+                         duration_s: float | None = None,
+                         progress: Callable[[str], None] | None = None) -> TwinRun:
+    """``fsmbench simulate --closed-loop CONTROLLER``: the closed-loop records of ``bench``.
+
+    Parameters
+    ----------
+    bench : Bench
+    controller : RunningController
+        Closes the loop (:func:`fsmbench.sim.loaded.running_controller`).
+    sources : sequence of str, optional
+        ``fsmbench excite`` outputs (folder, ``.json`` or ``.mat``), one per command
+        (``Uch``, ``Ucv``); a repeated design repeats its steady-state periods to the
+        record's end. Default: the beam-bounded multisines of both commands designed on
+        ``bench`` (:func:`fsmbench.excite.shaped.beam_bounded_measurement`, 0.25 Hz,
+        6 periods after 2 transient ones).
+    at : {"output", "reference"}
+    max_error_rad : float
+        The bound of the default design [rad].
+    seed, settle_s, duration_s
+        As :func:`play_closed_loop`.
+
+    Raises
+    ------
+    ValueError
+        A file for a channel the loop does not drive, two for one, or any refusal of
+        :func:`play_closed_loop`.
+    """
+    plays: list[ClosedLoopPlay] = []
+    if sources:
+        from fsmbench.excite.files import read_excitation
+
+        for src in sources:
+            design = read_excitation(src)
+            if design.input not in CLOSED_LOOP_EXPERIMENTS:
+                raise ValueError(f"{src}: excites {design.input}; with the loop closed an "
+                                 "excitation drives Uch or Ucv")
+            plays.append(ClosedLoopPlay(
+                channel=design.input, samples_v=np.asarray(design.samples_v, dtype=float),
+                at=at, loop_from=(design.transient_samples if design.after_end == "repeat"
+                                  else None),
+                description=f"the excitation of {src}"))
+    else:
+        from fsmbench.excite.shaped import beam_bounded_measurement
+
+        for ch in ("Uch", "Ucv"):
+            m = beam_bounded_measurement(
+                bench=bench, params=bench.nominal if bench.model is None else bench.true,
+                controller=controller.feedback, channel=ch, max_error_rad=max_error_rad,
+                at=at, resolution_hz=0.25, periods=6, transient_periods=2,
+                controller_name=controller.name)
+            plays.append(ClosedLoopPlay(channel=ch, samples_v=m.design.samples_v, at=at,
+                                        description="beam-bounded multisine"))
+    return play_closed_loop(plays, bench=bench, controller=controller, seed=seed,
+                            settle_s=settle_s, duration_s=duration_s, progress=progress)
