@@ -211,7 +211,7 @@ def load(seconds: float) -> int:
              "tests/live/test_epics.py::test_three_readers_and_a_commander"]
     env = {**os.environ, "FSMBENCH_LIVE_LOAD_S": str(seconds)}
     t0 = time.monotonic()
-    done = subprocess.run([sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider",
+    done = subprocess.run([sys.executable, "-m", "pytest", "-q", "-s", "-p", "no:cacheprovider",
                            *tests], cwd=ROOT, env=env, check=False)
     print(f"3 readers + 1 commander, {seconds:g} s on each protocol: "
           f"{'zero errors' if done.returncode == 0 else 'FAILED'} "
