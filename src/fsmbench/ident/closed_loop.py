@@ -30,7 +30,7 @@ outputs. :func:`identify_closed_loop`:
    of the same bench when given (``prior``), else the bench file's, each named.
 
 The result writes ``identification.json`` (format ``fsmbench.identification``
-version 3, the keys of ``twin_truth.json`` for what was identified here, the
+version 4, the keys of ``twin_truth.json`` for what was identified here, the
 closed-loop part under ``diagnostics.closed_loop``), ``plant.mat`` and
 ``frf.mat``: a folder ``--bench DIR`` takes like any identification.
 """
@@ -79,7 +79,7 @@ _REQUIRED = ("t", "Uch", "Ucv", "Vph", "Vpv")
 _SUFFIXES = (".mat", ".h5", ".nxs")
 # The coil-voltage channels: a failure there only leaves the current amplifiers unmeasured.
 _COIL = (": Vch", ": Vcv")
-_IDENTIFICATION_FORMAT = ("fsmbench.identification", 3)
+_IDENTIFICATION_FORMAT = ("fsmbench.identification", 4)
 # The loop's own error is read on the record before the excitation starts, after the
 # closing transient; shorter than this it is not measured.
 _MIN_BEFORE_S = 0.5
