@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+import scipy.stats as st
 
 from fsmbench.ident.frf import spectral_matrix
 from fsmbench.ident.frf_estimate import FrfEstimate, circular_bound_factor
@@ -29,7 +30,10 @@ def test_bounds_drawn_from_the_variance() -> None:
     mag, phase = fig.panels
     bounds = [t for t in mag.traces if "confidence" in t.name]
     assert len(bounds) == 2
-    r = circular_bound_factor(0.95) * 0.1
+    # The variance is estimated on 4 complex dof: |e|^2/var_hat is F(2, 8), and the 95 %
+    # radius sqrt(F^-1(0.95; 2, 8)) std (Hotelling), wider than the known-variance 1.73.
+    r = float(np.sqrt(st.f.ppf(0.95, 2, 8))) * 0.1
+    assert r > circular_bound_factor(0.95) * 0.1
     np.testing.assert_allclose(bounds[0].y, 2.0 - r)
     np.testing.assert_allclose(bounds[1].y, 2.0 + r)
     ph = [t for t in phase.traces if "confidence" in t.name]

@@ -58,7 +58,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from fsmbench.ident.frf_estimate import FrfEstimate, simo_signals
 
-__all__ = ["LpmOptions", "default_half_width", "local_polynomial_frf"]
+__all__ = ["LPM_NOISE_SMOOTHING", "LpmOptions", "default_half_width", "local_polynomial_frf"]
 
 # Lines per batch: bounds memory at ~(block x (2n+1) x 2(R+1)) complex values
 # (~40 MB for the default window), whatever the record's length.
@@ -257,6 +257,9 @@ def local_polynomial_frf(
         transient=t[:, :, None] if opts.transient else None, confidence=opts.confidence)
 
 
+#: The identification's half width of the noise variance's running median (7 estimated
+#: lines, ~31 dof instead of 7: the weighted fits' stds were optimistic, issue 20).
+LPM_NOISE_SMOOTHING = 3
 #: A line whose noise variance is this many times its neighbours' median keeps its own
 #: (a mains line, a spur): the median would hide it.
 _SPUR = 5.0

@@ -36,7 +36,7 @@ from fsmbench.ident.frf import FrequencyResponse, combine_columns, spectral_matr
 from fsmbench.ident.frf_estimate import FrfEstimate, combine_estimates
 from fsmbench.ident.frf_periodic import PeriodicOptions, detect_period, periodic_frf
 from fsmbench.ident.joint_delay import JointFit
-from fsmbench.ident.lpm import LpmOptions, local_polynomial_frf
+from fsmbench.ident.lpm import LPM_NOISE_SMOOTHING, LpmOptions, local_polynomial_frf
 from fsmbench.ident.sampled import SensorLowpass
 from fsmbench.ident.sercalo_delay import joint_path_delays
 from fsmbench.ident.vectfit import VectorFit, VectorFitOptions, vector_fit
@@ -150,7 +150,9 @@ def experiment_frf(recordings: Mapping[str, xr.Dataset], *, columns: Sequence[tu
     parts: list[FrfEstimate] = []
     if estimator == "lpm":
         length = min(u.size for *_, u, _y in data)
-        opts = LpmOptions(stride=2 * LpmOptions().n + 1)
+        # The noise variance smoothed over 7 estimated lines (LpmOptions.noise_smoothing):
+        # one line's 7 dof made the weighted fits' stds optimistic (in95 0.75-0.85).
+        opts = LpmOptions(stride=2 * LpmOptions().n + 1, noise_smoothing=LPM_NOISE_SMOOTHING)
         parts = [local_polynomial_frf(u[-length:], y[-length:], fs_hz=fs, input_name=signal,
                                       output_names=list(OUTPUTS), options=opts,
                                       source=f"{exp}.mat")
