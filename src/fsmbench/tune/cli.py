@@ -3,13 +3,16 @@
     fsmbench tune --twin --out DIR [--drift-resonance PCT] [--running seed|fsmbench]
                   [--max-error-urad U] [--better-by-pct P] [--watch-s S]
                   [--rollback-tolerance-pct P] [--periods N] [--seed N] [--params TOML]
+                  [--drift-rate PCT_PER_H [--watch-duration S]]
 
 On the digital twin (:func:`fsmbench.tune.guarded.tune_twin`): measure the running
 controller, identify the Sercalo with the loop closed, design (the same study as
 ``fsmbench design``), verify, compare, load only a better controller, watch it,
 roll back when it does worse than predicted. Writes ``DIR/tune.json``,
 ``DIR/identification/`` (the closed-loop identification, a ``--bench DIR`` for
-other commands) and ``DIR/report.html``. The live device is not wired yet.
+other commands) and ``DIR/report.html``. With ``--drift-rate`` the controller that
+runs afterwards is watched while the resonance drifts (:mod:`fsmbench.tune.watch_twin`),
+the warnings in ``tune.json``'s ``watch``. The live device is not wired yet.
 """
 
 from __future__ import annotations
@@ -78,6 +81,12 @@ def add_tune_command(sub: Any) -> None:
     p.add_argument("--seed", metavar="N", type=seed, default=0, help="random seed (default 0)")
     p.add_argument("--params", metavar="TOML", default=None,
                    help="bench parameters (TOML); default the packaged Sercalo bench")
+    p.add_argument("--drift-rate", metavar="PCT_PER_H", dest="drift_rate", type=float,
+                   default=None, help="after tuning, watch the controller that runs while the "
+                                      "resonance drifts this fast [%%/h] (the loop that "
+                                      "watches itself; tune.json's watch)")
+    p.add_argument("--watch-duration", metavar="S", dest="watch_duration", type=seconds,
+                   default=300.0, help="with --drift-rate: how long [s] (default 300)")
     p.set_defaults(func=_command)
 
 
@@ -121,12 +130,15 @@ def _command(args: argparse.Namespace) -> int:
     running = _running(args.running, bench)
     result = tune_twin(bench=bench, running=running, drift_pct=args.drift_pct, options=opts,
                        seed=args.seed, progress=say)
+    payload = result.to_json()
+    if args.drift_rate is not None:
+        payload["watch"] = _watch(args, bench, result, running, say)
     out = str(args.out)
     argv = [("." if a == out else a) for a in getattr(args, "argv", [])]
     with output_transaction(out, command="tune", arguments=argv, need_bytes=2**23,
                             inputs=inputs) as run:
         paths = [atomic_write_text(run.staging / "tune.json",
-                                   json.dumps(result.to_json(), indent=2, sort_keys=True,
+                                   json.dumps(payload, indent=2, sort_keys=True,
                                               allow_nan=False) + "\n")]
         paths += write_closed_loop_identification(result.measurement.identification,
                                                   run.staging / "identification")
@@ -141,9 +153,34 @@ def _command(args: argparse.Namespace) -> int:
             f"{a} {1e6 * v:.3g} µrad" for a, v in fig.measured_rms_rad.items()))
         print(f"{label}: {fig.name}: |S(1 Hz)| {s1} (objective below "
               f"{result.objective_bound:.3g}){meas}")
+    for event in (payload.get("watch") or {}).get("events", []):
+        print(f"watch: {event['time_s']:g} s: {event['level']}: {event['cause']}")
     for path in paths:
         print(f"wrote {run.final_path(Path(path))}", file=sys.stderr)
     return 0
+
+
+def _watch(args: argparse.Namespace, bench: Any, result: Any, running: Any,
+           say: Any) -> dict[str, Any]:
+    """``--drift-rate``: the controller that runs after tune, watched while the resonance drifts."""
+    from fsmbench.tune.watch_twin import watch_twin
+    from fsmbench.twin.closed_loop import drifted_bench
+
+    loop = result.candidate_loop if result.decision == "loaded" else running
+    base = drifted_bench(bench, resonance_pct=args.drift_pct)
+    run = watch_twin(bench=base, loop=loop, drift_pct_per_h=args.drift_rate,
+                     duration_s=args.watch_duration, seed=args.seed + 7, progress=say)
+    opts = run.watch.options
+    return {"controller": loop.name, "drift_rate_pct_per_h": args.drift_rate,
+            "duration_s": args.watch_duration, "drift_start_s": run.drift_start_s,
+            "first_warning_s": run.first_warning_s,
+            "drift_at_warning_pct": run.drift_at_warning_pct,
+            "options": {"window_s": opts.window_s, "raise_sigma": opts.raise_sigma,
+                        "clear_sigma": opts.clear_sigma, "raise_windows": opts.raise_windows,
+                        "clear_windows": opts.clear_windows,
+                        "baseline_windows": opts.baseline_windows},
+            "events": [{"time_s": e.time_s, "level": e.level, "cause": e.cause}
+                       for e in run.events]}
 
 
 def add_closed_loop_options(p: argparse.ArgumentParser) -> None:

@@ -13,12 +13,12 @@ the loaded controller on the current model (the PSD of
   the linear prediction misses part of the loop's response at a notched
   resonance, and the watch is for what changes afterwards;
 * the **statistical band**: a band's measured power over ``M`` Welch bins of ``K``
-  averaged segments scatters by ``1/sqrt(K M / c)`` relative (``c = 1.5``: the
-  Hann window's neighbouring bins are correlated, Welch 1967), ``M`` the bins
-  that carry the power (the participation ratio ``(sum S)² / sum S²`` of the
-  baseline's spectrum: a lightly damped peak is one or two bins), and the
-  baseline's mean of ``B`` windows by ``1/sqrt(B)`` of that, so
-  ``z = (P_measured / P_reference - 1) sqrt(K M / c) / sqrt(1 + 1/B)``;
+  averaged segments has ``2 K M / c`` degrees of freedom (``c = 1.5``: the Hann
+  window's neighbouring bins are correlated, Welch 1967), ``M`` the bins that
+  carry the power (the participation ratio ``(sum S)² / sum S²`` of the
+  baseline's spectrum: a lightly damped peak is one or two bins); against the
+  baseline's mean of ``B`` windows the ratio is F-distributed, and ``z`` is the
+  normal quantile of its tail probability (:func:`_z`);
 * a **WARNING** when a band's ``z`` exceeds ``raise_sigma`` in ``raise_windows``
   consecutive windows; cleared (hysteresis) only when every band stays below
   ``clear_sigma`` for ``clear_windows`` consecutive windows;
@@ -82,9 +82,9 @@ class WatchOptions:
     segment_s: float = 1.0
     raise_sigma: float = 5.0
     clear_sigma: float = 2.0
-    raise_windows: int = 2
+    raise_windows: int = 3
     clear_windows: int = 3
-    baseline_windows: int = 3
+    baseline_windows: int = 6
     resonance_width: float = 0.1
     line_share: float = 0.5
 
@@ -142,6 +142,28 @@ class WatchEvent:
     level: str
     cause: str
     bands: tuple[BandCheck, ...] = ()
+
+
+def _z(measured: float, reference: float, *, dof: float, baseline: int) -> float:
+    """The departure of ``measured`` from ``reference`` as a normal quantile [1].
+
+    A band power of ``dof`` degrees of freedom is ``reference chi2(dof)/dof``; against a
+    reference that is itself the mean of ``baseline`` such windows their ratio is
+    F(dof, baseline dof) distributed (chi2 over its dof when there is no baseline). The
+    one-sided tail probability of the ratio, as the normal quantile with that tail: few
+    degrees of freedom (a lightly damped peak is one or two bins) give a skewed ratio
+    that a normal scale would raise alarms on.
+    """
+    from scipy import stats
+
+    if not reference > 0:
+        return math.inf
+    ratio = measured / reference
+    tail = (stats.f.sf(ratio, dof, baseline * dof) if baseline
+            else stats.chi2.sf(ratio * dof, dof))
+    lower = (stats.f.cdf(ratio, dof, baseline * dof) if baseline
+             else stats.chi2.cdf(ratio * dof, dof))
+    return float(stats.norm.isf(tail) if tail < lower else -stats.norm.isf(lower))
 
 
 @dataclass
@@ -209,7 +231,8 @@ class LoopWatch:
         pred = np.column_stack([np.interp(f, self.f_hz, self.predicted_psd[:, i])
                                 for i in range(2)])
         # The spectrum's shape for the scatter: the baseline's mean where there is one.
-        shape = np.mean(self._baseline_psd, axis=0) if self._baseline_psd else pred
+        done = len(self._baseline) >= self.options.baseline_windows > 0
+        shape = np.mean(self._baseline_psd, axis=0) if done else pred
         self._last_psd = p
         checks = []
         for i, axis in enumerate(AXES):
@@ -225,16 +248,16 @@ class LoopWatch:
                 predicted = float(np.trapezoid(self.predicted_psd[fine, i],
                                                self.f_hz[fine])) + sum(
                     float(v[i]) for fl, v in self.line_power.items() if lo <= fl < hi)
-                base = self._calibration(axis, (lo, hi))
+                # Calibrated once the baseline is complete; its windows keep the bare
+                # prediction (what the calibration divides by).
+                base = self._calibration(axis, (lo, hi)) if done else 1.0
                 predicted *= base
                 # The band's independent bins: M for a flat spectrum, fewer where a narrow peak
                 # holds the power (the participation ratio, (sum S)^2 / sum S^2).
                 sb = shape[sel, i]
                 m_eff = float(sb.sum() ** 2 / np.sum(sb**2)) if np.any(sb > 0) else float(m)
-                # The baseline's own scatter (B windows averaged) adds to the window's.
-                spread = math.sqrt(1.0 + 1.0 / len(self._baseline)) if self._baseline else 1.0
-                z = ((measured / predicted - 1.0) * math.sqrt(k * m_eff / _BIN_CORRELATION)
-                     / spread if predicted > 0 else math.inf)
+                z = _z(measured, predicted, dof=2.0 * k * m_eff / _BIN_CORRELATION,
+                       baseline=len(self._baseline) if done else 0)
                 excess = np.maximum(p[sel, i] - base * pred[sel, i], 0.0)
                 j = int(np.argmax(excess))
                 share = float(excess[j] / excess.sum()) if excess.sum() > 0 else 0.0
@@ -270,9 +293,10 @@ class LoopWatch:
 
     def _calibration(self, axis: str, band: tuple[float, float]) -> float:
         """Measured over predicted power in ``band`` on the baseline windows (1 without)."""
-        ratios = [c.measured_rad2 / c.predicted_rad2 for w in self._baseline for c in w
-                  if c.axis == axis and c.band_hz == band and c.predicted_rad2 > 0]
-        return float(np.mean(ratios)) if ratios else 1.0
+        pairs = [(c.measured_rad2, c.predicted_rad2) for w in self._baseline for c in w
+                 if c.axis == axis and c.band_hz == band and c.predicted_rad2 > 0]
+        # The baseline's measured power over its predicted: a mean of powers, not of ratios.
+        return float(sum(m for m, _p in pairs) / sum(p for _m, p in pairs)) if pairs else 1.0
 
     def _judge(self, window: np.ndarray) -> list[WatchEvent]:
         opts = self.options
