@@ -65,8 +65,10 @@ _UPDATE_S = 0.1  # how often the records are refreshed [s]
 _SPECTRUM_S = 1.0  # least wall-clock time between two updates of a spectrum [s]
 _STRING = 2048  # long-string records [bytes]
 _PREFIX = re.compile(r"[A-Za-z0-9_:-]{1,40}")
-#: Views refreshed with State before a command's put completes.
-_WITH_STATE = tuple(s for s in ATTRIBUTES if s.name in ("LoopClosed", "Controller", "Task"))
+#: Views refreshed with State before a command's put completes, and only there, Task last
+#: (see BenchIoc._update_state).
+_WITH_STATE = tuple(s for name in ("LoopClosed", "Controller", "Task") for s in ATTRIBUTES
+                    if s.name == name)
 
 
 def check_prefix(prefix: str) -> str:
@@ -315,6 +317,8 @@ class BenchIoc:
 
         rec = self._records
         for spec in ATTRIBUTES:
+            if spec in _WITH_STATE:
+                continue  # with State, below
             value, quality = evaluate(spec, self.bench, self._latch)
             if spec.kind in ("spectrum", "image"):
                 if quality == "INVALID" or value is None:
@@ -351,13 +355,19 @@ class BenchIoc:
         from softioc import alarm
 
         with self._state_lock:
+            # Task is read first and written last: a task's result is in place (under the
+            # bench's lock) before Task reads empty, so a client that sees Task empty reads
+            # the Controller, LoopClosed and State it left (one read each, not one update).
+            values = {spec.name: evaluate(spec, self.bench, self._latch)[0]
+                      for spec in reversed(_WITH_STATE)}
             state = self.bench.state
+            status = self.bench.status
             severity = {"ALARM": alarm.MINOR_ALARM, "FAULT": alarm.MAJOR_ALARM}.get(state, 0)
             self._records["State"].set(STATES.index(state), severity=severity,
                                        alarm=alarm.STATE_ALARM if severity else alarm.NO_ALARM)
-            self._records["Status"].set(plain(self.bench.status)[:_STRING - 1])
+            self._records["Status"].set(plain(status)[:_STRING - 1])
             for spec in _WITH_STATE:
-                value, _ = evaluate(spec, self.bench, self._latch)
+                value = values[spec.name]
                 if value is not None:
                     self._records[spec.name].set(value if spec.kind == "bool"
                                                  else plain(str(value))[:_STRING - 1])
