@@ -149,7 +149,9 @@ def add_excite_command(sub: Any) -> None:
                         "PATH[::NAME]): its limits are checked through the closed loop")
     p.add_argument("--at", choices=("output", "reference"), default="output",
                    help="with --closed-loop: added to the controller's output (default) or to "
-                        "the loop's reference (4QD volts)")
+                        "the loop's reference (4QD volts)"
+                        + "; at the reference the controller's notch removes it at the "
+                          "Sercalo's resonances, which then come out poorly")
     p.add_argument("--max-error-urad", metavar="U", dest="max_error_urad",
                    type=functools.partial(positive, unit="µrad"), default=None,
                    help="with --closed-loop: the rms beam error a user tolerates during the "

@@ -192,7 +192,9 @@ def add_closed_loop_options(p: argparse.ArgumentParser) -> None:
                         "--excitation, beam-bounded multisines designed on the bench")
     p.add_argument("--at", choices=("output", "reference"), default="output",
                    help="with --closed-loop: add the excitation to the controller's output "
-                        "(default) or to the loop's reference")
+                        "(default) or to the loop's reference"
+                        + "; at the reference the controller's notch removes it at the "
+                          "Sercalo's resonances, which then come out poorly")
     p.add_argument("--max-error-urad", metavar="U", dest="max_error_urad",
                    type=functools.partial(positive, unit="µrad"), default=30.0,
                    help="with --closed-loop and no --excitation: the rms beam error the "
