@@ -156,9 +156,10 @@ def soak_tango(minutes: float, folder: Path) -> None:
                      str(port), "--out", str(folder / "out")], env=env, folder=folder,
                     ready="Ready to accept request", name="tango-server")
     (folder / "peer.py").write_text(_TANGO_PEER)
-    peer = _start([sys.executable, str(folder / "peer.py"), str(peer_port)], env=env,
-                  folder=folder, ready="Ready to accept request", name="tango-peer")
+    peer = None
     try:
+        peer = _start([sys.executable, str(folder / "peer.py"), str(peer_port)], env=env,
+                      folder=folder, ready="Ready to accept request", name="tango-peer")
         bench = tango.DeviceProxy(f"tango://localhost:{port}/fsmbench/bench/1#dbase=no")
         other = tango.DeviceProxy(f"tango://localhost:{peer_port}/peer/bench/1#dbase=no")
         for p in (bench, other):
@@ -169,8 +170,9 @@ def soak_tango(minutes: float, folder: Path) -> None:
                        lambda: _rss_mb(server.pid))
         assert bench.state() == tango.DevState.RUNNING, bench.status()
         _report("Tango device (no database), closed loop at real time", r)
-    finally:
-        print(f"  stopped by SIGTERM: status {_stop(server)} (peer {_stop(peer)})")
+    finally:  # the servers never outlive the benchmark, whatever failed
+        print(f"  stopped by SIGTERM: status {_stop(server)}"
+              f"{f' (peer {_stop(peer)})' if peer is not None else ''}")
 
 
 def soak_epics(minutes: float, folder: Path) -> None:
@@ -189,9 +191,10 @@ def soak_epics(minutes: float, folder: Path) -> None:
                      "--prefix", prefix, "--out", str(folder / "out")], env=env(port),
                     folder=folder, ready="fsmbench serve: IOC", name="ioc")
     (folder / "peer_ioc.py").write_text(_EPICS_PEER)
-    peer = _start([sys.executable, str(folder / "peer_ioc.py")], env=env(peer_port),
-                  folder=folder, ready="peer ready", name="ioc-peer")
+    peer = None
     try:
+        peer = _start([sys.executable, str(folder / "peer_ioc.py")], env=env(peer_port),
+                      folder=folder, ready="peer ready", name="ioc-peer")
         ours = epics.PV(f"{prefix}:BeamAngleH", auto_monitor=False)
         theirs = epics.PV("PEER:BeamAngleH", auto_monitor=False)
         assert ours.wait_for_connection(10.0) and theirs.wait_for_connection(10.0)
@@ -203,7 +206,8 @@ def soak_epics(minutes: float, folder: Path) -> None:
         assert state == "RUNNING", epics.caget(f"{prefix}:Status", as_string=True)
         _report("EPICS IOC (Channel Access), closed loop at real time", r)
     finally:
-        print(f"  stopped by SIGTERM: status {_stop(server)} (peer {_stop(peer)})")
+        print(f"  stopped by SIGTERM: status {_stop(server)}"
+              f"{f' (peer {_stop(peer)})' if peer is not None else ''}")
 
 
 def load(seconds: float) -> int:
