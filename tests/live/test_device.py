@@ -212,10 +212,10 @@ class TestTwinDevice:
                        "the first State and LoopClosed events")
             assert events.of("State")[-1] == tango.DevState.ON
             assert events.of("LoopClosed")[-1] is False
-            assert "seed controller" in proxy.CloseLoop()
+            assert "the ESRF study's controller" in proxy.CloseLoop()
             assert proxy.state() == tango.DevState.RUNNING
             assert proxy.LoopClosed is True
-            assert "seed controller" in proxy.Controller
+            assert "the ESRF study's controller" in proxy.Controller
             wait_until(lambda: tango.DevState.RUNNING in events.of("State")
                        and True in events.of("LoopClosed"), "RUNNING and LoopClosed events")
             wait_until(lambda: any("Loop closed" in s for s in events.of("Status")),
@@ -446,7 +446,7 @@ class TestTwinDevice:
             err = refusal(proxy, "CloseLoop")
             assert err.reason == "FSM_Settling" and "s of bench time left" in err.desc
             wait_until(lambda: proxy.state() == tango.DevState.ON, "ON after the ringdown")
-            assert "seed controller" in proxy.CloseLoop()
+            assert "the ESRF study's controller" in proxy.CloseLoop()
             t0 = proxy.BenchTime
             wait_bench_time(proxy, t0 + 0.3)
             assert proxy.state() == tango.DevState.RUNNING  # no new trip

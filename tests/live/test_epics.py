@@ -161,7 +161,7 @@ def test_records_carry_the_attribute_table(ioc: Ioc) -> None:
 
 def test_commands_answer_in_reply(ioc: Ioc, parts: SimpleNamespace) -> None:
     code, reply = ioc.command("CloseLoop.PROC")
-    assert code == "OK" and "loop closed with seed controller" in reply, reply
+    assert code == "OK" and "loop closed with the ESRF study's controller" in reply, reply
     ioc.wait_state(parts, "RUNNING")
     assert ioc.get("LoopClosed") == 1
     code, reply = ioc.command("CloseLoop")
@@ -248,7 +248,7 @@ def test_protection_trip_reset_and_ringdown(ioc: Ioc, parts: SimpleNamespace,
     assert code == "OK" and "no controller loaded" in reply
     # At 50x the ~2 s ringdown is ~50 ms of wall clock: CloseLoop waits for it.
     code, reply = ioc.command("CloseLoop")
-    assert code == "OK" and "seed controller" in reply, reply
+    assert code == "OK" and "the ESRF study's controller" in reply, reply
     t0 = ioc.get("BenchTime")
     parts.wait_until(lambda: ioc.get("BenchTime") > t0 + 1.0, "1 s of closed loop")
     assert ioc.text("State") == "RUNNING", ioc.text("Status")

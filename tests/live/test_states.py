@@ -258,7 +258,7 @@ def test_trip_reverts_the_controller_and_the_ringdown_refuses_close_loop(
     step_until(live, lambda: live.state == "ON", "the mirror to settle", bench_s=30.0,
                block=100)
     assert live.ringdown.time_left_s(live.monitor.qd_deviation_v(0.05)) == 0
-    assert "seed controller" in live.close_loop()  # the seed's, not the one that tripped
+    assert "the ESRF study's controller" in live.close_loop()  # not the one that tripped
     live.advance(round(2 * FS))
     assert live.state == "RUNNING", live.status
 

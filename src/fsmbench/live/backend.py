@@ -137,7 +137,7 @@ class PlaybackBackend:
                                  adc_bits=adc_bits)
         if not loaded.recordings:
             why = "; ".join(f"{name}: {reason}" for name, reason in loaded.skipped.items()) \
-                or "no recordings of the seed's experiments"
+                or "no recordings of the ESRF study's experiments"
             raise ValueError(f"{folder}: nothing to play back ({why})")
         self.fs_hz = float(fs_hz)
         self.converter_half_range_v = adc_range_v / 2

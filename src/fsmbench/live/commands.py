@@ -204,7 +204,7 @@ class BenchCommands:
     # -- the loop ------------------------------------------------------------------
 
     def _seed_controller(self) -> DiscreteController:
-        return replace(seed_feedback(self.bench), name="seed controller (9.2)")
+        return replace(seed_feedback(self.bench), name="the ESRF study's controller (9.2)")
 
     @_command("CloseLoop")
     def close_loop(self) -> str:
@@ -290,7 +290,7 @@ class BenchCommands:
             self._fault = None
             done.append(f"controller {self._loaded.name} loaded (the last that did not trip)"
                         if self._loaded is not None else
-                        "no controller loaded (CloseLoop uses the seed's, 9.2)")
+                        "no controller loaded (CloseLoop uses the ESRF study's, 9.2)")
             if restart:
                 done.append("the bench loop restarted")
             self._notice = "; ".join(done) + "."

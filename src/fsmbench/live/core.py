@@ -339,7 +339,7 @@ class LiveBench(BenchCommands):
             revert = (f" The controller {tripped.name} tripped: "
                       + (f"{self._loaded.name} is loaded again (the last that did not trip)."
                          if self._loaded is not None else
-                         "none is loaded now (CloseLoop would use the seed's)."))
+                         "none is loaded now (CloseLoop would use the ESRF study's)."))
         self._notice = ""  # the trip's sentence carries the news
         self._fault = ("trip", f"Protection opened the loop at bench time {bench_time_s:.3f} "
                                f"s: {reason}.{revert}")
@@ -514,7 +514,7 @@ class LiveBench(BenchCommands):
     def controller_name(self) -> str:
         """The controller in the loop, else the one loaded for the next close, else ``none``."""
         k = self.backend.controller or self._loaded
-        return k.name if k is not None else "none (CloseLoop uses the seed's controller, 9.2)"
+        return k.name if k is not None else "none (CloseLoop uses the ESRF study's controller, 9.2)"
 
     @property
     def excitation_text(self) -> str:

@@ -305,7 +305,7 @@ class FsmBench(Device):
     def _do(self, command_name: str, method: Callable[..., str], *args: str) -> str:
         return plain(self._call(command_name, lambda: method(*args)))
 
-    @command(dtype_out=str, doc_in="close the loop with the loaded controller (the seed's if "
+    @command(dtype_out=str, doc_in="close the loop with the loaded controller (the ESRF study's if "
                                    "none); waits up to 1 s for a ringing mirror to settle",
              doc_out="what it did")
     def CloseLoop(self) -> str:
