@@ -22,7 +22,13 @@ the loaded controller on the current model (the PSD of
 * a **WARNING** when a band's ``z`` exceeds ``raise_sigma`` in ``raise_windows``
   consecutive windows; cleared (hysteresis) only when every band stays below
   ``clear_sigma`` for ``clear_windows`` consecutive windows;
-* the **likely cause**, where the spectrum shows it: *a resonance moved* when the
+* each axis's **resonance peak** in the tracking error (within ``resonance_width``
+  of the model's resonance ``resonances_hz[i]``, h then v) is located in every
+  window (parabolic on the log PSD) and compared with where the baseline had
+  it, in units of its jitter over the baseline windows: a drift moves the peak
+  long before it changes the band's power;
+* the **likely cause**, where the spectrum shows it: *a resonance moved* when its
+  peak moved, or when the
   excess is a peak within ``resonance_width`` of a Sercalo resonance (where the
   controller's notch or roll-off is), *a new line* when one bin holds most of
   the band's excess elsewhere, *the sensor noise floor rose* when the excess is
@@ -112,6 +118,9 @@ class BandCheck:
         Frequency of the bin with the largest excess [Hz].
     peak_share : float
         That bin's share of the band's excess [1] (0 when there is none).
+    moved_from_hz : float or None
+        For a resonance's peak check: where the baseline had the peak [Hz] (``z`` is
+        then the peak's shift in units of its jitter over the baseline windows).
     """
 
     axis: str
@@ -121,6 +130,7 @@ class BandCheck:
     z: float
     peak_hz: float
     peak_share: float
+    moved_from_hz: float | None = None
 
 
 @dataclass(frozen=True)
@@ -200,6 +210,7 @@ class LoopWatch:
     _baseline: list[tuple[BandCheck, ...]] = field(default_factory=list)
     _baseline_psd: list[np.ndarray] = field(default_factory=list)
     _last_psd: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
+    _last_f: np.ndarray = field(default_factory=lambda: np.zeros(0))
     _recent: list[tuple[BandCheck, ...]] = field(default_factory=list)
     history: list[tuple[float, tuple[BandCheck, ...]]] = field(default_factory=list)
 
@@ -234,6 +245,7 @@ class LoopWatch:
         done = len(self._baseline) >= self.options.baseline_windows > 0
         shape = np.mean(self._baseline_psd, axis=0) if done else pred
         self._last_psd = p
+        self._last_f = f
         checks = []
         for i, axis in enumerate(AXES):
             for lo, hi in opts.bands_hz:
@@ -265,6 +277,35 @@ class LoopWatch:
                                         float(f[sel][j]), share))
         return tuple(checks)
 
+    def _peak_hz(self, f: np.ndarray, p: np.ndarray, f0: float) -> float:
+        """The peak of ``p`` within ``resonance_width`` of ``f0``, parabolic on log power [Hz]."""
+        w = self.options.resonance_width
+        idx = np.flatnonzero((f >= f0 * (1 - w)) & (f <= f0 * (1 + w)))
+        j = int(idx[np.argmax(p[idx])])
+        if 0 < j < f.size - 1 and np.all(p[j - 1: j + 2] > 0):
+            a, b, c = np.log(p[j - 1: j + 2])
+            den = a - 2 * b + c
+            shift = 0.5 * (a - c) / den if den < 0 else 0.0
+            return float(f[j] + shift * (f[1] - f[0]))
+        return float(f[j])
+
+    def _peak_checks(self, f: np.ndarray, p: np.ndarray) -> tuple[BandCheck, ...]:
+        """Each axis's resonance peak against where the baseline windows had it."""
+        out = []
+        df = f[1] - f[0]
+        for i, (axis, f0) in enumerate(zip(AXES, self.resonances_hz, strict=False)):
+            base = [self._peak_hz(self._last_f, q[:, i], f0) for q in self._baseline_psd]
+            ref = float(np.mean(base))
+            # The peak's jitter over the baseline windows, at least a tenth of a bin.
+            jitter = max(float(np.std(base, ddof=1)) if len(base) > 1 else 0.0, 0.1 * df)
+            now = self._peak_hz(f, p[:, i], f0)
+            w = self.options.resonance_width
+            band = (f0 * (1 - w), f0 * (1 + w))
+            out.append(BandCheck(axis, band, 0.0, 0.0,
+                                 abs(now - ref) / (jitter * math.sqrt(1 + 1 / len(base))),
+                                 now, 1.0, moved_from_hz=ref))
+        return tuple(out)
+
     def cause(self, bands: Sequence[BandCheck]) -> str:
         """The likely cause of the excess in ``bands``, in words, with what to do.
 
@@ -272,6 +313,15 @@ class LoopWatch:
         is for moves the loop's response around it, a neighbouring band may rise more).
         """
         opts = self.options
+        moved = [b for b in bands if b.moved_from_hz is not None]
+        if moved:
+            b = max(moved, key=lambda c: c.z)
+            assert b.moved_from_hz is not None
+            return (f"{b.axis} axis: the tracking error's peak near the Sercalo resonance moved "
+                    f"from {b.moved_from_hz:.1f} Hz to {b.peak_hz:.1f} Hz "
+                    f"({100 * (b.peak_hz / b.moved_from_hz - 1):+.1f} %): the resonance has "
+                    "likely moved. Run fsmbench tune to re-identify and re-tune with the loop "
+                    "closed")
         at_mode = [b for b in bands if b.peak_share >= 0.1 and any(
             abs(b.peak_hz / r - 1.0) <= opts.resonance_width for r in self.resonances_hz)]
         worst = max(at_mode or bands, key=lambda b: b.z)
@@ -301,6 +351,8 @@ class LoopWatch:
     def _judge(self, window: np.ndarray) -> list[WatchEvent]:
         opts = self.options
         checks = self.check(window)
+        if self.resonances_hz and len(self._baseline_psd) >= max(2, opts.baseline_windows):
+            checks = checks + self._peak_checks(self._last_f, self._last_psd)
         self.history.append((self._time_s, checks))
         if len(self._baseline) < opts.baseline_windows:
             self._baseline.append(checks)  # the calibration: nothing judged yet
