@@ -434,7 +434,7 @@ def _cmd_identify(args: argparse.Namespace) -> int:
         inp = _stage_input(args)
         result, paths = identify_stage(inp.recordings, bench=inp.bench, out_dir=run.staging,
                                        source=str(inp.data), progress=inp.say,
-                                       options=identify_options(args))
+                                       options=identify_options(args, data=inp.data))
     for step, why in result.skipped.items():
         inp.say(f"step {step} skipped: {why}")
     for warning in result.warnings:
@@ -624,7 +624,7 @@ def _cmd_study(args: argparse.Namespace) -> int:
         result = run_study(out_dir=run.staging, data_dir=data, bench=bench, seed=args.seed,
                            duration_s=args.duration, progress=say, figures=args.figures,
                            spec=Specification(distance_error_max_m=args.distance_target_m),
-                           identify_options=identify_options(args))
+                           identify_options=identify_options(args, data=data))
     print(run.final_path(result.report))
     # Once each, one line each: what was not used, what failed a check, what to know.
     for name, why in result.skipped_experiments.items():

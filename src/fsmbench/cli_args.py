@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import argparse
 import math
+from pathlib import Path
 from typing import Any, NoReturn
 
 __all__ = ["EXIT_USER_ERROR", "SEED_MAX", "Parser", "add_identify_options", "factor",
@@ -118,8 +119,15 @@ def add_identify_options(p: argparse.ArgumentParser) -> None:
                         "parameters standard deviations (default seed)")
 
 
-def identify_options(args: argparse.Namespace) -> Any:
-    """The :class:`~fsmbench.ident.pipeline.IdentifyOptions` of ``--frf`` and ``--weights``."""
+def identify_options(args: argparse.Namespace, *, data: str | Path | None = None) -> Any:
+    """The :class:`~fsmbench.ident.pipeline.IdentifyOptions` of ``--frf`` and ``--weights``.
+
+    ``data``: the recording folder; the transient periods of every excitation
+    described there (``fsmbench excite``'s JSON beside the records) are dropped by
+    the periodic averaging, at least (more when the records show a transient).
+    """
+    from fsmbench.ident.load import excitation_transients
     from fsmbench.ident.pipeline import IdentifyOptions
 
-    return IdentifyOptions(frf=args.frf, weights=args.weights)
+    return IdentifyOptions(frf=args.frf, weights=args.weights,
+                           transient_periods={} if data is None else excitation_transients(data))

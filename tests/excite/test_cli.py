@@ -84,8 +84,13 @@ def test_simulate_plays_the_file(tmp_path: Path, capsys: pytest.CaptureFixture[s
     sim = tmp_path / "sim"
     assert main(["simulate", str(sim), "--excitation", str(exc / "excitation.mat"),
                  "--seed", "4"]) == 0
-    assert sorted(p.name for p in sim.iterdir()) == ["data_unv.mat", "run.json",
-                                                     "twin_truth.json"]
+    assert sorted(p.name for p in sim.iterdir()) == ["data_unv.mat", "excitation_unv.json",
+                                                     "run.json", "twin_truth.json"]
+    # Its description beside the record: identify reads the transient periods from it.
+    from fsmbench.ident.load import excitation_transients
+
+    meta = json.loads((exc / "excitation.json").read_text())
+    assert excitation_transients(sim) == {"data_unv": meta["transient_periods"]}
     data = scipy.io.loadmat(sim / "data_unv.mat")
     played = scipy.io.loadmat(exc / "excitation.mat")["Unv"][:, 0]
     # data_unv's 3.5 s minimum: 1.5 s before the start, the 2 s chirp, nothing after.
@@ -114,3 +119,19 @@ def test_excite_twice_gives_byte_identical_files(tmp_path: Path) -> None:
         a = (tmp_path / "a" / "run" / file).read_bytes()
         assert a == (tmp_path / "b" / "run" / file).read_bytes(), file
     assert b"/a/" not in (tmp_path / "a" / "run" / "run.json").read_bytes()  # no folder path
+
+
+def test_identify_drops_the_transient_periods_the_excitation_describes(tmp_path: Path) -> None:
+    """excite → simulate --excitation → identify: the designed transient periods reach
+    the periodic averaging through the description written beside the record."""
+    exc = tmp_path / "ms"
+    assert main(["excite", str(exc), "--input", "Uch", "--kind", "multisine", "--band", "5",
+                 "500", "--resolution", "2", "--periods", "4", "--transient-periods", "3",
+                 "--amplitude-rms", "0.03"]) == 0
+    sim = tmp_path / "sim"
+    assert main(["simulate", str(sim), "--excitation", str(exc), "--experiments",
+                 "data_cal_pd_h", "data_cal_pd_v", "data_ucv", "--duration", "4"]) == 0
+    out = tmp_path / "id"
+    assert main(["identify", str(sim), "--out", str(out)]) == 0
+    ident = json.loads((out / "identification.json").read_text())
+    assert ident["diagnostics"]["options"]["transient_periods"] == {"data_uch": 3}

@@ -340,9 +340,15 @@ def play_excitation(sources: str | Path | Sequence[str | Path], bench: Bench | N
     Each designed excitation is played in its input's experiment
     (:func:`simulate_excitation`); ``experiments`` adds the seed's own
     experiments (those not played from a file), so one folder can hold a whole
-    identification set. Two files for the same input are refused. Returns the
-    paths written.
+    identification set. Two files for the same input are refused. Beside the
+    records, each played excitation's description is written as
+    ``excitation_<input>.json`` (its samples are in the record), so that
+    ``identify`` finds the transient periods to drop, as it does in a folder of
+    real recordings with ``fsmbench excite``'s JSON beside them. Returns the paths
+    written.
     """
+    from fsmbench.excite.files import find_description
+
     items = [sources] if isinstance(sources, (str, Path)) else list(sources)
     played = [simulate_excitation(src, bench, seed=seed, duration_s=duration_s,
                                   progress=progress) for src in items]
@@ -366,4 +372,11 @@ def play_excitation(sources: str | Path | Sequence[str | Path], bench: Bench | N
     merged = TwinRun(recordings={k: v for r in runs for k, v in r.recordings.items()},
                      truth=truth, seed=seed,
                      experiments=tuple(e for r in runs for e in r.experiments))
-    return write_twin(merged, out_dir, format=format)
+    paths = write_twin(merged, out_dir, format=format)
+    for src in items:
+        meta = json.loads(find_description(src).read_text("utf-8"))
+        meta["played_as"] = ("the description of the excitation played; its samples are "
+                             f"{meta['input']} in the record")
+        paths.append(atomic_write_text(Path(out_dir) / f"excitation_{meta['input'].lower()}.json",
+                                       json.dumps(meta, indent=2) + "\n"))
+    return paths
