@@ -75,3 +75,12 @@ def test_excite_refuses_an_amplitude_beyond_the_beam_bound(
     err = capsys.readouterr().err
     assert "tolerated during the measurement" in err and "keeps it within" in err
     assert not (tmp_path / "x").exists()
+
+
+@pytest.mark.parametrize("argv", [["--drift-rate", "nan"], ["--periods", "6.5"],
+                                  ["--drift-resonance", "80"], ["--better-by-pct", "100"]])
+def test_tune_refuses_bad_arguments(argv: list[str], tmp_path: Path,
+                                    capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["tune", "--twin", "--out", str(tmp_path / "t"), *argv]) == 2
+    err = capsys.readouterr().err
+    assert argv[0] in err and not (tmp_path / "t").exists()

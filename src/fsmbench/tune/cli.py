@@ -40,6 +40,26 @@ def _percent(text: str) -> float:
     return value
 
 
+def _rate(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a drift rate in %/h") from None
+    if not (math.isfinite(value) and abs(value) <= 1e4):
+        raise argparse.ArgumentTypeError(f"{text!r}: give a drift rate within ±10000 %/h")
+    return value
+
+
+def _periods(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a whole number of periods") from None
+    if not 2 <= value <= 100:
+        raise argparse.ArgumentTypeError(f"{text!r}: give 2 to 100 periods")
+    return value
+
+
 def _fraction_pct(text: str) -> float:
     try:
         value = float(text)
@@ -76,12 +96,12 @@ def add_tune_command(sub: Any) -> None:
                         "exceeds its prediction by more than this [%%] (default 25)")
     p.add_argument("--watch-s", metavar="S", dest="watch_s", type=seconds, default=10.0,
                    help="how long each controller is watched [s] (default 10)")
-    p.add_argument("--periods", metavar="N", type=functools.partial(positive, unit="periods"),
-                   default=6, help="measured periods of 4 s per command (default 6)")
+    p.add_argument("--periods", metavar="N", type=_periods, default=6,
+                   help="measured periods of 4 s per command and stage (default 6)")
     p.add_argument("--seed", metavar="N", type=seed, default=0, help="random seed (default 0)")
     p.add_argument("--params", metavar="TOML", default=None,
                    help="bench parameters (TOML); default the packaged Sercalo bench")
-    p.add_argument("--drift-rate", metavar="PCT_PER_H", dest="drift_rate", type=float,
+    p.add_argument("--drift-rate", metavar="PCT_PER_H", dest="drift_rate", type=_rate,
                    default=None, help="after tuning, watch the controller that runs while the "
                                       "resonance drifts this fast [%%/h] (the loop that "
                                       "watches itself; tune.json's watch)")
