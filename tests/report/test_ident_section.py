@@ -246,3 +246,37 @@ def test_every_identified_value_is_listed_with_its_total_and_largest_part(
         # the total is the root sum of squares of the parts, each a std
         assert u.std == pytest.approx(float(np.sqrt(sum(v**2 for v in u.parts.values()))))
     assert all(r[3].endswith("%)") and "_" not in r[3] for r in table.rows)  # words, no keys
+
+
+def test_current_amplifier_figure_draws_the_estimate_the_identification_fitted(
+        result: Identification, ident_twin: TwinRun, bench: Bench) -> None:
+    """The report estimates nothing again: Figs. 12–14 draw ``gi.frf``, the lines the
+    gain was fitted on, whichever estimator made them."""
+    sec = identification_section(result, recordings=ident_twin.recordings, bench=bench,
+                                 truth=None, skipped={})
+    fig = _figure(sec, "fig12_14_current_amplifier")
+    for panel, g in zip(fig.panels, result.current_amp.values()):  # the top row, one per axis
+        assert g.frf is not None
+        keep = g.frf.frequency_hz > 0
+        measured = panel.traces[0]
+        assert isinstance(measured, Line)
+        np.testing.assert_array_equal(measured.x, g.frf.frequency_hz[keep])
+        np.testing.assert_array_equal(measured.y, np.abs(g.frf.frf.values[keep, 0, 0]))
+    assert "frf" not in result.current_amp["h"].to_json()
+
+
+def test_the_report_calls_no_estimator() -> None:
+    """Numerics never draw, and the report never estimates: no report module imports an
+    FRF or spectrum estimator (the stages hand it every array it draws)."""
+    import ast
+    from pathlib import Path
+
+    import fsmbench.report
+
+    estimators = {"spectral_matrix", "tfestimate", "pwelch", "cpsd", "mscohere",
+                  "local_polynomial_frf", "periodic_frf", "seed_welch", "first_order_lowpass"}
+    for path in Path(fsmbench.report.__file__).parent.rglob("*.py"):
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+            if isinstance(node, ast.ImportFrom):
+                names = {a.name for a in node.names}
+                assert not names & estimators, (path.name, sorted(names & estimators))

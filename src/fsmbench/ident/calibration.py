@@ -24,8 +24,8 @@ Current amplifier (2.2)
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass
-from typing import Any
+from dataclasses import asdict, dataclass, field, fields
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import xarray as xr
@@ -33,6 +33,9 @@ import xarray as xr
 from fsmbench.bench.params import BenchParams
 from fsmbench.checks import Check
 from fsmbench.ident.regression import spectral_sandwich
+
+if TYPE_CHECKING:
+    from fsmbench.ident.frf import FrequencyResponse
 
 __all__ = [
     "MAX_CALIBRATION_RESIDUAL",
@@ -256,6 +259,9 @@ class CurrentAmplifierGain:
         Of the fit.
     estimator : str
         FRF estimator of the lines (``welch``, ``lpm``, ``periodic``).
+    frf : FrequencyResponse or None
+        The ``Uc → Vc`` estimate the gain was fitted on, every line (drawn by
+        the report; not in JSON).
     """
 
     axis: str
@@ -272,6 +278,7 @@ class CurrentAmplifierGain:
     delay_std_s: float = math.nan
     reduced_chi2: float = math.nan
     estimator: str = "welch"
+    frf: FrequencyResponse | None = field(default=None, repr=False, compare=False)
 
     @property
     def ratio_to_theoretical(self) -> float:
@@ -280,8 +287,10 @@ class CurrentAmplifierGain:
 
     def to_json(self) -> dict[str, Any]:
         """Scalars only (the per-bin curve is left out); units in the keys."""
-        out = {k: v for k, v in asdict(self).items()
-               if k not in ("frequency_hz", "gi_response_a_per_v")}
+        out: dict[str, Any] = {
+            f.name: getattr(self, f.name) for f in fields(self)
+            if f.name not in ("frequency_hz", "gi_response_a_per_v", "frf")}
+        out["band_hz"] = list(self.band_hz)
         out["ratio_to_theoretical"] = self.ratio_to_theoretical
         return out
 

@@ -281,4 +281,5 @@ def identify_current_amplifier(ds: xr.Dataset, *, axis: str, nominal: BenchParam
         frequency_hz=fit.frequency_hz, gi_response_a_per_v=fit.gain_per_line_a_per_v,
         experiment=name, noise_std_a_per_v=fit.noise_std_a_per_v,
         misfit_std_a_per_v=fit.misfit_std_a_per_v, delay_s=fit.delay_s,
-        delay_std_s=fit.delay_std_s, reduced_chi2=fit.reduced_chi2, estimator=est.estimator)
+        delay_std_s=fit.delay_std_s, reduced_chi2=fit.reduced_chi2, estimator=est.estimator,
+        frf=est.to_frequency_response())

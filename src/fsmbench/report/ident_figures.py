@@ -30,16 +30,14 @@ from fsmbench.ident.calibration import (
     trim_recording,
 )
 from fsmbench.ident.delay import remove_delay
-from fsmbench.ident.frf import FrequencyResponse, spectral_matrix
+from fsmbench.ident.frf import FrequencyResponse
 from fsmbench.ident.newport import NewportIdentification
 from fsmbench.ident.sercalo import SercaloIdentification
-from fsmbench.ident.welch import hanning
 from fsmbench.report.figure import H_COLOR, V_COLOR, Figure, Line, Panel
 
 __all__ = [
     "PHASE_MIN_RUN",
     "PHASE_STD_MAX_DEG",
-    "amplifier_frfs",
     "axis_color",
     "coherence_figure",
     "current_amplifier_figure",
@@ -110,47 +108,28 @@ def qd_regression_figure(qd: Mapping[str, QdCalibration],
                   panels=tuple(panels), seed_ref="Fig. 10", columns=len(panels))
 
 
-def amplifier_frfs(recordings: Mapping[str, xr.Dataset], *, trims_s: Mapping[str, float],
-                   window_s: float) -> dict[str, FrequencyResponse]:
-    """``Uc → Vc`` Welch estimate of each axis, as 2.2 computes it.
-
-    Parameters
-    ----------
-    recordings : mapping
-        Holds ``data_uch`` and/or ``data_ucv``.
-    trims_s : mapping experiment -> s
-        Seconds removed at the start.
-    window_s : float
-        Hann window length [s].
-    """
-    out = {}
-    for axis, (exp, u, v) in _AMP_SIGNALS.items():
-        if exp not in recordings:
-            continue
-        ds = trim_recording(recordings[exp], t0_s=trims_s.get(exp, 1.0))
-        fs = float(ds.attrs["fs_hz"])
-        out[axis] = spectral_matrix(ds[u].values, ds[v].values, input_names=[u], output_names=[v],
-                                    window=hanning(int(np.ceil(window_s * fs))), fs_hz=fs)
-    return out
-
-
 def current_amplifier_figure(gi: Mapping[str, CurrentAmplifierGain],
-                             measured: Mapping[str, FrequencyResponse],
                              nominal: BenchParams) -> Figure:
     """Figs. 12–14: ``|Vc/Uc|`` measured against ``Ga·Zc·Gi``; ``Gi`` over the averaging band.
 
-    Top row: the measured magnitude with ``Ga·Zc·Gi`` for the theoretical
-    ``Gi = 1/(R + Rc)`` (dashed) and the identified ``Gi`` (black). Bottom
-    row: the per-bin estimate ``|Ga Zc Gi| / |Ga Zc|`` over the band with
-    its mean, the identified gain.
+    Top row: the ``Uc → Vc`` estimate the identification fitted (``g.frf``, by its
+    own estimator) with ``Ga·Zc·Gi`` for the theoretical ``Gi = 1/(R + Rc)``
+    (dashed) and the identified ``Gi`` (black). Bottom row: the per-bin
+    estimate ``|Ga Zc Gi| / |Ga Zc|`` over the band with its mean, the
+    identified gain. Axes without an estimate are left out.
     """
     top, bottom = [], []
+    how = ""
     for axis, g in gi.items():
+        if g.frf is None:
+            continue
         _exp, u, v = _AMP_SIGNALS[axis]
         color = axis_color(u)
-        est = measured[axis]
-        f = est.frequency_hz[1:]
-        h = np.abs(est.frf.values[1:, 0, 0])
+        est = g.frf
+        how = estimator_description(est)
+        keep = est.frequency_hz > 0  # a log axis cannot show 0 Hz
+        f = est.frequency_hz[keep]
+        h = np.abs(est.frf.values[keep, 0, 0])
         gazc = known_ga_zc(nominal, axis=axis, f_hz=f)
         top.append(Panel(
             traces=(Line(f, h, name=f"measured {u} → {v}", color=color, width=2.5),
@@ -172,9 +151,10 @@ def current_amplifier_figure(gi: Mapping[str, CurrentAmplifierGain],
             x_label="Frequency [Hz]", y_label="Current-amplifier gain Gi [mA/V]", x_log=True))
     return Figure(key="fig12_14_current_amplifier",
                   title="Current amplifier: measured and modelled Uc → Vc",
-                  caption=("Welch estimate of Uc → Vc (1 s Hann window) against Ga·Zc·Gi with Ga "
-                           "(1000, 1 kHz low pass) and Zc = Rc + Lc·s taken as known; below, Gi "
-                           "per frequency bin over the averaging band and its mean."),
+                  caption=(f"Uc → Vc as the identification estimated it ({how}) against "
+                           "Ga·Zc·Gi with Ga (1000, 1 kHz low pass) and Zc = Rc + Lc·s taken as "
+                           "known; below, Gi per frequency line over the averaging band and its "
+                           "mean."),
                   panels=tuple(top + bottom), seed_ref="Figs. 12–14", columns=len(top))
 
 

@@ -31,7 +31,6 @@ from fsmbench.report.html import Block, Note, Section, Table
 from fsmbench.report.ident_figures import (
     PHASE_MIN_RUN,
     PHASE_STD_MAX_DEG,
-    amplifier_frfs,
     coherence_figure,
     current_amplifier_figure,
     estimator_description,
@@ -205,11 +204,10 @@ def _current_amp(result: Identification | None, *, recordings: Mapping[str, xr.D
     if why or result is None:
         blocks.append(why or "")
     else:
-        frfs = amplifier_frfs(recordings, trims_s=result.options.trims_s,
-                              window_s=result.options.window_s)
-        drawn = {a: g for a, g in result.current_amp.items() if a in frfs}
+        # The estimates the identification fitted: the report estimates nothing again.
+        drawn = {a: g for a, g in result.current_amp.items() if g.frf is not None}
         if drawn:
-            blocks.append(current_amplifier_figure(drawn, frfs, bench.nominal))
+            blocks.append(current_amplifier_figure(drawn, bench.nominal))
         blocks.append(Table(
             caption="Current-amplifier gains",
             header=("axis", "identified Gi [mA/V]", "± total [mA/V]", "1/(R + Rc) [mA/V]",
