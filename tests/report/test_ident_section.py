@@ -255,7 +255,8 @@ def test_current_amplifier_figure_draws_the_estimate_the_identification_fitted(
     sec = identification_section(result, recordings=ident_twin.recordings, bench=bench,
                                  truth=None, skipped={})
     fig = _figure(sec, "fig12_14_current_amplifier")
-    for panel, g in zip(fig.panels, result.current_amp.values()):  # the top row, one per axis
+    amps = list(result.current_amp.values())
+    for panel, g in zip(fig.panels[:len(amps)], amps, strict=True):  # the top row, per axis
         assert g.frf is not None
         keep = g.frf.frequency_hz > 0
         measured = panel.traces[0]
