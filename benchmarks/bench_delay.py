@@ -2,7 +2,7 @@
 
     python benchmarks/bench_delay.py [--repeats 20] [--seeds 5]
 
-1. Speed of :func:`fsmbench.ident.sampled.sampled_response` (the model the
+1. Speed of :func:`fsmbench.ident.delay.sampled.sampled_response` (the model the
    joint delay fit evaluates hundreds of times): the Sercalo-like path of two
    modes with a Butterworth sensor, 2000 lines, a delay of 2 samples plus a
    hold (whole samples, so that the peers can do it too), against
@@ -37,8 +37,8 @@ import scipy.signal as sig
 
 from fsmbench.bench.blocks import replace_params
 from fsmbench.bench.params import Bench, default_bench, real_bench
+from fsmbench.ident.delay.sampled import SensorLowpass, mode_sum, sampled_response, series
 from fsmbench.ident.pipeline import SEED_TRIMS_S
-from fsmbench.ident.sampled import SensorLowpass, mode_sum, sampled_response, series
 from fsmbench.ident.sercalo import experiment_frf, fit_sercalo
 from fsmbench.twin import simulate_bench
 from timing import timed_runs

@@ -52,7 +52,7 @@ def main() -> None:
         print(f"report.html: {report.stat().st_size / 1e6:.2f} MB")
 
         # The report build on the same sections, against matplotlib PNGs of the same figures.
-        from fsmbench.report.static import export_figures
+        from fsmbench.report.figures.static import export_figures
 
         sections = result.sections
         n_figures = sum(1 for _ in iter_figures(sections))

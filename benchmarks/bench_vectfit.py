@@ -39,7 +39,7 @@ import warnings
 import numpy as np
 import scipy
 
-from fsmbench.ident.vectfit import VectorFit, VectorFitOptions, vector_fit
+from fsmbench.ident.fit.vectfit import VectorFit, VectorFitOptions, vector_fit
 from timing import timed_runs
 
 F_HZ = np.arange(1.0, 5001.0)  # the seed's 1 Hz Welch grid, 1 Hz .. 5 kHz

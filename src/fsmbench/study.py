@@ -160,14 +160,14 @@ def _sections(*, bench: Bench, loaded: RecordingSet, source: str, is_twin: bool,
               budget: Any, design: Any, plant_source: str, validation: Any = None,
               validation_skipped: str = "") -> list[Section]:
     """Every chapter in the ESRF study's order (1–11), then the parameters appendix."""
-    from fsmbench.report.bench_section import bench_section, parameters_appendix
-    from fsmbench.report.budget_section import budget_section
-    from fsmbench.report.control_sections import control_sections
-    from fsmbench.report.huddle_section import huddle_section
-    from fsmbench.report.ident_section import identification_section
-    from fsmbench.report.noise_section import noise_subsection
-    from fsmbench.report.repeatability_section import repeatability_section
-    from fsmbench.report.validation_section import validation_subsection
+    from fsmbench.report.sections.bench import bench_section, parameters_appendix
+    from fsmbench.report.sections.budget import budget_section
+    from fsmbench.report.sections.control import control_sections
+    from fsmbench.report.sections.huddle import huddle_section
+    from fsmbench.report.sections.ident import identification_section
+    from fsmbench.report.sections.noise import noise_subsection
+    from fsmbench.report.sections.repeatability import repeatability_section
+    from fsmbench.report.sections.validation import validation_subsection
 
     rec = loaded.recordings
     chapter2 = identification_section(ident, recordings=rec, bench=bench, truth=truth,
@@ -360,7 +360,7 @@ def run_study(*, out_dir: str | Path, data_dir: str | Path | None = None,
     lap("report")
     exported: list[Path] = []
     if figures:
-        from fsmbench.report.static import export_figures
+        from fsmbench.report.figures.static import export_figures
 
         say(f"writing every figure as {', '.join(figures)} to {out / 'figures'}")
         exported = export_figures(iter_figures(sections), out / "figures", formats=figures)

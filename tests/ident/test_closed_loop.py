@@ -12,7 +12,7 @@ import pytest
 
 from fsmbench.bench.params import Bench
 from fsmbench.excite.limits import input_response
-from fsmbench.ident.frf_closed_loop import (
+from fsmbench.ident.frf.closed_loop import (
     ClosedLoopRecord,
     closed_loop_frf,
     joint_lpm,

@@ -10,7 +10,7 @@ import pytest
 import xarray as xr
 from scipy.integrate import quad
 
-from fsmbench.ident.delay import (
+from fsmbench.ident.delay.bode import (
     DelayEstimate,
     _coherent_band,
     _kernel_primitive,
@@ -19,8 +19,8 @@ from fsmbench.ident.delay import (
     estimate_delay_from_response,
     remove_delay,
 )
-from fsmbench.ident.frf import FrequencyResponse, spectral_matrix
-from fsmbench.ident.welch import hanning
+from fsmbench.ident.frf.response import FrequencyResponse, spectral_matrix
+from fsmbench.ident.frf.welch import hanning
 from fsmbench.twin import TwinRun
 
 FS_HZ = 1e4

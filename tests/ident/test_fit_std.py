@@ -13,10 +13,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from fsmbench.ident.fit_std import QUANTITIES, sercalo_parameter_std
-from fsmbench.ident.frf_estimate import FrfEstimate
+from fsmbench.ident.fit.parameter_std import QUANTITIES, sercalo_parameter_std
+from fsmbench.ident.fit.vectfit import VectorFitOptions, vector_fit
+from fsmbench.ident.frf.estimate import FrfEstimate
 from fsmbench.ident.sercalo import SercaloFitOptions, fit_sercalo, variance_weights
-from fsmbench.ident.vectfit import VectorFitOptions, vector_fit
 
 F_HZ = np.arange(1, 501) * 2.0
 GI = (0.01, 0.02)  # A/V

@@ -13,8 +13,8 @@ import pytest
 import scipy.signal as ss
 import scipy.stats as st
 
-from fsmbench.ident.frf_estimate import FrfEstimate, circular_bound_factor, combine_estimates
-from fsmbench.ident.frf_periodic import (
+from fsmbench.ident.frf.estimate import FrfEstimate, circular_bound_factor, combine_estimates
+from fsmbench.ident.frf.periodic import (
     PeriodicOptions,
     detect_period,
     excited_lines,

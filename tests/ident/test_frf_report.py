@@ -6,10 +6,10 @@ import numpy as np
 import pytest
 import scipy.stats as st
 
-from fsmbench.ident.frf import spectral_matrix
-from fsmbench.ident.frf_estimate import FrfEstimate, circular_bound_factor
-from fsmbench.ident.welch import hanning
-from fsmbench.report.ident_figures import estimator_description, frf_matrix_figure
+from fsmbench.ident.frf.estimate import FrfEstimate, circular_bound_factor
+from fsmbench.ident.frf.response import spectral_matrix
+from fsmbench.ident.frf.welch import hanning
+from fsmbench.report.figures.ident import estimator_description, frf_matrix_figure
 
 F_HZ = np.arange(1, 101) * 2.0
 

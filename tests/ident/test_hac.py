@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from fsmbench.ident.joint_delay import hac_factors
+from fsmbench.ident.delay.joint import hac_factors
 
 N = 8000  # lines
 LAGS = 10  # ceil(4 x 2.5), the nominal correlation of a zero-padded Hann window

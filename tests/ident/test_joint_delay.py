@@ -17,15 +17,15 @@ from hypothesis import strategies as st
 
 from fsmbench.bench.blocks import replace_params
 from fsmbench.bench.params import Bench, default_bench, real_bench
-from fsmbench.ident.joint_delay import BOUND_LR, fit_jointly
-from fsmbench.ident.pipeline import SEED_TRIMS_S
-from fsmbench.ident.sampled import (
+from fsmbench.ident.delay.joint import BOUND_LR, fit_jointly
+from fsmbench.ident.delay.sampled import (
     SensorLowpass,
     mode_sum,
     sampled_response,
     second_order,
     series,
 )
+from fsmbench.ident.pipeline import SEED_TRIMS_S
 from fsmbench.ident.sercalo import experiment_frf, fit_sercalo
 from fsmbench.sim.discretize import zoh_with_delays
 from fsmbench.twin import simulate_bench

@@ -26,9 +26,9 @@ import numpy as np
 import pytest
 import scipy.signal as ss
 
-from fsmbench.ident.frf import spectral_matrix
-from fsmbench.ident.modal import ModalEstimate, estimate_modes, fit_frf_modes
-from fsmbench.ident.welch import hanning
+from fsmbench.ident.fit.modal import ModalEstimate, estimate_modes, fit_frf_modes
+from fsmbench.ident.frf.response import spectral_matrix
+from fsmbench.ident.frf.welch import hanning
 from fsmbench.twin import TwinRun
 
 FS_HZ = 1e4

@@ -7,8 +7,9 @@ import dataclasses
 import numpy as np
 import pytest
 
-from fsmbench.ident.delay import DelayEstimate
-from fsmbench.ident.frf import spectral_matrix
+from fsmbench.ident.delay.bode import DelayEstimate
+from fsmbench.ident.frf.response import spectral_matrix
+from fsmbench.ident.frf.welch import hanning
 from fsmbench.ident.newport import identify_newport
 from fsmbench.ident.sercalo import (
     combined_delay,
@@ -19,7 +20,6 @@ from fsmbench.ident.sercalo import (
     relative_fit_error,
     seed_weights,
 )
-from fsmbench.ident.welch import hanning
 from fsmbench.twin import TwinRun
 
 TRIMS = {"data_uch": 1.0, "data_ucv": 1.0, "data_unh": 3.0, "data_unv": 1.5}

@@ -15,10 +15,10 @@ import scipy.signal as ss
 import scipy.stats as st
 
 import fsmbench.ident as ident_pkg
-from fsmbench.ident import frf as frf_mod
-from fsmbench.ident import spectral
-from fsmbench.ident import welch as welch_mod
-from fsmbench.ident.spectral import (
+from fsmbench.ident.frf import response as frf_mod
+from fsmbench.ident.frf import spectral
+from fsmbench.ident.frf import welch as welch_mod
+from fsmbench.ident.frf.spectral import (
     combine_columns,
     cpsd,
     hanning,

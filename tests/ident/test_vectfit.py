@@ -9,7 +9,7 @@ import control
 import numpy as np
 import pytest
 
-from fsmbench.ident.vectfit import Mode, VectorFit, VectorFitOptions, vector_fit
+from fsmbench.ident.fit.vectfit import Mode, VectorFit, VectorFitOptions, vector_fit
 
 F_HZ = np.arange(1.0, 5001.0)  # the seed's 1 Hz Welch grid, 1 Hz .. 5 kHz
 ZETA = 1e-3

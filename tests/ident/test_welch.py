@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 import scipy.signal as ss
 
-from fsmbench.ident import welch
-from fsmbench.ident.welch import (
+from fsmbench.ident.frf import welch
+from fsmbench.ident.frf.welch import (
     WelchOptions,
     cpsd,
     cross_spectral_density,

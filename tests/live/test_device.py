@@ -29,7 +29,7 @@ tango = pytest.importorskip("tango")
 from tango.test_context import DeviceTestContext  # noqa: E402
 
 from fsmbench.bench.params import Bench  # noqa: E402
-from fsmbench.ident.welch import default_nfft, hanning, mscohere, tfestimate  # noqa: E402
+from fsmbench.ident.frf.welch import default_nfft, hanning, mscohere, tfestimate  # noqa: E402
 from fsmbench.io.recording import read_recording  # noqa: E402
 from fsmbench.live.attributes import ATTRIBUTES  # noqa: E402
 from fsmbench.live.device import FsmBench  # noqa: E402

@@ -5,8 +5,8 @@ from __future__ import annotations
 import re
 
 from fsmbench.bench.params import Bench, param_rows
-from fsmbench.report.bench_section import bench_section, parameters_appendix
 from fsmbench.report.html import Section, Table, visible_text
+from fsmbench.report.sections.bench import bench_section, parameters_appendix
 from fsmbench.twin import TwinRun
 
 

@@ -140,7 +140,7 @@ def test_rules_and_labels_sit_at_their_values_on_log_axes(browser: Any, tmp_path
     # rule at 100 must be drawn at 10², its label beside it, the axis not stretched.
     import numpy as np
 
-    from fsmbench.report.figure import Figure, Label, Line, Panel, Rule
+    from fsmbench.report.figures.spec import Figure, Label, Line, Panel, Rule
     from fsmbench.report.html import Section, render_report
 
     f = np.logspace(0, 3, 50)

@@ -13,12 +13,12 @@ import pytest
 
 import fsmbench.budget
 from fsmbench.budget.study import BudgetResult, budget_study
-from fsmbench.report.budget_figures import distance_cumulative_m, log_envelope
-from fsmbench.report.budget_section import budget_section
-from fsmbench.report.figure import Figure, Line
+from fsmbench.report.figures.budget import distance_cumulative_m, log_envelope
+from fsmbench.report.figures.spec import Figure, Line
 from fsmbench.report.html import Note, Section, Table, iter_figures, render_report
-from fsmbench.report.huddle_section import huddle_section
-from fsmbench.report.repeatability_section import repeatability_section
+from fsmbench.report.sections.budget import budget_section
+from fsmbench.report.sections.huddle import huddle_section
+from fsmbench.report.sections.repeatability import repeatability_section
 from fsmbench.twin import simulate_bench
 
 HUDDLES = [f"data_huddle_test_{i}" for i in range(1, 6)]

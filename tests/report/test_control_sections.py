@@ -15,9 +15,9 @@ import pytest
 from fsmbench.bench.blocks import PlantModel
 from fsmbench.bench.params import Bench
 from fsmbench.control.study import DesignResult, design_study
-from fsmbench.report.control_sections import control_sections
-from fsmbench.report.figure import Figure, Line
+from fsmbench.report.figures.spec import Figure, Line
 from fsmbench.report.html import Note, Section, Table, iter_figures, render_report, visible_text
+from fsmbench.report.sections.control import control_sections
 from fsmbench.stages import DesignStage
 from fsmbench.twin.verify import verify_on_twin
 
@@ -196,14 +196,14 @@ def _imports_matplotlib(path: Path) -> bool:
 
 
 def test_control_numerics_do_not_draw() -> None:
-    files = [*sorted((SRC / "control").glob("*.py")), SRC / "report" / "control_figures.py",
-             SRC / "report" / "control_sections.py"]
+    files = [*sorted((SRC / "control").glob("*.py")), SRC / "report" / "figures" / "control.py",
+             SRC / "report" / "sections" / "control.py"]
     assert not [f.name for f in files if _imports_matplotlib(f)]
     # python-control itself imports matplotlib.pyplot; fsmbench must add nothing to it
     # (no backend switch, no figure module).
     code = ("import sys, control\n"
             "before = {m for m in sys.modules if m.startswith('matplotlib')}\n"
-            "import fsmbench.control, fsmbench.report.control_sections\n"
+            "import fsmbench.control, fsmbench.report.sections.control\n"
             "after = {m for m in sys.modules if m.startswith('matplotlib')}\n"
             "print(sorted(after - before))\n")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,

@@ -20,8 +20,8 @@ import numpy as np
 import pytest
 
 from fsmbench.io.recording import read_recording
+from fsmbench.report.figures.static import export_figures, render_matplotlib
 from fsmbench.report.html import iter_figures, visible_text
-from fsmbench.report.static import export_figures, render_matplotlib
 from fsmbench.study import StudyResult
 
 playwright_api = pytest.importorskip("playwright.sync_api")

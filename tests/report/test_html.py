@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from fsmbench.report.figure import Figure, Line, Panel
+from fsmbench.report.figures.spec import Figure, Line, Panel
 from fsmbench.report.html import Note, Section, Table, iter_figures, render_report, write_report
 
 

@@ -10,9 +10,9 @@ import pytest
 from fsmbench.bench.params import Bench
 from fsmbench.checks import Check, Notice
 from fsmbench.ident.pipeline import Identification, identify
-from fsmbench.report.figure import Bars, Figure, Line
+from fsmbench.report.figures.spec import Bars, Figure, Line
 from fsmbench.report.html import Section, Table, iter_figures, render_report, visible_text
-from fsmbench.report.ident_section import identification_section, quantity
+from fsmbench.report.sections.ident import identification_section, quantity
 from fsmbench.twin import TwinRun
 from fsmbench.twin.compare import TARGETS, comparison_rows
 

@@ -10,9 +10,9 @@ from typing import Any
 import numpy as np
 import pytest
 
-from fsmbench.report.figure import H_COLOR, V_COLOR, Bars, Figure, Line, Panel, Rule
+from fsmbench.report.figures.interactive import figure_json
+from fsmbench.report.figures.spec import H_COLOR, V_COLOR, Bars, Figure, Line, Panel, Rule
 from fsmbench.report.html import Section, render_report
-from fsmbench.report.interactive import figure_json
 
 N_RECORD = 1_000_000
 

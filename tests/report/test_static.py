@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from fsmbench.report.figure import H_COLOR, V_COLOR, Bars, Figure, Label, Line, Panel, Rule
-from fsmbench.report.static import PNG_DPI, export_figures, render_matplotlib
+from fsmbench.report.figures.spec import H_COLOR, V_COLOR, Bars, Figure, Label, Line, Panel, Rule
+from fsmbench.report.figures.static import PNG_DPI, export_figures, render_matplotlib
 
 N_RECORD = 1_000_000
 
@@ -224,6 +224,6 @@ def test_bad_input_is_refused(specs: list[Figure], tmp_path: Path) -> None:
 
 
 def test_importing_the_report_does_not_import_matplotlib() -> None:
-    code = ("import sys, fsmbench.report, fsmbench.report.static; "
+    code = ("import sys, fsmbench.report, fsmbench.report.figures.static; "
             "sys.exit('matplotlib' in sys.modules)")
     assert subprocess.run([sys.executable, "-c", code], check=False).returncode == 0

@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 import xarray as xr
 
-from fsmbench.report.figure import H_COLOR, V_COLOR, Line, Panel
-from fsmbench.report.time_figures import SEED_TIME_FIGURES, experiment_figure, signal_panels
+from fsmbench.report.figures.spec import H_COLOR, V_COLOR, Line, Panel
+from fsmbench.report.figures.time import SEED_TIME_FIGURES, experiment_figure, signal_panels
 from fsmbench.twin import TwinRun
 
 GN0 = 2.62e-3  # seed 2.1, rad/V

@@ -12,7 +12,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from fsmbench.ident.welch import (
+from fsmbench.ident.frf.welch import (
     WelchOptions,
     cpsd,
     cross_spectral_density,

@@ -9,7 +9,7 @@ from hypothesis import strategies as st
 
 from fsmbench.budget.signals import block_means
 from fsmbench.filters import first_order_lowpass
-from fsmbench.ident.welch import WelchOptions, hanning, pwelch
+from fsmbench.ident.frf.welch import WelchOptions, hanning, pwelch
 from fsmbench.scale.envelope import minmax_envelope
 from fsmbench.scale.streaming import (
     BlockMeanStream,

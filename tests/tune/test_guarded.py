@@ -128,7 +128,7 @@ def test_refusal_rules() -> None:
 
 def test_report_section(drift_tune: TuneResult) -> None:
     from fsmbench.report.html import render_report, visible_text
-    from fsmbench.report.tune_section import tune_section
+    from fsmbench.report.sections.tune import tune_section
 
     sec = tune_section(drift_tune)
     page = render_report(title="tune", sections=[sec])

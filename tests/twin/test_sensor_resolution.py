@@ -19,8 +19,8 @@ from fsmbench.bench.blocks import input_delays_s, replace_params
 from fsmbench.bench.params import Bench, real_bench
 from fsmbench.excite.design import design_multisine
 from fsmbench.excite.files import write_excitation
+from fsmbench.ident.delay.sampled import SensorLowpass
 from fsmbench.ident.pipeline import Identification, identify
-from fsmbench.ident.sampled import SensorLowpass
 from fsmbench.io.folder import load_recordings
 from fsmbench.twin.simulate import play_excitation
 

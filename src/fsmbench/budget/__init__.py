@@ -2,7 +2,7 @@
 
 Entry point: :func:`budget_study` (everything on the recordings present). The
 numerics draw nothing: the report's figures are built in
-:mod:`fsmbench.report.budget_figures` and :mod:`fsmbench.report.repeatability_figures`.
+:mod:`fsmbench.report.figures.budget` and :mod:`fsmbench.report.figures.repeatability`.
 """
 
 from fsmbench.budget.environment import (

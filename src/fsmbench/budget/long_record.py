@@ -31,7 +31,7 @@ import xarray as xr
 from numpy.typing import NDArray
 
 from fsmbench.budget.signals import LazyTrim, trim_record
-from fsmbench.ident.welch import SpectrumResult, WelchOptions, hanning
+from fsmbench.ident.frf.welch import SpectrumResult, WelchOptions, hanning
 from fsmbench.progress import advance
 from fsmbench.scale.allan import AllanResult
 from fsmbench.scale.envelope import Envelope

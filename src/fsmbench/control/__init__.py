@@ -2,7 +2,7 @@
 
 Entry point: :func:`design_study` (ESRF study sections 5–10 on a plant model); the
 ESRF study's controllers are in :mod:`fsmbench.control.seed`. The report's figures
-of these results are built in :mod:`fsmbench.report.control_figures`.
+of these results are built in :mod:`fsmbench.report.figures.control`.
 """
 
 from fsmbench.control.realize import zpk_cascade

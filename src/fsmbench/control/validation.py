@@ -53,7 +53,7 @@ from fsmbench.bench.blocks import PlantModel
 from fsmbench.bench.params import BenchParams
 from fsmbench.budget.propagation import loop_response
 from fsmbench.checks import Check
-from fsmbench.ident.welch import hanning, pwelch
+from fsmbench.ident.frf.welch import hanning, pwelch
 from fsmbench.jsonutil import plain_json
 from fsmbench.sim.spectra import qd_noise_spectrum
 

@@ -2,7 +2,7 @@
 
 With the loop closed, the plant's estimate on a line is as precise as the
 loop's output on that line stands above the noise: ``G = S_yr S_ur^-1`` has
-relative variance ``var(v) / |S_yr r|^2`` (:mod:`fsmbench.ident.frf_closed_loop`),
+relative variance ``var(v) / |S_yr r|^2`` (:mod:`fsmbench.ident.frf.closed_loop`),
 and ``S_yr r`` is the beam motion the excitation makes, which is also what a
 user's bound on the tracking error limits. So the most precise measurement
 within a bound moves the beam equally on every excited line: each line's

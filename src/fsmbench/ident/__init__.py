@@ -9,12 +9,13 @@ from fsmbench.ident.calibration import (
     calibrate_current_amplifier,
     calibrate_qd,
 )
-from fsmbench.ident.delay import DelayEstimate, estimate_delay, remove_delay
-from fsmbench.ident.frf_estimate import FrfEstimate, combine_estimates
-from fsmbench.ident.frf_periodic import PeriodicOptions, detect_period, periodic_frf
-from fsmbench.ident.lpm import LpmOptions, local_polynomial_frf
-from fsmbench.ident.modal import ModalEstimate, ModeEstimate, estimate_modes
-from fsmbench.ident.spectral import (
+from fsmbench.ident.delay.bode import DelayEstimate, estimate_delay, remove_delay
+from fsmbench.ident.fit.modal import ModalEstimate, ModeEstimate, estimate_modes
+from fsmbench.ident.fit.vectfit import Mode, VectorFit, VectorFitOptions, vector_fit
+from fsmbench.ident.frf.estimate import FrfEstimate, combine_estimates
+from fsmbench.ident.frf.lpm import LpmOptions, local_polynomial_frf
+from fsmbench.ident.frf.periodic import PeriodicOptions, detect_period, periodic_frf
+from fsmbench.ident.frf.spectral import (
     FrequencyResponse,
     SpectrumResult,
     WelchOptions,
@@ -31,7 +32,6 @@ from fsmbench.ident.spectral import (
     spectral_matrix,
     tfestimate,
 )
-from fsmbench.ident.vectfit import Mode, VectorFit, VectorFitOptions, vector_fit
 
 __all__ = [
     "CurrentAmplifierGain",

@@ -9,7 +9,7 @@ current-amplifier gains (2.2).
     seed reads ``a`` as rad/V in its text (errata E6); it is V/rad, and its
     inverse is reported in µrad/mV. R² and residual rms come from the ordinary
     least-squares fit; the standard errors from the residual's spectrum near
-    the sweep's frequency (:mod:`fsmbench.ident.regression`: 1/f noise, drift
+    the sweep's frequency (:mod:`fsmbench.ident.fit.regression`: 1/f noise, drift
     and mains are not white). The metrology noise (0.5 µrad) is
     errors-in-variables noise on the regressor, which biases ``a`` towards 0
     by ``var(noise)/var(x) < 1e-7`` here: negligible.
@@ -32,10 +32,10 @@ import xarray as xr
 
 from fsmbench.bench.params import BenchParams
 from fsmbench.checks import Check
-from fsmbench.ident.regression import spectral_sandwich
+from fsmbench.ident.fit.regression import spectral_sandwich
 
 if TYPE_CHECKING:
-    from fsmbench.ident.frf import FrequencyResponse
+    from fsmbench.ident.frf.response import FrequencyResponse
 
 __all__ = [
     "MAX_CALIBRATION_RESIDUAL",

@@ -11,7 +11,7 @@ outputs. :func:`identify_closed_loop`:
    against the user's bound when one is given;
 2. estimates the 2×2 FRF matrix ``Uch, Ucv → Vph, Vpv`` by the joint
    input–output method with the excitation as the instrument
-   (:mod:`fsmbench.ident.frf_closed_loop`: periodic averaging when the excitation
+   (:mod:`fsmbench.ident.frf.closed_loop`: periodic averaging when the excitation
    repeats, else the LPM), with the variance of every line, and the *direct*
    method on the same lines for its bias;
 3. fits it exactly as the open-loop identification fits its FRF
@@ -61,8 +61,8 @@ from fsmbench.bench.blocks import (
 )
 from fsmbench.bench.params import Bench
 from fsmbench.checks import Check, Notice, first_failure
-from fsmbench.ident.frf_closed_loop import ClosedLoopFrf, ClosedLoopRecord, closed_loop_frf
-from fsmbench.ident.sampled import SensorLowpass
+from fsmbench.ident.delay.sampled import SensorLowpass
+from fsmbench.ident.frf.closed_loop import ClosedLoopFrf, ClosedLoopRecord, closed_loop_frf
 from fsmbench.ident.sercalo import SercaloFitOptions, SercaloIdentification, fit_sercalo
 from fsmbench.io.atomic import atomic_write_text
 from fsmbench.jsonutil import plain_json, stamped
@@ -98,7 +98,7 @@ class ClosedLoopIdentifyOptions:
     transient_periods : int, optional
         Whole periods dropped after the excitation starts (the loop's transient);
         default found on each record
-        (:func:`fsmbench.ident.frf_closed_loop.settled_periods`).
+        (:func:`fsmbench.ident.frf.closed_loop.settled_periods`).
     sercalo : SercaloFitOptions
         The fit (inverse-variance weights by default: each line's own variance).
     max_error_rad : float, optional
@@ -331,7 +331,7 @@ def _synchronous_added(e: np.ndarray, x: np.ndarray) -> float | None:
     per-sample variance across periods over their number, is taken off. None when ``x``
     does not repeat at least three times.
     """
-    from fsmbench.ident.frf_periodic import detect_period
+    from fsmbench.ident.frf.periodic import detect_period
 
     n = detect_period(x)
     if n is None or x.size // n < 3:

@@ -17,7 +17,7 @@ periodic average, each with its per-line variance) is fitted, in the band, by
 
 ``M`` the path ``Uc → Vc`` with ``Gi = 1/(1/g + Lc s)`` — the coil circuit
 ``Vt = Uc − (R + R_buffer) Ic`` and the voltage amplifier ``Ga`` — as the
-converters sample it (:func:`fsmbench.ident.sampled.sampled_response`: hold,
+converters sample it (:func:`fsmbench.ident.delay.sampled.sampled_response`: hold,
 fractional delay, exactly), per unit of ``g``. ``g`` (real) is linear: its
 weighted least-squares value for each delay; the delay ``τ`` (the hold's
 half sample included) minimises the weighted residual. ``M`` depends on
@@ -44,12 +44,12 @@ from scipy.optimize import minimize_scalar
 
 from fsmbench.bench.params import BenchParams
 from fsmbench.ident.calibration import CurrentAmplifierGain, require_signals, trim_recording
-from fsmbench.ident.frf import spectral_matrix
-from fsmbench.ident.frf_estimate import FrfEstimate
-from fsmbench.ident.frf_periodic import PeriodicOptions, periodic_frf
-from fsmbench.ident.lpm import LPM_NOISE_SMOOTHING, LpmOptions, local_polynomial_frf
-from fsmbench.ident.sampled import StateSpace3, sampled_response
-from fsmbench.ident.welch import hanning
+from fsmbench.ident.delay.sampled import StateSpace3, sampled_response
+from fsmbench.ident.frf.estimate import FrfEstimate
+from fsmbench.ident.frf.lpm import LPM_NOISE_SMOOTHING, LpmOptions, local_polynomial_frf
+from fsmbench.ident.frf.periodic import PeriodicOptions, periodic_frf
+from fsmbench.ident.frf.response import spectral_matrix
+from fsmbench.ident.frf.welch import hanning
 
 __all__ = ["AmplifierFit", "amplifier_path", "fit_amplifier", "identify_current_amplifier"]
 

@@ -23,7 +23,7 @@ import control as ct
 import numpy as np
 
 from fsmbench.bench.blocks import PlantModel
-from fsmbench.ident.frf import FrequencyResponse
+from fsmbench.ident.frf.response import FrequencyResponse
 from fsmbench.io.matwrite import save_mat
 
 __all__ = ["frf_variables", "plant_variables", "ss_struct", "write_frf_mat", "write_plant_mat"]

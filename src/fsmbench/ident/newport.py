@@ -49,11 +49,11 @@ from scipy.ndimage import median_filter
 from scipy.optimize import brentq
 
 from fsmbench.checks import Check, Notice
-from fsmbench.ident.delay import DelayEstimate, remove_delay
-from fsmbench.ident.frf import FrequencyResponse
-from fsmbench.ident.joint_delay import SensorEstimate, fit_jointly, line_std
-from fsmbench.ident.sampled import SensorLowpass, StateSpace3, second_order
-from fsmbench.ident.sampled import sampled_response as sampled_path
+from fsmbench.ident.delay.bode import DelayEstimate, remove_delay
+from fsmbench.ident.delay.joint import SensorEstimate, fit_jointly, line_std
+from fsmbench.ident.delay.sampled import SensorLowpass, StateSpace3, second_order
+from fsmbench.ident.delay.sampled import sampled_response as sampled_path
+from fsmbench.ident.frf.response import FrequencyResponse
 from fsmbench.ident.sercalo import combined_delay, path_delays
 
 __all__ = ["NewportAxisFit", "NewportDynamics", "NewportIdentification", "fit_newport_dynamics",
@@ -97,7 +97,7 @@ class NewportAxisFit:
         Rms of ``|H_model − H| / |H|`` over the lines fitted.
     sensor : SensorEstimate or None
         The 4QD amplifier in the fit and what the lines say of its bandwidth
-        (:mod:`fsmbench.ident.joint_delay`); ``delay_s`` excludes its lag.
+        (:mod:`fsmbench.ident.delay.joint`); ``delay_s`` excludes its lag.
     """
 
     axis: str
@@ -236,7 +236,7 @@ def sampled_response(f_hz: FloatArray, *, gain: float, natural_freq_hz: float,
     """The second order and delay as the converter samples them, at ``f_hz`` [Hz] (V/V).
 
     Exact for a command held over each sample (zero-order hold) and a delay of
-    any fraction of a sample (:func:`fsmbench.ident.sampled.sampled_response`),
+    any fraction of a sample (:func:`fsmbench.ident.delay.sampled.sampled_response`),
     with the sensor's low pass when given. ``delay_s`` follows the seed's
     convention: it includes half a sample for the hold.
     """
@@ -312,7 +312,7 @@ def fit_newport_dynamics(frf: FrequencyResponse, *, dac_delay_samples: float = 1
         Lag defining the phase bandwidth [deg] (FSM-300 datasheet: 60°).
     sensor : SensorLowpass, optional
         The bench model's 4QD amplifier (default unlimited); its bandwidth is
-        fitted when the lines resolve it (:mod:`fsmbench.ident.joint_delay`).
+        fitted when the lines resolve it (:mod:`fsmbench.ident.delay.joint`).
 
     Raises
     ------

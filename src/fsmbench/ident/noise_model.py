@@ -61,7 +61,7 @@ from fsmbench.bench.blocks import newport_beam_matrix
 from fsmbench.bench.params import BenchParams
 from fsmbench.budget.huddle import HUDDLE_CONFIGS, band_id, huddle_number, trim_huddle
 from fsmbench.checks import Notice
-from fsmbench.ident.noise_fitting import (
+from fsmbench.ident.fit.noise_fitting import (
     DB,
     ERROR_BANDS_HZ,
     LINE_HALF_HZ,

@@ -63,17 +63,21 @@ from fsmbench.ident.calibration import (
     current_amp_checks,
     qd_checks,
 )
-from fsmbench.ident.compression import (
+from fsmbench.ident.consistency import screen_recordings
+from fsmbench.ident.crosscheck import NOISE_CHECKS, cross_checks, floor_checks
+from fsmbench.ident.delay.sampled import SensorLowpass
+from fsmbench.ident.delay.sercalo import with_sensor
+from fsmbench.ident.export import write_frf_mat, write_plant_mat
+from fsmbench.ident.fit.modes import ModeRefinement, refine_modes
+from fsmbench.ident.fit.truncation import TruncationCheck, truncation_checks
+from fsmbench.ident.frf.compression import (
     CompressionFactors,
     compression_factors,
     correct_compression,
 )
-from fsmbench.ident.consistency import screen_recordings
-from fsmbench.ident.crosscheck import NOISE_CHECKS, cross_checks, floor_checks
-from fsmbench.ident.export import write_frf_mat, write_plant_mat
-from fsmbench.ident.frf import FrequencyResponse, with_variance_part
-from fsmbench.ident.leakage import welch_leakage_bias
-from fsmbench.ident.modes import ModeRefinement, refine_modes
+from fsmbench.ident.frf.leakage import welch_leakage_bias
+from fsmbench.ident.frf.response import FrequencyResponse, with_variance_part
+from fsmbench.ident.frf.welch import hanning
 from fsmbench.ident.newport import (
     NewportIdentification,
     identify_newport,
@@ -82,7 +86,6 @@ from fsmbench.ident.newport import (
     sensor_notices,
 )
 from fsmbench.ident.noise_model import NoiseModelFit, fit_noise_model
-from fsmbench.ident.sampled import SensorLowpass
 from fsmbench.ident.sercalo import (
     OUTPUTS,
     SercaloFitOptions,
@@ -93,12 +96,9 @@ from fsmbench.ident.sercalo import (
     refit_with_poles,
     with_frf,
 )
-from fsmbench.ident.sercalo_delay import with_sensor
 from fsmbench.ident.totals import uncertainty_tree
-from fsmbench.ident.truncation import TruncationCheck, truncation_checks
 from fsmbench.ident.uncertainty import Uncertain
 from fsmbench.ident.validate import PathValidation, validate_sercalo
-from fsmbench.ident.welch import hanning
 from fsmbench.io.atomic import atomic_write_text
 from fsmbench.io.folder import check_recording
 from fsmbench.jsonutil import plain_json, stamped
@@ -150,7 +150,7 @@ class IdentifyOptions:
         Averaging bands [Hz] (seed: 10–100 Hz and 20–200 Hz).
     refine_modes : bool
         Re-estimate each Sercalo mode's frequency and damping from the time
-        records (:mod:`fsmbench.ident.modes`), which the 1 s window smears.
+        records (:mod:`fsmbench.ident.fit.modes`), which the 1 s window smears.
     frf : {"auto", "welch", "lpm", "periodic"}
         FRF estimator of the Sercalo and Newport matrices
         (:func:`fsmbench.ident.sercalo.experiment_frf`). ``"auto"``: periodic
@@ -159,7 +159,7 @@ class IdentifyOptions:
         (:func:`fsmbench.ident.sercalo.choose_estimator`).
     weights : {"seed", "variance"}
         Vector-fit weights: the seed's coherence recipe, or the inverse
-        standard deviation of every line (:mod:`fsmbench.ident.fit_std`; the
+        standard deviation of every line (:mod:`fsmbench.ident.fit.parameter_std`; the
         parameters' standard deviations come with either). Overrides
         ``sercalo.weights``.
     transient_periods : mapping of experiment name to int
@@ -231,7 +231,7 @@ class Identification:
     compression : dict {"sercalo", "newport"} -> CompressionFactors
         The 4QD's compression each FRF was corrected for.
     truncation : dict axis -> TruncationCheck
-        The Sercalo's static gains over half the band (:mod:`fsmbench.ident.truncation`).
+        The Sercalo's static gains over half the band (:mod:`fsmbench.ident.fit.truncation`).
     uncertainty : dict key -> Uncertain
         Every identified value with its total std and its parts, keyed as
         ``twin_truth.json`` (:mod:`fsmbench.ident.totals`).
@@ -644,7 +644,7 @@ def _identify(recordings: Mapping[str, xr.Dataset], *, bench: Bench, opts: Ident
 
 def _with_leakage(sid: SercaloIdentification, window_s: float) -> FrequencyResponse:
     """The Sercalo's Welch FRF with its leakage bias near the modes as a variance part
-    (:mod:`fsmbench.ident.leakage`), from the fitted model and its delay."""
+    (:mod:`fsmbench.ident.frf.leakage`), from the fitted model and its delay."""
     frf = sid.frf
     delay = sid.delay_s
 

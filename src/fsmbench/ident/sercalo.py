@@ -5,7 +5,7 @@ Sercalo (2.3)
     ``data_uch`` and ``data_ucv`` (first second removed, Sercalo off) give the
     2×2 H1 matrix ``Uc → Vp`` with the seed's ``hanning(ceil(fs))`` window.
     The delay of each diagonal path is estimated from its phase
-    (:mod:`fsmbench.ident.delay`) instead of the seed's hard-coded ``Ts``;
+    (:mod:`fsmbench.ident.delay.bode`) instead of the seed's hard-coded ``Ts``;
     their weighted mean is removed from both columns. The weights are the
     seed's (coherence, 10 within ±10 % of each column's resonance, 0 above
     1 kHz; :func:`seed_weights`), divided by ``|H|`` so that the fit
@@ -30,17 +30,17 @@ import numpy as np
 import xarray as xr
 
 from fsmbench.ident.calibration import require_signals, trim_recording
-from fsmbench.ident.delay import DelayEstimate, estimate_delay, remove_delay
-from fsmbench.ident.fit_std import ParameterStd, sercalo_parameter_std
-from fsmbench.ident.frf import FrequencyResponse, combine_columns, spectral_matrix
-from fsmbench.ident.frf_estimate import FrfEstimate, combine_estimates
-from fsmbench.ident.frf_periodic import PeriodicOptions, detect_period, periodic_frf
-from fsmbench.ident.joint_delay import JointFit
-from fsmbench.ident.lpm import LPM_NOISE_SMOOTHING, LpmOptions, local_polynomial_frf
-from fsmbench.ident.sampled import SensorLowpass
-from fsmbench.ident.sercalo_delay import joint_path_delays
-from fsmbench.ident.vectfit import VectorFit, VectorFitOptions, vector_fit
-from fsmbench.ident.welch import hanning
+from fsmbench.ident.delay.bode import DelayEstimate, estimate_delay, remove_delay
+from fsmbench.ident.delay.joint import JointFit
+from fsmbench.ident.delay.sampled import SensorLowpass
+from fsmbench.ident.delay.sercalo import joint_path_delays
+from fsmbench.ident.fit.parameter_std import ParameterStd, sercalo_parameter_std
+from fsmbench.ident.fit.vectfit import VectorFit, VectorFitOptions, vector_fit
+from fsmbench.ident.frf.estimate import FrfEstimate, combine_estimates
+from fsmbench.ident.frf.lpm import LPM_NOISE_SMOOTHING, LpmOptions, local_polynomial_frf
+from fsmbench.ident.frf.periodic import PeriodicOptions, detect_period, periodic_frf
+from fsmbench.ident.frf.response import FrequencyResponse, combine_columns, spectral_matrix
+from fsmbench.ident.frf.welch import hanning
 
 __all__ = [
     "SercaloFitOptions",
@@ -71,7 +71,7 @@ def choose_estimator(recordings: Mapping[str, xr.Dataset], *,
     """The "auto" rule: ``"periodic"`` when every column's input repeats, else ``"welch"``.
 
     A record is periodic when its input correlates with itself shifted by one
-    period above 0.9 (:func:`fsmbench.ident.frf_periodic.detect_period`: one
+    period above 0.9 (:func:`fsmbench.ident.frf.periodic.detect_period`: one
     FFT per record), with at least three whole periods (one dropped as the
     transient, two for the noise estimate). Non-periodic (noise) excitation
     keeps Welch's H1, the seed's estimator, so seed-style recordings give
@@ -257,7 +257,7 @@ def variance_weights(frf: FrequencyResponse, *, f_max_hz: float = 1000.0) -> xr.
     estimate. As :func:`seed_weights`: 0 at DC and above ``f_max_hz`` (the
     two-pole model is not meant for what lies above), and 0 where the
     variance is not finite and positive. Weighted so, the fit's residuals have
-    unit variance (:mod:`fsmbench.ident.fit_std`).
+    unit variance (:mod:`fsmbench.ident.fit.parameter_std`).
     """
     if frf.frf_variance is not None:
         var = frf.frf_variance
@@ -297,7 +297,7 @@ class SercaloFitOptions:
         the inverse standard deviation of each line (:func:`variance_weights`).
     joint_delay : bool
         Fit each direct path's delay with its poles and the 4QD amplifier
-        (:mod:`fsmbench.ident.sercalo_delay`); False keeps the phase-only delay.
+        (:mod:`fsmbench.ident.delay.sercalo`); False keeps the phase-only delay.
     """
 
     alpha: float = 0.1
@@ -345,7 +345,7 @@ class SercaloIdentification:
     options : SercaloFitOptions
     parameter_std : ParameterStd or None
         Resonance, damping and static gain per axis with standard deviations
-        propagated from the lines' variances (:mod:`fsmbench.ident.fit_std`;
+        propagated from the lines' variances (:mod:`fsmbench.ident.fit.parameter_std`;
         with the seed's weights by the weighted fit's sandwich).
     joint_delays : tuple of JointFit
         Each direct path fitted with its poles, delay and the 4QD amplifier;

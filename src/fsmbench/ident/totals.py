@@ -20,7 +20,7 @@ than the data determine it, both are given:
 ``effective_delay_s.sercalo``
     The delay a model of ``Uc → Vp`` without the coil's lag and the 4QD
     amplifier needs: the pure one plus their group delays (the mean of the two
-    axes' joint fits, :mod:`fsmbench.ident.sercalo_delay`). A delay fit over
+    axes' joint fits, :mod:`fsmbench.ident.delay.sercalo`). A delay fit over
     the band sees a lag by its band-averaged group delay, lower than the
     low-frequency one by ``τ (2π f τ)²/3`` at the band's top: that is the
     ``unresolved_lags`` part (a bound).
@@ -33,7 +33,7 @@ than the data determine it, both are given:
     coil's lag (on the Sercalo's path only; ``Lc g_i``, the nominal inductance).
 ``sercalo.{h,v}.dc_gain_v_per_a``
     ``Gc(0)``: the fit's static gain over the current-amplifier gain, the
-    4QD's compression corrected (:mod:`fsmbench.ident.compression`); parts
+    4QD's compression corrected (:mod:`fsmbench.ident.frf.compression`); parts
     from the fit (noise, distortion, leakage, misfit), the current
     amplifier's and the compression correction's.
 """
@@ -48,12 +48,12 @@ import numpy as np
 
 from fsmbench.bench.params import BenchParams
 from fsmbench.ident.calibration import CurrentAmplifierGain, QdCalibration
-from fsmbench.ident.compression import CompressionFactors
-from fsmbench.ident.truncation import TruncationCheck
+from fsmbench.ident.fit.truncation import TruncationCheck
+from fsmbench.ident.frf.compression import CompressionFactors
 from fsmbench.ident.uncertainty import Uncertain, bounded
 
 if TYPE_CHECKING:
-    from fsmbench.ident.modes import ModeRefinement
+    from fsmbench.ident.fit.modes import ModeRefinement
     from fsmbench.ident.newport import NewportIdentification
     from fsmbench.ident.sercalo import SercaloIdentification
 
@@ -261,7 +261,7 @@ def uncertainty_tree(*, qd: Mapping[str, QdCalibration],
     refinement : ModeRefinement, optional
         Unused but for the record (its stds are in ``modes``).
     truncation : mapping axis -> TruncationCheck, optional
-        The static gains over half the band (:mod:`fsmbench.ident.truncation`).
+        The static gains over half the band (:mod:`fsmbench.ident.fit.truncation`).
     """
     del refinement
     out: dict[str, Uncertain] = {}

@@ -23,7 +23,7 @@ value's unit:
 ``unresolved_lags`` lags a delay fit cannot tell from a delay (the 4QD
                     amplifier, the coil): bounded, not measured
 ``truncation``      modes above a fitted band that its model leaves out
-                    (:mod:`fsmbench.ident.truncation`): bounded
+                    (:mod:`fsmbench.ident.fit.truncation`): bounded
 ``definition``      what the quantity's definition adds (a rotation, a
                     nominal block the value is defined against)
 ``current_amp``     the current-amplifier gain's share (values divided by it)

@@ -1,7 +1,7 @@
 """The self-contained HTML report: a verdict, then sections of text, tables and figures.
 
 A :class:`Section` is a sequence of blocks in reading order: paragraphs
-(``str``), :class:`Table`, :class:`~fsmbench.report.figure.Figure` and
+(``str``), :class:`Table`, :class:`~fsmbench.report.figures.spec.Figure` and
 :class:`Note` (why a result differs from the ESRF study or looks odd). Figures are
 drawn in the browser by plotly.js, embedded once; each figure's data sits in
 its own ``<script type="application/json">`` and is plotted when it nears the
@@ -21,8 +21,8 @@ from typing import Any
 
 from fsmbench.io.atomic import atomic_write_text
 from fsmbench.report.errata import cited_errata, errata_appendix, link_citations
-from fsmbench.report.figure import Figure
-from fsmbench.report.interactive import ZOOM_JS, figure_json, plotly_js
+from fsmbench.report.figures.interactive import ZOOM_JS, figure_json, plotly_js
+from fsmbench.report.figures.spec import Figure
 
 __all__ = ["ERRATA_TITLE", "Block", "Note", "Section", "Table", "export_stem", "iter_figures",
            "render_report", "visible_text", "write_report"]

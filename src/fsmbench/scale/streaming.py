@@ -25,7 +25,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.signal import lfilter
 
-from fsmbench.ident.welch import SpectrumResult, WelchOptions, _result
+from fsmbench.ident.frf.welch import SpectrumResult, WelchOptions, _result
 from fsmbench.scale.allan import AllanResult
 from fsmbench.scale.envelope import Envelope, _envelope
 from fsmbench.scale.segments import segment_sums

@@ -1,6 +1,6 @@
 """Welch estimates on Dask arrays with MATLAB's semantics, equal to the in-memory engine.
 
-:func:`cross_spectral_density_dask` is :func:`fsmbench.ident.welch.cross_spectral_density`
+:func:`cross_spectral_density_dask` is :func:`fsmbench.ident.frf.welch.cross_spectral_density`
 for a record chunked along time: the same MATLAB segments (segment ``k`` is samples
 ``k*hop .. k*hop + L - 1``, ``K = floor((N - noverlap)/hop)`` of them), the same
 window, datawrap (``nfft < L``), density scaling and one-sided doubling. Only the
@@ -18,7 +18,7 @@ the whole record.
 
 The SISO functions :func:`pwelch_dask`, :func:`cpsd_dask`, :func:`tfestimate_dask`
 and :func:`mscohere_dask` take the arguments of their in-memory namesakes and return
-the same :class:`~fsmbench.ident.welch.SpectrumResult` (computed). They accept
+the same :class:`~fsmbench.ident.frf.welch.SpectrumResult` (computed). They accept
 Dask arrays or NumPy arrays (wrapped in chunks of :data:`DEFAULT_CHUNK_SAMPLES`).
 They run on Dask's current scheduler (a ``dask.distributed`` client if one is active).
 """
@@ -36,7 +36,7 @@ from dask.core import flatten
 from dask.highlevelgraph import HighLevelGraph
 from numpy.typing import ArrayLike, NDArray
 
-from fsmbench.ident.welch import (
+from fsmbench.ident.frf.welch import (
     SpectrumResult,
     WelchOptions,
     _check_record,
@@ -174,7 +174,7 @@ def cross_spectral_density_dask(
     Returns
     -------
     S : dask.array.Array, complex128, shape (nfft//2 + 1, c, c)
-        Lazy; ``S.compute()`` equals :func:`fsmbench.ident.welch.cross_spectral_density`
+        Lazy; ``S.compute()`` equals :func:`fsmbench.ident.frf.welch.cross_spectral_density`
         on the same samples (U_a U_b / Hz) to floating-point reordering.
     n_segments : int
         Number of segments ``K`` averaged (known without reading the data).
@@ -279,7 +279,7 @@ def pwelch_dask(
     x_name: str | None = None,
     segments_per_task: int | None = None,
 ) -> SpectrumResult:
-    """MATLAB ``pwelch`` of a record chunked along time; as :func:`fsmbench.ident.welch.pwelch`.
+    """MATLAB ``pwelch`` of a record chunked along time; as :func:`fsmbench.ident.frf.welch.pwelch`.
 
     Parameters
     ----------
@@ -396,7 +396,7 @@ def mscohere_dask(
 ) -> SpectrumResult:
     """MATLAB ``mscohere(x, y)`` = ``|Pxy|^2/(Pxx Pyy)`` of records chunked along time.
 
-    Needs at least two segments, as the in-memory :func:`fsmbench.ident.welch.mscohere`.
+    Needs at least two segments, as the in-memory :func:`fsmbench.ident.frf.welch.mscohere`.
 
     Parameters
     ----------

@@ -135,7 +135,7 @@ def _command(args: argparse.Namespace) -> int:
     from fsmbench.io.outdir import check_inputs, output_transaction
     from fsmbench.progress import Reporter
     from fsmbench.report.html import write_report
-    from fsmbench.report.tune_section import tune_section
+    from fsmbench.report.sections.tune import tune_section
     from fsmbench.tune.guarded import TuneOptions, tune_twin
     from fsmbench.tune.measure import MeasurementOptions
 

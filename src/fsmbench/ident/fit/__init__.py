@@ -1,0 +1,5 @@
+"""Models fitted to responses and records: vector fitting, parameter standard deviations,
+modal estimates, regressions, noise fits, the truncation of modes above the band.
+"""
+
+__all__: list[str] = []

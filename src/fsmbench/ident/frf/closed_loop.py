@@ -1,0 +1,536 @@
+"""The plant's FRF matrix from closed-loop records: the joint input–output method.
+
+With the loop closed, the command ``u`` carries the controller's answer to the
+sensor's noise ``v``: ``u = S_i (r - K v)`` (excitation ``r`` added at the
+controller's output, input sensitivity ``S_i = (I + K G)^-1``). The *direct*
+method, the spectra of ``y`` against ``u`` as in open loop,
+``G_d = Φ_yu Φ_uu^-1``, is then biased by ``Φ_vu Φ_uu^-1``: where the
+excitation does not dominate the noise it tends to ``-1/K`` (Ljung, *System
+Identification*, 2nd ed., 1999, §13.4; Pintelon & Schoukens 2012, §9.4).
+
+The excitation is independent of the noise, so it is the instrument. Per line
+``k``, the responses of ``u`` and ``y`` to ``r`` in experiment ``j`` (``r``
+on input ``j``) give the columns of ``S_ur`` and ``S_yr``, and
+
+    G = S_yr S_ur^-1                                               (2×2 MIMO)
+
+the *joint input–output* (indirect) estimate, consistent whatever the loop
+(Pintelon & Schoukens 2012, §2.7 and §9.4; with ``r`` injected at the
+reference instead, ``S_ur = S_i K`` and the same product gives ``G``).
+
+Two estimators of ``S_yr`` and ``S_ur``, each with the variance of every line:
+
+``periodic``
+    The excitation repeats (a multisine): the period averages ``U``, ``Y``
+    (after ``transient_periods`` dropped) on the lines the excitation excites in
+    *both* experiments; ``G = Y U^-1`` with ``Y = [Y_1 Y_2]``,
+    ``U = [U_1 U_2]``. To first order ``dG = (dY - G dU) U^-1``, so with the
+    per-period residuals ``e_p = (Y_p - Y) - G (U_p - U)`` of experiment ``j``
+    (sample variance ``s_e²`` over its ``P`` periods)::
+
+        var G_il = sum_j |(U^-1)_jl|^2 s_e,ij^2 / P_j.
+
+    It holds the input noise and the input/output covariance the feedback makes.
+
+``lpm``
+    Any excitation: the local polynomial method (Pintelon et al. 2010) on the
+    whole record, with ``r`` as the input and the four signals ``[y; u]`` as
+    outputs, each with its own transient polynomial. The residuals' full 4×4
+    covariance ``C_V`` per line (the feedback correlates ``u`` and ``y``) gives
+    ``Cov(column j of [S_yr; S_ur]) = C_V [(K^H K)^-1]_00``, and
+    ``var G_il = sum_j |(S_ur^-1)_jl|^2 ([I, -G] Cov_j [I, -G]^H)_ii``.
+
+Both return a :class:`ClosedLoopFrf`: ``plant`` is an
+:class:`~fsmbench.ident.frf.estimate.FrfEstimate` (inputs ``Uch, Ucv``, outputs
+``Vph, Vpv``) that the open-loop fit (:func:`fsmbench.ident.sercalo.fit_sercalo`)
+consumes as it is; ``direct`` is the direct method on the same lines and data,
+shown beside it for its bias.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Any, Literal
+
+import numpy as np
+from numpy.typing import NDArray
+
+from fsmbench.ident.frf.estimate import FrfEstimate
+from fsmbench.ident.frf.lpm import LpmOptions
+from fsmbench.ident.frf.periodic import detect_period
+
+__all__ = ["ClosedLoopFrf", "ClosedLoopRecord", "closed_loop_frf", "joint_lpm",
+           "joint_periodic", "settled_periods"]
+
+COMMANDS = ("Uch", "Ucv")
+# A line of the recorded excitation is excited above this fraction of the strongest line's
+# power: the excitation is the commanded one, exact, whose FFT holds round-off at ~1e-32 of
+# its lines elsewhere; a shaped multisine's lines span at most 1e6 in power.
+_EXCITED_RELATIVE_POWER = 1e-12
+OUTPUTS = ("Vph", "Vpv")
+
+
+@dataclass(frozen=True, eq=False)
+class ClosedLoopRecord:
+    """One closed-loop experiment: the excitation, the commands and the 4QD outputs.
+
+    Attributes
+    ----------
+    excitation : ndarray, shape (L,)
+        The excitation as played [V] (the instrument).
+    commands : ndarray, shape (L, 2)
+        ``Uch, Ucv`` as the DAC gave them [V].
+    outputs : ndarray, shape (L, 2)
+        ``Vph, Vpv`` [V].
+    fs_hz : float
+    name : str
+        For messages (e.g. ``data_cl_uch``).
+    """
+
+    excitation: NDArray[np.float64]
+    commands: NDArray[np.float64]
+    outputs: NDArray[np.float64]
+    fs_hz: float
+    name: str = "record"
+
+    def __post_init__(self) -> None:
+        r = np.asarray(self.excitation, dtype=float)
+        u = np.asarray(self.commands, dtype=float)
+        y = np.asarray(self.outputs, dtype=float)
+        if r.ndim != 1 or u.shape != (r.size, 2) or y.shape != (r.size, 2):
+            raise ValueError(f"{self.name}: the excitation {r.shape}, commands {u.shape} and "
+                             f"outputs {y.shape} must be (L,), (L, 2), (L, 2)")
+        if not (np.all(np.isfinite(r)) and np.all(np.isfinite(u)) and np.all(np.isfinite(y))):
+            raise ValueError(f"{self.name}: NaN or inf samples")
+        if not np.any(r != r[0]):
+            raise ValueError(f"{self.name}: the excitation is constant (nothing was played)")
+        object.__setattr__(self, "excitation", r)
+        object.__setattr__(self, "commands", u)
+        object.__setattr__(self, "outputs", y)
+
+
+@dataclass(frozen=True, eq=False)
+class ClosedLoopFrf:
+    """The plant and the loop's responses to the excitation, line by line.
+
+    Attributes
+    ----------
+    plant : FrfEstimate
+        ``G`` (``Uch, Ucv → Vph, Vpv`` [V/V]) by the joint input–output method,
+        with the variance of every line; ``estimator`` is ``"periodic"`` or ``"lpm"``.
+    s_ur, s_yr : ndarray, complex, shape (F, 2, 2)
+        Responses of the commands and of the 4QD outputs to the excitation
+        (column ``j``: experiment ``j``) [V/V]; with the excitation at the
+        controller's output ``s_ur`` is the input sensitivity ``(I + K G)^-1``.
+    direct : FrfEstimate
+        The direct method ``Φ_yu Φ_uu^-1`` on the same lines and data (its
+        variance is the one open-loop theory would give: it ignores the bias).
+    method : str
+        In words.
+    """
+
+    plant: FrfEstimate
+    s_ur: NDArray[np.complex128]
+    s_yr: NDArray[np.complex128]
+    direct: FrfEstimate
+    method: str
+
+    @property
+    def frequency_hz(self) -> NDArray[np.float64]:
+        """Lines [Hz], shape (F,)."""
+        return self.plant.frequency_hz
+
+    def summary(self) -> dict[str, Any]:
+        """JSON-ready: method, estimator, lines, median relative std per element."""
+        return {"method": self.method, **self.plant.summary()}
+
+
+def _inverse_2x2(m: NDArray[np.complex128]) -> NDArray[np.complex128]:
+    """Inverses of a stack of 2×2 matrices (NaN where singular)."""
+    det = m[:, 0, 0] * m[:, 1, 1] - m[:, 0, 1] * m[:, 1, 0]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        inv = np.empty_like(m)
+        inv[:, 0, 0] = m[:, 1, 1] / det
+        inv[:, 1, 1] = m[:, 0, 0] / det
+        inv[:, 0, 1] = -m[:, 0, 1] / det
+        inv[:, 1, 0] = -m[:, 1, 0] / det
+    return inv
+
+
+def _estimate(f: NDArray[np.float64], g: NDArray[np.complex128], var: NDArray[np.float64],
+              dof: Sequence[float], *, n_blocks: Sequence[float],
+              u_cols: NDArray[np.complex128],
+              noise_var: NDArray[np.float64], fs_hz: float, resolution_hz: float,
+              block: int, estimator: str, options: dict[str, Any]) -> FrfEstimate:
+    """An :class:`FrfEstimate` of ``G`` with the conventions of the open-loop estimators.
+
+    ``u_cols`` (F, 2): each column's own command on its line (normalised DFT, one block);
+    ``noise_var`` (F, 2, 2): the residual variance per output and column (one block);
+    ``dof`` the noise variance's degrees of freedom per column; ``n_blocks`` the blocks
+    averaged per column. ``snr = |G_il|^2 / (n_blocks var G_il)`` per block, so that the
+    coherence has its open-loop meaning (a noise-free input and that output noise).
+    """
+    blocks = np.asarray(n_blocks, dtype=float)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        snr = np.abs(g) ** 2 / (blocks[None, None, :] * var)
+    snr = np.where(np.isfinite(snr), snr, 0.0)
+    one_sided = np.where(np.isclose(f, fs_hz / 2) | (f == 0), 1.0, 2.0)
+    return FrfEstimate(
+        frequency_hz=f, frf=g, frf_variance=np.maximum(var, 0.0),
+        output_noise_psd=one_sided[:, None, None] * noise_var / fs_hz,
+        input_psd=one_sided[:, None] * np.abs(u_cols) ** 2 / fs_hz, snr=snr,
+        input_names=COMMANDS, output_names=OUTPUTS, fs_hz=float(fs_hz),
+        resolution_hz=float(resolution_hz), estimator=estimator,
+        options={**options, "block_samples": int(block)}, dof=tuple(float(d) for d in dof))
+
+
+def _project(g: NDArray[np.complex128], cov: NDArray[np.complex128]) -> NDArray[np.float64]:
+    """``diag([I, -G] C [I, -G]^H)`` per line: the variance of ``y - G u`` (F, 2)."""
+    f = g.shape[0]
+    proj = np.concatenate([np.broadcast_to(np.eye(2), (f, 2, 2)), -g], axis=2)  # (F, 2, 4)
+    e = proj @ cov @ np.conj(np.swapaxes(proj, 1, 2))
+    return np.real(np.diagonal(e, axis1=1, axis2=2))
+
+
+def _g_and_variance(s_yr: NDArray[np.complex128], s_ur: NDArray[np.complex128],
+                    cov: Sequence[NDArray[np.complex128]]
+                    ) -> tuple[NDArray[np.complex128], NDArray[np.float64],
+                               NDArray[np.float64]]:
+    """``G = S_yr S_ur^-1`` and ``var G_il`` from each column's 4×4 covariance of ``[S_yr; S_ur]``.
+
+    Returns G (F, 2, 2), var G (F, 2, 2) and the variance of ``dS_yr - G dS_ur`` per output
+    and column (F, 2, 2).
+    """
+    inv = _inverse_2x2(s_ur)
+    g = s_yr @ inv
+    resid = np.stack([_project(g, c) for c in cov], axis=2)
+    var = np.einsum("fij,fjl->fil", resid, np.abs(inv) ** 2)
+    return g, var, resid
+
+
+def _direct(f: NDArray[np.float64], phi_yu: np.ndarray,
+            phi_uu: np.ndarray, phi_yy: np.ndarray, n_blocks: float, *,
+            fs_hz: float, resolution_hz: float, block: int, estimator: str) -> FrfEstimate:
+    """``Φ_yu Φ_uu^-1`` with the variance open-loop theory gives it, ``Φ_ee,i (Φ_uu^-1)_ll / n``.
+
+    ``Φ_ee`` is what the direct model leaves of ``Φ_yy``; the bias the feedback adds is
+    not in that variance (it is what the comparison shows).
+    """
+    inv = _inverse_2x2(phi_uu)
+    g = phi_yu @ inv
+    explained = np.real(np.einsum("fij,fjk,fik->fi", g, phi_uu, np.conj(g)))
+    res = np.maximum(np.real(np.diagonal(phi_yy, axis1=1, axis2=2)) - explained, 0.0)
+    var = res[:, :, None] * np.real(np.diagonal(inv, axis1=1, axis2=2))[:, None, :] / n_blocks
+    u_cols = np.sqrt(np.real(np.diagonal(phi_uu, axis1=1, axis2=2)))
+    return _estimate(f, g, var, (n_blocks - 1.0,) * 2, n_blocks=(n_blocks,) * 2, u_cols=u_cols,
+                     noise_var=np.broadcast_to(res[:, :, None], g.shape).copy(), fs_hz=fs_hz,
+                     resolution_hz=resolution_hz, block=block, estimator=estimator,
+                     options={"method": "direct (y against u, the excitation ignored)"})
+
+
+def _period_blocks(x: NDArray[np.float64], n: int, first: int, periods: int
+                   ) -> NDArray[np.complex128]:
+    """Normalised DFT of each period, (periods, n//2 + 1, ...)."""
+    seg = x[first: first + periods * n].reshape(periods, n, *x.shape[1:])
+    return np.fft.rfft(seg, axis=1) / math.sqrt(n)
+
+
+def _smooth(x: NDArray[np.float64], width: int) -> NDArray[np.float64]:
+    """Running mean over ``width`` neighbouring lines along axis 0 (shorter at the ends)."""
+    if width <= 1:
+        return x
+    half = width // 2
+    c = np.cumsum(np.concatenate([np.zeros((1, *x.shape[1:])), x], axis=0), axis=0)
+    i = np.arange(x.shape[0])
+    lo, hi = np.maximum(i - half, 0), np.minimum(i + half + 1, x.shape[0])
+    return (c[hi] - c[lo]) / (hi - lo).reshape(-1, *([1] * (x.ndim - 1)))
+
+
+def settled_periods(z: NDArray[np.complex128], *, smoothing_lines: int = 7,
+                    threshold: float = 1.5) -> int:
+    """Leading periods to drop: those still carrying the loop's transient.
+
+    ``z`` (P, L, C): each period's DFT on the excited lines. The last half of the
+    periods (at least 2) is the reference; each line's noise variance is their
+    scatter (smoothed over ``smoothing_lines``). A period has settled when its mean
+    squared departure from the reference's mean, in units of that variance, is
+    within ``threshold`` times what noise alone gives, ``1 + 1/H`` (``H`` periods in
+    the reference): a lightly damped resonance's ringing stands out on its lines
+    long after the rest has settled. At least one period is dropped (the loop's
+    answer to the excitation's start) and at least two are kept.
+    """
+    p = z.shape[0]
+    h = max(2, p // 2)
+    ref = z[p - h:]
+    mean = ref.mean(axis=0)
+    var = np.sum(np.abs(ref - mean) ** 2, axis=0) / (h - 1)
+    var = _smooth(var, smoothing_lines)
+    var = np.where(var > 0, var, np.inf)
+    expected = 1.0 + 1.0 / h
+    for i in range(1, p - 2 + 1):
+        stat = float(np.mean(np.abs(z[i] - mean) ** 2 / var))
+        if stat <= threshold * expected:
+            return i
+    return p - 2
+
+
+def joint_periodic(records: Sequence[ClosedLoopRecord], *, period_samples: int | None = None,
+                   transient_periods: int | None = None,
+                   smoothing_lines: int = 7) -> ClosedLoopFrf:
+    """``G = Y U^-1`` from periodic excitations, one record per command (see the module notes).
+
+    Parameters
+    ----------
+    records : sequence of 2 ClosedLoopRecord
+        The excitation on ``Uch`` (or its reference), then on ``Ucv``.
+    period_samples : int, optional
+        The excitation's period [samples]; default found on each record
+        (:func:`fsmbench.ident.frf.periodic.detect_period`), and the two must agree.
+    transient_periods : int, optional
+        Whole periods dropped at the start of each record (the loop's transient);
+        default found on each record (:func:`settled_periods`).
+    smoothing_lines : int
+        The residual noise's variance is averaged over this many neighbouring
+        excited lines (odd): the noise spectrum is smooth, and ``P - 1`` degrees
+        of freedom alone make inverse-variance weights scatter (3 dof for 4
+        periods: a weight's relative spread is ~60 %). 1: each line's own.
+
+    Raises
+    ------
+    ValueError
+        Not two records, rates or periods that differ, fewer than two periods
+        left, or no line excited in both.
+    """
+    if len(records) != 2:
+        raise ValueError(f"the 2x2 plant needs two closed-loop records (one per command), got "
+                         f"{len(records)}")
+    fs = records[0].fs_hz
+    parts = []
+    dropped: list[int] = []
+    for rec in records:
+        if abs(rec.fs_hz - fs) > 1e-9 * fs:
+            raise ValueError(f"{rec.name} is sampled at {rec.fs_hz:g} Hz, {records[0].name} at "
+                             f"{fs:g} Hz")
+        n = period_samples or detect_period(rec.excitation)
+        if n is None:
+            raise ValueError(f"{rec.name}: the excitation is not periodic; use the LPM")
+        total = rec.excitation.size // n
+        if total < (3 if transient_periods is None else transient_periods + 2):
+            raise ValueError(f"{rec.name}: {total} whole period(s) of {n} samples; after "
+                             f"{transient_periods or 1} transient period(s) at least 2 are "
+                             "needed")
+        offset = rec.excitation.size - total * n
+        r = _period_blocks(rec.excitation, n, offset, total)
+        z = _period_blocks(np.hstack([rec.outputs, rec.commands]), n, offset, total)
+        power = np.abs(r.mean(axis=0)) ** 2
+        # The excitation is recorded as commanded (digital, exact): every line it holds
+        # above round-off is excited, however the lines are shaped.
+        lines = np.flatnonzero(power > _EXCITED_RELATIVE_POWER * power[1:].max())
+        lines = lines[lines > 0]
+        drop = (settled_periods(z[:, lines, :2], smoothing_lines=smoothing_lines)
+                if transient_periods is None else transient_periods)
+        r, z = r[drop:], z[drop:]
+        periods = total - drop
+        dropped.append(drop)
+        parts.append((rec, n, periods, r, z, r.mean(axis=0), lines))
+    if parts[0][1] != parts[1][1]:
+        raise ValueError(f"{records[0].name} repeats every {parts[0][1]} samples, "
+                         f"{records[1].name} every {parts[1][1]}: play both on the same grid")
+    n = parts[0][1]
+    lines = np.intersect1d(parts[0][6], parts[1][6])
+    if lines.size == 0:
+        raise ValueError(f"no line is excited in both {records[0].name} and {records[1].name}: "
+                         "excite both commands on the same grid")
+    f = lines * fs / n
+    s_yr = np.empty((lines.size, 2, 2), dtype=complex)
+    s_ur = np.empty((lines.size, 2, 2), dtype=complex)
+    u_mean = np.empty((lines.size, 2, 2), dtype=complex)  # columns: the mean commands
+    phi_yu = np.zeros((lines.size, 2, 2), dtype=complex)
+    phi_uu = np.zeros((lines.size, 2, 2), dtype=complex)
+    phi_yy = np.zeros((lines.size, 2, 2), dtype=complex)
+    blocks = 0
+    for j, (_rec, _n, periods, _r, z, rm, _lines) in enumerate(parts):
+        zm = z[:, lines, :].mean(axis=0)  # (F, 4): [y; u], averaged over the periods
+        s_yr[:, :, j] = zm[:, :2] / rm[lines, None]
+        s_ur[:, :, j] = zm[:, 2:] / rm[lines, None]
+        u_mean[:, :, j] = zm[:, 2:]
+        yl, ul = z[:, lines, :2], z[:, lines, 2:]
+        phi_yu += np.einsum("pfa,pfb->fab", yl, np.conj(ul))
+        phi_uu += np.einsum("pfa,pfb->fab", ul, np.conj(ul))
+        phi_yy += np.einsum("pfa,pfb->fab", yl, np.conj(yl))
+        blocks += periods
+    g = s_yr @ _inverse_2x2(s_ur)
+    # Residual of each period, e_p = (Y_p - Y) - G (U_p - U): the noise G sees [V per line].
+    noise = np.empty((lines.size, 2, 2))
+    for j, (_rec, _n, periods, _r, z, _rm, _lines) in enumerate(parts):
+        dz = z[:, lines, :] - z[:, lines, :].mean(axis=0)[None]
+        e = dz[:, :, :2] - np.einsum("fab,pfb->pfa", g, dz[:, :, 2:])
+        noise[:, :, j] = _smooth(np.sum(np.abs(e) ** 2, axis=0) / (periods - 1),
+                                 smoothing_lines)
+    p_used = [p[2] for p in parts]
+    inv_u = _inverse_2x2(u_mean)
+    var = np.einsum("fij,fjl->fil", noise / np.asarray(p_used, dtype=float)[None, None, :],
+                    np.abs(inv_u) ** 2)
+    u_cols = np.stack([u_mean[:, j, j] for j in range(2)], axis=1)
+    opts = {"period_samples": int(n), "periods_used": p_used,
+            "transient_periods": dropped,
+            "transient_periods_found": transient_periods is None, "n_lines": int(lines.size),
+            "noise_smoothing_lines": smoothing_lines,
+            "method": "joint input-output (G = S_yr S_ur^-1), periodic averaging"}
+    plant = _estimate(f, g, var, [(p - 1.0) * smoothing_lines for p in p_used],
+                      n_blocks=[float(p) for p in p_used], u_cols=u_cols,
+                      noise_var=noise, fs_hz=fs, resolution_hz=fs / n, block=n,
+                      estimator="periodic", options=opts)
+    direct = _direct(f, phi_yu / blocks, phi_uu / blocks, phi_yy / blocks, float(blocks),
+                     fs_hz=fs, resolution_hz=fs / n, block=n, estimator="periodic")
+    return ClosedLoopFrf(plant=plant, s_ur=s_ur, s_yr=s_yr, direct=direct,
+                         method="joint input-output, periodic averaging")
+
+
+def _lpm_columns(r: NDArray[np.complex128], z: NDArray[np.complex128],
+                 lines: NDArray[np.intp], n: int, degree: int
+                 ) -> tuple[NDArray[np.complex128], NDArray[np.complex128],
+                            NDArray[np.complex128]]:
+    """LPM with one input ``r`` and outputs ``z`` (B lines).
+
+    Returns θ_0 (B, q) (the responses of ``z`` to ``r``), their covariance (B, q, q) and the
+    residual covariance ``C_V`` of ``z`` per line (B, q, q).
+    """
+    width = 2 * n + 1
+    start = np.clip(lines - n, 0, r.size - width)
+    idx = start[:, None] + np.arange(width)[None, :]
+    rr = (idx - lines[:, None]) / n
+    powers = rr[:, :, None] ** np.arange(degree + 1)[None, None, :]
+    rw = r[idx]
+    scale = np.sqrt(np.mean(np.abs(rw) ** 2, axis=1))
+    scale = np.where(scale > 0.0, scale, 1.0)
+    k_mat = np.concatenate([rw[:, :, None] / scale[:, None, None] * powers,
+                            powers.astype(complex)], axis=2)  # (B, W, 2(R+1))
+    kh = np.conj(np.swapaxes(k_mat, 1, 2))
+    inv = np.linalg.inv(kh @ k_mat)
+    zw = z[idx]  # (B, W, q)
+    theta = inv @ (kh @ zw)
+    resid = zw - k_mat @ theta
+    dof = width - k_mat.shape[2]
+    c_v = np.einsum("bwa,bwc->bac", resid, np.conj(resid)) / dof
+    inv00 = inv[:, 0, 0].real / scale**2
+    return theta[:, 0, :] / scale[:, None], c_v * inv00[:, None, None], c_v
+
+
+def _record_dft(rec: ClosedLoopRecord, length: int) -> NDArray[np.complex128]:
+    """Normalised DFT of ``[y, u]`` over the record's last ``length`` samples, (L/2 + 1, 4)."""
+    z = np.hstack([rec.outputs, rec.commands])[-length:]
+    return np.fft.rfft(z, axis=0) / math.sqrt(length)
+
+
+def joint_lpm(records: Sequence[ClosedLoopRecord], *, options: LpmOptions | None = None
+              ) -> ClosedLoopFrf:
+    """``G = S_yr S_ur^-1`` by the local polynomial method, any excitation (module notes).
+
+    Parameters
+    ----------
+    records : sequence of 2 ClosedLoopRecord
+        The excitation on ``Uch`` (or its reference), then on ``Ucv``; cut to the
+        shorter one's length (kept from their ends) so that they share their lines.
+    options : LpmOptions, optional
+        Degree, window and band; default stride ``2n + 1`` (windows that do not
+        overlap: nearly independent lines, what the variance-weighted fit assumes).
+
+    Raises
+    ------
+    ValueError
+        Not two records, rates that differ, too short a record, no line in the band.
+    """
+    if len(records) != 2:
+        raise ValueError(f"the 2x2 plant needs two closed-loop records (one per command), got "
+                         f"{len(records)}")
+    opts = options or LpmOptions(stride=2 * LpmOptions().n + 1)
+    fs = records[0].fs_hz
+    if abs(records[1].fs_hz - fs) > 1e-9 * fs:
+        raise ValueError(f"{records[1].name} is sampled at {records[1].fs_hz:g} Hz, "
+                         f"{records[0].name} at {fs:g} Hz")
+    length = min(rec.excitation.size for rec in records)
+    n = opts.n
+    n_lines = length // 2 + 1
+    if n_lines < 2 * n + 1:
+        raise ValueError(f"{length} samples give {n_lines} lines, fewer than the LPM window of "
+                         f"{2 * n + 1}; use longer records")
+    f_all = np.arange(n_lines) * fs / length
+    keep = f_all > 0
+    if opts.f_min_hz is not None:
+        keep &= f_all >= opts.f_min_hz
+    if opts.f_max_hz is not None:
+        keep &= f_all <= opts.f_max_hz
+    lines = np.flatnonzero(keep)[:: opts.stride]
+    if lines.size == 0:
+        raise ValueError(f"no line in the band [{opts.f_min_hz}, {opts.f_max_hz}] Hz")
+    s_yr = np.empty((lines.size, 2, 2), dtype=complex)
+    s_ur = np.empty((lines.size, 2, 2), dtype=complex)
+    cov: list[NDArray[np.complex128]] = []
+    noise_cols: list[NDArray[np.complex128]] = []
+    u_cols = np.empty((lines.size, 2), dtype=complex)
+    for j, rec in enumerate(records):
+        r = np.fft.rfft(rec.excitation[-length:]) / math.sqrt(length)
+        z = _record_dft(rec, length)
+        theta, c, c_v = _lpm_columns(r, z, lines, n, opts.degree)
+        s_yr[:, :, j] = theta[:, :2]
+        s_ur[:, :, j] = theta[:, 2:]
+        cov.append(c)
+        noise_cols.append(c_v)
+        u_cols[:, j] = theta[:, 2 + j] * r[lines]
+    g, var, _resid = _g_and_variance(s_yr, s_ur, cov)
+    dof = 2 * n + 1 - 2 * (opts.degree + 1)
+    # The noise of y - G u per line of the whole record (normalised DFT) [V^2].
+    noise = np.stack([_project(g, c_v) for c_v in noise_cols], axis=2)
+    options_json = {"degree": opts.degree, "half_width": n, "stride": opts.stride,
+                    "record_samples": int(length),
+                    "method": "joint input-output (G = S_yr S_ur^-1), local polynomial method"}
+    plant = _estimate(f_all[lines], g, var, (float(dof),) * 2, n_blocks=(1.0, 1.0),
+                      u_cols=u_cols, noise_var=noise,
+                      fs_hz=fs, resolution_hz=fs / length, block=length, estimator="lpm",
+                      options=options_json)
+    # The direct method on the same lines: spectra summed over each line's window, both records.
+    width = 2 * n + 1
+    start = np.clip(lines - n, 0, n_lines - width)
+    idx = start[:, None] + np.arange(width)[None, :]
+    phi_yu = np.zeros((lines.size, 2, 2), dtype=complex)
+    phi_uu = np.zeros((lines.size, 2, 2), dtype=complex)
+    phi_yy = np.zeros((lines.size, 2, 2), dtype=complex)
+    for rec in records:
+        z = _record_dft(rec, length)
+        zw = z[idx]  # (F, W, 4)
+        y, u = zw[:, :, :2], zw[:, :, 2:]
+        phi_yu += np.einsum("fwa,fwb->fab", y, np.conj(u))
+        phi_uu += np.einsum("fwa,fwb->fab", u, np.conj(u))
+        phi_yy += np.einsum("fwa,fwb->fab", y, np.conj(y))
+    blocks = 2.0 * width
+    direct = _direct(f_all[lines], phi_yu / blocks, phi_uu / blocks, phi_yy / blocks, blocks,
+                     fs_hz=fs, resolution_hz=fs / length, block=length, estimator="lpm")
+    return ClosedLoopFrf(plant=plant, s_ur=s_ur, s_yr=s_yr, direct=direct,
+                         method="joint input-output, local polynomial method")
+
+
+def closed_loop_frf(records: Sequence[ClosedLoopRecord], *,
+                    estimator: Literal["auto", "periodic", "lpm"] = "auto",
+                    transient_periods: int | None = None,
+                    lpm_options: LpmOptions | None = None) -> ClosedLoopFrf:
+    """The plant from two closed-loop records: periodic averaging or the LPM.
+
+    ``"auto"``: periodic when both excitations repeat with at least
+    ``transient_periods + 2`` whole periods (3 when the transient is found from the
+    records), else the LPM.
+    """
+    if estimator not in ("auto", "periodic", "lpm"):
+        raise ValueError(f"estimator must be auto, periodic or lpm, got {estimator!r}")
+    if estimator == "auto":
+        periodic = True
+        for rec in records:
+            n = detect_period(rec.excitation)
+            if n is None or rec.excitation.size // n < (transient_periods or 1) + 2:
+                periodic = False
+        estimator = "periodic" if periodic else "lpm"
+    if estimator == "periodic":
+        return joint_periodic(records, transient_periods=transient_periods)
+    return joint_lpm(records, options=lpm_options)
