@@ -63,6 +63,7 @@ from fsmbench.bench.params import Bench
 from fsmbench.checks import Check, Notice, first_failure
 from fsmbench.ident.delay.sampled import SensorLowpass
 from fsmbench.ident.frf.closed_loop import ClosedLoopFrf, ClosedLoopRecord, closed_loop_frf
+from fsmbench.ident.pipeline import path_keyed_summary
 from fsmbench.ident.sercalo import SercaloFitOptions, SercaloIdentification, fit_sercalo
 from fsmbench.io.atomic import atomic_write_text
 from fsmbench.jsonutil import plain_json, stamped
@@ -240,7 +241,7 @@ class ClosedLoopIdentification:
             out["delay_s"] = {"sercalo": sid.pure_delay_s}
         out["checks"] = [c.to_json() for c in self.checks]
         out["notices"] = [n.to_json() for n in self.notices]
-        summary = None if sid is None else _path_keys(sid.summary())
+        summary = None if sid is None else path_keyed_summary(sid.summary())
         out["diagnostics"] = {
             "sercalo": summary,
             "sercalo_modes": modes,
@@ -260,18 +261,6 @@ class ClosedLoopIdentification:
             "options": self.options.to_json(),
         }
         return out
-
-
-def _path_keys(summary: dict[str, Any]) -> dict[str, Any]:
-    """``fit_error_rms_relative`` keyed ``Uch_to_Vph`` (identification.json's ids)."""
-    errors = summary.get("fit_error_rms_relative")
-    if not isinstance(errors, Mapping):
-        return summary
-    renamed = {}
-    for key, value in errors.items():
-        out, slash, inp = str(key).partition("/")
-        renamed[f"{inp}_to_{out}" if slash else str(key)] = value
-    return {**summary, "fit_error_rms_relative": renamed}
 
 
 def find_closed_loop_records(folder: str | Path) -> dict[str, Path]:

@@ -110,6 +110,7 @@ __all__ = [
     "Identification",
     "IdentifyOptions",
     "identify",
+    "path_keyed_summary",
     "quality_warnings",
     "write_identification",
 ]
@@ -340,7 +341,7 @@ class Identification:
         out["diagnostics"] = {
             "qd": {a: c.to_json() for a, c in self.qd.items()},
             "current_amp": {a: g.to_json() for a, g in self.current_amp.items()},
-            "sercalo": None if self.sercalo is None else _path_keys(self.sercalo.summary()),
+            "sercalo": None if self.sercalo is None else path_keyed_summary(self.sercalo.summary()),
             "sercalo_modes": self.sercalo_modes(),
             "mode_refinement": None if self.modes is None else self.modes.to_json(),
             "validation": [v.to_json() for v in self.validation],
@@ -361,7 +362,7 @@ class Identification:
         return out
 
 
-def _path_keys(summary: dict[str, Any]) -> dict[str, Any]:
+def path_keyed_summary(summary: dict[str, Any]) -> dict[str, Any]:
     """``fit_error_rms_relative`` keyed ``Uch_to_Vph`` (input ``_to_`` output), not ``Vph/Uch``:
     JSON keys are ids, without punctuation."""
     errors = summary.get("fit_error_rms_relative")
