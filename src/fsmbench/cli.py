@@ -48,8 +48,8 @@ import signal
 import sys
 import threading
 import traceback
-from collections.abc import Callable, Iterator, Sequence
-from dataclasses import dataclass
+from collections.abc import Callable, Iterator, Mapping, Sequence
+from dataclasses import dataclass, field
 from pathlib import Path
 from types import FrameType
 from typing import Any
@@ -366,6 +366,7 @@ class _StageInput:
     bench: Bench
     say: Callable[[str], None]
     recordings: dict[str, Any]
+    skipped: dict[str, str] = field(default_factory=dict)
 
 
 def _check_data(data: Path) -> None:
@@ -403,7 +404,8 @@ def _stage_input(args: argparse.Namespace, *,
             say(f"check failed: {check.sentence()}")
     for notice in loaded.notices:
         say(f"note: {notice.sentence()}")
-    return _StageInput(data=data, bench=bench, say=say, recordings=dict(loaded.recordings))
+    return _StageInput(data=data, bench=bench, say=say, recordings=dict(loaded.recordings),
+                       skipped=dict(loaded.skipped))
 
 
 def _stage_folder(args: argparse.Namespace, need_bytes: float) -> Any:
@@ -452,9 +454,9 @@ def _cmd_identify(args: argparse.Namespace) -> int:
     else:
         print("\n".join(readable_table(js, reference=reference, bench=inp.bench)))
         for step, why in result.skipped.items():
-            fix = _skip_fix(why, frf=getattr(args, "frf", "auto"))
             print(f"not identified: {_STEP_WORDS.get(step, step)}: "
-                  + (why.removesuffix("; use the LPM or Welch") if fix else why) + fix)
+                  + _skip_sentence(why, frf=getattr(args, "frf", "auto"),
+                                   unusable=inp.skipped))
     return 0
 
 
@@ -466,14 +468,25 @@ _STEP_WORDS = {"qd": "4QD calibration (2.1)", "current_amp": "current amplifiers
                "noise_model": "noise model of the huddle tests"}
 
 
-def _skip_fix(why: str, *, frf: str) -> str:
-    """What the user does about a skipped step, where the reason says it."""
+def _skip_sentence(why: str, *, frf: str, unusable: Mapping[str, str]) -> str:
+    """Why a step was skipped and what the user does about it, where the reason says it.
+
+    ``unusable``: the files present but not read, with why; such a file is not
+    "missing": it is named with its problem, to correct or record again.
+    """
     if "not periodic" in why and frf == "periodic":
-        return ("; to identify it, run identify with --frf auto (periods averaged where the "
-                "input repeats, the LPM elsewhere)")
+        return (why.removesuffix("; use the LPM or Welch") + "; to identify it, run identify "
+                "with --frf auto (periods averaged where the input repeats, the LPM "
+                "elsewhere)")
     if why.startswith("missing "):
-        return f"; record {why.removeprefix('missing ')} to identify it"
-    return ""
+        names = why.removeprefix("missing ").split(", ")
+        present = [n for n in names if n in unusable
+                   and not unusable[n].startswith(f"no {n}.mat")]
+        if present:
+            return "; ".join(f"{n} was not used ({unusable[n]}): correct it or record it "
+                             "again" for n in present)
+        return f"{why}; record {', '.join(names)} to identify it"
+    return why
 
 
 def _plant(args: argparse.Namespace, inp: _StageInput) -> Any:

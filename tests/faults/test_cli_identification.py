@@ -154,3 +154,17 @@ def test_a_step_the_estimator_cannot_do_says_the_fix(run_cli: Callable[..., Any]
     assert len(lines) == 1 and "is not periodic" in lines[0]
     assert lines[0].endswith("run identify with --frf auto (periods averaged where the input "
                              "repeats, the LPM elsewhere)")
+
+
+def test_an_unreadable_file_is_named_not_called_missing(run_cli: Callable[..., Any],
+                                                        data_copy: Path, tmp_path: Path) -> None:
+    """A truncated data_uch.mat: the steps it feeds say the file was not used and why
+    (to correct it or record it again), never "missing ... record data_uch"."""
+    path = data_copy / "data_uch.mat"
+    path.write_bytes(path.read_bytes()[:5000])
+    r = run_cli("identify", data_copy, "--out", tmp_path / "out")
+    assert r.status == 0, r.err
+    lines = [x for x in r.out.splitlines() if x.startswith("not identified: current amplifiers")]
+    assert len(lines) == 1, r.out
+    assert "data_uch was not used (" in lines[0] and "data_uch.mat" in lines[0]
+    assert lines[0].endswith("correct it or record it again") and "missing" not in lines[0]
