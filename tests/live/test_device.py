@@ -47,9 +47,9 @@ UNITS = {
     "BenchTime": "s", "LoopLag": "s", "Progress": "%", "SpeedFactor": "",
     "AsdFrequency": "Hz", "AsdVph": "V/sqrt(Hz)", "AsdVpv": "V/sqrt(Hz)",
     "AsdVa": "nm/sqrt(Hz)", "FrfFrequency": "Hz", "FrfMagnitude": "V/V", "FrfPhase": "deg",
-    "FrfCoherence": "",
+    "FrfCoherence": "", "WatchDeparture": "sigma",
 }
-TEXT = ("LoopClosed", "Controller", "Excitation", "Task")
+TEXT = ("LoopClosed", "Controller", "Excitation", "Task", "WatchVerdict", "WatchCause")
 
 #: Wall-clock seconds a wait may take before it fails (generous: 2 busy cores).
 WAIT_S = 60.0
@@ -148,6 +148,9 @@ class TestTwinDevice:
         assert proxy.Controller.startswith("none")
         assert json.loads(proxy.Excitation) == {}
         assert proxy.Task == "" and proxy.Progress == 100.0
+        assert proxy.WatchVerdict == "off (loop open)" and proxy.WatchCause == ""
+        # No judged window yet: INVALID (NaN), not a departure of zero.
+        assert proxy.read_attribute("WatchDeparture").quality == tango.AttrQuality.ATTR_INVALID
         assert proxy.SpeedFactor == SPEED
         beat, t0 = proxy.Heartbeat, proxy.BenchTime
         wait_bench_time(proxy, t0 + 0.5)

@@ -35,7 +35,8 @@ __all__ = ["ATTRIBUTES", "PUSHED", "QUALITIES", "AttributeSpec", "Events", "Limi
 QUALITIES = ("VALID", "WARNING", "ALARM", "INVALID")
 #: Views the bench pushes itself when they change (LiveBench.on_change), with State and
 #: Status; the others are polled.
-PUSHED = ("LoopClosed", "Controller", "Excitation", "SpeedFactor", "Task")
+PUSHED = ("LoopClosed", "Controller", "Excitation", "SpeedFactor", "Task", "WatchVerdict",
+          "WatchCause")
 #: Points of the ASD and FRF spectra at 10 kHz with a 1 s window (nfft 16384).
 MAX_SPECTRUM = 100_000
 
@@ -234,6 +235,20 @@ ATTRIBUTES: tuple[AttributeSpec, ...] = (
     AttributeSpec("Task", "str", lambda b: b.task_text,
                   "work running off the client's call (designing an excitation, loading a "
                   "controller); empty when none", events=Events(polling_ms=None)),
+    AttributeSpec("WatchVerdict", "str", lambda b: b.watch_view.verdict,
+                  "the loop watching itself: off (loop open), waiting, calibrating, within the "
+                  "prediction, or WARNING since a bench time (State ALARM; hysteresis: 3 "
+                  "windows of 10 s to raise, 3 to clear)", events=Events(polling_ms=None)),
+    AttributeSpec("WatchCause", "str", lambda b: b.watch_view.cause,
+                  "the warning's likely cause (a resonance moved, a new line, the noise "
+                  "floor), with what to do (fsmbench tune); empty without a warning",
+                  events=Events(polling_ms=None)),
+    AttributeSpec("WatchDeparture", "float", lambda b: b.watch_view.departure_sigma,
+                  "largest departure of the last 10 s window's tracking error from the "
+                  "loaded controller's prediction, in units of its statistical scatter "
+                  "(INVALID until a window is judged)", "sigma", "sigma", 1.0, "%.2f",
+                  events=Events(abs_change=0.5, archive_abs_change=2.0),
+                  display=(-10.0, 50.0)),
     AttributeSpec("AsdFrequency", "spectrum", lambda b: b.asd_frequency(),
                   "frequencies of AsdVph, AsdVpv and AsdVa", "Hz", "Hz", 1.0, "%.2f",
                   events=_SPECTRUM),

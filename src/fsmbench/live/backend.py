@@ -8,6 +8,7 @@ act with a message that says so.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -20,7 +21,15 @@ from fsmbench.sim.excitation import Excitation
 from fsmbench.sim.plant import ADC_CHANNELS, DAC_CHANNELS, bench_discrete
 from fsmbench.sim.stream import BenchStream, ControllerSwitch
 
-__all__ = ["LIVE_SIGNALS", "LiveBlock", "PlaybackBackend", "TwinBackend"]
+__all__ = ["DRIFT_STEP_PCT", "LIVE_SIGNALS", "MAX_DRIFT_PCT_PER_H", "LiveBlock",
+           "PlaybackBackend", "TwinBackend"]
+
+#: A drifting resonance moves in steps of this much [%] (a fifth of the 0.25 % a
+#: 10 s window locates a 0.1 %-damped peak to), every 1 to 30 s of bench time (a new
+#: plant costs ~70 ms: every second at 50x real time would slow the bench).
+DRIFT_STEP_PCT = 0.05
+#: Largest drift rate of the twin's resonance [%/h].
+MAX_DRIFT_PCT_PER_H = 10_000.0
 
 #: Signals a live block may carry, in the seed's names.
 LIVE_SIGNALS = (*DAC_CHANNELS, *ADC_CHANNELS, "Va")
@@ -61,17 +70,37 @@ class TwinBackend:
     bench : Bench
         ``bench.true`` is simulated; ``bench.nominal`` gives the calibrated 4QD gains.
     seed : int
+    drift_pct_per_h : float
+        The Sercalo's resonance (both axes) drifts this fast from ``drift_start_s`` [%/h]: the
+        plant is moved in steps of :data:`DRIFT_STEP_PCT`, its state carried over
+        (:meth:`~fsmbench.sim.stream.BenchStream.set_plant`).
+    drift_start_s : float
+        Bench time the drift starts [s].
     """
 
     kind = "twin"
     acts = True
 
-    def __init__(self, bench: Bench, *, seed: int) -> None:
+    def __init__(self, bench: Bench, *, seed: int, drift_pct_per_h: float = 0.0,
+                 drift_start_s: float = 0.0) -> None:
+        if not (math.isfinite(drift_pct_per_h) and abs(drift_pct_per_h) <= MAX_DRIFT_PCT_PER_H):
+            raise ValueError(f"a drift rate of {drift_pct_per_h!r} %/h is not within "
+                             f"+/-{MAX_DRIFT_PCT_PER_H:g} %/h")
         self.bench = bench
         self.stream = BenchStream(bench.true, seed=seed, name="live",
                                   plant=bench_discrete(bench))
         self.fs_hz = self.stream.fs_hz
         self.converter_half_range_v = bench.true.converter.range_v / 2
+        self.drift_pct_per_h = float(drift_pct_per_h)
+        self._drift_every_s = (min(30.0, max(1.0, DRIFT_STEP_PCT / abs(drift_pct_per_h) * 3600))
+                               if drift_pct_per_h else math.inf)
+        self.drift_start_s = max(0.0, float(drift_start_s))
+        self._next_drift_s = self.drift_start_s + self._drift_every_s
+
+    @property
+    def drift_pct(self) -> float:
+        """How far the resonance has drifted now [%]."""
+        return self.drift_pct_per_h * max(0.0, self.time_s - self.drift_start_s) / 3600.0
 
     @property
     def controller(self) -> DiscreteController | None:
@@ -102,6 +131,12 @@ class TwinBackend:
 
     def step(self, n: int) -> LiveBlock:
         """The next ``n`` samples."""
+        if self.drift_pct_per_h and self.time_s >= self._next_drift_s:
+            from fsmbench.twin.closed_loop import drifted_bench
+
+            self.stream.set_plant(bench_discrete(drifted_bench(self.bench,
+                                                               resonance_pct=self.drift_pct)))
+            self._next_drift_s = self.time_s + self._drift_every_s
         b = self.stream.step(n)
         signals = {name: b.dac[:, i] for i, name in enumerate(DAC_CHANNELS)}
         signals.update({name: b.adc[:, i] for i, name in enumerate(ADC_CHANNELS)})

@@ -148,6 +148,8 @@ class BenchCommands:
         @property
         def state(self) -> str: ...
         @property
+        def command_state(self) -> str: ...
+        @property
         def controller_name(self) -> str: ...
 
     # -- the state machine ---------------------------------------------------------
@@ -168,7 +170,7 @@ class BenchCommands:
 
     def check_allowed(self, command: str) -> None:
         """Nothing if ``command`` may run now; else :class:`Refused` saying why and what to do."""
-        state = self.state
+        state = self.command_state
         job, task = self._job, self._task
         experiment = job is not None and job.collecting and job.plan.kind == "experiment"
         if command in _ACTS and not self.backend.acts:
@@ -216,7 +218,7 @@ class BenchCommands:
         """
         with self._locked("CloseLoop"):
             self.check_allowed("CloseLoop")
-            ringing = self.state == "ALARM"
+            ringing = self.command_state == "ALARM"
             if ringing:
                 self._refuse_unsettled()
         waited = 0.0
@@ -227,7 +229,7 @@ class BenchCommands:
             waited = time.monotonic() - t0
         with self._locked("CloseLoop"):
             self.check_allowed("CloseLoop")
-            if self.state == "ALARM":
+            if self.command_state == "ALARM":
                 self._refuse_unsettled(wait=False)
             k = self._loaded or self._seed_controller()
             self._set_loop(k, hold=True, cause="CloseLoop")

@@ -38,6 +38,7 @@ from fsmbench.live.monitor import LiveMonitor
 from fsmbench.live.spectra import AccumulatingFrf, FrfSnapshot, RollingAsd
 from fsmbench.live.states import AlarmHysteresis, Refused, Ringdown
 from fsmbench.live.tasks import Task
+from fsmbench.live.watching import LiveWatch, WatchView
 from fsmbench.sim.engine import DiscreteController
 
 __all__ = ["ASD_SIGNALS", "MAX_SPEED", "MIN_SPEED", "ControllerMemory", "FileMemory",
@@ -123,6 +124,11 @@ class LiveBench(BenchCommands):
         Where the loaded controller is remembered (:meth:`restore_controller`).
     thread_init : callable, optional
         Context manager factory entered in each of the bench's threads.
+    drift_pct_per_h : float
+        The twin's Sercalo resonance drifts this fast, both axes [%/h] (0: none; what
+        the loop's watch, :mod:`fsmbench.live.watching`, is for).
+    drift_start_s : float
+        Bench time the drift starts [s].
     """
 
     def __init__(self, bench: Bench, *, backend: str = "twin",
@@ -131,11 +137,13 @@ class LiveBench(BenchCommands):
                  log: Callable[[str, str], None] | None = None,
                  on_change: Callable[[str], None] | None = None,
                  memory: ControllerMemory | None = None,
-                 thread_init: Callable[[], Any] | None = None) -> None:
+                 thread_init: Callable[[], Any] | None = None,
+                 drift_pct_per_h: float = 0.0, drift_start_s: float = 0.0) -> None:
         self.bench = bench
         conv = bench.nominal.converter
         if backend == "twin":
-            self.backend: TwinBackend | PlaybackBackend = TwinBackend(bench, seed=seed)
+            self.backend: TwinBackend | PlaybackBackend = TwinBackend(
+                bench, seed=seed, drift_pct_per_h=drift_pct_per_h, drift_start_s=drift_start_s)
         elif backend == "playback":
             if not playback_folder:
                 raise ValueError("the playback backend needs a folder of recordings")
@@ -181,6 +189,9 @@ class LiveBench(BenchCommands):
         self._job: Job | None = None
         self._task: Task | None = None
         self._notice = ""
+        self.watch = LiveWatch(bench, qd_gain_v_per_rad=self.qd_gain_v_per_rad, log=self.log,
+                               thread_init=thread_init)
+        self._watch_view = self.watch.view(None)
         self.loop = PacedLoop(step=self._step, speed=lambda: self._speed,
                               block_s=lambda: self.block_samples / self.fs_hz,
                               watchdog_s=watchdog_s, on_stall=self._stalled,
@@ -201,7 +212,8 @@ class LiveBench(BenchCommands):
                 "LoopClosed": self.loop_closed, "Controller": self.controller_name,
                 "Excitation": None if ex is None else tuple(sorted(ex.items())),
                 "SpeedFactor": self._speed, "Task": self.task_text,
-                "Progress": round(self.progress_percent)}
+                "Progress": round(self.progress_percent),
+                "WatchVerdict": self._watch_view.verdict, "WatchCause": self._watch_view.cause}
 
     def publish(self) -> None:
         """Tell ``on_change`` of every view changed since the last call (never under the lock).
@@ -280,6 +292,17 @@ class LiveBench(BenchCommands):
             block = self._advance(n)
             due, self._spectra_due = self._spectra_due, False
             frf = self._frf
+            job = self._job
+            quiet = self._excitation is None and not (
+                job is not None and job.collecting and job.plan.kind == "experiment")
+            controller = self.backend.controller
+        # The watch judges outside the lock (a 10 s Welch every 10 s of bench time).
+        for event in self.watch.push(controller=controller, quiet=quiet,
+                                     vph=block.signals.get("Vph"), vpv=block.signals.get("Vpv"),
+                                     end_s=(block.start_sample + block.n) / self.fs_hz):
+            self.log("WARNING" if event.level == "WARNING" else "INFO",
+                     f"the loop's watch: {event.level}: {event.cause}")
+        self._watch_view = self.watch.view(controller)
         if due:
             self._refresh_spectra(frf)
         self.loop.beat()
@@ -407,7 +430,24 @@ class LiveBench(BenchCommands):
             return "MOVING"
         if self._alarm[0] or self._ringing:
             return "ALARM"
+        if self.watch_view.warning:
+            return "ALARM"  # the loop's watch warns; commands are allowed as in RUNNING
         return "RUNNING" if self.backend.controller is not None else "ON"
+
+    @property
+    def watch_view(self) -> WatchView:
+        """The loop's watch now (:mod:`fsmbench.live.watching`)."""
+        return self.watch.view(self.backend.controller)
+
+    @property
+    def command_state(self) -> str:
+        """The state the commands are checked against: :attr:`state`, except that the loop's
+        watch's warning counts as RUNNING (it advises ``fsmbench tune``, which needs the
+        commands of a running loop)."""
+        state = self.state
+        if state == "ALARM" and not (self._alarm[0] or self._ringing):
+            return "RUNNING" if self.backend.controller is not None else "ON"
+        return state
 
     def _fault_sentence(self) -> str:
         if self._fault is not None:
@@ -441,6 +481,9 @@ class LiveBench(BenchCommands):
                 parts.append(f"{task.what[0].upper()}{task.what[1:]}{pct}; Abort cancels it.")
             return " ".join(parts)
         if state == "ALARM":
+            if not (self._ringing or self._alarm[0]):
+                return (f"Loop closed with {self.controller_name}; its tracking error departs "
+                        f"from the prediction (the loop's watch): {self.watch_view.cause}.")
             if not self._ringing:
                 return ("A converter saturates (a DAC command or a 4QD reading on a rail; ALARM "
                         f"until under {self.alarm_rule.leave_fraction:.1%} of "

@@ -18,8 +18,8 @@ logging (DEBUG, INFO, WARNING, ERROR).
 
 Device properties: ``Backend`` (``twin`` or ``playback``), ``PlaybackFolder``,
 ``ParamsFile``, ``BenchFolder``, ``Seed``, ``Speed``, ``OutputFolder``,
-``WatchdogSeconds`` (read from the database; written there, as defaults, only
-when absent) and ``MemorisedController`` (the device's own: the controller
+``WatchdogSeconds``, ``DriftRate``, ``DriftStart`` (read from the database; written
+there, as defaults, only when absent) and ``MemorisedController`` (the device's own: the controller
 loaded, so that a restart brings it back).
 
 This module imports PyTango: it is the ``fsmbench[tango]`` extra.
@@ -67,7 +67,8 @@ _EMPTY: dict[str, Any] = {"float": float("nan"), "int": 0, "bool": False, "str":
 #: Properties an administrator sets, with the defaults written when absent (text).
 PROPERTY_DEFAULTS = {"Backend": "twin", "PlaybackFolder": "", "ParamsFile": "",
                      "BenchFolder": "", "Seed": "0", "Speed": "1.0",
-                     "OutputFolder": "fsmbench-live", "WatchdogSeconds": "5.0"}
+                     "OutputFolder": "fsmbench-live", "WatchdogSeconds": "5.0",
+                     "DriftRate": "0.0", "DriftStart": "0.0"}
 _MEMORY = "MemorisedController"
 
 
@@ -161,6 +162,11 @@ class FsmBench(Device):
     WatchdogSeconds = device_property(dtype=float, default_value=5.0,
                                       doc="wall-clock seconds without a bench block that make "
                                           "the device FAULT")
+    DriftRate = device_property(dtype=float, default_value=0.0,
+                                doc="twin: the Sercalo resonance drifts this fast [%/h] (0: "
+                                    "none; for the loop's watch)")
+    DriftStart = device_property(dtype=float, default_value=0.0,
+                                 doc="twin: the bench time the drift starts [s]")
     MemorisedController = device_property(dtype=str, default_value="",
                                           doc="written by the device: the controller loaded "
                                               "(JSON), loaded again at start")
@@ -192,7 +198,9 @@ class FsmBench(Device):
                                    speed=self.Speed, output_folder=self.OutputFolder,
                                    watchdog_s=self.WatchdogSeconds, log=self._log,
                                    on_change=self._pusher.put, memory=_Memory(self),
-                                   thread_init=EnsureOmniThread)
+                                   thread_init=EnsureOmniThread,
+                                   drift_pct_per_h=self.DriftRate,
+                                   drift_start_s=self.DriftStart)
         except Exception as exc:
             self._init_error = plain(f"The device could not start: {exc}. Fix the property "
                                      "and run Init.")

@@ -403,6 +403,8 @@ def serve_epics(options: ServeOptions, *, ready: str = "") -> int:
     live = LiveBench(bench, backend=options.backend, playback_folder=options.playback_folder,
                      seed=options.seed, speed=options.speed, output_folder=out,
                      watchdog_s=options.watchdog_s, memory=memory,
+                     drift_pct_per_h=options.drift_pct_per_h,
+                     drift_start_s=options.drift_start_s,
                      on_change=lambda view: ioc.changed(view) if ioc is not None else None)
     ioc = BenchIoc(live, prefix)
     builder.LoadDatabase()

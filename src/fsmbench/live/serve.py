@@ -23,6 +23,7 @@ bench as a Channel Access (and PV Access) IOC (:mod:`fsmbench.live.epics`).
 from __future__ import annotations
 
 import argparse
+import math
 import os
 import socket
 import sys
@@ -65,6 +66,9 @@ class ServeOptions:
         PV prefix (EPICS).
     watchdog_s : float
         Wall-clock seconds without a bench block that make the device FAULT.
+    drift_pct_per_h : float
+        Twin: the Sercalo resonance drifts this fast [%/h], from ``drift_start_s`` [s] of
+        bench time.
     given : frozenset of str
         Properties the command line set explicitly (checked against the database).
     """
@@ -83,6 +87,8 @@ class ServeOptions:
     protocol: str = "tango"
     prefix: str = ""
     watchdog_s: float = 5.0
+    drift_pct_per_h: float = 0.0
+    drift_start_s: float = 0.0
     given: frozenset[str] = field(default_factory=frozenset)
 
     def properties(self) -> dict[str, str]:
@@ -97,6 +103,8 @@ class ServeOptions:
             "Speed": repr(float(self.speed)),
             "OutputFolder": str(self.output_folder.resolve()),
             "WatchdogSeconds": repr(float(self.watchdog_s)),
+            "DriftRate": repr(float(self.drift_pct_per_h)),
+            "DriftStart": repr(float(self.drift_start_s)),
         }
 
 
@@ -311,6 +319,19 @@ def starter_main(argv: Sequence[str] | None = None) -> int:
 # ------------------------------------------------------------------ the command line
 
 
+def _drift_rate(text: str) -> float:
+    from fsmbench.live.backend import MAX_DRIFT_PCT_PER_H
+
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a drift rate in %/h") from None
+    if not (math.isfinite(value) and abs(value) <= MAX_DRIFT_PCT_PER_H):
+        raise argparse.ArgumentTypeError(f"{text!r}: give a drift rate within "
+                                         f"+/-{MAX_DRIFT_PCT_PER_H:g} %/h")
+    return value
+
+
 def add_serve_command(sub: Any, *, factor: Callable[[str], float]) -> None:
     """Add ``serve`` to the CLI's sub-commands (``factor`` parses ``--speed``)."""
     p = sub.add_parser("serve", help="the bench live as a Tango device or an EPICS IOC "
@@ -341,6 +362,13 @@ def add_serve_command(sub: Any, *, factor: Callable[[str], float]) -> None:
     p.add_argument("--watchdog", metavar="S", type=factor, default=None,
                    help="wall-clock seconds without a bench block that make the device FAULT "
                         "(default 5)")
+    p.add_argument("--drift-rate", metavar="PCT_PER_H", dest="drift_rate", type=_drift_rate,
+                   default=None, help="twin: the Sercalo resonance (both axes) drifts this fast "
+                                      "[%%/h] (default 0), what the loop's watch (WatchVerdict, "
+                                      "WatchCause) is for")
+    p.add_argument("--drift-start", metavar="S", dest="drift_start", type=cli_args.seconds,
+                   default=None, help="with --drift-rate: the bench time the drift starts [s] "
+                                      "(default 0)")
     p.add_argument("--nodb", action="store_true", help="Tango without a database")
     p.add_argument("--port", metavar="N", type=cli_args.port, default=10000,
                    help="TCP port with --nodb (default 10000)")
@@ -351,7 +379,8 @@ def add_serve_command(sub: Any, *, factor: Callable[[str], float]) -> None:
 
 _OPTION_PROPERTY = {"backend": "Backend", "params": "ParamsFile", "bench_dir": "BenchFolder",
                     "seed": "Seed", "speed": "Speed", "out": "OutputFolder",
-                    "watchdog": "WatchdogSeconds"}
+                    "watchdog": "WatchdogSeconds", "drift_rate": "DriftRate",
+                    "drift_start": "DriftStart"}
 
 
 def _command(args: argparse.Namespace) -> int:
@@ -386,4 +415,6 @@ def _command(args: argparse.Namespace) -> int:
         bench_folder=Path(args.bench_dir) if args.bench_dir else None,
         device_name=args.device.lower(), instance=args.instance, protocol=args.protocol,
         prefix=args.prefix, watchdog_s=5.0 if args.watchdog is None else args.watchdog,
+        drift_pct_per_h=0.0 if args.drift_rate is None else args.drift_rate,
+        drift_start_s=0.0 if args.drift_start is None else args.drift_start,
         given=frozenset(given)))

@@ -6,8 +6,11 @@ The state is computed from facts, never stored as a label that could lie:
   or the device could not start (until ``Reset``);
 - **MOVING** a command's work runs: a recording, an experiment, or a task
   off the client's call (designing an excitation, loading a controller);
-- **ALARM** a converter is on a rail (with hysteresis: :class:`AlarmHysteresis`)
-  or the mirror still rings after a trip (:class:`Ringdown`);
+- **ALARM** a converter is on a rail (with hysteresis: :class:`AlarmHysteresis`),
+  the mirror still rings after a trip (:class:`Ringdown`), or the loop runs and
+  its watch warns that the tracking error departs from the loaded controller's
+  prediction (:mod:`fsmbench.live.watching`; the commands are then allowed as in
+  RUNNING: the warning advises ``fsmbench tune``, which needs them);
 - **RUNNING** the loop is closed;
 - **ON** the loop is open.
 

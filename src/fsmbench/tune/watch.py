@@ -232,6 +232,12 @@ class LoopWatch:
         self.events += out
         return out
 
+    def discard(self) -> None:
+        """Drop the samples of the window being filled (the loop was disturbed: an
+        excitation, an experiment); the next window starts with the next samples fed.
+        The time axis (``time_s`` of the events) counts judged windows only."""
+        self._buffer, self._buffered = [], 0
+
     def check(self, window: np.ndarray) -> tuple[BandCheck, ...]:
         """The band checks of one window (n, 2) [rad]."""
         opts = self.options
