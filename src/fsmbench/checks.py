@@ -18,7 +18,39 @@ from typing import Any, Literal
 
 from fsmbench.jsonutil import plain_json
 
-__all__ = ["Check", "Notice", "failed", "first_failure"]
+__all__ = ["CHECK_TITLES", "Check", "Notice", "failed", "first_failure"]
+
+
+#: What each check tests, in the words a user reads (its ``name`` stays the JSON key).
+CHECK_TITLES: dict[str, str] = {
+    "attocube_noise_vs_model": "interferometer noise against the bench file's model",
+    "calibration_r2": "4QD calibration linearity r²",
+    "calibration_residual": "4QD calibration residual (share of the fitted swing)",
+    "converter_range": "converter range",
+    "coprime_factor_margin": "robust stability margin b_max",
+    "current_amp_gain_vs_theoretical": "current-amplifier gain against 1/(R + Rc)",
+    "excited_axis": "excited axis (direct over cross response)",
+    "huddle_qd_vs_model": "4QD huddle-test noise against the bench file's",
+    "huddle_va_vs_prediction": "huddle-test distance noise against the budget's prediction",
+    "integer_samples": "sample type",
+    "model_validation": "model validation (recorded over predicted tracking error)",
+    "newport_amplitude_bandwidth": "Newport amplitude bandwidth",
+    "newport_gain_vs_model": "Newport gain against the bench file's",
+    "newport_noise_vs_datasheet": "Newport noise against its datasheet",
+    "newport_peaking": "Newport resonance peaking",
+    "newport_phase_bandwidth": "Newport phase bandwidth",
+    "noise_floor_across_files": "4QD noise floor across files",
+    "qd_gain_newport_vs_calibration": "4QD gain seen by the Newport experiments against "
+                                      "the calibration's",
+    "qd_gain_vs_nominal": "4QD gain against the bench file's",
+    "qd_noise_vs_model": "4QD noise against the bench file's",
+    "sampling_rate": "sampling rate",
+    "sercalo_gain_vs_model": "Sercalo gain against the bench file's",
+    "sign_vs_bench": "sign against the bench file's model",
+    "signal_varies": "signal varies",
+    "va_continuous": "distance record continuous (no jump)",
+    "va_in_metres": "distance in metres",
+}
 
 
 @dataclass(frozen=True)
@@ -38,6 +70,9 @@ class Check:
         What was checked: file and signal (``"data_cal_pd_h.mat: Vph"``).
     advice : str
         What to do when it fails; empty when passed.
+    unit : str
+        Unit of ``value`` ("Hz", "dB", "m", "×" for a ratio; empty when
+        dimensionless).
     """
 
     name: str
@@ -46,14 +81,30 @@ class Check:
     limit: str
     subject: str = ""
     advice: str = ""
+    unit: str = ""
+
+    @property
+    def title(self) -> str:
+        """What the check tests, in words (:data:`CHECK_TITLES`)."""
+        return CHECK_TITLES.get(self.name, self.name.replace("_", " "))
+
+    def value_words(self) -> str:
+        """The measured value with its unit ("814.9 Hz", "1.14×"; "not computed" for None)."""
+        if self.value is None:
+            return "not computed"
+        if not isinstance(self.value, float):
+            return str(self.value)
+        if self.unit == "×":
+            return f"{self.value:.4g}×"
+        return f"{self.value:.4g} {self.unit}".rstrip()
 
     def sentence(self) -> str:
-        """One line a user reads: subject, check, value against limit, advice."""
+        """One line a user reads: subject, what was checked, value against limit, advice."""
         head = f"{self.subject}: " if self.subject else ""
-        verdict = "passed" if self.passed else "FAILED"
-        value = f"{self.value:.4g}" if isinstance(self.value, float) else str(self.value)
+        verdict = "passed" if self.passed else "failed"
         tail = f"; {self.advice}" if self.advice and not self.passed else ""
-        return f"{head}{self.name} {verdict} ({value}, limit {self.limit}){tail}"
+        return (f"{head}{self.title} {verdict} ({self.value_words()}, limit {self.limit})"
+                f"{tail}")
 
     def to_json(self) -> dict[str, Any]:
         """JSON-ready dict (``plain_json`` convention)."""

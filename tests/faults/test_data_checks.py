@@ -21,7 +21,7 @@ import xarray as xr
 
 from fsmbench.bench.params import Bench
 from fsmbench.budget.study import BudgetResult, budget_study
-from fsmbench.checks import Check, failed
+from fsmbench.checks import CHECK_TITLES, Check, failed
 from fsmbench.ident.pipeline import identify
 from fsmbench.io import write_recording
 from fsmbench.io.errors import RecordingError
@@ -109,14 +109,14 @@ def test_dead_4qd_channel_falls_back_to_the_nominal_gain(twin: TwinRun, bench: B
     assert [c.subject for c in r2] == ["data_cal_pd_h: Vph"]
     assert r2[0].value is not None and float(r2[0].value) < 1e-2  # noise explains nothing
     assert ident.qd == {} and ident.plant_blocks["Gd"] == "nominal"
-    assert "calibration_r2" in ident.skipped["qd"]
+    assert CHECK_TITLES["calibration_r2"] in ident.skipped["qd"]
     saved = json.loads(paths[0].read_text())
     assert "qd_gain_v_per_rad" not in saved  # no identified 4QD gain is claimed
     assert any(c["name"] == "calibration_r2" and not c["passed"] for c in saved["checks"])
     assert isinstance(saved["notices"], list)
     choice = choose_plant(loaded.recordings, bench=bench, identification=ident)
     assert choice.source.startswith("identified")
-    assert "Gd: nominal — check calibration_r2 failed" in choice.source
+    assert "Gd: nominal — data_cal_pd_h: Vph: 4QD calibration linearity r² failed" in choice.source
     nominal = budget_quietly({}, bench)
     ours = budget_quietly({}, bench, plant=choice.plant)
     # Before: 114 nm (Gd = 0.078 V/rad). With the nominal Gd the budget is the
@@ -151,7 +151,7 @@ def test_data_uch_fault_is_the_reason_for_the_nominal_plant(
     choice = choose_plant(loaded.recordings, bench=bench)
     assert choice.source.startswith("nominal physical model")
     assert "missing" not in choice.source
-    assert check in choice.source and words in choice.source
+    assert CHECK_TITLES[check] in choice.source and words in choice.source
 
 
 def test_noisy_vph_gives_the_identification_failure_not_missing(
@@ -198,7 +198,7 @@ def test_int16_counts_are_not_taken_for_volts(twin: TwinRun, bench: Bench,
                                         "data_huddle_test_1.mat: Vpv"]
     assert bad[0].value == "int16" and "counts" in bad[0].advice and "2^16" in bad[0].advice
     result = budget_quietly(loaded.recordings, bench)
-    assert "integer_samples" in result.skipped["data_huddle_test_1"]
+    assert CHECK_TITLES["integer_samples"] in result.skipped["data_huddle_test_1"]
     assert result.huddle is not None and set(result.huddle.records) == {2}
 
 
@@ -216,7 +216,7 @@ def test_bad_va_is_left_out_of_the_huddle_findings(twin: TwinRun, bench: Bench,
     loaded = load_quietly(data, fs_hz=FS_HZ)
     assert [c.subject for c in failed(loaded.checks)] == ["data_huddle_test_2.mat: Va"]
     result = budget_quietly(loaded.recordings, bench)
-    assert check in result.skipped["data_huddle_test_2"]
+    assert CHECK_TITLES[check] in result.skipped["data_huddle_test_2"]
     assert result.huddle is not None and set(result.huddle.records) == {1}
     # Before: "increases the 3–50 Hz rms 87642986214.8-fold (significant)" or "×inf".
     assert result.huddle.comparisons == ()
@@ -239,7 +239,7 @@ def test_mixed_rates_name_the_files(twin: TwinRun, bench: Bench, tmp_path: Path)
     loaded = load_quietly(data, fs_hz=FS_HZ)
     assert [c.subject for c in failed(loaded.checks)] == ["data_huddle_test_2.mat: t"]
     result = budget_quietly(loaded.recordings, bench)
-    assert "sampling_rate" in result.skipped["data_huddle_test_2"]
+    assert CHECK_TITLES["sampling_rate"] in result.skipped["data_huddle_test_2"]
 
 
 def test_mixed_rates_in_the_identification_name_the_file(twin: TwinRun, bench: Bench,
@@ -252,7 +252,7 @@ def test_mixed_rates_in_the_identification_name_the_file(twin: TwinRun, bench: B
     ident = identify(load_quietly(data, fs_hz=FS_HZ).recordings, bench=bench)
     # Before: "response 1 has fs_hz=10000.0 but response 0 has 20000.0" (no file named).
     why = ident.skipped["newport"]
-    assert why.startswith("check sampling_rate failed: data_unh.mat: t")
+    assert why.startswith("data_unh.mat: t: sampling rate failed (2e+04 Hz, limit within")
     assert ident.newport is None and ident.plant_blocks["Gn"] == "nominal"
 
 
@@ -270,7 +270,7 @@ def test_1e300_values_give_a_check_not_numpy_warnings(twin: TwinRun, bench: Benc
     check = "converter_range" if signal == "Vph" else "va_in_metres"
     assert [c.name for c in failed(loaded.checks)] == [check]
     result = budget_quietly(loaded.recordings, bench)
-    assert check in result.skipped["data_huddle_test_2"]
+    assert CHECK_TITLES[check] in result.skipped["data_huddle_test_2"]
     assert not [n for n in (*loaded.notices, *result.notices) if n.kind == "numeric"]
     assert math.isfinite(result.total_rms_m) and result.total_rms_m < 1e-6
 

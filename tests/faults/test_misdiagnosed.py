@@ -114,7 +114,8 @@ def test_uch_flipped_in_data_uch_names_uch_and_leaves_the_sercalo_out(
     status, err = cli(capsys, "identify", data, "--out", tmp_path / "out")
     assert status == 0, err
     line = next(x for x in err.splitlines() if "step sercalo skipped" in x)
-    assert "check sign_vs_bench failed: data_uch.mat: Uch: sign_vs_bench FAILED" in line
+    assert "data_uch.mat: Uch: sign against the bench file's model failed (-" in line
+    assert " V/V, limit the sign of the bench file's model" in line  # value with its unit
     assert "Uch is recorded with its sign flipped" in line
     assert "data_ucv.mat's Ucv → Vcv and Ucv → Vpv agree" in line  # the other axis
     assert "raise the excitation" not in err
@@ -159,8 +160,8 @@ def test_a_flip_makes_exactly_its_steps_fall_back(runs: TwinRun, bench: Bench) -
     for exp, signal, subject, steps in (FLIPS[4], FLIPS[6]):
         recs = {**runs.recordings, exp: edited(runs.recordings[exp], **{signal: np.negative})}
         ident = identify(recs, bench=bench)
-        named = {k for k, why in ident.skipped.items() if f"sign_vs_bench failed: {subject}"
-                 in why}
+        reason = f"{subject}: sign against the bench file's model failed"
+        named = {k for k, why in ident.skipped.items() if reason in why}
         assert named == steps, ident.skipped
 
 
@@ -178,7 +179,7 @@ def test_a_4qd_output_flipped_in_every_file_is_one_decision(runs: TwinRun, bench
     assert [c.subject for c in bad] == [f"{', '.join(files)}: {output}"]
     assert "in every file that drives it" in bad[0].advice
     assert f"quad_diode.gain_v_per_rad.{axis}" in bad[0].advice
-    reason = f"check sign_vs_bench failed: {bad[0].subject}"
+    reason = f"{bad[0].subject}: sign against the bench file's model failed"
     assert all(reason in ident.skipped[step]
                for step in ("qd", "current_amp", "sercalo", "newport")), ident.skipped
     assert set(ident.plant_blocks.values()) == {"nominal"}  # one decision for every block
@@ -251,7 +252,8 @@ def test_swapped_dac_cables_are_named_as_a_swap(runs: TwinRun, bench: Bench) -> 
     assert "the Uch and Ucv DAC cables are swapped" in bad[0].advice
     assert bad[0].value is not None and float(bad[0].value) < 0.1
     for step in ("current_amp", "sercalo"):
-        assert "check excited_axis failed: data_uch.mat: Uch" in ident.skipped[step]
+        assert ("data_uch.mat: Uch: excited axis (direct over cross response) failed"
+                in ident.skipped[step])
         assert "raise the excitation" not in ident.skipped[step]
     assert ident.current_amp == {} and ident.sercalo is None  # no gain 3 % off
     assert not failed_named(ident.checks, "sign_vs_bench")  # a swap, not a sign
@@ -426,11 +428,13 @@ def test_a_jumped_huddle_record_gives_no_number(tmp_path: Path, bench: Bench) ->
     assert [c.subject for c in jump] == ["data_huddle_test_1.mat: Va"]
     assert "between samples 30999 and 31000 (t = 3.1 s)" in jump[0].advice
     result = budget_study(loaded.recordings, bench=bench, df_hz=1.0)
-    assert "check va_continuous failed" in result.skipped["data_huddle_test_1"]
+    assert ("data_huddle_test_1.mat: Va: distance record continuous (no jump) failed"
+            in result.skipped["data_huddle_test_1"])
     assert result.huddle is not None and set(result.huddle.records) == {2}
     ident = identify(loaded.recordings, bench=bench)
     assert ident.noise_model is not None
     assert ident.noise_model.tests == ("data_huddle_test_2",)
-    assert any(n.subject == "data_huddle_test_1.mat" and "va_continuous" in n.message
+    jumped = "distance record continuous (no jump) failed"
+    assert any(n.subject == "data_huddle_test_1.mat" and jumped in n.message
                for n in ident.notices)
     assert failed_named(ident.checks, "va_continuous")

@@ -170,7 +170,7 @@ def test_skips_failed_checks_and_fallbacks_are_listed_first() -> None:
                  checks=(check,), identified=False)
     page = verdict_html(s)
     assert "data_uch.mat: Vph: holds NaN" in page
-    assert "calibration_r2 FAILED" in page and "check the 4QD cable" in page
+    assert "4QD calibration linearity r² failed" in page and "check the 4QD cable" in page
     assert "nominal physical model" in page
     assert "NOT VERIFIED" in page and s.next_step in page
     # The fallback says what to do about it: the refused file, corrected.

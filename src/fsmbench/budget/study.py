@@ -204,7 +204,7 @@ def _plausible(recordings: Mapping[str, xr.Dataset], *, bench: Bench,
         checks.extend(found)
         notices.extend(notes)
         if (bad := first_failure(found)) is not None:
-            skipped[name] = (f"check {bad.name} failed: {bad.sentence()}; the record is left "
+            skipped[name] = (f"{bad.sentence()}; the record is left "
                              "out of the analysis and of every comparison")
             continue
         passed[name] = recordings[name]
@@ -460,7 +460,7 @@ def huddle_cross_checks(huddle: HuddleAnalysis, *, predicted_va_rms_m: Mapping[i
                 f"{HUDDLE_VA_BAND[0]:g} to {HUDDLE_VA_BAND[1]:g} times the budget's prediction",
                 f"{rec.name}.mat: Va", "" if ok else
                 f"measured {rec.va_rms_m * 1e9:.4g} nm rms where the budget predicts "
-                f"{pred * 1e9:.3g} nm for this configuration; likely {cause}"))
+                f"{pred * 1e9:.3g} nm for this configuration; likely {cause}", unit="×"))
         if rec.closed_loop:
             continue
         for i, (vp, rms) in enumerate((("Vph", rec.vph_rms_v), ("Vpv", rec.vpv_rms_v))):
@@ -475,7 +475,7 @@ def huddle_cross_checks(huddle: HuddleAnalysis, *, predicted_va_rms_m: Mapping[i
                 f"{HUDDLE_QD_BAND[0]:g} to {HUDDLE_QD_BAND[1]:g} times the bench file's noise",
                 f"{rec.name}.mat: {vp}", "" if ok else
                 f"measured {rms * 1e3:.4g} mV rms with nothing moving where the bench file's 4QD, "
-                f"Newport and ADC noise give {model * 1e3:.3g} mV; likely {cause}"))
+                f"Newport and ADC noise give {model * 1e3:.3g} mV; likely {cause}", unit="×"))
     return out
 
 

@@ -382,7 +382,7 @@ def validate_closed_loop(recorded: Mapping[str, xr.Dataset], *,
                   f"recorded / predicted tracking-error rms within {limits[0]:g}–{limits[1]:g}",
                   subject=", ".join(f"{n}.mat: Vph, Vpv" for n in names),
                   advice="" if ok else (reason + "; predictions on this model are not trusted "
-                                                 "until it is"))
+                                                 "until it is"), unit="×")
     return ClosedLoopValidation(
         bench=bench_label, controller=controller_name, experiments=tuple(names),
         gd_used_v_per_rad=(float(gd_used_v_per_rad[0]), float(gd_used_v_per_rad[1])),

@@ -361,7 +361,7 @@ def _factor_check(name: str, value: float, nominal: float, subject: str, what: s
                  f"times the nominal {nominal:.4g}", subject,
                  "" if ok else f"the identified {what} is {value:.4g}, not within a factor "
                  f"{MAX_GAIN_FACTOR:g} (same sign) of the nominal {nominal:.4g}: check the "
-                 "channel, its wiring and its unit")
+                 "channel, its wiring and its unit", unit="×")
 
 
 def qd_checks(cal: QdCalibration, *, nominal_v_per_rad: float) -> list[Check]:

@@ -354,7 +354,7 @@ def _axis_check(a: AxisRatio, axes: Mapping[str, AxisRatio]) -> Check:
              f"direct path's gain (≥ {a.model_direct_gain / SWAP_GAIN_FACTOR:.3g} V/V); the bench "
              f"file's model: {_ratio_words(a.model_ratio)}")
     if a.passed:
-        return Check("excited_axis", True, a.ratio, limit, subject)
+        return Check("excited_axis", True, a.ratio, limit, subject, unit="×")
     moved = [f"{a.input} moves {a.cross} ({a.cross_gain:.3g} V/V) more than {a.direct} "
              f"({a.direct_gain:.3g} V/V)"]
     if a.coil is not None and a.coil[3] >= a.coil[1]:
@@ -376,7 +376,7 @@ def _axis_check(a: AxisRatio, axes: Mapping[str, AxisRatio]) -> Check:
                  + (f"moves only {a.direct}" if not np.isfinite(a.model_ratio) else
                     f"has {a.direct} {a.model_ratio:.3g}× above {a.cross}")
                  + f"; likely a swap: "
-                 f"{cause}; this file's identification steps use the nominal model")
+                 f"{cause}; this file's identification steps use the nominal model", unit="×")
 
 
 def _sign_limit(p: PathSign) -> str:
@@ -417,7 +417,7 @@ def _sign_checks(judged: Mapping[str, list[PathSign]], params: BenchParams
             f"({gain:+.4g}) has the wrong sign; the 4QD gain, the Sercalo and the Newport all "
             "use the nominal model rather than mixing a reversed 4QD with a nominal one: fix "
             "the wiring, or if the bench is built so, give the gain the other sign in the "
-            "bench file"), files))
+            "bench file", unit="V/V"), files))
         explained |= {(p.experiment, vp) for p in paths}
     for exp, paths in judged.items():
         run = _BY_NAME[exp]
@@ -447,7 +447,8 @@ def _sign_checks(judged: Mapping[str, list[PathSign]], params: BenchParams
         out.append((Check(
             "sign_vs_bench", False, key.measured, _sign_limit(key), f"{exp}.mat: {signal}",
             f"{'; '.join(p.words() for p in rev)} (in phase with the model); likely a sign: "
-            f"{cause}; this file's identification steps use the nominal model"), [exp]))
+            f"{cause}; this file's identification steps use the nominal model", unit="V/V"),
+            [exp]))
     failed = {e for _, es in out for e in es}
     for exp, paths in judged.items():
         if exp in failed or not paths:
@@ -455,7 +456,7 @@ def _sign_checks(judged: Mapping[str, list[PathSign]], params: BenchParams
         run = _BY_NAME[exp]
         main = next((p for p in paths if p.output == run.direct), paths[0])
         out.append((Check("sign_vs_bench", True, main.measured, _sign_limit(main),
-                          f"{exp}.mat: {run.command}"), [exp]))
+                          f"{exp}.mat: {run.command}", unit="V/V"), [exp]))
     return out
 
 
@@ -549,7 +550,7 @@ def screen_recordings(recordings: Mapping[str, xr.Dataset], *, params: BenchPara
         if bad is not None:
             del kept[name]
             checks += [c for c in found_checks if not c.passed]
-            notices.append(Notice("other", f"{name}.mat", f"left out of the noise model: check "
-                                  f"{bad.name} failed ({bad.sentence()})"))
+            notices.append(Notice("other", f"{name}.mat", f"left out of the noise model: "
+                                  f"{bad.sentence()}"))
     return Screening(checks=tuple(checks), by_experiment=by_experiment,
                      notices=tuple(notices), recordings=kept)

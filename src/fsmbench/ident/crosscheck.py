@@ -96,9 +96,9 @@ def _cause(ratio: float, *, between: str) -> str:
 def _ratio_check(name: str, ratio: float, band: tuple[float, float], subject: str,
                  what: str, *, between: str) -> Check:
     ok = bool(np.isfinite(ratio) and band[0] <= ratio <= band[1])
-    return Check(name, ok, float(ratio), f"{band[0]:g} to {band[1]:g}", subject,
-                 "" if ok else f"{what} (ratio {ratio:.3g}); likely "
-                 f"{_cause(ratio, between=between)}")
+    advice = "" if ok else f"{what} (ratio {ratio:.3g}); likely {_cause(ratio, between=between)}"
+    return Check(name, ok, float(ratio), f"{band[0]:g} to {band[1]:g}", subject, advice,
+                 unit="×")
 
 
 def cross_checks(js: Mapping[str, Any], *, params: BenchParams) -> list[Check]:

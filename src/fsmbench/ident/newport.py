@@ -359,12 +359,12 @@ def newport_checks(dyn: NewportDynamics, *, amplitude_bandwidth_hz: float,
                 name, ok, value, f"within {tol:.0%} of the datasheet's {nominal:g} Hz", subject,
                 "" if ok else "the mirror or its controller departs from the FSM-300 "
                               "datasheet: check its tuning before trusting a closed-loop "
-                              "prediction"))
+                              "prediction", unit="Hz"))
         peak = dyn.peaking_db[axis]
         checks.append(Check("newport_peaking", peak <= peaking_max_db, peak,
                             f"≤ {peaking_max_db:g} dB (datasheet)", subject,
                             "" if peak <= peaking_max_db else
-                            "the mirror rings more than its datasheet allows"))
+                            "the mirror rings more than its datasheet allows", unit="dB"))
     return checks
 
 

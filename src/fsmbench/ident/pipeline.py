@@ -425,11 +425,11 @@ def identify(recordings: Mapping[str, xr.Dataset], *, bench: Bench,
                    checks=result.checks + tuple(crossed), skipped=skipped,
                    noise_model=None if noise_failed else result.noise_model,
                    warnings=result.warnings + tuple(
-                       f"{c.subject}: {c.name} failed: {c.advice}" for c in failed))
+                       f"{c.subject}: {c.title} failed: {c.advice}" for c in failed))
 
 
 def _failure_reason(check: Check, fallback: str) -> str:
-    return f"check {check.name} failed: {check.sentence()}; {fallback}"
+    return f"{check.sentence()}; {fallback}"
 
 
 def _identify(recordings: Mapping[str, xr.Dataset], *, bench: Bench, opts: IdentifyOptions,
@@ -522,7 +522,7 @@ def _identify(recordings: Mapping[str, xr.Dataset], *, bench: Bench, opts: Ident
                                         if c.name == "current_amp_gain_vs_theoretical")):
             gi = {}
             skipped["current_amp"] = _failure_reason(bad, "the nominal current amplifier is used")
-            skipped["sercalo"] = f"needs the current-amplifier gains (2.2): {bad.name} failed"
+            skipped["sercalo"] = f"needs the current-amplifier gains (2.2): {bad.title} failed"
     if gi:
         say("2.3 Sercalo: FRF matrix, delay, vector fitting")
         try:

@@ -137,7 +137,7 @@ def _rate_check(ds: xr.Dataset, label: str, fs_hz: float) -> Check:
                       f"converter.fs_hz = {fs:g} in the bench parameters if the bench did "
                       "run at this rate")
     return Check("sampling_rate", ok, fs, f"within {100 * RATE_TOLERANCE:g} % of the bench's "
-                 f"{fs_hz:g} Hz", f"{label}: t", advice)
+                 f"{fs_hz:g} Hz", f"{label}: t", advice, unit="Hz")
 
 
 def _stored_dtype(var: xr.DataArray) -> np.dtype[Any]:
@@ -287,7 +287,8 @@ def _check_recording(ds: xr.Dataset, *, name: str | None, fs_hz: float | None,
             checks.append(Check("converter_range", ok, peak, f"≤ {limit:.6g} V (the converter's "
                                 f"±{adc_range_v / 2:g} V)", subject,
                                 "" if ok else f"{v} exceeds what the converter can deliver: "
-                                "it is not in volts (counts, mV?) or not this bench's signal"))
+                                "it is not in volts (counts, mV?) or not this bench's signal",
+                                unit="V"))
             if ok and v in ADC_SIGNALS and at_rails:
                 notices.append(Notice("saturation", subject, str(SaturationWarning(
                     label, v, at_rails, int(ds[v].shape[0]), rail))))
@@ -305,12 +306,12 @@ def _check_recording(ds: xr.Dataset, *, name: str | None, fs_hz: float | None,
                 why = (f"{v} is {'zero' if peak == 0 else f'constant at {first:.6g} {unit}'} "
                        "throughout: the channel is dead or not connected")
             checks.append(Check("signal_varies", ok, spread, f"> 0 {unit} peak-to-peak",
-                                subject, why))
+                                subject, why, unit=unit))
         if v == "Va":
             ok = rms <= MAX_VA_RMS_M
             checks.append(Check("va_in_metres", ok, rms, f"≤ {MAX_VA_RMS_M:g} m rms (the bench "
                                 "moves by nm to µm)", subject,
-                                "" if ok else va_unit_hint(rms, exp)))
+                                "" if ok else va_unit_hint(rms, exp), unit="m rms"))
             if ok and v in required:  # jumps in a Va that is not in metres say nothing more
                 checks.append(jump_check(ds, subject))
     return checks, notices

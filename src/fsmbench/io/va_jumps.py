@@ -278,7 +278,7 @@ def jump_check(ds: xr.Dataset, subject: str) -> Check:
     limit = (f"≤ {found.limit_m:.3g} m ({JUMP_THRESHOLD:g} × the robust noise scale of Va's "
              f"sample-to-sample steps, {found.scale_m * 1e9:.2g} nm)")
     if not found.count:
-        return Check("va_continuous", True, abs(found.step_m), limit, subject)
+        return Check("va_continuous", True, abs(found.step_m), limit, subject, unit="m")
     t_s = float(np.asarray(ds["t"].data[found.index]))
     return Check("va_continuous", False, abs(found.step_m), limit, subject,
-                 jump_words(found, t_s=t_s))
+                 jump_words(found, t_s=t_s), unit="m")
