@@ -15,12 +15,15 @@ import re
 from dataclasses import dataclass
 from typing import Any
 
+import numpy as np
+
 from fsmbench.live.backend import LIVE_SIGNALS
 from fsmbench.live.states import Refused
-from fsmbench.sim.excitation import Excitation
+from fsmbench.sim.excitation import Excitation, SampledExcitation
 from fsmbench.sim.plant import DAC_CHANNELS
 
-__all__ = ["MAX_NAME_CHARS", "MAX_PERIOD_S", "MAX_RECORD_S", "MIN_PERIOD_S", "ExperimentRequest",
+__all__ = ["MAX_NAME_CHARS", "MAX_PERIOD_S", "MAX_RECORD_S", "MAX_SAMPLES", "MIN_PERIOD_S",
+           "ExperimentRequest",
            "RecordRequest", "check_name", "parse_excitation", "parse_experiment",
            "parse_record"]
 
@@ -166,7 +169,45 @@ def parse_experiment(argument: str, known: tuple[str, ...]) -> ExperimentRequest
     return ExperimentRequest(name=str(name), overwrite=overwrite)
 
 
-_KINDS = ("noise", "sine", "multisine")
+_KINDS = ("noise", "sine", "multisine", "samples")
+#: Most samples a ``samples`` excitation may hold (1000 s at 10 kHz, 80 MB).
+MAX_SAMPLES = 10_000_000
+
+
+def _samples(doc: dict[str, Any], channel: str, start_s: float,
+             half_range_v: float) -> SampledExcitation:
+    """A ``samples`` excitation: a 1-D ``.npy`` of float commands [V] at the bench's rate."""
+    cmd = "StartExcitation"
+    path = doc.get("path")
+    if not isinstance(path, str) or not path.endswith(".npy"):
+        raise _bad(cmd, f"a samples excitation needs path, a .npy file of commands in V, got "
+                        f"{path!r}")
+    for key in ("amplitude_v", "band_hz", "frequency_hz", "period_s"):
+        if key in doc:
+            raise _bad(cmd, f"{key} is not for a samples excitation (the file holds the "
+                            "commands)")
+    try:
+        x = np.load(path, allow_pickle=False, mmap_mode="r")
+    except (OSError, ValueError) as exc:
+        raise _bad(cmd, f"{path}: not a readable .npy file ({exc})") from None
+    if x.ndim != 1 or not 0 < x.size <= MAX_SAMPLES or x.dtype.kind != "f":
+        raise _bad(cmd, f"{path}: holds {x.dtype} of shape {x.shape}; give 1 to "
+                        f"{MAX_SAMPLES} float commands in V")
+    x = np.array(x, dtype=float)
+    if not np.all(np.isfinite(x)):
+        raise _bad(cmd, f"{path}: holds commands that are not finite")
+    peak = float(np.max(np.abs(x)))
+    if peak > half_range_v:
+        raise _bad(cmd, f"{path}: its commands reach {peak:.3g} V, beyond the DAC's "
+                        f"+/-{half_range_v:g} V")
+    loop_from = doc.get("loop_from")
+    if loop_from is not None and (isinstance(loop_from, bool) or not isinstance(loop_from, int)
+                                  or not 0 <= loop_from < x.size):
+        raise _bad(cmd, f"loop_from must be a sample index in [0, {x.size}) (the samples "
+                        f"repeated from there after the end), got {loop_from!r}")
+    return SampledExcitation(channel=channel, kind="samples",
+                             amplitude_v=float(np.sqrt(np.mean(x**2))), start_s=start_s,
+                             samples_v=x, loop_from=loop_from)
 
 
 def parse_excitation(argument: str, *, start_s: float, half_range_v: float,
@@ -180,10 +221,16 @@ def parse_excitation(argument: str, *, start_s: float, half_range_v: float,
     ``frequency_hz`` is the sine's (below Nyquist); ``period_s`` the
     multisine's (default 1 s, a whole number of samples in
     [:data:`MIN_PERIOD_S`, :data:`MAX_PERIOD_S`]).
+
+    ``{"input": "Uch", "kind": "samples", "path": "x.npy", "loop_from": i}``: the
+    commands of a 1-D ``.npy`` file [V] one per sample from now, then
+    ``samples[i:]`` repeated (zeros without ``loop_from``): a designed excitation,
+    e.g. ``fsmbench tune``'s beam-bounded multisines with the loop closed.
     """
     cmd = "StartExcitation"
     doc = _json(argument, cmd, '{"input": "Uch", "kind": "noise", "amplitude_v": 0.02}',
-                ("input", "kind", "amplitude_v", "band_hz", "frequency_hz", "period_s"))
+                ("input", "kind", "amplitude_v", "band_hz", "frequency_hz", "period_s", "path",
+                 "loop_from"))
     nyquist = fs_hz / 2
     channel = doc.get("input")
     if channel not in DAC_CHANNELS:
@@ -191,6 +238,11 @@ def parse_excitation(argument: str, *, start_s: float, half_range_v: float,
     kind = doc.get("kind", "noise")
     if kind not in _KINDS:
         raise _bad(cmd, f"unknown kind {kind!r}; known: {', '.join(_KINDS)}")
+    if kind == "samples":
+        return _samples(doc, str(channel), start_s, half_range_v)
+    for key in ("path", "loop_from"):
+        if key in doc:
+            raise _bad(cmd, f"{key} is for a samples excitation, not a {kind}")
     amp = _number(doc, "amplitude_v")
     if amp is None or not amp > 0:
         raise _bad(cmd, f"amplitude_v must be a positive number of volts, got "

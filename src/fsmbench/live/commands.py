@@ -470,6 +470,10 @@ class BenchCommands:
                             "start_time_s": ex.start_s}
         if ex.kind == "multisine":
             self._excitation.update(period_s=ex.period_s, crest_factor=crest)
+        if isinstance(played, SampledExcitation):
+            self._excitation.update(n_samples=int(played.samples_v.size),
+                                    loop_from=played.loop_from,
+                                    samples_sha256=played.samples_sha256)
         self._frf = AccumulatingFrf(fs_hz=self.fs_hz, input_name=ex.channel,
                                     output_names=("Vph", "Vpv"))
         self._frf_cache = None

@@ -1,18 +1,25 @@
 """``fsmbench tune``: one guarded tuning step with the loop closed.
 
-    fsmbench tune --twin --out DIR [--drift-resonance PCT] [--running seed|fsmbench]
+    fsmbench tune (--twin [--bench DIR] | --device ADDRESS) --out DIR
+                  [--drift-resonance PCT] [--running seed|fsmbench]
                   [--max-error-urad U] [--better-by-pct P] [--watch-s S]
                   [--rollback-tolerance-pct P] [--periods N] [--seed N] [--params TOML]
                   [--drift-rate PCT_PER_H [--watch-duration S]]
 
-On the digital twin (:func:`fsmbench.tune.guarded.tune_twin`): measure the running
-controller, identify the Sercalo with the loop closed, design (the same study as
-``fsmbench design``), verify, compare, load only a better controller, watch it,
-roll back when it does worse than predicted. Writes ``DIR/tune.json``,
-``DIR/identification/`` (the closed-loop identification, a ``--bench DIR`` for
-other commands) and ``DIR/report.html``. With ``--drift-rate`` the controller that
-runs afterwards is watched while the resonance drifts (:mod:`fsmbench.tune.watch_twin`),
-the warnings in ``tune.json``'s ``watch``. The live device is not wired yet.
+One guarded procedure (:func:`fsmbench.tune.guarded.tune_guarded`) on one of two
+targets: the digital twin (:class:`fsmbench.tune.targets.TwinTarget`; with
+``--bench DIR`` the twin simulates the bench identified in DIR, as ``simulate
+--bench``) or the live Tango device at ADDRESS (:class:`fsmbench.tune.device.DeviceTarget`,
+through its commands, the loop closed). Measure the running controller, identify the
+Sercalo with the loop closed, design (the same study as ``fsmbench design``), verify,
+compare, load only a better controller, watch it, roll back when it does worse than
+predicted. Writes ``DIR/tune.json``, ``DIR/identification/`` (the closed-loop
+identification, a ``--bench DIR`` for other commands) and ``DIR/report.html``; with
+``--device``, the excitations and controllers played through the device are kept in
+``DIR-device/`` (the device remembers the loaded controller's file). With
+``--drift-rate`` (twin) the controller that runs afterwards is watched while the
+resonance drifts (:mod:`fsmbench.tune.watch_twin`), the warnings in ``tune.json``'s
+``watch``; the device watches itself (``WatchVerdict``, ``WatchCause``).
 """
 
 from __future__ import annotations
@@ -73,9 +80,16 @@ def _fraction_pct(text: str) -> float:
 def add_tune_command(sub: Any) -> None:
     """Add ``tune`` to the CLI's sub-commands (``sub`` from ``add_subparsers``)."""
     p = sub.add_parser("tune", help="identify with the loop closed, design, and load a better "
-                                    "controller only if it is (on the twin)")
-    p.add_argument("--twin", action="store_true", required=True,
-                   help="tune the digital twin (the live device is not wired yet)")
+                                    "controller only if it is (the twin or the live device)")
+    where = p.add_mutually_exclusive_group(required=True)
+    where.add_argument("--twin", action="store_true", help="tune the digital twin")
+    where.add_argument("--device", metavar="ADDRESS", default=None,
+                       help="tune the live Tango device at ADDRESS (tango://HOST:PORT/dom/fam/"
+                            "member, #dbase=no without a database) through its commands, the "
+                            "loop closed; it must share this filesystem")
+    p.add_argument("--bench", metavar="DIR", dest="bench_dir", default=None,
+                   help="with --twin: the twin simulates the bench identified in DIR (the "
+                        "output of fsmbench identify or study), the model tune starts from")
     p.add_argument("--out", metavar="DIR", required=True, help="output folder")
     p.add_argument("--drift-resonance", metavar="PCT", type=_percent, default=0.0,
                    dest="drift_pct", help="move the twin's Sercalo resonance (both axes) by "
@@ -138,18 +152,43 @@ def _command(args: argparse.Namespace) -> int:
     from fsmbench.report.sections.tune import tune_section
     from fsmbench.tune.guarded import TuneOptions, tune_twin
     from fsmbench.tune.measure import MeasurementOptions
+    from fsmbench.twin.experiments import REP_AMPLITUDE_V
 
-    inputs = [("--params", args.params)]
+    if args.device is not None:
+        twin_only = [name for name, given in (("--drift-resonance", args.drift_pct != 0.0),
+                                              ("--drift-rate", args.drift_rate is not None),
+                                              ("--bench", args.bench_dir is not None)) if given]
+        if twin_only:
+            raise ValueError(f"{', '.join(twin_only)}: for --twin; the device runs the bench it "
+                             "serves (fsmbench serve --bench, --drift-rate)")
+    inputs = [("--params", args.params), ("--bench", args.bench_dir)]
     check_inputs(args.out, inputs)
     bench = load_bench(args.params)
+    if args.bench_dir is not None:
+        from fsmbench.sim.identified import identified_bench
+
+        bench = identified_bench(args.bench_dir, bench=bench)
     say = Reporter()
     opts = TuneOptions(better_by=args.better_by_pct / 100.0, watch_s=args.watch_s,
                        rollback_tolerance=args.rollback_pct / 100.0,
+                       # The device measures what runs: no Newport sine is played there.
+                       disturbance_v=REP_AMPLITUDE_V if args.device is None else 0.0,
                        measurement=MeasurementOptions(max_error_rad=args.max_error_urad * 1e-6,
                                                       periods=int(args.periods)))
     running = _running(args.running, bench)
-    result = tune_twin(bench=bench, running=running, drift_pct=args.drift_pct, options=opts,
-                       seed=args.seed, progress=say)
+    if args.device is None:
+        result = tune_twin(bench=bench, running=running, drift_pct=args.drift_pct,
+                           options=opts, seed=args.seed, progress=say)
+    else:
+        from fsmbench.tune.device import DeviceTarget, device_proxy
+        from fsmbench.tune.guarded import tune_guarded
+
+        out_dir = Path(args.out).resolve()
+        target = DeviceTarget(device_proxy(args.device), bench=bench, running=running,
+                              folder=out_dir.with_name(out_dir.name + "-device"),
+                              address=args.device)
+        result = tune_guarded(target=target, bench=bench, running=running, options=opts,
+                              seed=args.seed, progress=say)
     payload = result.to_json()
     if args.drift_rate is not None:
         payload["watch"] = _watch(args, bench, result, running, say)
@@ -163,7 +202,7 @@ def _command(args: argparse.Namespace) -> int:
         paths += write_closed_loop_identification(result.measurement.identification,
                                                   run.staging / "identification")
         paths.append(write_report(run.staging / "report.html",
-                                  title="fsmbench tune on the digital twin",
+                                  title=f"fsmbench tune on {result.target}",
                                   sections=[tune_section(result)],
                                   meta=[f"bench: {bench.label}"]))
     print(f"decision: {result.decision.replace('_', ' ')}: {result.reason}")

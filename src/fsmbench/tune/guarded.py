@@ -28,9 +28,9 @@ The decision is ``loaded``, ``refused`` or ``rolled_back``, with its reason.
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, Protocol
 
 import control as ct
 import numpy as np
@@ -43,23 +43,21 @@ from fsmbench.bench.params import Bench
 from fsmbench.jsonutil import plain_json
 from fsmbench.sim.controller import feedback_controller
 from fsmbench.sim.engine import DiscreteController
-from fsmbench.sim.excitation import Excitation
-from fsmbench.sim.plant import ADC_CHANNELS, bench_discrete
+from fsmbench.sim.loaded import RunningController
 from fsmbench.sim.stream import BenchStream
 from fsmbench.tune.measure import ClosedLoopMeasurement, MeasurementOptions, measure_closed_loop
-from fsmbench.twin.closed_loop import drifted_bench
-from fsmbench.twin.experiments import REP_AMPLITUDE_V, REP_FREQ_HZ
+from fsmbench.twin.closed_loop import ClosedLoopPlay, drifted_bench
+from fsmbench.twin.experiments import REP_AMPLITUDE_V
+from fsmbench.twin.simulate import TwinRun
 
 __all__ = ["TUNE_FORMAT", "ControllerFigures", "Loop", "TuneOptions", "TuneResult",
-           "loop_of", "tune_twin"]
+           "TuneTarget", "loop_of", "tune_guarded", "tune_twin"]
 
 #: ``tune.json``'s format and version.
 TUNE_FORMAT = ("fsmbench.tune", 1)
 AXES = ("h", "v")
-_QD = (ADC_CHANNELS.index("Vph"), ADC_CHANNELS.index("Vpv"))
 # Welch segments of the tracking-error ASDs [s]: 0.5 Hz resolution, 1 Hz line resolved.
 _ASD_SEGMENT_S = 2.0
-_BLOCK = 2**14
 
 
 @dataclass(frozen=True)
@@ -209,6 +207,8 @@ class TuneResult:
     options : TuneOptions
     candidate_loop : Loop
         The candidate as designed and wired (to offer it again, or export it).
+    target : str
+        What was tuned, in words (the twin, or the device's address).
     """
 
     decision: str
@@ -226,13 +226,14 @@ class TuneResult:
     switches: tuple[dict[str, Any], ...]
     options: TuneOptions
     candidate_loop: Loop
+    target: str = "the digital twin"
 
     def to_json(self) -> dict[str, Any]:
         """``tune.json``'s content (SI units)."""
         name, version = TUNE_FORMAT
         return plain_json({
             "format": name, "format_version": version, "fsmbench_version": __version__,
-            "decision": self.decision, "reason": self.reason,
+            "target": self.target, "decision": self.decision, "reason": self.reason,
             "objective_sensitivity_bound_at_1hz": self.objective_bound,
             "drift_resonance_pct": self.drift_pct,
             "before": self.before.to_json(), "candidate": self.candidate.to_json(),
@@ -244,14 +245,20 @@ class TuneResult:
 
 
 def _figures(loop: Loop, *, plant: PlantModel, bench: Bench, objective: Any,
-             robust: bool | None, watch_s: float) -> ControllerFigures:
+             robust: bool | None, watch_s: float, disturbance_v: float) -> ControllerFigures:
     from fsmbench.control.loops import analyse_loop
     from fsmbench.twin.verify import predict_tracking
 
     la = analyse_loop(plant, loop.k, objective=objective, name=loop.name)
-    predicted, _parts = predict_tracking(plant, loop.k, bench=bench,
-                                         gd_used_v_per_rad=loop.gd_v_per_rad,
-                                         f_min_hz=1.0 / watch_s)
+    predicted, parts = predict_tracking(plant, loop.k, bench=bench,
+                                        gd_used_v_per_rad=loop.gd_v_per_rad,
+                                        f_min_hz=1.0 / watch_s)
+    # predict_tracking plays the Newport's sine at the ESRF study's 1 V: scaled to what the
+    # target plays (none on the live device, which measures what runs).
+    for a in AXES:
+        sine = parts[a]["newport_sine"]
+        predicted[a] = math.sqrt(max(predicted[a] ** 2 - sine**2, 0.0)
+                                 + (sine * disturbance_v / REP_AMPLITUDE_V) ** 2)
     axes = dict(zip(AXES, la.axes.values(), strict=True))
     return ControllerFigures(
         name=loop.name,
@@ -263,35 +270,33 @@ def _figures(loop: Loop, *, plant: PlantModel, bench: Bench, objective: Any,
         predicted_rms_rad={a: float(predicted[a]) for a in AXES})
 
 
-class _Watch:
-    """The running bench: one stream, the Newport's sine on, controllers swapped in place."""
+class TuneTarget(Protocol):
+    """A running bench :func:`tune_guarded` acts on: the twin or the live device.
 
-    def __init__(self, bench: Bench, loop: Loop, *, seed: int, amplitude_v: float) -> None:
-        sines = tuple(Excitation(ch, "sine", amplitude_v, 0.0, REP_FREQ_HZ)
-                      for ch in ("Unh", "Unv"))
-        self.stream = BenchStream(bench.true, seed=seed, name="tune", controller=loop.feedback,
-                                  excitations=sines, plant=bench_discrete(bench),
-                                  specialise=False)
-        self.fs_hz = self.stream.fs_hz
-        self.gd = loop.gd_v_per_rad
+    Attributes
+    ----------
+    label : str
+        What it is, in words.
+    fs_hz : float
+    drift_pct : float
+        The twin's resonance drift from the bench file [%] (0 on a device: unknown).
+    """
+
+    label: str
+    fs_hz: float
+    drift_pct: float
 
     def run(self, duration_s: float, *, settle_s: float) -> np.ndarray:
-        """The 4QD tracking error after ``settle_s`` of ``duration_s`` [rad], (n, 2)."""
-        n = round(duration_s * self.fs_hz)
-        parts, done = [], 0
-        while done < n:
-            block = self.stream.step(min(_BLOCK, n - done))
-            parts.append(block.adc[:, _QD] / np.asarray(self.gd))
-            done += block.adc.shape[0]
-        e = np.vstack(parts)[round(settle_s * self.fs_hz):]
-        return e - e.mean(axis=0)
+        """The running loop's tracking error after ``settle_s`` of ``duration_s`` [rad],
+        (n, 2), mean removed."""
 
     def load(self, loop: Loop) -> dict[str, Any]:
-        sw = self.stream.set_controller(loop.feedback)
-        self.gd = loop.gd_v_per_rad
-        return {"sample": int(sw.sample), "from": sw.previous, "to": sw.current,
-                "command_before_v": [float(x) for x in sw.command_before_v],
-                "command_after_v": [float(x) for x in sw.command_after_v]}
+        """Load ``loop`` bumplessly in the running loop; the switch, JSON-ready."""
+
+    def play(self, plays: Sequence[ClosedLoopPlay], *, controller: RunningController,
+             settle_s: float, seed: int,
+             progress: Callable[[str], None] | None) -> TwinRun:
+        """Play each excitation with the loop closed; the records (data_cl_* layout)."""
 
 
 def _rms(e: np.ndarray) -> dict[str, float]:
@@ -341,6 +346,45 @@ def tune_twin(*, bench: Bench, running: Loop, drift_pct: float = 0.0,
         The running controller does not stabilise the twin, or the Sercalo cannot be
         identified in closed loop (named).
     """
+    from fsmbench.tune.targets import TwinTarget
+
+    opts = options or TuneOptions()
+    target = TwinTarget(drifted_bench(bench, resonance_pct=drift_pct), running, seed=seed,
+                        amplitude_v=opts.disturbance_v, drift_pct=drift_pct)
+    hook = None if after_load is None else (lambda _t: after_load(target.stream))
+    return tune_guarded(target=target, bench=bench, running=running, options=opts, seed=seed,
+                        candidate=candidate, after_load=hook, progress=progress)
+
+
+def tune_guarded(*, target: TuneTarget, bench: Bench, running: Loop,
+                 options: TuneOptions | None = None, seed: int = 0,
+                 candidate: Loop | None = None,
+                 after_load: Callable[[TuneTarget], str] | None = None,
+                 progress: Callable[[str], None] | None = None) -> TuneResult:
+    """One guarded tuning step on ``target``, the twin or the live device (module notes).
+
+    Parameters
+    ----------
+    target : TuneTarget
+        The running bench: :class:`fsmbench.tune.targets.TwinTarget` or
+        :class:`fsmbench.tune.device.DeviceTarget`.
+    bench : Bench
+        The bench file (see :func:`tune_twin`).
+    running : Loop
+        The controller running on ``target`` when ``tune`` starts.
+    options : TuneOptions, optional
+        Its ``disturbance_v`` must be what ``target`` plays during the watches.
+    seed : int
+        Noise seed of the twin's closed-loop measurement.
+    candidate : Loop, optional
+    after_load : callable, optional
+        ``after_load(target)`` when the candidate is loaded; returns the change in words.
+
+    Raises
+    ------
+    ValueError
+        The Sercalo cannot be identified in closed loop, or the target refuses (named).
+    """
     from fsmbench.control.analysis import control_objective
     from fsmbench.control.design import robustness
     from fsmbench.control.study import design_study
@@ -353,22 +397,20 @@ def tune_twin(*, bench: Bench, running: Loop, drift_pct: float = 0.0,
         if progress is not None:
             progress(msg)
 
-    true_bench = drifted_bench(bench, resonance_pct=drift_pct)
     objective = control_objective(bench.nominal)
     ts = bench.true.converter.ts_s
-    watch = _Watch(true_bench, running, seed=seed, amplitude_v=opts.disturbance_v)
-    say(f"watching {running.name} for {opts.watch_s:g} s on {true_bench.label}")
+    watch = target
+    drift_pct = target.drift_pct
+    say(f"watching {running.name} for {opts.watch_s:g} s on {target.label}")
     e_before = watch.run(opts.watch_s, settle_s=opts.settle_s)
     measured_before = _rms(e_before)
     say(f"measured tracking error of {running.name}: {_urad(measured_before)} rms")
-
-    from fsmbench.sim.loaded import RunningController
 
     rc = RunningController(feedback=running.feedback, a=np.zeros((0, 0)), b=np.zeros((0, 2)),
                            c=np.zeros((2, 0)), d=np.zeros((2, 2)), ts_s=ts,
                            gd_v_per_rad=running.gd_v_per_rad, name=running.name,
                            source=running.name)
-    measurement = measure_closed_loop(true_bench=true_bench, model=bench, controller=rc,
+    measurement = measure_closed_loop(play=target.play, model=bench, controller=rc,
                                       options=opts.measurement, seed=seed + 100,
                                       progress=say)
     ident = measurement.identification
@@ -393,10 +435,10 @@ def tune_twin(*, bench: Bench, running: Loop, drift_pct: float = 0.0,
     else:
         robust = bool(robustness(plant, candidate.k, objective=objective).all_stable)
     before = _figures(running, plant=plant, bench=bench, objective=objective, robust=None,
-                      watch_s=opts.watch_s)
+                      watch_s=opts.watch_s, disturbance_v=opts.disturbance_v)
     before = _replace(before, measured_rms_rad=measured_before)
     cand = _figures(candidate, plant=plant, bench=bench, objective=objective, robust=robust,
-                    watch_s=opts.watch_s)
+                    watch_s=opts.watch_s, disturbance_v=opts.disturbance_v)
     say(f"verified {candidate.name} on the identified bench: |S(1 Hz)| "
         + ", ".join(f"{a} {v:.3g}" for a, v in cand.sensitivity_at_1hz.items())
         + f"; predicted tracking error {_urad(cand.predicted_rms_rad)} rms")
@@ -405,16 +447,19 @@ def tune_twin(*, bench: Bench, running: Loop, drift_pct: float = 0.0,
     switches: list[dict[str, Any]] = []
     if refusal:
         say(f"refused: {refusal}")
-        return TuneResult(decision="refused", reason=refusal, before=before, candidate=cand,
+        return TuneResult(target=target.label, decision="refused", reason=refusal,
+                          before=before, candidate=cand,
                           after=before, objective_bound=objective.sensitivity_bound,
                           drift_pct=drift_pct, measurement=measurement, log=tuple(log),
                           psd_f_hz=f_asd, psd_before=asd_before, psd_after=asd_before,
                           switches=(), options=opts, candidate_loop=candidate)
     switches.append(watch.load(candidate))
-    say(f"loaded {candidate.name} bumplessly (command "
-        f"{switches[-1]['command_before_v'][:2]} V -> {switches[-1]['command_after_v'][:2]} V)")
+    sw = switches[-1]
+    say(f"loaded {candidate.name} bumplessly ("
+        + (f"command {sw['command_before_v'][:2]} V -> {sw['command_after_v'][:2]} V)"
+           if "command_before_v" in sw else f"the device: {sw.get('reply', '')})"))
     if after_load is not None:
-        say(f"the bench changed as the controller was loaded: {after_load(watch.stream)}")
+        say(f"the bench changed as the controller was loaded: {after_load(target)}")
     e_after = watch.run(opts.watch_s, settle_s=opts.settle_s)
     measured_after = _rms(e_after)
     cand = _replace(cand, measured_rms_rad=measured_after)
@@ -433,7 +478,8 @@ def tune_twin(*, bench: Bench, running: Loop, drift_pct: float = 0.0,
         after = _replace(before, measured_rms_rad=_rms(e_back))
         say(f"rolled back: {reason}; measured again {_urad(_rms(e_back))} rms")
         f_asd, asd_after = _asd(e_back, watch.fs_hz)
-        return TuneResult(decision="rolled_back", reason=reason, before=before, candidate=cand,
+        return TuneResult(target=target.label, decision="rolled_back", reason=reason,
+                          before=before, candidate=cand,
                           after=after, objective_bound=objective.sensitivity_bound,
                           drift_pct=drift_pct, measurement=measurement, log=tuple(log),
                           psd_f_hz=f_asd, psd_before=asd_before, psd_after=asd_after,
@@ -446,12 +492,12 @@ def tune_twin(*, bench: Bench, running: Loop, drift_pct: float = 0.0,
               f"{100 * opts.rollback_tolerance:g} % of the prediction")
     say(f"kept: {reason}")
     _f, asd_after = _asd(e_after, watch.fs_hz)
-    return TuneResult(decision="loaded", reason=reason, before=before, candidate=cand,
-                      after=cand, objective_bound=objective.sensitivity_bound,
+    return TuneResult(target=target.label, decision="loaded", reason=reason,
+                      before=before, candidate=cand, after=cand,
+                      objective_bound=objective.sensitivity_bound,
                       drift_pct=drift_pct, measurement=measurement, log=tuple(log),
                       psd_f_hz=f_asd, psd_before=asd_before, psd_after=asd_after,
-                      switches=tuple(switches), options=opts,
-                          candidate_loop=candidate)
+                      switches=tuple(switches), options=opts, candidate_loop=candidate)
 
 
 def _replace(fig: ControllerFigures, **changes: Any) -> ControllerFigures:

@@ -28,7 +28,7 @@ from __future__ import annotations
 
 import dataclasses
 import tempfile
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -46,8 +46,18 @@ from fsmbench.sim.loaded import RunningController
 from fsmbench.twin.closed_loop import ClosedLoopPlay, play_closed_loop
 from fsmbench.twin.simulate import TwinRun
 
-__all__ = ["ClosedLoopMeasurement", "MeasurementOptions", "identified_model", "located_bench",
-           "measure_closed_loop"]
+__all__ = [
+    "ClosedLoopMeasurement",
+    "MeasurementOptions",
+    "Player",
+    "identified_model",
+    "located_bench",
+    "measure_closed_loop",
+]
+
+
+#: ``play(plays, controller=, settle_s=, seed=, progress=)``: the closed-loop records.
+Player = Callable[..., TwinRun]
 
 
 @dataclass(frozen=True)
@@ -201,7 +211,7 @@ def located_bench(model: Bench, ident: ClosedLoopIdentification) -> Bench:
         origin=f"{model.origin} (resonances located in closed loop)")
 
 
-def _stage(*, true_bench: Bench, model: Bench, controller: RunningController,
+def _stage(*, play: Player, model: Bench, controller: RunningController,
            options: MeasurementOptions, dense_width: float, seed: int, prior_label: str,
            ident_bench: Bench, progress: Callable[[str], None] | None
            ) -> tuple[ClosedLoopIdentification, TwinRun, tuple[BoundedMeasurement, ...]]:
@@ -218,8 +228,8 @@ def _stage(*, true_bench: Bench, model: Bench, controller: RunningController,
     plays = [ClosedLoopPlay(channel=d.design.input, samples_v=d.design.samples_v, at=options.at,
                             description=f"beam-bounded multisine ({prior_label})")
              for d in designs]
-    run = play_closed_loop(plays, bench=true_bench, controller=controller, seed=seed,
-                           settle_s=options.settle_s, progress=progress)
+    run = play(plays, controller=controller, settle_s=options.settle_s, seed=seed,
+               progress=progress)
     ident = identify_closed_loop(
         run.recordings, bench=ident_bench,
         options=ClosedLoopIdentifyOptions(transient_periods=options.transient_periods,
@@ -228,15 +238,19 @@ def _stage(*, true_bench: Bench, model: Bench, controller: RunningController,
     return ident, run, designs
 
 
-def measure_closed_loop(*, true_bench: Bench, model: Bench, controller: RunningController,
+def measure_closed_loop(*, model: Bench, controller: RunningController,
+                        true_bench: Bench | None = None, play: Player | None = None,
                         options: MeasurementOptions | None = None, seed: int = 0,
                         progress: Callable[[str], None] | None = None) -> ClosedLoopMeasurement:
     """Measure and identify the Sercalo on ``true_bench`` with the loop closed (module notes).
 
     Parameters
     ----------
-    true_bench : Bench
-        What is played on (the twin, possibly drifted).
+    true_bench : Bench, optional
+        The twin played on (possibly drifted), when ``play`` is not given.
+    play : callable, optional
+        ``play(plays, controller=, settle_s=, seed=, progress=)`` returning the records
+        (:meth:`fsmbench.tune.guarded.TuneTarget.play`: the twin's or the live device's).
     model : Bench
         What the excitation is designed on (the bench file, or an identified bench).
     controller : RunningController
@@ -252,8 +266,19 @@ def measure_closed_loop(*, true_bench: Bench, model: Bench, controller: RunningC
     """
     opts = options or MeasurementOptions()
     say = progress or (lambda _m: None)
+    if play is None:
+        if true_bench is None:
+            raise ValueError("measure_closed_loop needs the twin (true_bench) or a player")
+        twin = true_bench
+
+        def play(plays: Sequence[ClosedLoopPlay], *, controller: RunningController,
+                 settle_s: float, seed: int,
+                 progress: Callable[[str], None] | None) -> TwinRun:
+            return play_closed_loop(plays, bench=twin, controller=controller, seed=seed,
+                                    settle_s=settle_s, progress=progress)
+
     say("closed-loop measurement, stage 1: locating the resonances (±5 % bands)")
-    first = _stage(true_bench=true_bench, model=model, controller=controller, options=opts,
+    first = _stage(play=play, model=model, controller=controller, options=opts,
                    dense_width=0.05, seed=seed, prior_label="the bench model", ident_bench=model,
                    progress=progress)
     stages = [first]
@@ -261,7 +286,7 @@ def measure_closed_loop(*, true_bench: Bench, model: Bench, controller: RunningC
         located = located_bench(model, first[0])
         say("closed-loop measurement, stage 2: the located resonances "
             f"(±{100 * opts.refine_width:g} % bands)")
-        stages.append(_stage(true_bench=true_bench, model=located, controller=controller,
+        stages.append(_stage(play=play, model=located, controller=controller,
                              options=opts, dense_width=opts.refine_width, seed=seed + 1,
                              prior_label="the resonances located in stage 1",
                              ident_bench=model, progress=progress))

@@ -1,0 +1,239 @@
+"""The live Tango device as :func:`fsmbench.tune.guarded.tune_guarded`'s target.
+
+:class:`DeviceTarget` acts only through the device's own commands, the loop closed
+all along:
+
+* **measure** the running loop: ``Record`` of ``Vph``, ``Vpv`` (read back from the
+  file the device writes), over the calibrated 4QD gains;
+* **play** each closed-loop excitation: ``Record`` of the closed-loop signals
+  (``Uch``, ``Ucv``, ``Vph``, ``Vpv``, ``Vch``, ``Vcv``), then, ``settle_s`` into it,
+  ``StartExcitation`` of kind ``samples`` (the designed commands as a ``.npy`` file,
+  added at the controller's output in RUNNING); the record is cut to the twin's
+  layout (``settle_s`` before the excitation's first sample, to its last) from the
+  excitation's start sample the device publishes (``Excitation``), and
+  ``StopExcitation`` ends it;
+* **load** a controller: its SOS file (:func:`fsmbench.control.export.write_sos_json`)
+  and ``LoadController``, which swaps it in bumplessly in RUNNING; the device's
+  ``Controller`` then names it.
+
+The device and ``tune`` share a filesystem (the excitation and controller files
+``tune`` writes, the records the device writes). The device's own watch
+(:mod:`fsmbench.live.watching`) holds its judgement while an excitation plays and
+starts afresh on the loaded controller.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from collections.abc import Callable, Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from fsmbench.bench.params import Bench
+from fsmbench.io.recording import make_recording, read_recording
+from fsmbench.sim.excitation import SampledExcitation, samples_sha256
+from fsmbench.sim.loaded import RunningController
+from fsmbench.tune.guarded import Loop
+from fsmbench.twin.closed_loop import CLOSED_LOOP_SIGNALS, ClosedLoopPlay, excitation_variable
+from fsmbench.twin.experiments import ExperimentSpec
+from fsmbench.twin.simulate import TwinRun
+
+__all__ = ["DeviceTarget", "device_proxy"]
+
+#: Bench time the excitation may start late in its record [s] (the client's round trips
+#: at the device's speed: 20 ms of wall clock is 1 s of bench time at 50x).
+_LATE_S = 3.0
+#: Wall clock a command's work may take beyond its bench time at the device's speed [s].
+_SLACK_S = 120.0
+
+
+def device_proxy(address: str) -> Any:
+    """A PyTango proxy to ``address`` (``tango://HOST:PORT/dom/fam/member[#dbase=no]``).
+
+    Raises
+    ------
+    ValueError
+        PyTango missing, or the device not reachable (one line).
+    """
+    try:
+        import tango
+    except ImportError:
+        raise ValueError("tune --device needs PyTango: pip install 'fsmbench[tango]'") from None
+    try:
+        proxy = tango.DeviceProxy(address)
+        proxy.set_source(tango.DevSource.DEV)
+        proxy.ping()
+    except tango.DevFailed as exc:
+        raise ValueError(f"--device {address}: not reachable "
+                         f"({' '.join(exc.args[0].desc.split())})") from None
+    return proxy
+
+
+class DeviceTarget:
+    """The live device, loop closed (see the module notes).
+
+    Parameters
+    ----------
+    proxy : tango.DeviceProxy
+        The ``FsmBench`` device.
+    bench : Bench
+        The bench file (the converter rate, the 4QD gains).
+    running : Loop
+        The controller the device runs; its name must be the device's ``Controller``.
+    folder : Path
+        Where the excitations and controllers played through the device are written
+        (kept: the device remembers the loaded controller's file).
+    address : str
+        In words, for the log and ``tune.json``.
+
+    Raises
+    ------
+    ValueError
+        The loop is not closed, or the device runs another controller (both named).
+    """
+
+    def __init__(self, proxy: Any, *, bench: Bench, running: Loop, folder: Path,
+                 address: str) -> None:
+        self.proxy = proxy
+        self.fs_hz = float(bench.true.converter.fs_hz)
+        self.label = f"the live device {address}"
+        self.drift_pct = 0.0
+        self.folder = Path(folder)
+        self.folder.mkdir(parents=True, exist_ok=True)
+        self.gd = running.gd_v_per_rad
+        self._n = 0
+        state = str(proxy.state())
+        if not proxy.LoopClosed or state not in ("RUNNING", "ALARM"):
+            raise ValueError(f"{address}: the loop is not running (state {state}: "
+                             f"{proxy.status()}); tune works with the loop closed: CloseLoop "
+                             "first")
+        if proxy.Controller != running.name:
+            raise ValueError(f"{address} runs {proxy.Controller!r}, not {running.name!r}: name "
+                             "the running controller (--running)")
+
+    # -- helpers -------------------------------------------------------------------
+
+    def _name(self, what: str) -> str:
+        self._n += 1
+        return f"tune_{what}_{self._n}"
+
+    def _wait(self, check: Callable[[], bool], what: str, bench_s: float) -> None:
+        """Poll until ``check()``; a wall-clock limit from the bench time it needs."""
+        limit = _SLACK_S + bench_s / max(float(self.proxy.SpeedFactor), 1e-3)
+        t0 = time.monotonic()
+        while not check():
+            if time.monotonic() - t0 > limit:
+                raise ValueError(f"{self.label}: {what} did not happen within {limit:.0f} s "
+                                 f"(wall clock); the device says: {self.proxy.status()}")
+            time.sleep(0.01)
+
+    def _record(self, signals: Sequence[str], duration_s: float,
+                during: Callable[[float], Any] | None = None) -> tuple[Any, Any]:
+        """Record ``signals`` for ``duration_s``; ``during(start_s)`` runs as it records.
+
+        Returns the record (xarray) and what ``during`` returned.
+        """
+        path = self.proxy.Record(json.dumps({"signals": list(signals), "duration_s": duration_s,
+                                             "name": self._name("record"), "overwrite": True}))
+        start_s = float(self.proxy.BenchTime)
+        out = during(start_s) if during is not None else None
+        self._wait(lambda: str(self.proxy.state()) != "MOVING" and Path(path).exists(),
+                   f"the record {path}", duration_s)
+        return read_recording(path, require=()), out
+
+    # -- the target ----------------------------------------------------------------
+
+    def run(self, duration_s: float, *, settle_s: float) -> np.ndarray:
+        """The device's tracking error after ``settle_s`` of ``duration_s`` [rad], (n, 2)."""
+        rec, _ = self._record(("Vph", "Vpv"), duration_s)
+        e = np.column_stack([np.asarray(rec["Vph"].values, dtype=float) / self.gd[0],
+                             np.asarray(rec["Vpv"].values, dtype=float) / self.gd[1]])
+        e = e[round(settle_s * self.fs_hz):]
+        return e - e.mean(axis=0)
+
+    def load(self, loop: Loop) -> dict[str, Any]:
+        """``LoadController`` of ``loop`` (its SOS file), bumpless in RUNNING."""
+        from fsmbench.control.export import InputScaling, write_sos_json
+
+        key = "tuned" if "closed-loop" in loop.name else "controller"
+        where = self.folder / self._name("controller") / "controllers_sos.json"
+        where.parent.mkdir(parents=True, exist_ok=True)
+        write_sos_json(where, {key: loop.k},
+                       scaling=InputScaling(qd_gain_v_per_rad=loop.gd_v_per_rad,
+                                            plant_source=f"identified ({loop.name})"),
+                       ts_s=1.0 / self.fs_hz, descriptions={key: loop.name})
+        before = self.proxy.Controller
+        reply = self.proxy.LoadController(json.dumps({"path": str(where), "controller": key}))
+        self._wait(lambda: self.proxy.Task == "", "the controller's load", 0.0)
+        now = self.proxy.Controller
+        if now == before or not now.startswith(key):
+            raise ValueError(f"{self.label}: LoadController did not load {loop.name} (the "
+                             f"device runs {now!r}): {self.proxy.status()}")
+        self.gd = loop.gd_v_per_rad
+        return {"bench_time_s": float(self.proxy.BenchTime), "from": before, "to": now,
+                "file": str(where), "reply": reply}
+
+    def play(self, plays: Sequence[ClosedLoopPlay], *, controller: RunningController,
+             settle_s: float, seed: int,
+             progress: Callable[[str], None] | None) -> TwinRun:
+        """Each excitation played through the device with the loop closed (module notes)."""
+        fs = self.fs_hz
+        recordings: dict[str, Any] = {}
+        specs = []
+        for play in plays:
+            variable = excitation_variable(play.channel, play.at)
+            if play.at != "output":
+                raise ValueError(f"{self.label} adds an excitation at the controller's output; "
+                                 "not at the reference")
+            x = np.asarray(play.samples_v, dtype=float)
+            npy = self.folder / f"{self._name(play.name)}.npy"
+            np.save(npy, x)
+            n_settle = round(settle_s * fs)
+            duration = 2 * settle_s + _LATE_S + x.size / fs
+            if progress is not None:
+                progress(f"playing {play.description} on {play.channel} through "
+                         f"{self.label} with the loop closed by {controller.name} "
+                         f"({duration:g} s recorded)")
+
+            def excite(start_s: float, play: ClosedLoopPlay = play, npy: Path = npy) -> float:
+                self._wait(lambda: float(self.proxy.BenchTime) >= start_s + settle_s,
+                           "the settling before the excitation", settle_s)
+                doc: dict[str, Any] = {"input": play.channel, "kind": "samples",
+                                       "path": str(npy)}
+                if play.loop_from is not None:
+                    doc["loop_from"] = int(play.loop_from)
+                self.proxy.StartExcitation(json.dumps(doc))
+                return float(json.loads(self.proxy.Excitation)["start_time_s"])
+
+            rec, e_start_s = self._record(CLOSED_LOOP_SIGNALS, duration, during=excite)
+            self.proxy.StopExcitation()
+            r0 = round(float(rec["t"].values[0]) * fs)
+            first = round(e_start_s * fs) - r0  # the excitation's first sample in the record
+            lo, hi = first - n_settle, first + x.size
+            if lo < 0 or hi > rec.sizes["t"]:
+                raise ValueError(f"{self.label}: the excitation on {play.channel} started "
+                                 f"{first / fs:.2f} s into its {rec.sizes['t'] / fs:g} s "
+                                 f"record, not within the {settle_s:g} to "
+                                 f"{settle_s + _LATE_S:g} s it needs (a slow client)")
+            signals = {s: np.asarray(rec[s].values, dtype=float)[lo:hi]
+                       for s in CLOSED_LOOP_SIGNALS}
+            signals[variable] = np.concatenate([np.zeros(n_settle), x])
+            recordings[play.name] = make_recording(
+                signals, fs_hz=fs, experiment=play.name,
+                source=f"fsmbench tune through {self.label} (loop closed)")
+            ex = SampledExcitation(play.channel, "samples", float(np.sqrt(np.mean(x**2))),
+                                   settle_s, samples_v=x, loop_from=play.loop_from)
+            specs.append(ExperimentSpec(
+                name=play.name, description=f"{play.description} on {play.channel} "
+                f"(controller output, from {settle_s:g} s), loop closed by {controller.name}, "
+                f"through {self.label}", seed_section="closed loop",
+                duration_s=(hi - lo) / fs, excitations=(ex,), closed_loop=True,
+                compensation_unit=True, shielding=True))
+        truth = {"source": self.label, "closed_loop": {
+            "controller": controller.name, "settle_s": settle_s,
+            "samples_sha256": {p.name: samples_sha256(np.asarray(p.samples_v, dtype=float))
+                               for p in plays}}}
+        return TwinRun(recordings=recordings, truth=truth, seed=seed, experiments=tuple(specs))

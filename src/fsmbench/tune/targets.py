@@ -1,0 +1,87 @@
+"""The twin as :func:`fsmbench.tune.guarded.tune_guarded`'s target.
+
+:class:`TwinTarget` runs one :class:`~fsmbench.sim.stream.BenchStream` of the
+(possibly drifted) twin with the running controller and the Newport's 1 Hz sine on
+both axes (the ESRF study's repeatability motion, the disturbance the 6.1 objective
+is about); controllers are swapped in it bumplessly. Its closed-loop measurements
+are :func:`fsmbench.twin.closed_loop.play_closed_loop` on the same twin. The live
+device is the other target (:mod:`fsmbench.tune.device`).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from typing import Any
+
+import numpy as np
+
+from fsmbench.bench.params import Bench
+from fsmbench.sim.excitation import Excitation
+from fsmbench.sim.loaded import RunningController
+from fsmbench.sim.plant import ADC_CHANNELS, bench_discrete
+from fsmbench.sim.stream import BenchStream
+from fsmbench.tune.guarded import Loop
+from fsmbench.twin.closed_loop import ClosedLoopPlay, play_closed_loop
+from fsmbench.twin.experiments import REP_FREQ_HZ
+from fsmbench.twin.simulate import TwinRun
+
+__all__ = ["TwinTarget"]
+
+_QD = (ADC_CHANNELS.index("Vph"), ADC_CHANNELS.index("Vpv"))
+_BLOCK = 2**14
+
+
+class TwinTarget:
+    """The running twin (see the module notes).
+
+    Parameters
+    ----------
+    true_bench : Bench
+        What the twin simulates (the bench file, drifted or identified).
+    loop : Loop
+        The controller running at the start.
+    seed : int
+    amplitude_v : float
+        The Newport's 1 Hz sine on both axes during the watches [V].
+    drift_pct : float
+        How far ``true_bench``'s resonance was moved from the bench file [%] (reported).
+    """
+
+    def __init__(self, true_bench: Bench, loop: Loop, *, seed: int, amplitude_v: float,
+                 drift_pct: float = 0.0) -> None:
+        sines = tuple(Excitation(ch, "sine", amplitude_v, 0.0, REP_FREQ_HZ)
+                      for ch in ("Unh", "Unv"))
+        self.true_bench = true_bench
+        self.stream = BenchStream(true_bench.true, seed=seed, name="tune",
+                                  controller=loop.feedback, excitations=sines,
+                                  plant=bench_discrete(true_bench), specialise=False)
+        self.fs_hz = self.stream.fs_hz
+        self.gd = loop.gd_v_per_rad
+        self.label = true_bench.label
+        self.drift_pct = float(drift_pct)
+
+    def run(self, duration_s: float, *, settle_s: float) -> np.ndarray:
+        """The 4QD tracking error after ``settle_s`` of ``duration_s`` [rad], (n, 2)."""
+        n = round(duration_s * self.fs_hz)
+        parts, done = [], 0
+        while done < n:
+            block = self.stream.step(min(_BLOCK, n - done))
+            parts.append(block.adc[:, _QD] / np.asarray(self.gd))
+            done += block.adc.shape[0]
+        e = np.vstack(parts)[round(settle_s * self.fs_hz):]
+        return e - e.mean(axis=0)
+
+    def load(self, loop: Loop) -> dict[str, Any]:
+        """Swap ``loop`` in bumplessly; the switch (sample, names, commands around it [V])."""
+        sw = self.stream.set_controller(loop.feedback)
+        self.gd = loop.gd_v_per_rad
+        return {"sample": int(sw.sample), "from": sw.previous, "to": sw.current,
+                "command_before_v": [float(x) for x in sw.command_before_v],
+                "command_after_v": [float(x) for x in sw.command_after_v]}
+
+    def play(self, plays: Sequence[ClosedLoopPlay], *, controller: RunningController,
+             settle_s: float, seed: int,
+             progress: Callable[[str], None] | None) -> TwinRun:
+        """The closed-loop records on the twin (each from a fresh loop, as the ESRF study's)."""
+        return play_closed_loop(plays, bench=self.true_bench, controller=controller, seed=seed,
+                                settle_s=settle_s, progress=progress)
