@@ -73,6 +73,7 @@ from fsmbench.live.serve import add_serve_command
 from fsmbench.scale.mc_cli import add_montecarlo_command
 from fsmbench.tune.cli import add_closed_loop_options, add_tune_command, closed_loop_simulation
 from fsmbench.tune.identify_cli import (
+    check_closed_loop_folder,
     identify_closed_loop_folder,
     is_closed_loop_folder,
     summary_lines,
@@ -423,10 +424,14 @@ def _cmd_identify(args: argparse.Namespace) -> int:
     from fsmbench.stages import identify_stage
     from fsmbench.twin.compare import comparison_rows, readable_table
 
-    if is_closed_loop_folder(args.data):  # data_cl_uch/ucv and no data_uch/ucv (issue 24)
+    asked = bool(getattr(args, "closed_loop", False))
+    if asked:
+        check_closed_loop_folder(args.data)  # one line when DATA has no data_cl_* (issue 24)
+    if asked or is_closed_loop_folder(args.data):  # or data_cl_* and no data_uch/ucv
         with _stage_folder(args, _IDENT_BYTES) as run:
             cl, paths = identify_closed_loop_folder(args.data, bench=_bench(args),
-                                                    out_dir=run.staging, progress=_progress())
+                                                    out_dir=run.staging, progress=_progress(),
+                                                    asked=asked)
         print("\n".join(summary_lines(cl, read_twin_truth(Path(args.data)))))
         for path in paths:
             print(f"wrote {run.final_path(path)}", file=sys.stderr)
@@ -707,6 +712,11 @@ def _parser() -> argparse.ArgumentParser:
         p.add_argument("--out", metavar="DIR", required=True, help="output folder")
         if name == "identify":
             add_identify_options(p)
+            p.add_argument("--closed-loop", action="store_true", dest="closed_loop",
+                           help="identify the Sercalo from the closed-loop records data_cl_uch "
+                                "and data_cl_ucv (joint input-output method), even beside "
+                                "open-loop records; without it a folder of closed-loop records "
+                                "only is detected")
             p.add_argument("--json", action="store_true",
                            help="print the comparison as JSON on stdout instead of the table")
         if name == "design":

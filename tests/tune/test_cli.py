@@ -84,3 +84,61 @@ def test_tune_refuses_bad_arguments(argv: list[str], tmp_path: Path,
     assert main(["tune", "--twin", "--out", str(tmp_path / "t"), *argv]) == 2
     err = capsys.readouterr().err
     assert argv[0] in err and not (tmp_path / "t").exists()
+
+
+def test_identify_closed_loop_flag_beside_open_loop_records(
+        chain: dict[str, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    # Beside an open-loop record the folder is identified in open loop unless asked: the
+    # flag identifies the closed-loop records, exactly as the detection did on them alone.
+    import shutil
+
+    data = tmp_path / "both"
+    shutil.copytree(chain["data"], data)
+    (data / "data_uch.mat").write_bytes(b"not a recording")  # open-loop: would be read first
+    capsys.readouterr()
+    assert main(["identify", str(data), "--closed-loop", "--out", str(tmp_path / "i")]) == 0
+    assert "identify --closed-loop" in capsys.readouterr().err
+    got = json.loads((tmp_path / "i" / "identification.json").read_text())
+    ref = json.loads((chain["ident"] / "identification.json").read_text())
+    assert got["sercalo"] == ref["sercalo"]  # the same records, the same estimator
+
+
+def test_identify_closed_loop_flag_without_records(tmp_path: Path,
+                                                   capsys: pytest.CaptureFixture[str]) -> None:
+    (tmp_path / "d").mkdir()
+    (tmp_path / "d" / "data_uch.mat").write_bytes(b"x")
+    assert main(["identify", str(tmp_path / "d"), "--closed-loop", "--out",
+                 str(tmp_path / "i")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "--closed-loop needs the closed-loop records data_cl_uch" in err[0]
+    assert "it holds data_uch.mat" in err[0] and not (tmp_path / "i").exists()
+
+
+@pytest.fixture(scope="module")
+def drifted_tune(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """tune --twin on a twin drifted by +2 %: its identification/ is a bench at +2 %."""
+    out = tmp_path_factory.mktemp("tune-drift") / "A"
+    assert main(["tune", "--twin", "--drift-resonance", "2", "--periods", "4", "--watch-s",
+                 "6", "--seed", "3", "--out", str(out)]) == 0
+    return out
+
+
+@pytest.mark.slow  # two tunes: ~20 s alone, ~2 min on 2 busy cores
+def test_tune_bench_runs_on_the_identified_bench(drifted_tune: Path, tmp_path: Path,
+                                                 bench) -> None:
+    # The twin of --bench DIR is the bench identified in DIR (+2 % from the packaged one):
+    # identified again with the loop closed, its resonances are DIR's, not the packaged ones.
+    out = tmp_path / "B"
+    assert main(["tune", "--twin", "--bench", str(drifted_tune / "identification"),
+                 "--periods", "4", "--watch-s", "6", "--seed", "4", "--out", str(out)]) == 0
+    js = json.loads((out / "tune.json").read_text())
+    assert "identified in" in js["target"]
+    first = json.loads((drifted_tune / "tune.json").read_text())["identified"]
+    for a in ("h", "v"):
+        packaged = float(bench.true.sercalo.resonance_hz[a])
+        assert first[a]["resonance_hz"] == pytest.approx(1.02 * packaged, rel=5e-3)
+        # The open-loop tolerance of a resonance, 0.5 %; the packaged one is 2 % away.
+        assert js["identified"][a]["resonance_hz"] == pytest.approx(
+            first[a]["resonance_hz"], rel=5e-3)
+    assert js["decision"] in ("loaded", "refused")  # a decision with its reason
+    assert js["reason"]

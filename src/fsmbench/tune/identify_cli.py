@@ -25,7 +25,8 @@ from fsmbench.ident.closed_loop import (
     write_closed_loop_identification,
 )
 
-__all__ = ["identify_closed_loop_folder", "is_closed_loop_folder", "summary_lines"]
+__all__ = ["check_closed_loop_folder", "identify_closed_loop_folder", "is_closed_loop_folder",
+           "summary_lines"]
 
 _OPEN_LOOP_SERCALO = ("data_uch", "data_ucv")
 _SUFFIXES = (".mat", ".h5", ".nxs")
@@ -39,10 +40,33 @@ def is_closed_loop_folder(folder: str | Path) -> bool:
     return not any((root / f"{n}{s}").is_file() for n in _OPEN_LOOP_SERCALO for s in _SUFFIXES)
 
 
+def check_closed_loop_folder(folder: str | Path) -> None:
+    """Nothing if ``folder`` holds a closed-loop record (``identify --closed-loop``).
+
+    Raises
+    ------
+    ValueError
+        One line: the folder holds no ``data_cl_*`` record (what it holds instead).
+    """
+    root = Path(folder)
+    if root.is_dir() and find_closed_loop_records(root):
+        return
+    held = sorted(p.name for p in root.iterdir() if p.suffix in _SUFFIXES) \
+        if root.is_dir() else []
+    what = (f"it holds {', '.join(held[:6])}{' ...' if len(held) > 6 else ''}" if held
+            else "it holds no recording" if root.is_dir() else "it is not a folder")
+    raise ValueError(f"{folder}: --closed-loop needs the closed-loop records data_cl_uch and "
+                     f"data_cl_ucv (.mat, .h5 or .nxs; fsmbench simulate --closed-loop writes "
+                     f"them); {what}")
+
+
 def identify_closed_loop_folder(folder: str | Path, *, bench: Bench, out_dir: Path,
-                                progress: Callable[[str], None] | None = None
+                                progress: Callable[[str], None] | None = None,
+                                asked: bool = False
                                 ) -> tuple[ClosedLoopIdentification, list[Path]]:
     """Identify the records of ``folder`` with the loop closed and write the results.
+
+    ``asked``: ``identify --closed-loop`` (else detected: no open-loop Sercalo record).
 
     Raises
     ------
@@ -50,8 +74,10 @@ def identify_closed_loop_folder(folder: str | Path, *, bench: Bench, out_dir: Pa
         A record missing, unreadable or failing its checks (named).
     """
     say = progress or (lambda _m: None)
-    say(f"closed-loop records in {folder} (data_cl_uch, data_cl_ucv), no open-loop Sercalo "
-        "record: identifying the Sercalo with the loop closed (joint input-output method)")
+    why = ("identify --closed-loop" if asked
+           else "no open-loop Sercalo record")
+    say(f"closed-loop records in {folder} (data_cl_uch, data_cl_ucv), {why}: identifying the "
+        "Sercalo with the loop closed (joint input-output method)")
     recordings = read_closed_loop_records(folder)
     result = identify_closed_loop(recordings, bench=bench, options=ClosedLoopIdentifyOptions(),
                                   source=str(folder))
