@@ -406,11 +406,29 @@ class DacNoiseEstimate:
 @njit(cache=True)
 def _state_space_run(a: FloatArray, b: FloatArray, c: FloatArray, d: FloatArray,
                      u: FloatArray) -> FloatArray:  # pragma: no cover - compiled
-    y = np.empty((u.shape[0], c.shape[0]))
-    x = np.zeros(a.shape[0])
-    for k in range(u.shape[0]):
-        y[k] = c @ x + d @ u[k]
-        x = a @ x + b @ u[k]
+    # Explicit loops into preallocated state vectors: small matrix products allocate a new
+    # array per call, which made this recursion ~10x slower than its arithmetic.
+    n_t, n_in = u.shape
+    n_x, n_out = a.shape[0], c.shape[0]
+    y = np.empty((n_t, n_out))
+    x = np.zeros(n_x)
+    x_next = np.empty(n_x)
+    for k in range(n_t):
+        for i in range(n_out):
+            acc = 0.0
+            for j in range(n_x):
+                acc += c[i, j] * x[j]
+            for j in range(n_in):
+                acc += d[i, j] * u[k, j]
+            y[k, i] = acc
+        for i in range(n_x):
+            acc = 0.0
+            for j in range(n_x):
+                acc += a[i, j] * x[j]
+            for j in range(n_in):
+                acc += b[i, j] * u[k, j]
+            x_next[i] = acc
+        x, x_next = x_next, x
     return y
 
 
