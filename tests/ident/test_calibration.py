@@ -17,7 +17,7 @@ from fsmbench.io.recording import make_recording
 from fsmbench.twin import TwinRun
 
 
-def _line(gain: float, offset: float, noise: float, n: int = 20000) -> xr.Dataset:
+def _line(gain: float, offset: float, noise: float, *, n: int = 20000) -> xr.Dataset:
     rng = np.random.default_rng(3)
     t = np.arange(n) / 1e4
     vn = 2.0 * np.sin(2 * np.pi * 0.2 * t)
@@ -35,18 +35,44 @@ def test_regression_recovers_a_known_line() -> None:
 
 
 def test_standard_error_matches_the_scatter_of_the_slope() -> None:
+    """White noise on two whole periods of the sweep (the twin's and the ESRF study's
+    record: 10 s at 0.2 Hz after the first second)."""
     slopes = []
+    base = _line(36.3, 0.0, 0.0, n=100_000)
     for seed in range(40):
-        ds = _line(36.3, 0.0, 0.0)
         rng = np.random.default_rng(seed)
-        noisy = ds.copy(deep=True)
-        noisy["Vph"].values[:] = noisy["Vph"].values + 0.05 * rng.standard_normal(ds.sizes["t"])
+        noisy = base.copy(deep=True)
+        noisy["Vph"].values[:] = noisy["Vph"].values + 0.05 * rng.standard_normal(base.sizes["t"])
         slopes.append(calibrate_qd(noisy, axis="h", metrology_gain_rad_per_v=2.62e-3,
                                    trim_s=0.0))
     spread = np.std([c.gain_v_per_rad for c in slopes], ddof=1)
     reported = np.mean([c.gain_std_v_per_rad for c in slopes])
     # 40 draws: the sample std is within ±25 % of the true one at ~2 sigma.
     assert reported == pytest.approx(spread, rel=0.3)
+    # The closed form: σ² (XᵀX)⁻¹ of the line-plus-trend design, within the same 30 %.
+    t = np.arange(100_000) / 1e4
+    x = 2 * 2.62e-3 * 2.0 * np.sin(2 * np.pi * 0.2 * t)
+    design = np.column_stack([np.ones_like(t), x, t - t.mean()])
+    exact = 0.05 * np.sqrt(np.linalg.inv(design.T @ design)[1, 1])
+    assert reported == pytest.approx(exact, rel=0.3)
+
+
+def test_a_drifting_offset_does_not_enter_the_slope() -> None:
+    """An offset drifting by 1 mV/s (a ramp) against a sweep that starts at zero phase: the
+    ESRF study's line takes part of it into the slope; the fitted trend does not."""
+    n = 100_000
+    t = np.arange(n) / 1e4
+    vn = 2.0 * np.sin(2 * np.pi * 0.2 * t)
+    vp = -31.0 * 2 * 2.62e-3 * vn + 1e-3 * t
+    ds = make_recording({"Vph": vp, "Vpv": 0 * vp, "Vnh": vn}, t=t, experiment="data_cal_pd_h")
+    cal = calibrate_qd(ds, axis="h", metrology_gain_rad_per_v=2.62e-3, trim_s=0.0)
+    assert cal.gain_v_per_rad == pytest.approx(-31.0, rel=1e-10)  # noise-free: rounding
+    # The line alone: slope bias = drift × ∫(t − T/2) x dt / ∫x̃² dt (closed form, 0.35 %).
+    x = 2 * 2.62e-3 * vn
+    tc, xc = t - t.mean(), x - x.mean()
+    bias = 1e-3 * float(np.sum(tc * xc) / np.sum(xc * xc))
+    assert cal.linear_slope_v_per_rad == pytest.approx(-31.0 + bias, rel=1e-9)
+    assert abs(bias) > 1e-3 * 31.0  # the trend matters at this drift
 
 
 @pytest.mark.parametrize("compression", [0.0, 0.02, -0.01])
@@ -66,8 +92,9 @@ def test_a_compressed_4qd_gives_its_small_signal_gain(compression: float) -> Non
     # The seed's straight line averages the slope over a sine's swing: 3/4 of the compression.
     assert cal.linear_slope_v_per_rad == pytest.approx(-31.0 * (1 - 0.75 * compression),
                                                        rel=1e-4)
-    if compression == 0.0:  # no cubic term found: the seed's line itself
-        assert cal.cubic_v_per_rad3 == 0.0 and cal.gain_v_per_rad == cal.linear_slope_v_per_rad
+    if compression == 0.0:  # no cubic term found: the line (with the offset's trend)
+        assert cal.cubic_v_per_rad3 == 0.0
+        assert abs(cal.linear_slope_v_per_rad + 31.0) < 5 * cal.gain_std_v_per_rad
 
 
 def test_calibration_on_the_twin(ident_twin: TwinRun, bench: Bench) -> None:

@@ -25,6 +25,7 @@ of freedom.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 
 import numpy as np
@@ -48,6 +49,10 @@ _SLOPE_RANGE = (-2.5, 0.5)
 _IMPORTANT = 1e-6
 #: E[ln P] = ln σ² − γ for a periodogram line (exponential, 2 degrees of freedom).
 _EULER_GAMMA = 0.5772156649015329
+#: ... and var[ln P] = π²/6 (trigamma(1)).
+_LOG_LINE_VARIANCE = math.pi**2 / 6.0
+#: A local slope is used when it is this many of its standard deviations from zero.
+_SLOPE_T = 2.0
 
 
 def _local_power_law(lines: NDArray[np.intp], power: FloatArray, *, at: int) -> float:
@@ -57,7 +62,14 @@ def _local_power_law(lines: NDArray[np.intp], power: FloatArray, *, at: int) -> 
     lp = np.log(np.maximum(power, np.finfo(float).tiny)) + _EULER_GAMMA
     if lines.size < 3 or np.ptp(lk) < np.log(_MIN_SPAN):
         return float(np.mean(power))
-    slope, _ = np.polyfit(lk, lp, 1)
+    centred = lk - lk.mean()
+    sxx = float(np.sum(centred**2))
+    slope = float(np.sum(centred * (lp - lp.mean())) / sxx)
+    # A slope the lines do not resolve (|t| < 2 against the log-periodogram's π²/6 per
+    # line) is white noise's: their mean is then read, not a power law whose random slope
+    # moves the estimate by tens of % (the lines' log-spacing puts the nearest far out).
+    if abs(slope) < _SLOPE_T * math.sqrt(_LOG_LINE_VARIANCE / sxx):
+        return float(np.mean(power))
     slope = float(np.clip(slope, *_SLOPE_RANGE))
     return float(np.exp(np.mean(lp - slope * lk) + slope * np.log(at)))
 
