@@ -68,12 +68,13 @@ def test_a_worse_candidate_is_refused_through_the_device(device: tuple[Any, str]
     assert "margins" in r.reason  # x0.3: phase margin ~22 deg < 30 (on the twin)
     assert r.switches == ()
     assert proxy.Controller == SEED_NAME and proxy.LoopClosed
-    # The records came from the device: the Sercalo identified within the open-loop
-    # tolerance of its resonance (0.5 %) from them.
+    # The records came from the device: one stage of 4 periods locates both modes within
+    # its +/-5 % band (it measured -0.6 % on v once: the precision is stage 2's, asserted
+    # in the test below).
     found = r.measurement.identification.to_json()["sercalo"]
     for a in ("h", "v"):
         truth = float(bench.true.sercalo.resonance_hz[a])
-        assert found[a]["resonance_hz"] == pytest.approx(truth, rel=5e-3)
+        assert found[a]["resonance_hz"] == pytest.approx(truth, rel=0.05)
     # The measurement's beam error stays under the user's bound (30 urad rms).
     assert max(r.measurement.tracking_added_rad().values()) <= 30e-6
     assert r.target.startswith("the live device")
@@ -96,6 +97,11 @@ def test_tune_device_loads_a_better_controller(device: tuple[Any, str], bench: B
         # roll-back tolerance (25 %) of the prediction.
         assert js["after"]["measured_rms_rad"][a] < js["before"]["measured_rms_rad"][a]
         assert js["after"]["measured_rms_rad"][a] <= 1.25 * js["after"]["predicted_rms_rad"][a]
+    # Identified through the device in two stages: the resonances within the open-loop
+    # tolerance (0.5 %) of the twin device's (the packaged bench).
+    for a in ("h", "v"):
+        assert js["identified"][a]["resonance_hz"] == pytest.approx(
+            float(bench.true.sercalo.resonance_hz[a]), rel=5e-3)
     # Loaded by the device's own command, which names the file tune wrote.
     sw = js["switches"][0]
     assert sw["from"] == SEED_NAME and proxy.Controller == sw["to"]

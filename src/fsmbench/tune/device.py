@@ -43,9 +43,12 @@ from fsmbench.twin.simulate import TwinRun
 
 __all__ = ["DeviceTarget", "device_proxy"]
 
-#: Bench time the excitation may start late in its record [s] (the client's round trips
-#: at the device's speed: 20 ms of wall clock is 1 s of bench time at 50x).
+#: Bench time the excitation may start late in its record [s], at least, and in wall clock
+#: at the device's speed [s] (the client's round trips: 20 ms of wall clock is 1 s of bench
+#: time at 50x); a record it misses is played again, up to :data:`_ATTEMPTS` times.
 _LATE_S = 3.0
+_LATE_WALL_S = 0.25
+_ATTEMPTS = 3
 #: Wall clock a command's work may take beyond its bench time at the device's speed [s].
 _SLACK_S = 120.0
 
@@ -192,7 +195,8 @@ class DeviceTarget:
             npy = self.folder / f"{self._name(play.name)}.npy"
             np.save(npy, x)
             n_settle = round(settle_s * fs)
-            duration = 2 * settle_s + _LATE_S + x.size / fs
+            late_s = max(_LATE_S, _LATE_WALL_S * float(self.proxy.SpeedFactor))
+            duration = 2 * settle_s + late_s + x.size / fs
             if progress is not None:
                 progress(f"playing {play.description} on {play.channel} through "
                          f"{self.label} with the loop closed by {controller.name} "
@@ -208,16 +212,22 @@ class DeviceTarget:
                 self.proxy.StartExcitation(json.dumps(doc))
                 return float(json.loads(self.proxy.Excitation)["start_time_s"])
 
-            rec, e_start_s = self._record(CLOSED_LOOP_SIGNALS, duration, during=excite)
-            self.proxy.StopExcitation()
-            r0 = round(float(rec["t"].values[0]) * fs)
-            first = round(e_start_s * fs) - r0  # the excitation's first sample in the record
-            lo, hi = first - n_settle, first + x.size
-            if lo < 0 or hi > rec.sizes["t"]:
-                raise ValueError(f"{self.label}: the excitation on {play.channel} started "
-                                 f"{first / fs:.2f} s into its {rec.sizes['t'] / fs:g} s "
-                                 f"record, not within the {settle_s:g} to "
-                                 f"{settle_s + _LATE_S:g} s it needs (a slow client)")
+            for attempt in range(1, _ATTEMPTS + 1):
+                rec, e_start_s = self._record(CLOSED_LOOP_SIGNALS, duration, during=excite)
+                self.proxy.StopExcitation()
+                r0 = round(float(rec["t"].values[0]) * fs)
+                first = round(e_start_s * fs) - r0  # the excitation's first sample in it
+                lo, hi = first - n_settle, first + x.size
+                if lo >= 0 and hi <= rec.sizes["t"]:
+                    break
+                why = (f"{self.label}: the excitation on {play.channel} started "
+                       f"{first / fs:.2f} s into its {rec.sizes['t'] / fs:g} s record, not "
+                       f"within the {settle_s:g} to {settle_s + late_s:g} s it needs (a slow "
+                       "client)")
+                if attempt == _ATTEMPTS:
+                    raise ValueError(f"{why}, {_ATTEMPTS} times")
+                if progress is not None:
+                    progress(f"{why}: played again")
             signals = {s: np.asarray(rec[s].values, dtype=float)[lo:hi]
                        for s in CLOSED_LOOP_SIGNALS}
             signals[variable] = np.concatenate([np.zeros(n_settle), x])
