@@ -261,6 +261,7 @@ class LiveBench(BenchCommands):
     def stop(self) -> None:
         """Stop the loop thread and its watchdog; end a running job, keeping its samples."""
         self.loop.stop()
+        self.watch.stop()
         with self._lock:
             job = self._job
             if job is not None and job.collecting:

@@ -46,7 +46,7 @@ SETTLE_S = 5.0
 #: Points of the prediction's grid up to Nyquist (0.1 Hz apart at 10 kHz: a 0.1 %-damped
 #: resonance is ~0.5 Hz wide).
 _N_FREQ = 50_000
-_CHUNK = 2_500
+_CHUNK = 1_000
 
 
 @dataclass(frozen=True)
@@ -74,7 +74,8 @@ class WatchView:
 
 def prediction_of(bench: Bench, controller: DiscreteController, *,
                   qd_gain_v_per_rad: tuple[float, float],
-                  options: WatchOptions | None = None) -> LoopWatch:
+                  options: WatchOptions | None = None,
+                  cancelled: Callable[[], bool] | None = None) -> LoopWatch | None:
     """A fresh :class:`LoopWatch` predicting ``controller`` as the bench runs it.
 
     ``controller`` reads the 4QD volts (its ``b``, ``d`` include the division by the
@@ -83,7 +84,8 @@ def prediction_of(bench: Bench, controller: DiscreteController, *,
     with unit "used gains" (:func:`~fsmbench.control.validation.tracking_error_spectra`
     multiplies by the plant's own 4QD gains). The measured error the watch is fed is
     the 4QD reading over ``qd_gain_v_per_rad``; the watch's baseline calibrates the
-    ratio of the two.
+    ratio of the two. ``cancelled()`` is asked between chunks of the frequency grid:
+    when it says so, None is returned (a new controller, or the bench stopping).
     """
     from fsmbench.bench.blocks import physical_plant
     from fsmbench.control.validation import tracking_error_spectra
@@ -98,6 +100,8 @@ def prediction_of(bench: Bench, controller: DiscreteController, *,
     # in the device's process (a Record's memory bound is 25 MB).
     total, spectra = [], None
     for part in np.array_split(f, _N_FREQ // _CHUNK):
+        if cancelled is not None and cancelled():
+            return None  # another controller took over, or the bench stopped
         spectra = tracking_error_spectra(plant, k_volts, params=p,
                                          gd_used_v_per_rad=(1.0, 1.0), f_hz=part)
         total.append(spectra.total)
@@ -228,7 +232,8 @@ class LiveWatch:
                     watch: LoopWatch | None = prediction_of(
                         self.bench, controller,
                         qd_gain_v_per_rad=(float(self.gd[0]), float(self.gd[1])),
-                        options=self.options)
+                        options=self.options,
+                        cancelled=lambda: generation != self._generation)
                     error = ""
                 except Exception as exc:  # a controller the model cannot predict: say so
                     watch, error = None, f"{type(exc).__name__}: {exc}"
@@ -244,6 +249,14 @@ class LiveWatch:
 
         self._quiet_from_s = now_s + SETTLE_S
         threading.Thread(target=predict, name="fsmbench-watch", daemon=True).start()
+
+    def stop(self) -> None:
+        """Stop watching (the bench stops): a prediction being computed ends at its next
+        chunk."""
+        with self._lock:
+            self._generation += 1
+            self._controller = None
+            self._watch = None
 
     # -- views ---------------------------------------------------------------------
 
