@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pytest
 import xarray as xr
@@ -13,6 +15,7 @@ from fsmbench.ident.calibration import (
     known_ga_zc,
     trim_recording,
 )
+from fsmbench.ident.fit.regression import spectral_sandwich, t_scaled_std
 from fsmbench.io.recording import make_recording
 from fsmbench.twin import TwinRun
 
@@ -159,3 +162,28 @@ def test_trim_leaves_the_input_untouched() -> None:
     out = trim_recording(ds, t0_s=1.0)
     assert out.sizes["t"] == ds.sizes["t"] - 10000
     np.testing.assert_array_equal(ds["Vph"].values, before)
+
+
+def test_t_scaled_std_is_students_quantile_over_the_normal() -> None:
+    """t₀.₉₇₅(ν)/z₀.₉₇₅ (scipy.stats): 4 dof give 2.776/1.960; infinite dof leave it."""
+    assert t_scaled_std(1.0, 4.0) == pytest.approx(2.7764451051977987 / 1.959963984540054,
+                                                   rel=1e-12)
+    assert t_scaled_std(2.0, math.inf) == 2.0
+    assert t_scaled_std(1.0, 1e4) == pytest.approx(1.0, abs=2e-4)
+
+
+def test_sandwich_dof_of_white_noise_read_on_a_mean() -> None:
+    """A whole-period sine in white noise: its line's density is the mean of the 2 × 5
+    nearest free lines (no resolved slope), var(ln mean) = 1/10, so ν = 2 × 10."""
+    n = 4096
+    t = np.arange(n)
+    design = np.column_stack([np.ones(n), np.sin(2 * np.pi * 64 * t / n)])
+    found = []
+    for seed in range(20):
+        resid = np.random.default_rng(seed).standard_normal(n)
+        resid -= design @ np.linalg.lstsq(design, resid, rcond=None)[0]
+        found.append(spectral_sandwich(design, resid, columns=[1], neighbours=5).dof[1])
+    # A white record's local slope is resolved by chance (|t| > 2) in ~5 % of records,
+    # which then read a power law on fewer degrees of freedom.
+    assert np.median(found) == pytest.approx(20.0, rel=1e-9)
+    assert min(found) > 1.0

@@ -92,7 +92,9 @@ class QdCalibration:
     offset_v : float
         Intercept ``b`` [V].
     gain_std_v_per_rad : float
-        Standard error of the slope [V/rad].
+        Standard deviation of the slope [V/rad]: the spectral sandwich's standard
+        error t-scaled to the degrees of freedom of its noise density
+        (:meth:`fsmbench.ident.fit.regression.SandwichCovariance.std`).
     linear_slope_v_per_rad : float
         The seed's straight-line slope over the whole swing [V/rad].
     cubic_v_per_rad3 : float
@@ -192,10 +194,12 @@ def calibrate_qd(ds: xr.Dataset, *, axis: str, metrology_gain_rad_per_v: float,
     n = x.size
     # Standard errors from the residual's spectrum near the sweep (ident.regression): the
     # ordinary s²(XᵀX)⁻¹ assumes white residuals, 5x optimistic under 1/f noise and drift.
-    cov2 = spectral_sandwich(design, resid, columns=[1])
+    # Their degrees of freedom are few where the sweep's lowest lines carry 1/f noise and
+    # drift: the std is t-scaled to them (SandwichCovariance.std), so ±1.96 std covers 95 %.
+    sandwich2 = spectral_sandwich(design, resid, columns=[1])
     # The ESRF study's straight line without the trend, kept to compare with its numbers.
     seed_slope = float(np.linalg.lstsq(design[:, :2], y, rcond=None)[0][1])
-    gain, gain_std, cubic = float(a), math.sqrt(cov2[1, 1]), 0.0
+    gain, gain_std, cubic = float(a), sandwich2.std(1), 0.0
     cubic_std = 0.0
     # A 4QD compresses towards the edges of its range (the spot leaves the quadrants): the
     # seed's straight line then averages the slope over the swing, ~1.5 % low for 2 %
@@ -206,13 +210,13 @@ def calibrate_qd(ds: xr.Dataset, *, axis: str, metrology_gain_rad_per_v: float,
     cub = np.column_stack([np.ones_like(u), u, u**3, trend])
     coef, *_ = np.linalg.lstsq(cub, y, rcond=None)
     resid3 = y - cub @ coef
-    cov3 = spectral_sandwich(cub, resid3, columns=[1, 2])
+    sandwich3 = spectral_sandwich(cub, resid3, columns=[1, 2])
+    cov3 = sandwich3.covariance
     # ... and large enough to matter: 1e-4 of the line at full swing (a noise-free line's
     # rounding-level cubic is "significant" against a rounding-level residual).
     if (n > 3 and abs(coef[2]) > 5 * math.sqrt(max(cov3[2, 2], 0.0))
             and abs(coef[2]) > 1e-4 * abs(coef[1])):
-        b, gain, gain_std = float(coef[0]), float(coef[1]) / scale, \
-            math.sqrt(cov3[1, 1]) / scale
+        b, gain, gain_std = float(coef[0]), float(coef[1]) / scale, sandwich3.std(1) / scale
         cubic = float(coef[2]) / scale**3
         cubic_std = math.sqrt(cov3[2, 2]) / scale**3
         resid = resid3
@@ -227,8 +231,7 @@ def calibrate_qd(ds: xr.Dataset, *, axis: str, metrology_gain_rad_per_v: float,
         yo = np.asarray(rec[other].values, dtype=float)
         coef_o, *_ = np.linalg.lstsq(design, yo, rcond=None)
         cross = float(coef_o[1])
-        cross_std = math.sqrt(spectral_sandwich(design, yo - design @ coef_o,
-                                                columns=[1])[1, 1])
+        cross_std = spectral_sandwich(design, yo - design @ coef_o, columns=[1]).std(1)
     return QdCalibration(
         axis=axis, gain_v_per_rad=gain, offset_v=float(b),
         gain_std_v_per_rad=gain_std, linear_slope_v_per_rad=seed_slope,

@@ -19,19 +19,30 @@ each such line takes the mean of the nearest ``neighbours`` lines on each
 side that the fit leaves (their periodogram divided by ``1 − ℓ_k``, the
 share the fit removes), through a local power law; elsewhere the
 periodogram averaged over ±``neighbours`` lines.
-The few lines averaged give the variance estimate ~``4 neighbours`` degrees
-of freedom.
+The few lines averaged give the variance estimate few degrees of freedom,
+fewest where a power law is read at the record's lowest lines (a 4QD
+calibration's sweep lives there, under 1/f noise and drift): the estimate's
+*effective degrees of freedom* ``ν = 2 / var(ln V̂)`` follow from each line's
+log-density variance (``π²/6`` times the log-log regression's leverage at the
+line it is read at; ``1/m`` for a mean of ``m`` lines), combined over the
+lines that carry a coefficient as fully correlated (they share their
+neighbours; conservative). :meth:`SandwichCovariance.std` gives the standard
+deviation whose ±1.96 interval is the 95 % interval of Student's t on ``ν``
+(``t₀.₉₇₅(ν)/1.96`` times the standard error, as the GUM's expanded
+uncertainty with effective degrees of freedom).
 """
 
 from __future__ import annotations
 
 import math
 from collections.abc import Sequence
+from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
+from scipy import stats
 
-__all__ = ["spectral_sandwich"]
+__all__ = ["SandwichCovariance", "spectral_sandwich", "t_scaled_std"]
 
 FloatArray = NDArray[np.float64]
 
@@ -55,13 +66,46 @@ _LOG_LINE_VARIANCE = math.pi**2 / 6.0
 _SLOPE_T = 2.0
 
 
-def _local_power_law(lines: NDArray[np.intp], power: FloatArray, *, at: int) -> float:
+@dataclass(frozen=True)
+class SandwichCovariance:
+    """The spectral sandwich's covariance and how well it is known.
+
+    Attributes
+    ----------
+    covariance : ndarray, shape (p, p)
+        Covariance of the coefficients [units of β²].
+    dof : ndarray, shape (p,)
+        Effective degrees of freedom of each diagonal element (module notes).
+    """
+
+    covariance: FloatArray
+    dof: FloatArray
+
+    def std(self, column: int) -> float:
+        """Standard deviation of one coefficient [its unit], t-scaled to its degrees of
+        freedom (:func:`t_scaled_std`)."""
+        return t_scaled_std(math.sqrt(max(float(self.covariance[column, column]), 0.0)),
+                            float(self.dof[column]))
+
+
+def t_scaled_std(std: float, dof: float) -> float:
+    """``std × t₀.₉₇₅(ν) / z₀.₉₇₅``: the standard deviation whose ±1.96 interval is the 95 %
+    interval of an estimate whose variance is read on ``dof`` degrees of freedom [unit of
+    ``std``]; ``std`` itself for infinite ``dof``."""
+    if not math.isfinite(dof):
+        return std
+    return float(std * stats.t.ppf(0.975, max(dof, 1.0)) / stats.norm.ppf(0.975))
+
+
+def _local_power_law(lines: NDArray[np.intp], power: FloatArray, *, at: int
+                     ) -> tuple[float, float]:
     """The noise density at line ``at`` from a straight line through ``(ln k, ln P_k)``
-    of nearby lines (1/f noise and drift are power laws; white noise a flat one)."""
+    of nearby lines (1/f noise and drift are power laws; white noise a flat one), and the
+    variance of its log."""
     lk = np.log(lines.astype(float))
     lp = np.log(np.maximum(power, np.finfo(float).tiny)) + _EULER_GAMMA
     if lines.size < 3 or np.ptp(lk) < np.log(_MIN_SPAN):
-        return float(np.mean(power))
+        return float(np.mean(power)), 1.0 / max(lines.size, 1)
     centred = lk - lk.mean()
     sxx = float(np.sum(centred**2))
     slope = float(np.sum(centred * (lp - lp.mean())) / sxx)
@@ -69,13 +113,16 @@ def _local_power_law(lines: NDArray[np.intp], power: FloatArray, *, at: int) -> 
     # line) is white noise's: their mean is then read, not a power law whose random slope
     # moves the estimate by tens of % (the lines' log-spacing puts the nearest far out).
     if abs(slope) < _SLOPE_T * math.sqrt(_LOG_LINE_VARIANCE / sxx):
-        return float(np.mean(power))
+        return float(np.mean(power)), 1.0 / lines.size
     slope = float(np.clip(slope, *_SLOPE_RANGE))
-    return float(np.exp(np.mean(lp - slope * lk) + slope * np.log(at)))
+    x0 = math.log(at)
+    leverage = 1.0 / lines.size + (x0 - float(lk.mean())) ** 2 / sxx
+    return (float(np.exp(np.mean(lp - slope * lk) + slope * x0)),
+            _LOG_LINE_VARIANCE * leverage)
 
 
 def spectral_sandwich(design: FloatArray, residual: FloatArray, *,
-                      columns: Sequence[int], neighbours: int = 5) -> FloatArray:
+                      columns: Sequence[int], neighbours: int = 5) -> SandwichCovariance:
     """Covariance of the least-squares coefficients for a coloured residual (see the module).
 
     Parameters
@@ -92,8 +139,9 @@ def spectral_sandwich(design: FloatArray, residual: FloatArray, *,
 
     Returns
     -------
-    ndarray, shape (p, p)
-        ``(XᵀX)⁻¹ [(1/n) Σ_k X_kᴴ X_k σ²_k] (XᵀX)⁻¹`` [units of β²].
+    SandwichCovariance
+        ``(XᵀX)⁻¹ [(1/n) Σ_k X_kᴴ X_k σ²_k] (XᵀX)⁻¹`` [units of β²] and the
+        effective degrees of freedom of its diagonal (module notes).
     """
     x = np.asarray(design, dtype=float)
     r = np.asarray(residual, dtype=float)
@@ -120,6 +168,7 @@ def spectral_sandwich(design: FloatArray, residual: FloatArray, *,
     count = ccount[hi] - ccount[lo]
     density = np.where(count > 0, (csum[hi] - csum[lo]) / np.maximum(count, 1),
                        float(np.mean(restored[~occupied])) if (~occupied).any() else 0.0)
+    log_var = 1.0 / np.maximum(count, 1).astype(float)
     # ... and where the columns of interest live, a local power law through the nearest
     # free lines (the lines that carry the estimate; a handful).
     interest = np.zeros(k)
@@ -132,11 +181,21 @@ def spectral_sandwich(design: FloatArray, residual: FloatArray, *,
             j = int(np.searchsorted(free, i))
             window = free[max(0, j - 2 * neighbours):j + 2 * neighbours]
             near = window[np.argsort(np.abs(window - i), kind="stable")[:2 * neighbours]]
-            density[i] = _local_power_law(near, restored[near], at=max(int(i), 1))
+            density[i], log_var[i] = _local_power_law(near, restored[near],
+                                                      at=max(int(i), 1))
     # One-sided lines count twice, except 0 and (even n) Nyquist.
     weight = np.full(k, 2.0)
     weight[0] = 1.0
     if n % 2 == 0:
         weight[-1] = 1.0
     meat = np.einsum("k,ki,kj->ij", weight * density, xk.conj(), xk).real / n
-    return np.asarray(bread @ meat @ bread, dtype=float)
+    covariance = np.asarray(bread @ meat @ bread, dtype=float)
+    # Each coefficient's variance is Σ_k a_k σ²_k (a_k ≥ 0); the relative variance of its
+    # estimate, the lines' log-density errors fully correlated, (Σ a_k σ²_k √v_k / Σ a_k σ²_k)².
+    share = np.abs(xk @ bread) ** 2 * (weight * density)[:, None] / n  # (K, p)
+    total = share.sum(axis=0)
+    spread = (share * np.sqrt(log_var)[:, None]).sum(axis=0)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        rel_var = np.where(total > 0, (spread / np.where(total > 0, total, 1.0)) ** 2, 0.0)
+        dof = np.where(rel_var > 0, 2.0 / np.where(rel_var > 0, rel_var, 1.0), np.inf)
+    return SandwichCovariance(covariance=covariance, dof=np.asarray(dof, dtype=float))
