@@ -497,6 +497,7 @@ def _identify(recordings: Mapping[str, xr.Dataset], *, bench: Bench, opts: Ident
     gi: dict[str, CurrentAmplifierGain] = {}
     sercalo_id: SercaloIdentification | None = None
     modes: ModeRefinement | None = None
+    unrefined: SercaloIdentification | None = None  # the fit before its modes' refinement
     validation: tuple[PathValidation, ...] = ()
     if gone := missing("data_uch", "data_ucv"):
         skipped["current_amp"] = skipped["sercalo"] = f"missing {', '.join(gone)}"
@@ -547,12 +548,14 @@ def _identify(recordings: Mapping[str, xr.Dataset], *, bench: Bench, opts: Ident
             elif opts.refine_modes:
                 say("2.3 Sercalo: refining the modes on the time records")
                 modes = refine_modes(recordings, sercalo=sercalo_id, trims_s=opts.trims_s)
+                unrefined = sercalo_id
                 sercalo_id = refit_with_poles(sercalo_id, poles=modes.poles_by_input())
             else:
                 skipped["mode_refinement"] = "disabled by option"
             if frf.estimator == "welch":
                 say("2.3 Sercalo: the Welch window's leakage near the modes")
-                sercalo_id = with_frf(sercalo_id, _with_leakage(sercalo_id, opts.window_s),
+                sercalo_id = with_frf(sercalo_id, _with_leakage(sercalo_id, opts.window_s,
+                                                                unrefined=unrefined),
                                       poles=None if modes is None else modes.poles_by_input())
             validation = validate_sercalo(recordings, sercalo=sercalo_id, trims_s=opts.trims_s)
             truncation = truncation_checks(
@@ -643,15 +646,9 @@ def _identify(recordings: Mapping[str, xr.Dataset], *, bench: Bench, opts: Ident
         newport=newport_id, compression=compression, nominal=nom, truncation=truncation))
 
 
-def _with_leakage(sid: SercaloIdentification, window_s: float) -> FrequencyResponse:
-    """The Sercalo's Welch FRF with its leakage bias near the modes removed and kept as a
-    variance part (:mod:`fsmbench.ident.frf.leakage`), from the fitted model (its modes
-    refined on the time records) and its delay.
-
-    Removed, because a bias only widened still pulls the fit: the lines a few Hz from the
-    vertical mode moved its static gain by +0.7 of its std on every seed (issue 20, 100
-    twin seeds); subtracted, +0.04. Kept as variance at its full size: the correction is
-    the fitted model's, whose own error is not known line by line (a bound)."""
+def _leakage_bias(sid: SercaloIdentification, window_s: float) -> np.ndarray:
+    """``E[Ĥ] − H`` of the Welch estimate on ``sid.frf``'s lines for ``sid``'s model and
+    delay (:func:`~fsmbench.ident.frf.leakage.welch_leakage_bias`), shape (F, p, m)."""
     frf = sid.frf
     delay = sid.delay_s
 
@@ -668,8 +665,26 @@ def _with_leakage(sid: SercaloIdentification, window_s: float) -> FrequencyRespo
     rows = [fit_out.index(o) for o in frf.output_names]
     cols = [fit_in.index(i) for i in frf.input_names]
     bias[sel] = b[:, rows][:, :, cols]
+    return bias
+
+
+def _with_leakage(sid: SercaloIdentification, window_s: float, *,
+                  unrefined: SercaloIdentification | None) -> FrequencyResponse:
+    """The Sercalo's Welch FRF with its leakage bias near the modes removed, and the
+    correction's uncertainty as a variance part (:mod:`fsmbench.ident.frf.leakage`).
+
+    The bias is the fitted model's (its modes refined on the time records) with its delay.
+    Removed, because a bias only widened still pulls the fit: the lines a few Hz from the
+    vertical mode moved its static gain by +0.7 of its std on every seed (issue 20, 100
+    twin seeds); subtracted, +0.04. The correction's own error is that of the model's
+    modes: bounded by how much the bias changes from the fit's modes before the refinement
+    (the FRF's, leakage-biased: 5-10 % in damping) to the refined ones; without a
+    refinement, by the bias itself."""
+    bias = _leakage_bias(sid, window_s)
+    spread = bias if unrefined is None else bias - _leakage_bias(unrefined, window_s)
+    frf = sid.frf
     corrected = replace(frf, frf=frf.frf.copy(data=np.asarray(frf.frf.values) - bias))
-    return with_variance_part(corrected, "leakage", np.abs(bias) ** 2)
+    return with_variance_part(corrected, "leakage", np.abs(spread) ** 2)
 
 
 _ESTIMATOR_WORDS = {"welch": "Welch H1 (the ESRF study's)",
