@@ -138,3 +138,18 @@ def test_report_section(drift_tune: TuneResult) -> None:
     assert "|S(1 Hz)|" in text and "µrad" in text
     for key in ("rolled_back", "sensitivity_at_1hz", "rms_rad", "gain_margin_db", "Uch_to"):
         assert key not in text  # words, not code keys
+
+
+@pytest.mark.parametrize(("found_h", "found_v", "named"), [
+    (411.5, 251.2, []), (419.0, 246.0, []),            # the model's, and a 2 % drift
+    (244.2, 251.2, ["h"]), (411.5, 411.0, ["v"]), (float("nan"), 251.2, ["h"]),
+])
+def test_implausible_modes_are_named(bench: Bench, found_h: float, found_v: float,
+                                     named: list[str]) -> None:
+    """A mode further than 15 % from the model's (a wrong axis) is named; a drift is not."""
+    from fsmbench.tune.guarded import implausible_modes
+
+    words = implausible_modes({"h": {"resonance_hz": found_h}, "v": {"resonance_hz": found_v}},
+                              bench=bench)
+    assert [a for a in "hv" if f"the {a} resonance" in words] == named
+    assert (words == "") == (named == [])

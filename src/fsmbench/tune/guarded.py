@@ -50,8 +50,13 @@ from fsmbench.twin.closed_loop import ClosedLoopPlay, drifted_bench
 from fsmbench.twin.experiments import REP_AMPLITUDE_V
 from fsmbench.twin.simulate import TwinRun
 
-__all__ = ["TUNE_FORMAT", "ControllerFigures", "Loop", "TuneOptions", "TuneResult",
-           "TuneTarget", "loop_of", "tune_guarded", "tune_twin"]
+__all__ = ["MAX_MODE_MOVE", "TUNE_FORMAT", "ControllerFigures", "Loop", "TuneOptions",
+           "TuneResult", "TuneTarget", "implausible_modes", "loop_of", "tune_guarded",
+           "tune_twin"]
+
+#: A resonance further than this from the model's is not a drift a tune follows (the drift
+#: scenarios move it by a few %): a mode assigned to the wrong axis, or another bench.
+MAX_MODE_MOVE = 0.15
 
 #: ``tune.json``'s format and version.
 TUNE_FORMAT = ("fsmbench.tune", 1)
@@ -356,6 +361,32 @@ def tune_twin(*, bench: Bench, running: Loop, drift_pct: float = 0.0,
                         candidate=candidate, after_load=hook, progress=progress)
 
 
+def implausible_modes(sercalo: Mapping[str, Mapping[str, Any]], *, bench: Bench) -> str:
+    """Why the identified Sercalo modes cannot be the bench's, in words ("" when they can).
+
+    Parameters
+    ----------
+    sercalo : mapping axis -> {"resonance_hz", ...}
+        The closed-loop identification's modes (``identification.json``'s ``sercalo``).
+    bench : Bench
+        The model the running controller runs on; its ``nominal`` resonances [Hz].
+
+    A closed-loop fit whose notch starves an axis's resonance can place that axis's mode
+    on the other axis's (twin: h at 244 Hz against 411.5 Hz): a controller designed on
+    it would be verified on the same wrong plant, so the guard is the model's resonances.
+    """
+    words = []
+    for axis, values in sercalo.items():
+        expected = float(bench.nominal.sercalo.resonance_hz[axis])
+        found = float(values.get("resonance_hz", math.nan))
+        if not (math.isfinite(found) and abs(found / expected - 1.0) <= MAX_MODE_MOVE):
+            words.append(f"the {axis} resonance at {found:.1f} Hz is "
+                         f"{100 * (found / expected - 1.0):+.0f} % from the model's "
+                         f"{expected:.1f} Hz (more than the {100 * MAX_MODE_MOVE:.0f} % a "
+                         "drift moves it; likely a mode assigned to the wrong axis)")
+    return "; ".join(words)
+
+
 def tune_guarded(*, target: TuneTarget, bench: Bench, running: Loop,
                  options: TuneOptions | None = None, seed: int = 0,
                  candidate: Loop | None = None,
@@ -423,6 +454,10 @@ def tune_guarded(*, target: TuneTarget, bench: Bench, running: Loop,
         for a, v in sercalo.items())
         + f" ({measurement.duration_s:g} s of measurement, beam error added "
           f"{_urad(measurement.tracking_added_rad())} rms)")
+    if (why := implausible_modes(sercalo, bench=bench)):
+        raise ValueError(f"the Sercalo's closed-loop identification is not plausible: {why}; "
+                         "nothing was loaded. Run tune again with more --periods, or "
+                         "identify the bench in open loop")
     plant = ident.plant
     if candidate is None:
         say("designing on the identified plant (the same study as fsmbench design)")
