@@ -28,3 +28,24 @@ def test_moving_average_long_run_variance(theta: float, rng: np.random.Generator
     rho = theta / (1 + theta**2)
     expected = min(max(1 + 2 * (1 - 1 / (LAGS + 1)) * rho, 1 / 2.5), 2.5)
     assert _factor(x) == pytest.approx(expected, rel=0.15)
+
+
+@pytest.mark.parametrize("theta", [0.0, -0.5, -0.8])
+def test_current_amplifier_factor_reaches_strong_cancellation(theta: float,
+                                                              rng: np.random.Generator) -> None:
+    """The current amplifier's factor (50 Bartlett lags at a nominal 2.5): an MA(1) whose
+    long-run variance cancels to (1 + θ)² / (1 + θ²) = 0.2 and 0.024 of the variance is
+    read down to its floor 1/2.5², where 10 lags and a floor of 1/2.5 read 0.4."""
+    from fsmbench.ident.current_amp import HAC_LAGS_PER_LINE, _hac_factor
+
+    e = rng.standard_normal(N + 1)
+    x = e[1:] + theta * e[:-1]
+    lags = int(np.ceil(HAC_LAGS_PER_LINE * 2.5))
+    rho = theta / (1 + theta**2)
+    expected = min(max(1 + 2 * (1 - 1 / (lags + 1)) * rho, 1 / 2.5**2), 2.5)
+    got = _hac_factor((x, np.zeros(N)), (np.ones(N), np.zeros(N)), 2.5)
+    # Bartlett's estimate over 50 lags and 8000 lines has a relative std sqrt(4 L / 3 N),
+    # 9 %: 3.5 of it.
+    assert got == pytest.approx(expected, rel=3.5 * np.sqrt(4 * lags / (3 * N)))
+    if theta <= -0.5:
+        assert got < 1 / 2.5  # below the old floor: the cancellation is claimed
