@@ -368,6 +368,7 @@ class _StageInput:
     say: Callable[[str], None]
     recordings: dict[str, Any]
     skipped: dict[str, str] = field(default_factory=dict)
+    unusable: dict[str, str] = field(default_factory=dict)
 
 
 def _check_data(data: Path) -> None:
@@ -394,10 +395,9 @@ def _stage_input(args: argparse.Namespace, *,
     conv = bench.nominal.converter
     loaded = load_recordings(data, progress=say, fs_hz=conv.fs_hz, adc_range_v=conv.range_v,
                              adc_bits=conv.bits)
-    for name, why in loaded.skipped.items():
+    for name, why in loaded.unusable().items():
         # Simply absent: not mentioned; a near miss ("found DATA_UCH.mat: rename it …") is.
-        absent = why.startswith(f"no {name}.mat") and "; found " not in why
-        if not absent and (uses is None or name in uses):
+        if uses is None or name in uses:
             say(f"skipped {name}: {why}")
     # What the user must know about the files it uses, once each, one line each.
     for check in failed(loaded.checks):
@@ -406,7 +406,7 @@ def _stage_input(args: argparse.Namespace, *,
     for notice in loaded.notices:
         say(f"note: {notice.sentence()}")
     return _StageInput(data=data, bench=bench, say=say, recordings=dict(loaded.recordings),
-                       skipped=dict(loaded.skipped))
+                       skipped=dict(loaded.skipped), unusable=loaded.unusable())
 
 
 def _stage_folder(args: argparse.Namespace, need_bytes: float) -> Any:
@@ -441,6 +441,7 @@ def _cmd_identify(args: argparse.Namespace) -> int:
         inp = _stage_input(args)
         result, paths = identify_stage(inp.recordings, bench=inp.bench, out_dir=run.staging,
                                        source=str(inp.data), progress=inp.say,
+                                       unusable=inp.unusable,
                                        options=identify_options(args, data=inp.data))
     for step, why in result.skipped.items():
         inp.say(f"step {step} skipped: {why}")

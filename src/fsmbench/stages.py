@@ -92,11 +92,13 @@ class PlantChoice:
 
 def identify_stage(recordings: Mapping[str, xr.Dataset], *, bench: Bench, out_dir: Path,
                    source: str, progress: Progress | None = None,
-                   options: IdentifyOptions | None = None
+                   options: IdentifyOptions | None = None,
+                   unusable: Mapping[str, str] | None = None
                    ) -> tuple[Identification, list[Path]]:
-    """Run ESRF study section 2 and write its files (``options``: the estimator and weights)."""
+    """Run ESRF study section 2 and write its files (``options``: the estimator and weights;
+    ``unusable``: files present but unreadable, by experiment, with the loader's reason)."""
     result = identify(recordings, bench=bench, options=options, source=source,
-                      progress=progress)
+                      progress=progress, unusable=unusable)
     return result, write_identification(result, out_dir)
 
 

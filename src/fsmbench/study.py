@@ -268,7 +268,8 @@ def run_study(*, out_dir: str | Path, data_dir: str | Path | None = None,
     if any(n in recordings for n in IDENT_EXPERIMENTS):
         say("identification (ESRF study section 2)")
         ident, written = identify_stage(recordings, bench=bench, out_dir=out, source=source,
-                                        progress=say, options=identify_options)
+                                        progress=say, options=identify_options,
+                                        unusable=loaded.unusable())
         stages.append(StageStatus(
             "identify", True, outputs=tuple(str(p) for p in written),
             reason="; ".join(f"{k}: {v}" for k, v in ident.skipped.items())))

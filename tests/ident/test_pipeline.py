@@ -99,6 +99,16 @@ def test_partial_data_runs_what_it_can(ident_twin: TwinRun, bench: Bench) -> Non
     assert "sercalo" not in out and "qd_gain_v_per_rad" in out
 
 
+def test_an_unreadable_file_is_not_called_missing(ident_twin: TwinRun, bench: Bench) -> None:
+    """A file that was there but could not be read: the steps it feeds give its reason."""
+    only_cal = {k: v for k, v in ident_twin.recordings.items() if k.startswith("data_cal")}
+    why = "/d/data_ucv.mat: cannot be read as a MATLAB v5/v7 file"
+    result = identify(only_cal, bench=bench, unusable={"data_ucv": why})
+    for step in ("current_amp", "sercalo"):
+        assert result.skipped[step] == f"missing data_uch; data_ucv unusable ({why})"
+    assert result.skipped["newport"] == "missing data_unh, data_unv"
+
+
 def _with(ident_twin: TwinRun, name: str, **changes) -> dict:
     recs = dict(ident_twin.recordings)
     ds = recs[name].copy(deep=True)

@@ -387,7 +387,8 @@ def _gi_block(gi: Mapping[str, CurrentAmplifierGain]) -> ct.StateSpace:
 
 def identify(recordings: Mapping[str, xr.Dataset], *, bench: Bench,
              options: IdentifyOptions | None = None, source: str = "",
-             progress: Progress | None = None) -> Identification:
+             progress: Progress | None = None,
+             unusable: Mapping[str, str] | None = None) -> Identification:
     """Run the seed's section 2 on the recordings present.
 
     Parameters
@@ -403,11 +404,15 @@ def identify(recordings: Mapping[str, xr.Dataset], *, bench: Bench,
         Where the recordings come from (for the report and JSON).
     progress : callable, optional
         Receives one message per step.
+    unusable : mapping of experiment name to reason, optional
+        Files that were there but could not be read (the loader's reason): a
+        step they would feed says so instead of "missing".
     """
     with pywarnings.catch_warnings(record=True) as caught:
         pywarnings.simplefilter("always")
         result = _identify(recordings, bench=bench, opts=options or IdentifyOptions(),
-                           source=source, say=progress or (lambda _msg: None))
+                           source=source, say=progress or (lambda _msg: None),
+                           unusable=dict(unusable or {}))
     numeric = [Notice("numeric", "identification", f"{w.category.__name__}: {w.message}")
                for w in caught]
     # Records against each other and against the physical model (ident.crosscheck): a
@@ -433,7 +438,7 @@ def _failure_reason(check: Check, fallback: str) -> str:
 
 
 def _identify(recordings: Mapping[str, xr.Dataset], *, bench: Bench, opts: IdentifyOptions,
-              source: str, say: Progress) -> Identification:
+              source: str, say: Progress, unusable: Mapping[str, str]) -> Identification:
     nom = bench.nominal
     conv = nom.converter
     # The 4QD amplifier as the bench model knows it (a datasheet value, or unlimited): the
@@ -446,6 +451,13 @@ def _identify(recordings: Mapping[str, xr.Dataset], *, bench: Bench, opts: Ident
 
     def missing(*names: str) -> list[str]:
         return [n for n in names if n not in recordings]
+
+    def absent_words(names: list[str]) -> str:
+        """Why the named records are absent: never "missing" for a file that was there."""
+        gone = [n for n in names if n not in unusable]
+        words = [f"missing {', '.join(gone)}"] if gone else []
+        words += [f"{n} unusable ({unusable[n]})" for n in names if n in unusable]
+        return "; ".join(words)
 
     def data_failure(*names: str) -> Check | None:
         """The first failed plausibility check of the named recordings (each checked once)."""
@@ -474,7 +486,7 @@ def _identify(recordings: Mapping[str, xr.Dataset], *, bench: Bench, opts: Ident
     compression: dict[str, CompressionFactors] = {}
     truncation: dict[str, TruncationCheck] = {}
     if gone := missing("data_cal_pd_h", "data_cal_pd_v"):
-        skipped["qd"] = f"missing {', '.join(gone)}"
+        skipped["qd"] = absent_words(gone)
     elif bad := data_failure("data_cal_pd_h", "data_cal_pd_v"):
         skipped["qd"] = _failure_reason(bad, "the nominal 4QD gain is used")
     else:
@@ -500,7 +512,7 @@ def _identify(recordings: Mapping[str, xr.Dataset], *, bench: Bench, opts: Ident
     unrefined: SercaloIdentification | None = None  # the fit before its modes' refinement
     validation: tuple[PathValidation, ...] = ()
     if gone := missing("data_uch", "data_ucv"):
-        skipped["current_amp"] = skipped["sercalo"] = f"missing {', '.join(gone)}"
+        skipped["current_amp"] = skipped["sercalo"] = absent_words(gone)
     elif bad := data_failure("data_uch", "data_ucv"):
         skipped["current_amp"] = skipped["sercalo"] = _failure_reason(
             bad, "the nominal current amplifier and Sercalo are used")
@@ -602,7 +614,7 @@ def _identify(recordings: Mapping[str, xr.Dataset], *, bench: Bench, opts: Ident
         except ValueError as exc:
             skipped["newport"] = f"failed (data_unh, data_unv): {exc}"
     else:
-        skipped["newport"] = f"missing {', '.join(gone)}"
+        skipped["newport"] = absent_words(gone)
 
     warnings = quality_warnings(sercalo=sercalo_id, modes=modes, validation=validation)
     for w in warnings:

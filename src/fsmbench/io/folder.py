@@ -104,6 +104,12 @@ class RecordingSet:
     notices: tuple[Notice, ...] = ()
     checks: tuple[Check, ...] = ()
 
+    def unusable(self) -> dict[str, str]:
+        """The skipped experiments whose file was there (unreadable, malformed) or nearly
+        so (a near-miss name): those a step must not call "missing"."""
+        return {name: why for name, why in self.skipped.items()
+                if not (why.startswith(f"no {name}.mat") and "; found " not in why)}
+
     def to_json(self) -> dict[str, Any]:
         """JSON-ready summary (no arrays)."""
         return {"folder": self.folder, "experiments": list(self.recordings),
