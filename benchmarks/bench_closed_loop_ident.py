@@ -5,7 +5,8 @@ features: second modes, mode-shape angles), several random seeds:
 
 * **closed loop**: :func:`fsmbench.tune.measure.measure_closed_loop` with the ESRF
   study's controller running, the beam error the measurement adds bounded at
-  30 µrad rms (two stages of 2 × 33 s: 132 s of records);
+  30 µrad rms (two stages of 2 × 33 s: 132 s of records; the Sercalo fitted on
+  both stages' lines merged, from 10 Hz);
 * **open loop**: the ESRF study's open-loop records ``data_uch``, ``data_ucv`` (white
   noise on the coil command, loop open) of the same total length (66 s each),
   identified by ``fsmbench identify``'s pipeline (:func:`fsmbench.ident.pipeline.identify`).
