@@ -1,7 +1,7 @@
 """``fsmbench tune``: one guarded tuning step with the loop closed.
 
     fsmbench tune (--twin [--bench DIR] | --device ADDRESS) --out DIR
-                  [--drift-resonance PCT] [--running seed|fsmbench]
+                  [--drift-resonance PCT] [--running seed|fsmbench|PATH[::NAME]]
                   [--max-error-urad U] [--better-by-pct P] [--watch-s S]
                   [--rollback-tolerance-pct P] [--periods N] [--seed N] [--params TOML]
                   [--drift-rate PCT_PER_H [--watch-duration S]]
@@ -94,9 +94,12 @@ def add_tune_command(sub: Any) -> None:
     p.add_argument("--drift-resonance", metavar="PCT", type=_percent, default=0.0,
                    dest="drift_pct", help="move the twin's Sercalo resonance (both axes) by "
                                           "this much from the bench file [%%] (default 0)")
-    p.add_argument("--running", choices=("seed", "fsmbench"), default="seed",
+    p.add_argument("--running", metavar="seed|fsmbench|PATH[::NAME]", default="seed",
                    help="the controller running when tune starts: the ESRF study's (9.2, "
-                        "default) or fsmbench's designed on the bench file before the drift")
+                        "default), fsmbench's designed on the bench file before the drift, or "
+                        "one from a controllers file (controllers_sos.json or "
+                        "controllers.mat, e.g. the one a previous tune loaded; ::NAME picks "
+                        "one of several): the device names it 'NAME (FILE)'")
     p.add_argument("--max-error-urad", metavar="U", dest="max_error_urad",
                    type=functools.partial(positive, unit="µrad"), default=30.0,
                    help="rms beam error the measurement may add [µrad] (default 30)")
@@ -131,6 +134,8 @@ def _running(kind: str, bench: Any) -> Any:
 
     ts = bench.true.converter.ts_s
     gd = bench.nominal.quad_diode.gain_v_per_rad
+    if kind not in ("seed", "fsmbench"):
+        return _running_file(kind, bench)
     if kind == "seed":
         return loop_of(seed_decentralised_controller(), name="the ESRF study's controller (9.2)",
                        ts_s=ts, gd_v_per_rad=(float(gd.h), float(gd.v)))
@@ -140,6 +145,43 @@ def _running(kind: str, bench: Any) -> Any:
     return loop_of(study.controllers["fsmbench_controller"],
                    name="fsmbench's controller (designed on the bench file)", ts_s=ts,
                    gd_v_per_rad=(float(gd.h), float(gd.v)))
+
+
+def _running_file(spec: str, bench: Any) -> Any:
+    """The controller ``PATH[::NAME]`` of a controllers file, as the device runs it.
+
+    The file holds it discrete at the converter rate (Tustin per section, prewarped);
+    ``Loop.k`` is its exact continuous pre-image under plain Tustin (``z = -1`` is no
+    pole of it), so that the loop the twin and the predictions run is the file's, line
+    for line. Named ``'NAME (FILE)'``, as ``LoadController`` names it on the device.
+    """
+    import control as ct
+    import numpy as np
+
+    from fsmbench.control.load import load_controllers, select_controller
+    from fsmbench.tune.guarded import loop_of
+
+    ts = bench.true.converter.ts_s
+    path, sep, name = spec.partition("::")
+    chosen = select_controller(load_controllers(path, ts_s=ts), name if sep else None)
+    if not chosen.maps(("Rh", "Rv"), ("Uch", "Ucv")):
+        raise ValueError(f"{path}: controller {chosen.name!r} maps {list(chosen.input_names)} "
+                         f"to {list(chosen.output_names)}, not Rh, Rv to Uch, Ucv")
+    n = chosen.a.shape[0]
+    m = np.eye(n) + chosen.a
+    if n and abs(np.linalg.det(m)) < 1e-12 * max(1.0, float(np.linalg.norm(m)) ** n):
+        raise ValueError(f"{path}: controller {chosen.name!r} has a pole at z = -1 (Nyquist): "
+                         "it has no continuous-time equivalent")
+    # z = (1 + s T/2) / (1 - s T/2) substituted in C (zI - A)^-1 B + D, with M = I + A:
+    # Ac = (2/T) M^-1 (A - I), Bc = M^-1 B, Cc = (4/T) C M^-1, Dc = D - C M^-1 B.
+    minv = np.linalg.inv(m) if n else np.zeros((0, 0))
+    k = ct.ss((2.0 / ts) * minv @ (chosen.a - np.eye(n)), minv @ chosen.b,
+              (4.0 / ts) * chosen.c @ minv, chosen.d - chosen.c @ minv @ chosen.b,
+              inputs=["Rh", "Rv"], outputs=["Uch", "Ucv"], name=chosen.name)
+    nominal = bench.nominal.quad_diode.gain_v_per_rad
+    gd = chosen.qd_gain_v_per_rad or (float(nominal.h), float(nominal.v))
+    return loop_of(k, name=f"{chosen.name} ({Path(chosen.source_path).name})", ts_s=ts,
+                   gd_v_per_rad=(float(gd[0]), float(gd[1])))
 
 
 def _command(args: argparse.Namespace) -> int:
@@ -162,6 +204,8 @@ def _command(args: argparse.Namespace) -> int:
             raise ValueError(f"{', '.join(twin_only)}: for --twin; the device runs the bench it "
                              "serves (fsmbench serve --bench, --drift-rate)")
     inputs = [("--params", args.params), ("--bench", args.bench_dir)]
+    if args.running not in ("seed", "fsmbench"):
+        inputs.append(("--running", args.running.partition("::")[0]))
     check_inputs(args.out, inputs)
     bench = load_bench(args.params)
     if args.bench_dir is not None:
