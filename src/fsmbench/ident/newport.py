@@ -39,7 +39,7 @@ peaking, against the FSM-300 datasheet (600 Hz, 250 Hz, ≤ 3 dB).
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import control as ct
@@ -56,9 +56,9 @@ from fsmbench.ident.delay.sampled import sampled_response as sampled_path
 from fsmbench.ident.frf.response import FrequencyResponse
 from fsmbench.ident.sercalo import combined_delay, path_delays
 
-__all__ = ["NewportAxisFit", "NewportDynamics", "NewportIdentification", "fit_newport_dynamics",
-           "identify_newport", "newport_checks", "resolved_sensor", "sampled_response",
-           "sensor_notices"]
+__all__ = ["NewportAxisFit", "NewportDynamics", "NewportIdentification", "SensorShift",
+           "fit_newport_dynamics", "identify_newport", "newport_checks", "resolved_sensor",
+           "sampled_response", "sensor_notices", "unresolved_sensor_shifts"]
 
 FloatArray = NDArray[np.float64]
 _PATHS = {"h": ("Vph", "Unh"), "v": ("Vpv", "Unv")}
@@ -245,7 +245,7 @@ def sampled_response(f_hz: FloatArray, *, gain: float, natural_freq_hz: float,
 
 
 def _fit_axis(frf: FrequencyResponse, axis: str, *, fs: float,
-              sensor: SensorLowpass) -> NewportAxisFit:
+              sensor: SensorLowpass, resolve_sensor: bool = True) -> NewportAxisFit:
     output, input_ = _PATHS[axis]
     f = frf.frequency_hz
     h = frf.frf.sel(output=output, input=input_).values
@@ -282,7 +282,7 @@ def _fit_axis(frf: FrequencyResponse, axis: str, *, fs: float,
                         lower=np.array([-np.inf, 1.0, 0.01]), upper=np.array([np.inf, fs, 20.0]),
                         delay_start_s=max(0.5 / fs, -float(slope) / 2), fs_hz=fs,
                         sensor=sensor, correlated_lines=correlated,
-                        max_lines=MAX_LINES)
+                        resolve_sensor=resolve_sensor, max_lines=MAX_LINES)
     k, fn, z = (float(v) for v in joint.parameters)
     std = joint.parameter_std
     return NewportAxisFit(axis=axis, gain_v_per_v=k, gain_std_v_per_v=float(std[0]),
@@ -368,6 +368,81 @@ def newport_checks(dyn: NewportDynamics, *, amplitude_bandwidth_hz: float,
     return checks
 
 
+@dataclass(frozen=True)
+class SensorShift:
+    """How much a 4QD amplifier the fit lacked would move one axis's parameters.
+
+    Attributes
+    ----------
+    axis : str
+    lag_s : float
+        The amplifier's group delay assumed [s] (the delays' measured lag, plus
+        1.96 of its std).
+    half_width : dict
+        The largest shift of each parameter over the orders tried
+        (``gain_v_per_v`` [V/V], ``natural_freq_hz`` [Hz], ``damping_ratio``).
+    by_order : dict int -> dict
+        The shifts per amplifier order (1: first order, 2: Butterworth).
+    """
+
+    axis: str
+    lag_s: float
+    half_width: dict[str, float]
+    by_order: dict[int, dict[str, float]]
+
+    def summary(self) -> dict[str, Any]:
+        """JSON-ready values."""
+        return {"axis": self.axis, "lag_s": self.lag_s, "half_width": dict(self.half_width),
+                "by_order": {str(k): dict(v) for k, v in self.by_order.items()}}
+
+
+_SHIFTED = ("gain_v_per_v", "natural_freq_hz", "damping_ratio")
+
+
+def unresolved_sensor_shifts(frf: FrequencyResponse, dyn: NewportDynamics, *,
+                             lag_s: float) -> dict[str, SensorShift]:
+    """The parameter shifts an unresolved 4QD amplifier of group delay ``lag_s`` could cause.
+
+    For each axis fitted without an amplifier (none in the bench model, none
+    resolved by the lines), the fit again with a first-order and with a
+    second-order (Butterworth) amplifier of that group delay, the bandwidth
+    fixed: the delays measure the lag, not its shape, and on the Newport's
+    band a second order fits the two shapes about equally well while moving
+    its natural frequency by up to 1 % (a 22.5 µs lag: +1.8 Hz for the
+    Butterworth the real-bench twin has, +28 Hz for a first order, on the
+    exact response). A shift is a bounded part of the parameter's uncertainty
+    (:mod:`fsmbench.ident.totals`).
+
+    Parameters
+    ----------
+    frf : FrequencyResponse
+        The Newport's matrix the axes were fitted on.
+    dyn : NewportDynamics
+    lag_s : float
+        The amplifier's group delay [s]; ≤ 0 or NaN: no shift.
+
+    Returns
+    -------
+    dict axis -> SensorShift
+        Only the axes fitted without an amplifier.
+    """
+    out: dict[str, SensorShift] = {}
+    if not (math.isfinite(lag_s) and lag_s > 0):
+        return out
+    for axis, fit in dyn.axes.items():
+        if fit.sensor is None or fit.sensor.source != "unlimited":
+            continue
+        by_order = {}
+        for order, per_rad in ((1, 1.0), (2, math.sqrt(2.0))):
+            lowpass = SensorLowpass(bandwidth_hz=per_rad / (2 * math.pi * lag_s), order=order)
+            refit = _fit_axis(frf, axis, fs=dyn.fs_hz, sensor=lowpass, resolve_sensor=False)
+            by_order[order] = {k: float(getattr(refit, k) - getattr(fit, k)) for k in _SHIFTED}
+        out[axis] = SensorShift(axis=axis, lag_s=float(lag_s), by_order=by_order,
+                                half_width={k: max(abs(v[k]) for v in by_order.values())
+                                            for k in _SHIFTED})
+    return out
+
+
 def resolved_sensor(dyn: NewportDynamics) -> SensorLowpass | None:
     """The 4QD amplifier the Newport's lines resolved (the mean of the axes that did), or None.
 
@@ -436,6 +511,10 @@ class NewportIdentification:
     dynamics : NewportDynamics or None
     dynamics_skipped : str
         Why the dynamics were not fitted (empty when they were).
+    sensor_shifts : dict axis -> SensorShift
+        The axes fitted without a 4QD amplifier while the delays measure one:
+        how much its unknown shape could move their parameters
+        (:func:`unresolved_sensor_shifts`).
     """
 
     frf: FrequencyResponse
@@ -448,6 +527,7 @@ class NewportIdentification:
     gn: ct.StateSpace
     dynamics: NewportDynamics | None = None
     dynamics_skipped: str = ""
+    sensor_shifts: dict[str, SensorShift] = field(default_factory=dict)
 
     def input_delays_s(self) -> dict[str, float]:
         """The delay of each Newport input in a plant model without the sensor's low pass [s]
@@ -464,7 +544,8 @@ class NewportIdentification:
                 "gain_v_per_v": self.gain_v_per_v, "seed_gain_v_per_v": self.seed_gain_v_per_v,
                 "band_hz": list(self.band_hz),
                 "dynamics": None if self.dynamics is None else self.dynamics.summary(),
-                "dynamics_skipped": self.dynamics_skipped}
+                "dynamics_skipped": self.dynamics_skipped,
+                "sensor_shifts": {k: v.summary() for k, v in self.sensor_shifts.items()}}
 
 
 def identify_newport(frf: FrequencyResponse, *, band_hz: tuple[float, float] = (10.0, 100.0),

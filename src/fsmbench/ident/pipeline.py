@@ -80,10 +80,12 @@ from fsmbench.ident.frf.response import FrequencyResponse, with_variance_part
 from fsmbench.ident.frf.welch import hanning
 from fsmbench.ident.newport import (
     NewportIdentification,
+    SensorShift,
     identify_newport,
     newport_checks,
     resolved_sensor,
     sensor_notices,
+    unresolved_sensor_shifts,
 )
 from fsmbench.ident.noise_model import NoiseModelFit, fit_noise_model
 from fsmbench.ident.sercalo import (
@@ -96,7 +98,7 @@ from fsmbench.ident.sercalo import (
     refit_with_poles,
     with_frf,
 )
-from fsmbench.ident.totals import uncertainty_tree
+from fsmbench.ident.totals import qd_amplifier_lag_s, uncertainty_tree
 from fsmbench.ident.uncertainty import Uncertain
 from fsmbench.ident.validate import PathValidation, validate_sercalo
 from fsmbench.io.atomic import atomic_write_text
@@ -597,16 +599,26 @@ def _identify(recordings: Mapping[str, xr.Dataset], *, bench: Bench, opts: Ident
                 nfrf, band_hz=opts.newport_band_hz, dac_delay_samples=conv.dac_delay_samples,
                 converter_delay_s=None if sercalo_id is None else sercalo_id.delay_s,
                 sensor=sensor)
-            if newport_id.dynamics is not None:
-                notices.extend(sensor_notices(newport_id.dynamics, model=sensor))
-                resolved = resolved_sensor(newport_id.dynamics)
+            if (dyn := newport_id.dynamics) is not None:
+                notices.extend(sensor_notices(dyn, model=sensor))
+                resolved = resolved_sensor(dyn)
                 if resolved is not None and sercalo_id is not None:
                     say("2.3 Sercalo: the delay again with the 4QD amplifier the Newport "
                         "resolved")
                     sercalo_id = with_sensor(sercalo_id, resolved)
+                # An amplifier neither the bench model nor the lines give: the delays
+                # measure its lag, and its shape bounds the Newport's parameters.
+                lag_s, lag_std_s = qd_amplifier_lag_s(sid=sercalo_id, gi=gi, nominal=nom)
+                if np.isfinite(lag_s):
+                    shifts = unresolved_sensor_shifts(
+                        nfrf, dyn, lag_s=max(lag_s, 0.0) + 1.96 * lag_std_s)
+                    newport_id = replace(newport_id, sensor_shifts=shifts)
+                    notices.extend(_sensor_shift_notices(shifts, lag_s=lag_s,
+                                                         noise={a: dyn.axes[a].natural_freq_std_hz
+                                                                for a in dyn.axes}))
                 ds_np = bench.datasheet.newport
                 checks.extend(newport_checks(
-                    newport_id.dynamics, amplitude_bandwidth_hz=ds_np.amplitude_bandwidth_hz,
+                    dyn, amplitude_bandwidth_hz=ds_np.amplitude_bandwidth_hz,
                     phase_bandwidth_hz=ds_np.phase_bandwidth_hz,
                     peaking_max_db=ds_np.peaking_max_db))
             else:
@@ -697,6 +709,25 @@ def _with_leakage(sid: SercaloIdentification, window_s: float, *,
     frf = sid.frf
     corrected = replace(frf, frf=frf.frf.copy(data=np.asarray(frf.frf.values) - bias))
     return with_variance_part(corrected, "leakage", np.abs(spread) ** 2)
+
+
+def _sensor_shift_notices(shifts: Mapping[str, SensorShift], *, lag_s: float,
+                          noise: Mapping[str, float]) -> list[Notice]:
+    """Advice where the amplifier's unknown order outweighs the noise on the Newport's
+    natural frequency: the bench file can state it."""
+    out = []
+    for axis, shift in shifts.items():
+        width = shift.half_width["natural_freq_hz"]
+        if width <= noise[axis]:
+            continue
+        out.append(Notice(
+            "other", f"Newport {axis}",
+            f"the delays measure a 4QD amplifier lag of {lag_s * 1e6:.3g} µs that the bench "
+            f"model lacks and the Newport's lines do not resolve; its order moves the "
+            f"Newport's natural frequency by up to {width:.3g} Hz (noise {noise[axis]:.2g} "
+            f"Hz): state quad_diode.bandwidth_hz and bandwidth_order in the bench file's "
+            f"[nominal] to remove it"))
+    return out
 
 
 _ESTIMATOR_WORDS = {"welch": "Welch H1 (the ESRF study's)",

@@ -31,6 +31,13 @@ than the data determine it, both are given:
 ``newport.{h,v}.internal_delay_s``
     The Newport's own lag: its effective delay less the Sercalo's, plus the
     coil's lag (on the Sercalo's path only; ``Lc g_i``, the nominal inductance).
+``newport.{h,v}.natural_freq_hz``, ``damping_ratio``, ``newport_gain_v_per_v.{h,v}``
+    The Newport's second order with the 4QD amplifier as the fit had it (the
+    bench model's, or resolved by the lines). An amplifier the model lacks and
+    the lines do not resolve is a lag the delays measure (``τ_4QD``) but whose
+    shape they do not: the ``unresolved_sensor`` part bounds what a first- or
+    second-order amplifier of that lag would change
+    (:func:`fsmbench.ident.newport.unresolved_sensor_shifts`).
 ``sercalo.{h,v}.dc_gain_v_per_a``
     ``Gc(0)``: the fit's static gain over the current-amplifier gain, the
     4QD's compression corrected (:mod:`fsmbench.ident.frf.compression`); parts
@@ -57,7 +64,7 @@ if TYPE_CHECKING:
     from fsmbench.ident.newport import NewportIdentification
     from fsmbench.ident.sercalo import SercaloIdentification
 
-__all__ = ["coil_lag_s", "uncertainty_tree"]
+__all__ = ["coil_lag_s", "qd_amplifier_lag_s", "uncertainty_tree"]
 
 _DIRECT = {"h": ("Vph", "Uch"), "v": ("Vpv", "Ucv")}
 _NEWPORT = {"h": ("Vph", "Unh"), "v": ("Vpv", "Unv")}
@@ -66,6 +73,45 @@ _NEWPORT = {"h": ("Vph", "Unh"), "v": ("Vpv", "Unv")}
 def coil_lag_s(nominal: BenchParams, axis: str, gain_a_per_v: float) -> float:
     """The coil's lag on ``Uc → Ic`` [s]: ``Lc / (R + R_buffer + Rc) = Lc g_i``."""
     return float(nominal.sercalo.l_coil_h[axis]) * float(gain_a_per_v)
+
+
+def _pure_delay(gi: Mapping[str, CurrentAmplifierGain]) -> tuple[float, float]:
+    """The converter path's pure delay [s] and its std: the axes' inverse-variance mean."""
+    pure = [(g.delay_s, g.delay_std_s) for g in gi.values()
+            if math.isfinite(g.delay_s) and math.isfinite(g.delay_std_s) and g.delay_std_s > 0]
+    if not pure:
+        return math.nan, math.nan
+    w = np.array([1.0 / s**2 for _, s in pure])
+    return (float(np.sum(w * np.array([d for d, _ in pure])) / np.sum(w)),
+            float(1.0 / math.sqrt(np.sum(w))))
+
+
+def _effective_delay(sid: SercaloIdentification | None) -> tuple[float, float]:
+    """The Sercalo paths' effective delay [s] and its std: the mean of the joint fits."""
+    if sid is None or not sid.joint_delays:
+        return math.nan, math.nan
+    eff = [j.effective_delay_s for j in sid.joint_delays]
+    std = (0.5 * math.hypot(*[j.delay_std_s for j in sid.joint_delays]) if len(eff) == 2
+           else float(sid.joint_delays[0].delay_std_s))
+    return float(np.mean(eff)), std
+
+
+def qd_amplifier_lag_s(*, sid: SercaloIdentification | None,
+                       gi: Mapping[str, CurrentAmplifierGain],
+                       nominal: BenchParams) -> tuple[float, float]:
+    """The 4QD amplifier's lag the delays measure [s], and its std [s] (NaN without them).
+
+    ``τ_4QD = effective − pure − τ_coil``: the Sercalo's effective delay on
+    ``Uc → Vp`` less the pure one of ``Uc → Vc`` (no sensor there) and the
+    coil's lag. Its shape (order, bandwidth) is not measured, only its group
+    delay.
+    """
+    pure_s, pure_std = _pure_delay(gi)
+    eff_s, eff_std = _effective_delay(sid)
+    if not (math.isfinite(pure_s) and math.isfinite(eff_s)):
+        return math.nan, math.nan
+    coil = float(np.mean([coil_lag_s(nominal, a, g.gain_a_per_v) for a, g in gi.items()]))
+    return eff_s - pure_s - coil, math.hypot(eff_std, pure_std)
 
 
 def _curvature_bound(lag_s: float, f_top_hz: float) -> float:
@@ -153,25 +199,16 @@ def _finite(x: float | None) -> float:
 def _delays(out: dict[str, Uncertain], *, sid: SercaloIdentification | None,
             gi: Mapping[str, CurrentAmplifierGain], newport: NewportIdentification | None,
             nominal: BenchParams) -> None:
-    pure = [(g.delay_s, g.delay_std_s) for g in gi.values()
-            if math.isfinite(g.delay_s) and math.isfinite(g.delay_std_s) and g.delay_std_s > 0]
-    pure_s = pure_std = math.nan
-    if pure:
-        w = np.array([1.0 / s**2 for _, s in pure])
-        pure_s = float(np.sum(w * np.array([d for d, _ in pure])) / np.sum(w))
-        pure_std = float(1.0 / math.sqrt(np.sum(w)))
+    pure_s, pure_std = _pure_delay(gi)
+    if math.isfinite(pure_s):
         out["delay_s.sercalo"] = Uncertain(
             pure_s, "s", "pure delay of the converter's path (DAC transport, the hold's half "
             "sample, latency), measured on Uc → Vc", {"noise": pure_std})
     coil = float(np.mean([coil_lag_s(nominal, a, g.gain_a_per_v) for a, g in gi.items()])) \
         if gi else 0.0
-    eff_s = eff_s_std = math.nan
+    eff_s, eff_s_std = _effective_delay(sid)
     lag_bound = 0.0
     if sid is not None and sid.joint_delays:
-        eff = [j.effective_delay_s for j in sid.joint_delays]
-        eff_s = float(np.mean(eff))
-        eff_s_std = 0.5 * math.hypot(*[j.delay_std_s for j in sid.joint_delays]) \
-            if len(eff) == 2 else float(sid.joint_delays[0].delay_std_s)
         f_top = max(j.band_hz[1] for j in sid.joint_delays)
         lag = eff_s - pure_s - coil if math.isfinite(pure_s) else 0.0
         lag_bound = _curvature_bound(lag, f_top)
@@ -224,15 +261,22 @@ def _newport(out: dict[str, Uncertain], newport: NewportIdentification,
         if compression is not None:
             factor, f_std = compression.element(*_NEWPORT[axis])
             parts["compression"] = abs(fit.gain_v_per_v) * f_std / factor
+        shift = newport.sensor_shifts.get(axis)
+        sensor = ({} if shift is None else
+                  {"unresolved_sensor": bounded(shift.half_width["gain_v_per_v"])})
         out[f"newport_gain_v_per_v.{axis}"] = Uncertain(
             fit.gain_v_per_v, "V/V", f"Newport static gain {_NEWPORT[axis][1]} → "
-            f"{_NEWPORT[axis][0]}, signed (the 4QD's small-signal gain in)", parts)
-        out[f"newport.{axis}.natural_freq_hz"] = Uncertain(
-            fit.natural_freq_hz, "Hz", f"Newport natural frequency, axis {axis}",
-            {"noise": fit.natural_freq_std_hz})
-        out[f"newport.{axis}.damping_ratio"] = Uncertain(
-            fit.damping_ratio, "1", f"Newport damping ratio, axis {axis}",
-            {"noise": fit.damping_std})
+            f"{_NEWPORT[axis][0]}, signed (the 4QD's small-signal gain in)", parts | sensor,
+            bounded_parts=tuple(sensor))
+        for key, unit, words, std in (
+                ("natural_freq_hz", "Hz", "natural frequency", fit.natural_freq_std_hz),
+                ("damping_ratio", "1", "damping ratio", fit.damping_std)):
+            extra = {} if shift is None else {"unresolved_sensor": bounded(shift.half_width[key])}
+            out[f"newport.{axis}.{key}"] = Uncertain(
+                getattr(fit, key), unit, f"Newport {words}, axis {axis}"
+                + ("" if shift is None else f" (with no 4QD amplifier in the model: the "
+                   f"delays measure its lag, {shift.lag_s * 1e6:.3g} µs, not its order)"),
+                {"noise": std} | extra, bounded_parts=tuple(extra))
 
 
 def uncertainty_tree(*, qd: Mapping[str, QdCalibration],

@@ -9,26 +9,30 @@ independent by construction: each comes from another source of error).
 Part names (:data:`PARTS`), each a one-sigma standard deviation in the
 value's unit:
 
-==================  ==========================================================
-``noise``           measurement noise propagated through the estimator
-``misfit``          what the model misses beyond the noise (reduced chi-square
-                    above 1, a Birge-ratio inflation)
-``sampled_model``   sampled against continuous model: what is left of it
-                    (the estimators model the hold and fractional delays)
-``leakage``         a Welch window's leakage near the modes (bias bound)
-``transient``       a transient left in periodic averaging
-``compression``     the 4QD's compression: the uncertainty of its correction
-``distortion``      nonlinear distortion on the excited lines (best linear
-                    approximation, from the non-excited lines)
-``unresolved_lags`` lags a delay fit cannot tell from a delay (the 4QD
-                    amplifier, the coil): bounded, not measured
-``truncation``      modes above a fitted band that its model leaves out
-                    (:mod:`fsmbench.ident.fit.truncation`): bounded
-``definition``      what the quantity's definition adds (a rotation, a
-                    nominal block the value is defined against)
-``current_amp``     the current-amplifier gain's share (values divided by it)
-``calibration``     another calibration's share (e.g. the 4QD gain's)
-==================  ==========================================================
+=======================  =======================================================
+``noise``                measurement noise propagated through the estimator
+``misfit``               what the model misses beyond the noise (reduced chi-square
+                         above 1, a Birge-ratio inflation)
+``sampled_model``        sampled against continuous model: what is left of it
+                         (the estimators model the hold and fractional delays)
+``leakage``              a Welch window's leakage near the modes (bias bound)
+``transient``            a transient left in periodic averaging
+``compression``          the 4QD's compression: the uncertainty of its correction
+``distortion``           nonlinear distortion on the excited lines (best linear
+                         approximation, from the non-excited lines)
+``unresolved_lags``      lags a delay fit cannot tell from a delay (the 4QD
+                         amplifier, the coil): bounded, not measured
+``unresolved_sensor``    a 4QD amplifier the delays measure (its lag) but
+                         neither the bench model nor the lines give the shape of:
+                         the shift a first or second order of that lag causes
+                         (the Newport's parameters; bounded)
+``truncation``           modes above a fitted band that its model leaves out
+                         (:mod:`fsmbench.ident.fit.truncation`): bounded
+``definition``           what the quantity's definition adds (a rotation, a
+                         nominal block the value is defined against)
+``current_amp``          the current-amplifier gain's share (values divided by it)
+``calibration``          another calibration's share (e.g. the 4QD gain's)
+=======================  =======================================================
 
 A *bounded* systematic (``unresolved_lags``) is a uniform interval
 ``[lo, hi]`` around the value, given as its half-width over √3 (the uniform
@@ -45,8 +49,8 @@ from typing import Any
 __all__ = ["PARTS", "Uncertain", "bounded", "largest_part", "total_std"]
 
 PARTS = ("noise", "misfit", "sampled_model", "leakage", "transient", "compression",
-         "distortion", "unresolved_lags", "truncation", "definition", "current_amp",
-         "calibration")
+         "distortion", "unresolved_lags", "unresolved_sensor", "truncation", "definition",
+         "current_amp", "calibration")
 
 
 def total_std(parts: Mapping[str, float]) -> float:

@@ -27,6 +27,7 @@ PART_WORDS = {
     "compression": "the 4QD compression's correction",
     "distortion": "nonlinear distortion",
     "unresolved_lags": "lags a delay fit cannot tell from a delay (a bound)",
+    "unresolved_sensor": "the 4QD amplifier's unknown order (a bound)",
     "definition": "the quantity's definition",
     "current_amp": "the current-amplifier gain",
     "calibration": "another calibration",
