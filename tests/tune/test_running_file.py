@@ -57,3 +57,37 @@ def test_a_missing_running_file_is_refused_in_one_line(tmp_path: Path,
     err = capsys.readouterr().err
     assert code != 0
     assert "nope.json" in err and len(err.strip().splitlines()) == 1
+
+
+def test_a_device_running_a_file_s_controller_is_accepted(bench: Bench, tmp_path: Path) -> None:
+    """The device, having loaded ``tuned`` from a controllers file (as a previous tune
+    leaves it), is tuned again with ``--running`` that file: the target accepts it."""
+    tango = pytest.importorskip("tango")
+    import time
+
+    from tango.test_context import DeviceTestContext
+
+    from fsmbench.live.device import FsmBench
+    from fsmbench.tune.device import DeviceTarget
+
+    gd = bench.nominal.quad_diode.gain_v_per_rad
+    path = tmp_path / "controllers_sos.json"
+    write_sos_json(path, {"tuned": seed_decentralised_controller()},
+                   scaling=InputScaling(qd_gain_v_per_rad=(float(gd.h), float(gd.v)),
+                                        plant_source="identified (test)"),
+                   ts_s=bench.true.converter.ts_s)
+    ctx = DeviceTestContext(FsmBench, device_name="fsmbench/bench/1", process=False,
+                            properties={"Speed": 50.0, "OutputFolder": str(tmp_path / "live")})
+    with ctx as proxy:
+        proxy.set_source(tango.DevSource.DEV)
+        proxy.CloseLoop()
+        proxy.LoadController(f'{{"path": "{path}", "controller": "tuned"}}')
+        for _ in range(600):  # the load runs off the call; polled, not timed
+            if proxy.Task == "" and proxy.Controller.startswith("tuned"):
+                break
+            time.sleep(0.05)
+        loop = _running_file(str(path), bench)
+        assert proxy.Controller == loop.name
+        target = DeviceTarget(proxy, bench=bench, running=loop, folder=tmp_path / "files",
+                              address=ctx.get_device_access())
+        assert target.gd == loop.gd_v_per_rad
