@@ -30,22 +30,23 @@ def test_moving_average_long_run_variance(theta: float, rng: np.random.Generator
     assert _factor(x) == pytest.approx(expected, rel=0.15)
 
 
-@pytest.mark.parametrize("theta", [0.0, -0.5, -0.8])
-def test_current_amplifier_factor_reaches_strong_cancellation(theta: float,
-                                                              rng: np.random.Generator) -> None:
-    """The current amplifier's factor (50 Bartlett lags at a nominal 2.5): an MA(1) whose
-    long-run variance cancels to (1 + θ)² / (1 + θ²) = 0.2 and 0.024 of the variance is
-    read down to its floor 1/2.5², where 10 lags and a floor of 1/2.5 read 0.4."""
+@pytest.mark.parametrize("theta", [0.0, -0.5, -0.8, 0.5])
+def test_current_amplifier_factor_is_t_scaled_newey_west(theta: float,
+                                                         rng: np.random.Generator) -> None:
+    """The current amplifier's factor (50 Bartlett lags at a nominal 2.5): an MA(1)'s long-run
+    variance over its variance, (1 + θ)² / (1 + θ²), clipped to [1/2.5, 2.5], times the
+    (t₀.₉₇₅(ν)/1.96)² of ν = 3N/(2L) degrees of freedom."""
+    from scipy import stats
+
     from fsmbench.ident.current_amp import HAC_LAGS_PER_LINE, _hac_factor
 
     e = rng.standard_normal(N + 1)
     x = e[1:] + theta * e[:-1]
     lags = int(np.ceil(HAC_LAGS_PER_LINE * 2.5))
     rho = theta / (1 + theta**2)
-    expected = min(max(1 + 2 * (1 - 1 / (lags + 1)) * rho, 1 / 2.5**2), 2.5)
+    t_scale = (stats.t.ppf(0.975, 3 * N / (2 * lags)) / stats.norm.ppf(0.975)) ** 2
+    expected = min(max(1 + 2 * (1 - 1 / (lags + 1)) * rho, 1 / 2.5), 2.5) * t_scale
     got = _hac_factor((x, np.zeros(N)), (np.ones(N), np.zeros(N)), 2.5)
     # Bartlett's estimate over 50 lags and 8000 lines has a relative std sqrt(4 L / 3 N),
     # 9 %: 3.5 of it.
     assert got == pytest.approx(expected, rel=3.5 * np.sqrt(4 * lags / (3 * N)))
-    if theta <= -0.5:
-        assert got < 1 / 2.5  # below the old floor: the cancellation is claimed

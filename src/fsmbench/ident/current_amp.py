@@ -45,6 +45,7 @@ from scipy.optimize import minimize_scalar
 from fsmbench.bench.params import BenchParams
 from fsmbench.ident.calibration import CurrentAmplifierGain, require_signals, trim_recording
 from fsmbench.ident.delay.sampled import StateSpace3, sampled_response
+from fsmbench.ident.fit.regression import t_scaled_std
 from fsmbench.ident.frf.estimate import FrfEstimate
 from fsmbench.ident.frf.lpm import LPM_NOISE_SMOOTHING, LpmOptions, local_polynomial_frf
 from fsmbench.ident.frf.periodic import PeriodicOptions, periodic_frf
@@ -186,10 +187,11 @@ def fit_amplifier(f_hz: FloatArray, h: NDArray[np.complex128], var: FloatArray, 
 
 
 #: Bartlett lags per correlated line in :func:`_hac_factor`. Measured on the default twin
-#: (Welch, 60 seeds, scores' std(z) against the truth): 4 lags per line (10 lags) left the
-#: delay's std 1.5-1.7x and the gain's 1.2x pessimistic, 20 (50 lags) calibrated both
-#: (delay std(z) 0.81 and 1.00, where its kink's mixture gives ~0.83; gain 0.94, 1.03);
-#: 28 (70 lags) over-claimed (1.11).
+#: (Welch, 130 seeds in two sets, against the truth): 4 lags per line (10 lags) left the
+#: gain's std 1.1-1.2x pessimistic and the delay's 1.2-1.7x (by seed set); 20 (50 lags),
+#: floored at 1/nominal and t-scaled, calibrates the gain (std(z) 0.89 and 0.98) and
+#: brings the delay to 0.66 and 0.88 (its kink makes its z a mixture of two half-normals:
+#: ~0.83 when calibrated).
 HAC_LAGS_PER_LINE = 20.0
 
 
@@ -200,24 +202,28 @@ def _hac_factor(residual: tuple[FloatArray, FloatArray], jac: tuple[FloatArray, 
     The scores ``s_k = J_k r_k`` (real and imaginary parts, lines in frequency
     order) summed with Bartlett weights over ``±HAC_LAGS_PER_LINE·nominal``
     lines (Newey & West), over ``Σ s_k²``. A zero-padded Hann window's scores
-    alternate in sign over ~5 bins (lag-1 +0.34, lags 2-3 −0.3 and −0.2, lags
-    8-10 −0.1 to −0.2 on the twin), so a smooth functional such as a delay
-    over 180 lines cancels most of its noise: the true factor is 0.2-0.5 where
-    the nominal one (the window's noise bandwidth, 2.5 zero-padded lines)
-    says 2.5. Bartlett's weights damp the lags they keep, so the lags must
-    reach well past that structure (:data:`HAC_LAGS_PER_LINE`). Clipped to
-    ``[1/nominal², nominal]``: at most the nominal, and a noisy sum does not
-    claim a factor below what two windows' overlap can cancel.
+    alternate in sign over ~5 bins on the twin (lag 1 +0.34, lags 2-3 −0.3
+    and −0.2, lags 8-10 −0.1 to −0.2), so a smooth functional such as a delay
+    over 180 lines cancels much of its noise; Bartlett's weights damp the lags
+    they keep, so the lags must reach well past that structure. Clipped to
+    ``[1/nominal, nominal]``: below, a sum over a few noisy lags claimed too
+    much (a floor of 1/nominal² covered 83 % of 70 seeds within ±1.96). Then
+    t-scaled: the estimate of a long-run variance over ``L`` lags and ``n``
+    scores has a relative variance ``4L/3n`` (Bartlett), i.e.
+    ``ν = 3n/(2L)`` degrees of freedom (about 13 here), and the factor is
+    multiplied by ``(t₀.₉₇₅(ν)/1.96)²`` so that ±1.96 std is a 95 % interval.
     """
     score = residual[0] * jac[0] + residual[1] * jac[1]
     white = float(np.sum(score**2))
     if white <= 0:
         return nominal
-    lags = math.ceil(HAC_LAGS_PER_LINE * nominal)
+    lags = min(math.ceil(HAC_LAGS_PER_LINE * nominal), score.size - 1)
     acc = white
-    for j in range(1, min(lags, score.size - 1) + 1):
+    for j in range(1, lags + 1):
         acc += 2.0 * (1.0 - j / (lags + 1)) * float(np.sum(score[:-j] * score[j:]))
-    return float(np.clip(acc / white, 1.0 / nominal**2, nominal))
+    factor = float(np.clip(acc / white, 1.0 / nominal, nominal))
+    dof = 3.0 * score.size / (2.0 * max(lags, 1))
+    return factor * (t_scaled_std(1.0, dof)) ** 2
 
 
 def _estimate(u: FloatArray, v: FloatArray, *, fs: float, name: str, u_name: str,
