@@ -61,9 +61,9 @@ def test_merged_stages_are_the_inverse_variance_mean_and_calibrated() -> None:
         x1 = np.tile(_multisine(lines1, trial), 8)
         x2 = np.tile(_multisine(lines2, 100 + trial), 8)
         a = joint_periodic(_records(x1, 0.3 * rng.standard_normal((x1.size, 2, 2))),
-                           transient_periods=1, smoothing_lines=1, period_samples=_N)
+                           transient_periods=1, period_samples=_N)
         b = joint_periodic(_records(x2, 0.3 * rng.standard_normal((x2.size, 2, 2))),
-                           transient_periods=1, smoothing_lines=1, period_samples=_N)
+                           transient_periods=1, period_samples=_N)
         m = merge_closed_loop_frf([a, b])
         f = m.frequency_hz
         # The union of the lines, on the grid.
@@ -78,9 +78,11 @@ def test_merged_stages_are_the_inverse_variance_mean_and_calibrated() -> None:
         shared = np.isin(f, b.frequency_hz) & np.isin(f, a.frequency_hz)
         e = m.plant.frf[shared] - _plant(f[shared])[:, None, None] * np.eye(2)
         z2.append(np.abs(e) ** 2 / m.plant.frf_variance[shared])
-    # 20 trials x 5 shared lines x 4 elements of |z|^2; each part's variance from 7 periods
-    # (F-distributed: mean 7/6 for one part, nearer 1 for the merge's mix): within 0.8-1.5.
-    assert 0.8 < float(np.mean(z2)) < 1.5
+    # 20 trials x 5 shared lines x 4 elements of |z|^2; each part's variance on 6 x 7 complex
+    # dof (7 periods, smoothed over 7 lines): F(2, 84) has mean 1.02, and the weights' own
+    # scatter understates the merged variance by a few per cent (measured 1.09; with each
+    # line's own 6 dof, 1.38): within 0.8-1.35.
+    assert 0.8 < float(np.mean(z2)) < 1.35
 
 
 def test_merge_refuses_estimates_of_other_rates() -> None:

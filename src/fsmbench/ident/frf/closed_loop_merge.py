@@ -10,7 +10,10 @@ its coherence in 1 of 6 ``real_bench.toml`` runs) and half the measurement
 time. :func:`merge_closed_loop_frf` keeps the union of the lines; on a line
 both measured, the inverse-variance mean per element (its variance
 ``1 / sum(1 / var)``): the minimum-variance unbiased combination of
-independent unbiased estimates.
+independent unbiased estimates. The variances are estimated, so the weights
+scatter and the merged variance is understated a little: on simulated records
+mean ``|z|^2`` 1.09 with the periodic estimator's 42 degrees of freedom per
+line, 1.38 with 6 (``tests/ident/test_closed_loop_stages.py``).
 """
 
 from __future__ import annotations
