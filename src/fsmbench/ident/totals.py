@@ -275,7 +275,7 @@ def _newport(out: dict[str, Uncertain], newport: NewportIdentification,
             out[f"newport.{axis}.{key}"] = Uncertain(
                 getattr(fit, key), unit, f"Newport {words}, axis {axis}"
                 + ("" if shift is None else f" (with no 4QD amplifier in the model: the "
-                   f"delays measure its lag, {shift.lag_s * 1e6:.3g} µs, not its order)"),
+                   f"delays put its lag at up to {shift.lag_s * 1e6:.3g} µs, not its order)"),
                 {"noise": std} | extra, bounded_parts=tuple(extra))
 
 
