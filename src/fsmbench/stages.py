@@ -135,6 +135,11 @@ _BLOCK_STEP = {"Gi": "current_amp", "Gc": "sercalo", "Gn": "newport", "Gd": "qd"
 
 
 def _why_nominal(recordings: Mapping[str, xr.Dataset], ident: Identification | None) -> str:
+    # The identification's own reason first: it tells a file that was there but could not
+    # be read ("unusable") from one that is missing.
+    for step in ("current_amp", "sercalo"):
+        if ident is not None and step in ident.skipped:
+            return f"Sercalo identification: {ident.skipped[step]}"
     gone = [n for n in ("data_uch", "data_ucv") if n not in recordings]
     if gone:
         return f"{' and '.join(gone)} missing"
