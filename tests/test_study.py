@@ -52,7 +52,7 @@ def test_study_on_a_partial_folder_says_what_it_skipped(data_dir: Path, tmp_path
     # Identification ran on what is there (2.2, 2.3) and says what it skipped.
     stage = next(s for s in result.stages if s.name == "identify")
     # data_unh was there (with a NaN): never called missing
-    assert stage.ran and "newport: missing data_unv; data_unh unusable (" in stage.reason
+    assert stage.ran and "newport: missing data_unv; data_unh was not used (" in stage.reason
     assert (tmp_path / "out" / "identification.json").is_file()
     assert "2. Identification of the system dynamics" in report
     assert "true value (twin)" not in report  # recorded data: no twin wording

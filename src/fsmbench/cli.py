@@ -484,15 +484,20 @@ def _skip_sentence(why: str, *, frf: str, unusable: Mapping[str, str]) -> str:
         return (why.removesuffix("; use the LPM or Welch") + "; to identify it, run identify "
                 "with --frf auto (periods averaged where the input repeats, the LPM "
                 "elsewhere)")
-    if why.startswith("missing "):
-        names = why.removeprefix("missing ").split(", ")
+    out = []
+    for part in why.split("; "):  # the identification names unusable files itself
+        if not part.startswith("missing "):
+            out.append(part)
+            continue
+        names = part.removeprefix("missing ").split(", ")
         present = [n for n in names if n in unusable
                    and not unusable[n].startswith(f"no {n}.mat")]
         if present:
-            return "; ".join(f"{n} was not used ({unusable[n]}): correct it or record it "
-                             "again" for n in present)
-        return f"{why}; record {', '.join(names)} to identify it"
-    return why
+            out.extend(f"{n} was not used ({unusable[n]}): correct it or record it again"
+                       for n in present)
+        else:
+            out.append(f"{part}; record {', '.join(names)} to identify it")
+    return "; ".join(out)
 
 
 def _plant(args: argparse.Namespace, inp: _StageInput) -> Any:

@@ -105,7 +105,8 @@ def test_an_unreadable_file_is_not_called_missing(ident_twin: TwinRun, bench: Be
     why = "/d/data_ucv.mat: cannot be read as a MATLAB v5/v7 file"
     result = identify(only_cal, bench=bench, unusable={"data_ucv": why})
     for step in ("current_amp", "sercalo"):
-        assert result.skipped[step] == f"missing data_uch; data_ucv unusable ({why})"
+        assert result.skipped[step] == (f"missing data_uch; data_ucv was not used ({why}): "
+                                        "correct it or record it again")
     assert result.skipped["newport"] == "missing data_unh, data_unv"
 
 

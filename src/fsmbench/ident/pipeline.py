@@ -458,7 +458,8 @@ def _identify(recordings: Mapping[str, xr.Dataset], *, bench: Bench, opts: Ident
         """Why the named records are absent: never "missing" for a file that was there."""
         gone = [n for n in names if n not in unusable]
         words = [f"missing {', '.join(gone)}"] if gone else []
-        words += [f"{n} unusable ({unusable[n]})" for n in names if n in unusable]
+        words += [f"{n} was not used ({unusable[n]}): correct it or record it again"
+                  for n in names if n in unusable]
         return "; ".join(words)
 
     def data_failure(*names: str) -> Check | None:
