@@ -27,15 +27,21 @@ def _response(ctrl: object, f_hz: np.ndarray, ts_s: float) -> np.ndarray:
     return np.array([c @ np.linalg.solve(zz * np.eye(a.shape[0]) - a, b) + d for zz in z])
 
 
-def test_running_controller_from_a_file_is_the_device_s(bench: Bench, tmp_path: Path) -> None:
+@pytest.fixture
+def tuned_file(bench: Bench, tmp_path: Path) -> Path:
+    """The ESRF study's controller as a previous tune would have written it, named
+    ``tuned`` (prewarped Tustin per section)."""
     gd = bench.nominal.quad_diode.gain_v_per_rad
     path = tmp_path / "controllers_sos.json"
-    # The ESRF study's controller as a previous tune would have written it (prewarped
-    # Tustin per section).
     write_sos_json(path, {"tuned": seed_decentralised_controller()},
                    scaling=InputScaling(qd_gain_v_per_rad=(float(gd.h), float(gd.v)),
                                         plant_source="identified (test)"),
                    ts_s=bench.true.converter.ts_s)
+    return path
+
+
+def test_running_controller_from_a_file_is_the_device_s(bench: Bench, tuned_file: Path) -> None:
+    path = tuned_file
     loop = _running_file(str(path), bench)
     assert loop.name == "tuned (controllers_sos.json)"  # as LoadController names it
     ts = bench.true.converter.ts_s
@@ -59,9 +65,11 @@ def test_a_missing_running_file_is_refused_in_one_line(tmp_path: Path,
     assert "nope.json" in err and len(err.strip().splitlines()) == 1
 
 
-def test_a_device_running_a_file_s_controller_is_accepted(bench: Bench, tmp_path: Path) -> None:
+def test_a_device_running_a_file_s_controller_is_accepted(bench: Bench, tmp_path: Path,
+                                                          tuned_file: Path) -> None:
     """The device, having loaded ``tuned`` from a controllers file (as a previous tune
     leaves it), is tuned again with ``--running`` that file: the target accepts it."""
+    path = tuned_file
     tango = pytest.importorskip("tango")
     import time
 
@@ -70,12 +78,6 @@ def test_a_device_running_a_file_s_controller_is_accepted(bench: Bench, tmp_path
     from fsmbench.live.device import FsmBench
     from fsmbench.tune.device import DeviceTarget
 
-    gd = bench.nominal.quad_diode.gain_v_per_rad
-    path = tmp_path / "controllers_sos.json"
-    write_sos_json(path, {"tuned": seed_decentralised_controller()},
-                   scaling=InputScaling(qd_gain_v_per_rad=(float(gd.h), float(gd.v)),
-                                        plant_source="identified (test)"),
-                   ts_s=bench.true.converter.ts_s)
     ctx = DeviceTestContext(FsmBench, device_name="fsmbench/bench/1", process=False,
                             properties={"Speed": 50.0, "OutputFolder": str(tmp_path / "live")})
     with ctx as proxy:
