@@ -44,6 +44,7 @@ from scipy.optimize import minimize_scalar
 
 from fsmbench.bench.params import BenchParams
 from fsmbench.ident.calibration import CurrentAmplifierGain, require_signals, trim_recording
+from fsmbench.ident.delay.joint import bartlett_ratio
 from fsmbench.ident.delay.sampled import StateSpace3, sampled_response
 from fsmbench.ident.fit.regression import t_scaled_std
 from fsmbench.ident.frf.estimate import FrfEstimate
@@ -214,14 +215,11 @@ def _hac_factor(residual: tuple[FloatArray, FloatArray], jac: tuple[FloatArray, 
     multiplied by ``(t₀.₉₇₅(ν)/1.96)²`` so that ±1.96 std is a 95 % interval.
     """
     score = residual[0] * jac[0] + residual[1] * jac[1]
-    white = float(np.sum(score**2))
-    if white <= 0:
-        return nominal
     lags = min(math.ceil(HAC_LAGS_PER_LINE * nominal), score.size - 1)
-    acc = white
-    for j in range(1, lags + 1):
-        acc += 2.0 * (1.0 - j / (lags + 1)) * float(np.sum(score[:-j] * score[j:]))
-    factor = float(np.clip(acc / white, 1.0 / nominal, nominal))
+    ratio = float(bartlett_ratio(score, lags)[0])
+    if not math.isfinite(ratio):
+        return nominal
+    factor = float(np.clip(ratio, 1.0 / nominal, nominal))
     dof = 3.0 * score.size / (2.0 * max(lags, 1))
     return factor * (t_scaled_std(1.0, dof)) ** 2
 

@@ -55,7 +55,7 @@ from fsmbench.ident.delay.sampled import SensorLowpass, StateSpace3, sampled_res
 from fsmbench.ident.frf.response import FrequencyResponse
 
 __all__ = ["RESOLVED_LR", "SENSOR_FALSE_ALARM", "SENSOR_TESTS", "JointFit", "SensorEstimate",
-           "fit_jointly", "hac_factors", "line_std"]
+           "bartlett_ratio", "fit_jointly", "hac_factors", "line_std"]
 
 FloatArray = NDArray[np.float64]
 
@@ -328,14 +328,25 @@ def hac_factors(influence: FloatArray, residual: FloatArray, nominal: float) -> 
     """
     n = residual.size // 2
     psi = influence[:, :n] * residual[None, :n] + influence[:, n:2 * n] * residual[None, n:2 * n]
-    white = np.sum(psi**2, axis=1)
-    lags = math.ceil(4 * nominal)
+    ratio = bartlett_ratio(psi, math.ceil(4 * nominal))
+    return np.asarray(np.clip(np.where(np.isfinite(ratio), ratio, nominal), 1.0 / nominal,
+                              nominal), dtype=float)
+
+
+def bartlett_ratio(scores: FloatArray, lags: int) -> FloatArray:
+    """Each row's long-run variance over its variance (Newey & West, Bartlett weights).
+
+    ``(Σ_k s_k² + 2 Σ_{j=1..L} (1 − j/(L+1)) Σ_k s_k s_{k+j}) / Σ_k s_k²`` for the
+    rows of ``scores`` (shape (P, n) or (n,)), ``L = lags`` (at most ``n − 1``);
+    NaN for a row of zeros. Shape (P,) (or (1,) for one row).
+    """
+    s = np.atleast_2d(np.asarray(scores, dtype=float))
+    white = np.sum(s**2, axis=1)
     acc = white.copy()
-    for j in range(1, min(lags, n - 1) + 1):
-        acc += 2.0 * (1.0 - j / (lags + 1)) * np.sum(psi[:, :-j] * psi[:, j:], axis=1)
+    for j in range(1, min(lags, s.shape[1] - 1) + 1):
+        acc += 2.0 * (1.0 - j / (lags + 1)) * np.sum(s[:, :-j] * s[:, j:], axis=1)
     with np.errstate(invalid="ignore", divide="ignore"):
-        ratio = np.where(white > 0, acc / np.where(white > 0, white, 1.0), nominal)
-    return np.asarray(np.clip(ratio, 1.0 / nominal, nominal), dtype=float)
+        return np.where(white > 0, acc / np.where(white > 0, white, 1.0), np.nan)
 
 
 def _resolve(solve: Callable[[FloatArray, SensorLowpass], _Solution], *, prior: _Solution,
