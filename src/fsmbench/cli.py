@@ -48,7 +48,7 @@ import signal
 import sys
 import threading
 import traceback
-from collections.abc import Callable, Iterator, Mapping, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from types import FrameType
@@ -461,8 +461,7 @@ def _cmd_identify(args: argparse.Namespace) -> int:
         print("\n".join(readable_table(js, reference=reference, bench=inp.bench)))
         for step, why in result.skipped.items():
             print(f"not identified: {_STEP_WORDS.get(step, step)}: "
-                  + _skip_sentence(why, frf=getattr(args, "frf", "auto"),
-                                   unusable=inp.skipped))
+                  + _skip_sentence(why, frf=getattr(args, "frf", "auto")))
     return 0
 
 
@@ -474,30 +473,20 @@ _STEP_WORDS = {"qd": "4QD calibration (2.1)", "current_amp": "current amplifiers
                "noise_model": "noise model of the huddle tests"}
 
 
-def _skip_sentence(why: str, *, frf: str, unusable: Mapping[str, str]) -> str:
+def _skip_sentence(why: str, *, frf: str) -> str:
     """Why a step was skipped and what the user does about it, where the reason says it.
 
-    ``unusable``: the files present but not read, with why; such a file is not
-    "missing": it is named with its problem, to correct or record again.
+    A file present but not read is already named by the identification with its
+    problem ("was not used (…): correct it or record it again"); a missing one
+    gets "record it to identify it" here.
     """
     if "not periodic" in why and frf == "periodic":
         return (why.removesuffix("; use the LPM or Welch") + "; to identify it, run identify "
                 "with --frf auto (periods averaged where the input repeats, the LPM "
                 "elsewhere)")
-    out = []
-    for part in why.split("; "):  # the identification names unusable files itself
-        if not part.startswith("missing "):
-            out.append(part)
-            continue
-        names = part.removeprefix("missing ").split(", ")
-        present = [n for n in names if n in unusable
-                   and not unusable[n].startswith(f"no {n}.mat")]
-        if present:
-            out.extend(f"{n} was not used ({unusable[n]}): correct it or record it again"
-                       for n in present)
-        else:
-            out.append(f"{part}; record {', '.join(names)} to identify it")
-    return "; ".join(out)
+    return "; ".join(
+        f"{part}; record {part.removeprefix('missing ')} to identify it"
+        if part.startswith("missing ") else part for part in why.split("; "))
 
 
 def _plant(args: argparse.Namespace, inp: _StageInput) -> Any:

@@ -207,10 +207,11 @@ def _delays(out: dict[str, Uncertain], *, sid: SercaloIdentification | None,
     coil = float(np.mean([coil_lag_s(nominal, a, g.gain_a_per_v) for a, g in gi.items()])) \
         if gi else 0.0
     eff_s, eff_s_std = _effective_delay(sid)
+    lag = qd_amplifier_lag_s(sid=sid, gi=gi, nominal=nominal)[0]
+    lag = lag if math.isfinite(lag) else 0.0
     lag_bound = 0.0
     if sid is not None and sid.joint_delays:
         f_top = max(j.band_hz[1] for j in sid.joint_delays)
-        lag = eff_s - pure_s - coil if math.isfinite(pure_s) else 0.0
         lag_bound = _curvature_bound(lag, f_top)
         out["effective_delay_s.sercalo"] = Uncertain(
             eff_s, "s", "effective delay of Uc → Vp: the pure delay with the coil's and the "
@@ -224,8 +225,7 @@ def _delays(out: dict[str, Uncertain], *, sid: SercaloIdentification | None,
     eff_n = float(np.mean([axes[a].effective_delay_s for a in "hv"]))
     eff_n_std = 0.5 * math.hypot(axes["h"].delay_std_s, axes["v"].delay_std_s)
     f_top_n = max(axes[a].band_hz[1] for a in "hv")
-    lag_n = (eff_s - pure_s - coil) if math.isfinite(eff_s) and math.isfinite(pure_s) else 0.0
-    bound_n = _curvature_bound(lag_n, f_top_n)
+    bound_n = _curvature_bound(lag, f_top_n)
     out["effective_delay_s.newport"] = Uncertain(
         eff_n, "s", "effective delay of Un → Vp: the Newport's pure delay with the 4QD "
         "amplifier's lag, the mean of the two axes",
