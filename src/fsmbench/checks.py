@@ -18,7 +18,7 @@ from typing import Any, Literal
 
 from fsmbench.jsonutil import plain_json
 
-__all__ = ["CHECK_TITLES", "Check", "Notice", "failed", "first_failure"]
+__all__ = ["CHECK_TITLES", "Check", "Finding", "Notice", "failed", "first_failure"]
 
 
 #: What each check tests, in the words a user reads (its ``name`` stays the JSON key).
@@ -44,10 +44,11 @@ CHECK_TITLES: dict[str, str] = {
                                       "the calibration's",
     "qd_gain_vs_nominal": "4QD gain against the bench file's",
     "qd_noise_vs_model": "4QD noise against the bench file's",
+    "rate_vs_controller": "sampling rate against the recorded controller's",
     "sampling_rate": "sampling rate",
     "sercalo_gain_vs_model": "Sercalo gain against the bench file's",
-    "sign_vs_bench": "sign against the bench file's model",
     "signal_varies": "signal varies",
+    "signs_across_records": "path signs across the records",
     "va_continuous": "distance record continuous (no jump)",
     "va_in_metres": "distance in metres",
 }
@@ -136,6 +137,56 @@ class Notice:
     def to_json(self) -> dict[str, Any]:
         """JSON-ready dict."""
         return dict(asdict(self))
+
+
+@dataclass(frozen=True)
+class Finding:
+    """What the records measured where the bench file says otherwise: a fact about the bench.
+
+    The bench file is a prior; a departure from it is not a fault of the
+    records. A finding names the bench-file key, the value the records give
+    it, and the other causes that would produce the same records.
+
+    Attributes
+    ----------
+    key : str
+        The bench-file key (``nominal.sercalo.beam_angle_per_mirror_angle.h``).
+    bench_value, measured : float
+        The bench file's value and the records', in ``unit``.
+    unit : str
+        Unit of both ("1" for a sign or a ratio).
+    subject : str
+        The records it rests on (``data_uch.mat, data_rep_h.mat``).
+    message : str
+        What was found, in words, with the evidence.
+    std : float
+        The measured value's standard deviation (0 for a sign the records fix).
+    alternatives : tuple of str
+        Other causes that fit the same records, each with what would separate it;
+        empty when the records leave one.
+    """
+
+    key: str
+    bench_value: float
+    measured: float
+    unit: str
+    subject: str
+    message: str
+    std: float = 0.0
+    alternatives: tuple[str, ...] = ()
+
+    def sentence(self) -> str:
+        """One line: subject, what was found, the key and both values, the alternatives."""
+        head = f"{self.subject}: " if self.subject else ""
+        unit = "" if self.unit in ("", "1") else f" {self.unit}"
+        alt = (f" (or: {'; or '.join(self.alternatives)})" if self.alternatives else "")
+        return (f"{head}{self.message}: {self.key} = {self.measured:.6g}{unit} (bench file "
+                f"{self.bench_value:.6g}{unit}){alt}")
+
+    def to_json(self) -> dict[str, Any]:
+        """JSON-ready dict (``plain_json`` convention)."""
+        out: dict[str, Any] = plain_json(asdict(self))
+        return out
 
 
 def failed(checks: Iterable[Check]) -> list[Check]:

@@ -393,7 +393,9 @@ def _stage_input(args: argparse.Namespace, *,
     say = _progress()
     bench = _bench(args)
     conv = bench.nominal.converter
-    loaded = load_recordings(data, progress=say, fs_hz=conv.fs_hz, adc_range_v=conv.range_v,
+    # The records' rate is judged by the identification against each other, then the bench
+    # file (ident.evidence.rate).
+    loaded = load_recordings(data, progress=say, fs_hz=None, adc_range_v=conv.range_v,
                              adc_bits=conv.bits)
     for name, why in loaded.unusable().items():
         # Simply absent: not mentioned; a near miss ("found DATA_UCH.mat: rename it …") is.
@@ -459,6 +461,11 @@ def _cmd_identify(args: argparse.Namespace) -> int:
                          indent=2, allow_nan=False))
     else:
         print("\n".join(readable_table(js, reference=reference, bench=inp.bench)))
+        for finding in result.findings:
+            print(f"found: {finding.sentence()}")
+        if result.findings:
+            print(f"the bench file that matches the records: "
+                  f"{run.final_path(run.staging / 'bench_identified.toml')}")
         for step, why in result.skipped.items():
             print(f"not identified: {_STEP_WORDS.get(step, step)}: "
                   + _skip_sentence(why, frf=getattr(args, "frf", "auto")))

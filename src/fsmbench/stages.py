@@ -50,12 +50,14 @@ __all__ = [
     "VALIDATION_FORMAT",
     "DesignStage",
     "PlantChoice",
+    "RecordedLoop",
     "SimulationBench",
     "ValidationStage",
     "budget_stage",
     "choose_plant",
     "design_stage",
     "identify_stage",
+    "recorded_loop",
     "simulation_bench",
     "validation_stage",
 ]
@@ -153,6 +155,49 @@ def _why_nominal(recordings: Mapping[str, xr.Dataset], ident: Identification | N
     return "the Sercalo was not identified"
 
 
+@dataclass(frozen=True)
+class RecordedLoop:
+    """The 4QD gains the recorded closed loop divided by, and where they come from.
+
+    ``gd_used_v_per_rad`` per axis (h, v) [V/rad], signed; ``measured`` per axis:
+    read from the closed-loop records (:mod:`fsmbench.ident.evidence.recorded_loop`),
+    else the bench file's (assumed, as the ESRF study's real-time code used).
+    """
+
+    gd_used_v_per_rad: tuple[float, float]
+    measured: tuple[bool, bool]
+
+    def words(self) -> str:
+        """Where the gains come from, in words."""
+        parts = []
+        for axis, gd, m in zip("hv", self.gd_used_v_per_rad, self.measured, strict=True):
+            how = "measured from the closed-loop records" if m else "assumed: the bench file's"
+            parts.append(f"{axis} {gd:+.4g} V/rad ({how})")
+        return ", ".join(parts)
+
+
+def recorded_loop(ident: Identification | None, *, bench: Bench) -> RecordedLoop:
+    """The recorded loop's 4QD gains: measured where the records ran the ESRF study's
+    controller, the bench file's otherwise. A measured gain within 3 of its standard
+    deviations (or 0.1 %) of the bench file's is the bench file's: the records confirm it,
+    and a simulation of the loop does not change with the fit's last digits."""
+    gd = bench.nominal.quad_diode.gain_v_per_rad
+    found = {} if ident is None else ident.recorded_loop
+    values, measured = [], []
+    for axis in "hv":
+        loop = found.get(axis)
+        ok = loop is not None and loop.verdict == "seed"
+        value = gd[axis]
+        if ok and loop is not None:
+            value = float(loop.gd_used_v_per_rad)
+            close = max(3.0 * loop.gd_used_std_v_per_rad, 1e-3 * abs(gd[axis]))
+            if abs(value - gd[axis]) <= close:
+                value = gd[axis]
+        values.append(value)
+        measured.append(ok)
+    return RecordedLoop((values[0], values[1]), (measured[0], measured[1]))
+
+
 def _write_json(path: Path, payload: Mapping[str, Any]) -> Path:
     return atomic_write_text(path, json.dumps(plain_json(payload), indent=2, sort_keys=True,
                                               allow_nan=False) + "\n")
@@ -164,15 +209,22 @@ def budget_stage(recordings: Mapping[str, xr.Dataset], *, bench: Bench, out_dir:
     """ESRF study sections 3, 4, 11: ``budget.json`` (``progress`` hears of long records' reads).
 
     ``recommended``: fsmbench's controller (continuous), whose budget is computed
-    beside the recorded loop's (the ESRF study's controller of 9.2).
+    beside the recorded loop's (the ESRF study's controller of 9.2, on the 4QD gains
+    the closed-loop records show it divided by: :func:`recorded_loop`).
     """
     from fsmbench.budget.study import budget_study
 
     ident = plant.identification
     # The measured noise replaces the bench file's only from a trusted identification.
     trusted = ident is not None and not ident.warnings and plant.plant is ident.plant
+    loop = recorded_loop(ident, bench=bench)
     result = budget_study(recordings, bench=bench, plant=plant.plant, progress=progress,
                           recommended=recommended,
+                          controller=_recorded_seed_controller(plant.plant, bench=bench,
+                                                               loop=loop),
+                          controller_name=("ESRF study 9.2 K, Tustin at 1/fs (9.3), on the 4QD "
+                                           f"gains the records ran ({loop.words()})"
+                                           if any(loop.measured) else ""),
                           noise_model=ident.noise_model if trusted and ident else None)
     # The stage's plant source (which blocks were identified, or why nominal) replaces the
     # plant model's own shorter one.
@@ -182,6 +234,24 @@ def budget_stage(recordings: Mapping[str, xr.Dataset], *, bench: Bench, out_dir:
     name, version = BUDGET_FORMAT
     return result, [_write_json(out_dir / "budget.json",
                                 stamped(payload, format=name, version=version))]
+
+
+def _recorded_seed_controller(plant: PlantModel, *, bench: Bench, loop: RecordedLoop) -> Any:
+    """The ESRF study's controller as the records ran it on this plant's beam angles:
+    ``K diag(Gd / g_used)`` (Tustin at 1/fs, ESRF study 9.3), or None (the budget's
+    default, K on the beam angle) when the records measured no loop."""
+    import control as ct
+    import numpy as np
+
+    from fsmbench.control.seed import seed_decentralised_controller, tustin
+
+    if not any(loop.measured) or "Gd" not in plant.blocks:
+        return None
+    scale = (np.diag(np.asarray(plant.blocks["Gd"].D, dtype=float))
+             / np.asarray(loop.gd_used_v_per_rad, dtype=float))
+    k = tustin(seed_decentralised_controller(), ts_s=bench.nominal.converter.ts_s)
+    return ct.ss(k.A, k.B @ np.diag(scale), k.C, np.asarray(k.D) @ np.diag(scale), k.dt,
+                 inputs=["Rh", "Rv"], outputs=["Uch", "Ucv"], name="Krecorded")
 
 
 @dataclass(frozen=True, eq=False)
@@ -290,7 +360,8 @@ class ValidationStage:
 
 def validation_stage(recordings: Mapping[str, xr.Dataset], *, bench: Bench,
                      simulated: Bench | None, plant: PlantModel | None, out_dir: Path,
-                     seed: int = 0, progress: Progress | None = None
+                     seed: int = 0, progress: Progress | None = None,
+                     loop: RecordedLoop | None = None
                      ) -> tuple[ValidationStage, list[Path]]:
     """``data_rep_h/v`` as recorded against the same experiments simulated on ``simulated``.
 
@@ -305,10 +376,14 @@ def validation_stage(recordings: Mapping[str, xr.Dataset], *, bench: Bench,
         The identified bench (or the twin); None: not run.
     plant : PlantModel or None
         The model's plant (the identified one).
+    loop : RecordedLoop, optional
+        The 4QD gains the recorded loop divided by (default: the bench file's,
+        assumed).
     """
+    from fsmbench.bench.axes import PerAxis
     from fsmbench.control.seed import seed_decentralised_controller, tustin
     from fsmbench.control.validation import validate_closed_loop
-    from fsmbench.twin.experiments import seed_feedback
+    from fsmbench.sim.controller import feedback_controller
     from fsmbench.twin.simulate import simulate_bench
 
     say = progress or _quiet
@@ -318,13 +393,15 @@ def validation_stage(recordings: Mapping[str, xr.Dataset], *, bench: Bench,
     if simulated is None or plant is None:
         return ValidationStage(None, "no identified bench to predict the recorded loop on"), []
     say(f"predicting the recorded closed loop ({', '.join(names)}) on {simulated.label}")
-    gd = bench.nominal.quad_diode.gain_v_per_rad
+    used = (loop or recorded_loop(None, bench=bench)).gd_used_v_per_rad
     runs: dict[str, xr.Dataset] = {}
     for name in names:
         t = recordings[name]["t"].values
         duration = float(t[-1] - t[0]) + 1.0 / bench.nominal.converter.fs_hz
-        # The recorded loop ran the seed's controller on the bench file's 4QD gains.
-        controller = seed_feedback(simulated)
+        # The recorded loop ran the seed's controller on the 4QD gains it divided by.
+        controller = feedback_controller(seed_decentralised_controller(),
+                                         gd_v_per_rad=PerAxis(h=used[0], v=used[1]),
+                                         ts_s=simulated.true.converter.ts_s, name="seed K (9.2)")
         run = simulate_bench(simulated, seed=seed, duration_s=duration, experiments=[name],
                              controller=controller)
         runs[name] = run.recordings[name]
@@ -333,7 +410,7 @@ def validation_stage(recordings: Mapping[str, xr.Dataset], *, bench: Bench,
         result = validate_closed_loop(recordings, simulated=runs, plant=plant,
                                       params=simulated.true, controller=k,
                                       controller_name="the ESRF study's controller (9.2)",
-                                      gd_used_v_per_rad=(gd.h, gd.v),
+                                      gd_used_v_per_rad=used,
                                       bench_label=simulated.label)
     except ValueError as exc:
         return ValidationStage(None, str(exc)), []

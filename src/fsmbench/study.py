@@ -46,6 +46,7 @@ from fsmbench.stages import (
     choose_plant,
     design_stage,
     identify_stage,
+    recorded_loop,
     simulation_bench,
     validation_stage,
 )
@@ -257,7 +258,9 @@ def run_study(*, out_dir: str | Path, data_dir: str | Path | None = None,
         source = f"recorded data in {data}"
 
     conv = bench.nominal.converter
-    loaded = load_recordings(data, progress=say, fs_hz=conv.fs_hz, adc_range_v=conv.range_v,
+    # The records' rate is judged against each other and then the bench file, by the
+    # identification (ident.evidence.rate): the loader does not hold t to the bench file.
+    loaded = load_recordings(data, progress=say, fs_hz=None, adc_range_v=conv.range_v,
                              adc_bits=conv.bits)
     recordings = loaded.recordings
     stages.append(StageStatus("recordings", True, outputs=tuple(recordings)))
@@ -276,6 +279,10 @@ def run_study(*, out_dir: str | Path, data_dir: str | Path | None = None,
     else:
         stages.append(StageStatus("identify", False,
                                   reason="none of " + ", ".join(IDENT_EXPERIMENTS) + " present"))
+    if ident is not None and ident.params is not None and ident.params != bench.nominal:
+        # The bench as the records describe its structure (their rate, its signs): every
+        # later stage models and simulates it so (ident.evidence).
+        bench = replace(bench, nominal=ident.params)
     plant = choose_plant(recordings, bench=bench, identification=ident, progress=say)
     say(f"plant for the budget and the design: {plant.source}")
     lap("identify")
@@ -308,7 +315,7 @@ def run_study(*, out_dir: str | Path, data_dir: str | Path | None = None,
     validation, written = validation_stage(
         recordings, bench=bench, simulated=identified.bench,
         plant=None if identified.bench is None else plant.plant, out_dir=out, seed=seed,
-        progress=say)
+        progress=say, loop=recorded_loop(ident, bench=bench))
     stages.append(StageStatus("validation", validation.result is not None,
                               outputs=tuple(str(p) for p in written),
                               reason=validation.skipped or identified.reason))

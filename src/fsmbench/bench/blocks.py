@@ -105,7 +105,8 @@ def current_amplifier(p: BenchParams) -> ct.StateSpace:
     l_h = p.sercalo.l_coil_h.as_array()
     # State: coil current [A]. The pole (R_tot/Lc, ~125 kHz) is kept: it is physics,
     # and exact discretisation handles the stiffness.
-    return ct.ss(np.diag(-r_tot / l_h), np.diag(1.0 / l_h), np.eye(2), np.zeros((2, 2)),
+    sign = p.current_amplifier.sign.as_array()  # an inverting amplifier or reversed coil
+    return ct.ss(np.diag(-r_tot / l_h), np.diag(sign / l_h), np.eye(2), np.zeros((2, 2)),
                  inputs=["Uch", "Ucv"], outputs=["Ich", "Icv"], states=["Ich", "Icv"], name="Gi")
 
 
@@ -124,8 +125,8 @@ def coil_impedance(p: BenchParams) -> ct.StateSpace:
 def voltage_amplifier(p: BenchParams) -> ct.StateSpace:
     """Ga: ``Ga0 / (1 + s/wc)`` per axis [V/V] (ESRF study 2.2 eq. 7)."""
     wc = 2.0 * np.pi * p.voltage_amplifier.cutoff_hz
-    g = p.voltage_amplifier.gain
-    return ct.ss(-wc * np.eye(2), wc * g * np.eye(2), np.eye(2), np.zeros((2, 2)),
+    g = p.voltage_amplifier.gain * p.voltage_amplifier.sign.as_array()
+    return ct.ss(-wc * np.eye(2), wc * np.diag(g), np.eye(2), np.zeros((2, 2)),
                  inputs=["Vtch", "Vtcv"], outputs=["Vch", "Vcv"], states=["Vch", "Vcv"],
                  name="Ga")
 

@@ -209,6 +209,11 @@ _NON_ZERO = {
     "newport.beam_angle_per_mirror_angle": "a gain", "quad_diode.gain_v_per_rad": "a gain",
 }
 
+_SIGNS = {
+    "current_amplifier.sign": "a sign", "voltage_amplifier.sign": "a sign",
+    "newport.metrology_sign": "a sign",
+}
+
 
 def _values(p: Any, prefix: str = "") -> list[tuple[str, Any]]:
     """(``section.name[.h|.v|[i]]``, value) of every number of a BenchParams."""
@@ -255,6 +260,8 @@ def check_ranges(p: BenchParams, where: str, origin: str) -> None:
         if base in _NON_ZERO and value == 0:
             raise ParamsError(f"{origin}: {name} must be non-zero ({_NON_ZERO[base]}: 0 "
                               "would cut the signal path)")
+        if base in _SIGNS and value not in (-1.0, 1.0):
+            raise ParamsError(f"{origin}: {name} must be +1 or -1 ({_SIGNS[base]})")
     if not 1 <= conv.bits <= BITS_MAX:
         raise ParamsError(f"{origin}: '{where}.converter.bits' = {conv.bits} must be a whole "
                           f"number from 1 to {BITS_MAX} (the converters' resolution)")

@@ -226,6 +226,12 @@ class CurrentAmplifierParams:
         "ESRF study 2.2",
         "buffer output and wiring resistance in series with R and Rc (zero in the schematic)",
     )
+    sign: PerAxis = _p(
+        "1", "fsmbench (evidence)",
+        "sign of the coil current per command volt: +1 as in ESRF study Fig. 11, -1 for an "
+        "inverting amplifier or a coil whose two wires are the other way round",
+        PerAxis(h=1.0, v=1.0),
+    )
 
 
 @dataclass(frozen=True)
@@ -235,6 +241,12 @@ class VoltageAmplifierParams:
     gain: float = _p("V/V", "ESRF study 2.2", "DC gain Ga0 (60 dB)")
     cutoff_hz: float = _p("Hz", "ESRF study 2.2", "first-order cut-off frequency")
     noise_rms_v: float = _p("V rms", "fsmbench", "white noise at the amplifier output")
+    sign: PerAxis = _p(
+        "1", "fsmbench (evidence)",
+        "sign of the monitor Vch, Vcv against the voltage across the coil (-1: its input or "
+        "output cable the other way round)",
+        PerAxis(h=1.0, v=1.0),
+    )
 
 
 @dataclass(frozen=True)
@@ -269,6 +281,12 @@ class NewportParams:
         "rad rms", "ESRF study Fig. 4", "noise of the local position sensor behind Vnh, Vnv"
     )
     concave_radius_m: float = _p("m", "ESRF study 4.5a", "radius of the concave Newport mirror")
+    metrology_sign: PerAxis = _p(
+        "1", "fsmbench (evidence)",
+        "sign of each metrology output Vnh, Vnv against the mirror's angle (-1: that output "
+        "reads the other way)",
+        PerAxis(h=1.0, v=1.0),
+    )
 
 
 @dataclass(frozen=True)

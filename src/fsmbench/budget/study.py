@@ -235,7 +235,7 @@ def budget_study(recordings: Mapping[str, xr.Dataset], *, bench: Bench,
                  progress: Callable[[str], None] | None = None,
                  recommended: ct.StateSpace | None = None,
                  recommended_name: str = "fsmbench's controller",
-                 noise_model: Any = None) -> BudgetResult:
+                 noise_model: Any = None, controller_name: str = "") -> BudgetResult:
     """ESRF study sections 3, 4 and 11 on the recordings present.
 
     Parameters
@@ -252,6 +252,8 @@ def budget_study(recordings: Mapping[str, xr.Dataset], *, bench: Bench,
     controller : control.StateSpace, optional
         Loop controller ``Rh, Rv → Uch, Ucv`` (``U = −K R``); default the ESRF study's
         9.2 controller discretised as its 9.3 (Tustin at ``1/fs``).
+    controller_name : str
+        ``controller`` in words (default its ``name``).
     window_s : float
         Record length of the budget's rms [s] (the huddle tests' 100 s).
     df_hz : float
@@ -276,7 +278,7 @@ def budget_study(recordings: Mapping[str, xr.Dataset], *, bench: Bench,
         result = _budget_study(recordings, bench=bench, plant=plant, controller=controller,
                                window_s=window_s, df_hz=df_hz, progress=progress,
                                recommended=recommended, recommended_name=recommended_name,
-                               noise_model=noise_model)
+                               noise_model=noise_model, controller_name=controller_name)
     numeric = tuple(Notice("numeric", "budget", f"{w.category.__name__}: {w.message}")
                     for w in caught)
     return replace(result, notices=result.notices + numeric) if numeric else result
@@ -287,14 +289,15 @@ def _budget_study(recordings: Mapping[str, xr.Dataset], *, bench: Bench,
                   window_s: float, df_hz: float,
                   progress: Callable[[str], None] | None,
                   recommended: ct.StateSpace | None = None,
-                  recommended_name: str = "", noise_model: Any = None) -> BudgetResult:
+                  recommended_name: str = "", noise_model: Any = None,
+                  controller_name: str = "") -> BudgetResult:
     params, measured = _measured_params(bench.nominal, noise_model)
     plant = physical_plant(params, source="physical (nominal)") if plant is None else plant
     if controller is None:
         controller = tustin(seed_decentralised_controller(), ts_s=params.converter.ts_s)
         controller_name = "ESRF study 9.2 K, Tustin at 1/fs (9.3)"
     else:
-        controller_name = str(controller.name or "given controller")
+        controller_name = controller_name or str(controller.name or "given controller")
     skipped: dict[str, str] = {}
     checks: list[Check] = []
     notices: list[Notice] = []

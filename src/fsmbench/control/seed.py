@@ -14,6 +14,8 @@ The ESRF study closes the loop with ``-K``: ``[Uch, Ucv] = -K [Rh, Rv]``.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import control as ct
 import numpy as np
 
@@ -21,9 +23,11 @@ from fsmbench.control.realize import zpk_cascade
 
 __all__ = [
     "SEED_TS_S",
+    "SeedZpk",
     "iff_controller",
     "newport_controller",
     "seed_decentralised_controller",
+    "seed_decentralised_zpk",
     "tustin",
 ]
 
@@ -34,15 +38,37 @@ def _quadratic_roots(b1: float, b0: float) -> list[complex]:
     return [complex(r) for r in np.roots([1.0, b1, b0])]
 
 
+@dataclass(frozen=True)
+class SeedZpk:
+    """One axis of the ESRF study's controller of 9.2 as continuous zeros, poles and gain.
+
+    Attributes
+    ----------
+    zeros_rad_s, poles_rad_s : tuple of complex
+        In rad/s (``s`` plane).
+    gain : float
+        The zpk gain [V/rad·(rad/s)^(poles − zeros)]: ``K(s) = gain Π(s − z)/Π(s − p)``.
+    """
+
+    zeros_rad_s: tuple[complex, ...]
+    poles_rad_s: tuple[complex, ...]
+    gain: float
+
+
+def seed_decentralised_zpk() -> dict[str, SeedZpk]:
+    """``Kh`` and ``Kv`` of ESRF study 9.2 by axis (``"h"``, ``"v"``), input R [rad], output V."""
+    w_lp = 2.0 * np.pi * 2000.0
+    return {"h": SeedZpk((-112.0, *_quadratic_roots(15.93, 6.686e6)),
+                         (0.0, 0.0, -352.5, -w_lp), -0.25598 * w_lp),
+            "v": SeedZpk((-55.15, *_quadratic_roots(17.45, 2.491e6)),
+                         (0.0, 0.0, -491.2, -7695.0), 10207.0)}
+
+
 def seed_decentralised_controller() -> ct.StateSpace:
     """``K = blkdiag(Kh, Kv)`` (ESRF study 9.2), inputs ``Rh, Rv`` [rad], outputs ``Uch, Ucv``."""
-    w_lp = 2.0 * np.pi * 2000.0
-    kh = zpk_cascade([-112.0, *_quadratic_roots(15.93, 6.686e6)],
-                     [0.0, 0.0, -352.5, -w_lp], -0.25598 * w_lp,
-                     input_name="Rh", output_name="Uch")
-    kv = zpk_cascade([-55.15, *_quadratic_roots(17.45, 2.491e6)],
-                     [0.0, 0.0, -491.2, -7695.0], 10207.0,
-                     input_name="Rv", output_name="Ucv")
+    axes = seed_decentralised_zpk()
+    kh, kv = (zpk_cascade(list(axes[a].zeros_rad_s), list(axes[a].poles_rad_s), axes[a].gain,
+                          input_name=f"R{a}", output_name=f"Uc{a}") for a in "hv")
     k = ct.append(kh, kv)
     return ct.ss(k.A, k.B, k.C, k.D, inputs=["Rh", "Rv"], outputs=["Uch", "Ucv"], name="K")
 

@@ -359,22 +359,27 @@ MIN_CALIBRATION_R2 = 0.9
 # swing of ~0.7 V is 0.1 %; 5 % means a curved response (spot near a quadrant's
 # edge) or a channel that does not see the beam.
 MAX_CALIBRATION_RESIDUAL = 0.05
-# Identified gains against the nominal: the 4QD's gain scales with the spot's
-# power and size, which realignment changes by tens of % (the seed's two axes
-# differ by 17 %); the seed measured the current amplifier at 0.64 and 0.68 of
-# 1/(R + Rc) (its buffer's resistance is not in that formula). A factor of 2,
-# or a sign flip, is a wrong channel, wiring or unit, not the bench.
-MAX_GAIN_FACTOR = 2.0
+# Identified gains against the bench file: the bench file is a prior, and a bench
+# that differs from it is a finding (ident.evidence.departures), not a fault: the
+# 4QD's gain scales with the spot's power and size (tens of % on realignment, ×5
+# between detectors), the seed measured its current amplifier at 0.64 of 1/(R + Rc),
+# another amplifier or detector is several times off. Only beyond a factor 10 does
+# the value stop being a plausible bench; even then a device that different is not
+# excluded, so the check names it beside a gain or unit slip and advises no change.
+# The sign is the records' own (ident.evidence.signs), not judged here.
+MAX_GAIN_FACTOR = 10.0
 
 
 def _factor_check(name: str, value: float, nominal: float, subject: str, what: str) -> Check:
-    ratio = value / nominal if nominal else float("nan")
+    ratio = abs(value / nominal) if nominal else float("nan")
     ok = bool(np.isfinite(ratio) and 1 / MAX_GAIN_FACTOR <= ratio <= MAX_GAIN_FACTOR)
     return Check(name, ok, float(ratio), f"{1 / MAX_GAIN_FACTOR:g} to {MAX_GAIN_FACTOR:g} "
-                 f"times the nominal {nominal:.4g}", subject,
-                 "" if ok else f"the identified {what} is {value:.4g}, not within a factor "
-                 f"{MAX_GAIN_FACTOR:g} (same sign) of the nominal {nominal:.4g}: check the "
-                 "channel, its wiring and its unit", unit="×")
+                 f"times the bench file's {abs(nominal):.4g} in magnitude", subject,
+                 "" if ok else f"the identified {what} is {value:.4g}, {ratio:.3g}× the bench "
+                 f"file's {nominal:.4g}: either a device that far from the bench file's, or a "
+                 "gain or unit slip in the records (an amplifier range, mV for V), or a wrong "
+                 "channel; the records cannot tell which: check the channel's gain, unit and "
+                 "cable, and the device's datasheet", unit="×")
 
 
 def qd_checks(cal: QdCalibration, *, nominal_v_per_rad: float) -> list[Check]:
@@ -392,7 +397,7 @@ def qd_checks(cal: QdCalibration, *, nominal_v_per_rad: float) -> list[Check]:
     list of Check
         ``calibration_r2`` (≥ 0.9), ``calibration_residual`` (residual rms
         ≤ 5 % of the fitted swing ``|a|·range``) and ``qd_gain_vs_nominal``
-        (ratio 0.5–2).
+        (magnitude 0.1–10 times the bench file's).
     """
     vp = _AXES[cal.axis][0]
     subject = f"{cal.experiment}: {vp}"
@@ -415,7 +420,8 @@ def qd_checks(cal: QdCalibration, *, nominal_v_per_rad: float) -> list[Check]:
 
 
 def current_amp_checks(gain: CurrentAmplifierGain) -> list[Check]:
-    """``current_amp_gain_vs_theoretical``: the identified Gi within a factor 2 of 1/(R + Rc)."""
+    """``current_amp_gain_vs_theoretical``: the identified Gi within a factor 10 of
+    1/(R + Rc) in magnitude (:data:`MAX_GAIN_FACTOR`)."""
     u_name, v_name = _CURRENT[gain.axis]
     return [_factor_check("current_amp_gain_vs_theoretical", gain.gain_a_per_v,
                           gain.theoretical_a_per_v, f"{gain.experiment}: {u_name} → {v_name}",

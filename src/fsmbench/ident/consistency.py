@@ -17,17 +17,17 @@ what they say with the bench file's nominal model and with each other:
     means the other axis was driven: a swapped DAC cable, or the other run
     saved under this name. A dead direct channel beside a coupling is not a
     swap: the steps' own checks name it.
-``sign_vs_bench``
-    Each direct path's sign against the model's, from its response in
-    :data:`SIGN_BAND_HZ` projected on the model's phase (``ρ``, the cosine
-    of the phase between them weighted by magnitude: +1 agrees, −1 is
-    reversed). The disagreements are then attributed: a 4QD output reversed
-    in every file that drives it (the 4QD's polarity, or the bench file's
-    sign: one check, attached to every such file, so the 4QD gain, the
-    Sercalo and the Newport all fall back together rather than a reversed
-    4QD mixing with a nominal one); both paths of a Sercalo run reversed (the
-    command ``Uch`` flipped in that file); one path reversed (that file's
-    output, or its command).
+``signs_across_records``
+    Each direct path's sign against the bench file's model, from its response
+    in :data:`SIGN_BAND_HZ` projected on the model's phase (``ρ``, the cosine of
+    the phase between them weighted by magnitude: +1 agrees, −1 is reversed),
+    with the metrology against the Newport's drive in ``data_rep_h/v`` and the
+    sign of the controller each closed-loop record ran
+    (:mod:`fsmbench.ident.evidence.recorded_loop`). The signs are then
+    explained (:mod:`fsmbench.ident.evidence.signs`) by the bench's own signs (a
+    finding with its bench-file key: the identification models the bench with
+    it) or by a record's flipped signal; only when every explanation flips a
+    record do the records contradict each other, and the check fails on them.
 
 A failed check is attached to the records it concerns
 (:attr:`Screening.by_experiment`): every step that uses them falls back
@@ -41,6 +41,7 @@ recordings the noise model sees.
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import Final
@@ -51,8 +52,11 @@ import xarray as xr
 
 from fsmbench.bench.blocks import PlantModel, newport_beam_matrix, physical_plant
 from fsmbench.bench.params import BenchParams
-from fsmbench.checks import Check, Notice, first_failure
+from fsmbench.checks import Check, Finding, Notice, first_failure
 from fsmbench.ident.calibration import trim_recording
+from fsmbench.ident.evidence.bench_signs import diagnose_signs
+from fsmbench.ident.evidence.recorded_loop import RecordedController, recorded_controllers
+from fsmbench.ident.evidence.signs import SignDiagnosis, SignObservation
 from fsmbench.io.folder import check_recording
 
 __all__ = [
@@ -224,12 +228,24 @@ class Screening:
         4QD offsets removed; huddle tests left out of the noise model.
     recordings : mapping of str to Dataset
         The recordings less the open-loop huddle tests whose own checks failed.
+    findings : tuple of Finding
+        The bench's own signs where the bench file states others.
+    params : BenchParams or None
+        The bench file's nominal parameters with those signs (what the steps model).
+    loops : dict of axis to RecordedController
+        The controller the closed-loop records ran.
+    signs : tuple of SignDiagnosis
+        The explanations of each axis's path signs.
     """
 
     checks: tuple[Check, ...]
     by_experiment: dict[str, tuple[Check, ...]]
     notices: tuple[Notice, ...]
     recordings: Mapping[str, xr.Dataset] = field(default_factory=dict)
+    findings: tuple[Finding, ...] = ()
+    params: BenchParams | None = None
+    loops: Mapping[str, RecordedController] = field(default_factory=dict)
+    signs: tuple[SignDiagnosis, ...] = ()
 
 
 def _values(ds: xr.Dataset, name: str) -> np.ndarray:
@@ -379,85 +395,88 @@ def _axis_check(a: AxisRatio, axes: Mapping[str, AxisRatio]) -> Check:
                  f"{cause}; this file's identification steps use the nominal model", unit="×")
 
 
-def _sign_limit(p: PathSign) -> str:
-    where = "the calibration's slope" if p.experiment in _CAL else _band_words()
-    return (f"the sign of the bench file's model: {p.model:+.3g} V/V ({p.input} → {p.output}, "
-            f"{where})")
+#: The bench signs (:data:`~fsmbench.ident.evidence.signs.BENCH_SIGNS`) along each measured
+#: path, by record kind and whether the output is the run's coil monitor.
+def _bench_letters(run: _Run, output: str) -> tuple[str, ...]:
+    if run.experiment in _CAL:
+        return ("q", "r")
+    if run.coil is not None:
+        return ("c", "i") if output == run.coil else ("q", "m", "i")
+    return ("q", "n")
 
 
-def _agreeing(exp: str, judged: Mapping[str, list[PathSign]]) -> str:
-    paths = judged.get(exp, [])
-    if paths and all(p.verdict == 1 for p in paths):
-        return (f", while {exp}.mat's {' and '.join(f'{p.input} → {p.output}' for p in paths)} "
-                f"agree{'s' if len(paths) == 1 else ''} with it")
-    return ""
+def _path_observations(judged: Mapping[str, list[PathSign]]) -> list[SignObservation]:
+    return [SignObservation(exp, p.input, p.output, _bench_letters(_BY_NAME[exp], p.output),
+                            p.verdict, p.words())
+            for exp, paths in judged.items() for p in paths if p.verdict != 0]
 
 
-def _sign_checks(judged: Mapping[str, list[PathSign]], params: BenchParams
-                 ) -> list[tuple[Check, list[str]]]:
-    """The sign checks with the experiments each answers for (module notes)."""
-    out: list[tuple[Check, list[str]]] = []
-    explained: set[tuple[str, str]] = set()
-    for axis, vp in enumerate(("Vph", "Vpv")):
-        paths = [p for exp in judged for p in judged[exp] if p.output == vp]
-        if len(paths) < 2 or any(p.verdict != -1 for p in paths):
+def _rep_observations(recordings: Mapping[str, xr.Dataset], params: BenchParams
+                      ) -> list[SignObservation]:
+    """``Un → Vn`` in ``data_rep_h/v``: the Newport's drive against its metrology (n·r)."""
+    out = []
+    for axis in "hv":
+        name, un, vn = f"data_rep_{axis}", f"Un{axis}", f"Vn{axis}"
+        ds = recordings.get(name)
+        if ds is None or un not in ds or vn not in ds:
             continue
-        files = [p.experiment for p in paths]
-        coils = [p for exp in files for p in judged[exp] if p.output != vp and p.verdict == 1]
-        gain = params.quad_diode.gain_v_per_rad.as_array()[axis]
-        also = (f", while {' and '.join(f'{p.input} → {p.output}' for p in coils)} "
-                "agree{}".format("s" if len(coils) == 1 else "") if coils else "")
-        out.append((Check(
-            "sign_vs_bench", False, paths[0].measured, _sign_limit(paths[0]),
-            f"{', '.join(f'{e}.mat' for e in files)}: {vp}",
-            f"{vp} reads with the opposite sign of the bench file's model in every file that "
-            f"drives it: {'; '.join(p.words() for p in paths)}{also}; likely a sign: the 4QD's "
-            f"{'horizontal' if axis == 0 else 'vertical'} output is reversed (its cable or "
-            f"amplifier), or the bench file's quad_diode.gain_v_per_rad.{'hv'[axis]} "
-            f"({gain:+.4g}) has the wrong sign; the 4QD gain, the Sercalo and the Newport all "
-            "use the nominal model rather than mixing a reversed 4QD with a nominal one: fix "
-            "the wiring, or if the bench is built so, give the gain the other sign in the "
-            "bench file", unit="V/V"), files))
-        explained |= {(p.experiment, vp) for p in paths}
-    for exp, paths in judged.items():
-        run = _BY_NAME[exp]
-        rev = [p for p in paths if p.verdict == -1 and (exp, p.output) not in explained]
-        if not rev:
+        u, v = _values(ds, un), _values(ds, vn)
+        if u.size != v.size or u.size < 3 or np.ptp(u) == 0 or np.ptp(v) == 0:
             continue
-        key = next((p for p in rev if p.output == run.direct), rev[0])
-        coil_path = next((p for p in paths if p.output == run.coil), None)
-        other = _agreeing(_PARTNER[exp], judged)
-        if len(rev) == 2:
-            signal, cause = run.command, (
-                f"both paths from {run.command} are reversed{other}, so {run.command} is "
-                "recorded with its sign flipped (a sign in the real-time model, or the DAC "
-                "output's polarity)")
-        elif coil_path is not None and key is coil_path:
-            signal, cause = str(run.coil), (
-                f"{run.command} → {run.direct} agrees, so {run.coil} is recorded with its sign "
-                "flipped (the coil-voltage amplifier's cable)")
-        elif coil_path is not None and coil_path.verdict == 1:
-            signal, cause = run.direct, (
-                f"{run.command} → {run.coil} agrees, so {run.direct} in this file is recorded "
-                f"with its sign flipped (a sign applied to this file only){other}")
-        else:
-            signal, cause = f"{run.command}, {run.direct}", (
-                f"one of the two is recorded with its sign flipped in this file{other}")
-        explained.add((exp, key.output))
-        out.append((Check(
-            "sign_vs_bench", False, key.measured, _sign_limit(key), f"{exp}.mat: {signal}",
-            f"{'; '.join(p.words() for p in rev)} (in phase with the model); likely a sign: "
-            f"{cause}; this file's identification steps use the nominal model", unit="V/V"),
-            [exp]))
-    failed = {e for _, es in out for e in es}
-    for exp, paths in judged.items():
-        if exp in failed or not paths:
+        corr = float(np.corrcoef(u, v)[0, 1])
+        if not np.isfinite(corr):
             continue
-        run = _BY_NAME[exp]
-        main = next((p for p in paths if p.output == run.direct), paths[0])
-        out.append((Check("sign_vs_bench", True, main.measured, _sign_limit(main),
-                          f"{exp}.mat: {run.command}", unit="V/V"), [exp]))
+        model = (float(np.sign(params.newport.gain_rad_per_v[axis]))
+                 * params.newport.metrology_sign[axis])
+        rho = corr * model
+        if abs(rho) < SIGN_AGREEMENT:
+            continue
+        slope = float(np.polyfit(u, v, 1)[0])
+        gain = (params.newport.gain_rad_per_v[axis] * params.newport.metrology_sign[axis]
+                / params.newport.metrology_gain_rad_per_v)
+        out.append(SignObservation(name, un, vn, ("n", "r"), 1 if rho > 0 else -1,
+                                   f"{un} → {vn} {slope:+.3g} V/V (model {gain:+.3g})"))
     return out
+
+
+def _loop_observations(loops: Mapping[str, RecordedController], plant: PlantModel
+                       ) -> list[SignObservation]:
+    """Each closed-loop record's controller sign against the one that closes a stable loop
+    on the bench file's model (q·m·i).
+
+    The ESRF study's controller closes a stable loop when the static gain of the path
+    ``Uc → Vp`` over the 4QD gain the loop divides by has the sign it had on the ESRF
+    bench (:func:`_esrf_loop_signs`): on the bench file's model, the divisor's sign
+    follows; a recorded divisor of the other sign means the path's sign is the other.
+    """
+    out = []
+    esrf = _esrf_loop_signs()
+    for axis, loop in loops.items():
+        path = plant.dc_gain(output=loop.reading, input=loop.command)
+        stable = float(np.sign(path)) * esrf[axis]
+        for fit in loop.fits:
+            if fit.verdict != "seed" or not np.isfinite(fit.gd_used_v_per_rad) or not stable:
+                continue
+            sign = 1 if fit.gd_used_v_per_rad * stable > 0 else -1
+            out.append(SignObservation(
+                fit.record, loop.reading, loop.command, ("q", "m", "i"), sign,
+                f"{fit.record}: {loop.command} = −K{axis}({loop.reading} / "
+                f"{fit.gd_used_v_per_rad:+.3g} V/rad), a divisor of sign {stable:+.0f} on the "
+                "bench file's model"))
+    return out
+
+
+@functools.cache
+def _esrf_loop_signs() -> dict[str, float]:
+    """sign(static ``Uc → Vp`` / the 4QD gain divided by) per axis on the ESRF bench (the
+    packaged bench's nominal model), for which the study's controller of 9.2 was designed."""
+    from fsmbench.bench.params import default_bench
+
+    nominal = default_bench().nominal
+    plant = physical_plant(nominal, source="nominal")
+    gd = nominal.quad_diode.gain_v_per_rad
+    return {a: float(np.sign(plant.dc_gain(output=f"Vp{a}", input=f"Uc{a}") / gd[a]))
+            for a in "hv"}
 
 
 def _offset_notices(offsets: Mapping[str, Mapping[str, float]], params: BenchParams
@@ -532,13 +551,19 @@ def screen_recordings(recordings: Mapping[str, xr.Dataset], *, params: BenchPara
     pairs = [(_axis_check(a, axes), [exp]) for exp, a in axes.items() if a.judged]
     judged = {exp: [p for p in signs[exp] if p.verdict != 0] for exp in signs
               if axes[exp].passed}
-    pairs += _sign_checks(judged, params)
+    loops = recorded_controllers(recordings, fs_hz=params.converter.fs_hz,
+                                 step_v=params.converter.lsb_v)
+    outcome = diagnose_signs([*_path_observations(judged),
+                              *_rep_observations(recordings, params),
+                              *_loop_observations(loops, plant)], params=params)
     by_experiment: dict[str, tuple[Check, ...]] = {}
     for check, exps in pairs:
         for exp in exps:
             by_experiment[exp] = (*by_experiment.get(exp, ()), check)
-    notices = _offset_notices(offsets, params)
-    checks = [c for c, _ in pairs]
+    for exp, found in outcome.by_experiment.items():
+        by_experiment[exp] = (*by_experiment.get(exp, ()), *found)
+    notices = [*_offset_notices(offsets, params), *outcome.notices]
+    checks = [c for c, _ in pairs] + list(outcome.checks)
     kept = dict(recordings)
     conv = params.converter
     for name in _NOISE_RUNS:
@@ -553,4 +578,5 @@ def screen_recordings(recordings: Mapping[str, xr.Dataset], *, params: BenchPara
             notices.append(Notice("other", f"{name}.mat", f"left out of the noise model: "
                                   f"{bad.sentence()}"))
     return Screening(checks=tuple(checks), by_experiment=by_experiment,
-                     notices=tuple(notices), recordings=kept)
+                     notices=tuple(notices), recordings=kept, findings=outcome.findings,
+                     params=outcome.params, loops=loops, signs=outcome.diagnoses)

@@ -7,21 +7,22 @@ numbers. These checks compare what different records say about the same
 quantity, and what was identified against the bench file's physics:
 
 ``qd_gain_newport_vs_calibration``
-    The Newport run sees the 4QD through ``Gn(0) = Gd · Mn · gn``: with the
-    calibration's ``Gd`` (data_cal_pd_*), the bench's beam factor ``Mn`` (2, the
-    two reflections) and the Newport's gain ``gn`` (its datasheet, ±1 %), the
-    ratio ``Gn(0) / (Gd Mn gn)`` is 1. Accepted 0.8–1.25: the two gains' own
-    errors are ~1 % each, 20 % admits a Newport ten times off its datasheet's
-    accuracy and still catches a gain or unit change between runs (×10 → 10).
+    Records against records. The Newport run sees the 4QD through
+    ``Gn(0) = Gd · Mn · gn``: with the calibration's ``Gd`` (data_cal_pd_*), the
+    bench's beam factor ``Mn`` (2, the two reflections) and the Newport's drive
+    gain ``gn`` *measured* in ``data_rep_h/v`` (its metrology ``Vn`` against its
+    command ``Un`` in the 1 Hz sine, :func:`newport_drive_gains`), the ratio
+    ``Gn(0) / (Gd Mn gn)`` is 1. Accepted 0.8–1.25: the gains' own errors are ~1 %
+    each, and a gain or unit change between runs (×10 → 10) is far outside.
+    Without ``data_rep`` there is no second measurement of ``gn``: the Newport's
+    gain is then a finding against the bench file, not a check.
 ``sercalo_gain_vs_model`` / ``newport_gain_vs_model``
-    The static gains against the nominal physical model (``Gc(0) = Gd · 4 · g0``
-    with the datasheet's ``g0``; ``Gn(0)`` likewise), within a factor 2 and of
-    the same sign: datasheet gains are typical values (±4 % between the seed's
-    axes), a mirror 2× off its datasheet is not the mirror in the bench file,
-    and a clipped ×40 channel (2989 V/A for 80 V/A) is far outside.
-``sercalo_sign_vs_model``
-    Part of the above: the static gain's sign against the model's (the DAC's,
-    the coil's and the reflections' signs are the bench's wiring).
+    The static gains against the bench file's physical model (``Gc(0) = Gd · 4 ·
+    g0`` with the datasheet's ``g0``; ``Gn(0)`` likewise), within a factor 10 in
+    magnitude and of the model's sign (the model carries the signs the records
+    gave, ident.evidence): the bench file is a prior, a mirror or a Newport a few
+    times off it is a bench (a finding, ident.evidence.departures); a clipped ×40
+    channel (2989 V/A for 80 V/A) is beyond a plausible bench.
 ``noise_floor_across_files``
     The same sensor's white floor (the 4QD outputs' PSD, median over 2–4.5 kHz,
     where the loop and the slow motions leave only noise) in every record that
@@ -56,10 +57,11 @@ from fsmbench.bench.params import BenchParams
 from fsmbench.checks import Check
 
 __all__ = ["FLOOR_FACTOR", "GAIN_FACTOR", "NEWPORT_CALIBRATION_BAND", "NOISE_CHECKS",
-           "NOISE_FACTOR", "cross_checks", "floor_checks"]
+           "NOISE_FACTOR", "cross_checks", "floor_checks", "newport_drive_gains"]
 
-#: The identified static gains against the nominal model: a factor 2, same sign.
-GAIN_FACTOR = 2.0
+#: The identified static gains against the bench file's model: a factor 10, same sign (the
+#: bench file is a prior: within it, a departure is a finding, ident.evidence.departures).
+GAIN_FACTOR = 10.0
 #: ``Gn(0) / (Gd Mn gn)``, the Newport run's 4QD gain against the calibration's.
 NEWPORT_CALIBRATION_BAND = (0.8, 1.25)
 #: The fitted noise levels against the bench file's.
@@ -80,28 +82,67 @@ _SERCALO_RUN = {"h": ("data_uch", "Vph"), "v": ("data_ucv", "Vpv")}
 
 
 def _cause(ratio: float, *, between: str) -> str:
-    """The likely slip behind a ratio, in words (``between``: what the ratio compares)."""
+    """Every cause that fits a ratio, in words (``between``: what the ratio compares).
+
+    A round factor (10, 1000, 10⁶) fits a gain or unit slip, and as well a device
+    or a noise that much larger: the ratio alone never separates them, so both are
+    named and no change of the data is advised.
+    """
     if not np.isfinite(ratio) or ratio == 0:
-        return "a missing or dead channel, or a noise hidden under a wrong reference"
+        return ("either a missing or dead channel, or a noise hidden under a wrong reference "
+                f"({between})")
     if ratio < 0:
-        return f"a sign: the channel or its cable is inverted ({between})"
-    for factor, words in ((1e3, "a unit: mV for V"), (1e6, "a unit: µV for V"),
+        return (f"either a sign of the channel or its cable, or of the device itself "
+                f"({between})")
+    for factor, words in ((1e3, "a unit (mV for V, or mm for m)"),
+                          (1e6, "a unit (µV for V, or µm for m)"),
                           (10.0, "a gain changed by 10 (an amplifier range)")):
-        for f, way in ((factor, "too large"), (1 / factor, "too small")):
+        for f, way in ((factor, "larger"), (1 / factor, "smaller")):
             if abs(np.log10(ratio / f)) < 0.1:  # within 26 % of the round factor
-                return f"{words}, {way} ({between})"
+                return (f"either {words}, or a device or a noise that much {way} than the "
+                        f"reference ({between}); the ratio alone cannot tell which")
     return f"a gain or a channel that changed, or a device not the bench file's ({between})"
 
 
 def _ratio_check(name: str, ratio: float, band: tuple[float, float], subject: str,
                  what: str, *, between: str) -> Check:
     ok = bool(np.isfinite(ratio) and band[0] <= ratio <= band[1])
-    advice = "" if ok else f"{what} (ratio {ratio:.3g}); likely {_cause(ratio, between=between)}"
+    advice = "" if ok else f"{what} (ratio {ratio:.3g}): {_cause(ratio, between=between)}"
     return Check(name, ok, float(ratio), f"{band[0]:g} to {band[1]:g}", subject, advice,
                  unit="×")
 
 
-def cross_checks(js: Mapping[str, Any], *, params: BenchParams) -> list[Check]:
+def newport_drive_gains(recordings: Mapping[str, Any], *, params: BenchParams
+                        ) -> dict[str, float]:
+    """The Newport's drive gain ``gn`` [rad/V] per axis measured in ``data_rep_h/v``.
+
+    The repeatability runs drive the Newport with a 1 Hz sine on ``Un`` and record its
+    metrology ``Vn``: at 1 Hz, three decades under its ~1 kHz bandwidth, the slope of
+    ``Vn`` on ``Un`` times the metrology gain (and its sign) is the static drive gain.
+    An axis whose record is absent, or whose ``Vn`` does not follow ``Un`` (r² < 0.9),
+    is left out.
+    """
+    out = {}
+    for axis in "hv":
+        ds = recordings.get(f"data_rep_{axis}")
+        un, vn = f"Un{axis}", f"Vn{axis}"
+        if ds is None or un not in ds or vn not in ds:
+            continue
+        u = np.asarray(ds[un].values, dtype=float)
+        v = np.asarray(ds[vn].values, dtype=float)
+        if u.size != v.size or u.size < 3 or np.ptp(u) == 0 or np.ptp(v) == 0:
+            continue
+        r = np.corrcoef(u, v)[0, 1]
+        if not np.isfinite(r) or r * r < 0.9:
+            continue
+        slope = float(np.polyfit(u, v, 1)[0])
+        out[axis] = (slope * params.newport.metrology_gain_rad_per_v
+                     * params.newport.metrology_sign[axis])
+    return out
+
+
+def cross_checks(js: Mapping[str, Any], *, params: BenchParams,
+                 newport_drive_rad_per_v: Mapping[str, float] | None = None) -> list[Check]:
     """The cross-checks of one identification (see the module notes).
 
     Parameters
@@ -110,7 +151,11 @@ def cross_checks(js: Mapping[str, Any], *, params: BenchParams) -> list[Check]:
         ``Identification.to_json()``: ``qd_gain_v_per_rad``, ``sercalo``,
         ``newport_gain_v_per_v`` where identified.
     params : BenchParams
-        The bench file's nominal parameters.
+        The bench file's nominal parameters (with the signs the records gave).
+    newport_drive_rad_per_v : mapping of axis to float, optional
+        The Newport's drive gain measured in ``data_rep_h/v``
+        (:func:`newport_drive_gains`); without it the Newport run is not checked
+        against the calibration.
 
     Returns
     -------
@@ -124,15 +169,17 @@ def cross_checks(js: Mapping[str, Any], *, params: BenchParams) -> list[Check]:
     for i, axis in enumerate("hv"):
         gn = js.get("newport_gain_v_per_v", {}).get(axis)
         exp, vp = _NEWPORT_RUN[axis]
-        if gn is not None and axis in qd:
-            expected = qd[axis] * mn[i, i] * params.newport.gain_rad_per_v[axis]
+        drive = (newport_drive_rad_per_v or {}).get(axis)
+        if gn is not None and axis in qd and drive is not None:
+            expected = qd[axis] * mn[i, i] * drive
             ratio = gn / expected
             out.append(_ratio_check(
                 "qd_gain_newport_vs_calibration", ratio, NEWPORT_CALIBRATION_BAND,
                 f"{exp}.mat: {vp}",
                 f"the Newport run gives {gn:.4g} V/V where the calibration's 4QD gain "
-                f"({qd[axis]:.4g} V/rad, data_cal_pd_{axis}) and the Newport's datasheet gain "
-                f"predict {expected:.4g} V/V", between="the Newport run against the calibration"))
+                f"({qd[axis]:.4g} V/rad, data_cal_pd_{axis}) and the Newport's drive gain "
+                f"measured in data_rep_{axis} ({drive:.4g} rad/V) predict {expected:.4g} V/V",
+                between="the Newport run against the calibration and the repeatability run"))
         if gn is not None:
             model = nominal.dc_gain(output=vp, input=exp.split("_")[1].capitalize())
             out.append(_ratio_check(
@@ -177,9 +224,10 @@ def _noise_checks(noise: Any, params: BenchParams) -> list[Check]:
             f"{model * 1e3:.3g} mV", between="the huddle tests against the bench file")
         if not check.passed and fitted < model / NOISE_FACTOR and newport_ratio > NOISE_FACTOR:
             check = replace(check, advice=(
-                f"{check.advice.split('; likely ')[0]}; likely Va's unit: the Newport's angle "
-                f"noise measured through Va is {newport_ratio:.3g}× its datasheet's and "
-                "leaves the 4QD none of its own (Va in mm or µm instead of m?)"))
+                f"{check.advice.split(': ')[0]}: the Newport's angle noise measured through "
+                f"Va is {newport_ratio:.3g}× its datasheet's and leaves the 4QD none of its "
+                "own: either Va's unit (mm or µm for m), or an interferometer and a Newport "
+                "that much noisier; the records cannot tell which"))
         out.append(check)
     if sig.get("significant"):
         value, model = float(sig["value"]), params.newport.angle_noise_rms_rad

@@ -72,10 +72,12 @@ def amplifier_path(p: BenchParams, *, axis: str, gain_a_per_v: float) -> StateSp
     lc = p.sercalo.l_coil_h[axis]
     rc = p.sercalo.r_coil_ohm[axis]
     wc = 2 * math.pi * p.voltage_amplifier.cutoff_hz
-    g0 = p.voltage_amplifier.gain
-    r_tot = 1.0 / gain_a_per_v
+    # The monitor's sign is the bench's (voltage_amplifier.sign); the amplifier's own sign
+    # (an inverting one) is g's, and the coil's pole takes |g|.
+    g0 = p.voltage_amplifier.gain * p.voltage_amplifier.sign[axis]
+    r_tot = 1.0 / abs(gain_a_per_v)
     a = np.array([[-r_tot / lc, 0.0], [-wc * g0 * (r_tot - rc), -wc]])
-    b = np.array([1.0 / lc, wc * g0]) / gain_a_per_v
+    b = np.array([1.0 / lc, wc * g0]) / abs(gain_a_per_v)
     return a, b, np.array([0.0, 1.0])
 
 
@@ -287,12 +289,13 @@ def identify_current_amplifier(ds: xr.Dataset, *, axis: str, nominal: BenchParam
         raise ValueError(f"{name}: {int(sel.sum())} lines in {band_hz} Hz with a variance; the "
                          "current amplifier needs 3")
     r_total = nominal.current_amplifier.r_ohm[axis] + nominal.sercalo.r_coil_ohm[axis]
+    sign = nominal.current_amplifier.sign[axis]
     fit = fit_amplifier(f[sel], h[sel], var[sel], nominal=nominal, axis=axis, fs_hz=fs,
-                        start_a_per_v=1.0 / r_total, correlated_lines=correlated)
+                        start_a_per_v=sign / r_total, correlated_lines=correlated)
     return CurrentAmplifierGain(
         axis=axis, gain_a_per_v=fit.gain_a_per_v,
         gain_std_a_per_v=math.hypot(fit.noise_std_a_per_v, fit.misfit_std_a_per_v),
-        theoretical_a_per_v=float(1.0 / r_total), band_hz=(float(band_hz[0]),
+        theoretical_a_per_v=float(sign / r_total), band_hz=(float(band_hz[0]),
                                                             float(band_hz[1])),
         frequency_hz=fit.frequency_hz, gi_response_a_per_v=fit.gain_per_line_a_per_v,
         experiment=name, noise_std_a_per_v=fit.noise_std_a_per_v,

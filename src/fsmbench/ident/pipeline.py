@@ -53,8 +53,8 @@ from fsmbench.bench.blocks import (
     sercalo,
     voltage_amplifier,
 )
-from fsmbench.bench.params import Bench
-from fsmbench.checks import Check, Notice, first_failure
+from fsmbench.bench.params import Bench, BenchParams
+from fsmbench.checks import Check, Finding, Notice, first_failure
 from fsmbench.ident.calibration import (
     CurrentAmplifierGain,
     QdCalibration,
@@ -64,9 +64,22 @@ from fsmbench.ident.calibration import (
     qd_checks,
 )
 from fsmbench.ident.consistency import screen_recordings
-from fsmbench.ident.crosscheck import NOISE_CHECKS, cross_checks, floor_checks
+from fsmbench.ident.crosscheck import (
+    NOISE_CHECKS,
+    cross_checks,
+    floor_checks,
+    newport_drive_gains,
+)
 from fsmbench.ident.delay.sampled import SensorLowpass
 from fsmbench.ident.delay.sercalo import with_sensor
+from fsmbench.ident.evidence.departures import departures, matching_params, measured_keys
+from fsmbench.ident.evidence.matching import MATCHING_BENCH, write_matching_bench
+from fsmbench.ident.evidence.rate import RateEvidence, records_rate
+from fsmbench.ident.evidence.recorded_loop import (
+    RateWitness,
+    RecordedController,
+    rate_witness,
+)
 from fsmbench.ident.export import write_frf_mat, write_plant_mat
 from fsmbench.ident.fit.modes import ModeRefinement, refine_modes
 from fsmbench.ident.fit.truncation import TruncationCheck, truncation_checks
@@ -238,6 +251,17 @@ class Identification:
     uncertainty : dict key -> Uncertain
         Every identified value with its total std and its parts, keyed as
         ``twin_truth.json`` (:mod:`fsmbench.ident.totals`).
+    findings : tuple of Finding
+        Where the records measured the bench other than its bench file states
+        (:mod:`fsmbench.ident.evidence`), each with its bench-file key.
+    recorded_loop : dict axis -> RecordedController
+        The controller the closed-loop records ran.
+    params : BenchParams or None
+        The nominal parameters the steps modelled the bench with: the bench
+        file's, with the signs the records gave.
+    matching : Bench or None
+        The bench file with every value the records measured: what
+        ``bench_identified.toml`` holds.
     """
 
     qd: dict[str, QdCalibration]
@@ -258,6 +282,10 @@ class Identification:
     compression: dict[str, CompressionFactors] = field(default_factory=dict)
     truncation: dict[str, TruncationCheck] = field(default_factory=dict)
     uncertainty: dict[str, Uncertain] = field(default_factory=dict)
+    findings: tuple[Finding, ...] = ()
+    recorded_loop: dict[str, RecordedController] = field(default_factory=dict)
+    params: BenchParams | None = None
+    matching: Bench | None = None
 
     def uncertain(self, key: str) -> Uncertain | None:
         """The value of ``key`` (``"sercalo.h.dc_gain_v_per_a"``) with its std and parts."""
@@ -340,6 +368,7 @@ class Identification:
         out["uncertainty"] = tree
         out["checks"] = [c.to_json() for c in self.checks]
         out["notices"] = [n.to_json() for n in self.notices]
+        out["findings"] = [f.to_json() for f in self.findings]
         out["diagnostics"] = {
             "qd": {a: c.to_json() for a, c in self.qd.items()},
             "current_amp": {a: g.to_json() for a, g in self.current_amp.items()},
@@ -357,6 +386,7 @@ class Identification:
             "compression": {k: c.summary() for k, c in self.compression.items()},
             "sercalo_truncation": {k: c.to_json() for k, c in self.truncation.items()},
             "plant_blocks": self.plant_blocks,
+            "recorded_loop": {a: r.to_json() for a, r in self.recorded_loop.items()},
             "skipped": self.skipped,
             "warnings": list(self.warnings),
             "options": self.options.to_json(),
@@ -417,10 +447,20 @@ def identify(recordings: Mapping[str, xr.Dataset], *, bench: Bench,
                            unusable=dict(unusable or {}))
     numeric = [Notice("numeric", "identification", f"{w.category.__name__}: {w.message}")
                for w in caught]
+    # The identified values as bench-file keys: the departures from the bench file are
+    # findings about the user's bench, and the bench file that matches the records is the
+    # file with every measured key set (ident.evidence.departures).
+    used = result.params or bench.nominal
+    measured = measured_keys(result.to_json(), params=used)
+    found = _merged_findings(result.findings, departures(
+        measured, bench_file=bench.nominal, fs_hz=used.converter.fs_hz))
+    result = replace(result, findings=found, matching=replace(
+        bench, nominal=matching_params(bench.nominal, measured, result.findings)))
     # Records against each other and against the physical model (ident.crosscheck): a
     # failed one makes the identification untrusted, as a quality warning does.
-    crossed = [*cross_checks(result.to_json(), params=bench.nominal),
-               *floor_checks(recordings, fs_hz=bench.nominal.converter.fs_hz)]
+    crossed = [*cross_checks(result.to_json(), params=used,
+                             newport_drive_rad_per_v=newport_drive_gains(recordings, params=used)),
+               *floor_checks(recordings, fs_hz=used.converter.fs_hz)]
     failed = [c for c in crossed if not c.passed and c.name not in NOISE_CHECKS]
     noise_failed = [c for c in crossed if not c.passed and c.name in NOISE_CHECKS]
     skipped = dict(result.skipped)
@@ -435,6 +475,41 @@ def identify(recordings: Mapping[str, xr.Dataset], *, bench: Bench,
                        f"{c.subject}: {c.title} failed: {c.advice}" for c in failed))
 
 
+def _rate_check(witness: RateWitness, rate: RateEvidence) -> Check:
+    """``rate_vs_controller``: the rate at which the ESRF study's controller explains the
+    closed-loop commands against the rate ``t`` gives (ident.evidence.recorded_loop)."""
+    left = {f: max(1.0 - e, 1e-12) for f, e in witness.explained.items()}
+    own = left[witness.labelled_fs_hz]
+    subject = f"{witness.record}.mat: t, {witness.command}"
+    limit = (f"the ESRF study's controller explains {witness.command} best at t's "
+             f"{witness.labelled_fs_hz:g} Hz")
+    if not witness.contradicts:
+        return Check("rate_vs_controller", True, witness.fs_hz, limit, subject, unit="Hz")
+    factor = witness.fs_hz / witness.labelled_fs_hz
+    others = len(rate.by_record) - 1
+    return Check(
+        "rate_vs_controller", False, witness.fs_hz, limit, subject,
+        f"the controller discretised at {witness.fs_hz:g} Hz leaves {own / left[witness.fs_hz]:.3g}"
+        f"× less of {witness.command} unexplained than at {witness.labelled_fs_hz:g} Hz: the "
+        f"records were sampled at {witness.fs_hz:g} Hz and t was saved with the step of "
+        f"{witness.labelled_fs_hz:g} Hz (×{factor:g} off"
+        + (f", in this record and the {others} others that share its step" if others else "")
+        + "), or the loop ran another controller than the ESRF study's, tuned an octave away; "
+        "every frequency and delay would be off by that factor: check the rate the target "
+        "recorded at, and save t = k / fs with it", unit="Hz")
+
+
+def _merged_findings(signs: tuple[Finding, ...], values: list[Finding]) -> tuple[Finding, ...]:
+    """One finding per key: a value's departure on a key whose sign the records also gave
+    keeps the sign's words and alternatives."""
+    by_key = {f.key: f for f in signs}
+    for f in values:
+        sign = by_key.get(f.key)
+        by_key[f.key] = f if sign is None else replace(
+            f, message=f"{sign.message}; {f.message}", alternatives=sign.alternatives)
+    return tuple(by_key.values())
+
+
 def _failure_reason(check: Check, fallback: str) -> str:
     return f"{check.sentence()}; {fallback}"
 
@@ -442,14 +517,26 @@ def _failure_reason(check: Check, fallback: str) -> str:
 def _identify(recordings: Mapping[str, xr.Dataset], *, bench: Bench, opts: IdentifyOptions,
               source: str, say: Progress, unusable: Mapping[str, str]) -> Identification:
     nom = bench.nominal
+    # The records' rate is the bench's (ident.evidence.rate): a bench file that states
+    # another is a finding, a record at another rate than the others is named.
+    rate = records_rate(recordings, bench_fs_hz=nom.converter.fs_hz)
+    if rate.fs_hz != nom.converter.fs_hz:
+        nom = replace(nom, converter=replace(nom.converter, fs_hz=rate.fs_hz))
     conv = nom.converter
     # The 4QD amplifier as the bench model knows it (a datasheet value, or unlimited): the
     # joint delay fits keep its lag apart from the paths' delays.
     sensor = SensorLowpass.from_params(nom)
     skipped: dict[str, str] = {}
-    checks: list[Check] = []
+    checks: list[Check] = [*rate.checks]
     notices: list[Notice] = []
     seen: dict[str, list[Check]] = {}
+    rate_findings = rate.findings
+    witness = rate_witness(recordings, fs_hz=conv.fs_hz, step_v=conv.lsb_v)
+    wrong_rate = _rate_check(witness, rate) if witness is not None else None
+    if wrong_rate is not None:
+        checks.append(wrong_rate)
+        if not wrong_rate.passed:
+            rate_findings = ()  # t's rate is not the records' rate: nothing to state
 
     def missing(*names: str) -> list[str]:
         return [n for n in names if n not in recordings]
@@ -476,6 +563,14 @@ def _identify(recordings: Mapping[str, xr.Dataset], *, bench: Bench, opts: Ident
     # ---- issue 21 (ident.consistency): signs, swapped cables and 4QD offsets across the
     # records. A failed check joins its records' own: each step using them falls back
     # naming it. Huddle tests failing their checks (a jump in Va …) leave the noise model.
+    for name, extra in rate.by_experiment.items():
+        if name in recordings:
+            data_failure(name)
+            seen[name] = [*seen[name], *extra]
+    if wrong_rate is not None and not wrong_rate.passed:
+        for name in recordings:
+            data_failure(name)
+            seen[name] = [*seen[name], wrong_rate]
     screen = screen_recordings(recordings, params=nom, trims_s=opts.trims_s,
                                failure=data_failure)
     for name, extra in screen.by_experiment.items():
@@ -483,6 +578,10 @@ def _identify(recordings: Mapping[str, xr.Dataset], *, bench: Bench, opts: Ident
     checks.extend(screen.checks)
     notices.extend(screen.notices)
     recordings = screen.recordings
+    # The bench's own signs, where the records give them, are the model every step works
+    # with: the bench file is a prior (ident.evidence).
+    if screen.params is not None:
+        nom = screen.params
     # ---- end of issue 21
 
     qd: dict[str, QdCalibration] = {}
@@ -498,7 +597,8 @@ def _identify(recordings: Mapping[str, xr.Dataset], *, bench: Bench, opts: Ident
             for axis in "hv":
                 qd[axis] = calibrate_qd(
                     recordings[f"data_cal_pd_{axis}"], axis=axis,
-                    metrology_gain_rad_per_v=nom.newport.metrology_gain_rad_per_v,
+                    metrology_gain_rad_per_v=(nom.newport.metrology_gain_rad_per_v
+                                              * nom.newport.metrology_sign[axis]),
                     trim_s=opts.trims_s.get(f"data_cal_pd_{axis}", 1.0))
                 checks.extend(qd_checks(qd[axis], nominal_v_per_rad=getattr(
                     nom.quad_diode.gain_v_per_rad, axis)))
@@ -665,7 +765,10 @@ def _identify(recordings: Mapping[str, xr.Dataset], *, bench: Bench, opts: Ident
                             plant_blocks={k: v[0] for k, v in blocks.items()}, skipped=skipped,
                             options=opts, source=source, warnings=warnings,
                             checks=tuple(checks), notices=tuple(notices), noise_model=noise,
-                            compression=compression, truncation=truncation)
+                            compression=compression, truncation=truncation,
+                            findings=rate_findings + screen.findings,
+                            recorded_loop=dict(screen.loops),
+                            params=nom)
     return replace(result, uncertainty=uncertainty_tree(
         qd=qd, current_amp=gi, sercalo=sercalo_id, modes=result.sercalo_modes(),
         newport=newport_id, compression=compression, nominal=nom, truncation=truncation))
@@ -792,5 +895,8 @@ def write_identification(result: Identification, out_dir: str | Path) -> list[Pa
                                                 ("newport", result.newport)) if part is not None}
     if frfs:
         paths.append(write_frf_mat(out / "frf.mat", frfs))
+    if result.matching is not None:
+        paths.append(write_matching_bench(out / MATCHING_BENCH, result.matching,
+                                          findings=result.findings))
     return paths
 

@@ -47,7 +47,8 @@ INTERNAL_SIGNALS = ("theta_ch", "theta_cv", "theta_nh", "theta_nv", "Rh", "Rv")
 def twin_continuous(p: BenchParams) -> ct.StateSpace:
     """Continuous plant of the twin, inputs :data:`DAC_CHANNELS`, outputs ADC + internal."""
     r_ext = p.current_amplifier.r_ohm.as_array() + p.current_amplifier.r_buffer_ohm.as_array()
-    coil = ct.ss([], [], [], np.hstack([np.eye(2), -np.diag(r_ext)]),
+    sign = np.diag(p.current_amplifier.sign.as_array())
+    coil = ct.ss([], [], [], np.hstack([sign, -np.diag(r_ext)]),
                  inputs=["Uch", "Ucv", "Ich", "Icv"], outputs=["Vtch", "Vtcv"], name="coil")
     beam = ct.ss([], [], [], np.hstack([sercalo_beam_matrix(p), newport_beam_matrix(p)]),
                  inputs=["theta_ch", "theta_cv", "theta_nh", "theta_nv"], outputs=["Rh", "Rv"],
@@ -57,7 +58,8 @@ def twin_continuous(p: BenchParams) -> ct.StateSpace:
     qd = ct.ss([], [], [], np.diag(p.quad_diode.gain_v_per_rad.as_array()),
                inputs=["Rh", "Rv"], outputs=qd_out, name="qd")
     extra = [] if lowpass is None else [lowpass]
-    metrology = ct.ss([], [], [], np.eye(2) / p.newport.metrology_gain_rad_per_v,
+    metrology = ct.ss([], [], [], np.diag(p.newport.metrology_sign.as_array())
+                      / p.newport.metrology_gain_rad_per_v,
                       inputs=["theta_nh", "theta_nv"], outputs=["Vnh", "Vnv"], name="metrology")
     outputs = list(ADC_CHANNELS + INTERNAL_SIGNALS)
     sys = ct.interconnect(

@@ -431,6 +431,7 @@ class BenchStream:
             qd_noise = qd_noise + n_slow
         adc_noise = np.column_stack([n_vc, qd_noise,
                                      (n_theta + n_metro)
+                                     * self.params.newport.metrology_sign.as_array()
                                      / self.params.newport.metrology_gain_rad_per_v])
         u_ext = np.zeros((n, len(DAC_CHANNELS)))
         for ex in self._excitations:

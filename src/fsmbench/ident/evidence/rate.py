@@ -1,0 +1,117 @@
+"""The records' sampling rate, against each other first and the bench file second.
+
+Each record's rate comes from its own ``t`` (the loader's ``fs_hz``). The
+records of one session share the converter's clock: the rate most of them
+have is the bench's. A record at another rate contradicts them (a failed
+``sampling_rate`` check naming it and both rates); a bench file that states
+another rate is a finding (``nominal.converter.fs_hz``), and the
+identification works at the records' rate. A bench file's rate is never used
+to call correct ``t`` wrong.
+
+``t`` itself can be wrong while the records agree (every file saved with the
+step of another rate): the physics the records carry says so. The
+closed-loop records ran the ESRF study's controller discretised at the
+converter's real rate; when that controller explains their commands at twice
+or half the rate ``t`` gives and not at ``t``'s own
+(:func:`~fsmbench.ident.evidence.recorded_loop.rate_witness`), ``t`` is off
+by that factor and the check names it.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from typing import Final
+
+import xarray as xr
+
+from fsmbench.checks import Check, Finding
+
+__all__ = ["RATE_TOLERANCE", "RateEvidence", "records_rate"]
+
+#: Two rates within this relative difference are one clock (a real-time target's rate
+#: is set to a few ppm; 1 % is the loader's tolerance on a rate from ``t``).
+RATE_TOLERANCE: Final = 0.01
+
+
+@dataclass(frozen=True)
+class RateEvidence:
+    """What the records say of the sampling rate.
+
+    Attributes
+    ----------
+    fs_hz : float
+        The rate most records share (the bench's) [Hz]; the bench file's when no
+        record gives one.
+    bench_fs_hz : float
+        The bench file's ``converter.fs_hz`` [Hz].
+    by_record : dict of str to float
+        Each record's own rate [Hz].
+    checks : tuple of Check
+        ``sampling_rate``, failed, for each record at another rate than the others.
+    by_experiment : dict of str to tuple of Check
+        The failed check each odd record answers for.
+    findings : tuple of Finding
+        ``nominal.converter.fs_hz`` when the records' rate is not the bench file's.
+    """
+
+    fs_hz: float
+    bench_fs_hz: float
+    by_record: dict[str, float] = field(default_factory=dict)
+    checks: tuple[Check, ...] = ()
+    by_experiment: dict[str, tuple[Check, ...]] = field(default_factory=dict)
+    findings: tuple[Finding, ...] = ()
+
+
+def _same(a: float, b: float) -> bool:
+    return abs(a / b - 1.0) <= RATE_TOLERANCE
+
+
+def records_rate(recordings: Mapping[str, xr.Dataset], *, bench_fs_hz: float) -> RateEvidence:
+    """The records' common rate, the records at another one, and the bench file's departure.
+
+    Parameters
+    ----------
+    recordings : mapping of experiment name to Dataset
+        Each with its ``fs_hz`` attribute (the rate its ``t`` gives) [Hz].
+    bench_fs_hz : float
+        The bench file's converter rate [Hz].
+    """
+    rates = {name: float(ds.attrs["fs_hz"]) for name, ds in recordings.items()
+             if float(ds.attrs.get("fs_hz", 0.0)) > 0}
+    if not rates:
+        return RateEvidence(bench_fs_hz, bench_fs_hz)
+    groups: list[list[str]] = []
+    for name, fs in rates.items():
+        for g in groups:
+            if _same(rates[g[0]], fs):
+                g.append(name)
+                break
+        else:
+            groups.append([name])
+    # The most records; on a tie, the bench file's rate if one of them has it.
+    groups.sort(key=lambda g: (len(g), _same(rates[g[0]], bench_fs_hz)), reverse=True)
+    main = groups[0]
+    fs = sorted(rates[n] for n in main)[len(main) // 2]
+    checks, by_experiment = [], {}
+    for g in groups[1:]:
+        for name in g:
+            check = Check(
+                "sampling_rate", False, rates[name],
+                f"within {100 * RATE_TOLERANCE:g} % of the other records' {fs:g} Hz",
+                f"{name}.mat: t",
+                f"t steps at {rates[name]:g} Hz where {len(main)} other record"
+                f"{'s' if len(main) > 1 else ''} ({', '.join(sorted(main)[:3])}"
+                f"{' …' if len(main) > 3 else ''}) step at {fs:g} Hz: either this record was "
+                "made at another rate, or its t was saved with another step; the records "
+                "cannot tell which: check how it was recorded and saved", unit="Hz")
+            checks.append(check)
+            by_experiment[name] = (check,)
+    findings: tuple[Finding, ...] = ()
+    if not _same(fs, bench_fs_hz):
+        findings = (Finding(
+            "nominal.converter.fs_hz", bench_fs_hz, fs, "Hz",
+            ", ".join(f"{n}.mat" for n in sorted(main)),
+            f"the recordings are sampled at {fs:g} Hz (their t's step), not at the bench "
+            "file's rate; the identification works at the records' rate"),)
+    return RateEvidence(fs, bench_fs_hz, rates, tuple(checks), by_experiment, findings)
