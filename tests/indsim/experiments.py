@@ -156,22 +156,26 @@ def durations(protocol: Protocol, duration_scale: float) -> tuple[float, float]:
     return total, lead
 
 
-def _noise_level(model: BenchModel, channel: str) -> float:
-    """Rms of a white excitation on ``channel`` that keeps every record in range [V]."""
+def _noise_level(model: BenchModel, channel: str) -> tuple[float, str]:
+    """Rms of a white excitation on ``channel`` that keeps every record in range [V].
+
+    Returns the level and what limits it.
+    """
     b = model.bench
     per_unit = output_rms_per_unit_input(model.sampled, channel)
-    limits = [ADC_PEAK_V / CREST]  # the DAC itself
+    limits = {channel: ADC_PEAK_V / CREST}  # the DAC itself
     for out in ("Vph", "Vpv", "Vch", "Vcv"):
-        limits.append(ADC_PEAK_V / CREST / max(per_unit[OUTPUTS.index(out)], 1e-30))
-    for out in ("psi_a", "psi_b"):  # metrology: Vn = psi / gn0
-        limits.append(ADC_PEAK_V * b.newport_metrology_rad_per_v / CREST
+        limits[out] = ADC_PEAK_V / CREST / max(per_unit[OUTPUTS.index(out)], 1e-30)
+    for out, vn in (("psi_a", "Vnh"), ("psi_b", "Vnv")):  # metrology: Vn = psi / gn0
+        limits[vn] = (ADC_PEAK_V * b.newport_metrology_rad_per_v / CREST
                       / max(per_unit[OUTPUTS.index(out)], 1e-30))
     for out in ("d_u", "d_w"):
-        limits.append(b.qd_compression_swing_rad / CREST
-                      / max(per_unit[OUTPUTS.index(out)], 1e-30))
+        limits[f"4QD linear range ({out})"] = (b.qd_compression_swing_rad / CREST
+                                               / max(per_unit[OUTPUTS.index(out)], 1e-30))
     if channel.startswith("Un"):
-        limits.append(1.0)  # the study's expected perturbation (Table 5)
-    return float(min(limits))
+        limits["the study's 1 V expected perturbation (Table 5)"] = 1.0
+    what = min(limits, key=limits.__getitem__)
+    return float(limits[what]), what
 
 
 def _sine_amplitude(model: BenchModel, channel: str, freq_hz: float, closed: bool) -> float:
@@ -209,10 +213,11 @@ def _commands(model: BenchModel, p: Protocol, rng: np.random.Generator, n: int,
     t = (np.arange(n - k0)) / b.fs_hz
     j = INPUTS.index(p.excite)
     if p.kind == "noise":
-        level = _noise_level(model, p.excite)
+        level, what = _noise_level(model, p.excite)
         x = np.clip(rng.standard_normal(n - k0), -CLIP_SIGMA, CLIP_SIGMA) * level
         info = {"channel": p.excite, "kind": "white noise", "amplitude_v": level,
-                "amplitude_is": "rms before clipping at 4.5 sigma", "freq_hz": None}
+                "amplitude_is": "rms before clipping at 4.5 sigma", "freq_hz": None,
+                "limited_by": what}
     else:
         level = _sine_amplitude(model, p.excite, p.freq_hz, p.closed_loop)
         x = level * np.sin(2.0 * math.pi * p.freq_hz * t)
