@@ -30,7 +30,7 @@ v: vertical ``b``/``y``/``w``).
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass, field, fields
+from dataclasses import asdict, dataclass, fields
 from typing import Any
 
 __all__ = ["HV", "IndBench"]
@@ -43,16 +43,12 @@ class HV:
     h: float
     v: float
 
-    def __iter__(self):  # noqa: ANN204 - tuple-like unpacking: h, v = pair
+    def __iter__(self):
         return iter((self.h, self.v))
 
     def scaled(self, fh: float, fv: float | None = None) -> HV:
         """The pair times ``fh`` (h) and ``fv`` (v, default ``fh``)."""
         return HV(self.h * fh, self.v * (fh if fv is None else fv))
-
-
-def _hv(h: float, v: float) -> Any:
-    return field(default_factory=lambda: HV(h, v))
 
 
 @dataclass(frozen=True)
@@ -72,48 +68,48 @@ class IndBench:
     dac_transport_samples: int = 1  # the command computed at sample k leaves at k+1
     dac_latency_s: float = 0.0  # computation time after the clock edge (fraction of a sample)
     # --- Sercalo: first modes ------------------------------------------------
-    sercalo_resonance_hz: HV = _hv(411.13, 252.5)
-    sercalo_damping_ratio: HV = _hv(0.0009141096903985803, 0.0008222735566507275)
-    sercalo_gain_rad_per_a: HV = _hv(0.6145525535191302, 0.4958321738620254)
-    sercalo_mount_sign: HV = _hv(-1.0, 1.0)
+    sercalo_resonance_hz: HV = HV(411.13, 252.5)
+    sercalo_damping_ratio: HV = HV(0.0009141096903985803, 0.0008222735566507275)
+    sercalo_gain_rad_per_a: HV = HV(0.6145525535191302, 0.4958321738620254)
+    sercalo_mount_sign: HV = HV(-1.0, 1.0)
     sercalo_beam_factor: float = 4.0
-    sercalo_mode_angle_rad: HV = _hv(0.0, 0.0)  # mode shapes turned in the mirror plane
-    sercalo_torque_crosstalk: HV = _hv(0.0, 0.0)  # coil h's torque about b; coil v's about a
+    sercalo_mode_angle_rad: HV = HV(0.0, 0.0)  # mode shapes turned in the mirror plane
+    sercalo_torque_crosstalk: HV = HV(0.0, 0.0)  # coil h's torque about b; coil v's about a
     # --- Sercalo: second (flexural) modes, 0 Hz = absent -----------------------
-    sercalo_second_mode_hz: HV = _hv(0.0, 0.0)
-    sercalo_second_mode_damping_ratio: HV = _hv(0.01, 0.01)
-    sercalo_second_mode_relative_gain: HV = _hv(0.0, 0.0)
-    sercalo_second_mode_angle_rad: HV = _hv(0.0, 0.0)
-    back_emf_v_s_per_rad: HV = _hv(0.0, 0.0)
+    sercalo_second_mode_hz: HV = HV(0.0, 0.0)
+    sercalo_second_mode_damping_ratio: HV = HV(0.01, 0.01)
+    sercalo_second_mode_relative_gain: HV = HV(0.0, 0.0)
+    sercalo_second_mode_angle_rad: HV = HV(0.0, 0.0)
+    back_emf_v_s_per_rad: HV = HV(0.0, 0.0)
     # --- coil and current amplifier ---------------------------------------------
-    r_coil_ohm: HV = _hv(9.3, 8.3)
-    l_coil_h: HV = _hv(1.0e-4, 1.0e-4)
-    r_amp_ohm: HV = _hv(41.0, 41.0)
-    r_series_ohm: HV = _hv(0.0, 0.0)  # unmodelled buffer output resistance
+    r_coil_ohm: HV = HV(9.3, 8.3)
+    l_coil_h: HV = HV(1.0e-4, 1.0e-4)
+    r_amp_ohm: HV = HV(41.0, 41.0)
+    r_series_ohm: HV = HV(0.0, 0.0)  # unmodelled buffer output resistance
     # --- coil-voltage monitor (voltage amplifier) -------------------------------
     vc_gain: float = 1000.0
     vc_cutoff_hz: float = 1000.0
     vc_noise_rms_v: float = 1.0e-3
     # --- Newport FSM-300 ------------------------------------------------------------
-    newport_gain_rad_per_v: HV = _hv(2.62e-3, 2.62e-3)
-    newport_natural_freq_hz: HV = _hv(1076.706455916, 1076.706455916)
-    newport_damping_ratio: HV = _hv(1.106173492, 1.106173492)
+    newport_gain_rad_per_v: HV = HV(2.62e-3, 2.62e-3)
+    newport_natural_freq_hz: HV = HV(1076.706455916, 1076.706455916)
+    newport_damping_ratio: HV = HV(1.106173492, 1.106173492)
     newport_internal_delay_s: float = 3.5e-4
     newport_beam_factor: float = 2.0
     newport_metrology_rad_per_v: float = 2.62e-3
     newport_angle_noise_rms_rad: float = 3.0e-6
     newport_metrology_noise_rms_rad: float = 0.5e-6
     # --- 4-quadrant diode ---------------------------------------------------------
-    qd_gain_v_per_rad: HV = _hv(31.0, 36.3)  # magnitudes
-    qd_polarity: HV = _hv(-1.0, 1.0)
+    qd_gain_v_per_rad: HV = HV(31.0, 36.3)  # magnitudes
+    qd_polarity: HV = HV(-1.0, 1.0)
     qd_rotation_rad: float = 0.0
     qd_amp_order: int = 0  # 0: no amplifier lag, 1 or 2: low-pass of that order
     qd_amp_bandwidth_hz: float = 10000.0
     qd_amp_damping_ratio: float = 0.7071067811865476  # second order only (Butterworth)
-    qd_noise_rms_v: HV = _hv(1.0e-3, 1.0e-3)  # white, per sample
-    qd_flicker_asd_v_per_rthz: HV = _hv(0.0, 0.0)  # 1/f noise ASD at 1 Hz
+    qd_noise_rms_v: HV = HV(1.0e-3, 1.0e-3)  # white, per sample
+    qd_flicker_asd_v_per_rthz: HV = HV(0.0, 0.0)  # 1/f noise ASD at 1 Hz
     qd_flicker_min_hz: float = 1.0e-3
-    qd_offset_v: HV = _hv(0.0, 0.0)
+    qd_offset_v: HV = HV(0.0, 0.0)
     qd_compression: float = 0.0  # fraction short of linear at qd_compression_swing_rad
     qd_compression_swing_rad: float = 0.0106
     # --- Attocube Va and its environment ----------------------------------------

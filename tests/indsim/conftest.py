@@ -13,7 +13,7 @@ if _TESTS not in sys.path:
 
 from indsim import BenchRun, corpus, simulate_bench  # noqa: E402
 
-SHORT = 0.1  # duration scale of the test runs: 3-10 s per record
+SHORT = 0.05  # duration scale of the test runs: 3-5 s per record
 
 
 @pytest.fixture(scope="session")

@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from functools import lru_cache
 
 import numpy as np
 from numpy.typing import NDArray
@@ -74,6 +75,7 @@ def seed_controller_tf(axis: str) -> tuple[Array, Array]:
     return num, den
 
 
+@lru_cache(maxsize=16)
 def seed_controller(axis: str, fs_hz: float) -> DiscreteSS:
     """``Kh`` or ``Kv`` discretised by Tustin (no prewarping) at ``fs_hz``."""
     num, den = seed_controller_tf(axis)

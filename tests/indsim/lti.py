@@ -129,14 +129,13 @@ def sample_with_delay(
     Phi, _ = held_input_integral(A, B, dt_s)
     Gb = np.empty_like(B, dtype=float)
     Ga = np.zeros_like(B, dtype=float)
-    for j in range(B.shape[1]):
-        bj = B[:, j : j + 1]
-        _, g_late = held_input_integral(A, bj, dt_s - frac[j])
-        Gb[:, j] = g_late[:, 0]
-        if frac[j] > 0.0:
-            e_late, _ = held_input_integral(A, bj, dt_s - frac[j])
-            _, g_early = held_input_integral(A, bj, frac[j])
-            Ga[:, j] = (e_late @ g_early)[:, 0]
+    for d in np.unique(frac):  # one pair of exponentials per distinct fraction
+        cols = np.flatnonzero(frac == d)
+        e_late, g_late = held_input_integral(A, B[:, cols], dt_s - d)
+        Gb[:, cols] = g_late
+        if d > 0.0:
+            _, g_early = held_input_integral(A, B[:, cols], d)
+            Ga[:, cols] = e_late @ g_early
     return Phi, Gb, Ga, n_whole
 
 

@@ -87,6 +87,8 @@ class BenchModel:
         Rms of the held white noise ``nu`` per rad of Newport angle-noise rms.
     qd_lpf : DiscreteSS or None
         The 4QD amplifier alone (compression residual).
+    cl_sampled : SampledPlant
+        The plant without the Vc monitors, sampled: what the loop is closed around.
     """
 
     bench: IndBench
@@ -96,6 +98,7 @@ class BenchModel:
     closed: ClosedLoop
     nu_per_rad: HV
     qd_lpf: DiscreteSS | None
+    cl_sampled: SampledPlant
 
 
 def bench_model(bench: IndBench) -> BenchModel:
@@ -113,4 +116,4 @@ def bench_model(bench: IndBench) -> BenchModel:
     for j, ax in enumerate(("a", "b")):
         rms = output_rms_per_unit_input(sampled, f"nu_{ax}")[OUTPUTS.index("psi_a") + j]
         nu.append(1.0 / rms)
-    return BenchModel(bench, plant, sampled, gd, closed, HV(*nu), _qd_lpf(bench))
+    return BenchModel(bench, plant, sampled, gd, closed, HV(*nu), _qd_lpf(bench), cl_plant)

@@ -96,7 +96,7 @@ def _shape(angle: float, axis: str) -> Array:
     return np.array([c, s]) if axis == "h" else np.array([-s, c])
 
 
-def build_plant(bench: IndBench, with_vc: bool = True) -> ContinuousPlant:  # noqa: PLR0915
+def build_plant(bench: IndBench, with_vc: bool = True) -> ContinuousPlant:
     """Assemble the analog bench of ``bench`` (see the module docstring).
 
     Parameters

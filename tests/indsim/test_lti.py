@@ -1,4 +1,4 @@
-"""The exact sampling with fractional delays and the fast simulator, against independent references."""
+"""Exact sampling with fractional delays and the fast simulator, against independent references."""
 
 from __future__ import annotations
 
@@ -26,8 +26,8 @@ def _continuous_reference(A, B, C, T, delay, u):
     for e in edges[1:]:
         if e <= t:
             continue
-        mid = 0.5 * (t + e)
-        sol = solve_ivp(lambda _t, x, v=u_of(mid): A @ x + B[:, 0] * v, (t, e), x,
+        held = u_of(0.5 * (t + e))
+        sol = solve_ivp(lambda _t, x, v=held: A @ x + B[:, 0] * v, (t, e), x,
                         rtol=1e-11, atol=1e-14, method="DOP853")
         x = sol.y[:, -1]
         t = e

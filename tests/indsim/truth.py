@@ -25,10 +25,10 @@ from typing import Any
 
 import numpy as np
 
-from .bench import HV, IndBench
+from .bench import HV
 from .control import REFERENCE_UC_TO_BEAM_RAD_PER_V, close_loop
 from .model import BenchModel
-from .plant import INPUTS, OUTPUTS, build_plant, sample_plant
+from .plant import INPUTS, OUTPUTS
 
 __all__ = ["GN0", "NOMINAL_BENCH_FILE", "bench_file", "truth"]
 
@@ -117,7 +117,7 @@ def _first_mode_pole(model: BenchModel, axis: str) -> complex:
 def gain_margin(model: BenchModel, high: float = 64.0) -> float:
     """Largest common factor on both controllers that keeps the loop stable (bisection)."""
     b = model.bench
-    sp = sample_plant(build_plant(b, with_vc=False), b.dt_s)
+    sp = model.cl_sampled
     mu, gd = model.closed.multiplier, model.closed.gd_v_per_rad
 
     def stable(f: float) -> bool:
@@ -126,7 +126,7 @@ def gain_margin(model: BenchModel, high: float = 64.0) -> float:
     if stable(high):
         return high
     lo, hi = 1.0, high
-    for _ in range(30):
+    for _ in range(20):
         mid = math.sqrt(lo * hi)
         lo, hi = (mid, hi) if stable(mid) else (lo, mid)
     return lo
@@ -249,7 +249,7 @@ def truth(model: BenchModel) -> dict[str, Any]:
     T = b.dt_s
     pure_s = b.dac_transport_samples * T + T / 2.0 + b.dac_latency_s
     pure_n = pure_s + b.newport_internal_delay_s
-    coil = [l / r for l, r in zip(b.l_coil_h, b.r_total_ohm, strict=True)]
+    coil = [ind / r for ind, r in zip(b.l_coil_h, b.r_total_ohm, strict=True)]
     qd_lag = b.qd_amp_group_delay_s
     sercalo = {}
     for ax in ("h", "v"):
