@@ -209,21 +209,22 @@ def simulate(sys: DiscreteSS, w: Array, block: int | None = None) -> Array:
     NB = -(-N // M)
     wp = np.zeros((NB * M, m))
     wp[:N] = w
-    Wb = wp.reshape(NB, M, m)
+    # Step i of every block at once: rows of Wt[i] are contiguous.
+    Wt = np.ascontiguousarray(wp.reshape(NB, M, m).transpose(1, 0, 2))
     At, Bt, Ct, Dt = sys.A.T, sys.B.T, sys.C.T, sys.D.T
     X = np.zeros((NB, n))
     for i in range(M):
-        X = X @ At + Wb[:, i] @ Bt
+        X = X @ At + Wt[i] @ Bt
     AM = np.linalg.matrix_power(sys.A, M)
     S = np.zeros((NB, n))
     for j in range(NB - 1):
         S[j + 1] = AM @ S[j] + X[j]
-    Y = np.empty((NB, M, sys.C.shape[0]))
+    Y = np.empty((M, NB, sys.C.shape[0]))
     X = S
     for i in range(M):
-        Y[:, i] = X @ Ct + Wb[:, i] @ Dt
-        X = X @ At + Wb[:, i] @ Bt
-    return Y.reshape(NB * M, -1)[:N]
+        Y[i] = X @ Ct + Wt[i] @ Dt
+        X = X @ At + Wt[i] @ Bt
+    return Y.transpose(1, 0, 2).reshape(NB * M, -1)[:N]
 
 
 def _simulate_loop(sys: DiscreteSS, w: Array) -> Array:
