@@ -18,6 +18,12 @@ chosen from the exact stationary rms of the bench's outputs so that 5 sigma
 of every recorded ADC channel stays below 8 V and 5 sigma of the beam within
 the 4QD's linear range ``qd_compression_swing_rad``; sines likewise. The
 commands are on the DAC's grid, so the recorded command is what was played.
+
+Closed loops (:mod:`indsim.control`): the converters' rounding inside the
+loop is additive uniform noise of one step, and the recorded ``Uc``/``Vp``
+are rounded to the grid; the 4QD's cubic compression is left out there (the
+loop holds the beam within tens of µrad, where it is below 1e-5 relative:
+``realized.<record>.qd_compression_max`` says how much).
 """
 
 from __future__ import annotations
