@@ -1,4 +1,5 @@
-"""``python -m indsim OUT [--bench NAME ...] [--seed N] [--duration-scale X] [--compress]``."""
+"""``python -m indsim OUT [--bench NAME ...] [--seed N] [--duration-scale X]
+[--bench-toml] [--compress]``."""
 
 from __future__ import annotations
 
@@ -20,6 +21,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--seed", type=int, default=0, help="noise seed (default 0)")
     ap.add_argument("--duration-scale", type=float, default=1.0,
                     help="fraction of the study's record lengths (default 1)")
+    ap.add_argument("--bench-toml", action="store_true",
+                    help="also write OUT/<bench>.toml, the bench in fsmbench's bench-file "
+                         "format (for --params)")
     ap.add_argument("--compress", action="store_true",
                     help="zip the MAT variables (about 5x smaller, slower to write)")
     args = ap.parse_args(argv)
@@ -27,7 +31,7 @@ def main(argv: list[str] | None = None) -> int:
         ap.error("--duration-scale must be positive")
     for name in args.bench or list(benches):
         print(timed_write(benches[name], args.out, args.seed, args.duration_scale,
-                          args.compress), flush=True)
+                          args.compress, args.bench_toml), flush=True)
     return 0
 
 

@@ -269,3 +269,16 @@ def test_cli_writes_the_named_benches(tmp_path, capsys):
     assert len(out) == 1 and out[0].startswith("fs5k:")
     assert len(list((tmp_path / "fs5k").glob("*.mat"))) == 13
     assert (tmp_path / "fs5k" / "truth.json").exists()
+
+
+def test_bench_file_toml_round_trips(runs):
+    """The TOML bench file parses and holds the truth's bench-file values."""
+    import tomllib
+
+    from indsim.truth import bench_file_toml
+
+    for run in runs.values():
+        data = tomllib.loads(bench_file_toml(run.truth))
+        assert data["base"] == "default"
+        for key, value in run.truth["bench_file"]["values"].items():
+            assert _get(data, key) == value, key

@@ -317,3 +317,37 @@ def truth(model: BenchModel) -> dict[str, Any]:
         },
         "bench_file": bench_file(model, signs),
     }
+
+
+def bench_file_toml(tr: dict[str, Any]) -> str:
+    """The bench in the user's bench-file format: ``base = "default"`` and its nominal keys.
+
+    Parameters
+    ----------
+    tr : dict
+        A truth (``truth.json``'s content).
+
+    Returns
+    -------
+    str
+        TOML text for ``fsmbench ... --params FILE``: the ``[nominal.*]`` keys
+        of ``bench_file.values`` (the real-bench keys are in ``bench_file``).
+    """
+    sections: dict[str, list[str]] = {}
+    for key, value in tr["bench_file"]["values"].items():
+        section, name = key.rsplit(".", 1)
+        if isinstance(value, dict):
+            text = "{ " + ", ".join(f"{k} = {_toml_number(v)}" for k, v in value.items()) + " }"
+        else:
+            text = _toml_number(value)
+        sections.setdefault(section, []).append(f"{name} = {text}")
+    lines = [f"# indsim bench {tr['name']!r}: {tr['description']}", 'base = "default"', ""]
+    for section, rows in sections.items():
+        lines += [f"[{section}]", *rows, ""]
+    return "\n".join(lines)
+
+
+def _toml_number(v: Any) -> str:
+    if isinstance(v, int):  # bool too
+        return str(int(v))
+    return repr(float(v))

@@ -16,7 +16,7 @@ from scipy.io import savemat
 from .bench import IndBench
 from .experiments import EXPERIMENTS, Record, run_experiment
 from .model import bench_model
-from .truth import truth
+from .truth import bench_file_toml, truth
 
 __all__ = ["BenchRun", "simulate_bench", "write_bench"]
 
@@ -111,9 +111,11 @@ def summary_line(run: BenchRun, seconds: float) -> str:
 
 
 def timed_write(bench: IndBench, out: Path, seed: int, duration_scale: float,
-                compress: bool = False) -> str:
-    """Simulate and write one bench; return its summary line."""
+                compress: bool = False, toml: bool = False) -> str:
+    """Simulate and write one bench (and ``out/<bench>.toml``); return its summary line."""
     t0 = time.perf_counter()
     run = simulate_bench(bench, seed, duration_scale)
     write_bench(run, out / bench.name, compress)
+    if toml:
+        (out / f"{bench.name}.toml").write_text(bench_file_toml(run.truth))
     return summary_line(run, time.perf_counter() - t0)
