@@ -184,27 +184,31 @@ def _noise_level(model: BenchModel, channel: str) -> tuple[float, str]:
     return float(limits[what]), what
 
 
-def _sine_amplitude(model: BenchModel, channel: str, freq_hz: float, closed: bool) -> float:
-    """Peak of a Newport sine that keeps the records in range [V]."""
+def _sine_amplitude(model: BenchModel, channel: str, freq_hz: float,
+                    closed: bool) -> tuple[float, str]:
+    """Peak of a Newport sine that keeps the records in range [V], and what limits it."""
     b = model.bench
     j = INPUTS.index(channel)
     H = np.abs(model.plant.freqresp(np.array([freq_hz]))[0])
     ax = j - 2
-    limits = [2.0 if not closed else 1.0,
-              ADC_PEAK_V * b.newport_metrology_rad_per_v / max(H[OUTPUTS.index("psi_a") + ax, j],
-                                                               1e-30)]
+
+    def per_volt(out: str) -> float:
+        return max(float(H[OUTPUTS.index(out), j]), 1e-30)
+
+    vn = ("Vnh", "Vnv")[ax]
+    limits = {"the study's sweep (2 V) or perturbation (1 V)": 1.0 if closed else 2.0,
+              vn: ADC_PEAK_V * b.newport_metrology_rad_per_v / per_volt(("psi_a", "psi_b")[ax])}
     if closed:
-        # The loop moves the Sercalo against the Newport: Uc = beam / (Uc -> beam).
-        beam = H[OUTPUTS.index("b_x") + ax, j]
-        uc_to_beam = H[OUTPUTS.index("b_x") + ax, ax]
-        limits.append(4.0 * uc_to_beam / max(beam, 1e-30))
+        # The loop turns the Sercalo against the Newport: Uc = beam / (Uc -> beam).
+        uc_to_beam = float(H[OUTPUTS.index("b_x") + ax, ax])
+        limits[("Uch", "Ucv")[ax]] = 4.0 * uc_to_beam / per_volt(("b_x", "b_y")[ax])
     else:
         for out in ("Vph", "Vpv"):
-            limits.append(0.75 * ADC_PEAK_V / max(H[OUTPUTS.index(out), j], 1e-30))
+            limits[out] = 0.75 * ADC_PEAK_V / per_volt(out)
         for out in ("d_u", "d_w"):
-            limits.append(0.95 * b.qd_compression_swing_rad / max(H[OUTPUTS.index(out), j],
-                                                                   1e-30))
-    return float(min(limits))
+            limits[f"4QD linear range ({out})"] = 0.95 * b.qd_compression_swing_rad / per_volt(out)
+    what = min(limits, key=limits.__getitem__)
+    return float(limits[what]), what
 
 
 def _commands(model: BenchModel, p: Protocol, rng: np.random.Generator, n: int,
@@ -225,10 +229,10 @@ def _commands(model: BenchModel, p: Protocol, rng: np.random.Generator, n: int,
                 "amplitude_is": "rms before clipping at 4.5 sigma", "freq_hz": None,
                 "limited_by": what}
     else:
-        level = _sine_amplitude(model, p.excite, p.freq_hz, p.closed_loop)
+        level, what = _sine_amplitude(model, p.excite, p.freq_hz, p.closed_loop)
         x = level * np.sin(2.0 * math.pi * p.freq_hz * t)
         info = {"channel": p.excite, "kind": "sine", "amplitude_v": level,
-                "amplitude_is": "peak", "freq_hz": p.freq_hz}
+                "amplitude_is": "peak", "freq_hz": p.freq_hz, "limited_by": what}
     info["start_s"] = k0 / b.fs_hz
     u[k0:, j] = x
     return quantise(u, b.lsb_v, b.converter_span_v), info
