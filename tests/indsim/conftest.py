@@ -9,7 +9,7 @@ import pytest
 
 _TESTS = str(Path(__file__).resolve().parents[1])
 if _TESTS not in sys.path:
-    sys.path.insert(0, _TESTS)
+    sys.path.append(_TESTS)  # last: its folders must shadow no installed package
 
 from indsim import BenchRun, corpus, simulate_bench  # noqa: E402
 
