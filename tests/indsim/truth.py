@@ -161,8 +161,10 @@ def bench_file(model: BenchModel, signs: dict[str, float]) -> dict[str, Any]:
         "nominal.voltage_amplifier.noise_rms_v": b.vc_noise_rms_v,
         "nominal.newport.gain_rad_per_v": _hv(b.newport_gain_rad_per_v),
         "nominal.newport.metrology_gain_rad_per_v": b.newport_metrology_rad_per_v,
-        "nominal.newport.natural_freq_hz": np_f.h if np_f.h == np_f.v else _hv(np_f),
-        "nominal.newport.damping_ratio": np_z.h if np_z.h == np_z.v else _hv(np_z),
+        # One value for both axes in the bench file: the axes' mean (the pair is kept
+        # under "not_expressible").
+        "nominal.newport.natural_freq_hz": (np_f.h + np_f.v) / 2.0,
+        "nominal.newport.damping_ratio": (np_z.h + np_z.v) / 2.0,
         "nominal.newport.internal_delay_s": b.newport_internal_delay_s,
         "nominal.newport.beam_angle_per_mirror_angle": b.newport_beam_factor,
         "nominal.newport.angle_noise_rms_rad": b.newport_angle_noise_rms_rad,
@@ -201,6 +203,9 @@ def bench_file(model: BenchModel, signs: dict[str, float]) -> dict[str, Any]:
         "sign_carriers": SIGN_CARRIERS,
         "departures": departures,
         "real_bench_keys": real,
+        "not_expressible": {k: _hv(v) for k, v in (
+            ("nominal.newport.natural_freq_hz", np_f), ("nominal.newport.damping_ratio", np_z))
+            if v.h != v.v},
         "not_in_bench_file": {
             "back_emf_v_s_per_rad": _hv(b.back_emf_v_s_per_rad),
             "qd_amp_damping_ratio": b.qd_amp_damping_ratio if b.qd_amp_order == 2 else None,
