@@ -70,6 +70,7 @@ def test_static_gains_by_hand():
     o, i = OUTPUTS.index, INPUTS.index
     gi = [1 / (41 + 12 + 9.3), 1 / (41 + 7 + 8.3)]
     # Ich -> Vph = p g (mount 4) G0; Uc -> Vc = 1000 Rc Gi; Unh -> Vph = p g 2 gn.
+    # Exact formulas: approx's default 1e-6 relative covers the solve's rounding.
     assert G[o("Vph"), i("Uch")] == pytest.approx(31.0 * -4 * b.sercalo_gain_rad_per_a.h * gi[0])
     assert G[o("Vpv"), i("Ucv")] == pytest.approx(-36.3 * 4 * b.sercalo_gain_rad_per_a.v * gi[1])
     assert G[o("Vch"), i("Uch")] == pytest.approx(1000 * 9.3 * gi[0])
@@ -85,7 +86,7 @@ def test_rotation_and_crosstalk_cross_paths():
     b = IndBench(qd_rotation_rad=th, sercalo_torque_crosstalk=HV(c, 0.0))
     G = build_plant(b).dc_gain()
     o, i = OUTPUTS.index, INPUTS.index
-    # Vpv = p_v g_v (-sin θ b_x + cos θ b_y); Unh moves b_x by 2 gn.
+    # Exact formulas (default 1e-6 relative). Vpv = p_v g_v (-sin θ b_x + cos θ b_y).
     assert G[o("Vpv"), i("Unh")] == pytest.approx(36.3 * -math.sin(th) * 2 * 2.62e-3)
     assert G[o("Vph"), i("Unh")] == pytest.approx(-31.0 * math.cos(th) * 2 * 2.62e-3)
     # Coil h's torque about b: static phi_b = c G0_v Ich.
