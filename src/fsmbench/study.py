@@ -146,6 +146,21 @@ _LOOP_BLOCKS = {"Gd": "the 4QD calibration (data_cal_pd_h, data_cal_pd_v)",
                 "Gc": "the Sercalo (data_uch, data_ucv)"}
 
 
+#: Blocks the distance budget, the closed-loop simulation and the model's check use beyond
+#: the loop's: the Newport drives the repeatability runs' motion and its DAC's noise.
+_DISTURBANCE_BLOCKS = {"Gn": "Newport (data_unh, data_unv)"}
+
+
+def _disturbance_blocks_missing(ident: Identification | None) -> str:
+    """The disturbance's blocks an identification left to the bench file, in words."""
+    if ident is None:
+        return ""
+    gone = [f"{words}: {ident.skipped.get('newport', 'not identified')}"
+            for block, words in _DISTURBANCE_BLOCKS.items()
+            if ident.plant_blocks.get(block) != "identified"]
+    return "; ".join(gone)
+
+
 def _loop_blocks_missing(ident: Identification | None) -> str:
     """The loop's blocks an identification left nominal, in words (empty when none)."""
     if ident is None:
@@ -349,6 +364,7 @@ def run_study(*, out_dir: str | Path, data_dir: str | Path | None = None,
         plant_source=plant.source, plant_identified=plant.identification is not None
         and plant.source.startswith("identified"),
         plant_missing=_loop_blocks_missing(plant.identification),
+        disturbance_missing=_disturbance_blocks_missing(plant.identification),
         budget=budget, design=design.payload, validation=validation.result,
         validation_skipped=validation.skipped or identified.reason,
         simulated_bench="" if simulated.bench is None else simulated.bench.label)

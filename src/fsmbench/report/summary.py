@@ -24,7 +24,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping, Sequence
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from typing import Any, Literal
 
 from fsmbench import __version__
@@ -441,7 +441,7 @@ def build_summary(*, source: str, is_twin: bool, spec: Specification,
                   identification_headline: str = "",
                   plant_source: str, plant_identified: bool,
                   budget: Any | None, design: Mapping[str, Any] | None,
-                  plant_missing: str = "",
+                  plant_missing: str = "", disturbance_missing: str = "",
                   validation: Any | None = None, validation_skipped: str = "",
                   simulated_bench: str = "") -> Summary:
     """The verdict of a study.
@@ -469,6 +469,10 @@ def build_summary(*, source: str, is_twin: bool, spec: Specification,
     plant_identified : bool
     plant_missing : str
         The loop's blocks the identification left nominal, in words (empty: none).
+    disturbance_missing : str
+        The Newport's block when the identification left it to the bench file, with
+        why (empty: identified): the distance budget, the closed-loop simulation and
+        the model's check rest on it, so they are *assumed* and not verified.
     budget : BudgetResult or None
     design : mapping or None
         ``design.json``'s payload.
@@ -537,6 +541,12 @@ def build_summary(*, source: str, is_twin: bool, spec: Specification,
         stages.append(StageLine("design", "skipped", "not run", "#decentralised-control"))
     if design is not None or validation is not None:
         reqs.append(_validation_requirement(validation, validation_skipped))
+    if disturbance_missing and plant_identified:
+        reqs = [_assumed(r, disturbance_missing) if r.name in _DISTURBANCE_ROWS else r
+                for r in reqs]
+        fallbacks.append(f"The distance budget, the closed-loop simulation and the model's "
+                         f"check used the bench file's {disturbance_missing}: they are not "
+                         "verified until it is identified.")
     status, verdict = _verdict(reqs, plant_identified=plant_identified)
     failed_checks = tuple(c for c in checks if not c.passed)
     contradictions = [c for c in failed_checks if c.name not in FINDINGS]
@@ -555,6 +565,21 @@ def build_summary(*, source: str, is_twin: bool, spec: Specification,
                    skipped=dict(skipped), parts_skipped=tuple(parts_skipped),
                    failed_checks=failed_checks, notices=tuple(notices), specification=spec,
                    verdict_status=status, next_step=step, simulated_bench=simulated_bench)
+
+
+#: The requirements whose chain runs through the Newport's block (its drive moves the
+#: repeatability runs' beam, its DAC adds noise).
+_DISTURBANCE_ROWS = frozenset({"distance_error_budget", "closed_loop_simulation",
+                               "model_validation"})
+
+
+def _assumed(r: Requirement, missing: str) -> Requirement:
+    """A requirement whose chain used a bench-file fallback: assumed, not verified."""
+    return replace(r, passed=None, provenance="assumed",
+                   provenance_detail=(f"assumed: the bench file's {missing}"
+                                      + (f"; {r.provenance_detail}" if r.provenance_detail
+                                         else "")),
+                   missing=f"the identified {missing.split(':')[0]}")
 
 
 def _against(r: Requirement) -> str:

@@ -42,9 +42,10 @@ _IDENT = ("data_cal_pd_h", "data_cal_pd_v", "data_uch", "data_ucv", "data_unh", 
 #: The recordings each verdict row is judged from (the study's sections 2, 3, 11).
 _NEEDS: Mapping[str, tuple[str, ...]] = {
     "control_objective": _IDENT, "gain_margin": _IDENT, "phase_margin": _IDENT,
-    "robust_stability": _IDENT, "closed_loop_simulation": _IDENT,
+    "robust_stability": _IDENT, "closed_loop_simulation": _IDENT,  # the Newport's runs too
     "model_validation": (*_IDENT, "data_rep_h", "data_rep_v"),
-    "distance_error_budget": tuple(f"data_huddle_test_{i}" for i in range(1, 6)),
+    "distance_error_budget": (*(f"data_huddle_test_{i}" for i in range(1, 6)), "data_unh",
+                              "data_unv"),
 }
 
 
