@@ -35,6 +35,7 @@ from fsmbench.budget.huddle import (
     estimate_dac_noise,
     huddle_number,
 )
+from fsmbench.budget.huddle_screen import screen_huddles
 from fsmbench.budget.long_record import LongRecordSummary, summarise_long_record
 from fsmbench.budget.optics import GeometryBudget, geometry_budget
 from fsmbench.budget.quantisation import NoiseSources, noise_sources
@@ -303,6 +304,14 @@ def _budget_study(recordings: Mapping[str, xr.Dataset], *, bench: Bench,
     notices: list[Notice] = []
     usable = _plausible(recordings, bench=bench, skipped=skipped, checks=checks,
                         notices=notices)
+    # Copies, a closed-loop test whose loop was not closed, an open-loop test recorded with
+    # the loop closed: named, and left out of every comparison (budget.huddle_screen).
+    screen = screen_huddles(usable, fs_hz=params.converter.fs_hz,
+                            step_v=params.converter.lsb_v)
+    checks.extend(screen.checks)
+    for name, why in screen.excluded.items():
+        skipped[name] = f"{why}; the record is left out of the analysis and of every comparison"
+        usable.pop(name, None)
     valid = _valid_huddles(usable, skipped)
     # Records out of core are read twice, in blocks, for everything below (huddle and stability).
     summaries = {name: summarise_long_record(ds, name=name, n_bins=DRIFT_BINS, progress=progress)

@@ -1,0 +1,184 @@
+"""Huddle tests that cannot be compared: copies, a loop that was not closed, a loop left closed.
+
+The ESRF study's section 3 compares five huddle tests (open loop 1, 2, 4; closed
+loop 3, 5; the compensation unit from 2 on, the aluminium shielding on 4 and 5):
+a difference between two of them is the effect of what changed. Three mistakes
+make that comparison say something false, and each is named here, its record
+left out of every comparison (a failed check, attached to the record):
+
+``huddle_distinct``
+    Two tests whose signals are the same samples (a file saved twice under two
+    names): two recordings of noise are never equal, so the second is a copy;
+    compared, it would say the change between them does nothing.
+``huddle_loop_closed``
+    A closed-loop test (3, 5) whose commands ``Uch``, ``Ucv`` are zero
+    throughout, or that did not run the ESRF study's controller
+    (:mod:`fsmbench.ident.evidence.recorded_loop`).
+``huddle_loop_open``
+    An open-loop test (1, 2, 4) whose beam motion between 1 and 10 Hz is that of
+    the closed-loop tests: the loop divides the measured motion there, the 4QD's
+    own noise included, by |S|² (36× on average over the band on the twin with the
+    ESRF study's controller), so an open-loop record carries tens of times more;
+    one that does not (within :data:`CLOSED_LIKE_FACTOR` of the closed-loop tests'
+    median) was recorded with the loop closed.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from typing import Final
+
+import numpy as np
+import scipy.signal
+import xarray as xr
+
+from fsmbench.checks import Check
+from fsmbench.ident.evidence.recorded_loop import recorded_controllers
+
+__all__ = ["CLOSED_LIKE_FACTOR", "HuddleScreen", "screen_huddles"]
+
+_OPEN: Final = ("data_huddle_test_1", "data_huddle_test_2", "data_huddle_test_4")
+_CLOSED: Final = ("data_huddle_test_3", "data_huddle_test_5")
+_SIGNALS: Final = ("Vph", "Vpv", "Va")
+#: An open-loop test whose 1–10 Hz beam motion is within this factor (in power) of the
+#: closed-loop tests' median was recorded with the loop closed: the loop divides that
+#: band's power by the mean of 1/|S|² (36× measured on the twin's huddle tests with the
+#: ESRF study's controller, crossover near 27 Hz); a loop left closed gives ~1×.
+CLOSED_LIKE_FACTOR: Final = 4.0
+_BAND_HZ: Final = (1.0, 10.0)
+
+
+@dataclass(frozen=True)
+class HuddleScreen:
+    """The huddle tests left out of the comparisons, and why.
+
+    Attributes
+    ----------
+    checks : tuple of Check
+        One per test judged (failed ones name the test and the cause).
+    excluded : dict of str to str
+        Test → the failed check's sentence.
+    """
+
+    checks: tuple[Check, ...] = ()
+    excluded: dict[str, str] = field(default_factory=dict)
+
+
+def _same_samples(a: xr.Dataset, b: xr.Dataset) -> bool:
+    names = [s for s in _SIGNALS if s in a and s in b]
+    if not names:
+        return False
+    for s in names:
+        x, y = np.asarray(a[s].values), np.asarray(b[s].values)
+        if x.shape != y.shape or not np.array_equal(x, y):
+            return False
+    return True
+
+
+def _band_power(ds: xr.Dataset) -> float | None:
+    """Mean PSD of the two 4QD outputs in :data:`_BAND_HZ` [V²/Hz], None if too short."""
+    fs = float(ds.attrs.get("fs_hz", 0.0))
+    if fs <= 0:
+        return None
+    n = round(4.0 * fs)  # 4 s windows: 0.25 Hz lines, 36 of them in the band
+    total = []
+    for s in ("Vph", "Vpv"):
+        if s not in ds:
+            continue
+        x = np.asarray(ds[s].values, dtype=float)
+        if x.size < 2 * n:
+            return None
+        f, p = scipy.signal.welch(x - x.mean(), fs=fs, nperseg=n, detrend="linear")
+        band = (f >= _BAND_HZ[0]) & (f <= _BAND_HZ[1])
+        total.append(float(np.mean(p[band])))
+    return float(np.mean(total)) if total else None
+
+
+def screen_huddles(recordings: Mapping[str, xr.Dataset], *, fs_hz: float, step_v: float
+                   ) -> HuddleScreen:
+    """Name the huddle tests a comparison cannot use (see the module notes).
+
+    Parameters
+    ----------
+    recordings : mapping of experiment name to Dataset
+        The huddle tests present (others are ignored).
+    fs_hz : float
+        The records' rate [Hz] (the controller's discretisation).
+    step_v : float
+        One converter step [V].
+    """
+    present = [n for n in (*_OPEN, *_CLOSED) if n in recordings]
+    checks: list[Check] = []
+    excluded: dict[str, str] = {}
+    order = sorted(present, key=lambda n: int(n.rsplit("_", 1)[1]))
+    for i, name in enumerate(order):
+        original = next((o for o in order[:i] if o not in excluded
+                         and _same_samples(recordings[o], recordings[name])), None)
+        if original is None:
+            continue
+        check = Check(
+            "huddle_distinct", False, "the same samples", f"different samples from "
+            f"{original}.mat (two recordings of noise are never equal)", f"{name}.mat",
+            f"{name}.mat holds the same samples as {original}.mat (Vph, Vpv, Va): the same "
+            "recording saved under two names; it is left out, since compared with "
+            f"{original} it would say the change between the two tests does nothing: "
+            f"record {name} again", unit="")
+        checks.append(check)
+        excluded[name] = check.sentence()
+    loops = recorded_controllers({n: recordings[n] for n in _CLOSED if n in recordings},
+                                 fs_hz=fs_hz, step_v=step_v)
+    for name in _CLOSED:
+        if name not in recordings or name in excluded:
+            continue
+        verdicts = {a: next((f for f in loops[a].fits if f.record == name), None)
+                    for a in "hv"}
+        bad = {a: f for a, f in verdicts.items() if f is not None and f.verdict != "seed"}
+        if not bad:
+            if any(f is not None for f in verdicts.values()):
+                checks.append(Check("huddle_loop_closed", True, "ran the ESRF study's "
+                                    "controller", "a command the controller explains",
+                                    f"{name}.mat: Uch, Ucv"))
+            continue
+        words = "; ".join(
+            f"{'Uch' if a == 'h' else 'Ucv'} is zero throughout" if f.verdict == "zero" else
+            f"the ESRF study's controller explains {100 * f.explained:.0f} % of "
+            f"{'Uch' if a == 'h' else 'Ucv'}" for a, f in bad.items())
+        zero = all(f.verdict == "zero" for f in bad.values())
+        check = Check(
+            "huddle_loop_closed", False, words, "a command the ESRF study's controller "
+            "explains (≥ 50 % of its variance)", f"{name}.mat: Uch, Ucv",
+            f"{words}: " + ("the loop was not closed while this closed-loop test was "
+                            "recorded (or the commands were not saved)" if zero else
+                            "another controller ran, or an excitation was added") +
+            "; it is left out of the comparisons with the budget and the other tests: "
+            f"record {name} again with the loop closed on the ESRF study's controller")
+        checks.append(check)
+        excluded[name] = check.sentence()
+    closed_power = [p for n in _CLOSED if n in recordings and n not in excluded
+                    and (p := _band_power(recordings[n])) is not None]
+    if closed_power:
+        reference = float(np.median(closed_power))
+        for name in _OPEN:
+            if name not in recordings or name in excluded:
+                continue
+            power = _band_power(recordings[name])
+            if power is None or reference <= 0:
+                continue
+            ratio = power / reference
+            ok = ratio > CLOSED_LIKE_FACTOR
+            check = Check(
+                "huddle_loop_open", ok, float(ratio),
+                f"> {CLOSED_LIKE_FACTOR:g}× the closed-loop tests' beam motion in "
+                f"{_BAND_HZ[0]:g}–{_BAND_HZ[1]:g} Hz (the loop rejects it there)",
+                f"{name}.mat: Vph, Vpv",
+                "" if ok else (
+                    f"its {_BAND_HZ[0]:g}–{_BAND_HZ[1]:g} Hz beam motion is {ratio:.2g}× the "
+                    "closed-loop tests': the loop was closed while this open-loop test was "
+                    "recorded (or a closed-loop record was saved under its name); it is "
+                    f"left out of the comparisons: record {name} again with the loop open"),
+                unit="×")
+            checks.append(check)
+            if not ok:
+                excluded[name] = check.sentence()
+    return HuddleScreen(tuple(checks), excluded)
