@@ -560,8 +560,8 @@ def screen_recordings(recordings: Mapping[str, xr.Dataset], *, params: BenchPara
     for check, exps in pairs:
         for exp in exps:
             by_experiment[exp] = (*by_experiment.get(exp, ()), check)
-    for exp, found in outcome.by_experiment.items():
-        by_experiment[exp] = (*by_experiment.get(exp, ()), *found)
+    for exp, sign_checks in outcome.by_experiment.items():
+        by_experiment[exp] = (*by_experiment.get(exp, ()), *sign_checks)
     notices = [*_offset_notices(offsets, params), *outcome.notices]
     checks = [c for c, _ in pairs] + list(outcome.checks)
     kept = dict(recordings)

@@ -57,7 +57,8 @@ from fsmbench.ident.frf.response import FrequencyResponse
 from fsmbench.ident.sercalo import combined_delay, path_delays
 
 __all__ = ["NewportAxisFit", "NewportDynamics", "NewportIdentification", "SensorShift",
-           "fit_newport_dynamics", "identify_newport", "newport_checks", "resolved_sensor",
+           "fit_newport_axis", "fit_newport_dynamics", "identify_newport", "newport_checks",
+           "resolved_sensor",
            "sampled_response", "sensor_notices", "unresolved_sensor_shifts"]
 
 FloatArray = NDArray[np.float64]
@@ -98,6 +99,10 @@ class NewportAxisFit:
     sensor : SensorEstimate or None
         The 4QD amplifier in the fit and what the lines say of its bandwidth
         (:mod:`fsmbench.ident.delay.joint`); ``delay_s`` excludes its lag.
+    weighted_cost, noise_unit : float
+        The fit's weighted squared residual and its noise unit
+        (:class:`~fsmbench.ident.delay.joint.JointFit`): fits of the same lines with
+        other amplifiers compare by their costs' difference in noise units.
     """
 
     axis: str
@@ -113,6 +118,8 @@ class NewportAxisFit:
     n_lines: int
     fit_error: float
     sensor: SensorEstimate | None = None
+    weighted_cost: float = math.nan
+    noise_unit: float = math.nan
 
     @property
     def effective_delay_s(self) -> float:
@@ -289,13 +296,23 @@ def _fit_axis(frf: FrequencyResponse, axis: str, *, fs: float,
                           natural_freq_hz=fn, natural_freq_std_hz=float(std[1]),
                           damping_ratio=z, damping_std=float(std[2]), delay_s=joint.delay_s,
                           delay_std_s=joint.delay_std_s, band_hz=(float(fl[0]), float(fl[-1])),
-                          n_lines=int(fl.size), fit_error=joint.fit_error, sensor=joint.sensor)
+                          n_lines=int(fl.size), fit_error=joint.fit_error, sensor=joint.sensor,
+                          weighted_cost=joint.weighted_cost, noise_unit=joint.noise_unit)
+
+
+def fit_newport_axis(frf: FrequencyResponse, axis: str, *, sensor: SensorLowpass,
+                     resolve_sensor: bool = True) -> NewportAxisFit:
+    """One direct path ``Un → Vp`` (``axis``: h or v) fitted with ``sensor`` as the 4QD
+    amplifier; ``resolve_sensor``: its bandwidth free when the lines resolve it."""
+    return _fit_axis(frf, axis, fs=float(frf.fs_hz), sensor=sensor,
+                     resolve_sensor=resolve_sensor)
 
 
 def fit_newport_dynamics(frf: FrequencyResponse, *, dac_delay_samples: float = 1.0,
                          converter_delay_s: float | None = None,
                          phase_lag_deg: float = 60.0,
-                         sensor: SensorLowpass | None = None) -> NewportDynamics:
+                         sensor: SensorLowpass | None = None,
+                         resolve_sensor: bool = True) -> NewportDynamics:
     """Fit both Newport paths (see the module) and derive their bandwidths.
 
     Parameters
@@ -313,6 +330,9 @@ def fit_newport_dynamics(frf: FrequencyResponse, *, dac_delay_samples: float = 1
     sensor : SensorLowpass, optional
         The bench model's 4QD amplifier (default unlimited); its bandwidth is
         fitted when the lines resolve it (:mod:`fsmbench.ident.delay.joint`).
+    resolve_sensor : bool
+        False: the amplifier is ``sensor``, not fitted (a decision made from more
+        records than these lines, :mod:`fsmbench.ident.evidence.amplifier`).
 
     Raises
     ------
@@ -325,7 +345,8 @@ def fit_newport_dynamics(frf: FrequencyResponse, *, dac_delay_samples: float = 1
                              f"FRF has {frf.input_names} → {frf.output_names}")
     fs = float(frf.fs_hz)
     sensor = sensor or SensorLowpass()
-    axes = {axis: _fit_axis(frf, axis, fs=fs, sensor=sensor) for axis in "hv"}
+    axes = {axis: _fit_axis(frf, axis, fs=fs, sensor=sensor, resolve_sensor=resolve_sensor)
+            for axis in "hv"}
     converter = ((dac_delay_samples + 0.5) / fs + sensor.group_delay_s
                  if converter_delay_s is None else float(converter_delay_s))
     return NewportDynamics(
@@ -551,7 +572,8 @@ class NewportIdentification:
 def identify_newport(frf: FrequencyResponse, *, band_hz: tuple[float, float] = (10.0, 100.0),
                      min_coherence: float = 0.9, dac_delay_samples: float = 1.0,
                      converter_delay_s: float | None = None,
-                     sensor: SensorLowpass | None = None) -> NewportIdentification:
+                     sensor: SensorLowpass | None = None,
+                     resolve_sensor: bool = True) -> NewportIdentification:
     """The Newport paths (seed 2.4) from the ``Un → Vp`` matrix: dynamics, delays, gains.
 
     Parameters
@@ -569,6 +591,8 @@ def identify_newport(frf: FrequencyResponse, *, band_hz: tuple[float, float] = (
         of the Newport's (see :func:`fit_newport_dynamics`).
     sensor : SensorLowpass, optional
         The bench model's 4QD amplifier (see :func:`fit_newport_dynamics`).
+    resolve_sensor : bool
+        See :func:`fit_newport_dynamics`.
     """
     inputs, outputs = frf.input_names, frf.output_names
     if len(inputs) != 2 or len(outputs) != 2:
@@ -586,7 +610,7 @@ def identify_newport(frf: FrequencyResponse, *, band_hz: tuple[float, float] = (
     try:
         dyn: NewportDynamics | None = fit_newport_dynamics(
             frf, dac_delay_samples=dac_delay_samples, converter_delay_s=converter_delay_s,
-            sensor=sensor)
+            sensor=sensor, resolve_sensor=resolve_sensor)
         why = ""
     except ValueError as exc:
         dyn, why = None, f"the constant gains are used: {exc}"

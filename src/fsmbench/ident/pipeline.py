@@ -72,7 +72,14 @@ from fsmbench.ident.crosscheck import (
 )
 from fsmbench.ident.delay.sampled import SensorLowpass
 from fsmbench.ident.delay.sercalo import with_sensor
-from fsmbench.ident.evidence.departures import departures, matching_params, measured_keys
+from fsmbench.ident.evidence.amplifier import decide_amplifier
+from fsmbench.ident.evidence.departures import (
+    datasheet_departures,
+    departures,
+    matching_datasheet,
+    matching_params,
+    measured_keys,
+)
 from fsmbench.ident.evidence.matching import MATCHING_BENCH, write_matching_bench
 from fsmbench.ident.evidence.rate import RateEvidence, records_rate
 from fsmbench.ident.evidence.recorded_loop import (
@@ -455,7 +462,8 @@ def identify(recordings: Mapping[str, xr.Dataset], *, bench: Bench,
     found = _merged_findings(result.findings, departures(
         measured, bench_file=bench.nominal, fs_hz=used.converter.fs_hz))
     result = replace(result, findings=found, matching=replace(
-        bench, nominal=matching_params(bench.nominal, measured, result.findings)))
+        bench, nominal=matching_params(bench.nominal, measured, result.findings),
+        datasheet=matching_datasheet(bench.datasheet, result.findings)))
     # Records against each other and against the physical model (ident.crosscheck): a
     # failed one makes the identification untrusted, as a quality warning does.
     crossed = [*cross_checks(result.to_json(), params=used,
@@ -655,6 +663,9 @@ def _identify(recordings: Mapping[str, xr.Dataset], *, bench: Bench, opts: Ident
             sercalo_id = fit_sercalo(frf, gi_a_per_v={a: g.gain_a_per_v for a, g in gi.items()},
                                      options=replace(opts.sercalo, weights=opts.weights),
                                      sensor=sensor)
+            if sercalo_id.options.weights_fallback:
+                notices.append(Notice("other", "data_uch.mat, data_ucv.mat",
+                                      f"Sercalo fit: {sercalo_id.options.weights_fallback}"))
             if opts.refine_modes and frf.estimator == "periodic":
                 # Averaged periods have no leakage to remove: the fit's modes stand, with
                 # stds from every line's noise and distortion (ident.fit_std).
@@ -680,6 +691,8 @@ def _identify(recordings: Mapping[str, xr.Dataset], *, bench: Bench, opts: Ident
             skipped["sercalo"] = f"failed (data_uch, data_ucv): {exc}"
 
     newport_id: NewportIdentification | None = None
+    datasheet_findings: list[Finding] = []
+    amplifier_findings: list[Finding] = []
     if not (gone := missing("data_unh", "data_unv")) and (
             bad := data_failure("data_unh", "data_unv")):
         skipped["newport"] = _failure_reason(bad, "the nominal Newport is used")
@@ -700,7 +713,26 @@ def _identify(recordings: Mapping[str, xr.Dataset], *, bench: Bench, opts: Ident
                 nfrf, band_hz=opts.newport_band_hz, dac_delay_samples=conv.dac_delay_samples,
                 converter_delay_s=None if sercalo_id is None else sercalo_id.delay_s,
                 sensor=sensor)
-            if (dyn := newport_id.dynamics) is not None:
+            lag_s, lag_std_s = qd_amplifier_lag_s(sid=sercalo_id, gi=gi, nominal=nom)
+            decision = (None if newport_id.dynamics is None else decide_amplifier(
+                nfrf, newport_id.dynamics, lag_s=lag_s, lag_std_s=lag_std_s, model=sensor))
+            if decision is not None and decision.sensor is not None:
+                # The delays give the amplifier's lag, the lines its order
+                # (ident.evidence.amplifier): the Newport fitted with what both decide.
+                newport_id = replace(identify_newport(
+                    nfrf, band_hz=opts.newport_band_hz,
+                    dac_delay_samples=conv.dac_delay_samples,
+                    converter_delay_s=None if sercalo_id is None else sercalo_id.delay_s,
+                    sensor=decision.sensor, resolve_sensor=False),
+                    sensor_shifts=decision.shifts)
+                notices.append(Notice("other", "4QD amplifier", decision.words))
+                amplifier_findings = list(decision.findings)
+                if decision.resolved and sercalo_id is not None and decision.sensor != sensor:
+                    say("2.3 Sercalo: the delay again with the 4QD amplifier the records "
+                        "decide")
+                    sercalo_id = with_sensor(sercalo_id, decision.sensor)
+            if (dyn := newport_id.dynamics) is not None and (
+                    decision is None or decision.sensor is None):
                 notices.extend(sensor_notices(dyn, model=sensor))
                 resolved = resolved_sensor(dyn)
                 if resolved is not None and sercalo_id is not None:
@@ -709,7 +741,6 @@ def _identify(recordings: Mapping[str, xr.Dataset], *, bench: Bench, opts: Ident
                     sercalo_id = with_sensor(sercalo_id, resolved)
                 # An amplifier neither the bench model nor the lines give: the delays
                 # measure its lag, and its shape bounds the Newport's parameters.
-                lag_s, lag_std_s = qd_amplifier_lag_s(sid=sercalo_id, gi=gi, nominal=nom)
                 if np.isfinite(lag_s):
                     shifts = unresolved_sensor_shifts(
                         nfrf, dyn, lag_s=max(lag_s, 0.0) + 1.96 * lag_std_s)
@@ -717,11 +748,16 @@ def _identify(recordings: Mapping[str, xr.Dataset], *, bench: Bench, opts: Ident
                     notices.extend(_sensor_shift_notices(shifts, lag_s=lag_s,
                                                          noise={a: dyn.axes[a].natural_freq_std_hz
                                                                 for a in dyn.axes}))
+            if (dyn := newport_id.dynamics) is not None:
                 ds_np = bench.datasheet.newport
-                checks.extend(newport_checks(
+                # The datasheet is a prior: a Newport off it is a finding about this mirror
+                # (its tuning, or another unit), with the datasheet key it contradicts.
+                found = newport_checks(
                     dyn, amplitude_bandwidth_hz=ds_np.amplitude_bandwidth_hz,
                     phase_bandwidth_hz=ds_np.phase_bandwidth_hz,
-                    peaking_max_db=ds_np.peaking_max_db))
+                    peaking_max_db=ds_np.peaking_max_db)
+                checks.extend(c for c in found if c.passed)
+                datasheet_findings = datasheet_departures(found, datasheet=ds_np)
             else:
                 skipped["newport_dynamics"] = newport_id.dynamics_skipped
         except ValueError as exc:
@@ -766,7 +802,8 @@ def _identify(recordings: Mapping[str, xr.Dataset], *, bench: Bench, opts: Ident
                             options=opts, source=source, warnings=warnings,
                             checks=tuple(checks), notices=tuple(notices), noise_model=noise,
                             compression=compression, truncation=truncation,
-                            findings=rate_findings + screen.findings,
+                            findings=(*rate_findings, *screen.findings, *amplifier_findings,
+                                      *datasheet_findings),
                             recorded_loop=dict(screen.loops),
                             params=nom)
     return replace(result, uncertainty=uncertainty_tree(

@@ -174,6 +174,10 @@ class JointFit:
         Sum of the squared weighted residuals (real and imaginary parts) [1].
     stride : int
         Every ``stride``-th line was fitted.
+    noise_unit : float
+        The cost of one noise unit (the reduced chi-square times the correlated
+        lines per fitted line): a difference of costs over it is a likelihood
+        ratio, comparable between fits of the same lines.
     """
 
     parameters: FloatArray
@@ -188,6 +192,7 @@ class JointFit:
     method: str = field(default="joint: own poles, delay and sensor")
     weighted_cost: float = math.nan
     stride: int = 1
+    noise_unit: float = math.nan
 
     @property
     def effective_delay_s(self) -> float:
@@ -311,7 +316,8 @@ def fit_jointly(f_hz: FloatArray, response: NDArray[np.complex128], sigma: Float
                     sensor=estimate, band_hz=(float(f[0]), float(f[-1])), n_lines=int(f.size),
                     reduced_chi2=float(final_chi2),
                     fit_error=float(np.sqrt(np.mean(np.abs((model - h) / h) ** 2))),
-                    weighted_cost=float(best.cost), stride=stride)
+                    weighted_cost=float(best.cost), stride=stride,
+                    noise_unit=float(max(final_chi2, 1e-300) * max(correlated_lines, 1.0)))
 
 
 def hac_factors(influence: FloatArray, residual: FloatArray, nominal: float) -> FloatArray:

@@ -26,11 +26,16 @@ from typing import Any, Final
 import numpy as np
 
 from fsmbench.bench.blocks import newport_beam_matrix
-from fsmbench.bench.params import BenchParams
-from fsmbench.checks import Finding
+from fsmbench.bench.params import BenchParams, Datasheet, NewportDatasheet
+from fsmbench.checks import Check, Finding
 
-__all__ = ["MeasuredKey", "departures", "get_key", "matching_params", "measured_keys",
-           "set_key"]
+__all__ = ["MeasuredKey", "datasheet_departures", "departures", "get_key", "matching_datasheet",
+           "matching_params", "measured_keys", "set_key"]
+
+#: The Newport's datasheet checks (ident.newport.newport_checks) by their datasheet key.
+_DATASHEET_KEYS: Final = {"newport_amplitude_bandwidth": "amplitude_bandwidth_hz",
+                          "newport_phase_bandwidth": "phase_bandwidth_hz",
+                          "newport_peaking": "peaking_max_db"}
 
 #: Relative departure below which a value agrees with the bench file, by key (the
 #: identification's tolerance: a closer bench file describes the bench as well as the
@@ -243,11 +248,49 @@ def departures(measured: Iterable[MeasuredKey], *, bench_file: BenchParams,
 
 def matching_params(bench_file: BenchParams, measured: Iterable[MeasuredKey],
                     signs: Iterable[Finding] = ()) -> BenchParams:
-    """The bench file with every measured key and sign set: what the records describe."""
+    """The bench file with every measured key and sign set: what the records describe
+    (findings on other tables than ``nominal``, the datasheet's, are left out)."""
     out = bench_file
     for f in signs:
-        out = set_key(out, f.key, f.measured)
+        if f.key.startswith("nominal."):
+            out = set_key(out, f.key, f.measured)
     for m in measured:
         out = set_key(out, m.key, m.value)
     return out
 
+
+
+def datasheet_departures(checks: Iterable[Check], *, datasheet: NewportDatasheet
+                         ) -> list[Finding]:
+    """The Newport's datasheet checks that failed, as findings on ``datasheet.newport.*``.
+
+    A mirror whose bandwidth or peaking is off its datasheet's is this bench's mirror
+    (its tuning, or another unit): a finding with the value the records give (the axes'
+    mean; each axis's in the words), not a fault of the records.
+    """
+    by_name: dict[str, list[Check]] = {}
+    for c in checks:
+        if not c.passed and c.name in _DATASHEET_KEYS and isinstance(c.value, float):
+            by_name.setdefault(c.name, []).append(c)
+    out = []
+    for name, failed in by_name.items():
+        field = _DATASHEET_KEYS[name]
+        bench = float(getattr(datasheet, field))
+        value = float(np.mean([float(c.value) for c in failed if isinstance(c.value, float)]))
+        unit = failed[0].unit
+        axes = "; ".join(f"{c.subject} {c.value_words()}" for c in failed)
+        out.append(Finding(f"datasheet.newport.{field}", bench, value, unit,
+                           "data_unh.mat, data_unv.mat",
+                           f"the Newport departs from its FSM-300 datasheet ({failed[0].title}: "
+                           f"{axes}): its controller's tuning, or another unit; check it before "
+                           "trusting a closed-loop prediction that assumes the datasheet"))
+    return out
+
+
+def matching_datasheet(datasheet: Datasheet, findings: Iterable[Finding]) -> Datasheet:
+    """The datasheet tables with the ``datasheet.newport.*`` findings' values."""
+    newport = datasheet.newport
+    for f in findings:
+        if f.key.startswith("datasheet.newport."):
+            newport = dataclasses.replace(newport, **{f.key.rsplit(".", 1)[1]: f.measured})
+    return dataclasses.replace(datasheet, newport=newport)

@@ -93,7 +93,8 @@ def records_rate(recordings: Mapping[str, xr.Dataset], *, bench_fs_hz: float) ->
     groups.sort(key=lambda g: (len(g), _same(rates[g[0]], bench_fs_hz)), reverse=True)
     main = groups[0]
     fs = sorted(rates[n] for n in main)[len(main) // 2]
-    checks, by_experiment = [], {}
+    checks: list[Check] = []
+    by_experiment: dict[str, tuple[Check, ...]] = {}
     for g in groups[1:]:
         for name in g:
             check = Check(

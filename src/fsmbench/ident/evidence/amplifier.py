@@ -1,0 +1,206 @@
+"""The 4QD amplifier from two kinds of record: the delays give its lag, the lines its order.
+
+The 4QD amplifier (a low pass in front of the ADC) sits on every path to the
+4QD. Two records see it in different ways:
+
+* **its lag**: the Sercalo's effective delay on ``Uc → Vp`` less the pure delay
+  of ``Uc → Vc`` (no 4QD there) and the coil's lag
+  (:func:`fsmbench.ident.totals.qd_amplifier_lag_s`), with its std;
+* **its shape**: the Newport's lines, up to 4 kHz, where a first order and a
+  Butterworth of the same lag droop differently.
+
+The Newport's lines alone confound it: an over-damped FSM-300 has a real pole
+near 1.7 kHz, and an amplifier near 2 kHz trades bandwidth with the mirror's
+natural frequency along a flat valley (an independent simulator's bench with a
+first-order amplifier at 2 kHz: the lines "resolved" 1686 ± 184 Hz and put the
+Newport at 1174 Hz for 1077). So the amplifier is decided by both:
+
+1. the lag must be measured (above three of its std);
+2. each order is fitted to the Newport's lines with the bandwidth that gives that
+   lag; the order is determined when the other fits worse by more than
+   :data:`~fsmbench.ident.delay.joint.RESOLVED_LR` noise units (summed over
+   the axes);
+3. determined: the amplifier is reported on its own (a finding on
+   ``quad_diode.bandwidth_hz`` and ``bandwidth_order``), the Newport fitted with
+   it, and the lag's std carried into the Newport's parameters as a bounded
+   part (refits at the lag ± its std);
+4. not determined: no amplifier is claimed; the Newport is fitted with the order
+   that fits better, and the other order's difference is a bounded part of its
+   parameters.
+
+Without a measured lag the lines' own conclusion stands only when it has no
+lag to contradict (no Sercalo record): a lag measured as zero rejects a
+bandwidth the Newport's lines resolved (their extra pole is the mirror's own,
+named), and the fit without amplifier stands.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Final
+
+from fsmbench.checks import Finding
+from fsmbench.ident.delay.joint import RESOLVED_LR
+from fsmbench.ident.delay.sampled import SensorLowpass
+from fsmbench.ident.frf.response import FrequencyResponse
+from fsmbench.ident.newport import (
+    NewportAxisFit,
+    NewportDynamics,
+    SensorShift,
+    fit_newport_axis,
+)
+
+__all__ = ["LAG_SIGMAS", "AmplifierDecision", "decide_amplifier"]
+
+#: A lag is measured when it is above this many of its standard deviations.
+LAG_SIGMAS: Final = 3.0
+#: Group delay per 1/ω_b of each order: 1 (first order), √2 (Butterworth).
+_PER_RAD: Final = {1: 1.0, 2: math.sqrt(2.0)}
+_SHIFTED: Final = ("gain_v_per_v", "natural_freq_hz", "damping_ratio")
+_ORDER_WORDS: Final = {1: "first-order", 2: "second-order (Butterworth)"}
+
+
+@dataclass(frozen=True)
+class AmplifierDecision:
+    """What the records decide about the 4QD amplifier.
+
+    Attributes
+    ----------
+    lag_s, lag_std_s : float
+        The lag the delays measure and its std [s].
+    sensor : SensorLowpass or None
+        The amplifier the Newport is fitted with (None: the lines' own fit stands).
+    resolved : bool
+        Order and bandwidth determined: the amplifier is reported on its own.
+    order_lr : float
+        How much worse the other order fits, in noise units (0 when not compared).
+    shifts : dict of axis to SensorShift
+        The Newport parameters' bounded parts (the lag's std, or the other order).
+    words : str
+        The decision in words, with the evidence.
+    findings : tuple of Finding
+        ``quad_diode.bandwidth_hz`` and ``bandwidth_order`` when resolved and the
+        bench file states otherwise.
+    """
+
+    lag_s: float
+    lag_std_s: float
+    sensor: SensorLowpass | None
+    resolved: bool
+    order_lr: float = 0.0
+    shifts: dict[str, SensorShift] = field(default_factory=dict)
+    words: str = ""
+    findings: tuple[Finding, ...] = ()
+
+
+def _bandwidth(lag_s: float, order: int) -> float:
+    return _PER_RAD[order] / (2.0 * math.pi * lag_s)
+
+
+def _shift(a: NewportAxisFit, b: NewportAxisFit) -> dict[str, float]:
+    return {k: float(getattr(a, k) - getattr(b, k)) for k in _SHIFTED}
+
+
+def _cost(fits: dict[str, NewportAxisFit]) -> float:
+    return sum(f.weighted_cost for f in fits.values())
+
+
+def _unit(*fit_sets: dict[str, NewportAxisFit]) -> float:
+    units = [f.noise_unit for fits in fit_sets for f in fits.values()
+             if math.isfinite(f.noise_unit)]
+    return min(units) if units else 1.0
+
+
+def decide_amplifier(frf: FrequencyResponse, dyn: NewportDynamics, *, lag_s: float,
+                     lag_std_s: float, model: SensorLowpass) -> AmplifierDecision:
+    """Decide the 4QD amplifier from the delays' lag and the Newport's lines (module notes).
+
+    Parameters
+    ----------
+    frf : FrequencyResponse
+        The Newport's matrix ``dyn`` was fitted on.
+    dyn : NewportDynamics
+        The Newport fitted with the bench model's amplifier (its bandwidth free
+        where the lines resolve one).
+    lag_s, lag_std_s : float
+        The amplifier's lag from the delays and its std [s] (NaN: not measured).
+    model : SensorLowpass
+        The bench file's amplifier (0: none).
+    """
+    if not (math.isfinite(lag_s) and math.isfinite(lag_std_s)):
+        return AmplifierDecision(lag_s, lag_std_s, None, False)
+    claimed = [a for a in dyn.axes.values() if a.sensor is not None
+               and a.sensor.source == "fitted"]
+    if lag_s <= LAG_SIGMAS * lag_std_s:
+        if not claimed:
+            return AmplifierDecision(lag_s, lag_std_s, None, False)
+        # The lines want a pole the delays do not show: the mirror's own, not the 4QD's.
+        lines = "; ".join(f"{_ORDER_WORDS[a.sensor.order]} at {a.sensor.bandwidth_hz:.4g} Hz "
+                          f"({a.axis})" for a in claimed if a.sensor is not None)
+        return AmplifierDecision(
+            lag_s, lag_std_s, model, False,
+            words=(f"the Newport's lines fit better with another low pass ({lines}), but the "
+                   f"delays measure no 4QD amplifier lag ({lag_s * 1e6:+.3g} ± "
+                   f"{lag_std_s * 1e6:.2g} µs): that pole is the Newport's own, which its "
+                   "second-order model leaves out; no 4QD amplifier is reported, and the "
+                   "Newport is fitted without it"))
+    by_order = {o: {axis: fit_newport_axis(frf, axis, sensor=SensorLowpass(
+        bandwidth_hz=_bandwidth(lag_s, o), order=o), resolve_sensor=False)
+        for axis in dyn.axes} for o in (1, 2)}
+    unit = _unit(*by_order.values())
+    cost = {o: _cost(f) for o, f in by_order.items()}
+    best = min(cost, key=lambda o: cost[o])
+    other = 3 - best
+    lr = (cost[other] - cost[best]) / unit
+    lag_words = (f"the delays measure a 4QD amplifier lag of {lag_s * 1e6:.3g} ± "
+                 f"{lag_std_s * 1e6:.2g} µs (the Sercalo's effective delay less the pure one "
+                 "of Uc → Vc and the coil's lag)")
+    if lr <= RESOLVED_LR:
+        shifts = {a: SensorShift(axis=a, lag_s=lag_s,
+                                 half_width={k: abs(v) for k, v in _shift(
+                                     by_order[other][a], by_order[best][a]).items()},
+                                 by_order={o: _shift(by_order[o][a], by_order[best][a])
+                                           for o in (1, 2)})
+                  for a in dyn.axes}
+        return AmplifierDecision(
+            lag_s, lag_std_s, SensorLowpass(bandwidth_hz=_bandwidth(lag_s, best), order=best),
+            False, lr, shifts,
+            words=(f"{lag_words}; the Newport's lines cannot tell its order (a "
+                   f"{_ORDER_WORDS[other]} low pass of that lag fits only {lr:.3g} noise units "
+                   f"worse, under {RESOLVED_LR:.3g}): no amplifier is reported on its own; the "
+                   "Newport is fitted with the better order and carries the other's difference "
+                   "as a bound; state the amplifier in the bench file to remove it"))
+    sensor = SensorLowpass(bandwidth_hz=_bandwidth(lag_s, best), order=best)
+    lo, hi = lag_s - lag_std_s, lag_s + lag_std_s
+    edges = {lag: {a: fit_newport_axis(frf, a, sensor=SensorLowpass(
+        bandwidth_hz=_bandwidth(lag, best), order=best), resolve_sensor=False) for a in dyn.axes}
+        for lag in (lo, hi) if lag > 0}
+    shifts = {}
+    for a in dyn.axes:
+        moved = [_shift(e[a], by_order[best][a]) for e in edges.values()]
+        shifts[a] = SensorShift(axis=a, lag_s=lag_s,
+                                half_width={k: max((abs(m[k]) for m in moved), default=0.0)
+                                            for k in _SHIFTED},
+                                by_order={best: moved[-1] if moved else dict.fromkeys(_SHIFTED,
+                                                                                    0.0)})
+    bw = sensor.bandwidth_hz
+    bw_std = bw * lag_std_s / lag_s
+    findings: list[Finding] = []
+    if not (model.limited and model.order == best
+            and abs(model.bandwidth_hz - bw) <= 2 * bw_std):
+        records = "data_uch.mat, data_ucv.mat, data_unh.mat, data_unv.mat"
+        findings = [
+            Finding("nominal.quad_diode.bandwidth_hz", model.bandwidth_hz, bw, "Hz", records,
+                    f"the 4QD amplifier: {lag_words}, and the Newport's lines choose its "
+                    f"order ({_ORDER_WORDS[other]} fits {lr:.3g} noise units worse): a "
+                    f"{_ORDER_WORDS[best]} low pass at {bw:.4g} ± {bw_std:.2g} Hz", bw_std),
+            Finding("nominal.quad_diode.bandwidth_order", float(model.order), float(best), "1",
+                    records, f"the 4QD amplifier's order ({_ORDER_WORDS[best]})")]
+    return AmplifierDecision(
+        lag_s, lag_std_s, sensor, True, lr, shifts,
+        words=(f"{lag_words}; the Newport's lines choose a {_ORDER_WORDS[best]} low pass "
+               f"(the other order fits {lr:.3g} noise units worse): the 4QD amplifier is a "
+               f"{_ORDER_WORDS[best]} low pass at {bw:.4g} ± {bw_std:.2g} Hz, and the "
+               "Newport's parameters carry the lag's std as a bound"),
+        findings=tuple(findings))
