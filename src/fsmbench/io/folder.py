@@ -47,8 +47,10 @@ import xarray as xr
 
 from fsmbench.checks import Check, Notice
 from fsmbench.io.errors import RecordingError, SaturationWarning
+from fsmbench.io.notes import READ_NOTES, TIME_JITTER
 from fsmbench.io.recording import find_experiments, read_recording
 from fsmbench.io.signals import ADC_SIGNALS, DAC_SIGNALS, EXPERIMENTS, SIGNALS, TIME
+from fsmbench.io.trailing import TrailingBytesWarning, data_end
 from fsmbench.io.va_jumps import jump_check, va_unit_hint
 
 __all__ = [
@@ -262,6 +264,9 @@ def _check_recording(ds: xr.Dataset, *, name: str | None, fs_hz: float | None,
         notices.append(Notice("data_type", f"{label}: t", f"t is stored in single precision "
                               f"({t_type}); it was uniform enough here, but longer records "
                               "will not be: save t in double precision"))
+    # What the reader found about the file (fsmbench.io.notes): given by every check of it.
+    notices += [Notice(kind, f"{label}: t" if kind == TIME_JITTER else label,
+                       str(ds.attrs[kind])) for kind in READ_NOTES if ds.attrs.get(kind)]
     for var in ds.data_vars:
         v = str(var)
         if v not in SIGNALS:
@@ -446,8 +451,8 @@ def _kind(mode: int) -> str:
 
 
 def _notice_of(w: warnings.WarningMessage, label: str) -> Notice | None:
-    if isinstance(w.message, SaturationWarning):
-        return None  # check_recording reports saturation itself
+    if isinstance(w.message, (SaturationWarning, TrailingBytesWarning)):
+        return None  # check_recording reports them itself (saturation, the recording's notes)
     text = str(w.message)
     if issubclass(w.category, RuntimeWarning):
         return Notice("numeric", label, f"numerical problem while reading: {text}")
@@ -547,7 +552,8 @@ def _read(path: Path, name: str, *, adc_range_v: float, adc_bits: int,
         out_of_core = True
     except ImportError:  # the fsmbench[dask] extra is not installed: read whole, if it fits
         out_of_core = False
-    if path.stat().st_size <= lazy_bytes or fmt not in ("hdf5", "mat73") or not out_of_core:
+    # The data's size, not the file's: zeros after them are not read (fsmbench.io.trailing).
+    if data_end(path, fmt).end <= lazy_bytes or fmt not in ("hdf5", "mat73") or not out_of_core:
         _refuse_if_too_large(path, name, fmt, out_of_core=out_of_core)
         return read_recording(path, experiment=name, adc_range_v=adc_range_v, adc_bits=adc_bits)
     from fsmbench.io.lazy import available_memory_bytes, open_recording
