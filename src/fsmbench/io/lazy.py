@@ -15,6 +15,7 @@ Dask is the ``fsmbench[dask]`` extra: this module imports it lazily.
 
 from __future__ import annotations
 
+import functools
 import math
 import os
 import struct
@@ -378,20 +379,33 @@ CONVERTED_FROM = "converted_from"
 _FS_TOLERANCE = 1e-3
 
 
-def _streamed_rate(pieces: Iterator[np.ndarray], n: int) -> float:
-    """The rate [Hz] fitted to ``t`` by least squares, ``t`` given block by block (nan
-    when ``t`` has fewer than 2 samples or no span)."""
+def _streamed_rate(pieces: Callable[[], Iterator[np.ndarray]], n: int) -> float:
+    """The rate [Hz] :func:`~fsmbench.io.timebase.time_base` gives ``t``, ``t`` read block by
+    block twice (the least-squares period, then the distances from it); nan when ``t`` has
+    fewer than 2 samples or no span."""
     if n < 2:
         return math.nan
-    centre, start, t0, sum_ku = 0.5 * (n - 1), 0, math.nan, 0.0
-    for block in pieces:
+    centre, t0, t_last, sum_ku, sum_u = 0.5 * (n - 1), math.nan, math.nan, 0.0, 0.0
+    start = 0
+    for block in pieces():
         if start == 0:
             t0 = float(block[0])
         k = np.arange(start, start + block.size, dtype=np.float64) - centre
         sum_ku += float(np.dot(k, block - t0))
-        start += block.size
+        sum_u += float(np.sum(block - t0))
+        start, t_last = start + block.size, float(block[-1])
     period = sum_ku / sum_k_squared(n)
-    return float(f"{1.0 / period:.12g}") if period > 0 else math.nan
+    if not period > 0:
+        return math.nan
+    start, deviation = 0, 0.0
+    for block in pieces():
+        k = np.arange(start, start + block.size, dtype=np.float64) - centre
+        deviation = max(deviation, float(np.max(np.abs(block - t0 - sum_u / n - period * k))))
+        start += block.size
+    base = time_base(n=n, span_s=t_last - t0, period_s=period, deviation_s=deviation,
+                     at_index=0)
+    # Irregular t is copied as it is: reading the archive says what is wrong with it.
+    return base.fs_hz if base is not None else float(f"{1.0 / period:.12g}")
 
 
 def converted_from(path: str | os.PathLike[str]) -> str | None:
@@ -455,7 +469,7 @@ def convert_recording(source: str | os.PathLike[str], dest: str | os.PathLike[st
             raise RecordingError(src, f"signals of unequal lengths ({', '.join(uneven)} vs "
                                  f"{TIME})")
         first_t = next(pieces(TIME))[:2]
-        from_t = _streamed_rate(pieces(TIME), n)
+        from_t = _streamed_rate(functools.partial(pieces, TIME), n)
         attrs = {"experiment": src.stem, "source": str(src)}
     elif fmt in ("mat73", "hdf5"):
         ds = open_recording(src)

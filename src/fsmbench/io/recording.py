@@ -182,7 +182,10 @@ def _validate(
     adc_bits: int,
     saturation: bool,
     stacklevel: int,
-) -> None:
+    base: TimeBase | None = None,
+) -> TimeBase:
+    """Raise on the first problem of ``ds``; return the grid fitted to its ``t`` (``base``:
+    already fitted to it by the caller, so ``t`` is not fitted twice)."""
     if TIME not in ds.coords and TIME not in ds.variables:
         present = ", ".join(map(str, ds.data_vars)) or "nothing"
         raise RecordingError(origin, "is missing: a recording needs its time vector t, in s "
@@ -204,7 +207,7 @@ def _validate(
     if t.size < 2:
         raise RecordingError(origin, f"holds {t.size} sample{'s' if t.size != 1 else ''}; "
                              "a recording needs at least 2", variable=TIME)
-    base = _check_time(t, origin)
+    base = base or _check_time(t, origin)
     for name in ds.data_vars:
         problem = _nonfinite_problem(np.asarray(ds[name].values), t)
         if problem:
@@ -218,6 +221,7 @@ def _validate(
                              f"t, whose rate is {base.fs_hz:.10g} Hz")
     if saturation:
         _check_saturation(ds, origin, adc_range_v, adc_bits, stacklevel + 1)
+    return base
 
 
 # --------------------------------------------------------------------------- public API
@@ -327,7 +331,7 @@ def make_recording(
         fs_hz = base.fs_hz if base is not None else float("nan")
     ds = _assemble(vectors, fs_hz=float(fs_hz), experiment=experiment, source=source)
     _validate(ds, origin=origin, require=(), adc_range_v=adc_range_v, adc_bits=adc_bits,
-              saturation=True, stacklevel=3)
+              saturation=True, stacklevel=3, base=base)
     _note_reading(ds, base)
     return ds
 
@@ -411,9 +415,9 @@ def read_recording(
             ds.attrs["experiment"] = experiment
         req = (_default_require(ds.attrs["experiment"], p.stem)[1] if require is None
                else tuple(require))
-        _validate(ds, origin=origin, require=req, adc_range_v=adc_range_v,
-                  adc_bits=adc_bits, saturation=True, stacklevel=3)
-        _note_reading(ds, _fitted(np.asarray(ds[TIME].values, dtype=np.float64)), end)
+        grid = _validate(ds, origin=origin, require=req, adc_range_v=adc_range_v,
+                         adc_bits=adc_bits, saturation=True, stacklevel=3)
+        _note_reading(ds, grid, end)
         return ds
     experiment = p.stem if experiment is None else experiment
     needs, req = _default_require(experiment, p.stem)
@@ -460,7 +464,7 @@ def read_recording(
             ds[name].attrs["stored_dtype"] = str(stored)
     try:
         _validate(ds, origin=origin, require=req, adc_range_v=adc_range_v, adc_bits=adc_bits,
-                  saturation=True, stacklevel=3)
+                  saturation=True, stacklevel=3, base=base)
     except RecordingError as exc:
         stored = np.asarray(raw[TIME]).dtype
         if exc.variable == TIME and stored.kind == "f" and stored.itemsize < 8:

@@ -41,8 +41,8 @@ from fsmbench.io.errors import RecordingError
 from fsmbench.io.signals import TIME
 
 __all__ = ["EXACT_TOLERANCE", "JITTER_TOLERANCE", "TimeBase", "coarse_double", "fit_time_base",
-           "irregular", "not_increasing", "rate_text", "single_precision", "sum_k_squared",
-           "time_base"]
+           "irregular", "nominal_rate", "not_increasing", "rate_text", "single_precision",
+           "sum_k_squared", "time_base"]
 
 #: Largest deviation of ``t`` from the fitted uniform grid [periods] taken as clock jitter.
 JITTER_TOLERANCE: Final = 1e-3
@@ -59,8 +59,9 @@ class TimeBase:
     ----------
     fs_hz : float
         Sampling rate [Hz]: from the first and last sample when ``t`` is a uniform grid
-        (``max_deviation_s`` below :data:`EXACT_TOLERANCE` of a period), else the least-
-        squares fit over every sample; rounded to 12 significant digits.
+        (``max_deviation_s`` below :data:`EXACT_TOLERANCE` of a period), to 12 significant
+        digits; else the least-squares fit over every sample, to the digits its error
+        allows (:func:`nominal_rate`).
     max_deviation_s : float
         Largest ``|t[k] - (t0 + k/fs)|`` from the least-squares grid [s].
     at_index : int
@@ -85,10 +86,10 @@ class TimeBase:
         """One line: how far ``t`` strays and how the samples are taken (for a notice)."""
         d, period = self.max_deviation_s, self.period_s
         return (f"t strays up to {_seconds(d)} ({100 * d / period:.2g} % of the "
-                f"{_seconds(period)} period) from a uniform grid, at t[{self.at_index}]: "
-                "clock jitter of the time stamps, within the 0.1 % of a period accepted; "
-                f"the samples are analysed as uniform at {rate_text(self.fs_hz)}, the rate "
-                "fitted to the whole of t")
+                f"{_seconds(period)} period, at t[{self.at_index}]) from a uniform grid: clock "
+                f"jitter (up to {100 * JITTER_TOLERANCE:g} % accepted); the samples are taken "
+                f"as uniform at {rate_text(self.fs_hz)}, fitted to the whole of t (least "
+                "squares, to the digits it fixes)")
 
 
 def rate_text(fs_hz: float) -> str:
@@ -185,12 +186,41 @@ def time_base(*, n: int, span_s: float, period_s: float, deviation_s: float,
     """
     if deviation_s > JITTER_TOLERANCE * period_s:
         return None
-    # A uniform grid keeps the rate read before jitter was accepted: the mean step over the
-    # whole record, exact to ~1e-15, whose 12 digits recover the nominal value (10000.0, not
-    # 9999.999999999998); jittered stamps, the least-squares period.
-    exact = deviation_s <= EXACT_TOLERANCE * period_s
-    fs = (n - 1) / span_s if exact else 1.0 / period_s
-    return TimeBase(fs_hz=float(f"{fs:.12g}"), max_deviation_s=deviation_s, at_index=at_index)
+    if deviation_s <= EXACT_TOLERANCE * period_s:
+        # The rate read before jitter was accepted: the mean step over the whole record,
+        # exact to ~1e-15, whose 12 digits recover the nominal value (10000.0, not
+        # 9999.999999999998).
+        fs = float(f"{(n - 1) / span_s:.12g}")
+    else:
+        fs = nominal_rate(period_s=period_s, deviation_s=deviation_s, n=n)
+    return TimeBase(fs_hz=fs, max_deviation_s=deviation_s, at_index=at_index)
+
+
+def nominal_rate(*, period_s: float, deviation_s: float, n: int) -> float:
+    """The rate [Hz] of a least-squares period, as the shortest decimal its error allows.
+
+    Stamps within ``d`` of the true grid move the fitted period by at most
+    ``d sum|k| / sum k^2 = 3 d / n`` (``k`` the centred sample numbers), so the rate is
+    known to ``3 d / (n T)`` of itself: ±3e-4 Hz for 50 ns stamps over 5 s at 10 kHz. Within
+    that, the fewest significant digits: the bench's 10000 Hz for every record of one
+    clock (the stages require one rate), a crystal's 10000.3 Hz where the record shows it.
+
+    Parameters
+    ----------
+    period_s : float
+        The least-squares period [s].
+    deviation_s : float
+        Largest distance of ``t`` from the fitted grid [s].
+    n : int
+        Samples.
+    """
+    fs = 1.0 / period_s
+    bound = fs * 3.0 * deviation_s / (n * period_s)
+    for digits in range(1, 13):
+        rounded = float(f"{fs:.{digits}g}")
+        if abs(rounded - fs) <= bound:
+            return rounded
+    return float(f"{fs:.12g}")
 
 
 def not_increasing(origin: str, index: int, t_before: float, t_after: float) -> RecordingError:
@@ -213,9 +243,9 @@ def irregular(origin: str, *, index: int, t_before: float, t_after: float, step_
     return RecordingError(
         origin, f"is not uniformly sampled at index {index}: t[{index - 1}] = {a} s, "
         f"t[{index}] = {b} s, a step of {gap:.6g} s where {step_words} is {step_s:.6g} s "
-        f"({periods:.4g} periods{why}); t strays up to {_seconds(deviation_s)} "
-        f"({_percent(deviation_s / period_s)} of a period) from the uniform grid fitted to it, "
-        f"where clock jitter stays within {100 * JITTER_TOLERANCE:g} %", variable=TIME,
+        f"({periods:.3g} periods{why}); t strays {_seconds(deviation_s)} "
+        f"({_percent(deviation_s / period_s)} of a period) from a uniform grid, more than "
+        f"clock jitter ({100 * JITTER_TOLERANCE:g} %)", variable=TIME,
         kind="is not uniformly sampled")
 
 
