@@ -6,7 +6,11 @@ files it did use (saturation, dropped variables …) comes back as
 :class:`~fsmbench.checks.Notice` records and plausibility verdicts as
 :class:`~fsmbench.checks.Check` records, never as Python warnings. A folder
 with no usable recording is a :class:`~fsmbench.io.errors.RecordingError`
-saying what was looked for, what was found and which file names nearly match.
+saying what was looked for, what was found and which file names nearly match
+(files failing in the same way named together, in one line). An experiment in
+two files (``data_uch.mat`` beside ``data_uch.h5``) is read from the first of
+``.mat``, ``.h5``, ``.nxs`` and refused unless the others hold the same samples
+(:mod:`fsmbench.io.duplicates`).
 
 :func:`check_recording` is the plausibility test of one recording against
 what the bench can produce; the stages run it too, so that a recording that
@@ -224,7 +228,9 @@ def check_recording(ds: xr.Dataset, *, name: str | None = None, fs_hz: float | N
     -------
     (list of Check, list of Notice)
         Checks in the order of the module docstring (only those that apply),
-        and notices: saturation at the ADC rails, single-precision ``t``.
+        and notices: saturation at the ADC rails, single-precision ``t``, and what
+        reading the file found (:mod:`fsmbench.io.notes`: bytes after the data, the file
+        read of two, ``t``'s clock jitter).
     """
     lazy = any(type(v.data).__module__.startswith("dask") for v in ds.data_vars.values())
     key = (id(ds), name, fs_hz, adc_range_v, adc_bits)
@@ -473,7 +479,8 @@ def load_recordings(data_dir: Path, *, fs_hz: float | None = None, adc_range_v: 
     ------
     RecordingError
         No recording could be read: the message lists what was looked for,
-        what the folder holds and the near-miss names.
+        what the folder holds and the near-miss names, or each file's problem (one
+        phrase naming the files that fail in the same way).
     NotADirectoryError
         ``data_dir`` is not a folder.
     """

@@ -145,7 +145,8 @@ def detect_format(path: str | os.PathLike[str]) -> FileFormat:
     p = Path(path)
     size = p.stat().st_size
     if size == 0:
-        raise RecordingError(p, "is empty (0 bytes), not a MAT-file or HDF5 file")
+        raise RecordingError(p, "is empty (0 bytes), not a MAT-file or HDF5 file",
+                             kind="is empty (0 bytes)")
     with open(p, "rb") as fh:
         head = fh.read(128)
         # The HDF5 superblock sits at 0 or after a userblock of 512 * 2**k bytes.
@@ -163,7 +164,8 @@ def detect_format(path: str | os.PathLike[str]) -> FileFormat:
     if _looks_like_mat4(head):
         return "mat4"
     raise RecordingError(
-        p, f"is not a MAT-file (v4, v5/v7, v7.3) or HDF5 file: it holds {_describe(head)}"
+        p, f"is not a MAT-file (v4, v5/v7, v7.3) or HDF5 file: it holds {_describe(head)}",
+        kind="is not a MAT-file (v4, v5/v7, v7.3) or HDF5 file",
     )
 
 

@@ -127,7 +127,7 @@ def _check_time(t: np.ndarray, origin: str) -> TimeBase:
     (:mod:`fsmbench.io.timebase`); return the grid fitted to it."""
     problem = _nonfinite_problem(t, None)
     if problem:
-        raise RecordingError(origin, problem, variable=TIME)
+        raise RecordingError(origin, problem, variable=TIME, kind="holds NaN or Inf values")
     return fit_time_base(t, origin)
 
 
@@ -211,7 +211,8 @@ def _validate(
     for name in ds.data_vars:
         problem = _nonfinite_problem(np.asarray(ds[name].values), t)
         if problem:
-            raise RecordingError(origin, problem, variable=str(name))
+            raise RecordingError(origin, problem, variable=str(name),
+                                 kind="holds NaN or Inf values")
     fs = ds.attrs.get("fs_hz")
     if not isinstance(fs, (int, float, np.floating, np.integer)) or not np.isfinite(fs) or fs <= 0:
         raise RecordingError(origin, f"attribute 'fs_hz' is {fs!r}; it must be the sampling "
@@ -427,13 +428,13 @@ def read_recording(
     if TIME not in raw:
         present = ", ".join(raw) or "nothing"
         raise RecordingError(origin, "is missing: a recording needs its time vector t, in s "
-                             f"(the file holds: {present})", variable=TIME)
+                             f"(the file holds: {present})", variable=TIME, kind="is missing")
     missing = [r for r in req if r not in raw]
     if missing:
         also = f" (and so are {', '.join(repr(m) for m in missing[1:])})" if missing[1:] else ""
         raise RecordingError(
             origin, f"is missing{also}; {needs} needs {', '.join(req)} "
-            f"(the file holds: {', '.join(raw)})", variable=missing[0],
+            f"(the file holds: {', '.join(raw)})", variable=missing[0], kind="is missing",
         )
     vectors = {TIME: _as_vector(TIME, raw[TIME], origin)}
     n = vectors[TIME].size
