@@ -195,3 +195,19 @@ def test_the_notes_of_a_reading_are_not_written_into_an_archive(
         warnings.simplefilter("error", TrailingBytesWarning)
         again: Any = read_recording(copy)
     assert "trailing_bytes" not in again.attrs
+
+
+def test_an_empty_element_ends_the_data_too(tmp_path: Path,
+                                            write: Callable[[str, Path], Path]) -> None:
+    # A miMATRIX tag of 0 bytes (type 14): scipy refuses the file at it ("Did not read any
+    # bytes"); the variables before it are kept, and what follows is not read.
+    path = write("mat5", tmp_path / "data_uch.mat")
+    size = path.stat().st_size
+    with open(path, "ab") as fh:
+        fh.write((14).to_bytes(4, "little") + bytes(4) + b"\xff" * 64)
+    with pytest.raises(ValueError, match="Did not read any bytes"):
+        scipy.io.loadmat(path)
+    with pytest.warns(TrailingBytesWarning, match=f"at byte {size}, where an element of type "
+                                                  r"14 and 0 bytes begins .*the 72 bytes"):
+        got = load_mat(path)
+    assert np.array_equal(got["Vph"].ravel(), _variables()["Vph"])

@@ -325,7 +325,7 @@ def _v5_elements(path: Path) -> Iterator[tuple[Any, str, int, int, _Stream]]:
             if len(head) < 8:
                 return
             outer, size = struct.unpack(endian + "II", head)
-            if outer == 0:  # type 0 is no element: the data end (fsmbench.io.trailing)
+            if outer == 0 or size == 0:  # no variable: the data end (fsmbench.io.trailing)
                 return
             start = fh.tell()
             s = _Stream(fh, size, compressed=outer == _MI_COMPRESSED)

@@ -10,7 +10,8 @@ costs the same whatever the padding's size and never touches the padding:
 
 * MAT v5/v7: the elements after the 128-byte header, each a tag (type, size)
   and its data, are stepped over by their sizes; a tag of type 0, which the
-  format does not define (8 zero bytes in a zero padding), is the end;
+  format does not define (8 zero bytes in a zero padding), or of 0 bytes (a
+  variable holds at least its flags, dimensions and name) is the end;
 * MAT v4: the matrices, each a 20-byte header and its data, are stepped over;
   a header with no name (``namlen`` 0, 20 zero bytes in a zero padding) is the
   end, since every v4 matrix stores its name and the name's terminating NUL;
@@ -153,6 +154,8 @@ def _v5_end(fh: BinaryIO, size: int) -> tuple[int, str]:
         kind, length = struct.unpack(endian + "II", fh.read(8))
         if kind == 0:
             return pos, "where an element of type 0 begins (zeros, not a variable)"
+        if length == 0:  # a variable is never empty (flags, dimensions, name): scipy stops here
+            return pos, f"where an element of type {kind} and 0 bytes begins (not a variable)"
         if kind >> 16:  # a small data element: never a variable, so not a walkable layout
             break
         # Uncompressed elements are padded to 8 bytes; compressed ones are not.
