@@ -122,14 +122,19 @@ class Notice:
 
     Attributes
     ----------
-    kind : {"saturation", "rate", "dropped_variable", "numeric", "data_type", "other"}
+    kind : str
+        ``saturation``, ``rate``, ``dropped_variable``, ``numeric``, ``data_type``,
+        ``trailing_bytes`` (bytes after a file's data ignored), ``file_choice`` (the
+        experiment is in two files of the folder: which was read), ``time_jitter`` (``t``
+        strays from a uniform grid by clock jitter) or ``other``.
     subject : str
         File and signal it concerns.
     message : str
         One line in words, with units.
     """
 
-    kind: Literal["saturation", "rate", "dropped_variable", "numeric", "data_type", "other"]
+    kind: Literal["saturation", "rate", "dropped_variable", "numeric", "data_type",
+                  "trailing_bytes", "file_choice", "time_jitter", "other"]
     subject: str
     message: str
 

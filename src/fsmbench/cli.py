@@ -60,12 +60,14 @@ from fsmbench.cli_args import (
     EXIT_USER_ERROR,
     Parser,
     add_identify_options,
+    default_noted,
     factor,
     figure_formats,
     identify_options,
     nanometres,
     seconds,
     seed,
+    typed_option,
 )
 from fsmbench.excite.cli import add_excite_command
 from fsmbench.io.convert_cli import add_convert_command
@@ -141,12 +143,13 @@ def sim_bench(args: argparse.Namespace) -> Bench:
     folder = getattr(args, "bench_dir", None)
     if folder is None:
         return bench
+    option = typed_option(args, "bench_dir", "--bench")  # or its alias --identification
     if Path(folder).is_file():
-        raise ParamsError(f"{folder}: is a file; --bench needs a folder written by fsmbench "
+        raise ParamsError(f"{folder}: is a file; {option} needs a folder written by fsmbench "
                           "identify or study (a bench TOML goes to --params)")
     from fsmbench.sim.identified import identified_bench
 
-    return identified_bench(folder, bench=bench)
+    return identified_bench(folder, bench=bench, option=option)
 
 
 def _bench(args: argparse.Namespace) -> Bench:
@@ -187,11 +190,10 @@ def _out_arguments(argv: Sequence[str], out: str | None) -> list[str]:
 
 def _inputs(args: argparse.Namespace, data: str | Path | None) -> list[tuple[str, Any]]:
     """Every input path of the command line, with the option that named it."""
-    argv = getattr(args, "argv", [])
-    bench_option = "--identification" if "--identification" in argv else "--bench"
     pairs: list[tuple[str, Any]] = [("--data" if args.command == "study" else "DATA", data),
                                     ("--params", args.params),
-                                    (bench_option, getattr(args, "bench_dir", None))]
+                                    (typed_option(args, "bench_dir", "--bench"),
+                                     getattr(args, "bench_dir", None))]
     pairs += [("--excitation", path) for path in getattr(args, "excitation", None) or ()]
     return pairs
 
@@ -203,7 +205,12 @@ def _check_inputs_first(args: argparse.Namespace, data: str | Path | None) -> No
 
     out = getattr(args, "out_pos", None) or getattr(args, "out", None)  # as _cmd_simulate
     if out is not None:
-        check_inputs(out, _inputs(args, data))
+        check_inputs(out, _inputs(args, data), out_option=_out_option(args))
+
+
+def _out_option(args: argparse.Namespace) -> str:
+    """How the user gave the output folder: ``--out DIR``, or ``simulate``'s ``OUT``."""
+    return typed_option(args, "out_pos", "") or typed_option(args, "out", "--out")
 
 
 @contextlib.contextmanager
@@ -219,7 +226,8 @@ def _run_folder(args: argparse.Namespace, out: str, *, data: str | Path | None,
                             arguments=_out_arguments(args.argv, out), data_dir=data,
                             need_bytes=int(need_bytes),
                             timestamp=getattr(args, "timestamp", False),
-                            warn=warn, inputs=_inputs(args, data)) as run, \
+                            warn=warn, inputs=_inputs(args, data),
+                            out_option=_out_option(args)) as run, \
             wall_clock_headers(getattr(args, "timestamp", False)):
         _Current.run = run  # kept after an error too: main maps paths in its message
         yield run
@@ -294,7 +302,8 @@ def _check_simulation_memory(args: argparse.Namespace, bench: Bench) -> None:
         what, fix = ("--excitation", "an excitation is played in memory whatever the format: "
                                      "shorten --duration")
     else:
-        what, fix = (f"--format {args.format}", "--format nexus streams the records to disk "
+        what, fix = (default_noted(args, "format", f"--format {args.format}"),
+                     "--format nexus streams the records to disk "
                      "block by block in bounded memory (0.39 GB measured for a day), or "
                      "shorten --duration")
     raise ValueError(f"{what}: {length} needs about {need / 1e9:.1f} GB of memory (every "
@@ -310,8 +319,10 @@ def _check_study_memory(args: argparse.Namespace, bench: Bench) -> None:
         experiments=None, excitation=None, duration=args.duration), bench)
     have = available_memory_bytes()
     if need > have:
+        length = (f"--duration {args.duration:g} s" if args.duration is not None
+                  else "the ESRF study's record lengths (no --duration given)")
         raise ValueError(
-            f"--duration {args.duration:g} s needs about {need / 1e9:.1f} GB of memory (the "
+            f"{length} needs about {need / 1e9:.1f} GB of memory (the "
             f"study simulates every record whole, then analyses it in memory) and this machine "
             f"has {have / 1e9:.1f} GB available: shorten --duration, or for long records run "
             "fsmbench simulate OUT --format nexus --duration S, then fsmbench budget OUT, which "
@@ -502,7 +513,8 @@ def _plant(args: argparse.Namespace, inp: _StageInput) -> Any:
     if args.bench_dir is not None:
         from fsmbench.ident.load import load_identified_plant
 
-        plant = load_identified_plant(args.bench_dir)
+        plant = load_identified_plant(args.bench_dir,
+                                      option=typed_option(args, "bench_dir", "--bench"))
     else:
         plant = choose_plant(inp.recordings, bench=inp.bench, progress=inp.say,
                              source=str(inp.data))

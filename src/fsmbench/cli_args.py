@@ -12,9 +12,9 @@ import math
 from pathlib import Path
 from typing import Any, NoReturn
 
-__all__ = ["EXIT_USER_ERROR", "SEED_MAX", "Parser", "add_identify_options", "factor",
-           "figure_formats", "identify_options", "nanometres", "port", "positive", "seconds",
-           "seed"]
+__all__ = ["EXIT_USER_ERROR", "SEED_MAX", "Parser", "add_identify_options", "default_noted",
+           "factor", "figure_formats", "identify_options", "nanometres", "port", "positive",
+           "seconds", "seed", "typed_option"]
 
 #: Exit status of an error the user can fix (bad argument, bad data, unwritable folder).
 EXIT_USER_ERROR = 2
@@ -34,12 +34,70 @@ class _DescribedSubParsers(argparse._SubParsersAction):
         return super().add_parser(name, **kwargs)
 
 
+#: Namespace attribute: destination to the option the user typed for it (``--bench`` or its
+#: alias ``--identification``), or a positional's name (``OUT``) when one was given.
+_TYPED = "typed_options"
+#: The actions that store what the user typed (help, version and sub-commands are not values).
+_VALUE_ACTIONS = (None, "store", "store_const", "store_true", "store_false", "append",
+                  "append_const", "extend", "count")
+
+
+def _recording(cls: type[argparse.Action]) -> type[argparse.Action]:
+    """``cls`` that also notes, in the namespace, the option string it was called by."""
+
+    class Recording(cls):  # type: ignore[valid-type,misc]
+        def __call__(self, parser: argparse.ArgumentParser, namespace: argparse.Namespace,
+                     values: Any, option_string: str | None = None) -> None:
+            # argparse passes the option's full string, also for an abbreviation or --opt=v.
+            name = option_string or (self.metavar if values is not self.default else None)
+            if isinstance(name, str):
+                typed = getattr(namespace, _TYPED, None)
+                if typed is None:
+                    typed = {}
+                    setattr(namespace, _TYPED, typed)
+                typed[self.dest] = name
+            super().__call__(parser, namespace, values, option_string)
+
+    Recording.__name__ = f"Recording{cls.__name__}"
+    return Recording
+
+
+def typed_option(args: argparse.Namespace, dest: str, default: str) -> str:
+    """The option the user typed for ``dest`` (of two aliases, the one typed; a positional's
+    name), or ``default`` when none was typed.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        Parsed by :class:`Parser`.
+    dest : str
+        The destination (``"bench_dir"``).
+    default : str
+        The name to use when the user typed none (``"--bench"``).
+    """
+    return str(getattr(args, _TYPED, {}).get(dest, default))
+
+
+def default_noted(args: argparse.Namespace, dest: str, text: str) -> str:
+    """``text`` (``"--band 1 2000"``) as is when the user typed the option, else followed by
+    ``" (the default)"``: a message never presents a default as what the user typed."""
+    return text if dest in getattr(args, _TYPED, {}) else f"{text} (the default)"
+
+
 class Parser(argparse.ArgumentParser):
-    """argparse with errors as one line ``fsmbench <cmd>: error: ...`` and status 2."""
+    """argparse with errors as one line ``fsmbench <cmd>: error: ...`` and status 2.
+
+    Every option and positional notes what the user typed for it (:func:`typed_option`),
+    so that messages name the alias that was typed.
+    """
 
     def __init__(self, *args: Any, **kwargs: Any) -> None:
         super().__init__(*args, **kwargs)
         self.register("action", "parsers", _DescribedSubParsers)
+        for name in _VALUE_ACTIONS:
+            cls = self._registry_get("action", name, None)
+            if cls is not None:
+                self.register("action", name, _recording(cls))
 
     def error(self, message: str) -> NoReturn:
         self.exit(EXIT_USER_ERROR, f"{self.prog}: error: {message} (see {self.prog} --help)\n")

@@ -97,8 +97,9 @@ def test_simulate_into_the_excitation_folder_it_plays(kit: SimpleNamespace,
     assert run_cli("excite", exc, *EXCITE).status == 0
     before = kit.hashes(exc)
     assert {"excitation.mat", "excitation.json"} <= set(before)
-    for source, what in ((exc, "is the --out folder"),
-                         (exc / "excitation.json", "is inside --out")):
+    # The output folder was typed as simulate's OUT, so the message names OUT (issue 30).
+    for source, what in ((exc, "is the OUT folder"),
+                         (exc / "excitation.json", "is inside OUT")):
         r = run_cli("simulate", exc, "--excitation", source, "--duration", "5")
         kit.assert_one_line_verdict(r, "simulate", str(source), "--excitation", what)
         assert len(r.err.strip().splitlines()) == 1
@@ -138,8 +139,10 @@ def test_every_input_is_checked_against_out(kit: SimpleNamespace, run_cli: Calla
     run = old_ident if "{i}" in argv else old_run
     before = kit.hashes(run)
     r = run_cli(command, *[a.format(**values) for a in argv])
+    # simulate and excite take the output folder as OUT too: the message names what was typed.
+    out_word = "--out" if "--out" in argv else "OUT"
     kit.assert_one_line_verdict(r, command, option, str(run), "which this run replaces",
-                                "choose another --out")
+                                f"choose another {out_word}")
     assert len(r.err.strip().splitlines()) == 1, r.err
     assert kit.hashes(run) == before
     assert kit.leftovers(run.parent) == []

@@ -37,7 +37,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from fsmbench.cli_args import positive, seconds, seed
+from fsmbench.cli_args import default_noted, positive, seconds, seed, typed_option
 
 __all__ = ["add_excite_command", "summary"]
 
@@ -199,7 +199,8 @@ def _check_band(args: argparse.Namespace, fs_hz: float) -> None:
     lo, hi = (float(x) for x in args.band)
     nyquist = fs_hz / 2
     if hi >= nyquist:
-        raise ValueError(f"--band {lo:g} {hi:g}: {hi:g} Hz is not below the Nyquist frequency "
+        raise ValueError(f"{default_noted(args, 'band', f'--band {lo:g} {hi:g}')}: {hi:g} Hz "
+                         "is not below the Nyquist frequency "
                          f"{nyquist:g} Hz of the bench's {fs_hz:g} Hz converters, where no "
                          f"line can be excited; give a high edge below {nyquist:g} Hz")
 
@@ -209,7 +210,7 @@ def _check_length(args: argparse.Namespace, fs_hz: float) -> None:
     repeats = args.periods + args.transient_periods
     if args.kind == "multisine":
         period = fs_hz / args.resolution
-        option = f"--resolution {args.resolution:g} Hz"
+        option = default_noted(args, "resolution", f"--resolution {args.resolution:g} Hz")
         if args.phases == "minimised" and period > _PERIOD_MAX_SAMPLES:
             raise ValueError(
                 f"{option}: a period of {period:.4g} samples ({period / fs_hz:.4g} s at "
@@ -220,15 +221,18 @@ def _check_length(args: argparse.Namespace, fs_hz: float) -> None:
                 "1e6 samples); choose a coarser --resolution or --phases schroeder")
     else:
         period = args.duration * fs_hz
-        option = f"--duration {args.duration:g} s"
+        option = default_noted(args, "duration", f"--duration {args.duration:g} s")
     record = period * repeats
     if record > _RECORD_MAX_SAMPLES:
+        counts = (default_noted(args, "periods", f"--periods {args.periods}") + ", "
+                  + default_noted(args, "transient_periods",
+                                  f"--transient-periods {args.transient_periods}"))
         raise ValueError(
-            f"{option} x {repeats} period{'s' if repeats != 1 else ''} (--periods, "
-            f"--transient-periods): a record of {record:.4g} samples ({record / fs_hz:.4g} s at "
-            f"{fs_hz:g} Hz), longer than the {_RECORD_MAX_SAMPLES} samples "
-            f"({_RECORD_MAX_SAMPLES / fs_hz:.4g} s) fsmbench designs and checks at the "
-            "converters (2.6 GB of memory measured at that length); fewer or shorter periods")
+            f"{option} x {repeats} period{'s' if repeats != 1 else ''} ({counts}): a record of "
+            f"{record:.4g} samples ({record / fs_hz:.4g} s at {fs_hz:g} Hz), longer than the "
+            f"{_RECORD_MAX_SAMPLES} samples ({_RECORD_MAX_SAMPLES / fs_hz:.4g} s) fsmbench "
+            "designs and checks at the converters (2.6 GB of memory measured at that length); "
+            "fewer or shorter periods")
 
 
 def _design(args: argparse.Namespace, fs_hz: float) -> Any:
@@ -300,8 +304,9 @@ def _command(args: argparse.Namespace) -> int:
     from fsmbench.io.matwrite import wall_clock_headers
     from fsmbench.io.outdir import check_inputs, output_transaction
 
-    inputs = [("--params", args.params), ("--bench", args.bench_dir)]
-    check_inputs(args.out, inputs)  # before anything is read or computed
+    option = typed_option(args, "bench_dir", "--bench")  # or its alias --identification
+    inputs = [("--params", args.params), (option, args.bench_dir)]
+    check_inputs(args.out, inputs, out_option="OUT")  # before anything is read or computed
     bench = load_bench(args.params)
     params = bench.nominal if args.model == "nominal" else bench.true
     model = args.model
@@ -309,23 +314,23 @@ def _command(args: argparse.Namespace) -> int:
     model_bench = bench  # what a closed-loop design is shaped on
     if args.bench_dir is not None:
         if Path(args.bench_dir).is_file():
-            raise ValueError(f"{args.bench_dir}: is a file; --bench needs a folder written by "
+            raise ValueError(f"{args.bench_dir}: is a file; {option} needs a folder written by "
                              "fsmbench identify or study (a bench TOML goes to --params)")
         from fsmbench.excite.identified import with_identified_quad_diode
         from fsmbench.ident.load import read_identification_json
         from fsmbench.sim.identified import identified_bench
         from fsmbench.sim.plant import bench_discrete
 
-        _path, ident = read_identification_json(args.bench_dir)
+        _path, ident = read_identification_json(args.bench_dir, option=option)
         if "sercalo" in ident:
-            identified = identified_bench(args.bench_dir, bench=bench)
+            identified = identified_bench(args.bench_dir, bench=bench, option=option)
             params, plant = identified.true, bench_discrete(identified)
             model_bench = identified
             model = f"bench identified in {args.bench_dir} (4QD identified in it too)"
         else:
             # Before the Sercalo is identified (the excitation is for that), the calibration
             # alone: the bench file's plant with the 4QD the calibration measured.
-            params = with_identified_quad_diode(params, args.bench_dir)
+            params = with_identified_quad_diode(params, args.bench_dir, option=option)
             model = (f"{args.model} bench model, 4QD identified in {args.bench_dir} (no "
                      "identified Sercalo there yet)")
     _check_band(args, params.converter.fs_hz)  # before the design, which may take long
@@ -349,7 +354,7 @@ def _command(args: argparse.Namespace) -> int:
     # Two float64 columns, compressed or not, plus a JSON of the lines and phases.
     need = 16 * design.samples_v.size + 64 * design.lines_hz.size + 65536
     with output_transaction(out, command="excite", arguments=argv, need_bytes=need,
-                            timestamp=args.timestamp, inputs=inputs) as run, \
+                            timestamp=args.timestamp, inputs=inputs, out_option="OUT") as run, \
             wall_clock_headers(args.timestamp):
         paths = write_excitation(design, run.staging, limits=report)
         if closed is not None:

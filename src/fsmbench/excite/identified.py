@@ -31,8 +31,10 @@ def _number(qd: dict, axis: str, key: str, path: Path) -> float:
     return float(value)
 
 
-def with_identified_quad_diode(params: BenchParams, folder: str | Path) -> BenchParams:
-    """``params`` with the 4QD's gains and compression from ``FOLDER/identification.json``.
+def with_identified_quad_diode(params: BenchParams, folder: str | Path, *,
+                               option: str = "--bench") -> BenchParams:
+    """``params`` with the 4QD's gains and compression from ``FOLDER/identification.json``
+    (``option``: what named the folder, as the user typed it, for the messages).
 
     Raises
     ------
@@ -42,19 +44,20 @@ def with_identified_quad_diode(params: BenchParams, folder: str | Path) -> Bench
     """
     from fsmbench.ident.load import read_identification_json
 
-    path, ident = read_identification_json(folder)
-    return quad_diode_from_identification(params, ident, path=path)
+    path, ident = read_identification_json(folder, option=option)
+    return quad_diode_from_identification(params, ident, path=path, option=option)
 
 
-def quad_diode_from_identification(params: BenchParams, ident: dict, *,
-                                   path: Path) -> BenchParams:
-    """``params`` with the 4QD of a parsed ``identification.json`` (``path`` names it in errors)."""
+def quad_diode_from_identification(params: BenchParams, ident: dict, *, path: Path,
+                                   option: str = "--bench") -> BenchParams:
+    """``params`` with the 4QD of a parsed ``identification.json`` (``path`` names it in errors;
+    ``option``, what named its folder as the user typed it)."""
     diagnostics = ident.get("diagnostics")
     qd = diagnostics.get("qd") if isinstance(diagnostics, dict) else None
     if not isinstance(qd, dict) or not all(a in qd for a in "hv"):
         raise RecordingError(path, "has no 4QD calibration of both axes (data_cal_pd_h and "
                                    "data_cal_pd_v were missing or failed); run identify with "
-                                   "them, or leave out --identification")
+                                   f"them, or leave out {option}")
     gain = {a: _number(qd, a, "gain_v_per_rad", path) for a in "hv"}
     cubic = {a: _number(qd, a, "cubic_v_per_rad3", path) for a in "hv"}
     half_swing = max(_number(qd, a, "beam_angle_range_rad", path) / 2 for a in "hv")

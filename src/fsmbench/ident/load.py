@@ -119,8 +119,12 @@ def read_plant_mat(path: str | Path) -> PlantModel:
                       source=source if isinstance(source, str) else "identified")
 
 
-def read_identification_json(folder: str | Path) -> tuple[Path, dict[str, Any]]:
+def read_identification_json(folder: str | Path, *,
+                             option: str = "--bench") -> tuple[Path, dict[str, Any]]:
     """``FOLDER/identification.json`` of a previous ``identify`` or ``study`` run, parsed.
+
+    ``option``: what named the folder, as the user typed it (``--bench``, its alias
+    ``--identification``, a device property), for the messages.
 
     Raises
     ------
@@ -129,13 +133,13 @@ def read_identification_json(folder: str | Path) -> tuple[Path, dict[str, Any]]:
     """
     d = Path(folder)
     if not d.is_dir():
-        raise RecordingError(d, "--identification must be a folder written by fsmbench identify "
-                                "or study; " + ("it does not exist" if not d.exists()
-                                                else "it is a file"))
+        raise RecordingError(d, f"{option} must be a folder written by fsmbench identify or "
+                                "study; " + ("it does not exist" if not d.exists()
+                                             else "it is a file"))
     ident_path = d / "identification.json"
     if not ident_path.is_file():
-        raise RecordingError(ident_path, "does not exist; --identification must be a folder "
-                                         "written by fsmbench identify or study")
+        raise RecordingError(ident_path, f"does not exist; {option} must be a folder written "
+                                         "by fsmbench identify or study")
     try:
         ident = json.loads(ident_path.read_text(encoding="utf-8"))
     except (OSError, UnicodeDecodeError) as exc:
@@ -148,13 +152,15 @@ def read_identification_json(folder: str | Path) -> tuple[Path, dict[str, Any]]:
     return ident_path, ident
 
 
-def load_identified_plant(folder: str | Path) -> PlantChoice:
+def load_identified_plant(folder: str | Path, *, option: str = "--bench") -> PlantChoice:
     """The plant of a previous ``identify`` or ``study`` run in ``folder``.
 
     Parameters
     ----------
     folder : str or Path
         Output folder holding ``identification.json`` and ``plant.mat``.
+    option : str
+        What named the folder, as the user typed it (``--bench`` or ``--identification``).
 
     Returns
     -------
@@ -168,22 +174,21 @@ def load_identified_plant(folder: str | Path) -> PlantChoice:
         A file is missing or malformed, or the identification does not
         describe a trustworthy identified plant (the Sercalo was not
         identified, or the identification raised warnings): then the reason
-        is named and the command should run without ``--identification``.
+        is named and the command should run without ``option``.
     """
     from fsmbench.stages import PlantChoice
 
-    ident_path, ident = read_identification_json(folder)
+    ident_path, ident = read_identification_json(folder, option=option)
     d = ident_path.parent
     diagnostics = ident.get("diagnostics") or {}
     warnings = diagnostics.get("warnings") if isinstance(diagnostics, dict) else None
     if "sercalo" not in ident:
         raise RecordingError(ident_path, "has no identified Sercalo (data_uch/data_ucv were "
-                                         "missing or failed); run without --identification "
-                                         "to use the nominal model")
+                                         f"missing or failed); run without {option} to use "
+                                         "the nominal model")
     if warnings:
         raise RecordingError(ident_path, f"the identification raised warnings ({warnings[0]}); "
-                                         "its plant is not trusted, run without "
-                                         "--identification")
+                                         f"its plant is not trusted, run without {option}")
     plant = read_plant_mat(d / "plant.mat")
     return PlantChoice(plant, source=f"identified (from {ident_path})", identification=None)
 

@@ -29,6 +29,7 @@ from fsmbench.io.signals import (
     ExperimentInfo,
     SignalInfo,
 )
+from fsmbench.io.trailing import TrailingBytesWarning
 
 __all__ = [
     "ADC_SIGNALS",
@@ -43,6 +44,7 @@ __all__ = [
     "RecordingFormat",
     "SaturationWarning",
     "SignalInfo",
+    "TrailingBytesWarning",
     "atomic_path",
     "atomic_write_bytes",
     "atomic_write_text",

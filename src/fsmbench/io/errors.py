@@ -27,6 +27,9 @@ class RecordingError(ValueError):
         otherwise.
     variable : str, optional
         The variable concerned, if any.
+    kind : str, optional
+        The problem in a few words without its particulars (``"not uniformly
+        sampled"``), so that files failing in the same way are named together.
 
     Attributes
     ----------
@@ -36,14 +39,18 @@ class RecordingError(ValueError):
         As given.
     variable : str or None
         As given.
+    kind : str or None
+        As given.
     """
 
     file: str
     problem: str
     variable: str | None
+    kind: str | None
 
     def __init__(
-        self, file: str | os.PathLike[str], problem: str, *, variable: str | None = None
+        self, file: str | os.PathLike[str], problem: str, *, variable: str | None = None,
+        kind: str | None = None,
     ) -> None:
         # ``args`` holds only the positional arguments and ``variable`` lives in
         # ``__dict__``: BaseException.__reduce__ then pickles both, so the error
@@ -52,6 +59,7 @@ class RecordingError(ValueError):
         self.file = os.fspath(file)
         self.problem = problem
         self.variable = variable
+        self.kind = kind
 
     def __str__(self) -> str:
         if self.variable is None:

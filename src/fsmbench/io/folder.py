@@ -6,7 +6,11 @@ files it did use (saturation, dropped variables …) comes back as
 :class:`~fsmbench.checks.Notice` records and plausibility verdicts as
 :class:`~fsmbench.checks.Check` records, never as Python warnings. A folder
 with no usable recording is a :class:`~fsmbench.io.errors.RecordingError`
-saying what was looked for, what was found and which file names nearly match.
+saying what was looked for, what was found and which file names nearly match
+(files failing in the same way named together, in one line). An experiment in
+two files (``data_uch.mat`` beside ``data_uch.h5``) is read from the first of
+``.mat``, ``.h5``, ``.nxs`` and refused unless the others hold the same samples
+(:mod:`fsmbench.io.duplicates`).
 
 :func:`check_recording` is the plausibility test of one recording against
 what the bench can produce; the stages run it too, so that a recording that
@@ -28,16 +32,11 @@ that loops or points nowhere) is named as what it is, not as missing.
 
 from __future__ import annotations
 
-import contextlib
-import difflib
-import errno
 import math
 import os
-import re
-import stat
 import warnings
 import weakref
-from collections.abc import Callable, Iterable
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Final
@@ -46,9 +45,13 @@ import numpy as np
 import xarray as xr
 
 from fsmbench.checks import Check, Notice
+from fsmbench.io.duplicates import compare_files, other_files
 from fsmbench.io.errors import RecordingError, SaturationWarning
+from fsmbench.io.folder_names import folder_hints, not_a_file
+from fsmbench.io.notes import FILE_CHOICE, READ_NOTES, TIME_JITTER
 from fsmbench.io.recording import find_experiments, read_recording
 from fsmbench.io.signals import ADC_SIGNALS, DAC_SIGNALS, EXPERIMENTS, SIGNALS, TIME
+from fsmbench.io.trailing import TrailingBytesWarning, data_end
 from fsmbench.io.va_jumps import jump_check, va_unit_hint
 
 __all__ = [
@@ -74,9 +77,6 @@ EXCITATION: Final[dict[str, str]] = {
     "data_cal_pd_h": "Vnh", "data_cal_pd_v": "Vnv", "data_uch": "Uch", "data_ucv": "Ucv",
     "data_unh": "Unh", "data_unv": "Unv", "data_rep_h": "Unh", "data_rep_v": "Unv",
 }
-_SUFFIXES: Final = (".mat", ".h5", ".nxs")
-_COPY_TAIL = re.compile(r"(\s*\(\d+\)|\s*-\s*copy(\s*\d+)?|\s+copy|_copy|\s*\[\d+\])$",
-                        re.IGNORECASE)
 
 
 @dataclass(frozen=True, eq=False)
@@ -228,7 +228,9 @@ def check_recording(ds: xr.Dataset, *, name: str | None = None, fs_hz: float | N
     -------
     (list of Check, list of Notice)
         Checks in the order of the module docstring (only those that apply),
-        and notices: saturation at the ADC rails, single-precision ``t``.
+        and notices: saturation at the ADC rails, single-precision ``t``, and what
+        reading the file found (:mod:`fsmbench.io.notes`: bytes after the data, the file
+        read of two, ``t``'s clock jitter).
     """
     lazy = any(type(v.data).__module__.startswith("dask") for v in ds.data_vars.values())
     key = (id(ds), name, fs_hz, adc_range_v, adc_bits)
@@ -262,6 +264,9 @@ def _check_recording(ds: xr.Dataset, *, name: str | None, fs_hz: float | None,
         notices.append(Notice("data_type", f"{label}: t", f"t is stored in single precision "
                               f"({t_type}); it was uniform enough here, but longer records "
                               "will not be: save t in double precision"))
+    # What the reader found about the file (fsmbench.io.notes): given by every check of it.
+    notices += [Notice(kind, f"{label}: t" if kind == TIME_JITTER else label,
+                       str(ds.attrs[kind])) for kind in READ_NOTES if ds.attrs.get(kind)]
     for var in ds.data_vars:
         v = str(var)
         if v not in SIGNALS:
@@ -324,130 +329,9 @@ def _check_recording(ds: xr.Dataset, *, name: str | None, fs_hz: float | None,
 
 
 # --------------------------------------------------------------------------- folder
-def _norm_stem(path: Path) -> str:
-    """Lower-case stem without extensions and copy marks: ``DATA_UCH (1).MAT`` → ``data_uch``."""
-    stem = path.name[: -len(path.suffix)] if path.suffix else path.name
-    for suffix in _SUFFIXES:
-        if stem.lower().endswith(suffix):
-            stem = stem[: -len(suffix)]
-    stem = _COPY_TAIL.sub("", stem.strip()).strip()
-    return stem.lower().replace(" ", "_").replace("-", "_")
-
-
-def folder_hints(folder: str | os.PathLike[str],
-                 names: Iterable[str] = tuple(EXPERIMENTS)) -> dict[str, str]:
-    """For each experiment absent from ``folder``, the file that nearly matches and the fix.
-
-    Parameters
-    ----------
-    folder : str or os.PathLike
-        The data folder (read, not recursed).
-    names : iterable of str
-        Experiment names to look for.
-
-    Returns
-    -------
-    dict of str to str
-        Experiment name to a sentence such as ``"found DATA_UCH.mat: rename it
-        data_uch.mat (file names are case-sensitive)"``; only for the
-        experiments with a near miss.
-    """
-    root = Path(folder)
-    files = sorted(p for p in root.iterdir() if p.is_file()) if root.is_dir() else []
-    wanted = list(names)
-    hints: dict[str, str] = {}
-    for p in files:
-        if p.name in {f"{n}{s}" for n in wanted for s in _SUFFIXES}:
-            continue
-        stem = _norm_stem(p)
-        exp = stem if stem in wanted else next(iter(difflib.get_close_matches(
-            stem, wanted, n=1, cutoff=0.9)), None)
-        if exp is None or exp in hints or any((root / f"{exp}{s}").is_file()
-                                              for s in _SUFFIXES):
-            continue
-        suffix = p.suffix.lower()
-        if suffix not in _SUFFIXES:
-            hints[exp] = (f"found {p.name}, a {p.suffix or 'suffix-less'} file: the study reads "
-                          f"MAT-files (MATLAB: save('{exp}.mat', ...)) or NeXus (.h5, .nxs)")
-            continue
-        if stem != exp:
-            why = "a similar name; the study reads only the exact name"
-        elif p.suffix != suffix:
-            why = "the extension must be lower case"
-        elif p.stem.lower() == exp:
-            why = "file names are case-sensitive"
-        else:
-            why = "a copy's name; the study reads only the exact name"
-        hints[exp] = f"found {p.name}: rename it {exp}{suffix} ({why})"
-    return hints
-
-
-def not_a_file(folder: Path, name: str) -> str | None:
-    """Why ``folder/name.mat`` (or ``.h5``, ``.nxs``) is there but is not a file to read.
-
-    Parameters
-    ----------
-    folder : Path
-        The data folder.
-    name : str
-        An experiment name (``"data_uch"``).
-
-    Returns
-    -------
-    str or None
-        ``"data_uch.mat in DIR is a directory, not a recording file …"``, a
-        symbolic link that loops or points to nothing, a named pipe …; None
-        when no entry of that name exists (or it is a file).
-    """
-    for suffix in _SUFFIXES:
-        path = folder / f"{name}{suffix}"
-        if not os.path.lexists(path):
-            continue
-        head = f"{path.name} in {folder} is"
-        if path.is_symlink():
-            target = os.readlink(path)
-            try:
-                mode = os.stat(path).st_mode
-            except OSError as exc:
-                if exc.errno == errno.ELOOP:
-                    return (f"{head} a symbolic link that loops ({path.name} → {target} → …, "
-                            "never reaching a file): point it at the recording")
-                return (f"{head} a symbolic link to {target}, which does not exist (a dangling "
-                        "link: the file was moved or deleted): point it at the recording")
-            if stat.S_ISREG(mode):
-                continue
-            what = f"a symbolic link to {target}, " + _kind(mode)
-        else:
-            try:
-                mode = os.lstat(path).st_mode
-            except OSError as exc:
-                return f"{head} not readable ({exc.strerror})"
-            if stat.S_ISREG(mode):
-                continue
-            what = _kind(mode)
-        inside = ""
-        if stat.S_ISDIR(mode):
-            with contextlib.suppress(OSError):
-                held = sorted(p.name for p in path.iterdir())
-                inside = (f" holding {', '.join(held[:5])}{' …' if len(held) > 5 else ''}"
-                          if held else " (empty)")
-        return (f"{head} {what}{inside}, not a recording file: the study reads {name}.mat as "
-                "a MAT-file (or .h5/.nxs)")
-    return None
-
-
-def _kind(mode: int) -> str:
-    for test, words in ((stat.S_ISDIR, "a directory"), (stat.S_ISFIFO, "a named pipe (FIFO)"),
-                        (stat.S_ISSOCK, "a socket"), (stat.S_ISCHR, "a character device"),
-                        (stat.S_ISBLK, "a block device")):
-        if test(mode):
-            return words
-    return "not a regular file"
-
-
 def _notice_of(w: warnings.WarningMessage, label: str) -> Notice | None:
-    if isinstance(w.message, SaturationWarning):
-        return None  # check_recording reports saturation itself
+    if isinstance(w.message, (SaturationWarning, TrailingBytesWarning)):
+        return None  # check_recording reports them itself (saturation, the recording's notes)
     text = str(w.message)
     if issubclass(w.category, RuntimeWarning):
         return Notice("numeric", label, f"numerical problem while reading: {text}")
@@ -547,7 +431,8 @@ def _read(path: Path, name: str, *, adc_range_v: float, adc_bits: int,
         out_of_core = True
     except ImportError:  # the fsmbench[dask] extra is not installed: read whole, if it fits
         out_of_core = False
-    if path.stat().st_size <= lazy_bytes or fmt not in ("hdf5", "mat73") or not out_of_core:
+    # The data's size, not the file's: zeros after them are not read (fsmbench.io.trailing).
+    if data_end(path, fmt).end <= lazy_bytes or fmt not in ("hdf5", "mat73") or not out_of_core:
         _refuse_if_too_large(path, name, fmt, out_of_core=out_of_core)
         return read_recording(path, experiment=name, adc_range_v=adc_range_v, adc_bits=adc_bits)
     from fsmbench.io.lazy import available_memory_bytes, open_recording
@@ -594,7 +479,8 @@ def load_recordings(data_dir: Path, *, fs_hz: float | None = None, adc_range_v: 
     ------
     RecordingError
         No recording could be read: the message lists what was looked for,
-        what the folder holds and the near-miss names.
+        what the folder holds and the near-miss names, or each file's problem (one
+        phrase naming the files that fail in the same way).
     NotADirectoryError
         ``data_dir`` is not a folder.
     """
@@ -606,6 +492,7 @@ def load_recordings(data_dir: Path, *, fs_hz: float | None = None, adc_range_v: 
     checks: list[Check] = []
     odd = {name: why for name in EXPERIMENTS if name not in found
            and (why := not_a_file(Path(data_dir), name)) is not None}
+    failures: dict[str, RecordingError] = {}
     for name in EXPERIMENTS:
         if name not in found:
             skipped[name] = odd.get(name) or f"no {name}.mat (or .h5/.nxs) in {data_dir}" + (
@@ -613,15 +500,32 @@ def load_recordings(data_dir: Path, *, fs_hz: float | None = None, adc_range_v: 
             continue
         if progress is not None:
             progress(f"reading {found[name].name}")
+        others = other_files(found[name], name)
+
+        def read(path: Path, name: str = name) -> xr.Dataset:
+            return _read(path, name, adc_range_v=adc_range_v, adc_bits=adc_bits,
+                         lazy_bytes=lazy_bytes)
         try:
             with warnings.catch_warnings(record=True) as caught:
                 warnings.simplefilter("always")
-                ds = _read(found[name], name, adc_range_v=adc_range_v, adc_bits=adc_bits,
-                           lazy_bytes=lazy_bytes)
+                try:
+                    ds = read(found[name])
+                except RecordingError as exc:
+                    if not others:
+                        raise
+                    raise RecordingError(exc.file, f"{exc.problem}; {others[0].name} beside it "
+                                         f"holds {name} too: remove or rename the file that is "
+                                         "not the record", variable=exc.variable,
+                                         kind=exc.kind) from None
+                if others:  # which file was read, and the others agree with it (or refused)
+                    with warnings.catch_warnings(record=True):  # of files not used: dropped
+                        ds.attrs[FILE_CHOICE] = compare_files(name, found[name], ds, others,
+                                                              read=read)
                 found_checks, found_notices = check_recording(
                     ds, name=name, fs_hz=fs_hz, adc_range_v=adc_range_v, adc_bits=adc_bits)
         except RecordingError as exc:
             skipped[name] = str(exc)
+            failures[name] = exc
             continue
         recordings[name] = ds
         checks += found_checks
@@ -629,7 +533,7 @@ def load_recordings(data_dir: Path, *, fs_hz: float | None = None, adc_range_v: 
         notices += found_notices
     if not recordings:
         raise RecordingError(data_dir, _empty_problem(Path(data_dir), found, skipped, hints,
-                                                      odd))
+                                                      odd, failures))
     if fs_hz is None:
         notices += _mixed_rates(recordings, found)
     else:
@@ -639,12 +543,38 @@ def load_recordings(data_dir: Path, *, fs_hz: float | None = None, adc_range_v: 
                         notices=tuple(notices), checks=tuple(checks))
 
 
+def _grouped(names: list[str], found: dict[str, Path], skipped: dict[str, str],
+             failures: dict[str, RecordingError]) -> list[str]:
+    """Why each experiment was not used, files failing in the same way named together.
+
+    Thirteen files refused for the same reason (a clock's jitter, once) made one line of
+    4 KB: such files become one phrase naming them, with the first file's full problem.
+    """
+    groups: dict[tuple[str | None, str], list[str]] = {}
+    for name in names:
+        exc = failures.get(name)
+        key = (exc.variable, exc.kind) if exc is not None and exc.kind else None
+        groups.setdefault(key or (None, name), []).append(name)
+    out = []
+    for (variable, kind), members in groups.items():
+        if len(members) < 2:
+            out.append(skipped[members[0]])
+            continue
+        what = f"variable '{variable}' {kind}" if variable else kind
+        first = failures[members[0]]
+        out.append(f"{what} in {len(members)} files ({', '.join(found[m].name for m in members)})"
+                   f"; the first, {first}")
+    return out
+
+
 def _empty_problem(root: Path, found: dict[str, Path], skipped: dict[str, str],
-                   hints: dict[str, str], odd: dict[str, str]) -> str:
+                   hints: dict[str, str], odd: dict[str, str],
+                   failures: dict[str, RecordingError]) -> str:
     names = sorted(p.name for p in root.iterdir()) if root.is_dir() else []
     shown = ", ".join(names[:12]) + (f" … ({len(names)} entries)" if len(names) > 12 else "")
     if found or odd:
-        bad = "; ".join(skipped[n] for n in EXPERIMENTS if n in found or n in odd)
+        bad = "; ".join(_grouped([n for n in EXPERIMENTS if n in found or n in odd], found,
+                                 skipped, failures))
         return f"no recording in this folder can be used: {bad}"
     looked = (f"looked for the ESRF study's recordings ({', '.join(list(EXPERIMENTS)[:2])} … "
               f"{list(EXPERIMENTS)[-1]}, {len(EXPERIMENTS)} names, as .mat, .h5 or .nxs)")

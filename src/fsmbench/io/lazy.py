@@ -15,6 +15,8 @@ Dask is the ``fsmbench[dask]`` extra: this module imports it lazily.
 
 from __future__ import annotations
 
+import functools
+import math
 import os
 import struct
 import zlib
@@ -30,7 +32,16 @@ from fsmbench.io.errors import RecordingError
 from fsmbench.io.matfile import available_memory_bytes, detect_format
 from fsmbench.io.nexus import _plain, is_nexus
 from fsmbench.io.nexus_stream import DEFAULT_CHUNK_SAMPLES, NexusAppender
+from fsmbench.io.notes import READ_NOTES, TIME_JITTER, TRAILING_BYTES, clear_notes
 from fsmbench.io.signals import TIME
+from fsmbench.io.timebase import (
+    EXACT_TOLERANCE,
+    irregular,
+    not_increasing,
+    sum_k_squared,
+    time_base,
+)
+from fsmbench.io.trailing import data_end, warn_trailing
 
 __all__ = ["CONVERTED_FROM", "available_memory_bytes", "convert_recording", "converted_from",
            "open_recording"]
@@ -179,23 +190,30 @@ def open_recording(path: str | os.PathLike[str], *, chunk_samples: int = DEFAULT
 
 
 def _validated(ds: xr.Dataset, path: Path, *, check_signals: bool) -> xr.Dataset:
-    """The checks :func:`~fsmbench.io.recording.read_recording` makes, in one pass out of core.
+    """The checks :func:`~fsmbench.io.recording.read_recording` makes, out of core.
 
-    Every signal finite (the first bad sample named), ``t`` increasing and
-    uniform (steps within 0.1 % of the mean step), ``fs_hz`` from the whole span.
+    Every signal finite (the first bad sample named), ``t`` increasing and on a uniform
+    grid but for clock jitter (:mod:`fsmbench.io.timebase`), ``fs_hz`` fitted to the whole
+    of ``t``. One pass over ``t`` (and the signals); a second over ``t`` only when it strays
+    from the line through its ends by more than float64 rounding.
     """
     import dask
     import dask.array as da
-
-    from fsmbench.io.recording import _STEP_TOLERANCE
 
     t = ds[TIME].data
     n = int(t.shape[0])
     names = [TIME, *map(str, ds.data_vars)] if check_signals else [TIME]
     bad = [~da.isfinite(ds[k].data) for k in names]
+    t_first, t_last = (float(v) for v in dask.compute(t[0], t[-1]))
     steps = da.diff(t)
-    out = dask.compute(*[b.sum() for b in bad], steps.min(), steps.max(), t[0], t[-1])
-    counts, (dt_min, dt_max, t_first, t_last) = out[:len(names)], out[len(names):]
+    period_ends = (t_last - t_first) / (n - 1) if n > 1 else 1.0
+    k = da.arange(n, chunks=t.chunks, dtype=np.float64)
+    u = t - t_first  # t far from 0 keeps its resolution in the differences
+    off_ends = u - k * period_ends  # distance from the line through the first and last sample
+    out = dask.compute(*[b.sum() for b in bad], steps.min(), ((k - 0.5 * (n - 1)) * u).sum(),
+                       u.sum(), abs(off_ends).max())
+    counts, (dt_min, sum_ku, sum_u, ends_max) = out[:len(names)], out[len(names):]
+    base = None
     for name, count, mask in zip(names, counts, bad, strict=True):
         if int(count):
             first = int(da.argmax(mask).compute())
@@ -203,19 +221,37 @@ def _validated(ds: xr.Dataset, path: Path, *, check_signals: bool) -> xr.Dataset
                                  f"{'s' if int(count) > 1 else ''} (first at index {first})",
                                  variable=name)
     if n > 1:
-        mean_step = (float(t_last) - float(t_first)) / (n - 1)
         if not float(dt_min) > 0:
-            raise RecordingError(path, "is not increasing", variable=TIME)
-        if max(abs(float(dt_max) - mean_step), abs(float(dt_min) - mean_step)) \
-                > _STEP_TOLERANCE * mean_step:
-            raise RecordingError(path, f"is not uniformly sampled: steps from {float(dt_min):.6g}"
-                                 f" to {float(dt_max):.6g} s around {mean_step:.6g} s "
-                                 f"(tolerance {100 * _STEP_TOLERANCE:g} %)", variable=TIME)
-        ds.attrs["fs_hz"] = float(f"{1.0 / mean_step:.12g}")
+            i = int(da.argmax(~(steps > 0)).compute())
+            raise not_increasing(str(path), i + 1, *(float(v) for v in t[i:i + 2].compute()))
+        period = float(sum_ku) / sum_k_squared(n)
+        # A line fitted to values within m of zero stays within 2.5 m over the fitted range, so
+        # the residuals stay within 3.5 m: no second pass when that is float64 rounding.
+        if 3.5 * float(ends_max) <= EXACT_TOLERANCE * period:
+            deviation, at = float(ends_max), 0
+        else:
+            residual = abs(u - float(sum_u) / n - period * (k - 0.5 * (n - 1)))
+            at = int(da.argmax(residual).compute())
+            deviation = float(residual[at].compute())
+        base = time_base(n=n, span_s=t_last - t_first, period_s=period, deviation_s=deviation,
+                         at_index=at)
+        if base is None:
+            i = int(da.argmax(abs(steps - period)).compute())
+            before, after = (float(v) for v in t[i:i + 2].compute())
+            raise irregular(str(path), index=i + 1, t_before=before, t_after=after,
+                            step_s=period, step_words="the period fitted to t",
+                            deviation_s=deviation, period_s=period)
+        ds.attrs["fs_hz"] = base.fs_hz
     ds.encoding["source"] = str(path)  # xarray's convention: the file a dataset came from
-    # As read_recording: the attributes stored in the file win.
+    # As read_recording: the attributes stored in the file win, but for the notes of a reading.
     ds.attrs.setdefault("experiment", path.stem)
     ds.attrs.setdefault("source", str(path))
+    clear_notes(ds)
+    end = warn_trailing(data_end(path, detect_format(path)), stacklevel=3)
+    if end.trailing:
+        ds.attrs[TRAILING_BYTES] = end.sentence()
+    if base is not None and base.jittered:
+        ds.attrs[TIME_JITTER] = base.jitter_sentence()
     return ds
 
 
@@ -289,6 +325,8 @@ def _v5_elements(path: Path) -> Iterator[tuple[Any, str, int, int, _Stream]]:
             if len(head) < 8:
                 return
             outer, size = struct.unpack(endian + "II", head)
+            if outer == 0 or size == 0:  # no variable: the data end (fsmbench.io.trailing)
+                return
             start = fh.tell()
             s = _Stream(fh, size, compressed=outer == _MI_COMPRESSED)
             kind = outer
@@ -341,6 +379,35 @@ CONVERTED_FROM = "converted_from"
 _FS_TOLERANCE = 1e-3
 
 
+def _streamed_rate(pieces: Callable[[], Iterator[np.ndarray]], n: int) -> float:
+    """The rate [Hz] :func:`~fsmbench.io.timebase.time_base` gives ``t``, ``t`` read block by
+    block twice (the least-squares period, then the distances from it); nan when ``t`` has
+    fewer than 2 samples or no span."""
+    if n < 2:
+        return math.nan
+    centre, t0, t_last, sum_ku, sum_u = 0.5 * (n - 1), math.nan, math.nan, 0.0, 0.0
+    start = 0
+    for block in pieces():
+        if start == 0:
+            t0 = float(block[0])
+        k = np.arange(start, start + block.size, dtype=np.float64) - centre
+        sum_ku += float(np.sum(k * (block - t0)))
+        sum_u += float(np.sum(block - t0))
+        start, t_last = start + block.size, float(block[-1])
+    period = sum_ku / sum_k_squared(n)
+    if not period > 0:
+        return math.nan
+    start, deviation = 0, 0.0
+    for block in pieces():
+        k = np.arange(start, start + block.size, dtype=np.float64) - centre
+        deviation = max(deviation, float(np.max(np.abs(block - t0 - sum_u / n - period * k))))
+        start += block.size
+    base = time_base(n=n, span_s=t_last - t0, period_s=period, deviation_s=deviation,
+                     at_index=0)
+    # Irregular t is copied as it is: reading the archive says what is wrong with it.
+    return base.fs_hz if base is not None else float(f"{1.0 / period:.12g}")
+
+
 def converted_from(path: str | os.PathLike[str]) -> str | None:
     """The input ``fsmbench convert`` made the archive ``path`` from (absolute), or None
     when ``path`` is not such an archive (another file, another tool's, unreadable)."""
@@ -368,9 +435,11 @@ def convert_recording(source: str | os.PathLike[str], dest: str | os.PathLike[st
         The NeXus archive to write (atomically). Its root records the source's
         absolute path (attribute :data:`CONVERTED_FROM`).
     fs_hz : float, optional
-        Sampling rate [Hz]; default: from the first samples of ``t``. When
-        ``t`` has two samples or more, it must agree with them within 0.1 %
-        (``t`` is copied as it is, so another rate would contradict it).
+        Sampling rate [Hz]; default: the rate fitted to the whole of ``t`` by least
+        squares (a v5 file's ``t`` is inflated once more for it; the first step alone
+        is off by twice the stamps' jitter). When ``t`` has two samples or more, it must
+        agree with that rate within 0.1 % (``t`` is copied as it is, so another rate
+        would contradict it).
     progress : callable, optional
         Called with a line per signal.
     created : float, optional
@@ -400,6 +469,7 @@ def convert_recording(source: str | os.PathLike[str], dest: str | os.PathLike[st
             raise RecordingError(src, f"signals of unequal lengths ({', '.join(uneven)} vs "
                                  f"{TIME})")
         first_t = next(pieces(TIME))[:2]
+        from_t = _streamed_rate(functools.partial(pieces, TIME), n)
         attrs = {"experiment": src.stem, "source": str(src)}
     elif fmt in ("mat73", "hdf5"):
         ds = open_recording(src)
@@ -411,15 +481,15 @@ def convert_recording(source: str | os.PathLike[str], dest: str | os.PathLike[st
             for k in range(0, n, _READ_BLOCK):
                 yield np.asarray(arr[k:k + _READ_BLOCK].compute())
         first_t = np.asarray(ds[TIME].data[:2].compute())
-        attrs = {k: v for k, v in ds.attrs.items() if k != "fs_hz"}
+        from_t = float(ds.attrs.get("fs_hz", math.nan))  # fitted to the whole of t (_validated)
+        attrs = {k: v for k, v in ds.attrs.items() if k != "fs_hz" and k not in READ_NOTES}
     else:
         raise RecordingError(src, "cannot be converted: MATLAB v4 files are small, read them "
                              "directly")
-    from_t = float(1.0 / (first_t[1] - first_t[0])) if first_t.size > 1 else float("nan")
     if fs_hz is not None and np.isfinite(from_t) and from_t > 0 \
             and abs(fs_hz - from_t) > _FS_TOLERANCE * from_t:
-        raise RecordingError(src, f"is sampled at {from_t:.6g} Hz (t[1] - t[0] = "
-                             f"{first_t[1] - first_t[0]:.6g} s) but --fs is {fs_hz:g} Hz; t is "
+        raise RecordingError(src, f"is sampled at {from_t:.6g} Hz (the rate fitted to t) but "
+                             f"--fs is {fs_hz:g} Hz; t is "
                              "copied as it is, so leave --fs out (the rate comes from t) or "
                              "fix t", variable=TIME)
     rate = fs_hz if fs_hz is not None else from_t

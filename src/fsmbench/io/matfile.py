@@ -46,6 +46,7 @@ import scipy.sparse
 from scipy.io import matlab as _matlab
 
 from fsmbench.io.errors import RecordingError
+from fsmbench.io.trailing import PrefixReader, data_end, warn_trailing
 
 __all__ = [
     "HDF5_SIGNATURE",
@@ -144,7 +145,8 @@ def detect_format(path: str | os.PathLike[str]) -> FileFormat:
     p = Path(path)
     size = p.stat().st_size
     if size == 0:
-        raise RecordingError(p, "is empty (0 bytes), not a MAT-file or HDF5 file")
+        raise RecordingError(p, "is empty (0 bytes), not a MAT-file or HDF5 file",
+                             kind="is empty (0 bytes)")
     with open(p, "rb") as fh:
         head = fh.read(128)
         # The HDF5 superblock sits at 0 or after a userblock of 512 * 2**k bytes.
@@ -162,7 +164,8 @@ def detect_format(path: str | os.PathLike[str]) -> FileFormat:
     if _looks_like_mat4(head):
         return "mat4"
     raise RecordingError(
-        p, f"is not a MAT-file (v4, v5/v7, v7.3) or HDF5 file: it holds {_describe(head)}"
+        p, f"is not a MAT-file (v4, v5/v7, v7.3) or HDF5 file: it holds {_describe(head)}",
+        kind="is not a MAT-file (v4, v5/v7, v7.3) or HDF5 file",
     )
 
 
@@ -195,13 +198,24 @@ def load_mat(
     Raises
     ------
     RecordingError
-        Not a MAT/HDF5 file, a corrupt file, a requested variable missing, or
-        an unreadable variable (unless ``skip_unreadable``).
+        Not a MAT/HDF5 file, a corrupt file, a requested variable missing, an
+        unreadable variable (unless ``skip_unreadable``), or no variable before
+        bytes that end the data (zeros right after the header).
+
+    Warns
+    -----
+    fsmbench.io.trailing.TrailingBytesWarning
+        Bytes follow the data (a zero padding): the variables before them are
+        read, the bytes are not (:mod:`fsmbench.io.trailing`).
     """
     p = Path(path)
     fmt = detect_format(p)
+    end = data_end(p, fmt)
+    if end.trailing and end.end <= (128 if fmt == "mat5" else 0):
+        raise RecordingError(p, f"holds no variable: {end.sentence()}")
+    warn_trailing(end, stacklevel=2)
     if fmt in ("mat4", "mat5"):
-        out = _load_v5(p, fmt, variables, skip_unreadable)
+        out = _load_v5(p, fmt, variables, skip_unreadable, end=end.end)
     else:
         out = _load_h5(p, fmt, variables, skip_unreadable)
     if variables is not None:
@@ -219,7 +233,7 @@ class _UnreadableError(Exception):
 
 
 def _load_v5(
-    p: Path, fmt: str, names: list[str] | tuple[str, ...] | None, skip: bool
+    p: Path, fmt: str, names: list[str] | tuple[str, ...] | None, skip: bool, *, end: int
 ) -> dict[str, Any]:
     # mat_dtype=True: MATLAB stores integer-valued doubles as small ints; this
     # returns them as the class MATLAB loads (double). But scipy then casts
@@ -228,12 +242,12 @@ def _load_v5(
     # without mat_dtype and their complex arrays taken from that reading.
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", np.exceptions.ComplexWarning)
-        raw = _scipy_loadmat(p, fmt, names, mat_dtype=True)
+        raw = _scipy_loadmat(p, fmt, names, mat_dtype=True, end=end)
     lost_imag = any(issubclass(w.category, np.exceptions.ComplexWarning) for w in caught)
     for w in caught:  # pass on the other warnings unchanged
         if not issubclass(w.category, np.exceptions.ComplexWarning):
             warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
-    raw_c = _scipy_loadmat(p, fmt, names, mat_dtype=False) if lost_imag else {}
+    raw_c = _scipy_loadmat(p, fmt, names, mat_dtype=False, end=end) if lost_imag else {}
     out: dict[str, Any] = {}
     for name, value in raw.items():
         if name.startswith("__"):
@@ -248,12 +262,14 @@ def _load_v5(
 
 
 def _scipy_loadmat(
-    p: Path, fmt: str, names: list[str] | tuple[str, ...] | None, *, mat_dtype: bool
+    p: Path, fmt: str, names: list[str] | tuple[str, ...] | None, *, mat_dtype: bool, end: int
 ) -> dict[str, Any]:
     try:
         with open(p, "rb") as fh:
+            # scipy reads to the end of its stream: the bytes after the data (a padding it
+            # would refuse the whole file for) are cut off.
             raw: dict[str, Any] = scipy.io.loadmat(
-                fh, variable_names=None if names is None else list(names),
+                PrefixReader(fh, end), variable_names=None if names is None else list(names),
                 mat_dtype=mat_dtype, squeeze_me=False, struct_as_record=False,
                 chars_as_strings=True,
             )

@@ -28,6 +28,7 @@ import xarray as xr
 
 from fsmbench.io.atomic import atomic_path
 from fsmbench.io.errors import RecordingError
+from fsmbench.io.notes import READ_NOTES
 from fsmbench.io.recording import _as_vector, _check_lengths, _validate
 from fsmbench.io.signals import TIME
 
@@ -117,7 +118,8 @@ def write_nexus(ds: xr.Dataset, path: str | os.PathLike[str], *, compress: bool 
         entry.attrs["NX_class"] = "NXentry"
         entry.attrs["default"] = _DATA
         for key, value in ds.attrs.items():
-            entry.attrs[key] = value
+            if key not in READ_NOTES:  # they describe the file read, not this one
+                entry.attrs[key] = value
         data = entry.create_group(_DATA)
         data.attrs["NX_class"] = "NXdata"
         data.attrs["axes"] = TIME

@@ -81,22 +81,25 @@ class OutputError(ValueError):
         return f"{self.file}: {self.problem}"
 
 
-def check_out_dir(out_dir: Path, data_dir: Path | None) -> None:
+def check_out_dir(out_dir: Path, data_dir: Path | None, *, out_option: str = "--out") -> None:
     """Refuse an output folder inside the data folder, or one holding it.
 
     Inputs are never touched: writing inside the data folder would mix
     outputs with recordings, and replacing a folder that holds the data
-    (the swap of :func:`output_transaction`) would delete them.
+    (the swap of :func:`output_transaction`) would delete them. ``out_option``:
+    how the user gave the output folder (``--out``, or ``simulate``'s ``OUT``).
     """
     if data_dir is None:
         return
     out, data = Path(out_dir).resolve(), Path(data_dir).resolve()
     if out == data or data in out.parents:
-        raise OutputError(out_dir, f"--out is inside the data folder {data_dir}; fsmbench "
-                                   "never writes into the data folder, choose another --out")
+        raise OutputError(out_dir, f"{out_option} is inside the data folder {data_dir}; "
+                                   "fsmbench never writes into the data folder, choose another "
+                                   f"{out_option}")
     if out in data.parents:
-        raise OutputError(out_dir, f"--out contains the data folder {data_dir}; a run replaces "
-                                   "its output folder as a whole, choose another --out")
+        raise OutputError(out_dir, f"{out_option} contains the data folder {data_dir}; a run "
+                                   "replaces its output folder as a whole, choose another "
+                                   f"{out_option}")
 
 
 #: The inputs of a command: (option as the user typed it, path) pairs; None paths are skipped.
@@ -132,7 +135,7 @@ def check_path_text(option: str, path: str | os.PathLike[str]) -> None:
                                        "it under a UTF-8 name") from None
 
 
-def check_inputs(out_dir: str | Path, inputs: InputPaths) -> None:
+def check_inputs(out_dir: str | Path, inputs: InputPaths, *, out_option: str = "--out") -> None:
     """Refuse, before anything runs, an input the run would destroy or write into.
 
     Parameters
@@ -143,6 +146,8 @@ def check_inputs(out_dir: str | Path, inputs: InputPaths) -> None:
         Every path the command line names as an input, with its option
         (``"--controller"``, ``"DATA"``, ...); a ``FILE::NAME`` controller is
         passed as its file.
+    out_option : str
+        How the user gave the output folder (``--out``, or ``simulate``'s ``OUT``).
 
     Raises
     ------
@@ -160,18 +165,19 @@ def check_inputs(out_dir: str | Path, inputs: InputPaths) -> None:
         raw = os.fspath(value)
         check_path_text(option, raw)
         if option in ("DATA", "--data"):  # the data folder's own wording
-            check_out_dir(Path(out_dir), Path(raw))
+            check_out_dir(Path(out_dir), Path(raw), out_option=out_option)
             continue
         path = Path(raw).resolve()
         if path == out or out in path.parents:
-            where = "is the --out folder" if path == out else "is inside --out"
+            where = (f"is the {out_option} folder" if path == out
+                     else f"is inside {out_option}")
             raise OutputError(raw, f"{option} {where} {_shown(os.fspath(out_dir))}, which this "
                                    "run replaces as a whole; copy it elsewhere or choose "
-                                   "another --out")
+                                   f"another {out_option}")
         if path in out.parents and path.is_dir() and option not in _FILE_OPTIONS:
-            raise OutputError(out_dir, f"--out is inside the {option} folder {raw}; fsmbench "
-                                       "never writes into its inputs' folders, choose another "
-                                       "--out")
+            raise OutputError(out_dir, f"{out_option} is inside the {option} folder {raw}; "
+                                       "fsmbench never writes into its inputs' folders, choose "
+                                       f"another {out_option}")
 
 
 def read_manifest(folder: Path) -> dict[str, Any] | None:
@@ -202,7 +208,7 @@ def _first_existing(path: Path) -> Path:
 
 
 def preflight(out_dir: str | Path, *, data_dir: str | Path | None = None,
-              need_bytes: int = 0) -> Path:
+              need_bytes: int = 0, out_option: str = "--out") -> Path:
     """Check that ``out_dir`` can take a run, before any computation.
 
     Parameters
@@ -214,6 +220,8 @@ def preflight(out_dir: str | Path, *, data_dir: str | Path | None = None,
     need_bytes : int
         Estimate of what the run writes [bytes]; the filesystem must have at
         least that much free.
+    out_option : str
+        How the user gave the output folder (``--out``, or ``simulate``'s ``OUT``).
 
     Returns
     -------
@@ -232,35 +240,35 @@ def preflight(out_dir: str | Path, *, data_dir: str | Path | None = None,
         The parent folders cannot be created (read-only, no permission).
     """
     out = Path(out_dir).resolve()
-    check_out_dir(out, None if data_dir is None else Path(data_dir))
+    check_out_dir(out, None if data_dir is None else Path(data_dir), out_option=out_option)
     cwd = Path.cwd().resolve()
     if cwd == out or out in cwd.parents:
         raise OutputError(out, "is the current folder or holds it; a run replaces its output "
                                "folder as a whole, so run fsmbench from another folder or "
-                               "choose another --out")
+                               f"choose another {out_option}")
     blocker = _first_existing(out)
     if blocker != out and not blocker.is_dir():
-        raise OutputError(blocker, f"is a file, not a folder, so --out {out_dir} cannot be "
-                                   "created under it; choose another --out")
+        raise OutputError(blocker, f"is a file, not a folder, so {out_option} {out_dir} cannot "
+                                   f"be created under it; choose another {out_option}")
     if out.exists() and not out.is_dir():
-        raise OutputError(out, "exists and is a file, not a folder; choose another --out")
+        raise OutputError(out, f"exists and is a file, not a folder; choose another {out_option}")
     if out.is_dir():
-        _check_replaceable(out)
+        _check_replaceable(out, out_option)
     out.parent.mkdir(parents=True, exist_ok=True)
     try:  # writable? (root ignores permission bits: only trying tells)
         os.rmdir(tempfile.mkdtemp(prefix=f".{out.name}{_STAGING_TAG}", dir=out.parent))
     except OSError as exc:
         raise OutputError(out.parent, f"cannot write the output folder here ({exc.strerror}); "
-                                      "choose another --out") from exc
+                                      f"choose another {out_option}") from exc
     free = shutil.disk_usage(out.parent).free
     if free < need_bytes:
         raise OutputError(out.parent, f"only {_human_bytes(free)} free on this filesystem but "
                                       f"the run writes about {_human_bytes(need_bytes)}; free "
-                                      "some space or choose another --out")
+                                      f"some space or choose another {out_option}")
     return out
 
 
-def _check_replaceable(out: Path) -> None:
+def _check_replaceable(out: Path, out_option: str) -> None:
     entries = sorted(p.name for p in out.iterdir())
     if not entries:
         return
@@ -268,7 +276,7 @@ def _check_replaceable(out: Path) -> None:
     if manifest is None:
         raise OutputError(out, f"is not empty ({len(entries)} entries, e.g. {entries[0]}) and "
                                f"holds no fsmbench run ({MANIFEST}); a run replaces its output "
-                               "folder as a whole, so choose a new or empty --out")
+                               f"folder as a whole, so choose a new or empty {out_option}")
     entries_listed = [f for f in manifest.get("files", [])
                       if isinstance(f, dict) and isinstance(f.get("path"), str)]
     listed = {f["path"] for f in entries_listed}
@@ -276,13 +284,14 @@ def _check_replaceable(out: Path) -> None:
         rel = path.relative_to(out).as_posix()
         if path.is_file() and rel != MANIFEST and rel not in listed:
             raise OutputError(path, f"is not part of the fsmbench run in {out} (not listed in "
-                                    f"its {MANIFEST}); move it away or choose another --out, "
+                                    f"its {MANIFEST}); move it away or choose another "
+                                    f"{out_option}, "
                                     "fsmbench never deletes files it did not write")
     for entry in entries_listed:
-        _check_unchanged(out, entry)
+        _check_unchanged(out, entry, out_option)
 
 
-def _check_unchanged(out: Path, entry: dict[str, Any]) -> None:
+def _check_unchanged(out: Path, entry: dict[str, Any], out_option: str) -> None:
     """Refuse to replace a listed file that was changed since fsmbench wrote it.
 
     The size is compared first (no read), then the SHA-256. A listed file that
@@ -300,7 +309,7 @@ def _check_unchanged(out: Path, entry: dict[str, Any]) -> None:
     if changed:
         raise OutputError(path, f"was changed after fsmbench wrote it (its SHA-256 no longer "
                                 f"matches {MANIFEST}); a run replaces {out} as a whole, so move "
-                                "this file away (or delete it) or choose another --out: "
+                                f"this file away (or delete it) or choose another {out_option}: "
                                 "fsmbench never overwrites a file it did not write")
 
 
@@ -427,7 +436,7 @@ def _swap_in(staging: Path, out: Path) -> Path | None:
     return old
 
 
-def _probe_replace(out: Path) -> None:
+def _probe_replace(out: Path, out_option: str) -> None:
     """Fail now, not after the computation, if ``out`` cannot be moved (immutable)."""
     if not out.exists():
         return
@@ -438,7 +447,8 @@ def _probe_replace(out: Path) -> None:
             os.rename(out, probe)
         except OSError as exc:
             raise OutputError(out, f"cannot be replaced ({exc.strerror}); check its permissions "
-                                   "and attributes (lsattr) or choose another --out") from exc
+                                   f"and attributes (lsattr) or choose another {out_option}") \
+                from exc
         os.rename(probe, out)
 
 
@@ -471,7 +481,8 @@ def output_transaction(out_dir: str | Path, *, command: str, arguments: Sequence
                        data_dir: str | Path | None = None, need_bytes: int = 0,
                        timestamp: bool = False,
                        not_reproducible: Sequence[str] = ("timings.json",),
-                       warn: Any = None, inputs: InputPaths = ()) -> Iterator[RunFolder]:
+                       warn: Any = None, inputs: InputPaths = (),
+                       out_option: str = "--out") -> Iterator[RunFolder]:
     """Run a command's writes as one transaction on ``out_dir``.
 
     Parameters
@@ -499,14 +510,16 @@ def output_transaction(out_dir: str | Path, *, command: str, arguments: Sequence
     inputs : iterable of (str, path or None)
         Every input the command line names, with its option; checked by
         :func:`check_inputs` before anything else.
+    out_option : str
+        How the user gave ``out_dir`` (``--out``, or ``simulate``'s ``OUT``), for the messages.
 
     Yields
     ------
     RunFolder
         ``staging`` to write into, ``final`` and a mapping between them.
     """
-    check_inputs(out_dir, inputs)
-    out = preflight(out_dir, data_dir=data_dir, need_bytes=need_bytes)
+    check_inputs(out_dir, inputs, out_option=out_option)
+    out = preflight(out_dir, data_dir=data_dir, need_bytes=need_bytes, out_option=out_option)
     _remove_stale_staging(out)
     try:
         # The pid in the name lets a later run tell a killed run's leftovers from a live one.
@@ -514,9 +527,9 @@ def output_transaction(out_dir: str | Path, *, command: str, arguments: Sequence
                                         dir=out.parent))
     except OSError as exc:
         raise OutputError(out.parent, f"cannot write the output folder here ({exc.strerror}); "
-                                      "choose another --out") from exc
+                                      f"choose another {out_option}") from exc
     try:
-        _probe_replace(out)
+        _probe_replace(out, out_option)
         yield RunFolder(final=out, staging=staging)
         with _signals_deferred():
             _write_manifest(staging, command=command, arguments=arguments,

@@ -30,7 +30,10 @@ import xarray as xr
 from fsmbench.io.errors import RecordingError, SaturationWarning
 from fsmbench.io.matfile import detect_format, load_mat
 from fsmbench.io.matwrite import save_mat
+from fsmbench.io.notes import TIME_JITTER, TRAILING_BYTES, clear_notes
 from fsmbench.io.signals import ADC_SIGNALS, EXPERIMENTS, SIGNALS, TIME
+from fsmbench.io.timebase import TimeBase, coarse_double, fit_time_base, single_precision
+from fsmbench.io.trailing import DataEnd, data_end, warn_trailing
 
 __all__ = [
     "RecordingFormat",
@@ -44,9 +47,8 @@ __all__ = [
 #: Formats :func:`write_recording` writes.
 RecordingFormat = Literal["mat5", "mat73", "nexus"]
 
-# Sampling is "uniform" when every step is within 1e-3 of the median step: far
-# above float64 rounding of t = (0:N-1)/fs (~1e-12 relative, even summed over
-# millions of samples) yet far below a dropped or doubled sample (100 %).
+# How far a file's fs_hz may be from the rate fitted to its t (relative): far above the
+# fit's error, far below another rate.
 _STEP_TOLERANCE: Final = 1e-3
 _UNKNOWN_NOTE: Final = "not in the ESRF study's signal table (fsmbench.io.signals.SIGNALS)"
 _SUFFIXES: Final = (".mat", ".h5", ".nxs")  # find_experiments' preference order
@@ -120,54 +122,13 @@ def _nonfinite_problem(v: np.ndarray, t: np.ndarray | None) -> str | None:
     return f"holds {' and '.join(counts)} value{'s' if total > 1 else ''} ({where})"
 
 
-def _two_times(a: float, b: float) -> tuple[str, str]:
-    """Two times [s] with 10 significant digits, or as many more as tell them apart."""
-    for digits in range(10, 18):
-        sa, sb = f"{a:.{digits}g}", f"{b:.{digits}g}"
-        if sa != sb or a == b:
-            return sa, sb
-    return sa, sb
-
-
-def _check_time(t: np.ndarray, origin: str) -> float:
-    """Check that ``t`` (s) is finite, increasing and uniform; return the median step (s)."""
+def _check_time(t: np.ndarray, origin: str) -> TimeBase:
+    """Check that ``t`` (s) is finite, increasing and on a uniform grid but for clock jitter
+    (:mod:`fsmbench.io.timebase`); return the grid fitted to it."""
     problem = _nonfinite_problem(t, None)
     if problem:
-        raise RecordingError(origin, problem, variable=TIME)
-    dt = np.diff(t)
-    not_up = ~(dt > 0)
-    if not_up.any():
-        i = int(np.argmax(not_up))
-        a, b = _two_times(t[i], t[i + 1])
-        raise RecordingError(
-            origin,
-            f"is not increasing at index {i + 1}: t[{i}] = {a} s, t[{i + 1}] = {b} s",
-            variable=TIME,
-        )
-    step = float(np.median(dt))
-    off = np.abs(dt - step) > _STEP_TOLERANCE * step
-    if off.any():
-        i = int(np.argmax(off))
-        a, b = _two_times(t[i], t[i + 1])
-        raise RecordingError(
-            origin,
-            f"is not uniformly sampled at index {i + 1}: t[{i}] = {a} s, "
-            f"t[{i + 1}] = {b} s, a step of {dt[i]:.6g} s where the median "
-            f"step is {step:.6g} s (tolerance {100 * _STEP_TOLERANCE:g} % of it)",
-            variable=TIME,
-        )
-    return step
-
-
-def _fs_from_time(t: np.ndarray) -> float:
-    """Sampling frequency (Hz) of a uniform ``t`` (s).
-
-    The mean step over the whole record is exact to ~1e-15 relative; rounding
-    to 12 significant digits then recovers the nominal value (10000.0, not
-    9999.999999999998), so round trips through MAT-files keep ``fs_hz``.
-    """
-    span = float(t[-1] - t[0])
-    return float(f"{(t.size - 1) / span:.12g}")
+        raise RecordingError(origin, problem, variable=TIME, kind="holds NaN or Inf values")
+    return fit_time_base(t, origin)
 
 
 def _signal_attrs(name: str) -> dict[str, str]:
@@ -221,7 +182,10 @@ def _validate(
     adc_bits: int,
     saturation: bool,
     stacklevel: int,
-) -> None:
+    base: TimeBase | None = None,
+) -> TimeBase:
+    """Raise on the first problem of ``ds``; return the grid fitted to its ``t`` (``base``:
+    already fitted to it by the caller, so ``t`` is not fitted twice)."""
     if TIME not in ds.coords and TIME not in ds.variables:
         present = ", ".join(map(str, ds.data_vars)) or "nothing"
         raise RecordingError(origin, "is missing: a recording needs its time vector t, in s "
@@ -243,20 +207,22 @@ def _validate(
     if t.size < 2:
         raise RecordingError(origin, f"holds {t.size} sample{'s' if t.size != 1 else ''}; "
                              "a recording needs at least 2", variable=TIME)
-    step = _check_time(t, origin)
+    base = base or _check_time(t, origin)
     for name in ds.data_vars:
         problem = _nonfinite_problem(np.asarray(ds[name].values), t)
         if problem:
-            raise RecordingError(origin, problem, variable=str(name))
+            raise RecordingError(origin, problem, variable=str(name),
+                                 kind="holds NaN or Inf values")
     fs = ds.attrs.get("fs_hz")
     if not isinstance(fs, (int, float, np.floating, np.integer)) or not np.isfinite(fs) or fs <= 0:
         raise RecordingError(origin, f"attribute 'fs_hz' is {fs!r}; it must be the sampling "
                              "frequency in Hz, a positive number")
-    if abs(float(fs) * step - 1.0) > _STEP_TOLERANCE:
+    if abs(float(fs) / base.fs_hz - 1.0) > _STEP_TOLERANCE:
         raise RecordingError(origin, f"attribute 'fs_hz' = {float(fs):.10g} Hz disagrees with "
-                             f"t, whose median step {step:.6g} s means {1 / step:.10g} Hz")
+                             f"t, whose rate is {base.fs_hz:.10g} Hz")
     if saturation:
         _check_saturation(ds, origin, adc_range_v, adc_bits, stacklevel + 1)
+    return base
 
 
 # --------------------------------------------------------------------------- public API
@@ -288,8 +254,9 @@ def validate_recording(
     RecordingError
         ``t`` or a required variable missing, a variable not 1-D on ``t`` or
         not real numeric, fewer than 2 samples, ``t`` not finite, not
-        increasing or not uniform (a step off the median step by more than
-        1e-3 of it), NaN/Inf in a signal, ``fs_hz`` missing or off ``t``.
+        increasing or not uniform (straying from the grid fitted to it by more
+        than 0.1 % of a period: :mod:`fsmbench.io.timebase`), NaN/Inf in a
+        signal, ``fs_hz`` missing or off ``t``.
 
     Warns
     -----
@@ -359,15 +326,35 @@ def make_recording(
             raise ValueError(f"{origin}: no signals and no t")
         n = _check_lengths(vectors, origin)
         vectors[TIME] = np.arange(n, dtype=np.float64) / float(fs_hz)
-    n = _check_lengths(vectors, origin)
+    _check_lengths(vectors, origin)
+    base = _fitted(vectors[TIME])
     if fs_hz is None:
-        time = vectors[TIME]
-        fs_hz = _fs_from_time(time) if n >= 2 and np.all(np.isfinite(time[[0, -1]])) \
-            and time[-1] > time[0] else float("nan")
+        fs_hz = base.fs_hz if base is not None else float("nan")
     ds = _assemble(vectors, fs_hz=float(fs_hz), experiment=experiment, source=source)
     _validate(ds, origin=origin, require=(), adc_range_v=adc_range_v, adc_bits=adc_bits,
-              saturation=True, stacklevel=3)
+              saturation=True, stacklevel=3, base=base)
+    _note_reading(ds, base)
     return ds
+
+
+def _fitted(t: np.ndarray) -> TimeBase | None:
+    """The grid fitted to ``t``, or None when it has none (the validation then says why)."""
+    if t.size < 2 or not np.isfinite(t).all():
+        return None
+    try:
+        return fit_time_base(t, "")
+    except RecordingError:
+        return None
+
+
+def _note_reading(ds: xr.Dataset, base: TimeBase | None, end: DataEnd | None = None) -> None:
+    """Say in the recording what reading it found (:mod:`fsmbench.io.notes`): bytes ignored
+    after the data, ``t`` jittering; every check of it then gives the notice."""
+    clear_notes(ds)  # the notes an archive kept from an earlier reading
+    if end is not None and end.trailing:
+        ds.attrs[TRAILING_BYTES] = end.sentence()
+    if base is not None and base.jittered:
+        ds.attrs[TIME_JITTER] = base.jitter_sentence()
 
 
 def _default_require(*names: str) -> tuple[str, tuple[str, ...]]:
@@ -423,29 +410,31 @@ def read_recording(
     from fsmbench.io import nexus  # nexus builds on this module: imported here
 
     if fmt == "hdf5" and nexus.is_nexus(p):
+        end = warn_trailing(data_end(p, fmt), stacklevel=2)
         ds = nexus.read_nexus(p)
         if experiment is not None:
             ds.attrs["experiment"] = experiment
         req = (_default_require(ds.attrs["experiment"], p.stem)[1] if require is None
                else tuple(require))
-        _validate(ds, origin=origin, require=req, adc_range_v=adc_range_v,
-                  adc_bits=adc_bits, saturation=True, stacklevel=3)
+        grid = _validate(ds, origin=origin, require=req, adc_range_v=adc_range_v,
+                         adc_bits=adc_bits, saturation=True, stacklevel=3)
+        _note_reading(ds, grid, end)
         return ds
     experiment = p.stem if experiment is None else experiment
     needs, req = _default_require(experiment, p.stem)
     if require is not None:
         needs, req = "the caller", tuple(require)
-    raw = load_mat(p, skip_unreadable=True)
+    raw = load_mat(p, skip_unreadable=True)  # warns of trailing bytes itself
     if TIME not in raw:
         present = ", ".join(raw) or "nothing"
         raise RecordingError(origin, "is missing: a recording needs its time vector t, in s "
-                             f"(the file holds: {present})", variable=TIME)
+                             f"(the file holds: {present})", variable=TIME, kind="is missing")
     missing = [r for r in req if r not in raw]
     if missing:
         also = f" (and so are {', '.join(repr(m) for m in missing[1:])})" if missing[1:] else ""
         raise RecordingError(
             origin, f"is missing{also}; {needs} needs {', '.join(req)} "
-            f"(the file holds: {', '.join(raw)})", variable=missing[0],
+            f"(the file holds: {', '.join(raw)})", variable=missing[0], kind="is missing",
         )
     vectors = {TIME: _as_vector(TIME, raw[TIME], origin)}
     n = vectors[TIME].size
@@ -467,54 +456,27 @@ def read_recording(
         vectors[name] = v
     _check_lengths(vectors, origin)
     t = vectors[TIME]
-    fs = _fs_from_time(t) if n >= 2 and np.isfinite(t[[0, -1]]).all() and t[-1] > t[0] \
-        else float("nan")
-    ds = _assemble(vectors, fs_hz=fs, experiment=experiment, source=os.path.abspath(p))
+    base = _fitted(t)
+    ds = _assemble(vectors, fs_hz=base.fs_hz if base is not None else float("nan"),
+                   experiment=experiment, source=os.path.abspath(p))
     for name in vectors:  # what the file held, for the data-type checks (integer counts …)
         stored = np.asarray(raw[name]).dtype
         if stored != np.float64:
             ds[name].attrs["stored_dtype"] = str(stored)
     try:
         _validate(ds, origin=origin, require=req, adc_range_v=adc_range_v, adc_bits=adc_bits,
-                  saturation=True, stacklevel=3)
+                  saturation=True, stacklevel=3, base=base)
     except RecordingError as exc:
         stored = np.asarray(raw[TIME]).dtype
         if exc.variable == TIME and stored.kind == "f" and stored.itemsize < 8:
-            raise RecordingError(origin, exc.problem + "; " + _single_precision(t, stored),
-                                 variable=TIME) from None
-        if exc.variable == TIME and (coarse := _coarse_double(t)):
-            raise RecordingError(origin, exc.problem + "; " + coarse, variable=TIME) from None
+            raise RecordingError(origin, exc.problem + "; " + single_precision(t, stored),
+                                 variable=TIME, kind=exc.kind) from None
+        if exc.variable == TIME and (coarse := coarse_double(t)):
+            raise RecordingError(origin, exc.problem + "; " + coarse, variable=TIME,
+                                 kind=exc.kind) from None
         raise
+    _note_reading(ds, base, data_end(p, fmt))
     return ds
-
-
-def _coarse_double(t: np.ndarray) -> str | None:
-    """Why a double ``t`` far from 0 (Unix time: doubles near 1.7e9 s are 2.4e-7 s apart,
-    0.24 % of a 10 kHz step) cannot be uniform: rounding alone moves a step by more than
-    half the tolerance ``_STEP_TOLERANCE``. None otherwise."""
-    if t.size < 2 or not np.isfinite(t).all():
-        return None
-    top, step = float(np.max(np.abs(t))), float(np.median(np.diff(t)))
-    spacing = float(np.spacing(top))
-    if not (step > 0 and spacing > 0.5 * _STEP_TOLERANCE * step):
-        return None
-    unix = 1e8 < float(t[0]) < 1e10  # 1973 to 2286 in seconds since 1970
-    return (f"t is stored in double precision (float64), whose values near {top:.4g} s are "
-            f"{spacing:.3g} s apart ({100 * spacing / step:.2g} % of the {step:.3g} s step), so "
-            "the steps cannot be uniform"
-            + ("; t looks like an absolute time (seconds since 1970, Unix time)"
-               if unix else "; t starts far from 0")
-            + ": save the time from the record's start, rebuilt from the sample numbers "
-            "(MATLAB: t = (0:N-1)'/fs), and the start time, if needed, in another variable")
-
-
-def _single_precision(t: np.ndarray, stored: np.dtype[Any]) -> str:
-    """Why a single-precision ``t`` is not uniform, and the fix."""
-    top = float(np.max(np.abs(t)))
-    spacing = float(np.spacing(np.asarray(top, dtype=stored)))
-    return (f"t is stored in single precision ({stored}), whose values near {top:.4g} s are "
-            f"{spacing:.3g} s apart, so the steps cannot be uniform; save t in double "
-            "precision, rebuilt from the sample numbers (MATLAB: t = (0:N-1)'/fs)")
 
 
 def write_recording(

@@ -192,7 +192,8 @@ class FsmBench(Device):
             if self.BenchFolder:
                 from fsmbench.sim.identified import identified_bench
 
-                bench = identified_bench(self.BenchFolder, bench=bench)
+                bench = identified_bench(self.BenchFolder, bench=bench,
+                                         option="the BenchFolder property")
             self.bench = LiveBench(bench, backend=self.Backend,
                                    playback_folder=self.PlaybackFolder or None, seed=self.Seed,
                                    speed=self.Speed, output_folder=self.OutputFolder,

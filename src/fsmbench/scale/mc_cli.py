@@ -55,7 +55,7 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from fsmbench.cli_args import seed
+from fsmbench.cli_args import default_noted, seed
 
 # The CLI builds its parser with this module: the model, numba and Dask load only when
 # the command runs.
@@ -382,8 +382,9 @@ def _command(args: argparse.Namespace) -> int:
     with_duration([e for e in seed_experiments() if e.name in ("data_rep_h", "data_rep_v")],
                   duration_s=args.duration)
     if args.settle >= args.duration:
-        raise ValueError(f"--settle {args.settle:g} s leaves nothing of a --duration "
-                         f"{args.duration:g} s record")
+        settle = default_noted(args, "settle", f"--settle {args.settle:g} s")
+        duration = default_noted(args, "duration", f"--duration {args.duration:g} s")
+        raise ValueError(f"{settle} leaves nothing of a {duration} record")
     start = time.perf_counter()
 
     def say(msg: str) -> None:

@@ -75,7 +75,8 @@ def _quad_diode(params: BenchParams, ident: Mapping[str, Any], gd: np.ndarray, p
     return dataclasses.replace(params, quad_diode=qd, converter=conv)
 
 
-def identified_bench(folder: str | Path, *, bench: Bench, label: str = "") -> Bench:
+def identified_bench(folder: str | Path, *, bench: Bench, label: str = "",
+                     option: str = "--bench") -> Bench:
     """The bench identified in ``folder``, ready for every simulation.
 
     Parameters
@@ -88,6 +89,9 @@ def identified_bench(folder: str | Path, *, bench: Bench, label: str = "") -> Be
         recording measured (``bench.nominal``).
     label : str
         The bench in words (default "the bench identified in FOLDER").
+    option : str
+        What named ``folder``, as the user typed it (``--bench``, ``--identification``, the
+        device's ``BenchFolder`` property), for the messages.
 
     Returns
     -------
@@ -103,8 +107,8 @@ def identified_bench(folder: str | Path, *, bench: Bench, label: str = "") -> Be
     """
     from fsmbench.ident.load import load_identified_plant, read_identification_json
 
-    ident_path, ident = read_identification_json(folder)
-    plant = load_identified_plant(ident_path.parent).plant
+    ident_path, ident = read_identification_json(folder, option=option)
+    plant = load_identified_plant(ident_path.parent, option=option).plant
     return bench_from_identification(ident, plant=plant, bench=bench, path=ident_path,
                                      label=label)
 
