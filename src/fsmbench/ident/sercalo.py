@@ -473,9 +473,9 @@ def fit_sercalo(frf: FrequencyResponse, *, gi_a_per_v: Mapping[str, float],
             # with its poles, its delay and the 4QD amplifier, and that delay is removed.
             first = _vector_fit(remove_delay(frf, delay), opts)
             if not first[0].converged and opts.weights == "seed":
-                alternative = _vector_fit(remove_delay(frf, delay), _with_variance_weights(opts))
-                if alternative[0].converged:
-                    first = alternative
+                retried = _vector_fit(remove_delay(frf, delay), _with_variance_weights(opts))
+                if retried[0].converged:
+                    first = retried
             try:
                 joint = joint_path_delays(frf, fit=first[0], starts=delays,
                                           resonances_hz=first[1], sensor=sensor,
