@@ -269,3 +269,27 @@ def test_the_next_step_names_the_file_to_rename_correct_or_record() -> None:
         "Next: rename the files the study did not recognise (DATA_UCH.mat: rename it "
         "data_uch.mat (file names are case-sensitive)), correct data_ucv (D/data_ucv.mat: "
         "Ucv holds 3 NaN values), record data_unh, then run the study again.")
+
+
+@pytest.mark.parametrize("kw", [{"identified": False}, {"validation": None},
+                                {"identified": False, "huddle": False}])
+def test_a_verdict_that_cannot_judge_reads_in_one_sentence_and_each_reason_once(
+        kw: dict[str, Any]) -> None:
+    # Issue 30: the headline ran to seven lines and each row repeated its 80-word reason.
+    s = _summary(**kw)
+    assert s.verdict_status == "not_verified"
+    assert len(s.verdict.split()) <= 30 and s.verdict.count(".") == 1, s.verdict
+    assert "— first, " in s.verdict  # the first thing to do
+    open_rows = [r for r in s.requirements if r.passed is None]
+    assert open_rows and all(r.reason >= 1 for r in open_rows)
+    # Each reason is listed once, and each row points to its own.
+    assert len(set(s.reasons)) == len(s.reasons)
+    for r in open_rows:
+        assert s.reasons[r.reason - 1] == f"missing: {r.missing}"
+    html = verdict_html(s)
+    for i in range(1, len(s.reasons) + 1):
+        assert html.count(f'<li id="reason-{i}">') == 1
+    # The requirements' table points to the reason; it does not repeat it.
+    table = html.split("<table>", 1)[1].split("</table>", 1)[0]
+    for r in open_rows:
+        assert r.missing not in table and f'href="#reason-{r.reason}"' in table

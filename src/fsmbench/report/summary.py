@@ -107,6 +107,9 @@ class Requirement:
         Where the number comes from, in words (which bench it ran on).
     missing : str
         When not verified: what is missing, in words.
+    reason : int
+        When not verified: its reason's number in the summary's ``reasons``
+        (1-based; 0 otherwise), so a reader reads each reason once.
     """
 
     name: str
@@ -122,6 +125,7 @@ class Requirement:
     provenance: Provenance = ""
     provenance_detail: str = ""
     missing: str = ""
+    reason: int = 0
 
     @property
     def status(self) -> Status:
@@ -136,6 +140,7 @@ class Requirement:
                 "passed": self.passed, "values": dict(self.values), "unit": self.unit,
                 "limits": dict(self.limits), "provenance": self.provenance,
                 "provenance_detail": self.provenance_detail, "missing": self.missing,
+                "reason": self.reason,
                 "display": {"value": self.value, "limit": self.limit},
                 "explanation": self.explanation, "link": self.link}
 
@@ -180,6 +185,7 @@ class Summary:
     verdict_status: str = "not_verified"
     next_step: str = ""
     simulated_bench: str = ""
+    reasons: tuple[str, ...] = ()
 
     def to_json(self) -> dict[str, Any]:
         """``summary.json``: format name and version first, then the verdict."""
@@ -188,7 +194,8 @@ class Summary:
             "fsmbench_version": __version__, "source": self.source, "is_twin": self.is_twin,
             "meets_specifications": self.meets_specifications,
             "verdict_status": self.verdict_status, "verdict": self.verdict,
-            "next_step": self.next_step, "simulated_bench": self.simulated_bench,
+            "next_step": self.next_step, "reasons": list(self.reasons),
+            "simulated_bench": self.simulated_bench,
             "limiting": self.limiting,
             "requirements": [r.to_json() for r in self.requirements],
             "stages": [asdict(s) for s in self.stages],
@@ -550,21 +557,25 @@ def build_summary(*, source: str, is_twin: bool, spec: Specification,
     status, verdict = _verdict(reqs, plant_identified=plant_identified)
     failed_checks = tuple(c for c in checks if not c.passed)
     contradictions = [c for c in failed_checks if c.name not in FINDINGS]
+    reqs, reasons = _reasons(reqs)
     if status == "meets" and contradictions:
         first = contradictions[0]
         status = "not_verified"
-        verdict = (f"Not verified: {len(contradictions)} check(s) of the recordings failed (first: "
-                   f"{first.subject}, {first.name}); a verdict on data that contradict "
-                   "themselves or the bench file would not be one.")
+        verdict = (f"Not verified: {len(contradictions)} check(s) of the recordings failed, "
+                   f"first on {first.subject}")
+        reasons = (*reasons, *(c.sentence() for c in contradictions))
     step = next_step(status=status, requirements=reqs, budget=budget, limiting_row=top,
                      skipped=skipped)
+    if status == "not_verified":
+        verdict = _headline(verdict, step)
     return Summary(source=source, is_twin=is_twin,
                    meets_specifications={"meets": True, "does_not_meet": False}.get(status),
                    verdict=verdict, limiting=limiting, requirements=tuple(reqs),
                    stages=tuple(stages), findings=tuple(findings), fallbacks=tuple(fallbacks),
                    skipped=dict(skipped), parts_skipped=tuple(parts_skipped),
                    failed_checks=failed_checks, notices=tuple(notices), specification=spec,
-                   verdict_status=status, next_step=step, simulated_bench=simulated_bench)
+                   verdict_status=status, next_step=step, simulated_bench=simulated_bench,
+                   reasons=tuple(reasons))
 
 
 #: The requirements whose chain runs through the Newport's block (its drive moves the
@@ -580,6 +591,36 @@ def _assumed(r: Requirement, missing: str) -> Requirement:
                                       + (f"; {r.provenance_detail}" if r.provenance_detail
                                          else "")),
                    missing=f"the identified {missing.split(':')[0]}")
+
+
+#: Longest headline a reader takes in at once [words] (issue 30); the reasons follow it.
+HEADLINE_WORDS = 30
+
+
+def _reasons(reqs: Sequence[Requirement]) -> tuple[list[Requirement], tuple[str, ...]]:
+    """Each unverified row's reason, listed once: the rows carry its number."""
+    reasons: list[str] = []
+    out = []
+    for r in reqs:
+        if r.passed is None and r.missing:
+            if r.missing not in reasons:
+                reasons.append(r.missing)
+            r = replace(r, reason=reasons.index(r.missing) + 1)
+        out.append(r)
+    return out, tuple(f"missing: {m}" for m in reasons)
+
+
+def _headline(verdict: str, step: str) -> str:
+    """``verdict``'s first clause and the next step's first action, in at most
+    :data:`HEADLINE_WORDS` words (the reasons are listed below it, once)."""
+    head = verdict.split(" (", 1)[0].rstrip(". ")
+    action = step.removeprefix("Next: ").removeprefix("Next, to do better: ")
+    for cut in (": ", "; ", " (", ", then"):
+        action = action.split(cut, 1)[0]
+    words = head.split() + (["— first,", *action.rstrip(".").split()] if action else [])
+    if len(words) > HEADLINE_WORDS:
+        words = [*words[:HEADLINE_WORDS - 1], "…"]
+    return " ".join(words) + "."
 
 
 def _against(r: Requirement) -> str:

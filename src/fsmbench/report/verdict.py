@@ -119,6 +119,10 @@ def verdict_html(summary: Summary) -> str:
               if summary.simulated_bench else "") + "</p>"]
     if summary.next_step:
         out.append(f'<p class="next-step"><b>{e(summary.next_step)}</b></p>')
+    if summary.reasons:
+        out.append('<p><b>Why not verified:</b></p><ol class="reasons">')
+        out += [f'<li id="reason-{i}">{e(r)}</li>' for i, r in enumerate(summary.reasons, 1)]
+        out.append("</ol>")
     out.append("<table><thead><tr><th>requirement</th><th>found</th><th>limit</th>"
                "<th>where the number comes from</th><th>verdict</th></tr></thead><tbody>")
     for r in summary.requirements:
@@ -126,7 +130,9 @@ def verdict_html(summary: Summary) -> str:
         link = f' <a href="{e(r.link)}">details</a>' if r.link else ""
         origin = _PROVENANCE_WORDS.get(r.provenance, r.provenance)
         detail = f"<br><small>{e(r.provenance_detail)}</small>" if r.provenance_detail else ""
-        missing = f"<br><small>missing: {e(r.missing)}</small>" if r.missing else ""
+        missing = (f'<br><small><a href="#reason-{r.reason}">reason {r.reason}</a></small>'
+                   if r.reason else
+                   f"<br><small>missing: {e(r.missing)}</small>" if r.missing else "")
         out.append(f"<tr><td>{e(r.description)}{why}</td><td>{e(r.value)}</td>"
                    f"<td>{e(r.limit)}</td><td>{e(origin)}{detail}</td>"
                    f"<td>{_mark(r.passed)}{missing}{link}</td></tr>")
