@@ -223,6 +223,8 @@ def _noise_checks(noise: Any, params: BenchParams) -> list[Check]:
                      if sig.get("significant") and params.newport.angle_noise_rms_rad > 0
                      else 1.0)
     for axis, vp in (("h", "Vph"), ("v", "Vpv")):
+        if not noise["noise_rms_v"][axis].get("significant", True):
+            continue  # not separated from the Newport's noise: no value to check
         fitted = float(noise["noise_rms_v"][axis]["value"])
         model = params.quad_diode.noise_rms_v[axis]
         check = _ratio_check(

@@ -550,13 +550,24 @@ def fit_noise_model(recordings: Mapping[str, xr.Dataset], *, params: BenchParams
     newport = (gd**2 * (newport_beam_matrix(params) ** 2).sum(axis=1) * 2.0
                * check.value**2 / fs)
     white = {}
+    undetermined = []
     for ch, axis in enumerate(AXES):
         rms = math.sqrt(max(own := fits[ch][0].w - adc - newport[ch], 0.0) * fs_eng / 2)
         sd = math.sqrt(fits[ch][0].cov[0, 0]) * fs_eng / (4 * rms) if rms else math.nan
         white[axis] = Estimate(rms, rms, sd)
         if own <= 0:
-            notices.append(Notice("other", _SIGNALS[ch], "white floor not above the ADC's and "
-                                  "the Newport's: noise_rms_v set to 0"))
+            # The floor is all the ADC's and the Newport's (as its angle noise measured at
+            # low frequency predicts it there): the records do not separate the 4QD's own
+            # noise, which is not zero for that; the engine keeps the bench file's.
+            white[axis] = Estimate(float(qd.noise_rms_v[axis]), 0.0, math.nan,
+                                   significant=False)
+            undetermined.append(axis)
+            notices.append(Notice(
+                "other", _SIGNALS[ch],
+                f"the white floor ({fits[ch][0].w:.3g} V²/Hz) is not above the ADC's and the "
+                f"Newport's share ({adc + newport[ch]:.3g} V²/Hz): the records do not separate "
+                "the 4QD's own white noise from the Newport's; the bench file's is kept "
+                "(assumed)"))
     va, va_floor, piston, s_va = _attocube(s1, vsel, params, check.value, fs_eng, notices)
     errors = [e for ch in (0, 1) for e in _errors(
         _SIGNALS[ch], f[mask], p[mask, ch], fits[ch][0].psd(f[mask], t_w[mask], fs), g[mask],
@@ -580,6 +591,9 @@ def fit_noise_model(recordings: Mapping[str, xr.Dataset], *, params: BenchParams
                                                "cross-spectrum)")
     if source == "identified":
         prov["quad_diode.gain_v_per_rad"] = "measured (identification)"
+    if undetermined:
+        prov["quad_diode.noise_rms_v"] = (f"{_ASSUMED}: not separated from the Newport's "
+                                          f"noise ({', '.join(undetermined)})")
     return NoiseModelFit(
         tuple(tests), "", fs, fs_eng, gains, source, (f_lo, f_hi), (_VA_LO_HZ, f_hi), white,
         {a: fits[ch][0].w for ch, a in enumerate(AXES)}, adc,
