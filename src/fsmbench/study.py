@@ -158,6 +158,9 @@ def _disturbance_blocks_missing(ident: Identification | None) -> str:
     gone = [f"{words}: {ident.skipped.get('newport', 'not identified')}"
             for block, words in _DISTURBANCE_BLOCKS.items()
             if ident.plant_blocks.get(block) != "identified"]
+    if not gone and ident.newport is not None:
+        gone = [f"Newport {a} (data_un{a}): {ident.skipped.get(f'newport_{a}', 'not identified')}"
+                for a in ident.newport.assumed_axes]
     return "; ".join(gone)
 
 

@@ -39,6 +39,7 @@ peaking, against the FSM-300 datasheet (600 Hz, 250 Hz, ≤ 3 dB).
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -48,6 +49,8 @@ from numpy.typing import NDArray
 from scipy.ndimage import median_filter
 from scipy.optimize import brentq
 
+from fsmbench.bench.blocks import newport_beam_matrix
+from fsmbench.bench.params import BenchParams
 from fsmbench.checks import Check, Notice
 from fsmbench.ident.delay.bode import DelayEstimate, remove_delay
 from fsmbench.ident.delay.joint import SensorEstimate, fit_jointly, line_std
@@ -58,7 +61,7 @@ from fsmbench.ident.sercalo import combined_delay, path_delays
 
 __all__ = ["NewportAxisFit", "NewportDynamics", "NewportIdentification", "SensorShift",
            "fit_newport_axis", "fit_newport_dynamics", "identify_newport", "newport_checks",
-           "resolved_sensor",
+           "nominal_newport_axis", "resolved_sensor",
            "sampled_response", "sensor_notices", "unresolved_sensor_shifts"]
 
 FloatArray = NDArray[np.float64]
@@ -308,11 +311,28 @@ def fit_newport_axis(frf: FrequencyResponse, axis: str, *, sensor: SensorLowpass
                      resolve_sensor=resolve_sensor)
 
 
+def nominal_newport_axis(params: BenchParams, axis: str, *, fs_hz: float) -> NewportAxisFit:
+    """One axis as the bench file models it (a record that could not give it): the static
+    gain ``Gd Mn gn``, the second order and the internal lag, every std NaN."""
+    gd = params.quad_diode.gain_v_per_rad[axis]
+    i = "hv".index(axis)
+    gain = float(gd * newport_beam_matrix(params)[i, i] * params.newport.gain_rad_per_v[axis])
+    nan = math.nan
+    delay = ((params.converter.dac_delay_samples + 0.5) / fs_hz
+             + params.converter.dac_extra_delay_s + params.newport.internal_delay_s)
+    return NewportAxisFit(axis=axis, gain_v_per_v=gain, gain_std_v_per_v=nan,
+                          natural_freq_hz=params.newport.natural_freq_hz, natural_freq_std_hz=nan,
+                          damping_ratio=params.newport.damping_ratio, damping_std=nan,
+                          delay_s=delay, delay_std_s=nan, band_hz=(nan, nan), n_lines=0,
+                          fit_error=nan)
+
+
 def fit_newport_dynamics(frf: FrequencyResponse, *, dac_delay_samples: float = 1.0,
                          converter_delay_s: float | None = None,
                          phase_lag_deg: float = 60.0,
                          sensor: SensorLowpass | None = None,
-                         resolve_sensor: bool = True) -> NewportDynamics:
+                         resolve_sensor: bool = True,
+                         fill: Mapping[str, NewportAxisFit] | None = None) -> NewportDynamics:
     """Fit both Newport paths (see the module) and derive their bandwidths.
 
     Parameters
@@ -333,19 +353,25 @@ def fit_newport_dynamics(frf: FrequencyResponse, *, dac_delay_samples: float = 1
     resolve_sensor : bool
         False: the amplifier is ``sensor``, not fitted (a decision made from more
         records than these lines, :mod:`fsmbench.ident.evidence.amplifier`).
+    fill : mapping of axis to NewportAxisFit, optional
+        The axes whose path the matrix lacks (its record missing or unusable), as the
+        bench file models them (:func:`nominal_newport_axis`).
 
     Raises
     ------
     ValueError
         A path missing or too few coherent lines, naming the path.
     """
-    for output, input_ in _PATHS.values():
-        if output not in frf.output_names or input_ not in frf.input_names:
+    fill = dict(fill or {})
+    for axis, (output, input_) in _PATHS.items():
+        if axis not in fill and (output not in frf.output_names
+                                 or input_ not in frf.input_names):
             raise ValueError(f"the Newport's dynamics need the {input_} → {output} path; the "
                              f"FRF has {frf.input_names} → {frf.output_names}")
     fs = float(frf.fs_hz)
     sensor = sensor or SensorLowpass()
-    axes = {axis: _fit_axis(frf, axis, fs=fs, sensor=sensor, resolve_sensor=resolve_sensor)
+    axes = {axis: fill[axis] if axis in fill else
+            _fit_axis(frf, axis, fs=fs, sensor=sensor, resolve_sensor=resolve_sensor)
             for axis in "hv"}
     converter = ((dac_delay_samples + 0.5) / fs + sensor.group_delay_s
                  if converter_delay_s is None else float(converter_delay_s))
@@ -536,6 +562,9 @@ class NewportIdentification:
         The axes fitted without a 4QD amplifier while the delays measure one:
         how much its unknown shape could move their parameters
         (:func:`unresolved_sensor_shifts`).
+    assumed_axes : tuple of str
+        Axes whose record was missing or unusable: the bench file's model stands in
+        for them (in ``gn`` and the delays), and nothing is reported of them.
     """
 
     frf: FrequencyResponse
@@ -549,6 +578,12 @@ class NewportIdentification:
     dynamics: NewportDynamics | None = None
     dynamics_skipped: str = ""
     sensor_shifts: dict[str, SensorShift] = field(default_factory=dict)
+    assumed_axes: tuple[str, ...] = ()
+
+    @property
+    def identified_axes(self) -> tuple[str, ...]:
+        """The axes the records gave."""
+        return tuple(a for a in "hv" if a not in self.assumed_axes)
 
     def input_delays_s(self) -> dict[str, float]:
         """The delay of each Newport input in a plant model without the sensor's low pass [s]
@@ -566,14 +601,16 @@ class NewportIdentification:
                 "band_hz": list(self.band_hz),
                 "dynamics": None if self.dynamics is None else self.dynamics.summary(),
                 "dynamics_skipped": self.dynamics_skipped,
-                "sensor_shifts": {k: v.summary() for k, v in self.sensor_shifts.items()}}
+                "sensor_shifts": {k: v.summary() for k, v in self.sensor_shifts.items()},
+                "assumed_axes": list(self.assumed_axes)}
 
 
 def identify_newport(frf: FrequencyResponse, *, band_hz: tuple[float, float] = (10.0, 100.0),
                      min_coherence: float = 0.9, dac_delay_samples: float = 1.0,
                      converter_delay_s: float | None = None,
                      sensor: SensorLowpass | None = None,
-                     resolve_sensor: bool = True) -> NewportIdentification:
+                     resolve_sensor: bool = True,
+                     fill: Mapping[str, NewportAxisFit] | None = None) -> NewportIdentification:
     """The Newport paths (seed 2.4) from the ``Un → Vp`` matrix: dynamics, delays, gains.
 
     Parameters
@@ -593,37 +630,45 @@ def identify_newport(frf: FrequencyResponse, *, band_hz: tuple[float, float] = (
         The bench model's 4QD amplifier (see :func:`fit_newport_dynamics`).
     resolve_sensor : bool
         See :func:`fit_newport_dynamics`.
+    fill : mapping of axis to NewportAxisFit, optional
+        The axes whose column the matrix lacks, as the bench file models them: the
+        other axis is identified alone (:attr:`NewportIdentification.assumed_axes`).
     """
     inputs, outputs = frf.input_names, frf.output_names
-    if len(inputs) != 2 or len(outputs) != 2:
-        raise ValueError(f"the Newport identification needs a 2x2 matrix, got {outputs} x "
-                         f"{inputs}")
+    fill = dict(fill or {})
+    if len(outputs) != 2 or len(inputs) + len(fill) != 2 or not inputs:
+        raise ValueError(f"the Newport identification needs a 2x2 matrix (or one column and "
+                         f"the other axis's model), got {outputs} x {inputs}")
     delays = path_delays(frf, min_coherence=min_coherence)
     delay, delay_std = combined_delay(delays)
     clean = remove_delay(frf, delay)
     f = clean.frequency_hz
     sel = (f > band_hz[0]) & (f < band_hz[1])
     seed_gains = {}
-    for axis, j in (("h", 0), ("v", 1)):
-        h = clean.frf.sel(output=outputs[j], input=inputs[j]).values[sel]
+    for axis in "hv":
+        if axis in fill:
+            continue
+        h = clean.frf.sel(output=_PATHS[axis][0], input=_PATHS[axis][1]).values[sel]
         seed_gains[axis] = float(np.sign(np.mean(h.real)) * np.mean(np.abs(h)))
     try:
         dyn: NewportDynamics | None = fit_newport_dynamics(
             frf, dac_delay_samples=dac_delay_samples, converter_delay_s=converter_delay_s,
-            sensor=sensor, resolve_sensor=resolve_sensor)
+            sensor=sensor, resolve_sensor=resolve_sensor, fill=fill)
         why = ""
     except ValueError as exc:
         dyn, why = None, f"the constant gains are used: {exc}"
+    fitted = [a for a in "hv" if a not in fill]
     if dyn is not None:
         gains = {a: dyn.axes[a].gain_v_per_v for a in "hv"}
-        delay = 0.5 * (dyn.axes["h"].delay_s + dyn.axes["v"].delay_s)
-        delay_std = 0.5 * math.hypot(dyn.axes["h"].delay_std_s, dyn.axes["v"].delay_std_s)
+        delay = float(np.mean([dyn.axes[a].delay_s for a in fitted]))
+        delay_std = math.hypot(*(dyn.axes[a].delay_std_s for a in fitted)) / len(fitted)
         gn = dyn.gn()
     else:
-        gains = dict(seed_gains)
+        gains = {**{a: fit.gain_v_per_v for a, fit in fill.items()}, **seed_gains}
         gn = ct.ss([], [], [], np.diag([gains["h"], gains["v"]]), inputs=["Unh", "Unv"],
                    outputs=["Vpnh", "Vpnv"], name="Gn")
     return NewportIdentification(frf=frf, delays=delays, delay_s=delay, delay_std_s=delay_std,
                                  gain_v_per_v=gains, seed_gain_v_per_v=seed_gains,
                                  band_hz=(float(band_hz[0]), float(band_hz[1])), gn=gn,
-                                 dynamics=dyn, dynamics_skipped=why)
+                                 dynamics=dyn, dynamics_skipped=why,
+                                 assumed_axes=tuple(a for a in "hv" if a in fill))

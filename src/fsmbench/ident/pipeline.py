@@ -103,6 +103,7 @@ from fsmbench.ident.newport import (
     SensorShift,
     identify_newport,
     newport_checks,
+    nominal_newport_axis,
     resolved_sensor,
     sensor_notices,
     unresolved_sensor_shifts,
@@ -346,12 +347,15 @@ class Identification:
                                   "damping_ratio": modes[a]["damping_ratio"],
                                   "dc_gain_v_per_a": dc[a]} for a in modes}
         if self.newport is not None:
-            out["newport_gain_v_per_v"] = dict(self.newport.gain_v_per_v)
+            known = self.newport.identified_axes
+            out["newport_gain_v_per_v"] = {a: g for a, g in self.newport.gain_v_per_v.items()
+                                           if a in known}
             dyn = self.newport.dynamics
             if dyn is not None:
                 out["newport"] = {a: {"natural_freq_hz": dyn.axes[a].natural_freq_hz,
                                       "damping_ratio": dyn.axes[a].damping_ratio,
-                                      "internal_delay_s": dyn.internal_delay_s(a)} for a in "hv"}
+                                      "internal_delay_s": dyn.internal_delay_s(a)}
+                                  for a in known}
         delays = {}
         if self.sercalo is not None:
             delays["sercalo"] = self.sercalo.pure_delay_s
@@ -693,26 +697,45 @@ def _identify(recordings: Mapping[str, xr.Dataset], *, bench: Bench, opts: Ident
     newport_id: NewportIdentification | None = None
     datasheet_findings: list[Finding] = []
     amplifier_findings: list[Finding] = []
-    if not (gone := missing("data_unh", "data_unv")) and (
-            bad := data_failure("data_unh", "data_unv")):
-        skipped["newport"] = _failure_reason(bad, "the nominal Newport is used")
-    elif not gone:
-        say("2.4 Newport: FRF matrix, delay and gains")
+    # Each Newport axis from its own record: one missing or unusable leaves the other
+    # identified, and the bench file's model stands in for it (named, not reported).
+    newport_usable, newport_fill = [], {}
+    for axis, (exp, _inp) in zip("hv", _NEWPORT_COLUMNS, strict=True):
+        if exp not in recordings:
+            skipped[f"newport_{axis}"] = absent_words([exp])
+        elif bad := data_failure(exp):
+            skipped[f"newport_{axis}"] = _failure_reason(bad, "the bench file's Newport is "
+                                                              f"used for axis {axis}")
+        else:
+            newport_usable.append((exp, _inp))
+            continue
+        newport_fill[axis] = nominal_newport_axis(nom, axis, fs_hz=conv.fs_hz)
+    newport_columns = tuple(newport_usable)
+    if not newport_columns:
+        gone = missing("data_unh", "data_unv")
+        skipped["newport"] = (absent_words(gone) if gone else
+                              "; ".join(skipped.pop(f"newport_{a}") for a in "hv"))
+        skipped.pop("newport_h", None)
+        skipped.pop("newport_v", None)
+    else:
+        say("2.4 Newport: FRF matrix, delay and gains"
+            + (f" (axis {', '.join(a for a in 'hv' if a not in newport_fill)} alone)"
+               if newport_fill else ""))
         try:
-            nfrf = experiment_frf(recordings, columns=_NEWPORT_COLUMNS,
+            nfrf = experiment_frf(recordings, columns=newport_columns,
                                   trims_s=opts.trims_s, window_s=opts.window_s,
                                   estimator=opts.frf, transient_periods=opts.transient_periods)
             if qd:
                 compression["newport"] = compression_factors(
-                    recordings, columns=_NEWPORT_COLUMNS, outputs=OUTPUTS, qd=qd,
+                    recordings, columns=newport_columns, outputs=OUTPUTS, qd=qd,
                     trims_s=opts.trims_s)
                 nfrf = correct_compression(nfrf, compression["newport"],
-                                           recordings=recordings, columns=_NEWPORT_COLUMNS,
+                                           recordings=recordings, columns=newport_columns,
                                            trims_s=opts.trims_s)
             newport_id = identify_newport(
                 nfrf, band_hz=opts.newport_band_hz, dac_delay_samples=conv.dac_delay_samples,
                 converter_delay_s=None if sercalo_id is None else sercalo_id.delay_s,
-                sensor=sensor)
+                sensor=sensor, fill=newport_fill)
             lag_s, lag_std_s = qd_amplifier_lag_s(sid=sercalo_id, gi=gi, nominal=nom)
             decision = (None if newport_id.dynamics is None else decide_amplifier(
                 nfrf, newport_id.dynamics, lag_s=lag_s, lag_std_s=lag_std_s, model=sensor))
@@ -723,7 +746,7 @@ def _identify(recordings: Mapping[str, xr.Dataset], *, bench: Bench, opts: Ident
                     nfrf, band_hz=opts.newport_band_hz,
                     dac_delay_samples=conv.dac_delay_samples,
                     converter_delay_s=None if sercalo_id is None else sercalo_id.delay_s,
-                    sensor=decision.sensor, resolve_sensor=False),
+                    sensor=decision.sensor, resolve_sensor=False, fill=newport_fill),
                     sensor_shifts=decision.shifts)
                 notices.append(Notice("other", "4QD amplifier", decision.words))
                 amplifier_findings = list(decision.findings)
@@ -756,14 +779,17 @@ def _identify(recordings: Mapping[str, xr.Dataset], *, bench: Bench, opts: Ident
                     dyn, amplitude_bandwidth_hz=ds_np.amplitude_bandwidth_hz,
                     phase_bandwidth_hz=ds_np.phase_bandwidth_hz,
                     peaking_max_db=ds_np.peaking_max_db)
+                # Only the axes the records gave (an assumed axis is the bench file's model).
+                found = [c for c in found
+                         if any(f"Newport {a} " in c.subject
+                                for a in newport_id.identified_axes)]
                 checks.extend(c for c in found if c.passed)
                 datasheet_findings = datasheet_departures(found, datasheet=ds_np)
             else:
                 skipped["newport_dynamics"] = newport_id.dynamics_skipped
         except ValueError as exc:
-            skipped["newport"] = f"failed (data_unh, data_unv): {exc}"
-    else:
-        skipped["newport"] = absent_words(gone)
+            skipped["newport"] = (f"failed ({', '.join(e for e, _ in newport_columns)}): "
+                                  f"{exc}")
 
     warnings = quality_warnings(sercalo=sercalo_id, modes=modes, validation=validation)
     for w in warnings:

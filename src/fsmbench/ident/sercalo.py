@@ -195,8 +195,10 @@ def _on_lines(est: FrfEstimate, keep: set[float]) -> FrfEstimate:
 def path_delays(frf: FrequencyResponse, *, min_coherence: float) -> tuple[DelayEstimate, ...]:
     """Delay of each direct path; low coherence becomes advice, not just a failure."""
     out = []
-    for j in range(2):
-        out_name, in_name = frf.output_names[j], frf.input_names[j]
+    for j, in_name in enumerate(frf.input_names):
+        # The direct output of each input (Uch → Vph, Unv → Vpv), also for one column.
+        direct = f"Vp{in_name[-1]}"
+        out_name = direct if direct in frf.output_names else frf.output_names[j]
         try:
             out.append(estimate_delay(frf, output_name=out_name, input_name=in_name,
                                       min_coherence=min_coherence,

@@ -222,13 +222,14 @@ def _delays(out: dict[str, Uncertain], *, sid: SercaloIdentification | None,
         return
     dyn = newport.dynamics
     axes = dyn.axes
-    eff_n = float(np.mean([axes[a].effective_delay_s for a in "hv"]))
-    eff_n_std = 0.5 * math.hypot(axes["h"].delay_std_s, axes["v"].delay_std_s)
-    f_top_n = max(axes[a].band_hz[1] for a in "hv")
+    known = newport.identified_axes
+    eff_n = float(np.mean([axes[a].effective_delay_s for a in known]))
+    eff_n_std = math.hypot(*(axes[a].delay_std_s for a in known)) / len(known)
+    f_top_n = max(axes[a].band_hz[1] for a in known)
     bound_n = _curvature_bound(lag, f_top_n)
     out["effective_delay_s.newport"] = Uncertain(
         eff_n, "s", "effective delay of Un → Vp: the Newport's pure delay with the 4QD "
-        "amplifier's lag, the mean of the two axes",
+        "amplifier's lag, the mean of the axes identified",
         {"noise": eff_n_std, "unresolved_lags": bounded(bound_n)},
         bounded_parts=("unresolved_lags",))
     if not math.isfinite(eff_s):
@@ -242,7 +243,7 @@ def _delays(out: dict[str, Uncertain], *, sid: SercaloIdentification | None,
              "unresolved_lags": both},
             derived="the effective delay less the 4QD amplifier's lag, which the Sercalo's "
                     "effective and pure delays give", bounded_parts=("unresolved_lags",))
-    for a in "hv":
+    for a in known:
         out[f"newport.{a}.internal_delay_s"] = Uncertain(
             axes[a].effective_delay_s - eff_s + coil, "s",
             f"the Newport's own lag, axis {a}: its effective delay less the Sercalo's, "
@@ -257,6 +258,8 @@ def _newport(out: dict[str, Uncertain], newport: NewportIdentification,
     if dyn is None:
         return
     for axis, fit in dyn.axes.items():
+        if axis in newport.assumed_axes:
+            continue  # the bench file's model stood in for a missing record: not reported
         parts = {"noise": fit.gain_std_v_per_v}
         if compression is not None:
             factor, f_std = compression.element(*_NEWPORT[axis])

@@ -130,8 +130,10 @@ def decide_amplifier(frf: FrequencyResponse, dyn: NewportDynamics, *, lag_s: flo
     """
     if not (math.isfinite(lag_s) and math.isfinite(lag_std_s)):
         return AmplifierDecision(lag_s, lag_std_s, None, False)
-    claimed = [a for a in dyn.axes.values() if a.sensor is not None
-               and a.sensor.source == "fitted"]
+    # The axes these lines give (an axis whose record is missing is the bench file's).
+    fitted = [a for a in dyn.axes if f"Un{a}" in frf.input_names]
+    claimed = [fit for a in fitted if (fit := dyn.axes[a]).sensor is not None
+               and fit.sensor.source == "fitted"]
     if lag_s <= LAG_SIGMAS * lag_std_s:
         if not claimed:
             return AmplifierDecision(lag_s, lag_std_s, None, False)
@@ -147,7 +149,7 @@ def decide_amplifier(frf: FrequencyResponse, dyn: NewportDynamics, *, lag_s: flo
                    "Newport is fitted without it"))
     by_order = {o: {axis: fit_newport_axis(frf, axis, sensor=SensorLowpass(
         bandwidth_hz=_bandwidth(lag_s, o), order=o), resolve_sensor=False)
-        for axis in dyn.axes} for o in (1, 2)}
+        for axis in fitted} for o in (1, 2)}
     unit = _unit(*by_order.values())
     cost = {o: _cost(f) for o, f in by_order.items()}
     best = min(cost, key=lambda o: cost[o])
@@ -162,7 +164,7 @@ def decide_amplifier(frf: FrequencyResponse, dyn: NewportDynamics, *, lag_s: flo
                                      by_order[other][a], by_order[best][a]).items()},
                                  by_order={o: _shift(by_order[o][a], by_order[best][a])
                                            for o in (1, 2)})
-                  for a in dyn.axes}
+                  for a in fitted}
         return AmplifierDecision(
             lag_s, lag_std_s, SensorLowpass(bandwidth_hz=_bandwidth(lag_s, best), order=best),
             False, lr, shifts,
@@ -174,10 +176,10 @@ def decide_amplifier(frf: FrequencyResponse, dyn: NewportDynamics, *, lag_s: flo
     sensor = SensorLowpass(bandwidth_hz=_bandwidth(lag_s, best), order=best)
     lo, hi = lag_s - lag_std_s, lag_s + lag_std_s
     edges = {lag: {a: fit_newport_axis(frf, a, sensor=SensorLowpass(
-        bandwidth_hz=_bandwidth(lag, best), order=best), resolve_sensor=False) for a in dyn.axes}
+        bandwidth_hz=_bandwidth(lag, best), order=best), resolve_sensor=False) for a in fitted}
         for lag in (lo, hi) if lag > 0}
     shifts = {}
-    for a in dyn.axes:
+    for a in fitted:
         moved = [_shift(e[a], by_order[best][a]) for e in edges.values()]
         shifts[a] = SensorShift(axis=a, lag_s=lag_s,
                                 half_width={k: max((abs(m[k]) for m in moved), default=0.0)

@@ -389,14 +389,18 @@ def newport_model(newport: NewportIdentification) -> np.ndarray:
     f = newport.frf.frequency_hz
     model = np.full(newport.frf.frf.shape, np.nan, dtype=complex)
     dyn = newport.dynamics
-    for i, axis in enumerate("hv"):
+    outputs = list(newport.frf.output_names)
+    # The matrix's own columns: an axis whose record was missing has none.
+    for j, inp in enumerate(newport.frf.input_names):
+        axis = inp[-1]
+        i = outputs.index(f"Vp{axis}")
         if dyn is not None:
             a = dyn.axes[axis]
             band = (f >= a.band_hz[0]) & (f <= a.band_hz[1])
-            model[band, i, i] = a.response(f[band], fs_hz=dyn.fs_hz, delay=False)
+            model[band, i, j] = a.response(f[band], fs_hz=dyn.fs_hz, delay=False)
         else:
             band = (f >= newport.band_hz[0]) & (f <= newport.band_hz[1])
-            model[band, i, i] = newport.gain_v_per_v[axis]
+            model[band, i, j] = newport.gain_v_per_v[axis]
     return model
 
 
@@ -407,7 +411,8 @@ def newport_delay_figure(newport: NewportIdentification, *, f_max_hz: float = 20
     clean = remove_delay(newport.frf, newport.delay_s)
     panels = []
     ms = 1e3 * newport.delay_s
-    for out, inp in zip(newport.frf.output_names, newport.frf.input_names, strict=True):
+    for inp in newport.frf.input_names:
+        out = f"Vp{inp[-1]}"
         raw = np.unwrap(np.angle(newport.frf.frf.sel(output=out, input=inp).values[sel]))
         fixed = np.unwrap(np.angle(clean.frf.sel(output=out, input=inp).values[sel]))
         panels.append(Panel(
