@@ -227,11 +227,16 @@ def _delays(out: dict[str, Uncertain], *, sid: SercaloIdentification | None,
     eff_n_std = math.hypot(*(axes[a].delay_std_s for a in known)) / len(known)
     f_top_n = max(axes[a].band_hz[1] for a in known)
     bound_n = _curvature_bound(lag, f_top_n)
+    # An amplifier whose order the lines could not decide moves the Newport's delay too
+    # (ident.evidence.amplifier): its half-width is a bounded part of every Newport delay.
+    order = max((newport.sensor_shifts[a].half_width.get("effective_delay_s", 0.0)
+                 for a in known if a in newport.sensor_shifts), default=0.0)
+    sensor = {"unresolved_sensor": bounded(order)} if order > 0 else {}
     out["effective_delay_s.newport"] = Uncertain(
         eff_n, "s", "effective delay of Un → Vp: the Newport's pure delay with the 4QD "
         "amplifier's lag, the mean of the axes identified",
-        {"noise": eff_n_std, "unresolved_lags": bounded(bound_n)},
-        bounded_parts=("unresolved_lags",))
+        {"noise": eff_n_std, "unresolved_lags": bounded(bound_n)} | sensor,
+        bounded_parts=("unresolved_lags", *sensor))
     if not math.isfinite(eff_s):
         return
     both = bounded(max(bound_n, lag_bound))
@@ -240,16 +245,17 @@ def _delays(out: dict[str, Uncertain], *, sid: SercaloIdentification | None,
             eff_n - eff_s + pure_s + coil, "s", "pure delay of the Newport's paths (the "
             "converter's and the Newport's own lag), the mean of the two axes",
             {"noise": math.sqrt(eff_n_std**2 + eff_s_std**2 + pure_std**2),
-             "unresolved_lags": both},
+             "unresolved_lags": both} | sensor,
             derived="the effective delay less the 4QD amplifier's lag, which the Sercalo's "
-                    "effective and pure delays give", bounded_parts=("unresolved_lags",))
+                    "effective and pure delays give",
+            bounded_parts=("unresolved_lags", *sensor))
     for a in known:
         out[f"newport.{a}.internal_delay_s"] = Uncertain(
             axes[a].effective_delay_s - eff_s + coil, "s",
             f"the Newport's own lag, axis {a}: its effective delay less the Sercalo's, "
             "plus the coil's lag (on the Sercalo's path only)",
-            {"noise": math.hypot(axes[a].delay_std_s, eff_s_std), "unresolved_lags": both},
-            bounded_parts=("unresolved_lags",))
+            {"noise": math.hypot(axes[a].delay_std_s, eff_s_std), "unresolved_lags": both}
+            | sensor, bounded_parts=("unresolved_lags", *sensor))
 
 
 def _newport(out: dict[str, Uncertain], newport: NewportIdentification,
