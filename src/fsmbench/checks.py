@@ -48,6 +48,7 @@ CHECK_TITLES: dict[str, str] = {
     "qd_gain_vs_nominal": "4QD gain against the bench file's",
     "qd_noise_vs_model": "4QD noise against the bench file's",
     "rate_vs_controller": "sampling rate against the recorded controller's",
+    "record_length": "record long enough for its analysis",
     "sampling_rate": "sampling rate",
     "sercalo_gain_vs_model": "Sercalo gain against the bench file's",
     "signal_varies": "signal varies",

@@ -383,13 +383,21 @@ def validation_stage(recordings: Mapping[str, xr.Dataset], *, bench: Bench,
     from fsmbench.bench.axes import PerAxis
     from fsmbench.control.seed import seed_decentralised_controller, tustin
     from fsmbench.control.validation import validate_closed_loop
+    from fsmbench.io.signals import MIN_DURATION_S
     from fsmbench.sim.controller import feedback_controller
     from fsmbench.twin.simulate import simulate_bench
 
     say = progress or _quiet
-    names = [n for n in ("data_rep_h", "data_rep_v") if n in recordings]
+    present = [n for n in ("data_rep_h", "data_rep_v") if n in recordings]
+    # A record shorter than its analysis reads is named by its record_length check: it
+    # is not simulated (the twin refuses a duration under the protocol's minimum).
+    names = [n for n in present if recordings[n]["t"].size
+             / float(recordings[n].attrs.get("fs_hz", bench.nominal.converter.fs_hz))
+             >= MIN_DURATION_S[n]]
     if not names:
-        return ValidationStage(None, "neither data_rep_h nor data_rep_v was recorded"), []
+        return ValidationStage(None, "neither data_rep_h nor data_rep_v was recorded" if not
+                               present else f"{' and '.join(present)} too short to compare "
+                               f"(at least {MIN_DURATION_S[present[0]]:g} s)"), []
     if simulated is None or plant is None:
         return ValidationStage(None, "no identified bench to predict the recorded loop on"), []
     say(f"predicting the recorded closed loop ({', '.join(names)}) on {simulated.label}")

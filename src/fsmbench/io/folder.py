@@ -50,7 +50,7 @@ from fsmbench.io.errors import RecordingError, SaturationWarning
 from fsmbench.io.folder_names import folder_hints, not_a_file
 from fsmbench.io.notes import FILE_CHOICE, READ_NOTES, TIME_JITTER
 from fsmbench.io.recording import find_experiments, read_recording
-from fsmbench.io.signals import ADC_SIGNALS, DAC_SIGNALS, EXPERIMENTS, SIGNALS, TIME
+from fsmbench.io.signals import ADC_SIGNALS, DAC_SIGNALS, EXPERIMENTS, MIN_DURATION_S, SIGNALS, TIME
 from fsmbench.io.trailing import TrailingBytesWarning, data_end
 from fsmbench.io.va_jumps import jump_check, va_unit_hint
 
@@ -264,6 +264,11 @@ def _check_recording(ds: xr.Dataset, *, name: str | None, fs_hz: float | None,
         notices.append(Notice("data_type", f"{label}: t", f"t is stored in single precision "
                               f"({t_type}); it was uniform enough here, but longer records "
                               "will not be: save t in double precision"))
+    # A record shorter than its analysis reads: named for its length, before any signal in
+    # it is judged (10 samples of a run whose excitation starts at 1 s are not "zero").
+    short = _length_check(ds, exp, label)
+    if short is not None:
+        checks.append(short)
     # What the reader found about the file (fsmbench.io.notes): given by every check of it.
     notices += [Notice(kind, f"{label}: t" if kind == TIME_JITTER else label,
                        str(ds.attrs[kind])) for kind in READ_NOTES if ds.attrs.get(kind)]
@@ -304,7 +309,8 @@ def _check_recording(ds: xr.Dataset, *, name: str | None, fs_hz: float | None,
                 notices.append(Notice("saturation", subject, str(SaturationWarning(
                     label, v, at_rails, int(ds[v].shape[0]), rail))))
         measured = v in ADC_SIGNALS or v == "Va"
-        if v in required and (measured or EXCITATION.get(exp) == v):
+        if v in required and (measured or EXCITATION.get(exp) == v) and (
+                short is None or short.passed):
             ok = spread > 0.0
             unit = SIGNALS[v].units
             if ok:
@@ -326,6 +332,24 @@ def _check_recording(ds: xr.Dataset, *, name: str | None, fs_hz: float | None,
             if ok and v in required:  # jumps in a Va that is not in metres say nothing more
                 checks.append(jump_check(ds, subject))
     return checks, notices
+
+
+def _length_check(ds: xr.Dataset, exp: str, label: str) -> Check | None:
+    """``record_length``: the record against the shortest its analysis reads (None for a
+    record that is not one of the study's experiments)."""
+    need = MIN_DURATION_S.get(exp)
+    if need is None:
+        return None
+    n = int(ds[TIME].shape[0])
+    fs = float(ds.attrs.get("fs_hz", math.nan))
+    length = n / fs if fs > 0 else math.nan
+    ok = bool(math.isfinite(length) and length >= need)
+    words = (f"{length * 1e3:.3g} ms" if length < 1.0 else f"{length:.3g} s")
+    return Check("record_length", ok, length, f"≥ {need:g} s (what the ESRF study's analysis of "
+                 f"{exp} reads)", f"{label}: t",
+                 "" if ok else f"the record is {words} long ({n} samples): too short for its "
+                 f"analysis, which needs {need:g} s; nothing in it is judged: record it again at "
+                 "its length", unit="s")
 
 
 # --------------------------------------------------------------------------- folder

@@ -565,7 +565,7 @@ def build_summary(*, source: str, is_twin: bool, spec: Specification,
                    f"first on {first.subject}")
         reasons = (*reasons, *(c.sentence() for c in contradictions))
     step = next_step(status=status, requirements=reqs, budget=budget, limiting_row=top,
-                     skipped=skipped)
+                     skipped=skipped, failed_checks=contradictions)
     if status == "not_verified":
         verdict = _headline(verdict, step)
     return Summary(source=source, is_twin=is_twin,

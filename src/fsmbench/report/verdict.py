@@ -16,6 +16,7 @@ from typing import TYPE_CHECKING, Any
 from fsmbench.budget.provenance import remedies
 
 if TYPE_CHECKING:
+    from fsmbench.checks import Check
     from fsmbench.report.summary import Requirement, Summary
 
 __all__ = ["next_step", "verdict_html"]
@@ -49,10 +50,14 @@ _NEEDS: Mapping[str, tuple[str, ...]] = {
 }
 
 
-def _files_step(open_: Sequence[Requirement], skipped: Mapping[str, str]) -> str:
-    """What to do with the files the unjudged rows need: rename, correct, or record them."""
-    needed = [e for e in dict.fromkeys(e for r in open_ for e in _NEEDS.get(r.name, ()))
-              if e in skipped]
+def _files_step(open_: Sequence[Requirement], skipped: Mapping[str, str],
+                failed: Sequence[Check] = ()) -> str:
+    """What to do with the files the unjudged rows need: rename, correct, or record them
+    (a file read but refused by a failed check: record again, naming the check)."""
+    wanted = list(dict.fromkeys(e for r in open_ for e in _NEEDS.get(r.name, ())))
+    refused = list(dict.fromkeys(f"{e} ({c.title})" for e in wanted if e not in skipped
+                                 for c in failed if c.subject.startswith(f"{e}.mat")))
+    needed = [e for e in wanted if e in skipped]
     renames = [skipped[e].split("; found ", 1)[1] for e in needed if "; found " in skipped[e]]
     absent = [e for e in needed if skipped[e].startswith(f"no {e}.")
               and "; found " not in skipped[e]]
@@ -61,16 +66,19 @@ def _files_step(open_: Sequence[Requirement], skipped: Mapping[str, str]) -> str
              if renames else [])
     parts += [f"correct {'; '.join(broken)}"] if broken else []
     parts += [f"record {', '.join(absent)}"] if absent else []
+    parts += [f"record again {'; '.join(refused)}"] if refused else []
     return ", ".join(parts)
 
 
 def next_step(*, status: str, requirements: Sequence[Requirement], budget: Any | None,
-              limiting_row: Any | None, skipped: Mapping[str, str] | None = None) -> str:
+              limiting_row: Any | None, skipped: Mapping[str, str] | None = None,
+              failed_checks: Sequence[Check] = ()) -> str:
     """One or two sentences: what to do next, from the results (see the module notes).
 
     ``skipped``: the recordings the loader could not use (experiment → reason, with the
     near-miss file names it found), so that an unjudged row names the file to rename,
-    correct or record.
+    correct or record; ``failed_checks``: the failed checks, so that a file read but refused is
+    named to record again.
     """
     model = next((r for r in requirements if r.name == "model_validation"), None)
     if model is not None and model.passed is False:
@@ -89,7 +97,7 @@ def next_step(*, status: str, requirements: Sequence[Requirement], budget: Any |
                 "identified plant.")
     open_ = [r for r in requirements if r.passed is None]
     if open_:
-        files = _files_step(open_, skipped or {})
+        files = _files_step(open_, skipped or {}, failed_checks)
         if files:
             return f"Next: {files}, then run the study again."
         missing = sorted({r.missing for r in open_ if r.missing})

@@ -30,6 +30,7 @@ import numpy as np
 
 from fsmbench.bench.params import Bench
 from fsmbench.control.seed import seed_decentralised_controller
+from fsmbench.io.signals import MIN_DURATION_S as SIGNAL_MIN_DURATION_S
 from fsmbench.sim.controller import feedback_controller
 from fsmbench.sim.discretize import DiscretePlant
 from fsmbench.sim.engine import DiscreteController
@@ -96,15 +97,9 @@ CAL_FREQ_HZ = 0.2
 REP_AMPLITUDE_V = 1.0  # seed Table 5: expected perturbation 1 V
 REP_FREQ_HZ = 1.0  # seed 11: 1 s periods
 
-# Shortest lengths: start time plus what the seed's scripts then need
-# (two 1 s Welch windows, or alignment + two whole periods for 11.1).
-MIN_DURATION_S = {
-    "data_cal_pd_h": 3.0, "data_cal_pd_v": 3.0,
-    "data_uch": 3.0, "data_ucv": 3.0,
-    "data_unh": 5.0, "data_unv": 3.5,
-    **{f"data_huddle_test_{i}": 3.0 for i in range(1, 6)},
-    "data_rep_h": 4.5, "data_rep_v": 4.5,
-}
+# Shortest lengths: start time plus what the seed's scripts then need (the analysis's own
+# minimum, io.signals).
+MIN_DURATION_S = dict(SIGNAL_MIN_DURATION_S)
 
 EXPERIMENT_NAMES = tuple(MIN_DURATION_S)
 
