@@ -25,6 +25,7 @@ __all__ = ["CHECK_TITLES", "Check", "Finding", "Notice", "failed", "first_failur
 CHECK_TITLES: dict[str, str] = {
     "attocube_noise_vs_model": "interferometer noise against the bench file's model",
     "calibration_r2": "4QD calibration linearity r²",
+    "channels_distinct": "two channels holding two signals",
     "calibration_residual": "4QD calibration residual (share of the fitted swing)",
     "converter_range": "converter range",
     "coprime_factor_margin": "robust stability margin b_max",
@@ -51,6 +52,7 @@ CHECK_TITLES: dict[str, str] = {
     "record_length": "record long enough for its analysis",
     "sampling_rate": "sampling rate",
     "sercalo_gain_vs_model": "Sercalo gain against the bench file's",
+    "signal_clipped": "signal not clipped",
     "signal_varies": "signal varies",
     "signs_across_records": "path signs across the records",
     "va_continuous": "distance record continuous (no jump)",

@@ -291,20 +291,38 @@ def _swapped(runs: TwinRun) -> dict[str, xr.Dataset]:
     return {**runs.recordings, "data_uch": as_h, "data_ucv": as_v}
 
 
-def test_swapped_dac_cables_are_named_as_a_swap(runs: TwinRun, bench: Bench) -> None:
-    # Before: "raise the excitation" advice, and current-amplifier gains silently 3 % off.
+def test_exchanged_sercalo_runs_are_named_for_what_they_are(runs: TwinRun,
+                                                            bench: Bench) -> None:
+    # Before: "raise the excitation" advice, and current-amplifier gains silently 3 % off;
+    # then "the Uch and Ucv DAC cables are swapped: swap them back", which the coil
+    # monitors refute (they follow their commands: the files, not the cables).
     ident = identify(_swapped(runs), bench=bench)
     bad = failed_named(ident.checks, "excited_axis")
     assert [c.subject for c in bad] == ["data_uch.mat: Uch", "data_ucv.mat: Ucv"]
     assert "Uch moves Vpv" in bad[0].advice and "more than Vph" in bad[0].advice
-    assert "the Uch and Ucv DAC cables are swapped" in bad[0].advice
+    assert "the two files exchanged" in bad[0].advice and "not the DAC cables" in bad[0].advice
+    assert "excites the 251 Hz mode" in bad[0].advice  # the v mode, in data_uch
     assert bad[0].value is not None and float(bad[0].value) < 0.1
     for step in ("current_amp", "sercalo"):
         assert ("data_uch.mat: Uch: excited axis (direct over cross response) failed"
                 in ident.skipped[step])
         assert "raise the excitation" not in ident.skipped[step]
     assert ident.current_amp == {} and ident.sercalo is None  # no gain 3 % off
-    assert not failed_named(ident.checks, "sign_vs_bench")  # a swap, not a sign
+    assert not failed_named(ident.checks, "signs_across_records")  # a swap, not a sign
+
+
+def test_4qd_outputs_crossed_in_every_file_are_not_called_a_dac_swap(runs: TwinRun,
+                                                                     bench: Bench) -> None:
+    # Issue 30: "the Uch and Ucv DAC cables are swapped … swap them back" would damage a
+    # working bench. The calibrations (no Sercalo) and the coil monitors separate them.
+    recs = {n: ds.rename({"Vph": "tmp"}).rename({"Vpv": "Vph", "tmp": "Vpv"})
+            if "Vph" in ds and "Vpv" in ds else ds for n, ds in runs.recordings.items()}
+    found = screen(recs, bench)
+    bad = failed_named(found.checks, "excited_axis")
+    assert len(bad) == 6  # every identification run shows the other output
+    for check in bad:
+        assert "the 4QD's outputs are crossed" in check.advice
+        assert "not the DAC cables" in check.advice and "swap them back" not in check.advice
 
 
 def test_a_dac_swap_seen_on_the_coil_voltages(runs: TwinRun, bench: Bench) -> None:

@@ -178,6 +178,12 @@ class AxisRatio:
         The model's direct gain, same measure as ``direct_gain`` [V/V].
     coil : tuple of (str, float, str, float) or None
         Own coil voltage and gain, other coil and gain, when both were recorded.
+    own_coil_coherence : float
+        Median γ² of the run's own coil monitor (``Uch → Vch``) in the band: the DAC
+        drove this axis's coil when it is coherent (NaN without a coil monitor).
+    mode_hz : float
+        The Sercalo mode the run excites (the largest response between 50 Hz and
+        1 kHz on either 4QD output) [Hz]; NaN for a run without a coil.
     """
 
     experiment: str
@@ -191,6 +197,8 @@ class AxisRatio:
     cross_coherence: float
     model_direct_gain: float
     coil: tuple[str, float, str, float] | None = None
+    own_coil_coherence: float = float("nan")
+    mode_hz: float = float("nan")
 
     @property
     def judged(self) -> bool:
@@ -310,10 +318,20 @@ def _measure_dynamic(run: _Run, ds: xr.Dataset, plant: PlantModel
     coil = None
     if run.coil in rms and run.other_coil in rms and run.coil and run.other_coil:
         coil = (run.coil, rms[run.coil], run.other_coil, rms[run.other_coil])
+    # The Sercalo mode the run excites: its own axis's (a mirror turned against the 4QD) or
+    # the other's (the other axis's run), on whichever output carries it.
+    peak = float("nan")
+    if run.coil is not None:
+        search = (f >= 50.0) & (f <= min(1000.0, 0.4 * fs))
+        if search.any():
+            both = np.abs(hs[0][search]) + np.abs(hs[1][search])
+            peak = float(f[search][int(np.argmax(both))])
     axis = AxisRatio(run.experiment, run.command, run.direct, run.cross, rms[run.direct],
                      rms[run.cross], mod[run.direct] / mod[run.cross] if mod[run.cross] > 0
                      else float("inf"), coherence[run.direct], coherence[run.cross],
-                     mod[run.direct], coil)
+                     mod[run.direct], coil,
+                     coherence.get(run.coil, float("nan")) if run.coil else float("nan"),
+                     peak)
     offsets = {o: float(np.mean(_values(ds, o))) for o in outs}
     return signs, axis, offsets
 
@@ -363,8 +381,8 @@ def _ratio_words(r: float) -> str:
     return "no cross path" if not np.isfinite(r) else f"{r:.3g}×"
 
 
-def _axis_check(a: AxisRatio, axes: Mapping[str, AxisRatio]) -> Check:
-    run = _BY_NAME[a.experiment]
+def _axis_check(a: AxisRatio, axes: Mapping[str, AxisRatio],
+                resonances_hz: Mapping[str, float] | None = None) -> Check:
     subject = f"{a.experiment}.mat: {a.input}"
     limit = (f"> {AXIS_RATIO_MIN:g} ({a.direct} over {a.cross}) if {a.cross} moves with a "
              f"direct path's gain (≥ {a.model_direct_gain / SWAP_GAIN_FACTOR:.3g} V/V); the bench "
@@ -376,23 +394,78 @@ def _axis_check(a: AxisRatio, axes: Mapping[str, AxisRatio]) -> Check:
     if a.coil is not None and a.coil[3] >= a.coil[1]:
         moved.append(f"the {a.coil[2]} coil ({a.coil[3]:.3g} V/V) more than its own {a.coil[0]} "
                      f"({a.coil[1]:.3g} V/V)")
-    partner = axes.get(_PARTNER[a.experiment])
-    if partner is not None and partner.judged and not partner.passed:
-        cause = (f"{_PARTNER[a.experiment]}.mat's {partner.input} moves {partner.cross} too: the "
-                 f"two runs drive each other's axis, so the {a.input} and {partner.input} "
-                 "DAC cables are swapped (or the two files): swap them back")
-    elif run.experiment in _CAL:
-        cause = ("the Newport swept the other axis: the metrology cables (Vnh, Vnv) or the two "
-                 "calibration files are swapped")
-    else:
-        cause = (f"the excitation drove the other axis: a swapped DAC cable, or the other "
-                 f"axis's run saved as {a.experiment}.mat")
     return Check("excited_axis", False, a.ratio, limit, subject,
                  f"{' and '.join(moved)} ({_band_words()}), where the bench file's model "
                  + (f"moves only {a.direct}" if not np.isfinite(a.model_ratio) else
                     f"has {a.direct} {a.model_ratio:.3g}× above {a.cross}")
-                 + f"; likely a swap: "
-                 f"{cause}; this file's identification steps use the nominal model", unit="×")
+                 + f"; {_swap_cause(a, axes, resonances_hz)}; this file's identification "
+                 "steps use the nominal model", unit="×")
+
+
+def _kind(exp: str) -> str:
+    return "cal" if exp in _CAL else ("uc" if _BY_NAME[exp].coil is not None else "un")
+
+
+def _swap_cause(a: AxisRatio, axes: Mapping[str, AxisRatio],
+                resonances_hz: Mapping[str, float] | None = None) -> str:
+    """Every cause that moves the other axis in the records that show it, across the runs:
+    the pattern over the calibrations, the Sercalo and the Newport runs separates the 4QD's
+    outputs crossed (every run, the coil monitors following their own commands) from the
+    DAC cables swapped (the Sercalo's runs only, the monitors not following)."""
+    judged = {e: r for e, r in axes.items() if r.judged}
+    other = {e for e, r in judged.items() if not r.passed}
+    kinds = {_kind(e) for e in judged}
+    crossed_kinds = {_kind(e) for e in other}
+    coils = [r.own_coil_coherence for e, r in judged.items()
+             if _kind(e) == "uc" and np.isfinite(r.own_coil_coherence)]
+    coils_follow = bool(coils) and min(coils) >= MIN_COHERENCE
+    if other == set(judged) and len(kinds) >= 2:
+        separated = [w for k, w in (
+            ("cal", "the calibrations, where the metrology reads the Newport's own axis"),
+            ("uc", "the Sercalo's runs, whose coil monitors follow their own commands"
+                   if coils_follow else "the Sercalo's runs"),
+            ("un", "the Newport's runs")) if k in kinds]
+        return ("one cause explains every record: the 4QD's outputs are crossed (Vph reads the "
+                "vertical beam angle and Vpv the horizontal: their cables exchanged, or the "
+                "detector turned by 90°), as " + ", ".join(separated) + " show alike; not the "
+                "DAC cables" + (", whose commands reach their own coils" if coils_follow else "")
+                + ": exchange Vph and Vpv (the cables, or the variables of the files)")
+    partner_name = _PARTNER[a.experiment]
+    partner = axes.get(partner_name)
+    both = partner is not None and partner.judged and not partner.passed
+    if _kind(a.experiment) == "uc":
+        axis = _BY_NAME[a.experiment].axis
+        res = resonances_hz or {}
+        own, far = res.get("hv"[axis]), res.get("hv"[1 - axis])
+        other_mode = (own is not None and far is not None and np.isfinite(a.mode_hz)
+                      and abs(a.mode_hz - far) < abs(a.mode_hz - own))
+        if both and coils_follow and other_mode:
+            return (f"the two runs hold each other's axis: {a.experiment}.mat excites the "
+                    f"{a.mode_hz:.0f} Hz mode, the bench file's {'hv'[1 - axis]} mode, and its "
+                    "coil monitor follows its command: the two files exchanged (the other "
+                    "run saved under this name); not the DAC cables, which would leave this "
+                    "file's coil monitor still: exchange the two files")
+        if both and coils_follow:
+            return ("the Sercalo's two runs move each other's 4QD axis while their coil "
+                    "monitors follow their own commands and each excites its own axis's mode: "
+                    "the Sercalo's axes are turned against the 4QD's (the mirror turned by "
+                    "90°, or its coil pairs exchanged after the monitors); not the DAC cables "
+                    "nor the files; check the mirror's mounting and its coils' wiring")
+        if both and partner is not None:
+            return (f"the two runs drive each other's axis: the {a.input} and {partner.input} "
+                    f"DAC cables swapped, or the two files exchanged ({a.experiment}.mat holds "
+                    f"{partner_name}'s run); the records cannot tell the two: check the cables "
+                    "and the files' names")
+        return (f"the excitation drove the other axis in this run only: a DAC cable swapped "
+                f"for it, or the other axis's run saved as {a.experiment}.mat; the records "
+                "cannot tell the two")
+    if _kind(a.experiment) == "cal":
+        return ("the Newport swept the other axis in the calibration: the metrology cables "
+                "(Vnh, Vnv), the Newport's drive cables, or the two calibration files exchanged"
+                + ("" if crossed_kinds == {"cal"} else " (other runs show it too)")
+                + "; the records cannot tell which")
+    return ("the Newport's command drove its other axis: the drive cables (Unh, Unv) "
+            "exchanged, or the two files; the records cannot tell which")
 
 
 #: The bench signs (:data:`~fsmbench.ident.evidence.signs.BENCH_SIGNS`) along each measured
@@ -548,7 +621,8 @@ def screen_recordings(recordings: Mapping[str, xr.Dataset], *, params: BenchPara
         except ValueError:
             continue  # too short to read: the step says so itself
         signs[run.experiment], axes[run.experiment], offsets[run.experiment] = found
-    pairs = [(_axis_check(a, axes), [exp]) for exp, a in axes.items() if a.judged]
+    res = {a: params.sercalo.resonance_hz[a] for a in "hv"}
+    pairs = [(_axis_check(a, axes, res), [exp]) for exp, a in axes.items() if a.judged]
     judged = {exp: [p for p in signs[exp] if p.verdict != 0] for exp in signs
               if axes[exp].passed}
     loops = recorded_controllers(recordings, fs_hz=params.converter.fs_hz,
