@@ -46,6 +46,7 @@ CHECK_TITLES: dict[str, str] = {
     "noise_floor_across_files": "4QD noise floor across files",
     "qd_gain_newport_vs_calibration": "4QD gain seen by the Newport experiments against "
                                       "the calibration's",
+    "open_loop_record": "an open-loop run recorded open",
     "qd_gain_vs_nominal": "4QD gain against the bench file's",
     "qd_noise_vs_model": "4QD noise against the bench file's",
     "rate_vs_controller": "sampling rate against the recorded controller's",

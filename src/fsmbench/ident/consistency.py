@@ -55,7 +55,11 @@ from fsmbench.bench.params import BenchParams
 from fsmbench.checks import Check, Finding, Notice, first_failure
 from fsmbench.ident.calibration import trim_recording
 from fsmbench.ident.evidence.bench_signs import diagnose_signs
-from fsmbench.ident.evidence.recorded_loop import RecordedController, recorded_controllers
+from fsmbench.ident.evidence.recorded_loop import (
+    RecordedController,
+    closed_loop_in_open_run,
+    recorded_controllers,
+)
 from fsmbench.ident.evidence.signs import SignDiagnosis, SignObservation
 from fsmbench.io.folder import check_recording
 
@@ -478,6 +482,32 @@ def _bench_letters(run: _Run, output: str) -> tuple[str, ...]:
     return ("q", "n")
 
 
+def _closed_loop_runs(recordings: Mapping[str, xr.Dataset], params: BenchParams
+                      ) -> list[tuple[Check, list[str]]]:
+    """``open_loop_record``: a Sercalo run whose command the ESRF study's controller explains
+    (a closed-loop record saved as ``data_uch``): named, and its steps fall back."""
+    out = []
+    for name, command, reading in (("data_uch", "Uch", "Vph"), ("data_ucv", "Ucv", "Vpv")):
+        ds = recordings.get(name)
+        if ds is None:
+            continue
+        fit = closed_loop_in_open_run(ds, command=command, reading=reading,
+                                      fs_hz=float(ds.attrs.get("fs_hz",
+                                                               params.converter.fs_hz)),
+                                      step_v=params.converter.lsb_v)
+        if fit is None:
+            continue
+        out.append((Check(
+            "open_loop_record", False, fit.explained, "an open-loop run's command is its "
+            f"excitation, not a function of {reading}", f"{name}.mat: {command}",
+            f"the ESRF study's controller explains {100 * fit.explained:.1f} % of {command} "
+            f"from {reading}: {name}.mat was recorded with the loop closed (a closed-loop "
+            "record saved under this name, or the loop left closed during the noise run); "
+            "the open-loop identification cannot use it: record the noise run with the loop "
+            "open"), [name]))
+    return out
+
+
 def _path_observations(judged: Mapping[str, list[PathSign]]) -> list[SignObservation]:
     return [SignObservation(exp, p.input, p.output, _bench_letters(_BY_NAME[exp], p.output),
                             p.verdict, p.words())
@@ -623,6 +653,7 @@ def screen_recordings(recordings: Mapping[str, xr.Dataset], *, params: BenchPara
         signs[run.experiment], axes[run.experiment], offsets[run.experiment] = found
     res = {a: params.sercalo.resonance_hz[a] for a in "hv"}
     pairs = [(_axis_check(a, axes, res), [exp]) for exp, a in axes.items() if a.judged]
+    pairs += _closed_loop_runs(recordings, params)
     judged = {exp: [p for p in signs[exp] if p.verdict != 0] for exp in signs
               if axes[exp].passed}
     loops = recorded_controllers(recordings, fs_hz=params.converter.fs_hz,

@@ -39,6 +39,7 @@ import xarray as xr
 from fsmbench.control.seed import seed_decentralised_zpk
 
 __all__ = [
+    "CLOSED_LOOP_EXPLAINED",
     "CLOSED_LOOP_RECORDS",
     "MIN_EXPLAINED",
     "MIN_STEPS",
@@ -47,6 +48,7 @@ __all__ = [
     "ControllerFit",
     "RateWitness",
     "RecordedController",
+    "closed_loop_in_open_run",
     "rate_witness",
     "recorded_controllers",
 ]
@@ -309,6 +311,29 @@ def rate_witness(recordings: Mapping[str, xr.Dataset], *, fs_hz: float, step_v: 
         fit = _fit_record(name, u, y, axis=axis, fs_hz=fs, step_v=step_v)
         explained[fs] = fit.explained
     return RateWitness(name, command, fs_hz, explained)
+
+
+#: An open-loop noise run whose command the ESRF study's controller explains this well
+#: was recorded with the loop closed: noise on Uch is not a function of Vph (a run with
+#: the excitation on explains ~0), a closed loop's command is (0.65 at half a step, > 0.99
+#: above a few steps).
+CLOSED_LOOP_EXPLAINED: Final = 0.9
+
+
+def closed_loop_in_open_run(ds: xr.Dataset, *, command: str, reading: str, fs_hz: float,
+                            step_v: float) -> ControllerFit | None:
+    """The fit of an open-loop run's command on the ESRF study's controller when it explains
+    at least :data:`CLOSED_LOOP_EXPLAINED` of it (a closed-loop record saved under the
+    open-loop run's name), else None."""
+    if command not in ds or reading not in ds:
+        return None
+    u = np.asarray(ds[command].values, dtype=np.float64)
+    y = np.asarray(ds[reading].values, dtype=np.float64)
+    if u.size != y.size or u.size < round(2 * SETTLE_S * fs_hz):
+        return None
+    fit = _fit_record(str(ds.attrs.get("experiment", "")), u, y, axis=command[-1],
+                      fs_hz=fs_hz, step_v=step_v)
+    return fit if fit.explained >= CLOSED_LOOP_EXPLAINED else None
 
 
 def recorded_controllers(recordings: Mapping[str, xr.Dataset], *, fs_hz: float,
