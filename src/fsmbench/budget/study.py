@@ -21,6 +21,7 @@ from dataclasses import dataclass, field, replace
 from typing import Any
 
 import control as ct
+import numpy as np
 import xarray as xr
 
 from fsmbench.bench.blocks import PlantModel, newport_beam_matrix, physical_plant
@@ -432,15 +433,36 @@ HUDDLE_VA_BAND = (0.2, 5.0)
 HUDDLE_QD_BAND = (0.1, 10.0)
 
 
-def _unit_cause(ratio: float, *, unit: str) -> str:
-    """A ratio near a power of a thousand names the unit slip (empty otherwise)."""
+def _unit_cause(ratio: float, *, unit: str, device: str) -> str:
+    """A ratio near a power of a thousand: the unit slip, beside ``device`` that much off
+    (the ratio alone cannot tell them: dividing by 1000 on a guess would fake a pass);
+    empty otherwise."""
     for power, prefix in ((1, "m"), (2, "µ"), (3, "n")):
         factor = 1e3**power
         if abs(math.log10(ratio / factor)) < 0.15:  # within 40 % of the round factor
-            return f"a unit: the record in {prefix}{unit}, not {unit} ({factor:g}× too large)"
+            return (f"either a unit (the record in {prefix}{unit}, not {unit}), or {device} "
+                    f"{factor:g}× the bench file's; the records cannot tell which: check the "
+                    "channel's unit before anything is rescaled")
         if abs(math.log10(ratio * factor)) < 0.15:
-            return f"a unit: the record {factor:g}× too small (a scaling applied twice?)"
+            return (f"either a unit (the record {factor:g}× too small: a scaling applied "
+                    f"twice?), or {device} {factor:g}× below the bench file's; the records "
+                    "cannot tell which")
     return ""
+
+
+def _line_share(f_hz: np.ndarray, psd: np.ndarray) -> tuple[float, float]:
+    """(share of the power in the strongest mains line family, its frequency [Hz]): a line at
+    50 or 60 Hz and its first harmonics, ±1 Hz each, over the whole PSD."""
+    df = float(f_hz[1] - f_hz[0]) if f_hz.size > 1 else 1.0
+    total = float(np.sum(psd)) * df
+    best = (0.0, 0.0)
+    for mains in (50.0, 60.0):
+        near = np.zeros(f_hz.size, dtype=bool)
+        for k in range(1, 6):
+            near |= np.abs(f_hz - k * mains) <= 1.0
+        share = float(np.sum(psd[near])) * df / total if total > 0 else 0.0
+        best = max(best, (share, mains))
+    return best
 
 
 def huddle_cross_checks(huddle: HuddleAnalysis, *, predicted_va_rms_m: Mapping[int, float],
@@ -464,7 +486,7 @@ def huddle_cross_checks(huddle: HuddleAnalysis, *, predicted_va_rms_m: Mapping[i
         if pred is not None and pred > 0:
             ratio = rec.va_rms_m / pred
             ok = bool(math.isfinite(ratio) and HUDDLE_VA_BAND[0] <= ratio <= HUDDLE_VA_BAND[1])
-            cause = _unit_cause(ratio, unit="m") or (
+            cause = _unit_cause(ratio, unit="m", device="an interferometer noise") or (
                 "a jump in Va (the interferometer lost count) or an environment far from the "
                 "bench file's" if ratio > 1 else "Va not the beam path's distance")
             out.append(Check(
@@ -472,7 +494,7 @@ def huddle_cross_checks(huddle: HuddleAnalysis, *, predicted_va_rms_m: Mapping[i
                 f"{HUDDLE_VA_BAND[0]:g} to {HUDDLE_VA_BAND[1]:g} times the budget's prediction",
                 f"{rec.name}.mat: Va", "" if ok else
                 f"measured {rec.va_rms_m * 1e9:.4g} nm rms where the budget predicts "
-                f"{pred * 1e9:.3g} nm for this configuration; likely {cause}", unit="×"))
+                f"{pred * 1e9:.3g} nm for this configuration: {cause}", unit="×"))
         if rec.closed_loop:
             continue
         for i, (vp, rms) in enumerate((("Vph", rec.vph_rms_v), ("Vpv", rec.vpv_rms_v))):
@@ -480,14 +502,19 @@ def huddle_cross_checks(huddle: HuddleAnalysis, *, predicted_va_rms_m: Mapping[i
                               + conv.lsb_v**2 / 12.0)
             ratio = rms / model
             ok = bool(math.isfinite(ratio) and HUDDLE_QD_BAND[0] <= ratio <= HUDDLE_QD_BAND[1])
-            cause = _unit_cause(ratio, unit="V") or "a wrong channel or a 4QD amplifier not the "\
-                "bench file's"
+            share, mains = _line_share(rec.f_hz, rec.psd_vph_v2_per_hz if i == 0
+                                       else rec.psd_vpv_v2_per_hz)
+            cause = (f"mains pickup: the {mains:g} Hz line and its harmonics carry "
+                     f"{100 * share:.0f} % of the power (an earth loop, a cable near a supply)"
+                     if share > 0.5 else
+                     _unit_cause(ratio, unit="V", device="a 4QD noise") or
+                     "either a wrong channel, or a 4QD amplifier noisier than the bench file's")
             out.append(Check(
                 "huddle_qd_vs_model", ok, float(ratio),
                 f"{HUDDLE_QD_BAND[0]:g} to {HUDDLE_QD_BAND[1]:g} times the bench file's noise",
                 f"{rec.name}.mat: {vp}", "" if ok else
                 f"measured {rms * 1e3:.4g} mV rms with nothing moving where the bench file's 4QD, "
-                f"Newport and ADC noise give {model * 1e3:.3g} mV; likely {cause}", unit="×"))
+                f"Newport and ADC noise give {model * 1e3:.3g} mV: {cause}", unit="×"))
     return out
 
 
