@@ -48,6 +48,7 @@ CHECK_TITLES: dict[str, str] = {
                                       "the calibration's",
     "open_loop_record": "an open-loop run recorded open",
     "qd_gain_vs_nominal": "4QD gain against the bench file's",
+    "qd_lag_across_axes": "4QD lag alike on both axes",
     "qd_noise_vs_model": "4QD noise against the bench file's",
     "rate_vs_controller": "sampling rate against the recorded controller's",
     "record_length": "record long enough for its analysis",

@@ -72,7 +72,7 @@ from fsmbench.ident.crosscheck import (
 )
 from fsmbench.ident.delay.sampled import SensorLowpass
 from fsmbench.ident.delay.sercalo import with_sensor
-from fsmbench.ident.evidence.amplifier import decide_amplifier
+from fsmbench.ident.evidence.amplifier import axis_lag_check, decide_amplifier
 from fsmbench.ident.evidence.departures import (
     datasheet_departures,
     departures,
@@ -119,7 +119,11 @@ from fsmbench.ident.sercalo import (
     refit_with_poles,
     with_frf,
 )
-from fsmbench.ident.totals import qd_amplifier_lag_s, uncertainty_tree
+from fsmbench.ident.totals import (
+    qd_amplifier_lag_s,
+    qd_amplifier_lags_by_axis,
+    uncertainty_tree,
+)
 from fsmbench.ident.uncertainty import Uncertain
 from fsmbench.ident.validate import PathValidation, validate_sercalo
 from fsmbench.io.atomic import atomic_write_text
@@ -697,6 +701,15 @@ def _identify(recordings: Mapping[str, xr.Dataset], *, bench: Bench, opts: Ident
     newport_id: NewportIdentification | None = None
     datasheet_findings: list[Finding] = []
     amplifier_findings: list[Finding] = []
+    # One 4QD amplifier feeds both outputs: the two Sercalo runs' lags must agree, or one
+    # run's 4QD channels were delayed, and no delay or amplifier is read from them.
+    lag_check = axis_lag_check(qd_amplifier_lags_by_axis(sid=sercalo_id, gi=gi, nominal=nom),
+                               fs_hz=conv.fs_hz)
+    if lag_check is not None:
+        checks.append(lag_check)
+        if not lag_check.passed:
+            skipped["sercalo"] = _failure_reason(lag_check, "the nominal Sercalo is used")
+            sercalo_id, modes, validation = None, None, ()
     # Each Newport axis from its own record: one missing or unusable leaves the other
     # identified, and the bench file's model stands in for it (named, not reported).
     newport_usable, newport_fill = [], {}

@@ -64,7 +64,7 @@ if TYPE_CHECKING:
     from fsmbench.ident.newport import NewportIdentification
     from fsmbench.ident.sercalo import SercaloIdentification
 
-__all__ = ["coil_lag_s", "qd_amplifier_lag_s", "uncertainty_tree"]
+__all__ = ["coil_lag_s", "qd_amplifier_lag_s", "qd_amplifier_lags_by_axis", "uncertainty_tree"]
 
 _DIRECT = {"h": ("Vph", "Uch"), "v": ("Vpv", "Ucv")}
 _NEWPORT = {"h": ("Vph", "Unh"), "v": ("Vpv", "Unv")}
@@ -94,6 +94,22 @@ def _effective_delay(sid: SercaloIdentification | None) -> tuple[float, float]:
     std = (0.5 * math.hypot(*[j.delay_std_s for j in sid.joint_delays]) if len(eff) == 2
            else float(sid.joint_delays[0].delay_std_s))
     return float(np.mean(eff)), std
+
+
+def qd_amplifier_lags_by_axis(*, sid: SercaloIdentification | None,
+                              gi: Mapping[str, CurrentAmplifierGain],
+                              nominal: BenchParams) -> dict[str, tuple[float, float]]:
+    """Each axis's 4QD lag [s] and std [s]: its direct path's effective delay less its own
+    ``Uc → Vc`` pure delay and its coil's lag (empty without the joint fits)."""
+    if sid is None or len(sid.joint_delays) != 2 or set(gi) != {"h", "v"}:
+        return {}
+    out = {}
+    for axis, joint in zip("hv", sid.joint_delays, strict=True):
+        g = gi[axis]
+        out[axis] = (joint.effective_delay_s - g.delay_s
+                     - coil_lag_s(nominal, axis, g.gain_a_per_v),
+                     math.hypot(joint.delay_std_s, g.delay_std_s))
+    return out
 
 
 def qd_amplifier_lag_s(*, sid: SercaloIdentification | None,

@@ -37,10 +37,11 @@ named), and the fit without amplifier stands.
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Final
 
-from fsmbench.checks import Finding
+from fsmbench.checks import Check, Finding
 from fsmbench.ident.delay.joint import RESOLVED_LR
 from fsmbench.ident.delay.sampled import SensorLowpass
 from fsmbench.ident.frf.response import FrequencyResponse
@@ -51,7 +52,8 @@ from fsmbench.ident.newport import (
     fit_newport_axis,
 )
 
-__all__ = ["LAG_SIGMAS", "AmplifierDecision", "decide_amplifier"]
+__all__ = ["AXIS_LAG_SIGMAS", "LAG_SIGMAS", "AmplifierDecision", "axis_lag_check",
+           "decide_amplifier"]
 
 #: A lag is measured when it is above this many of its standard deviations.
 LAG_SIGMAS: Final = 3.0
@@ -208,3 +210,48 @@ def decide_amplifier(frf: FrequencyResponse, dyn: NewportDynamics, *, lag_s: flo
                f"{_ORDER_WORDS[best]} low pass at {bw:.4g} ± {bw_std:.2g} Hz, and the "
                "Newport's parameters carry the lag's std as a bound"),
         findings=tuple(findings))
+
+
+#: The two axes' 4QD lags (one amplifier feeds both outputs) agree within this many
+#: standard deviations of their difference, or a quarter sample: two channels of one
+#: amplifier differ by far less (the real-bench twin: 0.2 µs).
+AXIS_LAG_SIGMAS: Final = 5.0
+
+
+def axis_lag_check(lags: Mapping[str, tuple[float, float]], *, fs_hz: float) -> Check | None:
+    """``qd_lag_across_axes``: each axis's 4QD lag (its Sercalo run's effective delay less
+    its pure ``Uc → Vc`` delay and its coil's lag) against the other's.
+
+    One amplifier feeds both 4QD outputs: lags apart by more than
+    ``max(AXIS_LAG_SIGMAS σ, ¼ sample)`` mean one run's 4QD channels were delayed (a
+    buffer, a time base), the run with the longer lag (a delay never advances a signal).
+    None without both axes.
+
+    Parameters
+    ----------
+    lags : mapping of axis to (lag [s], std [s])
+    fs_hz : float
+        The records' rate [Hz].
+    """
+    if set(lags) != {"h", "v"} or not all(math.isfinite(v) for pair in lags.values()
+                                          for v in pair):
+        return None
+    (lh, sh), (lv, sv) = lags["h"], lags["v"]
+    limit = max(AXIS_LAG_SIGMAS * math.hypot(sh, sv), 0.25 / fs_hz)
+    diff = lh - lv
+    later = "h" if diff > 0 else "v"
+    record = f"data_uc{later}"
+    subject = "data_uch.mat, data_ucv.mat: Vph, Vpv"
+    words = f"{abs(diff) * 1e6:.3g} µs ({abs(diff) * fs_hz:.3g} samples)"
+    if abs(diff) <= limit:
+        return Check("qd_lag_across_axes", True, abs(diff), f"≤ {limit * 1e6:.3g} µs (one "
+                     "amplifier feeds both outputs)", subject, unit="s")
+    return Check(
+        "qd_lag_across_axes", False, abs(diff), f"≤ {limit * 1e6:.3g} µs (one amplifier "
+        "feeds both outputs)", subject,
+        f"the 4QD output of {record}.mat lags the other axis's by {words} on the same "
+        f"amplifier (h {lh * 1e6:.4g} µs, v {lv * 1e6:.4g} µs beyond each coil's path): "
+        f"{record}'s 4QD channels were delayed (a buffer, a time base shifted when it was "
+        f"saved), or its command Uc{later} was; either way its Sercalo path's delay is not "
+        f"the bench's: record {record} again (no 4QD amplifier is inferred from it)",
+        unit="s")
