@@ -303,8 +303,9 @@ def run_experiment(model: BenchModel, name: str, rng: np.random.Generator,
     nu = _nu(model, rng, n)
     qd_noise = _qd_noise(model, rng, n)
     U = np.column_stack([cmd, nu])
+    adc_seen = None
     if p.closed_loop:
-        Y, uc = _closed(model, rng, U, qd_noise)
+        Y, uc, adc_seen = _closed(model, rng, U, qd_noise)
     else:
         W = delayed_inputs(U, model.sampled.n_whole, model.sampled.fractional)
         Y = simulate(model.sampled.system, W)
@@ -318,7 +319,11 @@ def run_experiment(model: BenchModel, name: str, rng: np.random.Generator,
     sig: dict[str, Array] = {"t": t}
     sig["Uch"], sig["Ucv"] = uc[:, 0], uc[:, 1]
     sig["Unh"], sig["Unv"] = cmd[:, 2], cmd[:, 3]
-    vp_q = _adc(model, vp)
+    # A real-time target records the reading its controller used: in closed loop the same
+    # additive rounding the loop ran with (rounding it again would record a reading the
+    # controller never saw, which no recorded controller could explain).
+    vp_q = (np.clip(vp + adc_seen, -b.converter_span_v / 2, b.converter_span_v / 2)
+            if adc_seen is not None else _adc(model, vp))
     sig["Vph"], sig["Vpv"] = vp_q[:, 0], vp_q[:, 1]
     vc_q = _adc(model, Y[:, 2:4] + vc_noise)
     sig["Vch"], sig["Vcv"] = vc_q[:, 0], vc_q[:, 1]
@@ -344,8 +349,9 @@ def run_experiment(model: BenchModel, name: str, rng: np.random.Generator,
 
 
 def _closed(model: BenchModel, rng: np.random.Generator, U: Array,
-            qd_noise: Array) -> tuple[Array, Array]:
-    """Run the closed loop; return the plant outputs (N, 14) and the DAC commands (N, 2)."""
+            qd_noise: Array) -> tuple[Array, Array, Array]:
+    """Run the closed loop; return the plant outputs (N, 14), the DAC commands (N, 2) and the
+    ADC's rounding the controller's reading carried (N, 2) [V]."""
     b = model.bench
     n = U.shape[0]
     sp = model.sampled
@@ -356,13 +362,15 @@ def _closed(model: BenchModel, rng: np.random.Generator, U: Array,
                       ("Unh_d1", m + 2), ("Unv_d1", m + 3)):
         w[:, CL_INPUTS.index(name)] = W6[:, src]
     w[:, CL_INPUTS.index("qd_noise_h"):CL_INPUTS.index("qd_noise_h") + 2] = qd_noise
-    w[:, CL_INPUTS.index("adc_h"):CL_INPUTS.index("adc_h") + 2] = uniform_lsb(rng, (n, 2),
-                                                                              b.lsb_v)
+    adc = uniform_lsb(rng, (n, 2), b.lsb_v)
+    w[:, CL_INPUTS.index("adc_h"):CL_INPUTS.index("adc_h") + 2] = adc
     w[:, CL_INPUTS.index("dac_h"):CL_INPUTS.index("dac_h") + 2] = uniform_lsb(rng, (n, 2),
                                                                               b.lsb_v)
     Y = simulate(model.closed.system, w)
     k = len(OUTPUTS)
-    # The DAC's own rows are zero in the closed-loop plant: the monitors are left out.
-    uc = quantise(Y[:, k:k + 2], b.lsb_v, b.converter_span_v)
+    # The DAC's own rows are zero in the closed-loop plant: the monitors are left out. The
+    # command recorded is the one the DAC put out: the controller's with the same additive
+    # rounding the loop ran with (rounded again, it would not be what the plant received).
+    uc = np.clip(Y[:, k:k + 2], -b.converter_span_v / 2.0, b.converter_span_v / 2.0)
     assert CL_OUTPUTS[k] == "Uch"
-    return Y[:, :k], uc
+    return Y[:, :k], uc, adc
