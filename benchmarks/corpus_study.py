@@ -106,6 +106,23 @@ def study_one(data: Path, out: Path, *, identify_only: bool, params: Path | None
             "identification": json.loads((out / "identification.json").read_text())}
 
 
+#: fsmbench's own twin benches (packaged, or the test suite's files).
+TWIN_BENCHES = {"default": None, "real": "real_bench.toml",
+                "soft": str(ROOT / "tests/data/benches/soft_bench.toml"),
+                "stiff": str(ROOT / "tests/data/benches/stiff_bench.toml")}
+
+
+def _write_twin_bench(name: str, data: Path, *, seed: int) -> None:
+    """The twin's thirteen records of one of its benches, its truth as ``truth.json`` (no
+    ``twin_truth.json``: the study treats them as a user's recordings)."""
+    from fsmbench.bench.params import load_bench
+    from fsmbench.twin import simulate_bench, write_twin
+
+    bench = load_bench(TWIN_BENCHES[name])
+    write_twin(simulate_bench(bench, seed=seed), data)
+    (data / "twin_truth.json").rename(data / "truth.json")
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("out", type=Path)
@@ -117,19 +134,26 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--identify-only", action="store_true")
     parser.add_argument("--rerun", action="store_true",
                         help="identify again with the bench_identified.toml written")
+    parser.add_argument("--twin", nargs="*", default=[],
+                        help="fsmbench's own twin benches too: default, real, soft, stiff "
+                             "(their twin_truth.json renamed truth.json: a user's records)")
     args = parser.parse_args(argv)
 
     import indsim
 
     benches = indsim.corpus()
-    names = args.bench or list(benches)
+    names = (args.bench if args.bench is not None else list(benches)) + [
+        f"twin_{t}" for t in args.twin]
     corpus = args.corpus or args.out / "corpus"
     results = {}
     for name in names:
         data = corpus / name
         if not (data / "truth.json").exists():
-            indsim.write_bench(indsim.simulate_bench(benches[name], seed=args.seed,
-                                                     duration_scale=args.duration_scale), data)
+            if name.startswith("twin_"):
+                _write_twin_bench(name.removeprefix("twin_"), data, seed=args.seed)
+            else:
+                indsim.write_bench(indsim.simulate_bench(
+                    benches[name], seed=args.seed, duration_scale=args.duration_scale), data)
         truth = json.loads((data / "truth.json").read_text())
         res = study_one(data, args.out / "study" / name, identify_only=args.identify_only)
         rows = compare(res["identification"], truth)
