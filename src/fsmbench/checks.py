@@ -51,6 +51,7 @@ CHECK_TITLES: dict[str, str] = {
     "qd_lag_across_axes": "4QD lag alike on both axes",
     "qd_noise_vs_model": "4QD noise against the bench file's",
     "rate_vs_controller": "sampling rate against the recorded controller's",
+    "rate_vs_current_amplifier": "sampling rate against the coil path's corners",
     "record_length": "record long enough for its analysis",
     "sampling_rate": "sampling rate",
     "sercalo_gain_vs_model": "Sercalo gain against the bench file's",

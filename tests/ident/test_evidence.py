@@ -205,3 +205,19 @@ def test_keys_round_trip_and_the_matching_bench_has_no_departure() -> None:
     assert "nominal.quad_diode.gain_v_per_rad.v" not in found  # equal: no departure
     matching = matching_params(params, measured)
     assert departures(measured, bench_file=matching, fs_hz=1e4) == []
+
+
+@pytest.mark.parametrize("factor", [1.0, 2.0, 0.5])
+def test_the_coil_path_s_corners_witness_the_rate(factor: float) -> None:
+    # Without a closed-loop record the coil path is the witness: its corners are in Hz.
+    from fsmbench.ident.evidence.rate import current_amplifier_rate_check
+
+    run = simulate_bench(seed=2, duration_s=5.0, experiments=["data_uch"])
+    ds = run.recordings["data_uch"]
+    moved = ds.assign_coords(t=ds["t"].values * factor)
+    moved.attrs["fs_hz"] = 1e4 / factor
+    check = current_amplifier_rate_check({"data_uch": moved}, params=default_bench().nominal,
+                                         trim_s=factor)
+    assert check is not None and check.passed == (factor == 1.0)
+    if factor != 1.0:
+        assert check.value == pytest.approx(1e4) and "sampled at 10000 Hz" in check.advice

@@ -81,7 +81,11 @@ from fsmbench.ident.evidence.departures import (
     measured_keys,
 )
 from fsmbench.ident.evidence.matching import MATCHING_BENCH, write_matching_bench
-from fsmbench.ident.evidence.rate import RateEvidence, records_rate
+from fsmbench.ident.evidence.rate import (
+    RateEvidence,
+    current_amplifier_rate_check,
+    records_rate,
+)
 from fsmbench.ident.evidence.recorded_loop import (
     RateWitness,
     RecordedController,
@@ -548,11 +552,17 @@ def _identify(recordings: Mapping[str, xr.Dataset], *, bench: Bench, opts: Ident
     seen: dict[str, list[Check]] = {}
     rate_findings = rate.findings
     witness = rate_witness(recordings, fs_hz=conv.fs_hz, step_v=conv.lsb_v)
-    wrong_rate = _rate_check(witness, rate) if witness is not None else None
+    # Two witnesses of the real rate in the physics the records carry: the controller the
+    # closed-loop records ran, and the coil path's analog corners (ident.evidence).
+    rate_checks = [c for c in (
+        _rate_check(witness, rate) if witness is not None else None,
+        current_amplifier_rate_check(recordings, params=nom,
+                                     trim_s=opts.trims_s.get("data_uch", 1.0)))
+        if c is not None]
+    checks.extend(rate_checks)
+    wrong_rate = next((c for c in rate_checks if not c.passed), None)
     if wrong_rate is not None:
-        checks.append(wrong_rate)
-        if not wrong_rate.passed:
-            rate_findings = ()  # t's rate is not the records' rate: nothing to state
+        rate_findings = ()  # t's rate is not the records' rate: nothing to state
 
     def missing(*names: str) -> list[str]:
         return [n for n in names if n not in recordings]
@@ -583,7 +593,7 @@ def _identify(recordings: Mapping[str, xr.Dataset], *, bench: Bench, opts: Ident
         if name in recordings:
             data_failure(name)
             seen[name] = [*seen[name], *extra]
-    if wrong_rate is not None and not wrong_rate.passed:
+    if wrong_rate is not None:
         for name in recordings:
             data_failure(name)
             seen[name] = [*seen[name], wrong_rate]

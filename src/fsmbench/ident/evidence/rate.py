@@ -20,14 +20,16 @@ by that factor and the check names it.
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Final
 
 import xarray as xr
 
+from fsmbench.bench.params import BenchParams
 from fsmbench.checks import Check, Finding
 
-__all__ = ["RATE_TOLERANCE", "RateEvidence", "records_rate"]
+__all__ = ["AMPLIFIER_RATE_PREFERENCE", "RATE_TOLERANCE", "RateEvidence",
+           "current_amplifier_rate_check", "records_rate"]
 
 #: Two rates within this relative difference are one clock (a real-time target's rate
 #: is set to a few ppm; 1 % is the loader's tolerance on a rate from ``t``).
@@ -116,3 +118,55 @@ def records_rate(recordings: Mapping[str, xr.Dataset], *, bench_fs_hz: float) ->
             f"the recordings are sampled at {fs:g} Hz (their t's step), not at the bench "
             "file's rate; the identification works at the records' rate"),)
     return RateEvidence(fs, bench_fs_hz, rates, tuple(checks), by_experiment, findings)
+
+
+#: How many times the coil path's reduced chi-square at ``t``'s rate must exceed another
+#: rate's to say ``t`` is wrong: on the twin the right rate gives 0.84, an octave off
+#: 4.4e3 and 1.9e4.
+AMPLIFIER_RATE_PREFERENCE: Final = 10.0
+
+
+def current_amplifier_rate_check(recordings: Mapping[str, xr.Dataset], *,
+                                 params: BenchParams, trim_s: float = 1.0) -> Check | None:
+    """``rate_vs_current_amplifier``: the rate at which the coil path ``Uc → Vc`` fits.
+
+    The path's analog corners are fixed in Hz (the coil's ``R/L``, the monitor's
+    cut-off); read with ``t``'s step off by two, its lines sit an octave away and the
+    fit's reduced chi-square grows by thousands. The run fitting best at another rate
+    than ``t``'s, by :data:`AMPLIFIER_RATE_PREFERENCE`, names ``t`` as wrong; without a
+    Sercalo run, or when a fit fails, None.
+    """
+    from fsmbench.ident.current_amp import identify_current_amplifier
+
+    ds = recordings.get("data_uch")
+    if ds is None or "Uch" not in ds or "Vch" not in ds:
+        return None
+    fs = float(ds.attrs.get("fs_hz", 0.0))
+    if fs <= 0:
+        return None
+    chi2 = {}
+    for rate in (fs, 2.0 * fs, 0.5 * fs):
+        moved = ds.assign_coords(t=ds["t"].values * fs / rate)
+        moved.attrs["fs_hz"] = rate
+        p = replace(params, converter=replace(params.converter, fs_hz=rate))
+        try:
+            fit = identify_current_amplifier(moved, axis="h", nominal=p, trim_s=trim_s * fs / rate,
+                                             band_hz=(20.0, 200.0), window_s=fs / rate,
+                                             estimator="welch")
+        except ValueError:
+            return None
+        chi2[rate] = max(float(fit.reduced_chi2), 1e-12)
+    best = min(chi2, key=lambda r: chi2[r])
+    subject = "data_uch.mat: t, Uch, Vch"
+    limit = f"the coil path Uch → Vch fits best at t's {fs:g} Hz"
+    if best == fs or chi2[fs] < AMPLIFIER_RATE_PREFERENCE * chi2[best]:
+        return Check("rate_vs_current_amplifier", True, fs, limit, subject, unit="Hz")
+    return Check(
+        "rate_vs_current_amplifier", False, best, limit, subject,
+        f"the coil path Uch → Vch fits with a reduced chi-square of {chi2[best]:.3g} at "
+        f"{best:g} Hz and {chi2[fs]:.3g} at t's {fs:g} Hz: its corners (the coil's R/L, the "
+        f"monitor's cut-off) sit where a {best:g} Hz rate puts them, so the records were "
+        f"sampled at {best:g} Hz and t was saved with the step of {fs:g} Hz (×{best / fs:g} "
+        "off), or the coil circuit is not the bench file's by an octave; every frequency and "
+        "delay would be off by that factor: check the rate the target recorded at",
+        unit="Hz")
