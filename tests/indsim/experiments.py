@@ -351,7 +351,13 @@ def run_experiment(model: BenchModel, name: str, rng: np.random.Generator,
 def _closed(model: BenchModel, rng: np.random.Generator, U: Array,
             qd_noise: Array) -> tuple[Array, Array, Array]:
     """Run the closed loop; return the plant outputs (N, 14), the DAC commands (N, 2) and the
-    ADC's rounding the controller's reading carried (N, 2) [V]."""
+    ADC's rounding the controller's reading carried (N, 2) [V].
+
+    The ADC's rounding is additive uniform noise of one step (the 4QD's own noise, several
+    steps rms, dithers it). The DAC's is not: a loop's command moves by less than a step per
+    sample, and its rounding then is a dead band, not white noise; the loop is run sample by
+    sample with the command rounded to the DAC's grid (and clipped to its rails).
+    """
     b = model.bench
     n = U.shape[0]
     sp = model.sampled
@@ -364,13 +370,25 @@ def _closed(model: BenchModel, rng: np.random.Generator, U: Array,
     w[:, CL_INPUTS.index("qd_noise_h"):CL_INPUTS.index("qd_noise_h") + 2] = qd_noise
     adc = uniform_lsb(rng, (n, 2), b.lsb_v)
     w[:, CL_INPUTS.index("adc_h"):CL_INPUTS.index("adc_h") + 2] = adc
-    w[:, CL_INPUTS.index("dac_h"):CL_INPUTS.index("dac_h") + 2] = uniform_lsb(rng, (n, 2),
-                                                                              b.lsb_v)
-    Y = simulate(model.closed.system, w)
+    sys = model.closed.system
     k = len(OUTPUTS)
-    # The DAC's own rows are zero in the closed-loop plant: the monitors are left out. The
-    # command recorded is the one the DAC put out: the controller's with the same additive
-    # rounding the loop ran with (rounded again, it would not be what the plant received).
-    uc = np.clip(Y[:, k:k + 2], -b.converter_span_v / 2.0, b.converter_span_v / 2.0)
     assert CL_OUTPUTS[k] == "Uch"
-    return Y[:, :k], uc, adc
+    dac = [CL_INPUTS.index("dac_h"), CL_INPUTS.index("dac_v")]
+    # The command rows carry the DAC's rounding as an input (its column); the command
+    # before the DAC is those rows without it.
+    bw = w @ sys.B.T
+    dw = w @ sys.D.T
+    b_dac, d_dac = sys.B[:, dac], sys.D[:, dac]
+    c_u, dw_u = sys.C[k:k + 2], dw[:, k:k + 2]
+    a, c = sys.A, sys.C
+    lsb, top = b.lsb_v, b.converter_span_v / 2.0 - b.lsb_v
+    x = np.zeros(a.shape[0])
+    y = np.empty((n, c.shape[0]))
+    for i in range(n):
+        u = c_u @ x + dw_u[i]
+        q = np.clip(np.round(u / lsb) * lsb, -top - lsb, top)
+        e = q - u
+        y[i] = c @ x + dw[i] + d_dac @ e
+        x = a @ x + bw[i] + b_dac @ e
+    uc = y[:, k:k + 2]
+    return y[:, :k], uc, adc
