@@ -17,6 +17,7 @@ imported: the faults know nothing of fsmbench.
 from __future__ import annotations
 
 import gzip
+import io
 import os
 import shutil
 import zlib
@@ -64,7 +65,7 @@ CAUSES: dict[str, str] = {
                 "bench, not a fault of the records)",
 }
 
-_HUDDLE = [f"data_huddle_test_{i}" for i in range(1, 6)]
+_HEADER = b"MATLAB 5.0 MAT-file, written by indsim.faults".ljust(116)
 
 
 @dataclass(frozen=True)
@@ -133,8 +134,12 @@ class Records:
         """Write ``name`` into the copy (MATLAB v5, column vectors), noting what changed."""
         path = self.dst / f"{name}.mat"
         path.unlink(missing_ok=True)  # a new file: never write through a link to the input
-        savemat(path, {k: np.ascontiguousarray(v, dtype=np.float64).reshape(-1, 1)
-                       for k, v in variables.items()}, format="5", oned_as="column")
+        buf = io.BytesIO()
+        savemat(buf, {k: np.ascontiguousarray(v, dtype=np.float64).reshape(-1, 1)
+                      for k, v in variables.items()}, format="5", oned_as="column")
+        data = bytearray(buf.getvalue())
+        data[:116] = _HEADER  # scipy's header carries the time: a fixed one, same seed same bytes
+        path.write_bytes(bytes(data))
         self.touch(name, signals)
 
     def touch(self, name: str, signals: Iterable[str] = ()) -> None:
