@@ -385,10 +385,13 @@ def sources_hash() -> str:
     return h.hexdigest()[:16]
 
 
-def _env() -> dict[str, str]:
+def _env(single_thread: bool = False) -> dict[str, str]:
     env = dict(os.environ)
     env["PYTHONPATH"] = os.pathsep.join([str(ROOT / "src"), str(ROOT / "tests"),
                                          *filter(None, [env.get("PYTHONPATH")])])
+    if single_thread:  # parallel cases: one BLAS thread each, not jobs × cores fighting
+        for var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+            env.setdefault(var, "1")
     return env
 
 
@@ -402,13 +405,14 @@ def command(mode: str, data: Path, out: Path, params: Path | None) -> list[str]:
     return argv + (["--params", str(params)] if params is not None else [])
 
 
-def run_fsmbench(argv: Sequence[str], *, timeout_s: float, in_process: bool = False
-                 ) -> tuple[int | None, str]:
+def run_fsmbench(argv: Sequence[str], *, timeout_s: float, in_process: bool = False,
+                 single_thread: bool = False) -> tuple[int | None, str]:
     """Run fsmbench; its exit status (None after ``timeout_s``) and standard error.
 
     A separate process by default: a case that hangs (a FIFO read) is killed
     without taking the harness with it. ``in_process`` (the tests) saves the
-    imports.
+    imports. ``single_thread`` runs BLAS on one thread (cases run in parallel);
+    it changes a few diagnostics' last digits, no diagnosis.
     """
     if in_process:
         from fsmbench.cli import main
@@ -417,7 +421,7 @@ def run_fsmbench(argv: Sequence[str], *, timeout_s: float, in_process: bool = Fa
         with contextlib.redirect_stderr(err), contextlib.redirect_stdout(io.StringIO()):
             status = main(list(argv))
         return status, err.getvalue()
-    with subprocess.Popen([sys.executable, "-c", _RUNNER, *argv], env=_env(),
+    with subprocess.Popen([sys.executable, "-c", _RUNNER, *argv], env=_env(single_thread),
                           stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
                           start_new_session=True) as proc:
         try:
@@ -431,7 +435,7 @@ def run_fsmbench(argv: Sequence[str], *, timeout_s: float, in_process: bool = Fa
 
 def run_case(bench: str, clean: Path, fault: Fault, work: Path, cfg: Config, *,
              params: Path | None = None, timeout_s: float = 900.0, keep: bool = False,
-             in_process: bool = False) -> dict[str, Any]:
+             in_process: bool = False, single_thread: bool = False) -> dict[str, Any]:
     """Inject ``fault`` into ``clean``, run fsmbench on the copy, return the case (raw).
 
     The faulted copy and fsmbench's output go under ``work`` and are removed
@@ -443,7 +447,7 @@ def run_case(bench: str, clean: Path, fault: Fault, work: Path, cfg: Config, *,
     t0 = time.perf_counter()
     case = fault(clean, data, seed=cfg.seed)
     status, err = run_fsmbench(command(cfg.mode, data, out, params), timeout_s=timeout_s,
-                               in_process=in_process)
+                               in_process=in_process, single_thread=single_thread)
     statements = collect(out, status, err)
     if not keep:
         shutil.rmtree(work, ignore_errors=True)
@@ -649,7 +653,8 @@ def run_matrix(out: Path, benches: dict[str, Path], chosen: Sequence[Fault], cfg
     def one(bench: str, fault: Fault) -> dict[str, Any]:
         work = out / "work" / cfg.mode / bench / fault.id
         case = run_case(bench, benches[bench], fault, work, cfg, params=params,
-                        timeout_s=timeout_s, keep=keep, in_process=in_process)
+                        timeout_s=timeout_s, keep=keep, in_process=in_process,
+                        single_thread=jobs > 1)
         path = _case_path(out, cfg.mode, bench, fault.id)
         path.parent.mkdir(parents=True, exist_ok=True)
         tmp = path.with_suffix(".part")
