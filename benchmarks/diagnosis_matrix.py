@@ -16,26 +16,36 @@ count as "among the alternatives"), and marked when it gives **data-changing
 advice** (:data:`ADVICE_PATTERNS`: negate, swap … back, divide, multiply,
 rescale, exchange, flip, "set t = …", "save t …").
 
-A statement the bench's clean control also makes (same kind, id and subject;
-the numbers may differ) is *baseline*: it is what fsmbench says about that
-bench, not about the fault, and is left out of the fault's row. Then, per case:
+A statement the bench's clean control also makes (same kind, id, subject and
+named causes; the numbers may differ) is *baseline*: it is what fsmbench says
+about that bench, not about the fault, and is left out of the fault's row. The
+verdict and the fallbacks repeat the other statements' words and are not
+classified; the verdict is counted apart (``meets``: a faulted bench that
+"meets its specifications"). A run that crashes names ``crash``, one killed
+after ``--timeout`` ``hang``. Then, per case:
 
 * **named**: the true cause is among the causes of the non-baseline
-  statements (alone or among alternatives); for the clean control: no failed
-  check, no error and no data-changing advice;
+  statements (alone or among alternatives); for a signal negated in every file
+  (true cause ``bench_sign``) also when the control's bench-sign finding is
+  gone (the fault undid a sign of the bench's own); for the clean control: no
+  failed check, no error and no data-changing advice;
 * **wrong advice**: a statement gives data-changing advice and the true
   cause is not among the causes it names (itself or among its alternatives):
   following it would change data for a wrong reason (the issue's bar: 0; on
   the clean control every data-changing advice is wrong). ``wrong_advice_single``
   keeps those that name one cause alone. Advice that names no cause of the
   table counts as ``unclassified``, also wrong;
-* **false alarms**: on the clean control, every failed check.
+* **false alarms**: on the clean control, every failed check (and, listed
+  apart, the identification steps it skipped: a good bench refused).
 
-The tables: true cause (rows) × named cause (columns), counts of cases; per
-fault the share of benches where the true cause is named (the issue's bar:
-95 %), the wrong-advice count and the causes named most; the clean control's
-false alarms per bench. Printed as Markdown, written to
-``OUT/diagnosis_matrix.md`` and ``OUT/diagnosis_matrix.json``.
+The tables: true cause (rows) × named cause (columns), counts of cases (a
+case counts once in every column it names; ``(nothing)``: no new statement
+names a cause); per fault the share of benches where the true cause is named
+(the issue's bar: 95 %), the wrong-advice count, the runs that stopped, the
+``meets`` verdicts and the causes named most; the clean control's false alarms
+per bench. Printed as Markdown, written to ``OUT/diagnosis_matrix.md`` and
+``OUT/diagnosis_matrix.json`` (with every case's classification, its
+wrong advice and its ``unclassified`` statements).
 
 Every finished case is cached in ``OUT/cases/<mode>/<bench>/<fault>.json``
 with the raw statements (the classification is recomputed from them on every
@@ -52,8 +62,11 @@ Run::
         [--twin-duration 20] [--corpus DIR] [--timeout 900] [--keep] [--force] \\
         [--list] [--report-only]
 
-A full run (19 benches × 51 faults at duration scale 1) is long: at scale 0.2
-a study takes ~25 s (2 CPUs), so one bench × every fault is ~20 min per job.
+A full run (19 benches × 51 faults) is long: at duration scale 0.2 a study
+takes 20–45 s, and 6 benches × 51 faults took 58 min with ``--jobs 2`` on a
+shared 2-CPU machine (``--mode identify``: ~10 s a case). fs5k and fs20k run
+at another rate than the packaged bench file's; ``--params`` gives every case
+another bench file.
 """
 
 from __future__ import annotations
@@ -110,7 +123,8 @@ CAUSE_PATTERNS: dict[str, tuple[str, ...]] = {
         r"\b(?:negated|flipped|reversed|inverted) in (?:this|that|one) (?:file|record)"),
     "bench_sign": (
         r"opposite (?:sign|polarity)", r"\bpolarity\b", r"\bmount(?:ed)? the other way",
-        r"a divisor of sign", r"\bor of the device itself\b"),
+        r"a divisor of sign", r"\bor of the device itself\b",
+        r"\bthe other way (?:from|round)\b"),
     "unit": (
         r"(?<!compensation )\bunits?\b", r"\bnot in (?:volts|metres)\b",
         r"\bin (?:mV|mm|nm|µm|kV)\b", r"looks like (?:nano|micro|milli|kilo)", r"\bmV for V\b",
@@ -126,7 +140,7 @@ CAUSE_PATTERNS: dict[str, tuple[str, ...]] = {
         r"4QD(?:'s)? outputs? (?:are |were )?(?:crossed|swapped|exchanged)",
         r"\bVph and Vpv (?:are |were )?(?:crossed|swapped|exchanged)",
         r"\bcrossed (?:4QD )?outputs", r"4QD(?:'s)? (?:output )?cables? (?:are |were )?"
-        r"(?:crossed|swapped)"),
+        r"(?:crossed|swapped)", r"\b4QD channel is\b[^.;:]*\bswapped\b"),
     "clipped": (r"\bclip", r"\bsaturat", r"\brails?\b", r"\bflat tops?\b"),
     "va_jump": (r"\bjumps?\b", r"\bfringe", r"\blost count\b", r"\bdiscontinu",
                 r"\bva_continuous\b"),
@@ -166,9 +180,12 @@ CAUSE_PATTERNS: dict[str, tuple[str, ...]] = {
     # causes no fault injects
     "departure": (r"\bfrom the bench file's\b", r"×\s*the bench file's\b",
                   r"\bnot the bench file's\b", r"\bdeparts from\b"),
-    "wrong_channel": (r"\bwrong channel\b", r"\ba gain or a channel that changed\b"),
+    "wrong_channel": (r"\bwrong channel\b", r"\ba gain or a channel that changed\b",
+                      r"\ba gain changed by\b"),
     "model_disagrees": (r"\bdoes not predict\b", r"\bfit misses\b", r"\bnot trusted\b",
-                        r"\bmodel explains \d", r"\bnot a line\b", r"\bmodel_validation\b"),
+                        r"\bmodel explains -?\d", r"\bnot a line\b", r"\bmodel_validation\b",
+                        r"\bdid not converge\b", r"\bband probably misses\b"),
+    "uc_not_controller": (r"\bnot the quantised output of the controller\b",),
     "excitation": (r"\bexcitation level\b", r"\bexcitation on\b",
                    r"\bno power in the excitation\b", r"\bcoherence\b.{0,80}\btoo low\b"),
     "sensor_lag": (r"\b4QD amplifier lag\b", r"\b4QD amplifier not the bench file's\b",
@@ -244,11 +261,18 @@ class Statement:
     alternatives: list[str] = field(default_factory=list)
     detail: str = ""
 
-    def signature(self) -> tuple[str, str, str]:
-        """Identity across runs: kind, id, subject (numbers in free text ignored)."""
+    def signature(self) -> tuple[str, str, str, tuple[str, ...]]:
+        """Identity across runs: kind, id, subject and the causes named.
+
+        A check or a finding is the same when it names the same causes, whatever its
+        numbers (a 4QD gain "1.01× the bench file's" in the control and "of the
+        opposite polarity" in the fault are two statements); other kinds compare
+        their words with the numbers left out.
+        """
+        causes = tuple(sorted({*self.causes(), *self.alternative_causes()}))
         if self.kind in ("check", "finding"):
-            return self.kind, self.id, self.subject
-        return self.kind, self.id, _NUMBER_RE.sub("#", f"{self.subject} {self.text}")
+            return self.kind, self.id, self.subject, causes
+        return self.kind, self.id, _NUMBER_RE.sub("#", f"{self.subject} {self.text}"), causes
 
     def causes(self) -> list[str]:
         """Causes named by the statement itself (its kind, id and words)."""
@@ -550,10 +574,17 @@ def evaluate(case: dict[str, Any], control: dict[str, Any] | None) -> dict[str, 
         ok = not failed and not stopped and not wrong
     else:
         ok = true in named or true in alternatives
+        if true == "bench_sign" and control is not None:
+            # a signal negated in every file can undo a sign of the bench's own: then the
+            # control's bench-sign finding is gone, and saying nothing is right
+            signatures = {s.signature() for s in statements}
+            ok = ok or any("bench_sign" in s.causes() and s.signature() not in signatures
+                           for s in map(Statement.from_json, control["statements"]))
     return {"bench": case["bench"], "fault": case["case"]["fault"], "cause": true,
             "named": ok, "named_causes": sorted(named), "alternative_causes": sorted(
                 alternatives - set(named)), "wrong_advice": wrong, "wrong_advice_single": single,
             "unclassified": unclassified, "failed_checks": [s.to_json() for s in failed],
+            "skipped_steps": [f"{s.id}: {s.text}" for s in statements if s.kind == "skipped"],
             "status": case["status"], "verdict": next(
                 (s.id for s in statements if s.kind == "verdict"), ""),
             "stopped": [s.text for s in stopped]}
@@ -591,8 +622,11 @@ def tabulate(results: list[dict[str, Any]]) -> dict[str, Any]:
     alarms = {r["bench"]: [f"{s['id']} ({s['subject']}): {s['text'][:200]}"
                            for s in r["failed_checks"]] + r["stopped"]
               for r in results if r["fault"] == "none"}
+    # not failed checks, but a clean bench's step left out is a good bench refused
+    refused = {r["bench"]: [t[:200] for t in r["skipped_steps"]]
+               for r in results if r["fault"] == "none" and r["skipped_steps"]}
     return {"matrix": {c: dict(row) for c, row in matrix.items()}, "cases_per_cause": dict(cases),
-            "per_fault": per_fault, "false_alarms": alarms}
+            "per_fault": per_fault, "false_alarms": alarms, "refused_on_clean": refused}
 
 
 def markdown(table: dict[str, Any]) -> str:
@@ -623,6 +657,11 @@ def markdown(table: dict[str, Any]) -> str:
     lines += ["", "### False alarms on the clean control", ""]
     for bench, alarms in table["false_alarms"].items():
         lines.append(f"* {bench}: " + ("none" if not alarms else "; ".join(alarms)))
+    if table["refused_on_clean"]:
+        lines += ["", "Identification steps skipped on the clean control (a good bench "
+                  "refused):", ""]
+        lines += [f"* {bench}: " + "; ".join(steps)
+                  for bench, steps in table["refused_on_clean"].items()]
     return "\n".join(lines) + "\n"
 
 
