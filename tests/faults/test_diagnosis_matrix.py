@@ -1,0 +1,186 @@
+"""A reduced confusion matrix of diagnoses (issue 30, item 6).
+
+``benchmarks/diagnosis_matrix.py`` injects a fault of ``tests/indsim/faults.py``
+into a bench of the independent simulator's corpus, runs fsmbench on the
+copy and maps what it said to named causes. Here: three corpus benches (plain,
+a Sercalo mounted the other way, a 4QD polarity reversed) at a fifth of the
+study's lengths, and the faults whose diagnosis should be right:
+
+* a sign flipped in one file with the loop records present, the 4QD's outputs
+  crossed in every file, ``t`` saved with twice its step in every file: the
+  identification decides (``fsmbench identify``);
+* huddle tests 2–5 copies of test 1, the closed-loop huddle tests with the
+  controller's output zero throughout: the huddle tests decide (``fsmbench
+  budget``, on the plain bench).
+
+Each asserts the issue's bars: the true cause is named (alone or among the
+alternatives); no statement gives advice that changes data for a wrong cause;
+the clean control raises no failed check. Where fsmbench falls short today the
+test is marked ``xfail`` (not strict) with what it says instead, so the gap
+shows in the test report and the mark goes when fsmbench's diagnoses are fixed.
+The first tests check the pattern table itself on fsmbench's own sentences.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import sys
+from pathlib import Path
+from types import ModuleType
+from typing import Any
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[2]
+if str(ROOT / "tests") not in sys.path:
+    sys.path.append(str(ROOT / "tests"))  # indsim; last, so it shadows no package
+
+BENCHES = ("plain", "sercalo_h_flipped", "qd_v_flipped")
+SCALE = 0.2  # the shortest records on which the corpus benches' identification is clean
+SEED = 1
+IDENTIFY = ("sign_Vph_data_uch", "qd_outputs_crossed", "rate_x2_every_file")
+BUDGET = ("copies_huddle_2345_of_1", "zero_controller_output")
+BUDGET_BENCHES = BENCHES[:1]
+
+CROSSED = ("fsmbench says 'the Uch and Ucv DAC cables are swapped (or the two files): swap "
+           "them back' (excited_axis, on every run), never that Vph and Vpv are crossed")
+#: (fault, bench or "*", "named" | "advice") -> what fsmbench says today instead.
+GAPS: dict[tuple[str, str, str], str] = {
+    ("sign_Vph_data_uch", "sercalo_h_flipped", "named"):
+        "fsmbench identify stops: KeyError: 'data_rep_h' in ident/pipeline.py (_identify) when "
+        "a record's sign is flipped on a bench whose Sercalo h is mounted the other way",
+    ("qd_outputs_crossed", "*", "named"): CROSSED,
+    ("qd_outputs_crossed", "*", "advice"): CROSSED,
+    ("copies_huddle_2345_of_1", "*", "named"):
+        "fsmbench budget says only 'data_huddle_test_3: not in the recordings' (the copies "
+        "lack Uch, Ucv); that 2 and 4 are test 1's samples goes unsaid (the study: 'The bench "
+        "meets its specifications')",
+    ("zero_controller_output", "*", "named"):
+        "nothing: closed-loop huddle tests 3 and 5 with Uch = Ucv = 0 throughout are "
+        "accepted (the only words, 'recorded Uc is not the quantised output of the "
+        "controller', are said of the clean records too)",
+}
+
+
+def _gap(fault: str, bench: str, what: str) -> str | None:
+    return GAPS.get((fault, bench, what)) or GAPS.get((fault, "*", what))
+
+
+def _cases(what: str) -> list[Any]:
+    out = []
+    for mode, faults, benches in (("identify", IDENTIFY, BENCHES),
+                                  ("budget", BUDGET, BUDGET_BENCHES)):
+        for fault in faults:
+            for bench in benches:
+                reason = _gap(fault, bench, what)
+                marks = [pytest.mark.xfail(strict=False, reason=reason)] if reason else []
+                out.append(pytest.param(mode, bench, fault, marks=marks,
+                                        id=f"{fault}-{bench}"))
+    return out
+
+
+@pytest.fixture(scope="module")
+def dm() -> ModuleType:
+    """benchmarks/diagnosis_matrix.py as a module."""
+    path = ROOT / "benchmarks" / "diagnosis_matrix.py"
+    spec = importlib.util.spec_from_file_location("diagnosis_matrix", path)
+    assert spec is not None and spec.loader is not None
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = module  # dataclasses resolve their module by name
+    spec.loader.exec_module(module)
+    return module
+
+
+@pytest.fixture(scope="module")
+def results(dm: ModuleType, tmp_path_factory: pytest.TempPathFactory
+            ) -> dict[tuple[str, str, str], dict[str, Any]]:
+    """(mode, bench, fault) -> the evaluated case, the clean control included."""
+    from indsim.faults import faults
+
+    root = tmp_path_factory.mktemp("matrix")
+    benches = dm.prepare_corpus(BENCHES, root / "corpus", seed=SEED, duration_scale=SCALE)
+    catalogue = faults()
+    out = {}
+    for mode, names, on in (("identify", IDENTIFY, BENCHES), ("budget", BUDGET, BUDGET_BENCHES)):
+        cfg = dm.Config(SCALE, SEED, mode, "packaged", "test")
+        cases = dm.run_matrix(root / "out", {b: benches[b] for b in on},
+                              [catalogue[n] for n in ("none", *names)], cfg, jobs=2,
+                              timeout_s=600, say=lambda _m: None)
+        for r in dm.evaluate_all(cases):
+            out[mode, r["bench"], r["fault"]] = r
+    return out
+
+
+# ----------------------------------------------------------------------------- the table
+
+
+@pytest.mark.parametrize(("sentence", "causes", "advice"), [
+    ("the two runs drive each other's axis, so the Uch and Ucv DAC cables are swapped (or the "
+     "two files): swap them back", {"dac_swap", "files_exchanged"}, True),
+    ("Vph in data_uch.mat is recorded with its sign flipped; record it again (or, knowing it, "
+     "negate that signal in that file)", {"sign_flipped_in_record"}, True),
+    ("measured 999.5 nm rms where the budget predicts 1.34 nm for this configuration; likely a "
+     "unit: the record in mm, not m (1000× too large)", {"unit"}, True),
+    ("the 4QD's horizontal output has the opposite polarity of the bench file's",
+     {"bench_sign"}, False),
+    ("Va jumps by +765.1 nm between samples 87932 and 87933: the interferometer lost count "
+     "(fringe loss); re-record it, or cut the record before the jump", {"va_jump"}, True),
+    ("Va is constant at 2.79e-10 m throughout: the channel is dead or not connected",
+     {"stuck"}, False),
+    ("huddle test 2: open loop, compensation unit", set(), False),
+    ("the bench runs at 10000 Hz; record at that rate, or set converter.fs_hz = 5000 in the "
+     "bench parameters if the bench did run at this rate", {"rate"}, False),
+])
+def test_pattern_table_on_fsmbench_words(dm, sentence, causes, advice):
+    """Each sentence names exactly these causes; data-changing advice is told from a remedy."""
+    assert set(dm.causes_in(sentence)) == causes
+    assert bool(dm.advice_in(sentence)) is advice
+
+
+def test_evaluate_leaves_out_the_controls_words_and_counts_wrong_advice(dm):
+    """A statement the clean control makes is baseline; swap-back advice for a crossed 4QD
+    is wrong advice, and the true cause is not named."""
+    check = {"kind": "check", "id": "model_validation", "subject": "data_rep_h.mat: Vph",
+             "text": "recorded 41 µrad rms against 56 predicted", "alternatives": []}
+    swap = {"kind": "check", "id": "excited_axis", "subject": "data_uch.mat: Uch",
+            "text": "the Uch and Ucv DAC cables are swapped: swap them back",
+            "alternatives": []}
+    control = {"bench": "b", "status": 0, "statements": [check],
+               "case": {"fault": "none", "cause": "none"}}
+    crossed = {"bench": "b", "status": 0, "statements": [dict(check, text="other numbers 3"),
+                                                         swap],
+               "case": {"fault": "qd_outputs_crossed", "cause": "qd_outputs_crossed"}}
+    ctrl, res = dm.evaluate_all([control, crossed])
+    assert not ctrl["named"]  # the failed check on the clean control is a false alarm
+    assert res["named_causes"] == ["dac_swap"]  # model_validation is baseline
+    assert not res["named"]
+    assert [w["advice"] for w in res["wrong_advice"]] == [["swap them back"]]
+    table = dm.tabulate([ctrl, res])
+    assert table["per_fault"]["qd_outputs_crossed"]["wrong_advice"] == 1
+    assert table["false_alarms"]["b"]
+
+
+# ----------------------------------------------------------------------------- the matrix
+
+
+@pytest.mark.parametrize(("mode", "bench", "fault"), _cases("named"))
+def test_true_cause_named(results, mode, bench, fault):
+    """The fault's true cause is among the causes fsmbench names (not said of the clean bench)."""
+    r = results[mode, bench, fault]
+    assert r["named"], (r["cause"], r["named_causes"], r["alternative_causes"], r["stopped"])
+
+
+@pytest.mark.parametrize(("mode", "bench", "fault"), _cases("advice"))
+def test_no_data_changing_advice_for_a_wrong_cause(results, mode, bench, fault):
+    """No statement tells the user to change the data for a cause that is not the fault's."""
+    r = results[mode, bench, fault]
+    assert not r["wrong_advice"], [(w["advice"], w["causes"], w["text"][:200])
+                                   for w in r["wrong_advice"]]
+
+
+@pytest.mark.parametrize(("mode", "bench"), [("identify", b) for b in BENCHES]
+                         + [("budget", b) for b in BUDGET_BENCHES])
+def test_no_false_alarm_on_the_clean_control(results, mode, bench):
+    """The clean copy of a corpus bench: no failed check, no stop, no data-changing advice."""
+    r = results[mode, bench, "none"]
+    assert r["named"], (r["failed_checks"], r["stopped"], r["wrong_advice"])
