@@ -199,9 +199,11 @@ def test_closed_loop_records_are_bounded_and_track(runs):
                 # half holds few independent values; a factor 3 tells growth from scatter.
                 assert r2 < 3.0 * r1, (name, exp, ax)
                 assert np.abs(angle - angle.mean()).max() < 8.0 * np.std(angle), (name, exp, ax)
-                # The loop holds the beam: 1 mrad is 50x the plain bench's noise (the
-                # "hot" bench's DAC step is 110 urad of beam).
-                assert np.std(angle) < 1e-3, (name, exp, ax)
+                # The loop holds the beam: 1 mrad is 50x the plain bench's noise; a DAC
+                # that rounds limit-cycles by a few of its steps, and the "hot" bench's
+                # step is 110 urad of beam: 15 steps bound it there.
+                step = (20.0 / 2**16) * abs(t["controller"]["bench_uc_to_beam_rad_per_v"][ax])
+                assert np.std(angle) < max(1e-3, 15 * step), (name, exp, ax)
         for exp, un, uc, ax in (("data_rep_h", "Unh", "Uch", "h"), ("data_rep_v", "Unv", "Ucv",
                                                                      "v")):
             s = run.records[exp].signals

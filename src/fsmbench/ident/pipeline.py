@@ -600,7 +600,9 @@ def _identify(recordings: Mapping[str, xr.Dataset], *, bench: Bench, opts: Ident
     screen = screen_recordings(recordings, params=nom, trims_s=opts.trims_s,
                                failure=data_failure)
     for name, extra in screen.by_experiment.items():
-        seen[name] = [*seen[name], *extra]
+        if name in recordings:
+            data_failure(name)  # a closed-loop record the signs name: its own checks first
+        seen[name] = [*seen.get(name, []), *extra]
     checks.extend(screen.checks)
     notices.extend(screen.notices)
     recordings = screen.recordings

@@ -130,6 +130,9 @@ def _findings(d: SignDiagnosis, chosen: Sequence[SignCause], params: BenchParams
     if alternatives and separate:
         alternatives = (*alternatives[:-1], f"{alternatives[-1]} ({separate} would separate "
                                              "them)")
+    # With one cause more: another bench sign and one record flipped (less likely than one
+    # cause, but the same records).
+    alternatives += tuple(f"{_explanation_words(e)} (two causes)" for e in d.near)
     out = []
     for cause in chosen:
         value = _value(params, cause)

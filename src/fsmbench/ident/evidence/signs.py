@@ -143,12 +143,17 @@ class SignDiagnosis:
         smallest size. Empty with ``explained`` False when none of up to
         :data:`MAX_CAUSES` does; ``((),)`` when every sign is the model's.
     explained : bool
+    near : tuple of tuple of SignCause
+        Explanations with one cause more that flip exactly one record and hold no
+        smallest explanation: a bench sign the smallest explanation states could
+        instead be another bench sign and a record flipped (named as alternatives).
     """
 
     axis: str
     observations: tuple[SignObservation, ...]
     explanations: tuple[tuple[SignCause, ...], ...]
     explained: bool = True
+    near: tuple[tuple[SignCause, ...], ...] = ()
 
     @property
     def agrees(self) -> bool:
@@ -221,7 +226,7 @@ def explain_signs(observations: Iterable[SignObservation], *, axis: str) -> Sign
     # Each observation's parity: which variables it touches, and whether it is reversed.
     touched = [[_touches(v, o) for o in obs] for v in variables]
     target = [o.sign < 0 for o in obs]
-    for size in range(MAX_CAUSES + 1):
+    def explaining(size: int) -> list[tuple[SignCause, ...]]:
         found = []
         for combo in itertools.combinations(range(len(variables)), size):
             parity = [False] * len(obs)
@@ -229,6 +234,16 @@ def explain_signs(observations: Iterable[SignObservation], *, axis: str) -> Sign
                 parity = [p != t for p, t in zip(parity, touched[i], strict=True)]
             if parity == target:
                 found.append(tuple(variables[i] for i in combo))
-        if found:
-            return SignDiagnosis(axis, obs, tuple(found))
+        return found
+
+    for size in range(MAX_CAUSES + 1):
+        found = explaining(size)
+        if not found:
+            continue
+        near: list[tuple[SignCause, ...]] = []
+        if 0 < size < MAX_CAUSES:
+            near = [e for e in explaining(size + 1)
+                    if sum(c.kind == "record" for c in e) == 1
+                    and not any(set(m) <= set(e) for m in found)]
+        return SignDiagnosis(axis, obs, tuple(found), near=tuple(near))
     return SignDiagnosis(axis, obs, (), explained=False)
