@@ -36,6 +36,7 @@ from __future__ import annotations
 
 import os
 import warnings
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any, Final, Literal
 
@@ -54,6 +55,7 @@ __all__ = [
     "available_memory_bytes",
     "detect_format",
     "load_mat",
+    "other_run_words",
 ]
 
 #: What :func:`detect_format` can report.
@@ -222,10 +224,26 @@ def load_mat(
         missing = [v for v in variables if v not in out]
         if missing:
             raise RecordingError(
-                p, f"is missing (the file holds: {', '.join(out) or 'nothing'})",
-                variable=missing[0],
+                p, f"is missing (the file holds: {', '.join(out) or 'nothing'})"
+                + other_run_words(p, out), variable=missing[0],
             )
     return out
+
+
+def other_run_words(path: Path, held: Mapping[str, Any]) -> str:
+    """Words naming the experiment whose variables a file holds instead of its own (a file
+    saved under another run's name), empty when none matches."""
+    from fsmbench.io.signals import EXPERIMENTS
+
+    names = set(held)
+    own = path.stem
+    for name, info in EXPERIMENTS.items():
+        if name != own and set(info.required) <= names and not set(
+                EXPERIMENTS.get(own, info).required) <= names:
+            return (f": it holds {name}'s variables; the files exchanged or misnamed (the "
+                    f"other run saved as {path.name}), or the variables renamed: check which "
+                    "run this is")
+    return ""
 
 
 class _UnreadableError(Exception):

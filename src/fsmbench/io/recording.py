@@ -28,7 +28,7 @@ import scipy.sparse
 import xarray as xr
 
 from fsmbench.io.errors import RecordingError, SaturationWarning
-from fsmbench.io.matfile import detect_format, load_mat
+from fsmbench.io.matfile import detect_format, load_mat, other_run_words
 from fsmbench.io.matwrite import save_mat
 from fsmbench.io.notes import TIME_JITTER, TRAILING_BYTES, clear_notes
 from fsmbench.io.signals import ADC_SIGNALS, EXPERIMENTS, SIGNALS, TIME
@@ -434,7 +434,8 @@ def read_recording(
         also = f" (and so are {', '.join(repr(m) for m in missing[1:])})" if missing[1:] else ""
         raise RecordingError(
             origin, f"is missing{also}; {needs} needs {', '.join(req)} "
-            f"(the file holds: {', '.join(raw)})", variable=missing[0], kind="is missing",
+            f"(the file holds: {', '.join(raw)}){other_run_words(p, raw)}",
+            variable=missing[0], kind="is missing",
         )
     vectors = {TIME: _as_vector(TIME, raw[TIME], origin)}
     n = vectors[TIME].size
