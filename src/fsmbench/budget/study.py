@@ -307,9 +307,15 @@ def _budget_study(recordings: Mapping[str, xr.Dataset], *, bench: Bench,
                         notices=notices)
     # Copies, a closed-loop test whose loop was not closed, an open-loop test recorded with
     # the loop closed: named, and left out of every comparison (budget.huddle_screen).
+    # The plant from the commands to the 4QD, flat in the 1–10 Hz band (its value at 5 Hz):
+    # the closed-loop tests then measure how much of that band their loop removed.
+    uc_to_vp = np.real(plant.frequency_response(
+        np.array([5.0]), outputs=("Vph", "Vpv"), inputs=("Uch", "Ucv")).values[0])
     screen = screen_huddles(usable, fs_hz=params.converter.fs_hz,
-                            step_v=params.converter.lsb_v)
+                            step_v=params.converter.lsb_v, uc_to_vp=uc_to_vp)
     checks.extend(screen.checks)
+    notices.extend(Notice("other", "data_huddle_test_1, 2, 4: Vph, Vpv", n)
+                   for n in screen.notes)
     for name, why in screen.excluded.items():
         skipped[name] = f"{why}; the record is left out of the analysis and of every comparison"
         usable.pop(name, None)

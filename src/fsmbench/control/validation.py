@@ -213,6 +213,9 @@ class ClosedLoopValidation:
         ``model_validation``: passed when both ratios are within ``limits``.
     reason : str
         When it fails: which axis, which way, the largest predicted source.
+    action : str
+        When it fails and the records name the cause: what to do first, in words
+        (empty otherwise).
     """
 
     bench: str
@@ -232,6 +235,7 @@ class ClosedLoopValidation:
     check: Check
     reason: str = ""
     predicted_parts_rms_rad: dict[str, dict[str, float]] = field(default_factory=dict)
+    action: str = ""
 
     @property
     def passed(self) -> bool:
@@ -248,7 +252,7 @@ class ClosedLoopValidation:
             "measured_rms_rad": self.measured_rms_rad,
             "predicted_rms_rad": self.predicted_rms_rad,
             "measured_over_predicted": self.ratio, "limits": list(self.limits),
-            "passed": self.passed, "reason": self.reason,
+            "passed": self.passed, "reason": self.reason, "action": self.action,
             "predicted_parts_rms_rad": self.predicted_parts_rms_rad,
         })
 
@@ -288,6 +292,25 @@ def _measured_psd(recordings: Mapping[str, xr.Dataset], names: list[str], *, gd:
         f = np.asarray(cols[0].f_hz, dtype=float)
         psds.append(np.column_stack([c.values for c in cols]))
     return f, np.mean(psds, axis=0), min(periods)
+
+
+def _dead_band(recorded: Mapping[str, xr.Dataset], names: list[str], *, plant: PlantModel,
+               params: BenchParams, gd: FloatArray) -> dict[str, tuple[float, float]]:
+    """Axes whose recorded command moves by less than one DAC step per sample.
+
+    Returns axis -> (one step in beam angle [rad], the command's rms change per sample
+    [steps]), from the records that hold ``Uch``/``Ucv``.
+    """
+    lsb = params.converter.lsb_v
+    dc = np.abs(np.diag(plant.frequency_response(
+        np.array([1.0]), outputs=("Vph", "Vpv"), inputs=("Uch", "Ucv")).values[0]))
+    out: dict[str, tuple[float, float]] = {}
+    for i, (a, signal) in enumerate((("h", "Uch"), ("v", "Ucv"))):
+        moves = [float(np.std(np.diff(np.asarray(recorded[n][signal].values, dtype=float))))
+                 / lsb for n in names if signal in recorded[n]]
+        if moves and max(moves) < 1.0:
+            out[a] = (float(dc[i] * lsb / abs(gd[i])), max(moves))
+    return out
 
 
 def validate_closed_loop(recorded: Mapping[str, xr.Dataset], *,
@@ -365,16 +388,31 @@ def validate_closed_loop(recorded: Mapping[str, xr.Dataset], *,
     ok = all(limits[0] <= r <= limits[1] for r in ratio.values())
     parts_rms = {a: {k: float(math.sqrt(max(v[i], 0.0))) for k, v in parts_var.items()}
                  for i, a in enumerate("hv")}
-    reason = ""
+    reason = action = ""
     if not ok:
         words = []
+        steps = _dead_band(recorded, names, plant=plant, params=params, gd=gd)
         for a in (x for x in "hv" if not limits[0] <= ratio[x] <= limits[1]):
             top = max(parts_rms[a], key=lambda k: parts_rms[a][k])
             what = fine.words.get(top, "mains lines")
-            words.append(f"{a}: recorded {measured_rms[a] * 1e6:.3g} µrad rms against "
-                         f"{predicted_rms[a] * 1e6:.3g} predicted "
-                         f"({'more' if ratio[a] > 1 else 'less'} than the model gives; its "
-                         f"largest source is {what})")
+            said = (f"{a}: recorded {measured_rms[a] * 1e6:.3g} µrad rms against "
+                    f"{predicted_rms[a] * 1e6:.3g} predicted "
+                    f"({'more' if ratio[a] > 1 else 'less'} than the model gives; its "
+                    f"largest source is {what}")
+            step = steps.get(a)
+            if top == "sercalo_dac_quantisation" and step is not None:
+                # A command moving by less than a step per sample meets a dead band, not
+                # white noise: its limit cycles (at the lightly damped resonance above all)
+                # follow the last details of the loop, and no model predicts them to 25 %.
+                said += (f", one step of which is {step[0] * 1e6:.3g} µrad of beam while the "
+                         f"recorded command moves by {step[1]:.2g} step rms per sample: the "
+                         "DAC's rounding is a dead band whose limit cycles set the error; a "
+                         "finer step (a smaller Sercalo current-amplifier gain or DAC span) "
+                         "makes the loop quieter and predictable")
+                action = ("make the Sercalo DAC's step finer (a smaller current-amplifier "
+                          "gain or DAC span): its rounding limit-cycles and sets the recorded "
+                          "error, which no model predicts")
+            words.append(said + ")")
         reason = "; ".join(words)
     worst = max(ratio.values(), key=lambda r: abs(math.log(r)) if 0 < r < math.inf
                 else math.inf)
@@ -390,4 +428,4 @@ def validate_closed_loop(recorded: Mapping[str, xr.Dataset], *,
         band_hz=(float(lo), float(hi)),
         measured_rms_rad=measured_rms, predicted_rms_rad=predicted_rms, ratio=ratio,
         limits=limits, n_periods=n_periods, check=check, reason=reason,
-        predicted_parts_rms_rad=parts_rms)
+        predicted_parts_rms_rad=parts_rms, action=action)

@@ -110,6 +110,8 @@ class Requirement:
     reason : int
         When not verified: its reason's number in the summary's ``reasons``
         (1-based; 0 otherwise), so a reader reads each reason once.
+    action : str
+        When it fails and the evidence names the cause: what to do first, in words.
     """
 
     name: str
@@ -126,6 +128,7 @@ class Requirement:
     provenance_detail: str = ""
     missing: str = ""
     reason: int = 0
+    action: str = ""
 
     @property
     def status(self) -> Status:
@@ -140,7 +143,7 @@ class Requirement:
                 "passed": self.passed, "values": dict(self.values), "unit": self.unit,
                 "limits": dict(self.limits), "provenance": self.provenance,
                 "provenance_detail": self.provenance_detail, "missing": self.missing,
-                "reason": self.reason,
+                "reason": self.reason, "action": self.action,
                 "display": {"value": self.value, "limit": self.limit},
                 "explanation": self.explanation, "link": self.link}
 
@@ -372,7 +375,8 @@ def _validation_requirement(validation: Any, skipped: str) -> Requirement:
                      + (f" {v.reason}." if v.reason else "")),
         link="#validation", values=_hv(v.measured_rms_rad), unit="rad",
         limits={"min": v.limits[0], "max": v.limits[1]}, provenance="measured",
-        provenance_detail=f"recorded in {', '.join(v.experiments)}; compared with {v.bench}")
+        provenance_detail=f"recorded in {', '.join(v.experiments)}; compared with {v.bench}",
+        action=v.action)
 
 
 def _distance_requirement(budget: Any, spec: Specification) -> tuple[Requirement, str, Any]:
