@@ -57,8 +57,8 @@ def _budget(total_m: float, *, huddle: bool = True) -> SimpleNamespace:
         frame=SimpleNamespace(expansion_per_k=23e-6), noise=SimpleNamespace(bits=16))
 
 
-def _validation(ratio: float = 1.02) -> SimpleNamespace:
-    return SimpleNamespace(
+def _validation(ratio: float = 1.02, action: str = "") -> SimpleNamespace:
+    return SimpleNamespace(action=action,
         band_hz=(2.0, 5000.0), measured_rms_rad={"h": 4.0e-5 * ratio, "v": 4.1e-5 * ratio},
         predicted_rms_rad={"h": 4.0e-5, "v": 4.1e-5}, ratio={"h": ratio, "v": ratio},
         limits=(0.8, 1.25), passed=0.8 <= ratio <= 1.25, n_periods=40,
@@ -152,6 +152,17 @@ def test_a_model_that_misses_the_recorded_loop_makes_the_verdict_not_verified() 
     assert s.verdict_status == "not_verified" and s.meets_specifications is None
     assert "does not predict their own closed loop" in s.verdict
     assert "recorded more than the model gives" in s.next_step
+
+
+def test_a_missed_loop_whose_cause_the_records_name_says_what_to_do_first() -> None:
+    # The DAC's rounding limit-cycling (control.validation._dead_band): the action leads.
+    s = _summary(validation=_validation(ratio=0.3, action="make the Sercalo DAC's step "
+                                        "finer (a smaller current-amplifier gain)"))
+    assert s.verdict_status == "not_verified"
+    assert s.next_step.startswith("Next: make the Sercalo DAC's step finer")
+    assert s.verdict.endswith("— first, make the Sercalo DAC's step finer.")
+    row = next(r for r in s.requirements if r.name == "model_validation")
+    assert row.to_json()["action"].startswith("make the Sercalo DAC's step finer")
 
 
 def test_the_distance_limit_is_configurable() -> None:
