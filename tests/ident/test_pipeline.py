@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 import scipy.io
 
-from fsmbench.bench.params import Bench
+from fsmbench.bench.params import Bench, load_bench
 from fsmbench.ident.pipeline import Identification, identify, write_identification
 from fsmbench.twin import TwinRun
 from fsmbench.twin.compare import TARGETS, comparison_rows
@@ -72,7 +72,12 @@ def test_outputs_have_the_truth_schema_and_load_in_matlab_form(identified: Ident
                                                                ident_twin: TwinRun,
                                                                tmp_path: Path) -> None:
     paths = write_identification(identified, tmp_path)
-    assert [p.name for p in paths] == ["identification.json", "plant.mat", "frf.mat"]
+    assert [p.name for p in paths] == ["identification.json", "plant.mat", "frf.mat",
+                                       "bench_identified.toml"]
+    # The bench file that matches the records: read back, it holds the identified values.
+    matching = load_bench(tmp_path / "bench_identified.toml")
+    assert matching.nominal.quad_diode.gain_v_per_rad.h == pytest.approx(
+        identified.qd["h"].gain_v_per_rad, rel=1e-12)  # repr: a float round-trips exactly
     data = json.loads((tmp_path / "identification.json").read_text())
     for key in ("qd_gain_v_per_rad", "current_amp_gain_a_per_v", "sercalo",
                 "newport_gain_v_per_v", "delay_s"):
@@ -123,9 +128,11 @@ def test_record_shorter_than_the_window_is_reported(ident_twin: TwinRun, bench: 
     recs = dict(ident_twin.recordings)
     recs["data_unv"] = recs["data_unv"].isel(t=slice(0, 20000))  # 2 s: 0.5 s after the trim
     result = identify(recs, bench=bench)
-    assert result.newport is None
-    msg = result.skipped["newport"]
-    assert "data_unh, data_unv" in msg and "too short" in msg and "samples" in msg
+    # Each Newport axis from its own record: h stands, v is the bench file's (named).
+    assert result.newport is not None
+    assert result.newport.identified_axes == ("h",) and result.newport.assumed_axes == ("v",)
+    msg = result.skipped["newport_v"]
+    assert "too short" in msg and "20000 samples" in msg and "axis v" in msg
 
 
 def test_excitation_with_no_power_is_reported(ident_twin: TwinRun, bench: Bench) -> None:

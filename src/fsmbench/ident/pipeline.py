@@ -30,20 +30,15 @@ sentence as the reason; every check is in ``checks``.
 
 from __future__ import annotations
 
-import json
 import warnings as pywarnings
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass, field, replace
-from pathlib import Path
-from typing import Any, Literal
+from dataclasses import replace
 
 import control as ct
 import numpy as np
 import xarray as xr
 
-from fsmbench import __version__
 from fsmbench.bench.blocks import (
-    PlantModel,
     assemble_plant,
     coil_impedance,
     current_amplifier,
@@ -53,7 +48,7 @@ from fsmbench.bench.blocks import (
     sercalo,
     voltage_amplifier,
 )
-from fsmbench.bench.params import Bench, BenchParams
+from fsmbench.bench.params import Bench
 from fsmbench.checks import Check, Finding, Notice, first_failure
 from fsmbench.ident.calibration import (
     CurrentAmplifierGain,
@@ -79,32 +74,30 @@ from fsmbench.ident.evidence.departures import (
     matching_datasheet,
     matching_params,
     measured_keys,
+    merged_findings,
 )
-from fsmbench.ident.evidence.matching import MATCHING_BENCH, write_matching_bench
 from fsmbench.ident.evidence.rate import (
-    RateEvidence,
+    controller_rate_check,
     current_amplifier_rate_check,
     records_rate,
 )
 from fsmbench.ident.evidence.recorded_loop import (
-    RateWitness,
-    RecordedController,
     rate_witness,
 )
-from fsmbench.ident.export import write_frf_mat, write_plant_mat
 from fsmbench.ident.fit.modes import ModeRefinement, refine_modes
+from fsmbench.ident.fit.quality import (
+    leakage_corrected,
+    quality_warnings,
+    sensor_shift_notices,
+)
 from fsmbench.ident.fit.truncation import TruncationCheck, truncation_checks
 from fsmbench.ident.frf.compression import (
     CompressionFactors,
     compression_factors,
     correct_compression,
 )
-from fsmbench.ident.frf.leakage import welch_leakage_bias
-from fsmbench.ident.frf.response import FrequencyResponse, with_variance_part
-from fsmbench.ident.frf.welch import hanning
 from fsmbench.ident.newport import (
     NewportIdentification,
-    SensorShift,
     identify_newport,
     newport_checks,
     nominal_newport_axis,
@@ -112,10 +105,17 @@ from fsmbench.ident.newport import (
     sensor_notices,
     unresolved_sensor_shifts,
 )
-from fsmbench.ident.noise_model import NoiseModelFit, fit_noise_model
+from fsmbench.ident.noise_model import fit_noise_model
+from fsmbench.ident.result import (
+    IDENTIFICATION_FORMAT,
+    SEED_TRIMS_S,
+    Identification,
+    IdentifyOptions,
+    path_keyed_summary,
+    write_identification,
+)
 from fsmbench.ident.sercalo import (
     OUTPUTS,
-    SercaloFitOptions,
     SercaloIdentification,
     choose_estimator,
     experiment_frf,
@@ -128,11 +128,8 @@ from fsmbench.ident.totals import (
     qd_amplifier_lags_by_axis,
     uncertainty_tree,
 )
-from fsmbench.ident.uncertainty import Uncertain
 from fsmbench.ident.validate import PathValidation, validate_sercalo
-from fsmbench.io.atomic import atomic_write_text
 from fsmbench.io.folder import check_recording
-from fsmbench.jsonutil import plain_json, stamped
 
 __all__ = [
     "IDENTIFICATION_FORMAT",
@@ -146,284 +143,13 @@ __all__ = [
     "write_identification",
 ]
 
-# The seed's t0 for each experiment (2.1: 1 s, 2.3: 1 s, 2.4: 3 s and 1.5 s).
 #: The records the noise model is fitted to (open-loop huddle tests, seed 3).
 NOISE_EXPERIMENTS = ("data_huddle_test_1", "data_huddle_test_2", "data_huddle_test_4")
 
-SEED_TRIMS_S = {"data_cal_pd_h": 1.0, "data_cal_pd_v": 1.0, "data_uch": 1.0, "data_ucv": 1.0,
-                "data_unh": 3.0, "data_unv": 1.5}
-
 Progress = Callable[[str], None]
-
-#: ``identification.json``'s format and version (docs/results.md); 2: the keys of
-#: ``diagnostics.sercalo.fit_error_rms_relative`` are ``Uch_to_Vph``, not ``Vph/Uch``;
-#: 3: ``noise_model``, the noise fitted to the open-loop huddle tests; 4: ``uncertainty``,
-#: every value with its total std and parts (issue 20), ``effective_delay_s`` and
-#: ``qd_diode_gain_v_per_rad``; ``delay_s.sercalo`` measured on ``Uc → Vc``.
-IDENTIFICATION_FORMAT = ("fsmbench.identification", 4)
 
 _SERCALO_COLUMNS = (("data_uch", "Uch"), ("data_ucv", "Ucv"))
 _NEWPORT_COLUMNS = (("data_unh", "Unh"), ("data_unv", "Unv"))
-
-
-@dataclass(frozen=True)
-class IdentifyOptions:
-    """Options of :func:`identify`.
-
-    Attributes
-    ----------
-    window_s : float
-        Hann window of every Welch estimate [s] (seed: 1 s).
-    trims_s : mapping
-        Seconds removed at the start of each experiment (seed's values).
-    sercalo : SercaloFitOptions
-        Weights and order of the rational fit.
-    newport_band_hz, current_amp_band_hz : (float, float)
-        Averaging bands [Hz] (seed: 10–100 Hz and 20–200 Hz).
-    refine_modes : bool
-        Re-estimate each Sercalo mode's frequency and damping from the time
-        records (:mod:`fsmbench.ident.fit.modes`), which the 1 s window smears.
-    frf : {"auto", "welch", "lpm", "periodic"}
-        FRF estimator of the Sercalo and Newport matrices
-        (:func:`fsmbench.ident.sercalo.experiment_frf`). ``"auto"``: periodic
-        averaging when every experiment's input repeats with a period (three
-        whole periods at least), else Welch, the seed's estimator
-        (:func:`fsmbench.ident.sercalo.choose_estimator`).
-    weights : {"seed", "variance"}
-        Vector-fit weights: the seed's coherence recipe, or the inverse
-        standard deviation of every line (:mod:`fsmbench.ident.fit.parameter_std`; the
-        parameters' standard deviations come with either). Overrides
-        ``sercalo.weights``.
-    transient_periods : mapping of experiment name to int
-        The transient periods of each played excitation (``excitation.json``'s
-        ``transient_periods``, :func:`fsmbench.ident.load.excitation_transients`):
-        periodic averaging drops at least these, more when the data show a
-        transient (default: at least 1).
-    """
-
-    window_s: float = 1.0
-    trims_s: Mapping[str, float] = field(default_factory=lambda: dict(SEED_TRIMS_S))
-    sercalo: SercaloFitOptions = field(default_factory=SercaloFitOptions)
-    newport_band_hz: tuple[float, float] = (10.0, 100.0)
-    current_amp_band_hz: tuple[float, float] = (20.0, 200.0)
-    refine_modes: bool = True
-    frf: Literal["auto", "welch", "lpm", "periodic"] = "auto"
-    weights: Literal["seed", "variance"] = "seed"
-    transient_periods: Mapping[str, int] = field(default_factory=dict)
-
-    def __post_init__(self) -> None:
-        if self.frf not in ("auto", "welch", "lpm", "periodic"):
-            raise ValueError(f"frf must be auto, welch, lpm or periodic, got {self.frf!r}")
-        if self.weights not in ("seed", "variance"):
-            raise ValueError(f"weights must be 'seed' (the ESRF study's coherence recipe) or "
-                             f"'variance', got {self.weights!r}")
-
-    def to_json(self) -> dict[str, Any]:
-        """Plain values."""
-        return {"window_s": self.window_s, "trims_s": dict(self.trims_s),
-                "sercalo": {**self.sercalo.__dict__, "weights": self.weights},
-                "newport_band_hz": list(self.newport_band_hz),
-                "current_amp_band_hz": list(self.current_amp_band_hz),
-                "refine_modes": self.refine_modes, "frf": self.frf, "weights": self.weights,
-                "transient_periods": dict(self.transient_periods)}
-
-
-@dataclass(frozen=True, eq=False)
-class Identification:
-    """Everything section 2 identified, with what it skipped.
-
-    Attributes
-    ----------
-    qd : dict axis -> QdCalibration
-    current_amp : dict axis -> CurrentAmplifierGain
-    sercalo : SercaloIdentification or None
-    modes : ModeRefinement or None
-        Refined modal parameters (None when not run).
-    validation : tuple of PathValidation
-        Time-domain check of the fitted Sercalo model.
-    newport : NewportIdentification or None
-    plant : PlantModel or None
-        The assembled system (2.5); blocks not identified are nominal, see
-        ``plant_blocks``.
-    plant_blocks : dict block -> "identified" | "nominal"
-    skipped : dict step -> reason
-        Steps not run (missing data) or failed (the error message).
-    options : IdentifyOptions
-    source : str
-    warnings : tuple of str
-        Why the results should not be trusted (bad fit, low coherence, no
-        convergence); empty when all quality checks pass.
-    checks : tuple of Check
-        Plausibility checks of the recordings used and of the calibrations;
-        a failed one made its step fall back to the nominal block, and
-        ``skipped`` names it.
-    notices : tuple of Notice
-        Non-fatal findings (saturation, numerical warnings while computing).
-    noise_model : NoiseModelFit or None
-    compression : dict {"sercalo", "newport"} -> CompressionFactors
-        The 4QD's compression each FRF was corrected for.
-    truncation : dict axis -> TruncationCheck
-        The Sercalo's static gains over half the band (:mod:`fsmbench.ident.fit.truncation`).
-    uncertainty : dict key -> Uncertain
-        Every identified value with its total std and its parts, keyed as
-        ``twin_truth.json`` (:mod:`fsmbench.ident.totals`).
-    findings : tuple of Finding
-        Where the records measured the bench other than its bench file states
-        (:mod:`fsmbench.ident.evidence`), each with its bench-file key.
-    recorded_loop : dict axis -> RecordedController
-        The controller the closed-loop records ran.
-    params : BenchParams or None
-        The nominal parameters the steps modelled the bench with: the bench
-        file's, with the signs the records gave.
-    matching : Bench or None
-        The bench file with every value the records measured: what
-        ``bench_identified.toml`` holds.
-    """
-
-    qd: dict[str, QdCalibration]
-    current_amp: dict[str, CurrentAmplifierGain]
-    sercalo: SercaloIdentification | None
-    modes: ModeRefinement | None
-    validation: tuple[PathValidation, ...]
-    newport: NewportIdentification | None
-    plant: PlantModel | None
-    plant_blocks: dict[str, str]
-    skipped: dict[str, str]
-    options: IdentifyOptions
-    source: str
-    warnings: tuple[str, ...] = ()
-    checks: tuple[Check, ...] = ()
-    notices: tuple[Notice, ...] = ()
-    noise_model: NoiseModelFit | None = None
-    compression: dict[str, CompressionFactors] = field(default_factory=dict)
-    truncation: dict[str, TruncationCheck] = field(default_factory=dict)
-    uncertainty: dict[str, Uncertain] = field(default_factory=dict)
-    findings: tuple[Finding, ...] = ()
-    recorded_loop: dict[str, RecordedController] = field(default_factory=dict)
-    params: BenchParams | None = None
-    matching: Bench | None = None
-
-    def uncertain(self, key: str) -> Uncertain | None:
-        """The value of ``key`` (``"sercalo.h.dc_gain_v_per_a"``) with its std and parts."""
-        return self.uncertainty.get(key)
-
-    def largest_part(self, key: str) -> str:
-        """The largest part of the uncertainty of ``key`` ("" when not identified)."""
-        u = self.uncertainty.get(key)
-        return "" if u is None else u.largest_part
-
-    def sercalo_modes(self) -> dict[str, dict[str, float]]:
-        """Resonance and damping per axis: refined when available, else from the fit."""
-        out: dict[str, dict[str, float]] = {}
-        if self.modes is not None:
-            for axis, est in self.modes.by_axis().items():
-                out[axis] = {"resonance_hz": est.resonance_hz,
-                             "damping_ratio": est.damping_ratio,
-                             "resonance_hz_std": est.resonance_hz_std,
-                             "damping_ratio_std": est.damping_ratio_std}
-            return out
-        if self.sercalo is not None:
-            modes = self.sercalo.fit.modes()
-            res = self.sercalo.resonances_hz
-            pstd = self.sercalo.parameter_std
-            for axis, inp in (("h", "Uch"), ("v", "Ucv")):
-                if inp in res and modes:
-                    fr = res[inp]
-                    m = modes[int(np.argmin([abs(x.resonance_hz - fr) for x in modes]))]
-                    out[axis] = {"resonance_hz": m.resonance_hz,
-                                 "damping_ratio": m.damping_ratio,
-                                 "resonance_hz_std": m.resonance_hz_std,
-                                 "damping_ratio_std": m.damping_ratio_std}
-                    if pstd is not None and not pstd.fixed_poles and axis in pstd.std:
-                        # The lines' own variances (noise, distortion), propagated.
-                        out[axis].update(resonance_hz_std=pstd.std[axis]["resonance_hz"],
-                                         damping_ratio_std=pstd.std[axis]["damping_ratio"])
-        return out
-
-    def to_json(self) -> dict[str, Any]:
-        """``twin_truth.json``'s keys for what was identified, plus diagnostics."""
-        out: dict[str, Any] = {"fsmbench_version": __version__, "source": self.source}
-        if self.qd:
-            out["qd_gain_v_per_rad"] = {a: c.gain_v_per_rad for a, c in self.qd.items()}
-        if self.current_amp:
-            out["current_amp_gain_a_per_v"] = {a: g.gain_a_per_v
-                                               for a, g in self.current_amp.items()}
-        if self.sercalo is not None:
-            dc = self.sercalo.dc_gain_v_per_a()
-            modes = self.sercalo_modes()
-            out["sercalo"] = {a: {"resonance_hz": modes[a]["resonance_hz"],
-                                  "damping_ratio": modes[a]["damping_ratio"],
-                                  "dc_gain_v_per_a": dc[a]} for a in modes}
-        if self.newport is not None:
-            known = self.newport.identified_axes
-            out["newport_gain_v_per_v"] = {a: g for a, g in self.newport.gain_v_per_v.items()
-                                           if a in known}
-            dyn = self.newport.dynamics
-            if dyn is not None:
-                out["newport"] = {a: {"natural_freq_hz": dyn.axes[a].natural_freq_hz,
-                                      "damping_ratio": dyn.axes[a].damping_ratio,
-                                      "internal_delay_s": dyn.internal_delay_s(a)}
-                                  for a in known}
-        delays = {}
-        if self.sercalo is not None:
-            delays["sercalo"] = self.sercalo.pure_delay_s
-        if self.newport is not None:
-            delays["newport"] = self.newport.delay_s
-        if delays:
-            out["delay_s"] = delays
-        if self.noise_model is not None:
-            out["noise_model"] = self.noise_model.to_json()
-        # Values the uncertainty tree holds are its own (one value per key, with its std),
-        # nested as the values are (JSON keys are ids: no dots).
-        tree: dict[str, Any] = {}
-        for key, u in sorted(self.uncertainty.items()):
-            node, branch = out, tree
-            *stems, leaf = key.split(".")
-            for stem in stems:
-                node = node.setdefault(stem, {})
-                branch = branch.setdefault(stem, {})
-            node[leaf] = u.value
-            branch[leaf] = u.to_json()
-        out["uncertainty"] = tree
-        out["checks"] = [c.to_json() for c in self.checks]
-        out["notices"] = [n.to_json() for n in self.notices]
-        out["findings"] = [f.to_json() for f in self.findings]
-        out["diagnostics"] = {
-            "qd": {a: c.to_json() for a, c in self.qd.items()},
-            "current_amp": {a: g.to_json() for a, g in self.current_amp.items()},
-            "sercalo": None if self.sercalo is None else path_keyed_summary(self.sercalo.summary()),
-            "sercalo_modes": self.sercalo_modes(),
-            "mode_refinement": None if self.modes is None else self.modes.to_json(),
-            "validation": [v.to_json() for v in self.validation],
-            "newport": None if self.newport is None else self.newport.summary(),
-            "frf_estimator": {name: part.frf.estimator
-                              for name, part in (("sercalo", self.sercalo),
-                                                 ("newport", self.newport)) if part is not None},
-            "frf_columns": {name: {k: dict(v) for k, v in part.frf.column_options.items()}
-                            for name, part in (("sercalo", self.sercalo),
-                                               ("newport", self.newport)) if part is not None},
-            "compression": {k: c.summary() for k, c in self.compression.items()},
-            "sercalo_truncation": {k: c.to_json() for k, c in self.truncation.items()},
-            "plant_blocks": self.plant_blocks,
-            "recorded_loop": {a: r.to_json() for a, r in self.recorded_loop.items()},
-            "skipped": self.skipped,
-            "warnings": list(self.warnings),
-            "options": self.options.to_json(),
-        }
-        return out
-
-
-def path_keyed_summary(summary: dict[str, Any]) -> dict[str, Any]:
-    """``fit_error_rms_relative`` keyed ``Uch_to_Vph`` (input ``_to_`` output), not ``Vph/Uch``:
-    JSON keys are ids, without punctuation."""
-    errors = summary.get("fit_error_rms_relative")
-    if not isinstance(errors, Mapping):
-        return summary
-    renamed = {}
-    for key, value in errors.items():
-        out, slash, inp = str(key).partition("/")
-        renamed[f"{inp}_to_{out}" if slash else str(key)] = value
-    return {**summary, "fit_error_rms_relative": renamed}
 
 
 def _gd_block(qd: Mapping[str, QdCalibration]) -> ct.StateSpace:
@@ -471,7 +197,7 @@ def identify(recordings: Mapping[str, xr.Dataset], *, bench: Bench,
     # file with every measured key set (ident.evidence.departures).
     used = result.params or bench.nominal
     measured = measured_keys(result.to_json(), params=used)
-    found = _merged_findings(result.findings, departures(
+    found = merged_findings(result.findings, departures(
         measured, bench_file=bench.nominal, fs_hz=used.converter.fs_hz))
     result = replace(result, findings=found, matching=replace(
         bench, nominal=matching_params(bench.nominal, measured, result.findings),
@@ -495,39 +221,11 @@ def identify(recordings: Mapping[str, xr.Dataset], *, bench: Bench,
                        f"{c.subject}: {c.title} failed: {c.advice}" for c in failed))
 
 
-def _rate_check(witness: RateWitness, rate: RateEvidence) -> Check:
-    """``rate_vs_controller``: the rate at which the ESRF study's controller explains the
-    closed-loop commands against the rate ``t`` gives (ident.evidence.recorded_loop)."""
-    left = {f: max(1.0 - e, 1e-12) for f, e in witness.explained.items()}
-    own = left[witness.labelled_fs_hz]
-    subject = f"{witness.record}.mat: t, {witness.command}"
-    limit = (f"the ESRF study's controller explains {witness.command} best at t's "
-             f"{witness.labelled_fs_hz:g} Hz")
-    if not witness.contradicts:
-        return Check("rate_vs_controller", True, witness.fs_hz, limit, subject, unit="Hz")
-    factor = witness.fs_hz / witness.labelled_fs_hz
-    others = len(rate.by_record) - 1
-    return Check(
-        "rate_vs_controller", False, witness.fs_hz, limit, subject,
-        f"the controller discretised at {witness.fs_hz:g} Hz leaves {own / left[witness.fs_hz]:.3g}"
-        f"× less of {witness.command} unexplained than at {witness.labelled_fs_hz:g} Hz: the "
-        f"records were sampled at {witness.fs_hz:g} Hz and t was saved with the step of "
-        f"{witness.labelled_fs_hz:g} Hz (×{factor:g} off"
-        + (f", in this record and the {others} others that share its step" if others else "")
-        + "), or the loop ran another controller than the ESRF study's, tuned an octave away; "
-        "every frequency and delay would be off by that factor: check the rate the target "
-        "recorded at, and save t = k / fs with it", unit="Hz")
+_ESTIMATOR_WORDS = {"welch": "Welch H1 (the ESRF study's)",
+                    "lpm": "the local polynomial method", "periodic": "averaging over periods"}
 
+_QD_CHECKS = ("calibration_r2", "calibration_residual", "qd_gain_vs_nominal")
 
-def _merged_findings(signs: tuple[Finding, ...], values: list[Finding]) -> tuple[Finding, ...]:
-    """One finding per key: a value's departure on a key whose sign the records also gave
-    keeps the sign's words and alternatives."""
-    by_key = {f.key: f for f in signs}
-    for f in values:
-        sign = by_key.get(f.key)
-        by_key[f.key] = f if sign is None else replace(
-            f, message=f"{sign.message}; {f.message}", alternatives=sign.alternatives)
-    return tuple(by_key.values())
 
 
 def _failure_reason(check: Check, fallback: str) -> str:
@@ -555,7 +253,7 @@ def _identify(recordings: Mapping[str, xr.Dataset], *, bench: Bench, opts: Ident
     # Two witnesses of the real rate in the physics the records carry: the controller the
     # closed-loop records ran, and the coil path's analog corners (ident.evidence).
     rate_checks = [c for c in (
-        _rate_check(witness, rate) if witness is not None else None,
+        controller_rate_check(witness, rate) if witness is not None else None,
         current_amplifier_rate_check(recordings, params=nom,
                                      trim_s=opts.trims_s.get("data_uch", 1.0)))
         if c is not None]
@@ -700,7 +398,7 @@ def _identify(recordings: Mapping[str, xr.Dataset], *, bench: Bench, opts: Ident
                 skipped["mode_refinement"] = "disabled by option"
             if frf.estimator == "welch":
                 say("2.3 Sercalo: the Welch window's leakage near the modes")
-                sercalo_id = with_frf(sercalo_id, _with_leakage(sercalo_id, opts.window_s,
+                sercalo_id = with_frf(sercalo_id, leakage_corrected(sercalo_id, opts.window_s,
                                                                 unrefined=unrefined),
                                       poles=None if modes is None else modes.poles_by_input())
             validation = validate_sercalo(recordings, sercalo=sercalo_id, trims_s=opts.trims_s)
@@ -793,7 +491,7 @@ def _identify(recordings: Mapping[str, xr.Dataset], *, bench: Bench, opts: Ident
                     shifts = unresolved_sensor_shifts(
                         nfrf, dyn, lag_s=max(lag_s, 0.0) + 1.96 * lag_std_s)
                     newport_id = replace(newport_id, sensor_shifts=shifts)
-                    notices.extend(_sensor_shift_notices(shifts, lag_s=lag_s,
+                    notices.extend(sensor_shift_notices(shifts, lag_s=lag_s,
                                                          noise={a: dyn.axes[a].natural_freq_std_hz
                                                                 for a in dyn.axes}))
             if (dyn := newport_id.dynamics) is not None:
@@ -861,130 +559,4 @@ def _identify(recordings: Mapping[str, xr.Dataset], *, bench: Bench, opts: Ident
         qd=qd, current_amp=gi, sercalo=sercalo_id, modes=result.sercalo_modes(),
         newport=newport_id, compression=compression, nominal=nom, truncation=truncation))
 
-
-def _leakage_bias(sid: SercaloIdentification, window_s: float) -> np.ndarray:
-    """``E[Ĥ] − H`` of the Welch estimate on ``sid.frf``'s lines for ``sid``'s model and
-    delay (:func:`~fsmbench.ident.frf.leakage.welch_leakage_bias`), shape (F, p, m)."""
-    frf = sid.frf
-    delay = sid.delay_s
-
-    def model(f_hz: np.ndarray) -> np.ndarray:
-        return sid.fit.response(f_hz) * np.exp(-2j * np.pi * f_hz * delay)[:, None, None]
-
-    f = frf.frequency_hz
-    bias = np.zeros(frf.frf.shape, dtype=complex)
-    sel = f > 0
-    fit_out = list(sid.fit.output_names)
-    fit_in = list(sid.fit.input_names)
-    b = welch_leakage_bias(model, f[sel], fs_hz=frf.fs_hz,
-                           window=hanning(int(np.ceil(window_s * frf.fs_hz))))
-    rows = [fit_out.index(o) for o in frf.output_names]
-    cols = [fit_in.index(i) for i in frf.input_names]
-    bias[sel] = b[:, rows][:, :, cols]
-    return bias
-
-
-def _with_leakage(sid: SercaloIdentification, window_s: float, *,
-                  unrefined: SercaloIdentification | None) -> FrequencyResponse:
-    """The Sercalo's Welch FRF with its leakage bias near the modes removed, and the
-    correction's uncertainty as a variance part (:mod:`fsmbench.ident.frf.leakage`).
-
-    The bias is the fitted model's (its modes refined on the time records) with its delay.
-    Removed, because a bias only widened still pulls the fit: the lines a few Hz from the
-    vertical mode moved its static gain by +0.7 of its std on every seed (issue 20, 100
-    twin seeds); subtracted, +0.04. The correction's own error is that of the model's
-    modes: bounded by how much the bias changes from the fit's modes before the refinement
-    (the FRF's, leakage-biased: 5-10 % in damping) to the refined ones; without a
-    refinement, by the bias itself."""
-    bias = _leakage_bias(sid, window_s)
-    spread = bias if unrefined is None else bias - _leakage_bias(unrefined, window_s)
-    frf = sid.frf
-    corrected = replace(frf, frf=frf.frf.copy(data=np.asarray(frf.frf.values) - bias))
-    return with_variance_part(corrected, "leakage", np.abs(spread) ** 2)
-
-
-def _sensor_shift_notices(shifts: Mapping[str, SensorShift], *, lag_s: float,
-                          noise: Mapping[str, float]) -> list[Notice]:
-    """Advice where the amplifier's unknown order outweighs the noise on the Newport's
-    natural frequency: the bench file can state it."""
-    out = []
-    for axis, shift in shifts.items():
-        width = shift.half_width["natural_freq_hz"]
-        if width <= noise[axis]:
-            continue
-        out.append(Notice(
-            "other", f"Newport {axis}",
-            f"the delays measure a 4QD amplifier lag of {lag_s * 1e6:.3g} µs that the bench "
-            f"model lacks and the Newport's lines do not resolve; its order moves the "
-            f"Newport's natural frequency by up to {width:.3g} Hz (noise {noise[axis]:.2g} "
-            f"Hz): state quad_diode.bandwidth_hz and bandwidth_order in the bench file's "
-            f"[nominal] to remove it"))
-    return out
-
-
-_ESTIMATOR_WORDS = {"welch": "Welch H1 (the ESRF study's)",
-                    "lpm": "the local polynomial method", "periodic": "averaging over periods"}
-
-_QD_CHECKS = ("calibration_r2", "calibration_residual", "qd_gain_vs_nominal")
-
-
-# Quality limits: the identification issue's 5 % fit target on direct paths;
-# a direct path whose model explains < 90 % of the recorded variance, or a
-# modal fit that did not converge, is not a model to design a controller on.
-MAX_DIRECT_FIT_ERROR = 0.05
-MIN_DIRECT_VAF = 0.9
-
-
-def quality_warnings(*, sercalo: SercaloIdentification | None, modes: ModeRefinement | None,
-                     validation: tuple[PathValidation, ...]) -> tuple[str, ...]:
-    """Why a Sercalo model should not be trusted, one sentence each (empty when good)."""
-    out: list[str] = []
-    if sercalo is None:
-        return ()
-    if not sercalo.fit.converged:
-        out.append(f"vector fitting did not converge in {sercalo.fit.iterations} iterations; "
-                   "the poles may be wrong — check the weights and the excitation")
-    for path in ("Vph/Uch", "Vpv/Ucv"):
-        err = sercalo.fit_error.get(path, float("nan"))
-        if not np.isfinite(err):
-            out.append(f"{path}: no bin with coherence > 0.9 between 10 Hz and 1 kHz; the "
-                       "excitation is too weak for this path — raise its level or lengthen "
-                       "the record")
-        elif err > MAX_DIRECT_FIT_ERROR:
-            out.append(f"{path}: the fit misses the measured FRF by {err:.1%} rms "
-                       f"(limit {MAX_DIRECT_FIT_ERROR:.0%}); more poles or other weights needed")
-    for v in validation:
-        if v.output[-1] == v.input[-1] and v.vaf < MIN_DIRECT_VAF:
-            out.append(f"{v.experiment}: the model explains {v.vaf:.1%} of {v.output}'s "
-                       f"variance (limit {MIN_DIRECT_VAF:.0%})")
-    if modes is not None:
-        for axis, est in modes.estimates.items():
-            if not est.converged:
-                out.append(f"modal estimate of axis {axis} did not converge; its damping is "
-                           "unreliable")
-    return tuple(out)
-
-
-def write_identification(result: Identification, out_dir: str | Path) -> list[Path]:
-    """Write ``identification.json``, ``plant.mat`` and ``frf.mat`` into ``out_dir``.
-
-    Every file is written atomically. ``frf.mat`` holds the measured FRF
-    matrices present (Sercalo and/or Newport); it is not written when none is.
-    """
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
-    name, version = IDENTIFICATION_FORMAT
-    payload = stamped(result.to_json(), format=name, version=version)
-    paths = [atomic_write_text(out / "identification.json",
-                               json.dumps(plain_json(payload), indent=2, sort_keys=True) + "\n")]
-    if result.plant is not None:
-        paths.append(write_plant_mat(out / "plant.mat", result.plant))
-    frfs = {name: part.frf for name, part in (("sercalo", result.sercalo),
-                                                ("newport", result.newport)) if part is not None}
-    if frfs:
-        paths.append(write_frf_mat(out / "frf.mat", frfs))
-    if result.matching is not None:
-        paths.append(write_matching_bench(out / MATCHING_BENCH, result.matching,
-                                          findings=result.findings))
-    return paths
 

@@ -20,7 +20,7 @@ from __future__ import annotations
 import dataclasses
 import math
 from collections.abc import Iterable, Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any, Final
 
 import numpy as np
@@ -30,7 +30,7 @@ from fsmbench.bench.params import BenchParams, Datasheet, NewportDatasheet
 from fsmbench.checks import Check, Finding
 
 __all__ = ["MeasuredKey", "datasheet_departures", "departures", "get_key", "matching_datasheet",
-           "matching_params", "measured_keys", "set_key"]
+           "matching_params", "measured_keys", "merged_findings", "set_key"]
 
 #: The Newport's datasheet checks (ident.newport.newport_checks) by their datasheet key.
 _DATASHEET_KEYS: Final = {"newport_amplitude_bandwidth": "amplitude_bandwidth_hz",
@@ -294,3 +294,14 @@ def matching_datasheet(datasheet: Datasheet, findings: Iterable[Finding]) -> Dat
         if f.key.startswith("datasheet.newport."):
             newport = dataclasses.replace(newport, **{f.key.rsplit(".", 1)[1]: f.measured})
     return dataclasses.replace(datasheet, newport=newport)
+
+
+def merged_findings(signs: tuple[Finding, ...], values: list[Finding]) -> tuple[Finding, ...]:
+    """One finding per key: a value's departure on a key whose sign the records also gave
+    keeps the sign's words and alternatives."""
+    by_key = {f.key: f for f in signs}
+    for f in values:
+        sign = by_key.get(f.key)
+        by_key[f.key] = f if sign is None else replace(
+            f, message=f"{sign.message}; {f.message}", alternatives=sign.alternatives)
+    return tuple(by_key.values())

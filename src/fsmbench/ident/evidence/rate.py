@@ -27,9 +27,10 @@ import xarray as xr
 
 from fsmbench.bench.params import BenchParams
 from fsmbench.checks import Check, Finding
+from fsmbench.ident.evidence.recorded_loop import RateWitness
 
 __all__ = ["AMPLIFIER_RATE_PREFERENCE", "RATE_TOLERANCE", "RateEvidence",
-           "current_amplifier_rate_check", "records_rate"]
+           "controller_rate_check", "current_amplifier_rate_check", "records_rate"]
 
 #: Two rates within this relative difference are one clock (a real-time target's rate
 #: is set to a few ppm; 1 % is the loader's tolerance on a rate from ``t``).
@@ -170,3 +171,27 @@ def current_amplifier_rate_check(recordings: Mapping[str, xr.Dataset], *,
         "off), or the coil circuit is not the bench file's by an octave; every frequency and "
         "delay would be off by that factor: check the rate the target recorded at",
         unit="Hz")
+
+
+def controller_rate_check(witness: RateWitness, rate: RateEvidence) -> Check:
+    """``rate_vs_controller``: the rate at which the ESRF study's controller explains the
+    closed-loop commands against the rate ``t`` gives (ident.evidence.recorded_loop)."""
+    left = {f: max(1.0 - e, 1e-12) for f, e in witness.explained.items()}
+    own = left[witness.labelled_fs_hz]
+    subject = f"{witness.record}.mat: t, {witness.command}"
+    limit = (f"the ESRF study's controller explains {witness.command} best at t's "
+             f"{witness.labelled_fs_hz:g} Hz")
+    if not witness.contradicts:
+        return Check("rate_vs_controller", True, witness.fs_hz, limit, subject, unit="Hz")
+    factor = witness.fs_hz / witness.labelled_fs_hz
+    others = len(rate.by_record) - 1
+    return Check(
+        "rate_vs_controller", False, witness.fs_hz, limit, subject,
+        f"the controller discretised at {witness.fs_hz:g} Hz leaves {own / left[witness.fs_hz]:.3g}"
+        f"× less of {witness.command} unexplained than at {witness.labelled_fs_hz:g} Hz: the "
+        f"records were sampled at {witness.fs_hz:g} Hz and t was saved with the step of "
+        f"{witness.labelled_fs_hz:g} Hz (×{factor:g} off"
+        + (f", in this record and the {others} others that share its step" if others else "")
+        + "), or the loop ran another controller than the ESRF study's, tuned an octave away; "
+        "every frequency and delay would be off by that factor: check the rate the target "
+        "recorded at, and save t = k / fs with it", unit="Hz")
