@@ -78,8 +78,9 @@ def test_identify_writes_its_outputs_and_compares_with_the_truth(
     out = tmp_path / "out"
     assert main(["identify", str(data), "--out", str(out)]) == 0
     captured = capsys.readouterr()
-    assert sorted(p.name for p in out.iterdir()) == ["frf.mat", "identification.json",
-                                                     "plant.mat", "run.json"]
+    assert sorted(p.name for p in out.iterdir()) == ["bench_identified.toml", "frf.mat",
+                                                     "identification.json", "plant.mat",
+                                                     "run.json"]
     # The readable table on stdout: quantities in words with units, the verdict per row.
     rows = {line[:37].strip(): line.split()[-1] for line in captured.out.splitlines()[1:]
             if line.startswith("Sercalo")}

@@ -100,7 +100,8 @@ def _vpv_stuck_at_0v(name: str, sig: dict[str, np.ndarray]) -> bool:
      "either a unit (the record in mV, not V), or a 4QD noise 1000×"),
     (_qd_gain_x10_in_identification_runs, "qd_gain_newport_vs_calibration",
      "data_unh.mat: Vph", "a gain changed by 10"),
-    (_vph_x40_clipped, "sercalo_gain_vs_model", "data_uch.mat: Vph", "ratio"),
+    # The clip itself is named (its gains would read low), never "raise the excitation".
+    (_vph_x40_clipped, "signal_clipped", "data_uch.mat: Vph", "record it again within"),
 ], ids=["Va in mm", "all in mV", "4QD gain x10 in the identification runs",
         "Vph x40 clipped"])
 def test_a_lie_is_a_named_failed_check_and_never_a_pass(

@@ -76,8 +76,12 @@ def test_a_multisine_to_8_khz_resolves_the_4qd_amplifier(recordings: dict) -> No
         # The Newport's pure delay (DAC 1 sample + 35 us latency + hold + 0.35 ms lag: 460 us);
         # 3 us: the fit's ~1 us scatter.
         assert fit.delay_s == pytest.approx(TRUE_DELAYS_S["Unh"], abs=3e-6)
+    # One amplifier feeds both outputs: one finding per bench-file key, with its record.
+    keys = [f.key for f in ident.findings if "quad_diode.bandwidth" in f.key]
+    assert sorted(keys) == ["nominal.quad_diode.bandwidth_hz",
+                            "nominal.quad_diode.bandwidth_order"], keys
     notes = [n.sentence() for n in ident.notices]
-    assert sum("quad_diode.bandwidth_hz" in n for n in notes) == 2, notes
+    assert sum("second-order (Butterworth) low pass at" in n for n in notes) == 1, notes
 
 
 def test_the_resolved_amplifier_makes_the_sercalo_delay_pure(recordings: dict) -> None:

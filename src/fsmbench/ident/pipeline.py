@@ -67,7 +67,11 @@ from fsmbench.ident.crosscheck import (
 )
 from fsmbench.ident.delay.sampled import SensorLowpass
 from fsmbench.ident.delay.sercalo import with_sensor
-from fsmbench.ident.evidence.amplifier import axis_lag_check, decide_amplifier
+from fsmbench.ident.evidence.amplifier import (
+    axis_lag_check,
+    decide_amplifier,
+    with_decided_sensor,
+)
 from fsmbench.ident.evidence.departures import (
     datasheet_departures,
     departures,
@@ -435,9 +439,10 @@ def _identify(recordings: Mapping[str, xr.Dataset], *, bench: Bench, opts: Ident
         newport_fill[axis] = nominal_newport_axis(nom, axis, fs_hz=conv.fs_hz)
     newport_columns = tuple(newport_usable)
     if not newport_columns:
+        # Both absent read as one phrase; otherwise each axis's own reason, h first.
         gone = missing("data_unh", "data_unv")
-        skipped["newport"] = (absent_words(gone) if gone else
-                              "; ".join(skipped.pop(f"newport_{a}") for a in "hv"))
+        skipped["newport"] = (absent_words(gone) if len(gone) == 2 else
+                              "; ".join(skipped[f"newport_{a}"] for a in "hv"))
         skipped.pop("newport_h", None)
         skipped.pop("newport_v", None)
     else:
@@ -471,6 +476,9 @@ def _identify(recordings: Mapping[str, xr.Dataset], *, bench: Bench, opts: Ident
                     converter_delay_s=None if sercalo_id is None else sercalo_id.delay_s,
                     sensor=decision.sensor, resolve_sensor=False, fill=newport_fill),
                     sensor_shifts=decision.shifts)
+                if newport_id.dynamics is not None:
+                    newport_id = replace(newport_id, dynamics=with_decided_sensor(
+                        newport_id.dynamics, decision, axes=newport_id.identified_axes))
                 notices.append(Notice("other", "4QD amplifier", decision.words))
                 amplifier_findings = list(decision.findings)
                 if decision.resolved and sercalo_id is not None and decision.sensor != sensor:

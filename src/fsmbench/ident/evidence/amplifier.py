@@ -38,11 +38,11 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Final
 
 from fsmbench.checks import Check, Finding
-from fsmbench.ident.delay.joint import RESOLVED_LR
+from fsmbench.ident.delay.joint import RESOLVED_LR, SensorEstimate
 from fsmbench.ident.delay.sampled import SensorLowpass
 from fsmbench.ident.frf.response import FrequencyResponse
 from fsmbench.ident.newport import (
@@ -53,7 +53,7 @@ from fsmbench.ident.newport import (
 )
 
 __all__ = ["AXIS_LAG_SIGMAS", "LAG_SIGMAS", "AmplifierDecision", "axis_lag_check",
-           "decide_amplifier"]
+           "decide_amplifier", "with_decided_sensor"]
 
 #: A lag is measured when it is above this many of its standard deviations.
 LAG_SIGMAS: Final = 3.0
@@ -210,6 +210,31 @@ def decide_amplifier(frf: FrequencyResponse, dyn: NewportDynamics, *, lag_s: flo
                f"{_ORDER_WORDS[best]} low pass at {bw:.4g} ± {bw_std:.2g} Hz, and the "
                "Newport's parameters carry the lag's std as a bound"),
         findings=tuple(findings))
+
+
+def with_decided_sensor(dyn: NewportDynamics, decision: AmplifierDecision, *,
+                        axes: tuple[str, ...]) -> NewportDynamics:
+    """The Newport refitted with a resolved decision's amplifier, each identified axis
+    saying so: source ``"fitted"`` (the records decide it), the bandwidth's std from the
+    lag's, and how much worse the other order fits. Unchanged when not resolved.
+
+    Parameters
+    ----------
+    dyn : NewportDynamics
+        The refit with ``decision.sensor`` held fixed.
+    decision : AmplifierDecision
+    axes : tuple of str
+        The axes the records gave (an assumed axis keeps the bench file's label).
+    """
+    sensor = decision.sensor
+    if not decision.resolved or sensor is None or decision.lag_s <= 0:
+        return dyn
+    bw_std = sensor.bandwidth_hz * decision.lag_std_s / decision.lag_s
+    estimate = SensorEstimate(order=sensor.order, bandwidth_hz=sensor.bandwidth_hz,
+                              source="fitted", bandwidth_std_hz=bw_std,
+                              lower_bound_hz=math.nan, likelihood_ratio=decision.order_lr)
+    return replace(dyn, axes={a: (replace(fit, sensor=estimate) if a in axes else fit)
+                              for a, fit in dyn.axes.items()})
 
 
 #: The two axes' 4QD lags (one amplifier feeds both outputs) agree within this many
