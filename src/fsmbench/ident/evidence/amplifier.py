@@ -200,9 +200,11 @@ def decide_amplifier(frf: FrequencyResponse, dyn: NewportDynamics, *, lag_s: flo
             Finding("nominal.quad_diode.bandwidth_hz", model.bandwidth_hz, bw, "Hz", records,
                     f"the 4QD amplifier: {lag_words}, and the Newport's lines choose its "
                     f"order ({_ORDER_WORDS[other]} fits {lr:.3g} noise units worse): a "
-                    f"{_ORDER_WORDS[best]} low pass at {bw:.4g} ± {bw_std:.2g} Hz", bw_std),
-            Finding("nominal.quad_diode.bandwidth_order", float(model.order), float(best), "1",
-                    records, f"the 4QD amplifier's order ({_ORDER_WORDS[best]})")]
+                    f"{_ORDER_WORDS[best]} low pass at {bw:.4g} ± {bw_std:.2g} Hz", bw_std)]
+        if not (model.limited and model.order == best):
+            findings.append(Finding(
+                "nominal.quad_diode.bandwidth_order", float(model.order), float(best), "1",
+                records, f"the 4QD amplifier's order ({_ORDER_WORDS[best]})"))
     return AmplifierDecision(
         lag_s, lag_std_s, sensor, True, lr, shifts,
         words=(f"{lag_words}; the Newport's lines choose a {_ORDER_WORDS[best]} low pass "
