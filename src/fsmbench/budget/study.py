@@ -25,7 +25,7 @@ import numpy as np
 import xarray as xr
 
 from fsmbench.bench.blocks import PlantModel, newport_beam_matrix, physical_plant
-from fsmbench.bench.params import Bench, BenchParams
+from fsmbench.bench.params import Bench, BenchParams, PerAxis
 from fsmbench.budget.environment import AirBudget, FrameBudget, air_budget, frame_budget
 from fsmbench.budget.huddle import (
     HUDDLE_CONFIGS,
@@ -295,6 +295,7 @@ def _budget_study(recordings: Mapping[str, xr.Dataset], *, bench: Bench,
                   controller_name: str = "") -> BudgetResult:
     params, measured = _measured_params(bench.nominal, noise_model)
     plant = physical_plant(params, source="physical (nominal)") if plant is None else plant
+    params = _with_plant_qd_gain(params, plant)
     if controller is None:
         controller = tustin(seed_decentralised_controller(), ts_s=params.converter.ts_s)
         controller_name = "ESRF study 9.2 K, Tustin at 1/fs (9.3)"
@@ -522,6 +523,21 @@ def huddle_cross_checks(huddle: HuddleAnalysis, *, predicted_va_rms_m: Mapping[i
                 f"measured {rms * 1e3:.4g} mV rms with nothing moving where the bench file's 4QD, "
                 f"Newport and ADC noise give {model * 1e3:.3g} mV: {cause}", unit="×"))
     return out
+
+
+def _with_plant_qd_gain(params: BenchParams, plant: PlantModel) -> BenchParams:
+    """``params`` with the 4QD gain of the plant the budget runs on (its ``Gd``).
+
+    Volts become radians with one gain everywhere: the huddle tests' Newport share and the
+    4QD noise in radians with the plant's own (an identified 4QD five times the bench
+    file's once read the Newport's share 5× low and the 4QD's noise 35 % high)."""
+    if "Gd" not in plant.blocks:
+        return params
+    gd = np.diag(np.asarray(plant.blocks["Gd"].D, dtype=float))
+    if gd.shape != (2,) or not np.all(np.isfinite(gd)) or np.any(gd == 0):
+        return params
+    return replace(params, quad_diode=replace(
+        params.quad_diode, gain_v_per_rad=PerAxis(h=float(gd[0]), v=float(gd[1]))))
 
 
 def _measured_params(params: BenchParams, noise_model: Any) -> tuple[BenchParams, dict[str, str]]:
