@@ -368,7 +368,10 @@ def _validation_requirement(validation: Any, skipped: str) -> Requirement:
         value=(f"{_pair(v.measured_rms_rad, '.3g', 1e6)} µrad rms recorded, "
                f"{_pair(v.predicted_rms_rad, '.3g', 1e6)} predicted; ratio "
                f"{_pair(v.ratio, '.2f')}"),
-        limit=f"recorded / predicted within {v.limits[0]:g}–{v.limits[1]:g}",
+        limit=(f"recorded / predicted within {v.limits[0]:g}–{v.limits[1]:g}"
+               + (", widened by the records' scatter to " + " / ".join(
+                   f"{band[0]:.2f}–{band[1]:.2f}" for band in accepted.values())
+                  if (accepted := getattr(v, "accepted", None)) else "")),
         passed=v.passed,
         explanation=(f"{lo:g} Hz to {hi:g} Hz, {v.n_periods} periods; predicted by simulating "
                      f"{', '.join(v.experiments)} on {v.bench} with {v.controller}."

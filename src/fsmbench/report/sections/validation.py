@@ -71,7 +71,12 @@ def validation_subsection(v: Any | None, *, skipped: str) -> Section:
          f"V/rad), and analysed identically. The recorded rms is "
          + " and ".join(f"{v.ratio[a]:.2f}" for a, *_ in _AXES)
          + f" times the predicted one (h and v), {verdict} the accepted "
-           f"{v.limits[0]:g}–{v.limits[1]:g}."
+           f"{v.limits[0]:g}–{v.limits[1]:g}"
+         + (" widened by the records' own scatter (each rms is an estimate from "
+            f"{v.n_periods} periods): "
+            + ", ".join(f"{a} {lo_:.2f}–{hi_:.2f}" for a, (lo_, hi_) in v.accepted.items())
+            if v.accepted else "")
+         + "."
          + (f" {v.reason}." if v.reason else "")),
         Table(caption=f"Tracking-error rms, {v.band_hz[0]:g}–{v.band_hz[1]:g} Hz",
               header=("axis", "recorded [µrad]", "predicted [µrad]", "recorded / predicted"),
