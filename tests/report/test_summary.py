@@ -160,6 +160,8 @@ def test_a_missed_loop_whose_cause_the_records_name_says_what_to_do_first() -> N
                                         "finer (a smaller current-amplifier gain)"))
     assert s.verdict_status == "not_verified"
     assert s.next_step.startswith("Next: make the Sercalo DAC's step finer")
+    # The reason is the row's, said once: the next step does not repeat it.
+    assert len(s.next_step.split()) <= 40, s.next_step
     assert s.verdict.endswith("— first, make the Sercalo DAC's step finer.")
     row = next(r for r in s.requirements if r.name == "model_validation")
     assert row.to_json()["action"].startswith("make the Sercalo DAC's step finer")

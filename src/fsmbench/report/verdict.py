@@ -82,7 +82,9 @@ def next_step(*, status: str, requirements: Sequence[Requirement], budget: Any |
     """
     model = next((r for r in requirements if r.name == "model_validation"), None)
     if model is not None and model.passed is False and model.action:
-        return f"Next: {model.action}. " + (model.explanation or model.value)
+        # The numbers and the mechanism are the model's row: said once, there.
+        return (f"Next: {model.action}. The model's row below gives the recorded and "
+                "predicted numbers.")
     if model is not None and model.passed is False:
         return ("Next: find why the model misses the recorded loop before trusting any "
                 "prediction: " + (model.explanation or model.value) + " Check the 4QD gains "
