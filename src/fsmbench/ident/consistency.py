@@ -444,11 +444,16 @@ def _swap_cause(a: AxisRatio, axes: Mapping[str, AxisRatio],
         other_mode = (own is not None and far is not None and np.isfinite(a.mode_hz)
                       and abs(a.mode_hz - far) < abs(a.mode_hz - own))
         if both and coils_follow and other_mode:
+            # The records are self-consistent either way: exchanging files when the coils
+            # were crossed would hide a wiring fault, so no data-changing advice.
             return (f"the two runs hold each other's axis: {a.experiment}.mat excites the "
                     f"{a.mode_hz:.0f} Hz mode, the bench file's {'hv'[1 - axis]} mode, and its "
-                    "coil monitor follows its command: the two files exchanged (the other "
-                    "run saved under this name); not the DAC cables, which would leave this "
-                    "file's coil monitor still: exchange the two files")
+                    "coil monitor follows its command: either the amplifiers drive each "
+                    "other's axis (the cables from the current amplifiers to the coils "
+                    "swapped for these runs), or the two files exchanged with their variables "
+                    "renamed; not the DAC's cables, which would leave this file's coil monitor "
+                    "still; the records cannot tell the two: check which coil each amplifier "
+                    "drives before changing any file")
         if both and coils_follow:
             return ("the Sercalo's two runs move each other's 4QD axis while their coil "
                     "monitors follow their own commands and each excites its own axis's mode: "
