@@ -132,7 +132,7 @@ CAUSE_PATTERNS: dict[str, tuple[str, ...]] = {
     "dac_swap": (
         r"\bDAC cables?(?: are| were)? swapped", r"swapped DAC cable", r"drove the other axis",
         r"drive each other's axis", r"swept the other axis", r"\bcables? \([^)]*\) or the two",
-        r"\blikely a swap\b"),
+        r"\bdrive cables? \([^)]*\) (?:exchanged|swapped)", r"\blikely a swap\b"),
     "files_exchanged": (
         r"other axis's run saved as", r"\bor the two (?:\w+ )?files\b",
         r"\bfiles? (?:are |were )?(?:exchanged|swapped|mixed up)"),
@@ -161,7 +161,8 @@ CAUSE_PATTERNS: dict[str, tuple[str, ...]] = {
         r"\bno controller output\b"),
     "duplicated_channel": (r"\bduplicat", r"\bVpv (?:is |equals |holds )(?:a copy of )?Vph",
                            r"\bsame channel\b", r"\bidentical channels?\b",
-                           r"\bequal to Vph\b"),
+                           r"\bequal to Vph\b", r"\bholds the same samples as\b",
+                           r"\bone channel recorded twice\b"),
     "mains": (r"\bmains\b", r"\b(?:50|60) Hz (?:line|pick-?up|hum)", r"\bhum\b",
               r"\bline frequency\b"),
     "delayed_channel": (r"\bdelayed (?:by|against)\b", r"\bchannels? (?:are )?(?:misaligned|"

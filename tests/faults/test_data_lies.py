@@ -180,3 +180,22 @@ def test_random_unit_and_sign_mistakes_never_meet_the_specifications(
 
     summary = _study(records, tmp_path_factory.mktemp("mistake"), mutate)
     assert summary["verdict_status"] != "meets", (file, signal, factor, summary["verdict"])
+
+
+def _vph_negated_in_rep_h(name: str, sig: dict[str, np.ndarray]) -> bool:
+    if name != "data_rep_h":
+        return False
+    sig["Vph"] = -sig["Vph"]
+    return True
+
+
+def test_a_closed_loop_record_its_model_cannot_run_is_named_and_the_study_goes_on(
+        records: TwinRun, tmp_path: Path) -> None:
+    # Issue 30's matrix: Vph negated in data_rep_h alone stopped the whole study (exit 2,
+    # "controller 'seed K (9.2)' does not stabilise the bench identified …").
+    summary = _study(records, tmp_path, _vph_negated_in_rep_h)
+    assert summary["verdict_status"] != "meets", summary["verdict"]
+    row = next(r for r in summary["requirements"] if r["name"] == "model_validation")
+    assert row["passed"] is not True
+    if row["passed"] is None:  # the model cannot run the record's loop: named, not a crash
+        assert "data_rep_h" in row["missing"], row
