@@ -166,7 +166,8 @@ CAUSE_PATTERNS: dict[str, tuple[str, ...]] = {
     "mains": (r"\bmains\b", r"\b(?:50|60) Hz (?:line|pick-?up|hum)", r"\bhum\b",
               r"\bline frequency\b"),
     "delayed_channel": (r"\bdelayed (?:by|against)\b", r"\bchannels? (?:are )?(?:misaligned|"
-                        r"shifted|skewed)", r"\bsamples? late\b", r"\bout of step\b"),
+                        r"shifted|skewed)", r"\bsamples? late\b", r"\bout of step\b",
+                        r"\bchannels? (?:were|was) delayed\b"),
     "too_short": (r"\btoo short\b", r"\bnothing left after\b", r"\bnot enough samples\b",
                   r"\bneeds? at least\b", r"\bshorter than\b"),
     "missing_or_unreadable": (

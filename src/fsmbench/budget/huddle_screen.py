@@ -149,13 +149,19 @@ def screen_huddles(recordings: Mapping[str, xr.Dataset], *, fs_hz: float, step_v
                          and _same_samples(recordings[o], recordings[name])), None)
         if original is None:
             continue
+        # A closed-loop test holding an open one's samples with its commands at zero: the
+        # loop did not run, whichever file was saved under its name.
+        idle = name in _CLOSED and original in _OPEN and _commands_zero(recordings[name])
+        how = (f"; its commands Uch, Ucv are zero throughout: the loop was not closed (the "
+               f"controller off), so the open-loop test {original} stands under the "
+               "closed-loop test's name" if idle else "")
         check = Check(
             "huddle_distinct", False, "the same samples", f"different samples from "
             f"{original}.mat (two recordings of noise are never equal)", f"{name}.mat",
             f"{name}.mat holds the same samples as {original}.mat (Vph, Vpv, Va): the same "
-            "recording saved under two names; it is left out, since compared with "
+            f"recording saved under two names{how}; it is left out, since compared with "
             f"{original} it would say the change between the two tests does nothing: "
-            f"record {name} again", unit="")
+            f"record {name} again" + (" with the loop closed" if idle else ""), unit="")
         checks.append(check)
         excluded[name] = check.sentence()
     loops = recorded_controllers({n: recordings[n] for n in _CLOSED if n in recordings},
@@ -224,6 +230,11 @@ def screen_huddles(recordings: Mapping[str, xr.Dataset], *, fs_hz: float, step_v
             if not ok:
                 excluded[name] = check.sentence()
     return HuddleScreen(tuple(checks), excluded, tuple(notes))
+
+
+def _commands_zero(ds: xr.Dataset) -> bool:
+    """Both commands present and zero on every sample."""
+    return all(c in ds and not np.any(np.asarray(ds[c].values)) for c in ("Uch", "Ucv"))
 
 
 def _injection(recordings: Mapping[str, xr.Dataset], excluded: Mapping[str, str],

@@ -25,6 +25,10 @@ fails it is skipped *with the check's name as the reason*:
 ``va_continuous``     ``Va`` of a huddle or repeatability record has no single-sample step
                       above 10 robust standard deviations of its increments (fringe loss:
                       :mod:`fsmbench.io.va_jumps`), the sample, time and size named
+``channels_distinct``, ``signal_clipped``, ``signal_frozen``, ``record_padded``
+                      what a channel's own samples say about it: recorded twice,
+                      clipped, frozen for a stretch, zeros after the record's end
+                      (:mod:`fsmbench.io.channels`)
 
 A name that is there but is not a readable file (a directory, a symbolic link
 that loops or points nowhere) is named as what it is, not as missing.
@@ -45,6 +49,7 @@ import numpy as np
 import xarray as xr
 
 from fsmbench.checks import Check, Notice
+from fsmbench.io.channels import clipped_signals, copied_channels, frozen_segments
 from fsmbench.io.duplicates import compare_files, other_files
 from fsmbench.io.errors import RecordingError, SaturationWarning
 from fsmbench.io.folder_names import folder_hints, not_a_file
@@ -332,68 +337,10 @@ def _check_recording(ds: xr.Dataset, *, name: str | None, fs_hz: float | None,
             if ok and v in required:  # jumps in a Va that is not in metres say nothing more
                 checks.append(jump_check(ds, subject))
     if short is None or short.passed:
-        checks += _copied_channels(ds, label)
-        checks += _clipped(ds, exp, label, lsb)
+        checks += copied_channels(ds, label)
+        checks += clipped_signals(ds, exp, label, lsb)
+        checks += frozen_segments(ds, label)
     return checks, notices
-
-
-#: The noise runs: their excitation is random, so a measured signal that passes it on is
-#: never flat at its extremes (a sine spends a share of its samples at its top code).
-_NOISE_RUNS: Final = ("data_uch", "data_ucv", "data_unh", "data_unv")
-#: A signal with at least this share of its samples at its largest (or smallest) value is
-#: clipped: Gaussian noise of 10^5 samples puts 1 there, a record clipped at 30 % of its
-#: peak ~30 % (its gain then reads 16 % low).
-CLIPPED_SHARE: Final = 0.005
-#: Signals spanning fewer converter steps than this are not judged: a few codes are
-#: each visited often, clipped or not.
-CLIPPED_MIN_STEPS: Final = 64
-
-
-def _in_memory(x: Any) -> bool:
-    return not type(x).__module__.startswith("dask")
-
-
-def _copied_channels(ds: xr.Dataset, label: str) -> list[Check]:
-    """``channels_distinct``: two measured channels of one record holding the same samples."""
-    names = [str(v) for v in ds.data_vars if str(v) in ADC_SIGNALS and _in_memory(ds[v].data)]
-    out = []
-    for i, a in enumerate(names):
-        for b in names[i + 1:]:
-            x, y = np.asarray(ds[a].values), np.asarray(ds[b].values)
-            if x.shape == y.shape and np.ptp(x) > 0 and np.array_equal(x, y):
-                out.append(Check(
-                    "channels_distinct", False, "the same samples", "two channels, two signals",
-                    f"{label}: {a}, {b}",
-                    f"{b} holds the same samples as {a}: one channel recorded twice (a cable "
-                    f"split to both inputs, or the save writing {a} twice); the records "
-                    f"cannot tell which: record it again with {a} and {b} on their own channels"))
-    return out
-
-
-def _clipped(ds: xr.Dataset, exp: str, label: str, lsb: float) -> list[Check]:
-    """``signal_clipped``: a measured signal of a noise run flat at its extremes."""
-    if exp not in _NOISE_RUNS:
-        return []
-    out = []
-    for var in ds.data_vars:
-        v = str(var)
-        if v not in ADC_SIGNALS or not _in_memory(ds[v].data):
-            continue
-        x = np.asarray(ds[v].values, dtype=float)
-        lo, hi = float(np.min(x)), float(np.max(x))
-        if x.size == 0 or (hi - lo) < CLIPPED_MIN_STEPS * lsb:
-            continue
-        share = max(float(np.mean(x >= hi)), float(np.mean(x <= lo)))
-        ok = share < CLIPPED_SHARE
-        out.append(Check(
-            "signal_clipped", ok, share, f"< {CLIPPED_SHARE:g} of the samples at its largest or "
-            "smallest value (a noise run's signal is never flat at its extremes)",
-            f"{label}: {v}",
-            "" if ok else f"{v} sits at {hi:+.4g} V or {lo:+.4g} V on {100 * share:.3g} % of its "
-            "samples: clipped below the converter's range (an amplifier's or a channel's "
-            "limit, or a saturation in the target); its gains would read low: record it "
-            "again within the limit", unit="×"))
-    return out
 
 
 def _length_check(ds: xr.Dataset, exp: str, label: str) -> Check | None:
