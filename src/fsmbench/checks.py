@@ -44,6 +44,8 @@ CHECK_TITLES: dict[str, str] = {
     "newport_peaking": "Newport resonance peaking",
     "newport_phase_bandwidth": "Newport phase bandwidth",
     "noise_floor_across_files": "4QD noise floor across files",
+    "plant_output_error": "the plant's response to the recorded commands against the 4QD "
+                          "readings",
     "qd_gain_newport_vs_calibration": "4QD gain seen by the Newport experiments against "
                                       "the calibration's",
     "open_loop_record": "an open-loop run recorded open",

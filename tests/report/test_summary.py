@@ -167,6 +167,34 @@ def test_a_missed_loop_whose_cause_the_records_name_says_what_to_do_first() -> N
     assert row.to_json()["action"].startswith("make the Sercalo DAC's step finer")
 
 
+def test_a_dead_band_the_plant_explains_gives_a_verdict_from_the_other_rows() -> None:
+    # control.validation: the loop's rms missed by a DAC dead band while the plant predicts
+    # the records from their own commands (control.compare) -> the model row passes, and
+    # the verdict is the other rows' (here fsmbench's loop simulated 2.6x its linear
+    # prediction: does not meet), led by the records' action.
+    action = "make the Sercalo DAC's step finer (a smaller current-amplifier gain)"
+    plant = SimpleNamespace(check=Check("plant_output_error", True, 1.04, "≤ 2×", unit="×"))
+    validation = SimpleNamespace(
+        **{**vars(_validation(ratio=0.3, action=action)), "passed": True,
+           "reason": "h: recorded less than the model gives (a dead band); the plant itself "
+                     "predicts the recorded 4QD readings", "plant_check": plant,
+           "check": SimpleNamespace(limit="…; where the DAC's dead band sets the error, "
+                                          "the plant's output error within its limit")})
+    design = _design(1.2e-4)
+    design["closed_loop_twin"]["measured_over_predicted"] = {"h": 2.65, "v": 2.01}
+    s = build_summary(
+        source="test", is_twin=False, spec=Specification(), skipped={}, n_experiments=13,
+        n_read=13, checks=(), identification={"ran": True, "warnings": [], "skipped": {}},
+        plant_source="identified", plant_identified=True, budget=_budget(2.25e-9),
+        design=design, validation=validation)
+    assert s.verdict_status == "does_not_meet", s.verdict
+    assert "closed loop" in s.verdict and "2.65" in s.verdict
+    assert s.next_step.startswith("Next: make the Sercalo DAC's step finer")
+    row = next(r for r in s.requirements if r.name == "model_validation")
+    assert row.passed is True and "output error 1.04× the noise" in row.value
+    assert "dead band" in row.limit
+
+
 def test_the_distance_limit_is_configurable() -> None:
     s = build_summary(source="t", is_twin=True, spec=Specification(distance_error_max_m=2e-9),
                       skipped={}, n_experiments=13, n_read=13, identification=None,

@@ -367,11 +367,15 @@ def _validation_requirement(validation: Any, skipped: str) -> Requirement:
         name="model_validation", description=description,
         value=(f"{_pair(v.measured_rms_rad, '.3g', 1e6)} µrad rms recorded, "
                f"{_pair(v.predicted_rms_rad, '.3g', 1e6)} predicted; ratio "
-               f"{_pair(v.ratio, '.2f')}"),
+               f"{_pair(v.ratio, '.2f')}"
+               + (f"; the plant's output error {plant.check.value_words()} the noise"
+                  if (plant := getattr(v, "plant_check", None)) is not None else "")),
         limit=(f"recorded / predicted within {v.limits[0]:g}–{v.limits[1]:g}"
                + (", widened by the records' scatter to " + " / ".join(
                    f"{band[0]:.2f}–{band[1]:.2f}" for band in accepted.values())
-                  if (accepted := getattr(v, "accepted", None)) else "")),
+                  if (accepted := getattr(v, "accepted", None)) else "")
+               + ("; under a DAC dead band, the plant's output error ≤ 2× the noise"
+                  if "dead band" in getattr(getattr(v, "check", None), "limit", "") else "")),
         passed=v.passed,
         explanation=(f"{lo:g} Hz to {hi:g} Hz, {v.n_periods} periods; predicted by simulating "
                      f"{', '.join(v.experiments)} on {v.bench} with {v.controller}."

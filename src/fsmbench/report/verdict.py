@@ -91,6 +91,10 @@ def next_step(*, status: str, requirements: Sequence[Requirement], budget: Any |
                 "the recorded loop divided by and the huddle tests' noise against the "
                 "repeatability records' (section 11).")
     failed = [r for r in requirements if r.passed is False]
+    if failed and model is not None and model.action:
+        # A verified model whose records name the bench's flaw (a DAC dead band): the
+        # flaw is what to fix before any redesign.
+        return f"Next: {model.action}. The model's row below says why."
     if failed:
         first = failed[0]
         if first.name == "distance_error_budget" and budget is not None \
