@@ -191,7 +191,7 @@ def test_a_dead_band_the_plant_explains_gives_a_verdict_from_the_other_rows() ->
     assert "closed loop" in s.verdict and "2.65" in s.verdict
     assert s.next_step.startswith("Next: make the Sercalo DAC's step finer")
     row = next(r for r in s.requirements if r.name == "model_validation")
-    assert row.passed is True and "output error 1.04× the noise" in row.value
+    assert row.passed is True and "plant output error 1.04× the noise" in row.value
     assert "dead band" in row.limit
 
 

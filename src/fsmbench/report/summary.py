@@ -368,7 +368,7 @@ def _validation_requirement(validation: Any, skipped: str) -> Requirement:
         value=(f"{_pair(v.measured_rms_rad, '.3g', 1e6)} µrad rms recorded, "
                f"{_pair(v.predicted_rms_rad, '.3g', 1e6)} predicted; ratio "
                f"{_pair(v.ratio, '.2f')}"
-               + (f"; the plant's output error {plant.check.value_words()} the noise"
+               + (f"; plant output error {plant.check.value_words()} the noise"
                   if (plant := getattr(v, "plant_check", None)) is not None else "")),
         limit=(f"recorded / predicted within {v.limits[0]:g}–{v.limits[1]:g}"
                + (", widened by the records' scatter to " + " / ".join(
