@@ -43,15 +43,16 @@ from typing import Any, Final
 
 import numpy as np
 import scipy.fft
-import scipy.signal
 import xarray as xr
 from numpy.typing import NDArray
 
 from fsmbench.bench.blocks import PlantModel
 from fsmbench.checks import Check
+from fsmbench.ident.frf.welch import hanning, pwelch
 from fsmbench.jsonutil import plain_json
 
-__all__ = ["BANDS_HZ", "MAX_EXCESS", "OutputErrorCheck", "output_error_check"]
+__all__ = ["BANDS_HZ", "MAX_EXCESS", "OutputErrorCheck", "output_error_check",
+           "without_mean_period"]
 
 FloatArray = NDArray[np.float64]
 
@@ -125,15 +126,30 @@ def _slowest_decay_s(plant: PlantModel) -> float:
     return 1.0 / min(rates) if rates else 0.0
 
 
-def _welch(x: FloatArray, *, fs_hz: float, period: int) -> tuple[FloatArray, FloatArray]:
-    f, p = scipy.signal.welch(x, fs=fs_hz, window="hann", nperseg=period,
-                              noverlap=period // 2, detrend="constant", axis=0)
-    return np.asarray(f), np.asarray(p)
+def without_mean_period(x: FloatArray, period: int) -> tuple[FloatArray, int]:
+    """``x`` (n, k) cut to whole periods, less its mean period, and the number of periods."""
+    n = x.shape[0] // period
+    whole = x[: n * period].reshape(n, period, x.shape[1])
+    return (whole - whole.mean(axis=0, keepdims=True)).reshape(n * period, x.shape[1]), n
+
+
+def _psd(x: FloatArray, *, fs_hz: float, period: int, name: str) -> tuple[FloatArray, FloatArray]:
+    """One-sided PSD of ``Vph, Vpv`` (columns of ``x``, mean removed): Hann of one period."""
+    window = hanning(period)
+    x = x - x.mean(axis=0)
+    cols = [pwelch(x[:, i], window=window, nfft=period, fs_hz=fs_hz, x_name=f"{name} {c}")
+            for i, c in enumerate(("Vph", "Vpv"))]
+    return np.asarray(cols[0].f_hz, dtype=float), np.column_stack([c.values for c in cols])
 
 
 def _predicted(ds: xr.Dataset, plant: PlantModel, *, fs_hz: float, lsb_v: float,
-               span_v: float) -> tuple[FloatArray, FloatArray, bool]:
-    """``(Vp recorded (n, 2), Vp predicted (n, 2), commands rounded)``, means removed."""
+               span_v: float, responses: dict[int, NDArray[np.complex128]]
+               ) -> tuple[FloatArray, FloatArray, bool]:
+    """``(Vp recorded (n, 2), Vp predicted (n, 2), commands rounded)``, means removed.
+
+    ``responses``: the plant's response per FFT length, filled here (the two records
+    of a study share one length, and the response is most of the cost).
+    """
     u = np.column_stack([np.asarray(ds[c].values, dtype=float) for c in _COMMANDS])
     on_grid = np.round(u / lsb_v) * lsb_v
     rounded = bool(np.max(np.abs(u - on_grid)) > 1e-6 * lsb_v)
@@ -142,11 +158,13 @@ def _predicted(ds: xr.Dataset, plant: PlantModel, *, fs_hz: float, lsb_v: float,
     vp = np.column_stack([np.asarray(ds[c].values, dtype=float) for c in ("Vph", "Vpv")])
     n = u.shape[0]
     m = scipy.fft.next_fast_len(2 * n, real=True)
-    f = np.fft.rfftfreq(m, 1.0 / fs_hz)
-    h = plant.frequency_response(f[1:], outputs=("Vph", "Vpv"), inputs=_COMMANDS).values
+    if m not in responses:
+        f = np.fft.rfftfreq(m, 1.0 / fs_hz)
+        responses[m] = plant.frequency_response(f[1:], outputs=("Vph", "Vpv"),
+                                                inputs=_COMMANDS).values
     spectrum = np.fft.rfft(u - u.mean(axis=0), n=m, axis=0)
-    y = np.zeros((f.size, 2), dtype=complex)
-    y[1:] = np.einsum("foi,fi->fo", h, spectrum[1:])
+    y = np.zeros((spectrum.shape[0], 2), dtype=complex)
+    y[1:] = np.einsum("foi,fi->fo", responses[m], spectrum[1:])
     return vp - vp.mean(axis=0), np.fft.irfft(y, n=m, axis=0)[:n], rounded
 
 
@@ -190,26 +208,23 @@ def output_error_check(recordings: Mapping[str, xr.Dataset], names: list[str], *
     for h in reference:
         v = np.column_stack([np.asarray(recordings[h][c].values, dtype=float)
                              for c in ("Vph", "Vpv")])
-        f, p = _welch(v, fs_hz=fs_hz, period=period)
-        noise.append(p)
+        noise.append(_psd(v, fs_hz=fs_hz, period=period, name=h)[1])
     ref = np.median(noise, axis=0)
     edges = [*(b for b in BANDS_HZ if b < fs_hz / 2), fs_hz / 2]
     bands = tuple((float(lo), float(hi)) for lo, hi in itertools.pairwise(edges))
     excess = {a: [0.0] * len(bands) for a in "hv"}
     explained = {a: 1.0 for a in "hv"}
     rounded = False
+    responses: dict[int, NDArray[np.complex128]] = {}
     for name in usable:
         vp, pred, was_rounded = _predicted(recordings[name], plant, fs_hz=fs_hz, lsb_v=lsb_v,
-                                           span_v=span_v)
+                                           span_v=span_v, responses=responses)
         rounded = rounded or was_rounded
-        resid = (vp - pred)[skip:]
-        periods = resid.shape[0] // period
-        if periods < 3:
+        if (vp.shape[0] - skip) // period < 3:
             return None
-        resid = resid[: periods * period].reshape(periods, period, 2)
         # The repeatable part removed, the noise's power scaled back by the 1 − 1/N it took.
-        resid = (resid - resid.mean(axis=0, keepdims=True)).reshape(periods * period, 2)
-        f, p = _welch(resid, fs_hz=fs_hz, period=period)
+        resid, periods = without_mean_period((vp - pred)[skip:], period)
+        f, p = _psd(resid, fs_hz=fs_hz, period=period, name=name)
         p = p / (1.0 - 1.0 / periods)
         for i, a in enumerate("hv"):
             var_vp = float(np.var(vp[skip:, i]))

@@ -53,7 +53,7 @@ from fsmbench.bench.blocks import PlantModel
 from fsmbench.bench.params import BenchParams
 from fsmbench.budget.propagation import loop_response
 from fsmbench.checks import Check
-from fsmbench.control.compare import OutputErrorCheck, output_error_check
+from fsmbench.control.compare import OutputErrorCheck, output_error_check, without_mean_period
 from fsmbench.ident.frf.welch import hanning, pwelch
 from fsmbench.jsonutil import plain_json
 from fsmbench.sim.spectra import qd_noise_spectrum
@@ -303,8 +303,7 @@ def _residual(ds: xr.Dataset, name: str, *, fs_hz: float, period_s: float,
         raise ValueError(f"{name}: {v.shape[0] / fs_hz:.3g} s after the first {settle_s:g} s "
                          f"hold {n} whole periods of {period_s:g} s; the model validation "
                          "needs at least 3")
-    v = v[: n * per].reshape(n, per, 2)
-    return (v - v.mean(axis=0, keepdims=True)).reshape(n * per, 2), n
+    return without_mean_period(v, per)
 
 
 def _measured_psd(recordings: Mapping[str, xr.Dataset], names: list[str], *, gd: FloatArray,
