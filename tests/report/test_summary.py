@@ -173,13 +173,13 @@ def test_a_dead_band_the_plant_explains_gives_a_verdict_from_the_other_rows() ->
     # the verdict is the other rows' (here fsmbench's loop simulated 2.6x its linear
     # prediction: does not meet), led by the records' action.
     action = "make the Sercalo DAC's step finer (a smaller current-amplifier gain)"
-    plant = SimpleNamespace(check=Check("plant_output_error", True, 1.04, "≤ 2×", unit="×"))
+    plant = SimpleNamespace(check=Check("plant_output_error", True, 1.04, "≤ 2× the noise",
+                                        unit="×"))
     validation = SimpleNamespace(
         **{**vars(_validation(ratio=0.3, action=action)), "passed": True,
            "reason": "h: recorded less than the model gives (a dead band); the plant itself "
                      "predicts the recorded 4QD readings", "plant_check": plant,
-           "check": SimpleNamespace(limit="…; where the DAC's dead band sets the error, "
-                                          "the plant's output error within its limit")})
+           "dead_band_axes": ("h", "v")})
     design = _design(1.2e-4)
     design["closed_loop_twin"]["measured_over_predicted"] = {"h": 2.65, "v": 2.01}
     s = build_summary(
@@ -192,7 +192,7 @@ def test_a_dead_band_the_plant_explains_gives_a_verdict_from_the_other_rows() ->
     assert s.next_step.startswith("Next: make the Sercalo DAC's step finer")
     row = next(r for r in s.requirements if r.name == "model_validation")
     assert row.passed is True and "plant output error 1.04× the noise" in row.value
-    assert "dead band" in row.limit
+    assert "dead band" in row.limit and "≤ 2× the noise" in row.limit
 
 
 def test_the_distance_limit_is_configurable() -> None:

@@ -242,6 +242,8 @@ class ClosedLoopValidation:
         the largest predicted source) and ``ratio`` is outside ``accepted``, the model
         is judged by it: limit cycles follow the last details of the loop and no model
         predicts their rms, while the plant's response to the recorded commands does.
+    dead_band_axes : tuple of str
+        The axes whose missed rms the DAC's dead band explains (empty otherwise).
     """
 
     bench: str
@@ -265,6 +267,7 @@ class ClosedLoopValidation:
     log_ratio_std: dict[str, float] = field(default_factory=dict)
     accepted: dict[str, tuple[float, float]] = field(default_factory=dict)
     plant_check: OutputErrorCheck | None = None
+    dead_band_axes: tuple[str, ...] = ()
 
     @property
     def passed(self) -> bool:
@@ -581,4 +584,4 @@ def validate_closed_loop(recorded: Mapping[str, xr.Dataset], *,
         measured_rms_rad=measured_rms, predicted_rms_rad=predicted_rms, ratio=ratio,
         limits=limits, n_periods=n_periods, check=check, reason=reason,
         predicted_parts_rms_rad=parts_rms, action=action, log_ratio_std=log_std,
-        accepted=accepted, plant_check=plant_check)
+        accepted=accepted, plant_check=plant_check, dead_band_axes=tuple(dead_band_axes))

@@ -374,8 +374,8 @@ def _validation_requirement(validation: Any, skipped: str) -> Requirement:
                + (", widened by the records' scatter to " + " / ".join(
                    f"{band[0]:.2f}–{band[1]:.2f}" for band in accepted.values())
                   if (accepted := getattr(v, "accepted", None)) else "")
-               + ("; under a DAC dead band, the plant's output error ≤ 2× the noise"
-                  if "dead band" in getattr(getattr(v, "check", None), "limit", "") else "")),
+               + (f"; under a DAC dead band, the plant output error {plant.check.limit}"
+                  if plant is not None and len(getattr(v, "dead_band_axes", ())) > 0 else "")),
         passed=v.passed,
         explanation=(f"{lo:g} Hz to {hi:g} Hz, {v.n_periods} periods; predicted by simulating "
                      f"{', '.join(v.experiments)} on {v.bench} with {v.controller}."
