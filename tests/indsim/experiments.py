@@ -38,7 +38,7 @@ from numpy.typing import NDArray
 from .attocube import attocube
 from .control import CL_INPUTS, CL_OUTPUTS
 from .lti import delayed_inputs, simulate
-from .model import BenchModel, output_rms_per_unit_input
+from .model import BenchModel, output_rms_per_unit_input, qd_amp_response
 from .noise import flicker, quantise, uniform_lsb
 from .plant import INPUTS, OUTPUTS
 
@@ -260,8 +260,10 @@ def _nu(model: BenchModel, rng: np.random.Generator, n: int) -> Array:
 def _compression(model: BenchModel, d: Array) -> Array:
     """What the cubic compression takes off the 4QD outputs (N, 2) [V].
 
-    The residual ``-g c d³`` passes the amplifier as a held input: exact
-    without an amplifier, a ZOH approximation of a <2 % term with one.
+    The residual ``-g c d³`` happens at the diode, before its amplifier: it
+    passes the amplifier's continuous response line by line
+    (:func:`indsim.model.qd_amp_response`), so the compression stays the
+    memoryless law it is at every frequency.
     """
     b = model.bench
     c = b.qd_cubic_per_rad2
@@ -270,9 +272,11 @@ def _compression(model: BenchModel, d: Array) -> Array:
     g = np.array([b.qd_polarity.h * b.qd_gain_v_per_rad.h,
                   b.qd_polarity.v * b.qd_gain_v_per_rad.v])
     r = -g * c * d**3
-    if model.qd_lpf is None:
+    n = r.shape[0]
+    response = qd_amp_response(b, np.fft.rfftfreq(n, b.dt_s))
+    if response is None:
         return r
-    return np.column_stack([simulate(model.qd_lpf, r[:, j:j + 1])[:, 0] for j in range(2)])
+    return np.fft.irfft(np.fft.rfft(r, axis=0) * response[:, None], n=n, axis=0)
 
 
 def _adc(model: BenchModel, x: Array) -> Array:
