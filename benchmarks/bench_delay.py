@@ -38,8 +38,9 @@ import scipy.signal as sig
 from fsmbench.bench.blocks import replace_params
 from fsmbench.bench.params import Bench, default_bench, real_bench
 from fsmbench.ident.delay.sampled import SensorLowpass, mode_sum, sampled_response, series
+from fsmbench.ident.frf.experiment import experiment_frf
 from fsmbench.ident.pipeline import SEED_TRIMS_S
-from fsmbench.ident.sercalo import experiment_frf, fit_sercalo
+from fsmbench.ident.sercalo import fit_sercalo
 from fsmbench.twin import simulate_bench
 from timing import timed_runs
 

@@ -15,8 +15,9 @@ import pytest
 
 from fsmbench.ident.fit.parameter_std import QUANTITIES, sercalo_parameter_std
 from fsmbench.ident.fit.vectfit import VectorFitOptions, vector_fit
+from fsmbench.ident.fit.weights import variance_weights
 from fsmbench.ident.frf.estimate import FrfEstimate
-from fsmbench.ident.sercalo import SercaloFitOptions, fit_sercalo, variance_weights
+from fsmbench.ident.sercalo import SercaloFitOptions, fit_sercalo
 
 F_HZ = np.arange(1, 501) * 2.0
 GI = (0.01, 0.02)  # A/V

@@ -19,8 +19,8 @@ import xarray as xr
 from fsmbench.bench.params import Bench
 from fsmbench.excite.design import design_multisine
 from fsmbench.ident.fit.parameter_std import QUANTITIES
+from fsmbench.ident.frf.experiment import choose_estimator, experiment_frf
 from fsmbench.ident.pipeline import Identification, IdentifyOptions, identify
-from fsmbench.ident.sercalo import choose_estimator, experiment_frf
 from fsmbench.report.html import Table, iter_figures
 from fsmbench.report.sections.ident import identification_section
 from fsmbench.sim.plant import twin_discrete

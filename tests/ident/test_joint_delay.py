@@ -25,8 +25,9 @@ from fsmbench.ident.delay.sampled import (
     second_order,
     series,
 )
+from fsmbench.ident.frf.experiment import experiment_frf
 from fsmbench.ident.pipeline import SEED_TRIMS_S
-from fsmbench.ident.sercalo import experiment_frf, fit_sercalo
+from fsmbench.ident.sercalo import fit_sercalo
 from fsmbench.sim.discretize import zoh_with_delays
 from fsmbench.twin import simulate_bench
 

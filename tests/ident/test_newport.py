@@ -11,14 +11,10 @@ from scipy.optimize import brentq
 from fsmbench.bench.params import default_bench, real_bench
 from fsmbench.ident.delay.joint import fit_jointly
 from fsmbench.ident.delay.sampled import SensorLowpass, second_order
-from fsmbench.ident.newport import (
-    NewportAxisFit,
-    fit_newport_dynamics,
-    newport_checks,
-    unresolved_sensor_shifts,
-)
+from fsmbench.ident.evidence.sensor_shifts import unresolved_sensor_shifts
+from fsmbench.ident.frf.experiment import experiment_frf
+from fsmbench.ident.newport import NewportAxisFit, fit_newport_dynamics, newport_checks
 from fsmbench.ident.pipeline import SEED_TRIMS_S
-from fsmbench.ident.sercalo import experiment_frf
 from fsmbench.sim.plant import twin_discrete
 from fsmbench.twin.simulate import simulate_bench
 

@@ -8,17 +8,16 @@ import numpy as np
 import pytest
 
 from fsmbench.ident.delay.bode import DelayEstimate
+from fsmbench.ident.fit.weights import detect_resonances, seed_weights
+from fsmbench.ident.frf.experiment import experiment_frf
 from fsmbench.ident.frf.response import spectral_matrix
 from fsmbench.ident.frf.welch import hanning
 from fsmbench.ident.newport import identify_newport
 from fsmbench.ident.sercalo import (
     combined_delay,
-    detect_resonances,
-    experiment_frf,
     fit_sercalo,
     refit_with_poles,
     relative_fit_error,
-    seed_weights,
 )
 from fsmbench.twin import TwinRun
 

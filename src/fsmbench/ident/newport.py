@@ -51,7 +51,7 @@ from scipy.optimize import brentq
 
 from fsmbench.bench.blocks import newport_beam_matrix
 from fsmbench.bench.params import BenchParams
-from fsmbench.checks import Check, Notice
+from fsmbench.checks import Check
 from fsmbench.ident.delay.bode import DelayEstimate, remove_delay
 from fsmbench.ident.delay.joint import SensorEstimate, fit_jointly, line_std
 from fsmbench.ident.delay.sampled import SensorLowpass, StateSpace3, second_order
@@ -59,13 +59,14 @@ from fsmbench.ident.delay.sampled import sampled_response as sampled_path
 from fsmbench.ident.frf.response import FrequencyResponse
 from fsmbench.ident.sercalo import combined_delay, path_delays
 
-__all__ = ["NewportAxisFit", "NewportDynamics", "NewportIdentification", "SensorShift",
+__all__ = ["NEWPORT_PATHS", "NewportAxisFit", "NewportDynamics", "NewportIdentification",
+           "SensorShift",
            "fit_newport_axis", "fit_newport_dynamics", "identify_newport", "newport_checks",
-           "nominal_newport_axis", "resolved_sensor",
-           "sampled_response", "sensor_notices", "unresolved_sensor_shifts"]
+           "nominal_newport_axis", "sampled_response"]
 
 FloatArray = NDArray[np.float64]
-_PATHS = {"h": ("Vph", "Unh"), "v": ("Vpv", "Unv")}
+NEWPORT_PATHS = {"h": ("Vph", "Unh"), "v": ("Vpv", "Unv")}
+_PATHS = NEWPORT_PATHS
 
 #: Lines below this coherence are left out (the seed's own threshold for its fits).
 MIN_COHERENCE = 0.9
@@ -443,94 +444,6 @@ class SensorShift:
                 "by_order": {str(k): dict(v) for k, v in self.by_order.items()}}
 
 
-_SHIFTED = ("gain_v_per_v", "natural_freq_hz", "damping_ratio")
-
-
-def unresolved_sensor_shifts(frf: FrequencyResponse, dyn: NewportDynamics, *,
-                             lag_s: float) -> dict[str, SensorShift]:
-    """The parameter shifts an unresolved 4QD amplifier of group delay ``lag_s`` could cause.
-
-    For each axis fitted without an amplifier (none in the bench model, none
-    resolved by the lines), the fit again with a first-order and with a
-    second-order (Butterworth) amplifier of that group delay, the bandwidth
-    fixed: the delays measure the lag, not its shape, and on the Newport's
-    band a second order fits the two shapes about equally well while moving
-    its natural frequency by up to 1 % (a 22.5 µs lag: +1.8 Hz for the
-    Butterworth the real-bench twin has, +28 Hz for a first order, on the
-    exact response). A shift is a bounded part of the parameter's uncertainty
-    (:mod:`fsmbench.ident.totals`).
-
-    Parameters
-    ----------
-    frf : FrequencyResponse
-        The Newport's matrix the axes were fitted on.
-    dyn : NewportDynamics
-    lag_s : float
-        The amplifier's group delay [s]; ≤ 0 or NaN: no shift.
-
-    Returns
-    -------
-    dict axis -> SensorShift
-        Only the axes fitted without an amplifier.
-    """
-    out: dict[str, SensorShift] = {}
-    if not (math.isfinite(lag_s) and lag_s > 0):
-        return out
-    for axis, fit in dyn.axes.items():
-        if fit.sensor is None or fit.sensor.source != "unlimited":
-            continue
-        by_order = {}
-        for order, per_rad in ((1, 1.0), (2, math.sqrt(2.0))):
-            lowpass = SensorLowpass(bandwidth_hz=per_rad / (2 * math.pi * lag_s), order=order)
-            refit = _fit_axis(frf, axis, fs=dyn.fs_hz, sensor=lowpass, resolve_sensor=False)
-            by_order[order] = {k: float(getattr(refit, k) - getattr(fit, k)) for k in _SHIFTED}
-        out[axis] = SensorShift(axis=axis, lag_s=float(lag_s), by_order=by_order,
-                                half_width={k: max(abs(v[k]) for v in by_order.values())
-                                            for k in _SHIFTED})
-    return out
-
-
-def resolved_sensor(dyn: NewportDynamics) -> SensorLowpass | None:
-    """The 4QD amplifier the Newport's lines resolved (the mean of the axes that did), or None.
-
-    Both axes' amplifiers are taken as one, as the bench file has one bandwidth; the
-    order is the better-fitting axis's (the larger likelihood ratio).
-    """
-    fitted = [a.sensor for a in dyn.axes.values()
-              if a.sensor is not None and a.sensor.source == "fitted"]
-    if not fitted:
-        return None
-    best = max(fitted, key=lambda e: e.likelihood_ratio)
-    return SensorLowpass(bandwidth_hz=float(np.mean([e.bandwidth_hz for e in fitted])),
-                         order=best.order)
-
-
-def sensor_notices(dyn: NewportDynamics, *, model: SensorLowpass) -> list[Notice]:
-    """A notice per axis whose lines resolve a 4QD amplifier bandwidth the bench model lacks.
-
-    The run fits the Sercalo's delay again with it (:func:`resolved_sensor`); the bench
-    file should carry it so that the twin and a design's checks use it too.
-    """
-    out = []
-    for axis, fit in dyn.axes.items():
-        est = fit.sensor
-        if est is None or est.source != "fitted":
-            continue
-        if model.limited and abs(est.bandwidth_hz / model.bandwidth_hz - 1) <= (
-                2 * est.bandwidth_std_hz / est.bandwidth_hz):
-            continue  # the model's value is within two standard deviations
-        out.append(Notice("other", f"{_PATHS[axis][1]} → {_PATHS[axis][0]}",
-                          f"the 4QD amplifier is resolved as a "
-                          f"{'first-order' if est.order == 1 else 'second-order (Butterworth)'}"
-                          f" low pass at {est.bandwidth_hz:.4g} ± {est.bandwidth_std_hz:.2g} Hz"
-                          f" (bench model: {model.bandwidth_hz:g} Hz, 0 = unlimited); set "
-                          f"quad_diode.bandwidth_hz = {est.bandwidth_hz:.4g} and "
-                          f"quad_diode.bandwidth_order = {est.order} in the bench file's "
-                          f"[nominal] (this run used it for the Sercalo's delay; the file "
-                          f"makes the twin and the checks of a design use it too)"))
-    return out
-
-
 @dataclass(frozen=True, eq=False)
 class NewportIdentification:
     """What 2.4 identifies.
@@ -561,7 +474,7 @@ class NewportIdentification:
     sensor_shifts : dict axis -> SensorShift
         The axes fitted without a 4QD amplifier while the delays measure one:
         how much its unknown shape could move their parameters
-        (:func:`unresolved_sensor_shifts`).
+        (:mod:`fsmbench.ident.evidence.sensor_shifts`).
     assumed_axes : tuple of str
         Axes whose record was missing or unusable: the bench file's model stands in
         for them (in ``gn`` and the delays), and nothing is reported of them.

@@ -89,6 +89,11 @@ from fsmbench.ident.evidence.rate import (
 from fsmbench.ident.evidence.recorded_loop import (
     rate_witness,
 )
+from fsmbench.ident.evidence.sensor_shifts import (
+    resolved_sensor,
+    sensor_notices,
+    unresolved_sensor_shifts,
+)
 from fsmbench.ident.fit.modes import ModeRefinement, refine_modes
 from fsmbench.ident.fit.quality import (
     leakage_corrected,
@@ -101,14 +106,12 @@ from fsmbench.ident.frf.compression import (
     compression_factors,
     correct_compression,
 )
+from fsmbench.ident.frf.experiment import OUTPUTS, choose_estimator, experiment_frf
 from fsmbench.ident.newport import (
     NewportIdentification,
     identify_newport,
     newport_checks,
     nominal_newport_axis,
-    resolved_sensor,
-    sensor_notices,
-    unresolved_sensor_shifts,
 )
 from fsmbench.ident.noise_model import fit_noise_model
 from fsmbench.ident.result import (
@@ -120,10 +123,7 @@ from fsmbench.ident.result import (
     write_identification,
 )
 from fsmbench.ident.sercalo import (
-    OUTPUTS,
     SercaloIdentification,
-    choose_estimator,
-    experiment_frf,
     fit_sercalo,
     refit_with_poles,
     with_frf,

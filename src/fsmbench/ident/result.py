@@ -69,10 +69,10 @@ class IdentifyOptions:
         records (:mod:`fsmbench.ident.fit.modes`), which the 1 s window smears.
     frf : {"auto", "welch", "lpm", "periodic"}
         FRF estimator of the Sercalo and Newport matrices
-        (:func:`fsmbench.ident.sercalo.experiment_frf`). ``"auto"``: periodic
+        (:func:`fsmbench.ident.frf.experiment.experiment_frf`). ``"auto"``: periodic
         averaging when every experiment's input repeats with a period (three
         whole periods at least), else Welch, the seed's estimator
-        (:func:`fsmbench.ident.sercalo.choose_estimator`).
+        (:func:`fsmbench.ident.frf.experiment.choose_estimator`).
     weights : {"seed", "variance"}
         Vector-fit weights: the seed's coherence recipe, or the inverse
         standard deviation of every line (:mod:`fsmbench.ident.fit.parameter_std`; the

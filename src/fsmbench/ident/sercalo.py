@@ -29,37 +29,32 @@ import control as ct
 import numpy as np
 import xarray as xr
 
-from fsmbench.ident.calibration import require_signals, trim_recording
 from fsmbench.ident.delay.bode import DelayEstimate, estimate_delay, remove_delay
 from fsmbench.ident.delay.joint import JointFit
 from fsmbench.ident.delay.sampled import SensorLowpass
 from fsmbench.ident.delay.sercalo import joint_path_delays
 from fsmbench.ident.fit.parameter_std import ParameterStd, sercalo_parameter_std
 from fsmbench.ident.fit.vectfit import VectorFit, VectorFitOptions, vector_fit
-from fsmbench.ident.frf.estimate import FrfEstimate, combine_estimates
-from fsmbench.ident.frf.lpm import LPM_NOISE_SMOOTHING, LpmOptions, local_polynomial_frf
-from fsmbench.ident.frf.periodic import PeriodicOptions, detect_period, periodic_frf
-from fsmbench.ident.frf.response import FrequencyResponse, combine_columns, spectral_matrix
-from fsmbench.ident.frf.welch import hanning
+from fsmbench.ident.fit.weights import (
+    detect_resonances,
+    fit_weights,
+    seed_weights,
+    variance_weights,
+)
+from fsmbench.ident.frf.experiment import OUTPUTS
+from fsmbench.ident.frf.response import FrequencyResponse
 
 __all__ = [
+    "OUTPUTS",
     "SercaloFitOptions",
     "SercaloIdentification",
-    "choose_estimator",
     "combined_delay",
-    "detect_resonances",
-    "experiment_frf",
     "fit_sercalo",
     "path_delays",
     "refit_with_poles",
-    "seed_weights",
-    "variance_weights",
     "with_frf",
 ]
 
-FrfEstimator = Literal["auto", "welch", "lpm", "periodic"]
-
-OUTPUTS = ("Vph", "Vpv")
 # Both mirrors are second-order mechanical systems: above their modes the
 # magnitude falls as f^-2. Given to the delay estimator, it removes its most
 # fragile automatic choice (the slope it continues the magnitude with).
@@ -70,126 +65,6 @@ MIRROR_HIGH_FREQUENCY_SLOPE = -2.0
 # with it (issue 24: a stage-2 closed-loop fit lost a mode, another came out 1.35 samples
 # off, when its excitation changed by 4 %).
 MIRROR_LOW_FREQUENCY_SLOPE = 0.0
-
-
-def choose_estimator(recordings: Mapping[str, xr.Dataset], *,
-                     columns: Sequence[tuple[str, str]], trims_s: Mapping[str, float]) -> str:
-    """The "auto" rule: ``"periodic"`` when every column's input repeats, else ``"welch"``.
-
-    A record is periodic when its input correlates with itself shifted by one
-    period above 0.9 (:func:`fsmbench.ident.frf.periodic.detect_period`: one
-    FFT per record), with at least three whole periods (one dropped as the
-    transient, two for the noise estimate). Non-periodic (noise) excitation
-    keeps Welch's H1, the seed's estimator, so seed-style recordings give
-    today's results; ask for ``"lpm"`` explicitly for the LPM.
-    """
-    for experiment, signal in columns:
-        if experiment not in recordings or signal not in recordings[experiment]:
-            return "welch"  # experiment_frf reports what is missing
-        ds = trim_recording(recordings[experiment], t0_s=trims_s.get(experiment, 0.0))
-        u = np.asarray(ds[signal].values, dtype=float)
-        period = detect_period(u)
-        if period is None or u.size // period < 3:
-            return "welch"
-    return "periodic"
-
-
-def experiment_frf(recordings: Mapping[str, xr.Dataset], *, columns: Sequence[tuple[str, str]],
-                   trims_s: Mapping[str, float], window_s: float = 1.0,
-                   estimator: FrfEstimator = "welch",
-                   transient_periods: Mapping[str, int] | None = None) -> FrequencyResponse:
-    """FRF matrix ``inputs → (Vph, Vpv)`` from single-input experiments.
-
-    Parameters
-    ----------
-    recordings : mapping of experiment name to Dataset
-    columns : sequence of (experiment, input signal)
-        E.g. ``[("data_uch", "Uch"), ("data_ucv", "Ucv")]``, one column each.
-    trims_s : mapping of experiment name to seconds
-        Start of each record removed first (the seed's ``t0``).
-    window_s : float
-        Hann window length [s] (seed: 1 s), Welch only.
-    estimator : {"welch", "lpm", "periodic", "auto"}
-        Welch H1 (the seed's); the local polynomial method on each whole
-        record (every experiment cut to the shortest one's length, kept from
-        its end, so that all columns share their lines; lines strided by the
-        window width, 13, so that they are nearly independent); periodic
-        averaging (the transient periods detected in the data, at least the
-        excitation's own; the excited lines; the distortion of an odd grid
-        from its non-excited lines); or :func:`choose_estimator`.
-    transient_periods : mapping of experiment name to int, optional
-        The excitation's own transient periods (``excitation.json``): the
-        fewest the periodic average drops (default 1).
-
-    Returns
-    -------
-    FrequencyResponse
-        ``estimator`` says which; ``frf_variance`` set for LPM and periodic.
-
-    Notes
-    -----
-    Each record's means (after trimming) are removed first: a beam off the 4QD's
-    centre reads volts of mean, which Welch's window leaks onto the lines of a
-    response of millivolts; a constant changes only the 0 Hz line otherwise.
-    """
-    if estimator == "auto":
-        estimator = "periodic" if choose_estimator(
-            recordings, columns=columns, trims_s=trims_s) == "periodic" else "welch"
-    if estimator not in ("welch", "lpm", "periodic"):
-        raise ValueError(f"estimator must be auto, welch, lpm or periodic, got {estimator!r}")
-    data = []
-    for experiment, signal in columns:
-        if experiment not in recordings:
-            raise ValueError(f"{experiment} is needed for the {signal} column and is missing")
-        require_signals(recordings[experiment], (signal, *OUTPUTS),
-                        purpose=f"the {signal} column of the FRF matrix")
-        ds = trim_recording(recordings[experiment], t0_s=trims_s.get(experiment, 0.0))
-        u = np.asarray(ds[signal].values, dtype=float)  # means removed (Notes)
-        y = np.column_stack([ds[o].values for o in OUTPUTS]).astype(float)
-        data.append((experiment, signal, float(ds.attrs["fs_hz"]), u - u.mean(),
-                     y - y.mean(axis=0)))
-    if estimator == "welch":
-        return combine_columns([spectral_matrix(
-            u, y, input_names=[signal], output_names=list(OUTPUTS),
-            window=hanning(int(np.ceil(window_s * fs))), fs_hz=fs)
-            for _, signal, fs, u, y in data])
-    parts: list[FrfEstimate] = []
-    if estimator == "lpm":
-        length = min(u.size for *_, u, _y in data)
-        # The noise variance smoothed over 7 estimated lines (LpmOptions.noise_smoothing):
-        # one line's 7 dof made the weighted fits' stds optimistic (in95 0.75-0.85).
-        opts = LpmOptions(stride=2 * LpmOptions().n + 1, noise_smoothing=LPM_NOISE_SMOOTHING)
-        parts = [local_polynomial_frf(u[-length:], y[-length:], fs_hz=fs, input_name=signal,
-                                      output_names=list(OUTPUTS), options=opts,
-                                      source=f"{exp}.mat")
-                 for exp, signal, fs, u, y in data]
-    else:
-        least = dict(transient_periods or {})
-        parts = [periodic_frf(u, y, fs_hz=fs, input_name=signal, output_names=list(OUTPUTS),
-                              options=PeriodicOptions(
-                                  min_transient_periods=int(least.get(exp, 1))),
-                              source=f"{exp}.mat")
-                 for exp, signal, fs, u, y in data]
-        # Columns on the lines they share (a line excited in one record only is dropped).
-        common = set(parts[0].frequency_hz.tolist())
-        for part in parts[1:]:
-            common &= set(part.frequency_hz.tolist())
-        parts = [_on_lines(part, common) for part in parts]
-    return combine_estimates(parts).to_frequency_response()
-
-
-def _on_lines(est: FrfEstimate, keep: set[float]) -> FrfEstimate:
-    """The estimate on the lines of ``keep`` only [Hz]."""
-    sel = np.array([f in keep for f in est.frequency_hz.tolist()], dtype=bool)
-    if sel.all():
-        return est
-    return dataclasses.replace(
-        est, frequency_hz=est.frequency_hz[sel], frf=est.frf[sel],
-        frf_variance=est.frf_variance[sel], output_noise_psd=est.output_noise_psd[sel],
-        input_psd=est.input_psd[sel], snr=est.snr[sel],
-        transient=None if est.transient is None else est.transient[sel],
-        distortion_variance=(None if est.distortion_variance is None
-                             else est.distortion_variance[sel]))
 
 
 def path_delays(frf: FrequencyResponse, *, min_coherence: float) -> tuple[DelayEstimate, ...]:
@@ -223,70 +98,6 @@ def _inverse_variance_mean(values: Sequence[float], stds: Sequence[float]
             float(1.0 / np.sqrt(np.sum(w))))
 
 
-def detect_resonances(frf: FrequencyResponse, *, f_min_hz: float = 20.0,
-                      f_max_hz: float = 1000.0) -> dict[str, float]:
-    """Frequency [Hz] of the largest magnitude peak of each column's diagonal element.
-
-    The seed's ``freqs_res_uh = 410``, ``freqs_res_uv = 250`` (read off Fig. 18).
-    """
-    f = frf.frequency_hz
-    band = (f >= f_min_hz) & (f <= f_max_hz)
-    out = {}
-    for j, inp in enumerate(frf.input_names):
-        diag = frf.output_names[min(j, len(frf.output_names) - 1)]
-        mag = np.abs(frf.frf.sel(output=diag, input=inp).values)
-        out[inp] = float(f[band][np.argmax(mag[band])])
-    return out
-
-
-def seed_weights(frf: FrequencyResponse, *, resonances_hz: Mapping[str, float],
-                 alpha: float = 0.1, boost: float = 10.0,
-                 f_max_hz: float = 1000.0) -> xr.DataArray:
-    """The seed's fit weights (2.3e, Fig. 20), dims ``(frequency, output, input)``.
-
-    Coherence; ``boost`` where ``(1-alpha) f_r < f < (1+alpha) f_r`` for the
-    column's resonance ``f_r``; 0 above ``f_max_hz``. The DC bin gets 0 too
-    (a Welch estimate has no information there).
-    """
-    w = frf.coherence.copy(deep=True).fillna(0.0)
-    f = frf.frequency_hz
-    for inp, fr in resonances_hz.items():
-        near = (f > (1 - alpha) * fr) & (f < (1 + alpha) * fr)
-        w.loc[{"input": inp}] = xr.where(xr.DataArray(near, dims="frequency"), boost,
-                                         w.sel(input=inp))
-    w = w.where(xr.DataArray((f <= f_max_hz) & (f > 0), dims="frequency"), 0.0)
-    return w
-
-
-def variance_weights(frf: FrequencyResponse, *, f_max_hz: float = 1000.0) -> xr.DataArray:
-    """Inverse standard deviation of each line, ``1 / std(H)``, dims (frequency, output, input).
-
-    ``frf.frf_variance`` when the estimator gives it (periodic, LPM), else
-    Bendat & Piersol's ``var(H) = 2 (random_error |H|)^2`` of a Welch
-    estimate. As :func:`seed_weights`: 0 at DC and above ``f_max_hz`` (the
-    two-pole model is not meant for what lies above), and 0 where the
-    variance is not finite and positive. Weighted so, the fit's residuals have
-    unit variance (:mod:`fsmbench.ident.fit.parameter_std`).
-    """
-    if frf.frf_variance is not None:
-        var = frf.frf_variance
-    else:
-        var = 2.0 * (frf.random_error * np.abs(frf.frf)) ** 2
-    ok = np.isfinite(var) & (var > 0)
-    w = xr.where(ok, 1.0 / np.sqrt(var.where(ok, 1.0)), 0.0)
-    f = frf.frequency_hz
-    return w.where(xr.DataArray((f <= f_max_hz) & (f > 0), dims="frequency"), 0.0)
-
-
-def _fit_weights(weights: xr.DataArray, h: np.ndarray, keep: np.ndarray, kind: str
-                 ) -> np.ndarray:
-    """Weights given to the vector fit: seed weights over ``|H|`` (relative error), or 1/std."""
-    if kind == "variance":
-        return np.asarray(weights.values[keep], dtype=float)
-    mag = np.abs(h[keep])
-    return np.asarray(weights.values[keep] / np.where(mag > 0, mag, np.inf), dtype=float)
-
-
 @dataclass(frozen=True)
 class SercaloFitOptions:
     """Options of :func:`fit_sercalo`.
@@ -294,7 +105,7 @@ class SercaloFitOptions:
     Attributes
     ----------
     alpha, boost, f_max_hz : float
-        The seed's weights (:func:`seed_weights`).
+        The seed's weights (:func:`fsmbench.ident.fit.weights.seed_weights`).
     min_coherence : float
         Coherence threshold of the delay band.
     delay_s : float, optional
@@ -302,8 +113,8 @@ class SercaloFitOptions:
     n_poles : int, optional
         Model order; default two per detected resonance (one pair each).
     weights : {"seed", "variance"}
-        The seed's coherence recipe over ``|H|`` (:func:`seed_weights`), or
-        the inverse standard deviation of each line (:func:`variance_weights`).
+        The seed's coherence recipe over ``|H|``, or the inverse standard
+        deviation of each line (:mod:`fsmbench.ident.fit.weights`).
     joint_delay : bool
         Fit each direct path's delay with its poles and the 4QD amplifier
         (:mod:`fsmbench.ident.delay.sercalo`); False keeps the phase-only delay.
@@ -453,7 +264,8 @@ def fit_sercalo(frf: FrequencyResponse, *, gi_a_per_v: Mapping[str, float],
     Parameters
     ----------
     frf : FrequencyResponse
-        Inputs ``Uch, Ucv``, outputs ``Vph, Vpv`` (:func:`experiment_frf`).
+        Inputs ``Uch, Ucv``, outputs ``Vph, Vpv``
+        (:func:`fsmbench.ident.frf.experiment.experiment_frf`).
     gi_a_per_v : mapping {"h", "v"} -> float
         Current-amplifier gains [A/V] (2.2).
     options : SercaloFitOptions, optional
@@ -520,7 +332,7 @@ def fit_sercalo(frf: FrequencyResponse, *, gi_a_per_v: Mapping[str, float],
     f = clean.frequency_hz
     h = clean.frf.values
     keep = f > 0  # vector fitting works on s = j2πf; the DC bin carries no weight anyway
-    w = _fit_weights(weights, h, keep, opts.weights)
+    w = fit_weights(weights, h, keep, opts.weights)
     fitted = fit.to_statespace()
     gi = np.array([gi_a_per_v["h"], gi_a_per_v["v"]], dtype=float)
     gc = ct.ss(fitted.A, np.asarray(fitted.B) / gi[None, :], fitted.C,
@@ -592,7 +404,7 @@ def _vector_fit(clean: FrequencyResponse, opts: SercaloFitOptions
     f = clean.frequency_hz
     h = clean.frf.values
     keep = f > 0
-    w = _fit_weights(weights, h, keep, opts.weights)
+    w = fit_weights(weights, h, keep, opts.weights)
     n_poles = opts.n_poles or 2 * len(set(np.round(list(resonances.values()), 0)))
     fit = vector_fit(f[keep], h[keep], weights=w, input_names=list(clean.input_names),
                      output_names=list(clean.output_names),
@@ -611,7 +423,7 @@ def _fit_inputs(sid: SercaloIdentification) -> tuple[np.ndarray, np.ndarray, np.
     f = clean.frequency_hz
     keep = f > 0
     h = clean.frf.values
-    return f[keep], h[keep], _fit_weights(sid.weights, h, keep, sid.options.weights)
+    return f[keep], h[keep], fit_weights(sid.weights, h, keep, sid.options.weights)
 
 
 def refit_with_poles(sid: SercaloIdentification, *, poles: Mapping[str, complex]

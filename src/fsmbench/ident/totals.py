@@ -37,7 +37,7 @@ than the data determine it, both are given:
     the lines do not resolve is a lag the delays measure (``τ_4QD``) but whose
     shape they do not: the ``unresolved_sensor`` part bounds what a first- or
     second-order amplifier of that lag would change
-    (:func:`fsmbench.ident.newport.unresolved_sensor_shifts`).
+    (:func:`fsmbench.ident.evidence.sensor_shifts.unresolved_sensor_shifts`).
 ``sercalo.{h,v}.dc_gain_v_per_a``
     ``Gc(0)``: the fit's static gain over the current-amplifier gain, the
     4QD's compression corrected (:mod:`fsmbench.ident.frf.compression`); parts

@@ -97,7 +97,7 @@ def compression_factors(recordings: Mapping[str, xr.Dataset], *,
     ----------
     recordings : mapping of experiment name to Dataset
     columns : sequence of (experiment, input signal)
-        The FRF's columns, as :func:`fsmbench.ident.sercalo.experiment_frf`.
+        The FRF's columns, as :func:`fsmbench.ident.frf.experiment.experiment_frf`.
     outputs : sequence of str
         ``Vph``, ``Vpv``.
     qd : mapping axis -> QdCalibration
