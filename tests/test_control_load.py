@@ -216,9 +216,12 @@ def test_errors_name_the_file_and_the_problem(tmp_path: Path) -> None:
                 "(5000 Hz)") in _one_line(err, path)
 
     doc = json.loads(sos.read_text())
+    # Another document's 'format' is not quoted (the live device answers clients with these
+    # words); fsmbench's own format's version is a number, and named.
     for key, value, found in (("format_version", 1, "format 'fsmbench.controllers_sos' "
                                                    "version 1"),
-                              ("format", "fsmbench.plant", "format 'fsmbench.plant' version 2")):
+                              ("format_version", "2b", "another 'format_version'"),
+                              ("format", "fsmbench.plant", "another 'format'")):
         bad = tmp_path / f"bad_{key}.json"
         bad.write_text(json.dumps({**doc, key: value}))
         with pytest.raises(RecordingError) as err:
@@ -236,13 +239,23 @@ def test_errors_name_the_file_and_the_problem(tmp_path: Path) -> None:
         load_controllers(other)
     assert _one_line(err, other).endswith("is not a controllers file written by fsmbench "
                                           "design: it has no 'fsmbench' struct listing the "
-                                          "controllers (it holds: t, Vph)")
+                                          "controllers (it holds 2 other variables)")
     text = tmp_path / "notes.txt"
     text.write_text("gain = 3\n")
     with pytest.raises(RecordingError) as err:
         load_controllers(text)
-    assert "is neither a controllers_sos JSON document nor a readable MAT-file" in _one_line(
-        err, text)
+    line = _one_line(err, text)
+    assert "is not a controllers file fsmbench reads" in line
+    assert "gain" not in line.removeprefix(f"{text}: ")  # the reader's excerpt is not kept
+    for content, words in ((b'{"format": "Qz7:x:0:0', "is not valid JSON (line 1, column 12)"),
+                           (b'{"a": "\xff\xfe Qz7"}', "is not UTF-8 text (byte 7)"),
+                           (b"[" * 100_000, "nests too deeply")):
+        doc_path = tmp_path / "broken.json"
+        doc_path.write_bytes(content)
+        with pytest.raises(RecordingError) as err:
+            load_controllers(doc_path)
+        line = _one_line(err, doc_path).removeprefix(f"{doc_path}: ")
+        assert words in line and "Qz7" not in line and "\\x" not in line, line
 
     broken = json.loads(sos.read_text())
     broken["controllers"]["seed_controller"]["h"]["sos"][0][3] = 0.0

@@ -16,6 +16,7 @@ from fsmbench.control.loops import (
     analyse_loop,
     closed_loop_poles,
     delayed_subsystem,
+    discrete_axis_margins,
     newport_to_beam,
 )
 from fsmbench.control.seed import newport_controller, seed_decentralised_controller, tustin
@@ -144,3 +145,22 @@ def test_newport_to_beam(true_plant: PlantModel) -> None:
     np.testing.assert_allclose((np.eye(2)[None] + lmat) @ closed, open_, rtol=1e-9,
                                atol=1e-15)  # (I + L) S Gn = Gn
     assert np.all(np.abs(closed[:2, 0, 0]) < 0.01 * np.abs(open_[:2, 0, 0]))  # rejected at 1 Hz
+
+
+def test_discrete_axis_margins_are_the_study_s_and_scale_with_the_loop(
+        true_plant: PlantModel, seed_on_true: LoopAnalysis) -> None:
+    """The margins the live device checks a controller with are the design study's discrete
+    ones; a 4QD gain twice the one divided by doubles the loop: 6.02 dB less gain margin."""
+    assert seed_on_true.discrete is not None
+    kd = seed_on_true.discrete.kd
+    abcd = {x: np.asarray(getattr(kd, x.upper()), dtype=float) for x in "abcd"}
+    one = discrete_axis_margins(true_plant, **abcd, ts_s=float(kd.dt))
+    two = discrete_axis_margins(true_plant, **abcd, ts_s=float(kd.dt), loop_scale=(2.0, 2.0))
+    for axis in ("h", "v"):
+        ref = seed_on_true.discrete.margins[axis]
+        # The same loop on grids refined alike: root-finding tolerance (1e-12 relative).
+        assert one[axis].gain_margin_db == pytest.approx(ref.gain_margin_db, rel=1e-6)
+        assert one[axis].modulus_margin == pytest.approx(ref.modulus_margin, rel=1e-6)
+        # A pure gain moves the phase crossing nowhere: exactly 20 log10(2) dB.
+        assert one[axis].gain_margin_db - two[axis].gain_margin_db == pytest.approx(
+            20 * np.log10(2.0), abs=1e-6)

@@ -15,6 +15,7 @@ import itertools
 import json
 import math
 import re
+import shutil
 import threading
 import time
 from collections.abc import Callable, Iterator
@@ -269,10 +270,9 @@ class TestTwinDevice:
 
     def test_bad_arguments_refused_and_bench_runs_on(self, twin: tuple[Any, Path],
                                                       tmp_path: Path) -> None:
-        proxy, _ = twin
-        not_controllers = tmp_path / "not_controllers.json"
-        not_controllers.write_text('{"format": "something else"}\n')
-        missing = tmp_path / "missing" / "controllers_sos.json"
+        proxy, out = twin
+        # The controllers folder is the output folder (ControllersFolder is empty).
+        (out / "not_controllers.json").write_text('{"format": "something else"}\n')
         cases = [
             ("StartExcitation", '{"input": "Foo", "kind": "noise", "amplitude_v": 0.02}',
              "unknown input 'Foo'"),
@@ -284,7 +284,13 @@ class TestTwinDevice:
                                 '"period_s": 0}', "period_s must be"),
             ("StartExcitation", '{"input": "Uch", "kind": "sine", "amplitude_v": 0.1, '
                                 '"frequency_hz": 1e6}', "below Nyquist"),
-            ("LoadController", str(missing), f"{missing}: does not exist"),
+            ("LoadController", "missing/controllers_sos.json",
+             "missing/controllers_sos.json: does not exist in the controllers folder"),
+            ("LoadController", str(tmp_path / "controllers_sos.json"),
+             "is outside the controllers folder"),
+            # Judged on the call, where it used to answer OK and fail later in Status.
+            ("LoadController", "not_controllers.json", "not_controllers.json: is not a "
+                                                       "controllers file: expected format"),
             ("RunExperiment", "data_nothing", "unknown experiment 'data_nothing'"),
             ("Record", '{"signals": ["Vph", "Foo"], "duration_s": 1}', "unknown signal(s) Foo"),
             # Case 6.2: a 300-character name gave FAULT ("File name too long").
@@ -297,10 +303,7 @@ class TestTwinDevice:
             err = refusal(proxy, command, argument)
             assert err.reason == "FSM_BadArgument", (command, err.reason)
             assert words in err.desc, (command, argument, err.desc)
-        # Loading runs off the call: the file's content is judged there, Status says why.
-        assert "loading" in proxy.LoadController(str(not_controllers))
-        wait_task(proxy)
-        assert "is not a controllers file" in proxy.status(), proxy.status()
+        assert "controllers file" not in proxy.status(), proxy.status()
         assert proxy.state() == tango.DevState.ON
         assert json.loads(proxy.Excitation) == {}
         assert proxy.Controller.startswith("none")
@@ -409,9 +412,9 @@ class TestTwinDevice:
         n = read_recording(path).sizes["t"]
         assert 0 < n < 600 * 10_000
 
-    def test_protection_trips_a_20x_gain_and_reset_recovers(
-            self, twin: tuple[Any, Path], controller_x20: Path, tmp_path: Path) -> None:
-        proxy, _ = twin
+    def test_protection_trips_and_reset_recovers(
+            self, twin: tuple[Any, Path], controller_x1: Path, tmp_path: Path) -> None:
+        proxy, out = twin
         # Case 8: Tango logging of every command, state change and trip.
         log = tmp_path / "fsmbench.log"
         proxy.add_logging_target(f"file::{log}")
@@ -420,13 +423,17 @@ class TestTwinDevice:
         # CloseLoop taking effect are then milliseconds of bench time, not 50x more.
         proxy.SpeedFactor = 1.0
         try:
-            assert "loading" in proxy.LoadController(str(controller_x20))
-            wait_task(proxy)
+            shutil.copy(controller_x1, out / "controllers_sos.json")
+            assert "next CloseLoop" in proxy.LoadController("controllers_sos.json")
             name = proxy.Controller
             assert "fsmbench_controller" in name
             assert proxy.state() == tango.DevState.ON  # loaded, not yet closed
-            before_s = proxy.BenchTime
             proxy.CloseLoop()
+            # The trip: a 3 V sine at the h mode added to the command (a 20x controller,
+            # which tripped 0.2-2.8 s after it was loaded, is now refused on the call).
+            before_s = proxy.BenchTime
+            proxy.StartExcitation(json.dumps({"input": "Uch", "kind": "sine",
+                                              "amplitude_v": 3.0, "frequency_hz": 411.5}))
             wait_until(lambda: proxy.state() == tango.DevState.FAULT, "the protection's FAULT")
             status = proxy.status()
             assert proxy.LoopClosed is False
@@ -435,8 +442,8 @@ class TestTwinDevice:
             assert m, status
             trip_s = float(m.group(1))
             assert "DAC saturated" in m.group(2) or "beam diverges" in m.group(2), status
-            # Issue 12: FAULT within 0.2 s of bench time after the loop closed (the close
-            # happened after before_s, so this bounds the delay from above).
+            # Issue 12: FAULT within 0.2 s of bench time after the loop went wrong (the
+            # excitation started after before_s, so this bounds the delay from above).
             assert before_s < trip_s <= before_s + 0.2, (before_s, trip_s)
             assert "none is loaded now" in status  # case 5.4: the faulty one is unloaded
             err = refusal(proxy, "CloseLoop")

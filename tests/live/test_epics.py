@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import json
 import os
+import shutil
 import signal
 import sys
 import threading
@@ -230,13 +231,50 @@ def test_identification_through_the_ioc(ioc: Ioc, parts: SimpleNamespace) -> Non
     assert not missed, "\n".join(missed)
 
 
+def test_unsafe_controllers_are_refused_on_the_call(ioc: Ioc, parts: SimpleNamespace,
+                                                    controller_x20: Path) -> None:
+    """Issue 31, through Channel Access: each refused in the put's own Reply, the loop on
+    its controller, and neither Reply nor Status holding the file's bytes."""
+    ioc.out.mkdir(parents=True, exist_ok=True)  # the controllers folder: --out's
+    shutil.copy(controller_x20, ioc.out / "x20.json")
+    fifo = ioc.out / "fifo"
+    if not fifo.exists():
+        os.mkfifo(fifo)
+    assert ioc.command("CloseLoop")[0] == "OK"
+    controller = ioc.text("Controller")
+    try:
+        for argument, words in (("", "the argument is empty"),
+                                ("/dev/zero", "is outside the controllers folder"),
+                                ("/etc/passwd", "is outside the controllers folder"),
+                                ("../../etc/passwd", "is outside the controllers folder"),
+                                ("fifo", "is a FIFO"),
+                                ("x20.json", "the closed loop is unstable")):
+            code, reply = ioc.command("LoadController", argument)
+            assert code == "FSM_BadArgument" and words in reply, (argument, code, reply)
+            assert ioc.text("Reply.SEVR") == "MINOR"
+            status = ioc.text("Status")
+            for text in (reply, status, ioc.text("Controller")):
+                assert "root:" not in text and "/bin/" not in text, (argument, text)
+            assert ioc.text("Controller") == controller and ioc.get("LoopClosed") == 1
+            assert ioc.text("State") == "RUNNING", status
+    finally:
+        fifo.unlink()  # the folder is read as recordings by later tests
+        (ioc.out / "x20.json").unlink()
+    assert ioc.command("OpenLoop")[0] == "OK"
+
+
 def test_protection_trip_reset_and_ringdown(ioc: Ioc, parts: SimpleNamespace,
-                                            controller_x20: Path) -> None:
-    code, reply = ioc.command("LoadController", str(controller_x20))
-    assert code == "OK" and "loading" in reply
-    parts.wait_until(lambda: ioc.text("Task") == "", "the controller to load")
+                                            controller_x1: Path) -> None:
+    ioc.out.mkdir(parents=True, exist_ok=True)
+    shutil.copy(controller_x1, ioc.out / "controllers_sos.json")
+    code, reply = ioc.command("LoadController", "controllers_sos.json")
+    assert code == "OK" and "next CloseLoop" in reply, reply
     assert "fsmbench_controller" in ioc.text("Controller")
     assert ioc.command("CloseLoop")[0] == "OK"
+    # The trip: a 3 V sine at the h mode on the command (a 20x controller is refused now).
+    code, reply = ioc.command("StartExcitation", json.dumps(
+        {"input": "Uch", "kind": "sine", "amplitude_v": 3.0, "frequency_hz": 411.5}))
+    assert code == "OK", reply
     ioc.wait_state(parts, "FAULT")
     assert ioc.text("State.SEVR") == "MAJOR"
     status = ioc.text("Status")
@@ -346,8 +384,9 @@ def test_second_start_refused_and_a_restart_remembers(
                                  "epics", "--prefix", ioc.prefix], env=ca.env, cwd=ioc.folder)
     lines = err.strip().splitlines()
     assert status == 2 and "already answers" in lines[-1], err
-    assert ioc.command("LoadController", str(controller_x1))[0] == "OK"
-    parts.wait_until(lambda: ioc.text("Task") == "", "the controller to load")
+    ioc.out.mkdir(parents=True, exist_ok=True)
+    shutil.copy(controller_x1, ioc.out / "controllers_sos.json")
+    assert ioc.command("LoadController", "controllers_sos.json")[0] == "OK"
     name = ioc.text("Controller")
     # SIGINT (Ctrl-C) during a Record: the server stops cleanly and keeps what was recorded.
     code, reply = ioc.command("Record", json.dumps({"signals": ["Vph"], "duration_s": 600,

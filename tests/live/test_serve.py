@@ -148,6 +148,23 @@ def test_playback_of_a_missing_folder_is_refused(tmp_path: Path,
     assert f"{missing}: no such folder of recordings" in line
 
 
+def test_a_missing_controllers_folder_is_refused(tmp_path: Path,
+                                                capsys: pytest.CaptureFixture[str]) -> None:
+    missing = tmp_path / "no-such-controllers"
+    line = _serve_error(capsys, "--controllers", str(missing), "--nodb", "--port", "0")
+    assert f"--controllers {missing}: no such folder" in line
+    from fsmbench.live.serve import ServeOptions
+
+    # The property the database gets: resolved; empty without the option (OutputFolder's).
+    options = ServeOptions(backend="twin", playback_folder=None, params_file=None, seed=0,
+                           speed=1.0, nodb=True, port=0, output_folder=tmp_path / "out",
+                           controllers_folder=tmp_path)
+    assert options.properties()["ControllersFolder"] == str(tmp_path.resolve())
+    assert ServeOptions(backend="twin", playback_folder=None, params_file=None, seed=0,
+                        speed=1.0, nodb=True, port=0, output_folder=tmp_path
+                        ).properties()["ControllersFolder"] == ""
+
+
 def test_a_busy_port_is_refused(capsys: pytest.CaptureFixture[str]) -> None:
     with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as busy:
         busy.bind(("", 0))

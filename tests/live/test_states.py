@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import errno
 import json
+import shutil
 import threading
 import time
 import tracemalloc
@@ -239,13 +240,18 @@ def test_an_intermittently_clipping_excitation_gives_few_state_changes(
 
 
 def test_trip_reverts_the_controller_and_the_ringdown_refuses_close_loop(
-        live: LiveBench, controller_x20: Path) -> None:
+        live: LiveBench, controller_x1: Path) -> None:
     # Cases 5.1 (CloseLoop accepted in ALARM while the mirror rings, and trips) and 5.4
-    # (Reset kept the faulty controller loaded).
-    live.load_controller(str(controller_x20))
-    idle(live)
+    # (Reset kept the faulty controller loaded). The trip: a 3 V sine at the h mode added
+    # to the loaded controller's command (a 20x controller is refused on the call now).
+    live.controllers_folder.mkdir(parents=True)
+    shutil.copy(controller_x1, live.controllers_folder / "controllers_sos.json")
+    live.load_controller("controllers_sos.json")
     assert "fsmbench_controller" in live.controller_name
     live.close_loop()
+    live.advance(1000)
+    live.start_excitation(json.dumps({"input": "Uch", "kind": "sine", "amplitude_v": 3.0,
+                                      "frequency_hz": 411.5}))
     step_until(live, lambda: live.state == "FAULT", "the protection's FAULT", bench_s=2.0,
                block=100)
     assert "tripped: none is loaded now" in live.status, live.status

@@ -15,6 +15,7 @@ from __future__ import annotations
 import gc
 import json
 import os
+import shutil
 import signal
 import sys
 import threading
@@ -160,12 +161,14 @@ def test_properties_and_the_controller_survive_a_restart(
     # Cases 2.2 (Seed=7 went back to 0 at every start) and the memorised controller.
     _running(parts, tdb)
     proxy = tdb.proxy()
-    assert "loading" in proxy.LoadController(str(controller_x1))
-    parts.wait_until(lambda: proxy.Task == "", "the controller to load")
+    # The controllers folder is the output folder (the ControllersFolder property is empty).
+    (tdb.folder / "out1").mkdir(exist_ok=True)
+    path = Path(shutil.copy(controller_x1, tdb.folder / "out1" / "controllers_sos.json"))
+    assert "loaded for the next CloseLoop" in proxy.LoadController("controllers_sos.json")
     name = proxy.Controller
     assert "fsmbench_controller" in name
     assert json.loads(tdb.properties()["MemorisedController"][0])["path"] == \
-        str(controller_x1)
+        str(path.resolve())
     assert tdb.server.stop() == 0
     tdb.server = None
     tdb.db.put_device_property(DEVICE, {"Seed": ["7"]})  # an administrator's setting

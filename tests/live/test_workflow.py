@@ -75,11 +75,12 @@ def test_design_controller_through_the_device(twin_study: Any, tmp_path: Path) -
     predicted = design["closed_loop_twin"]["predicted_rms_rad"]
     out = tmp_path / "live"
     with DeviceTestContext(FsmBench, device_name="fsmbench/bench/1", process=False,
-                           properties={"Speed": 50.0, "Seed": 12,
-                                       "OutputFolder": str(out)}) as proxy:
+                           properties={"Speed": 50.0, "Seed": 12, "OutputFolder": str(out),
+                                       "ControllersFolder": str(twin_study.out_dir)}) as proxy:
         proxy.set_timeout_millis(10000)
-        assert "loading" in proxy.LoadController(str(twin_study.out_dir))
-        _wait_idle(proxy)  # the controller loads off the call (MOVING while it does)
+        # The design folder is the controllers folder: "." is its controllers file, checked
+        # on the device's bench on the call.
+        assert "loaded for the next CloseLoop" in proxy.LoadController(".")
         assert proxy.Controller.startswith("fsmbench_controller"), proxy.status()
         proxy.CloseLoop()
         assert proxy.LoopClosed and proxy.state() == tango.DevState.RUNNING
@@ -96,3 +97,31 @@ def test_design_controller_through_the_device(twin_study: Any, tmp_path: Path) -
         # measured over predicted within 0.9-1.1.
         assert 0.9 <= ratio <= 1.1, (axis, measured[axis], predicted[axis])
     assert np.all(np.isfinite(list(measured.values())))
+
+
+def test_controllers_are_checked_on_the_identified_bench(twin_study: Any, tmp_path: Path,
+                                                         controller_x20: Path) -> None:
+    """A device running the bench identified by the study (``BenchFolder``) checks a
+    controller on that bench: the design's controller passes, 20 times it is refused
+    naming the identified bench."""
+    import shutil
+
+    from fsmbench.live.core import LiveBench
+    from fsmbench.live.states import Refused
+    from fsmbench.sim.identified import identified_bench
+
+    bench = identified_bench(twin_study.out_dir, bench=BENCH)
+    folder = tmp_path / "controllers"
+    shutil.copytree(twin_study.out_dir, folder, ignore=shutil.ignore_patterns("*.h5", "*.html"))
+    shutil.copy(controller_x20, folder / "x20.json")
+    live = LiveBench(bench, seed=3, output_folder=tmp_path / "out", controllers_folder=folder)
+    try:
+        reply = live.load_controller(".")
+        assert reply.startswith("fsmbench_controller (controllers.mat) loaded for the next "
+                                "CloseLoop; checked on the device's bench"), reply
+        with pytest.raises(Refused) as exc:
+            live.load_controller("x20.json")
+        assert f"fails the check on the device's bench ({bench.label})" in exc.value.sentence
+        assert "identified" in bench.label and "unstable" in exc.value.sentence
+    finally:
+        live.stop()

@@ -7,6 +7,7 @@ swaps from must be that one, line for line.
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import numpy as np
@@ -65,29 +66,88 @@ def test_a_missing_running_file_is_refused_in_one_line(tmp_path: Path,
     assert "nope.json" in err and len(err.strip().splitlines()) == 1
 
 
+@pytest.fixture(scope="module")
+def designed(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """``fsmbench design``'s own files (controllers.mat, controllers_sos.json) for the
+    packaged bench: fsmbench's controller with its four integrators."""
+    from fsmbench.bench.blocks import physical_plant
+    from fsmbench.bench.params import default_bench
+    from fsmbench.control.study import design_study
+
+    b = default_bench()
+    out = tmp_path_factory.mktemp("design")
+    design_study(physical_plant(b.nominal, source="the bench file"), bench=b).write(out)
+    return out
+
+
+@pytest.mark.parametrize("name", ["controllers_sos.json", "controllers.mat"])
+def test_fsmbench_s_own_files_can_be_the_running_controller(bench: Bench, designed: Path,
+                                                           name: str) -> None:
+    """Issue 31: after one tune, its controllers_sos.json was refused as 'a pole at z = -1'.
+    Its integrator sections' delta realisation puts entries of ~1e12 in A, which the old
+    det(I + A) < 1e-12 |I + A|^n test read as singular; no pole is near -1."""
+    path = designed / name
+    loop = _running_file(f"{path}::fsmbench_controller", bench)
+    assert loop.name == f"fsmbench_controller ({name})"
+    ts = bench.true.converter.ts_s
+    chosen = select_controller(load_controllers(path, ts_s=ts), "fsmbench_controller")
+    device = sercalo_feedback(a=chosen.a, b=chosen.b, c=chosen.c, d=chosen.d,
+                              gd_v_per_rad=chosen.qd_gain_v_per_rad, name="device")
+    f = np.array([0.1, 1.0, 10.0, 100.0, 251.2, 411.5, 1000.0, 4000.0])
+    ours, theirs = _response(loop.feedback, f, ts), _response(device, f, ts)
+    # The exact pre-image under Tustin, through 1e12-sized entries: round-off (measured
+    # 2e-12), with room.
+    assert np.max(np.abs(ours - theirs) / np.max(np.abs(theirs), axis=(1, 2))[:, None, None]) \
+        < 1e-8
+
+
+@pytest.mark.parametrize(("a1", "refused"), [(1.0, True), (0.999, False)])
+def test_a_pole_on_nyquist_is_refused_and_one_just_inside_is_not(
+        bench: Bench, tuned_file: Path, tmp_path: Path, a1: float, refused: bool) -> None:
+    """A section ``1 / (1 + a1 q)``: its pole z = -a1. On -1 it has no pre-image under
+    Tustin; at -0.999 it is Tustin's image of a lowpass at ~640 times the sample rate."""
+    doc = json.loads(tuned_file.read_text())
+    doc["controllers"]["tuned"]["h"]["sos"].append([1.0, 0.0, 0.0, 1.0, a1, 0.0])
+    path = tmp_path / "with_pole.json"
+    path.write_text(json.dumps(doc))
+    if refused:
+        with pytest.raises(ValueError, match=r"has a pole at z = -1 \(Nyquist\)"):
+            _running_file(f"{path}::tuned", bench)
+        return
+    loop = _running_file(f"{path}::tuned", bench)
+    ts = bench.true.converter.ts_s
+    chosen = select_controller(load_controllers(path, ts_s=ts), "tuned")
+    device = sercalo_feedback(a=chosen.a, b=chosen.b, c=chosen.c, d=chosen.d,
+                              gd_v_per_rad=chosen.qd_gain_v_per_rad, name="device")
+    f = np.array([1.0, 100.0, 411.5, 4000.0])
+    ours, theirs = _response(loop.feedback, f, ts), _response(device, f, ts)
+    # The pre-image's pole at ~4e7 rad/s and back: round-off times (2/T)/|1 + z| = 2e7.
+    assert np.max(np.abs(ours - theirs) / np.max(np.abs(theirs), axis=(1, 2))[:, None, None]) \
+        < 1e-6
+
+
+# Last in this module: the device's watch thread may still be predicting after the device
+# stops, importing dask.array while scipy's array checks in a later design look it up.
 def test_a_device_running_a_file_s_controller_is_accepted(bench: Bench, tmp_path: Path,
                                                           tuned_file: Path) -> None:
     """The device, having loaded ``tuned`` from a controllers file (as a previous tune
     leaves it), is tuned again with ``--running`` that file: the target accepts it."""
     path = tuned_file
     tango = pytest.importorskip("tango")
-    import time
-
     from tango.test_context import DeviceTestContext
 
     from fsmbench.live.device import FsmBench
     from fsmbench.tune.device import DeviceTarget
 
     ctx = DeviceTestContext(FsmBench, device_name="fsmbench/bench/1", process=False,
-                            properties={"Speed": 50.0, "OutputFolder": str(tmp_path / "live")})
+                            properties={"Speed": 50.0, "OutputFolder": str(tmp_path / "live"),
+                                        "ControllersFolder": str(tmp_path)})
     with ctx as proxy:
         proxy.set_source(tango.DevSource.DEV)
         proxy.CloseLoop()
-        proxy.LoadController(f'{{"path": "{path}", "controller": "tuned"}}')
-        for _ in range(600):  # the load runs off the call; polled, not timed
-            if proxy.Task == "" and proxy.Controller.startswith("tuned"):
-                break
-            time.sleep(0.05)
+        # Checked on the device's bench and swapped in on the call.
+        reply = proxy.LoadController(f'{{"path": "{path}", "controller": "tuned"}}')
+        assert reply.startswith("tuned (controllers_sos.json) in the loop"), reply
         loop = _running_file(str(path), bench)
         assert proxy.Controller == loop.name
         target = DeviceTarget(proxy, bench=bench, running=loop, folder=tmp_path / "files",

@@ -12,6 +12,10 @@ Two files hold them (:mod:`fsmbench.control.export`):
   whose coefficients lose the lightly damped notches to rounding); the
   sections are cascaded and the two axes put side by side (block diagonal).
 
+Messages name the file, the key or variable and what is wrong, never the file's bytes
+(a value, a decoder's excerpt, a header): the live device answers its clients with them,
+and a file that is not a controllers file must not reach them through its words.
+
 Both give a :class:`LoadedController`: ``x[k+1] = a x[k] + b r[k]``,
 ``v[k] = c x[k] + d r[k]``, from the beam angle ``r = [Rh, Rv]`` [rad] to
 ``v = [Uch, Ucv]`` [V] for the bench's feedback controllers. The sign
@@ -144,8 +148,8 @@ class LoadedController:
 
 
 # --------------------------------------------------------------------------- reading
-def load_controllers(path: str | os.PathLike[str], *,
-                     ts_s: float | None = None) -> dict[str, LoadedController]:
+def load_controllers(path: str | os.PathLike[str], *, ts_s: float | None = None,
+                     max_states: int | None = None) -> dict[str, LoadedController]:
     """Every controller of a ``controllers.mat`` or ``controllers_sos.json``.
 
     Parameters
@@ -157,6 +161,9 @@ def load_controllers(path: str | os.PathLike[str], *,
     ts_s : float, optional
         The sample time the caller runs at, s; when given, the file's must
         equal it (to rounding).
+    max_states : int, optional
+        Refuse a controller of more states, before it is realised (a caller that
+        must answer in bounded time: a cascade's realisation grows as its cube).
 
     Returns
     -------
@@ -170,12 +177,14 @@ def load_controllers(path: str | os.PathLike[str], *,
     RecordingError
         (a ``ValueError``) One line, ``"<file>: <problem>"``: the file does not
         exist, is not a controllers file written by ``fsmbench design`` (what
-        was found is listed), is malformed, or its sample time is not ``ts_s``.
+        was found, in words), is malformed, has more than ``max_states`` states,
+        or its sample time is not ``ts_s``.
     """
     p = _resolve(Path(path))
     with open(p, "rb") as fh:
         head = fh.read(4096).lstrip()
-    out = _from_sos_json(p) if head[:1] in (b"{", b"[") else _from_mat(p)
+    out = (_from_sos_json(p, max_states) if head[:1] in (b"{", b"[")
+           else _from_mat(p, max_states))
     if not out:
         raise RecordingError(p, "lists no controllers")
     if ts_s is not None:
@@ -265,11 +274,18 @@ def _positive_ts(p: Path, value: Any, where: str) -> float:
     try:
         ts = float(np.asarray(value, dtype=float).reshape(()))
     except (TypeError, ValueError):
-        raise RecordingError(p, f"{where}: the sample time is not a number ({value!r})") from None
+        raise RecordingError(p, f"{where}: the sample time is not a number (a "
+                             f"{type(value).__name__})") from None
     if not (math.isfinite(ts) and ts > 0.0):
         raise RecordingError(p, f"{where}: the sample time is {ts:g} s; a discrete controller "
                              "needs a positive one")
     return ts
+
+
+def _check_states(p: Path, n: int, name: str, max_states: int | None) -> None:
+    if max_states is not None and n > max_states:
+        raise RecordingError(p, f"controller {name!r} has up to {n} states, more than the "
+                             f"{max_states} this loop takes")
 
 
 def _freeze(*arrays: FloatArray) -> None:
@@ -278,17 +294,21 @@ def _freeze(*arrays: FloatArray) -> None:
 
 
 # --------------------------------------------------------------------------- controllers.mat
-def _from_mat(p: Path) -> dict[str, LoadedController]:
+def _from_mat(p: Path, max_states: int | None) -> dict[str, LoadedController]:
     try:
         data = load_mat(p)
     except RecordingError as exc:
-        raise RecordingError(p, "is neither a controllers_sos JSON document nor a readable "
-                             f"MAT-file ({exc.problem})") from None
+        # The reader's particulars may quote the file's first bytes: only its kind, which
+        # has none ("is empty (0 bytes)").
+        why = exc.kind or "cannot be read as a MAT-file"
+        raise RecordingError(p, "is not a controllers file fsmbench reads (a controllers_sos "
+                             f"JSON document or a MAT-file from fsmbench design): it {why}"
+                             ) from None
     meta = data.get("fsmbench")
     if not isinstance(meta, dict) or "controllers" not in meta:
         raise RecordingError(p, "is not a controllers file written by fsmbench design: it has "
-                             "no 'fsmbench' struct listing the controllers (it holds: "
-                             + (", ".join(data) or "nothing") + ")")
+                             f"no 'fsmbench' struct listing the controllers (it holds "
+                             f"{len(data)} other variables)")
     names = meta["controllers"]
     names = [names] if isinstance(names, str) else [str(n) for n in names]
     gd = meta.get("qd_gain_v_per_rad")
@@ -304,6 +324,7 @@ def _from_mat(p: Path) -> dict[str, LoadedController]:
             raise RecordingError(p, f"lists controller {name!r} but has no discrete model "
                                  f"{name}.Kd")
         a, b, c, d = _mat_matrices(p, kd, name)
+        _check_states(p, a.shape[0], name, max_states)
         ins = _names(p, kd.get("InputName"), b.shape[1], f"{name}.Kd.InputName")
         outs = _names(p, kd.get("OutputName"), c.shape[0], f"{name}.Kd.OutputName")
         desc = kd.get("Description", "")
@@ -347,13 +368,26 @@ def _names(p: Path, value: Any, count: int, where: str) -> tuple[str, ...]:
 
 
 # --------------------------------------------------------------------------- controllers_sos.json
-def _from_sos_json(p: Path) -> dict[str, LoadedController]:
+def _from_sos_json(p: Path, max_states: int | None) -> dict[str, LoadedController]:
+    # Where a document fails, never the decoder's excerpt of it (module notes).
     try:
-        doc = json.loads(p.read_text(encoding="utf-8"))
-    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
-        raise RecordingError(p, f"is not valid JSON ({exc})") from None
-    found = (f"format {doc.get('format')!r} version {doc.get('format_version')!r}"
-             if isinstance(doc, dict) else f"a JSON {type(doc).__name__}")
+        doc = json.loads(p.read_bytes().decode("utf-8"))
+    except json.JSONDecodeError as exc:
+        raise RecordingError(p, f"is not valid JSON (line {exc.lineno}, column {exc.colno})"
+                             ) from None
+    except UnicodeDecodeError as exc:
+        raise RecordingError(p, f"is not UTF-8 text (byte {exc.start})") from None
+    except RecursionError:
+        raise RecordingError(p, "is not a controllers file: its JSON nests too deeply") from None
+    if not isinstance(doc, dict):
+        found = f"a JSON {type(doc).__name__}"
+    elif doc.get("format") != SOS_FORMAT:
+        found = "another 'format'" if "format" in doc else "no 'format' key"
+    else:  # fsmbench's own format: its version, when it is a number, is no one's secret
+        version = doc.get("format_version")
+        found = (f"format {SOS_FORMAT!r} version {version}"
+                 if isinstance(version, int) and not isinstance(version, bool)
+                 else "another 'format_version'")
     if (not isinstance(doc, dict) or doc.get("format") != SOS_FORMAT
             or doc.get("format_version") != SOS_FORMAT_VERSION):
         raise RecordingError(p, f"is not a controllers file: expected format {SOS_FORMAT!r} "
@@ -372,6 +406,11 @@ def _from_sos_json(p: Path) -> dict[str, LoadedController]:
         raise RecordingError(p, "has no 'controllers' object")
     out: dict[str, LoadedController] = {}
     for name, entry in entries.items():
+        if max_states is not None and isinstance(entry, dict):
+            # At most two states a section: counted before anything is realised.
+            n = sum(2 * len(chan["sos"]) for chan in (entry.get(a) for a in _AXES)
+                    if isinstance(chan, dict) and isinstance(chan.get("sos"), list))
+            _check_states(p, n, name, max_states)
         parts, ins, outs = [], [], []
         for axis in _AXES:
             chan = entry.get(axis) if isinstance(entry, dict) else None

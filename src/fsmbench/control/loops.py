@@ -51,6 +51,7 @@ __all__ = [
     "analyse_loop",
     "closed_loop_poles",
     "delayed_subsystem",
+    "discrete_axis_margins",
     "loop_grid",
     "newport_to_beam",
 ]
@@ -452,6 +453,56 @@ def _discrete(plant: PlantModel, k: ct.StateSpace, f: np.ndarray,
                               max_relative_error=float(np.max(rel)),
                               max_warp=float(np.tan(np.pi * f_top * ts) / (np.pi * f_top * ts) - 1),
                               notch_shifts_hz=shifts, margins=margins)
+
+
+def discrete_axis_margins(plant: PlantModel, *, a: np.ndarray, b: np.ndarray, c: np.ndarray,
+                          d: np.ndarray, ts_s: float,
+                          loop_scale: Sequence[float] = (1.0, 1.0)) -> dict[str, Margins]:
+    """Margins of each axis's sampled loop ``L_ii = (G Kd)_ii`` below the Nyquist frequency.
+
+    The discrete controller ``Kd(e^{jωT})`` against the plant's exact response and
+    delays (which hold the DAC's and the hold's lag), as the design study's
+    :class:`DiscreteComparison` and the Monte Carlo draws judge a controller.
+
+    Parameters
+    ----------
+    plant : PlantModel
+        Its path ``Uch, Ucv -> Rh, Rv`` (command [V] to beam angle [rad]) is ``G``.
+    a, b, c, d : ndarray, shapes (n, n), (n, 2), (2, n), (2, 2)
+        Discrete ``K``: ``Rh, Rv`` [rad] to ``Uch, Ucv`` [V] (the loop is ``u = -K y``).
+    ts_s : float
+        Sample time of ``K`` [s].
+    loop_scale : (float, float)
+        Factor on each axis's loop [1]: the 4QD gain the plant has over the one the
+        real-time code divides by (1: the same).
+
+    Returns
+    -------
+    dict of axis to Margins
+        ``h`` and ``v``.
+    """
+    cmds, meas = ["Uch", "Ucv"], ["Rh", "Rv"]
+    g_sub = plant.subsystem(outputs=meas, inputs=cmds)
+    tau = np.array([plant.input_delay_s[n] for n in cmds])
+    a, b, c, d = (np.asarray(x, dtype=float) for x in (a, b, c, d))
+    eig_k = np.linalg.eigvals(a) if a.size else np.zeros(0)
+    eig_k = eig_k[np.abs(eig_k) > 0]
+    poles = np.concatenate([g_sub.poles(), np.log(eig_k.astype(complex)) / ts_s])
+    f = frequency_grid(poles, f_min_hz=1e-2, f_max_hz=0.999 * 0.5 / ts_s, per_decade=60)
+    out: dict[str, Margins] = {}
+    for i, axis in enumerate(AXES):
+        def loop(f_hz: np.ndarray, i: int = i) -> np.ndarray:
+            s = 2j * np.pi * np.asarray(f_hz, dtype=float).ravel()
+            g = evaluate_ss(g_sub, s) * np.exp(-s[:, None, None] * tau[None, None, :])
+            z = np.exp(s * ts_s)
+            n = a.shape[0]
+            x = np.linalg.solve(z[:, None, None] * np.eye(n)[None] - a[None],
+                                np.broadcast_to(b, (z.size, *b.shape)).astype(complex))
+            kz = np.einsum("pn,fnm->fpm", c, x) + d[None]
+            return np.asarray(loop_scale[i] * np.einsum("fj,fj->f", g[:, i, :], kz[:, :, i]))
+
+        out[axis] = siso_margins(loop, f)
+    return out
 
 
 def newport_to_beam(plant: PlantModel, k: ct.StateSpace | None, f_hz: np.ndarray, *,

@@ -233,8 +233,11 @@ ATTRIBUTES: tuple[AttributeSpec, ...] = (
                   "the running excitation as JSON ({} when none)",
                   events=Events(polling_ms=None)),
     AttributeSpec("Task", "str", lambda b: b.task_text,
-                  "work running off the client's call (designing an excitation, loading a "
-                  "controller); empty when none", events=Events(polling_ms=None)),
+                  "work running off the client's call (designing an excitation); empty when "
+                  "none", events=Events(polling_ms=None)),
+    AttributeSpec("ControllersPath", "str", lambda b: str(b.controllers_folder),
+                  "the only folder LoadController reads controller files from (absolute; a "
+                  "relative path is taken inside it)", events=Events(polling_ms=None)),
     AttributeSpec("WatchVerdict", "str", lambda b: b.watch_view.verdict,
                   "the loop watching itself: off (loop open), waiting, calibrating, within the "
                   "prediction, or WARNING since a bench time (State ALARM; hysteresis: 3 "

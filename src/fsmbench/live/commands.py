@@ -1,7 +1,8 @@
 """The live bench's commands: each checked against the state, logged, and answered in words.
 
-:class:`BenchCommands` is the command half of :class:`~fsmbench.live.core.LiveBench`
-(the loop, the state and the views are the other half). Every command
+:class:`BenchCommands` holds the commands of :class:`~fsmbench.live.core.LiveBench`
+but ``LoadController`` (:mod:`fsmbench.live.loading`); the loop, the state and the views
+are the core's. Every command
 
 - is checked against the state first (:meth:`BenchCommands.check_allowed`,
   the table :data:`~fsmbench.live.states.ALLOWED`), then against its
@@ -15,7 +16,6 @@ from __future__ import annotations
 
 import contextlib
 import functools
-import json
 import threading
 import time
 from collections.abc import Callable, Iterator
@@ -23,7 +23,6 @@ from dataclasses import replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Concatenate, ParamSpec
 
-from fsmbench.control.load import load_controllers, select_controller
 from fsmbench.io.signals import EXPERIMENTS
 from fsmbench.live.arguments import parse_excitation, parse_experiment, parse_record
 from fsmbench.live.backend import TwinBackend
@@ -31,14 +30,12 @@ from fsmbench.live.jobs import JobOutcome, JobPlan, JobWriter, plan_job
 from fsmbench.live.spectra import AccumulatingFrf
 from fsmbench.live.states import ALLOWED, Refused
 from fsmbench.live.tasks import Task, TaskControl, design_multisine
-from fsmbench.sim.controller import sercalo_feedback
 from fsmbench.sim.excitation import Excitation, SampledExcitation
 from fsmbench.twin.experiments import seed_experiments, seed_feedback
 
 if TYPE_CHECKING:
     from fsmbench.bench.params import Bench
     from fsmbench.live.backend import PlaybackBackend
-    from fsmbench.live.core import ControllerMemory
     from fsmbench.live.loop import PacedLoop
     from fsmbench.live.monitor import LiveMonitor
     from fsmbench.live.spectra import FrfSnapshot
@@ -114,17 +111,13 @@ class BenchCommands:
         backend: TwinBackend | PlaybackBackend
         fs_hz: float
         half_range_v: float
-        qd_gain_v_per_rad: tuple[float, float]
         output_folder: Path
-        memory: ControllerMemory | None
         thread_init: Callable[[], Any] | None
         monitor: LiveMonitor
         ringdown: Ringdown
         loop: PacedLoop
         _lock: threading.RLock
         _loaded: DiscreteController | None
-        _loaded_doc: dict[str, str] | None
-        _good: list[tuple[DiscreteController, dict[str, str]]]
         _fault: tuple[str, str] | None
         _ringing: bool
         _alarm: tuple[bool, float]
@@ -141,7 +134,6 @@ class BenchCommands:
         def _set_loop(self, controller: DiscreteController | None, *, hold: bool,
                       cause: str) -> None: ...
         def _stop_frf(self) -> None: ...
-        def _remember(self) -> None: ...
         def _state_line(self, state: str, *, with_numbers: bool) -> str: ...
         def _fault_sentence(self) -> str: ...
         def _ringing_sentence(self) -> str: ...
@@ -320,86 +312,6 @@ class BenchCommands:
                 done.append(f"{task.what} cancelled")
                 self._notice = f"Aborted: {task.what}."
         return "; ".join(done) if done else "nothing was running"
-
-    # -- controllers ---------------------------------------------------------------
-
-    def _discrete(self, path: str, name: str | None) -> DiscreteController:
-        ts = 1.0 / self.fs_hz
-        chosen = select_controller(load_controllers(path, ts_s=ts), name)
-        return sercalo_feedback(a=chosen.a, b=chosen.b, c=chosen.c, d=chosen.d,
-                                gd_v_per_rad=chosen.qd_gain_v_per_rad or self.qd_gain_v_per_rad,
-                                name=f"{chosen.name} ({Path(chosen.source_path).name})")
-
-    @_command("LoadController")
-    def load_controller(self, argument: str) -> str:
-        """Load a controller, off the call: ``path`` or JSON ``{"path": ..., "controller": name}``.
-
-        In closed loop the new controller takes over bumplessly when loaded;
-        otherwise it is used by the next :meth:`close_loop`. ``Controller``
-        changes when it is loaded; Status says why if it cannot be.
-        """
-        text = argument.strip()
-        if text.startswith("{"):
-            try:
-                doc = json.loads(text)
-            except json.JSONDecodeError as exc:
-                raise Refused("FSM_BadArgument", f"LoadController refused: the argument is not "
-                                                 f"valid JSON ({exc})") from None
-            if not isinstance(doc, dict) or not isinstance(doc.get("path"), str) or \
-                    not set(doc) <= {"path", "controller"}:
-                raise Refused("FSM_BadArgument", 'LoadController refused: give a path, or '
-                                                 '{"path": ..., "controller": name}')
-            source = {"path": doc["path"]}
-            if doc.get("controller") is not None:
-                source["controller"] = str(doc["controller"])
-        else:
-            source = {"path": text}
-        try:
-            exists = Path(source["path"]).exists()
-        except (OSError, ValueError) as exc:  # a name too long for the filesystem, a NUL
-            why = exc.strerror if isinstance(exc, OSError) and exc.strerror else str(exc)
-            raise Refused("FSM_BadArgument", f"LoadController refused: the path "
-                                             f"{source['path'][:80]!r}... is not one the "
-                                             f"filesystem takes ({why})") from None
-        if not exists:
-            raise Refused("FSM_BadArgument",
-                          f"LoadController refused: {source['path']}: does not exist")
-        with self._locked("LoadController"):
-            self.check_allowed("LoadController")
-            self._load(source, restored=False)
-        return (f"loading {source.get('controller', 'the default controller')} from "
-                f"{source['path']}; Controller shows it when loaded")
-
-    def _load(self, source: dict[str, str], *, restored: bool) -> None:
-        def work(control: TaskControl) -> DiscreteController:
-            control.progress(0.1)
-            k = self._discrete(source["path"], source.get("controller"))
-            control.progress(1.0)
-            return k
-
-        def apply(k: DiscreteController) -> str:
-            self._loaded, self._loaded_doc = k, dict(source)
-            self._good.append((k, dict(source)))
-            if self.backend.controller is not None:
-                self._set_loop(k, hold=True, cause="LoadController")
-            self._remember()
-            where = f" (restored from the last run: {self.memory.where})" \
-                if restored and self.memory is not None else ""
-            return f"Controller {k.name} loaded from {source['path']}{where}."
-
-        self._start_task(f"loading a controller from {source['path']}", work, apply)
-
-    def restore_controller(self) -> str:
-        """Load the controller remembered from the last run (``memory``); what it does."""
-        doc = self.memory.load() if self.memory is not None else None
-        if not doc or "path" not in doc:
-            return "no controller remembered"
-        with self._locked("Init"):
-            if not self.backend.acts:
-                return "a playback runs no controller"
-            self._load(doc, restored=True)
-        self.publish()
-        return f"restoring the controller from {doc['path']}"
 
     # -- tasks ---------------------------------------------------------------------
 

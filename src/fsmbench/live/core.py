@@ -26,13 +26,15 @@ import threading
 import time
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any, Protocol, TypeVar
+from typing import Any, TypeVar
 
 import numpy as np
 
 from fsmbench.bench.params import Bench
 from fsmbench.live.backend import LiveBlock, PlaybackBackend, TwinBackend
 from fsmbench.live.commands import BenchCommands, Job
+from fsmbench.live.controllers import BenchCheck
+from fsmbench.live.loading import ControllerCommands, ControllerMemory, FileMemory
 from fsmbench.live.loop import PacedLoop
 from fsmbench.live.monitor import LiveMonitor
 from fsmbench.live.spectra import AccumulatingFrf, FrfSnapshot, RollingAsd
@@ -57,46 +59,7 @@ T = TypeVar("T")
 _log = logging.getLogger("fsmbench.live")
 
 
-class ControllerMemory(Protocol):
-    """Where the loaded controller is remembered across restarts."""
-
-    where: str  #: in words, for Status
-
-    def load(self) -> dict[str, str] | None:
-        """The remembered ``{"path": ..., "controller": ...}``, or None."""
-
-    def save(self, doc: dict[str, str] | None) -> None:
-        """Remember ``doc`` (None: forget)."""
-
-
-class FileMemory:
-    """A :class:`ControllerMemory` in a small JSON file (the EPICS IOC's).
-
-    Parameters
-    ----------
-    path : Path
-    """
-
-    def __init__(self, path: Path) -> None:
-        self.path = Path(path)
-        self.where = f"the file {self.path}"
-
-    def load(self) -> dict[str, str] | None:
-        try:
-            doc = json.loads(self.path.read_text())
-        except (OSError, ValueError):
-            return None
-        return {str(k): str(v) for k, v in doc.items()} if isinstance(doc, dict) and doc \
-            else None
-
-    def save(self, doc: dict[str, str] | None) -> None:
-        self.path.parent.mkdir(parents=True, exist_ok=True)
-        tmp = self.path.with_suffix(".tmp")
-        tmp.write_text(json.dumps(doc or {}))
-        tmp.replace(self.path)
-
-
-class LiveBench(BenchCommands):
+class LiveBench(ControllerCommands, BenchCommands):
     """The live bench (see the module notes).
 
     Parameters
@@ -111,6 +74,9 @@ class LiveBench(BenchCommands):
         Bench seconds per wall-clock second, in [:data:`MIN_SPEED`, :data:`MAX_SPEED`].
     output_folder : str or Path
         Where experiments and recordings are written (created when needed).
+    controllers_folder : str or Path, optional
+        The only folder ``LoadController`` reads controller files from (a relative path is
+        taken inside it; :mod:`fsmbench.live.controllers`); default ``output_folder``.
     watchdog_s : float
         Wall-clock time without a block that makes the loop count as stalled [s].
     log : callable, optional
@@ -133,7 +99,8 @@ class LiveBench(BenchCommands):
 
     def __init__(self, bench: Bench, *, backend: str = "twin",
                  playback_folder: str | Path | None = None, seed: int = 0, speed: float = 1.0,
-                 output_folder: str | Path = "fsmbench-live", watchdog_s: float = 5.0,
+                 output_folder: str | Path = "fsmbench-live",
+                 controllers_folder: str | Path | None = None, watchdog_s: float = 5.0,
                  log: Callable[[str, str], None] | None = None,
                  on_change: Callable[[str], None] | None = None,
                  memory: ControllerMemory | None = None,
@@ -164,6 +131,10 @@ class LiveBench(BenchCommands):
                          (s.damping_ratio.v, s.resonance_hz.v))))
         self.alarm_rule = AlarmHysteresis()
         self.output_folder = Path(output_folder)
+        #: Resolved once: a path is inside it when it resolves there (links followed).
+        self.controllers_folder = Path(controllers_folder if controllers_folder is not None
+                                       else output_folder).resolve()
+        self.bench_check = BenchCheck(bench)
         self.memory = memory
         self.thread_init = thread_init
         self._log_fn = log

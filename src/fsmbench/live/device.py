@@ -18,6 +18,7 @@ logging (DEBUG, INFO, WARNING, ERROR).
 
 Device properties: ``Backend`` (``twin`` or ``playback``), ``PlaybackFolder``,
 ``ParamsFile``, ``BenchFolder``, ``Seed``, ``Speed``, ``OutputFolder``,
+``ControllersFolder`` (the only folder ``LoadController`` reads; empty: ``OutputFolder``),
 ``WatchdogSeconds``, ``DriftRate``, ``DriftStart`` (read from the database; written
 there, as defaults, only when absent) and ``MemorisedController`` (the device's own: the controller
 loaded, so that a restart brings it back).
@@ -67,7 +68,8 @@ _EMPTY: dict[str, Any] = {"float": float("nan"), "int": 0, "bool": False, "str":
 #: Properties an administrator sets, with the defaults written when absent (text).
 PROPERTY_DEFAULTS = {"Backend": "twin", "PlaybackFolder": "", "ParamsFile": "",
                      "BenchFolder": "", "Seed": "0", "Speed": "1.0",
-                     "OutputFolder": "fsmbench-live", "WatchdogSeconds": "5.0",
+                     "OutputFolder": "fsmbench-live", "ControllersFolder": "",
+                     "WatchdogSeconds": "5.0",
                      "DriftRate": "0.0", "DriftStart": "0.0"}
 _MEMORY = "MemorisedController"
 
@@ -159,6 +161,10 @@ class FsmBench(Device):
                             doc="bench seconds per wall-clock second at start")
     OutputFolder = device_property(dtype=str, default_value="fsmbench-live",
                                    doc="where RunExperiment and Record write")
+    ControllersFolder = device_property(dtype=str, default_value="",
+                                        doc="the only folder LoadController reads controller "
+                                            "files from (relative paths are inside it); "
+                                            "empty: OutputFolder")
     WatchdogSeconds = device_property(dtype=float, default_value=5.0,
                                       doc="wall-clock seconds without a bench block that make "
                                           "the device FAULT")
@@ -197,6 +203,7 @@ class FsmBench(Device):
             self.bench = LiveBench(bench, backend=self.Backend,
                                    playback_folder=self.PlaybackFolder or None, seed=self.Seed,
                                    speed=self.Speed, output_folder=self.OutputFolder,
+                                   controllers_folder=self.ControllersFolder or None,
                                    watchdog_s=self.WatchdogSeconds, log=self._log,
                                    on_change=self._pusher.put, memory=_Memory(self),
                                    thread_init=EnsureOmniThread,
@@ -332,9 +339,11 @@ class FsmBench(Device):
         return self._allowed("OpenLoop")
 
     @command(dtype_in=str, dtype_out=str,
-             doc_in='path of controllers_sos.json / controllers.mat / a design folder, or '
-                    '{"path": ..., "controller": name}; loaded off the call',
-             doc_out="what it does (Controller shows the controller when loaded)")
+             doc_in='controllers_sos.json / controllers.mat / a design folder in the '
+                    'ControllersFolder (its path, or {"path": ..., "controller": name}), seed '
+                    '(the ESRF study\'s controller) or last-good; checked on the bench on the '
+                    'call',
+             doc_out="what it loaded, with the margins it passed the check with")
     def LoadController(self, argument: str) -> str:
         return self._do("LoadController", self._require().load_controller, argument)
 

@@ -23,7 +23,9 @@ Its records come from the same table as the Tango attributes
   (``STAT`` WRITE) after a refusal, until the next command succeeds;
   ``PREFIX:ReplyCount`` counts the replies.
 
-The loaded controller is remembered in ``<out>/.fsmbench-ioc-<PREFIX>.json``.
+The loaded controller is remembered in ``<out>/.fsmbench-ioc-<PREFIX>.json``;
+``LoadController`` reads controller files only from ``--controllers DIR`` (default the
+``--out`` folder).
 This module imports softioc only when serving: it is the ``fsmbench[epics]`` extra.
 """
 
@@ -402,6 +404,7 @@ def serve_epics(options: ServeOptions, *, ready: str = "") -> int:
     ioc: BenchIoc | None = None
     live = LiveBench(bench, backend=options.backend, playback_folder=options.playback_folder,
                      seed=options.seed, speed=options.speed, output_folder=out,
+                     controllers_folder=(options.controllers_folder or out).resolve(),
                      watchdog_s=options.watchdog_s, memory=memory,
                      drift_pct_per_h=options.drift_pct_per_h,
                      drift_start_s=options.drift_start_s,

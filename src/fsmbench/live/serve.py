@@ -58,6 +58,9 @@ class ServeOptions:
     port : int
         TCP port without a database (0: any free port).
     output_folder : Path
+    controllers_folder : Path or None
+        The only folder ``LoadController`` reads controller files from (None: the output
+        folder).
     device_name : str
     instance : str
         Tango server instance (``FsmBench/<instance>``).
@@ -89,6 +92,7 @@ class ServeOptions:
     watchdog_s: float = 5.0
     drift_pct_per_h: float = 0.0
     drift_start_s: float = 0.0
+    controllers_folder: Path | None = None
     given: frozenset[str] = field(default_factory=frozenset)
 
     def properties(self) -> dict[str, str]:
@@ -102,6 +106,8 @@ class ServeOptions:
             "Seed": str(self.seed),
             "Speed": repr(float(self.speed)),
             "OutputFolder": str(self.output_folder.resolve()),
+            "ControllersFolder": str(self.controllers_folder.resolve())
+            if self.controllers_folder else "",
             "WatchdogSeconds": repr(float(self.watchdog_s)),
             "DriftRate": repr(float(self.drift_pct_per_h)),
             "DriftStart": repr(float(self.drift_start_s)),
@@ -152,6 +158,10 @@ def _check_inputs(options: ServeOptions) -> None:
     out = options.output_folder
     if out.exists() and not out.is_dir():
         raise ValueError(f"{out}: the output folder is a file")
+    folder = options.controllers_folder
+    if folder is not None and not folder.is_dir():
+        raise ValueError(f"--controllers {folder}: no such folder (LoadController reads "
+                         "controller files only from there)")
 
 
 # ------------------------------------------------------------------ the Tango database
@@ -374,13 +384,16 @@ def add_serve_command(sub: Any, *, factor: Callable[[str], float]) -> None:
                    help="TCP port with --nodb (default 10000)")
     p.add_argument("--out", metavar="DIR", default=None,
                    help="where RunExperiment and Record write (default fsmbench-live)")
+    p.add_argument("--controllers", metavar="DIR", default=None,
+                   help="the only folder LoadController reads controller files from (a "
+                        "relative path is taken inside it; default: the --out folder)")
     p.set_defaults(func=_command)
 
 
 _OPTION_PROPERTY = {"backend": "Backend", "params": "ParamsFile", "bench_dir": "BenchFolder",
                     "seed": "Seed", "speed": "Speed", "out": "OutputFolder",
                     "watchdog": "WatchdogSeconds", "drift_rate": "DriftRate",
-                    "drift_start": "DriftStart"}
+                    "drift_start": "DriftStart", "controllers": "ControllersFolder"}
 
 
 def _command(args: argparse.Namespace) -> int:
@@ -417,4 +430,5 @@ def _command(args: argparse.Namespace) -> int:
         prefix=args.prefix, watchdog_s=5.0 if args.watchdog is None else args.watchdog,
         drift_pct_per_h=0.0 if args.drift_rate is None else args.drift_rate,
         drift_start_s=0.0 if args.drift_start is None else args.drift_start,
+        controllers_folder=Path(args.controllers) if args.controllers else None,
         given=frozenset(given)))

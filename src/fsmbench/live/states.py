@@ -5,7 +5,7 @@ The state is computed from facts, never stored as a label that could lie:
 - **FAULT** the protection opened the loop, the bench loop stalled or died,
   or the device could not start (until ``Reset``);
 - **MOVING** a command's work runs: a recording, an experiment, or a task
-  off the client's call (designing an excitation, loading a controller);
+  off the client's call (designing an excitation);
 - **ALARM** a converter is on a rail (with hysteresis: :class:`AlarmHysteresis`),
   the mirror still rings after a trip (:class:`Ringdown`), or the loop runs and
   its watch warns that the tracking error departs from the loaded controller's

@@ -1,4 +1,4 @@
-"""Work that runs off the client's call: designing an excitation, loading a controller.
+"""Work that runs off the client's call: designing an excitation.
 
 A :class:`Task` runs one function in its own thread and shows its progress
 (0 to 1) and what it does; ``Abort`` cancels it at its next progress step.

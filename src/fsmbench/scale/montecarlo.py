@@ -249,32 +249,14 @@ class DrawResult:
 
 def _margins(bench: Bench, choice: ControllerChoice) -> dict[str, float]:
     """Gain, phase and modulus margins of ``L_ii = (G Kd)_ii`` below Nyquist (exact delays)."""
-    from fsmbench.control.freq import evaluate_ss, frequency_grid, siso_margins
+    from fsmbench.control.loops import discrete_axis_margins
 
     plant = (physical_plant(bench.true, source="drawn") if bench.model is None
              else bench.model.plant)
-    cmds, meas = ["Uch", "Ucv"], ["Rh", "Rv"]
-    g_sub = plant.subsystem(outputs=meas, inputs=cmds)
-    tau = np.array([plant.input_delay_s[n] for n in cmds])
-    ts = choice.ts_s
-    eig_k = np.linalg.eigvals(choice.a) if choice.a.size else np.zeros(0)
-    eig_k = eig_k[np.abs(eig_k) > 0]
-    poles = np.concatenate([g_sub.poles(), np.log(eig_k.astype(complex)) / ts])
-    f = frequency_grid(poles, f_min_hz=1e-2, f_max_hz=0.999 * 0.5 / ts, per_decade=60)
+    margins = discrete_axis_margins(plant, a=choice.a, b=choice.b, c=choice.c, d=choice.d,
+                                    ts_s=choice.ts_s)
     out: dict[str, float] = {}
-    for i, axis in enumerate("hv"):
-        def loop(f_hz: np.ndarray, i: int = i) -> np.ndarray:
-            s = 2j * np.pi * np.asarray(f_hz, dtype=float).ravel()
-            g = evaluate_ss(g_sub, s) * np.exp(-s[:, None, None] * tau[None, None, :])
-            z = np.exp(s * ts)
-            n = choice.a.shape[0]
-            x = np.linalg.solve(z[:, None, None] * np.eye(n)[None] - choice.a[None],
-                                np.broadcast_to(choice.b, (z.size, *choice.b.shape))
-                                .astype(complex))
-            kz = np.einsum("pn,fnm->fpm", choice.c, x) + choice.d[None]
-            return np.asarray(np.einsum("fj,fj->f", g[:, i, :], kz[:, :, i]))
-
-        m = siso_margins(loop, f)
+    for axis, m in margins.items():
         out[f"gain_margin_db.{axis}"] = m.gain_margin_db
         out[f"phase_margin_deg.{axis}"] = m.phase_margin_deg
         out[f"modulus_margin.{axis}"] = m.modulus_margin

@@ -16,7 +16,9 @@ compare, load only a better controller, watch it, roll back when it does worse t
 predicted. Writes ``DIR/tune.json``, ``DIR/identification/`` (the closed-loop
 identification, a ``--bench DIR`` for other commands) and ``DIR/report.html``; with
 ``--device``, the excitations and controllers played through the device are kept in
-``DIR-device/`` (the device remembers the loaded controller's file). With
+``DIR-device/`` (the device remembers the loaded controller's file; the controllers go to
+a ``DIR-device/`` in the device's controllers folder, ``ControllersPath``, when DIR is not
+in it). With
 ``--drift-rate`` (twin) the controller that runs afterwards is watched while the
 resonance drifts (:mod:`fsmbench.tune.watch_twin`), the warnings in ``tune.json``'s
 ``watch``; the device watches itself (``WatchVerdict``, ``WatchCause``).
@@ -35,6 +37,11 @@ from typing import Any
 from fsmbench.cli_args import positive, seconds, seed
 
 __all__ = ["add_closed_loop_options", "add_tune_command", "closed_loop_simulation"]
+
+#: A controller pole closer than this to z = -1 counts as on it [1]: its Tustin pre-image
+#: would lie beyond 4 / (T 1e-6) rad/s (6e5 times the sample rate), no roll-off of a
+#: physical loop, and a double pole on -1 is located only to ~sqrt(eps) = 1.5e-8.
+_AT_NYQUIST = 1e-6
 
 
 def _percent(text: str) -> float:
@@ -169,7 +176,14 @@ def _running_file(spec: str, bench: Any) -> Any:
                          f"to {list(chosen.output_names)}, not Rh, Rv to Uch, Ucv")
     n = chosen.a.shape[0]
     m = np.eye(n) + chosen.a
-    if n and abs(np.linalg.det(m)) < 1e-12 * max(1.0, float(np.linalg.norm(m)) ** n):
+    # Tustin maps s = infinity, and only it, to z = -1: a pole there has no pre-image. Decided
+    # on the poles themselves. det(I + A) against |I + A|^n refused fsmbench's own files: the
+    # delta realisation of their integrator sections puts entries of ~1e12 in A beside exact
+    # poles at z = 1 (|I + A|^14 ~ 1e120), with no pole near -1 (|1 + z| >= 1.9). A pole just
+    # inside -1 is legitimate: Tustin's image of a real lowpass far above Nyquist, at
+    # s = -(2/T)(1 - z)/(1 + z) (1e-3 from -1 is a roll-off at 640 times the sample rate).
+    poles = np.linalg.eigvals(chosen.a) if n else np.zeros(0)
+    if n and float(np.min(np.abs(1.0 + poles))) < _AT_NYQUIST:
         raise ValueError(f"{path}: controller {chosen.name!r} has a pole at z = -1 (Nyquist): "
                          "it has no continuous-time equivalent")
     # z = (1 + s T/2) / (1 - s T/2) substituted in C (zI - A)^-1 B + D, with M = I + A:

@@ -12,9 +12,11 @@ all along:
   layout (``settle_s`` before the excitation's first sample, to its last) from the
   excitation's start sample the device publishes (``Excitation``), and
   ``StopExcitation`` ends it;
-* **load** a controller: its SOS file (:func:`fsmbench.control.export.write_sos_json`)
-  and ``LoadController``, which swaps it in bumplessly in RUNNING; the device's
-  ``Controller`` then names it.
+* **load** a controller: its SOS file (:func:`fsmbench.control.export.write_sos_json`),
+  written in the device's controllers folder (``ControllersPath``: the only folder
+  ``LoadController`` reads), and ``LoadController``, which checks it on the device's
+  bench and swaps it in bumplessly in RUNNING, on the call; the device's ``Controller``
+  then names it.
 
 The device and ``tune`` share a filesystem (the excitation and controller files
 ``tune`` writes, the records the device writes). The device's own watch
@@ -75,6 +77,16 @@ def device_proxy(address: str) -> Any:
     return proxy
 
 
+def _controllers_folder(proxy: Any, folder: Path) -> Path:
+    """Where the controllers tune loads are written: ``folder`` when the device's controllers
+    folder (``ControllersPath``) holds it, else a folder of the same name in there."""
+    try:
+        where = Path(str(proxy.ControllersPath))
+    except AttributeError:  # a device that reads a controller from any path
+        return folder
+    return folder if folder.resolve().is_relative_to(where.resolve()) else where / folder.name
+
+
 class DeviceTarget:
     """The live device, loop closed (see the module notes).
 
@@ -88,7 +100,9 @@ class DeviceTarget:
         The controller the device runs; its name must be the device's ``Controller``.
     folder : Path
         Where the excitations and controllers played through the device are written
-        (kept: the device remembers the loaded controller's file).
+        (kept: the device remembers the loaded controller's file); the controllers in a
+        folder of the same name in the device's controllers folder (``ControllersPath``)
+        when ``folder`` is not in it.
     address : str
         In words, for the log and ``tune.json``.
 
@@ -106,6 +120,7 @@ class DeviceTarget:
         self.drift_pct = 0.0
         self.folder = Path(folder)
         self.folder.mkdir(parents=True, exist_ok=True)
+        self.controllers = _controllers_folder(proxy, self.folder)
         self.gd = running.gd_v_per_rad
         self._n = 0
         state = str(proxy.state())
@@ -162,7 +177,7 @@ class DeviceTarget:
         from fsmbench.control.export import InputScaling, write_sos_json
 
         key = "tuned" if "closed-loop" in loop.name else "controller"
-        where = self.folder / self._name("controller") / "controllers_sos.json"
+        where = self.controllers / self._name("controller") / "controllers_sos.json"
         where.parent.mkdir(parents=True, exist_ok=True)
         write_sos_json(where, {key: loop.k},
                        scaling=InputScaling(qd_gain_v_per_rad=loop.gd_v_per_rad,
