@@ -126,8 +126,6 @@ def test_a_pole_on_nyquist_is_refused_and_one_just_inside_is_not(
         < 1e-6
 
 
-# Last in this module: the device's watch thread may still be predicting after the device
-# stops, importing dask.array while scipy's array checks in a later design look it up.
 def test_a_device_running_a_file_s_controller_is_accepted(bench: Bench, tmp_path: Path,
                                                           tuned_file: Path) -> None:
     """The device, having loaded ``tuned`` from a controllers file (as a previous tune

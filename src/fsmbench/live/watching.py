@@ -152,6 +152,7 @@ class LiveWatch:
         self._last_z = math.nan
         self._error = ""
         self._lock = threading.Lock()
+        self._threads: list[threading.Thread] = []
 
     # -- from the bench's loop -----------------------------------------------------
 
@@ -248,15 +249,22 @@ class LiveWatch:
                                          f"{error}; not watched")
 
         self._quiet_from_s = now_s + SETTLE_S
-        threading.Thread(target=predict, name="fsmbench-watch", daemon=True).start()
+        thread = threading.Thread(target=predict, name="fsmbench-watch", daemon=True)
+        self._threads = [t for t in self._threads if t.is_alive()] + [thread]
+        thread.start()
 
-    def stop(self) -> None:
+    def stop(self, *, timeout_s: float = 10.0) -> None:
         """Stop watching (the bench stops): a prediction being computed ends at its next
-        chunk."""
+        chunk, and is waited for (at most ``timeout_s`` [s]) so that no thread of a stopped
+        device goes on computing (or importing) beside what runs next in the process."""
         with self._lock:
             self._generation += 1
             self._controller = None
             self._watch = None
+            threads, self._threads = self._threads, []
+        for thread in threads:
+            if thread is not threading.current_thread():
+                thread.join(timeout_s)
 
     # -- views ---------------------------------------------------------------------
 
