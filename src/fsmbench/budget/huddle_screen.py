@@ -9,7 +9,11 @@ left out of every comparison (a failed check, attached to the record):
 ``huddle_distinct``
     Two tests whose signals are the same samples (a file saved twice under two
     names): two recordings of noise are never equal, so the second is a copy;
-    compared, it would say the change between them does nothing.
+    compared, it would say the change between them does nothing. When the second
+    is a closed-loop test whose commands the ESRF study's controller explains from
+    those very samples, they are a closed-loop record: the open-loop test is named
+    instead (the loop closed while it was recorded, or the closed test's record
+    saved under its name).
 ``huddle_loop_closed``
     A closed-loop test (3, 5) whose commands ``Uch``, ``Ucv`` are zero
     throughout, or that did not run the ESRF study's controller
@@ -152,6 +156,23 @@ def screen_huddles(recordings: Mapping[str, xr.Dataset], *, fs_hz: float, step_v
         # A closed-loop test holding an open one's samples with its commands at zero: the
         # loop did not run, whichever file was saved under its name.
         idle = name in _CLOSED and original in _OPEN and _commands_zero(recordings[name])
+        if name in _CLOSED and original in _OPEN and _ran_its_controller(
+                name, recordings[name], fs_hz=fs_hz, step_v=step_v):
+            # The samples are a closed-loop record (the ESRF study's controller explains its
+            # commands from these very Vph, Vpv): the open-loop test is the one that does
+            # not hold what its name says. Open-loop samples pasted under a closed-loop
+            # name would leave the commands unexplained: that is the copy below.
+            check = Check(
+                "huddle_distinct", False, "the same samples", f"different samples from "
+                f"{name}.mat (two recordings of noise are never equal)", f"{original}.mat",
+                f"{original}.mat holds the same samples as {name}.mat (Vph, Vpv, Va), a "
+                f"closed-loop record whose commands Uch, Ucv moved: the loop was closed "
+                f"when {original} was recorded, or {name}'s record saved as {original}; "
+                f"{original} is left out, since compared with {name} it would say the loop "
+                f"does nothing: record {original} again with the loop open", unit="")
+            checks.append(check)
+            excluded[original] = check.sentence()
+            continue
         how = (f"; its commands Uch, Ucv are zero throughout: the loop was not closed (the "
                f"controller off), so the open-loop test {original} stands under the "
                "closed-loop test's name" if idle else "")
@@ -230,6 +251,15 @@ def screen_huddles(recordings: Mapping[str, xr.Dataset], *, fs_hz: float, step_v
             if not ok:
                 excluded[name] = check.sentence()
     return HuddleScreen(tuple(checks), excluded, tuple(notes))
+
+
+def _ran_its_controller(name: str, ds: xr.Dataset, *, fs_hz: float, step_v: float) -> bool:
+    """The ESRF study's controller explains both commands of ``ds`` from its own Vph, Vpv."""
+    if not all(c in ds for c in ("Uch", "Ucv")):
+        return False
+    loops = recorded_controllers({name: ds}, fs_hz=fs_hz, step_v=step_v)
+    fits = [next((f for f in loops[a].fits if f.record == name), None) for a in "hv"]
+    return all(f is not None and f.verdict == "seed" for f in fits)
 
 
 def _commands_zero(ds: xr.Dataset) -> bool:
