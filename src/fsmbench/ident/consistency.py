@@ -13,7 +13,9 @@ what they say with the bench file's nominal model and with each other:
     Sercalo run with both coil voltages recorded, its own coil's. The cross
     paths are couplings of a few % (the twin's direct paths are 26–76× its
     cross ones), so a cross output that moves more than the direct one,
-    coherently and with a direct path's gain (:data:`SWAP_GAIN_FACTOR`),
+    coherently and with a direct path's gain (:data:`SWAP_GAIN_FACTOR`; the
+    bench file's or, when smaller, the partner run's as measured: a bench far
+    below the bench file's gains is a finding, not a reason to miss a swap),
     means the other axis was driven: a swapped DAC cable, or the other run
     saved under this name. A dead direct channel beside a coupling is not a
     swap: the steps' own checks name it.
