@@ -94,3 +94,28 @@ def test_without_the_plant_the_screen_judges_on_the_band_alone() -> None:
     judged = [c for c in screen.checks if c.name == "huddle_loop_open"]
     assert len(judged) == 3 and not any(c.passed for c in judged)
     assert all(c.value < CLOSED_LIKE_FACTOR for c in judged)
+
+
+@pytest.mark.parametrize(("explained", "named"), [(0.99, "data_huddle_test_1"),
+                                                  (0.0, "data_huddle_test_3")])
+def test_shared_samples_name_the_test_whose_name_they_do_not_fit(
+        monkeypatch: pytest.MonkeyPatch, explained: float, named: str) -> None:
+    """Test 1 and test 3 hold the same Vph, Vpv, Va. When the ESRF study's controller
+    explains test 3's commands from them, they are a closed-loop record: test 1 is named
+    (the loop closed while it was recorded) and test 3 kept. When it does not, test 3's
+    samples are not its own: test 3 is the copy (its commands left from another record)."""
+    def fits(recordings: dict[str, xr.Dataset], **_: float) -> dict[str, RecordedController]:
+        return {a: RecordedController(a, f"Uc{a}", f"Vp{a}", tuple(
+            ControllerFit(n, 1e-3, 5.0, 30.0, 0.1, explained, 1) for n in recordings),
+            30.0, 0.1) for a in "hv"}
+    monkeypatch.setattr(huddle_screen, "recorded_controllers", fits)
+    recs = _tests(open_std=1.0, closed_std=0.1, removed_std=1.0, test2_std=1.0)
+    closed = recs["data_huddle_test_3"]
+    recs["data_huddle_test_1"] = closed[["Vph", "Vpv", "Va"]]
+    screen = screen_huddles(recs, fs_hz=FS_HZ, step_v=1e-4, uc_to_vp=PLANT)
+    (copy,) = [c for c in screen.checks if c.name == "huddle_distinct"]
+    assert copy.subject == f"{named}.mat" and named in screen.excluded
+    other = ({"data_huddle_test_1", "data_huddle_test_3"} - {named}).pop()
+    assert other not in screen.excluded
+    if named == "data_huddle_test_1":
+        assert "the loop was closed when data_huddle_test_1 was recorded" in copy.advice
