@@ -45,7 +45,7 @@ import scipy.signal
 import xarray as xr
 
 from fsmbench.checks import Check
-from fsmbench.ident.evidence.recorded_loop import recorded_controllers
+from fsmbench.ident.evidence.recorded_loop import RecordedController, recorded_controllers
 
 __all__ = ["CLOSED_LIKE_FACTOR", "MAX_INJECTION", "HuddleScreen", "screen_huddles"]
 
@@ -148,6 +148,8 @@ def screen_huddles(recordings: Mapping[str, xr.Dataset], *, fs_hz: float, step_v
     checks: list[Check] = []
     excluded: dict[str, str] = {}
     order = sorted(present, key=lambda n: int(n.rsplit("_", 1)[1]))
+    loops = recorded_controllers({n: recordings[n] for n in _CLOSED if n in recordings},
+                                 fs_hz=fs_hz, step_v=step_v)
     for i, name in enumerate(order):
         original = next((o for o in order[:i] if o not in excluded
                          and _same_samples(recordings[o], recordings[name])), None)
@@ -156,37 +158,33 @@ def screen_huddles(recordings: Mapping[str, xr.Dataset], *, fs_hz: float, step_v
         # A closed-loop test holding an open one's samples with its commands at zero: the
         # loop did not run, whichever file was saved under its name.
         idle = name in _CLOSED and original in _OPEN and _commands_zero(recordings[name])
-        if name in _CLOSED and original in _OPEN and _ran_its_controller(
-                name, recordings[name], fs_hz=fs_hz, step_v=step_v):
+        if name in _CLOSED and original in _OPEN and _ran_the_seed(loops, name):
             # The samples are a closed-loop record (the ESRF study's controller explains its
             # commands from these very Vph, Vpv): the open-loop test is the one that does
             # not hold what its name says. Open-loop samples pasted under a closed-loop
             # name would leave the commands unexplained: that is the copy below.
-            check = Check(
-                "huddle_distinct", False, "the same samples", f"different samples from "
-                f"{name}.mat (two recordings of noise are never equal)", f"{original}.mat",
+            check = _shared_samples(
+                original, name,
                 f"{original}.mat holds the same samples as {name}.mat (Vph, Vpv, Va), a "
-                f"closed-loop record whose commands Uch, Ucv moved: the loop was closed "
-                f"when {original} was recorded, or {name}'s record saved as {original}; "
-                f"{original} is left out, since compared with {name} it would say the loop "
-                f"does nothing: record {original} again with the loop open", unit="")
+                f"closed-loop record whose commands Uch, Ucv the ESRF study's controller "
+                f"explains from them: the loop was closed when {original} was recorded, or "
+                f"{name}'s record saved as {original}; {original} is left out, since "
+                f"compared with {name} it would say the loop does nothing: record "
+                f"{original} again with the loop open")
             checks.append(check)
             excluded[original] = check.sentence()
             continue
         how = (f"; its commands Uch, Ucv are zero throughout: the loop was not closed (the "
                f"controller off), so the open-loop test {original} stands under the "
                "closed-loop test's name" if idle else "")
-        check = Check(
-            "huddle_distinct", False, "the same samples", f"different samples from "
-            f"{original}.mat (two recordings of noise are never equal)", f"{name}.mat",
+        check = _shared_samples(
+            name, original,
             f"{name}.mat holds the same samples as {original}.mat (Vph, Vpv, Va): the same "
             f"recording saved under two names{how}; it is left out, since compared with "
             f"{original} it would say the change between the two tests does nothing: "
-            f"record {name} again" + (" with the loop closed" if idle else ""), unit="")
+            f"record {name} again" + (" with the loop closed" if idle else ""))
         checks.append(check)
         excluded[name] = check.sentence()
-    loops = recorded_controllers({n: recordings[n] for n in _CLOSED if n in recordings},
-                                 fs_hz=fs_hz, step_v=step_v)
     for name in _CLOSED:
         if name not in recordings or name in excluded:
             continue
@@ -253,13 +251,18 @@ def screen_huddles(recordings: Mapping[str, xr.Dataset], *, fs_hz: float, step_v
     return HuddleScreen(tuple(checks), excluded, tuple(notes))
 
 
-def _ran_its_controller(name: str, ds: xr.Dataset, *, fs_hz: float, step_v: float) -> bool:
-    """The ESRF study's controller explains both commands of ``ds`` from its own Vph, Vpv."""
-    if not all(c in ds for c in ("Uch", "Ucv")):
-        return False
-    loops = recorded_controllers({name: ds}, fs_hz=fs_hz, step_v=step_v)
+def _ran_the_seed(loops: Mapping[str, RecordedController], name: str) -> bool:
+    """The ESRF study's controller explains both of ``name``'s commands from its own Vph, Vpv
+    (``loops``: :func:`recorded_controllers` of the closed-loop tests)."""
     fits = [next((f for f in loops[a].fits if f.record == name), None) for a in "hv"]
     return all(f is not None and f.verdict == "seed" for f in fits)
+
+
+def _shared_samples(subject: str, other: str, advice: str) -> Check:
+    """``huddle_distinct`` failed on ``subject``: it holds ``other``'s samples."""
+    return Check("huddle_distinct", False, "the same samples", f"different samples from "
+                 f"{other}.mat (two recordings of noise are never equal)", f"{subject}.mat",
+                 advice, unit="")
 
 
 def _commands_zero(ds: xr.Dataset) -> bool:
