@@ -78,14 +78,16 @@ def free_port() -> int:
 
 
 def wait_until(check: Callable[[], Any], what: str, *, timeout_s: float = WAIT_S,
-               poll_s: float = 0.05) -> Any:
+               poll_s: float = 0.05, detail: Callable[[], str] | None = None) -> Any:
+    """``check()`` once it is true; a failure naming ``what`` (and ``detail()``) if never."""
     deadline = time.monotonic() + timeout_s
     while True:
         value = check()
         if value:
             return value
         if time.monotonic() > deadline:
-            pytest.fail(f"timed out after {timeout_s:g} s (wall clock) waiting for {what}")
+            seen = f": {detail()}" if detail is not None else ""
+            pytest.fail(f"timed out after {timeout_s:g} s (wall clock) waiting for {what}{seen}")
         time.sleep(poll_s)
 
 

@@ -58,6 +58,9 @@ def ca(parts: SimpleNamespace) -> Any:
 
     epics.ca.initialize_libca()
     yield SimpleNamespace(epics=epics, env={**os.environ, **env})
+    # Every channel cleared here, while the test's objects are alive, not by libca's exit
+    # handler racing the interpreter's teardown (pyepics: a random SIGSEGV otherwise).
+    epics.ca.finalize_libca()
     for k, v in saved.items():
         if v is None:
             os.environ.pop(k, None)
@@ -87,6 +90,17 @@ class Ioc(SimpleNamespace):
             return pvs[name].get(timeout=10.0, use_monitor=False, **kw)
         except self.epics.ca.ChannelAccessGetFailure:
             return None
+
+    def forget_channels(self) -> None:
+        """Clear every channel before the IOC restarts, so the new one is searched at once.
+
+        Without a caRepeater (pyepics ships none) a client never hears the new IOC's
+        beacons, and a channel that lost its server searches with a back-off that reaches
+        a minute: a restart on a busy machine is then found only after the wait ends.
+        """
+        for pv in self.__dict__.pop("pvs", {}).values():
+            pv.disconnect()
+        self.epics.ca.clear_cache()
 
     def get(self, name: str, **kw: Any) -> Any:
         value = self.try_get(name, **kw)
@@ -155,7 +169,9 @@ def test_records_carry_the_attribute_table(ioc: Ioc) -> None:
     angle = ioc.epics.PV(ioc.pv("BeamAngleH"), form="ctrl")
     assert angle.wait_for_connection(timeout=10.0)
     value = angle.get(timeout=10.0)
-    assert value is not None and abs(value) < 1e3 and angle.severity == 0  # urad at rest
+    severity = angle.severity
+    angle.disconnect()
+    assert value is not None and abs(value) < 1e3 and severity == 0  # urad at rest
     asd = ioc.get("AsdVph")
     assert len(asd) == 8193 and np.all(np.isfinite(asd)) and np.all(asd[1:] > 0)
 
@@ -341,6 +357,8 @@ def test_three_readers_and_a_commander(ioc: Ioc, parts: SimpleNamespace) -> None
                 if pv.get(timeout=5.0) is None:
                     errors.append(f"reader {i}: no value from {pv.pvname}")
             reads[i] += 1
+        for pv in pvs:
+            pv.disconnect()
 
     def commander() -> None:
         script = [("CloseLoop", 1), ("StartExcitation", json.dumps(
@@ -394,12 +412,16 @@ def test_second_start_refused_and_a_restart_remembers(
     assert code == "OK", reply
     t0 = ioc.get("BenchTime")
     parts.wait_until(lambda: ioc.get("BenchTime") > t0 + 1.0, "1 s of recording")
+    ioc.forget_channels()
     assert ioc.server.stop(signal.SIGINT) == 0
     assert "stopping on SIGINT" in ioc.server.text()
     n = read_recording(ioc.out / "interrupted.h5").sizes["t"]
     assert 0 < n < 600 * FS, n
     ioc.server = start_ioc(parts, ca, ioc.folder, ioc.prefix, "ioc-again")
     parts.wait_until(lambda: ioc.try_get("Task", as_string=True) == "",
-                     "the restarted IOC, its remembered controller loaded")
+                     "the restarted IOC, its remembered controller loaded",
+                     detail=lambda: f"Task {ioc.try_get('Task', as_string=True)!r}, Status "
+                     f"{ioc.try_get('Status', as_string=True)!r}; the IOC printed: "
+                     f"{ioc.server.text()[-1500:]}")
     assert ioc.text("Controller") == name
     assert "restored from the last run" in ioc.text("Status")

@@ -218,6 +218,37 @@ def test_alarm_hysteresis_rule() -> None:
                      leave_measure=0.01)[0]
 
 
+def test_alarm_time_left_when_no_converter_touches_a_rail_again() -> None:
+    rule = AlarmHysteresis()  # 1 s window at 1 kHz: the alarm ends below 2 rail samples
+    rails = np.zeros(1000, dtype=bool)
+    assert rule.time_left_s(since_s=0.0, now_s=5.0, rails=rails, fs_hz=1e3) == 0.0
+    rails[[100, 900]] = True
+    # The older rail sample leaves the window after 101 new samples.
+    assert rule.time_left_s(since_s=0.0, now_s=5.0, rails=rails, fs_hz=1e3) == \
+        pytest.approx(0.101, abs=1e-12)
+    # The 2 s dwell, when longer, decides.
+    assert rule.time_left_s(since_s=4.5, now_s=5.0, rails=rails, fs_hz=1e3) == \
+        pytest.approx(1.5, abs=1e-12)
+
+
+def test_close_loop_waits_out_the_saturation_alarm_and_names_an_excitation(
+        live: LiveBench) -> None:
+    # Issue 31: CloseLoop after the rails was refused "Stop the excitation" with none running
+    # (FSM_NotAllowed); the README promises FSM_Settling and the time left.
+    live.start_excitation(json.dumps({"input": "Uch", "kind": "noise", "amplitude_v": 0.8}))
+    step_until(live, lambda: live.state == "ALARM", "the saturation ALARM", bench_s=10.0,
+               block=100)
+    assert "Stop the excitation" in refused(live.close_loop, reason="FSM_NotAllowed")
+    live.stop_excitation()
+    live.advance(100)
+    assert live.state == "ALARM"  # the 2 s dwell has not run out
+    sentence = refused(live.close_loop, reason="FSM_Settling")
+    assert "is no more" in sentence and "s of bench time left" in sentence, sentence
+    assert "Stop the excitation" not in sentence
+    step_until(live, lambda: live.state == "ON", "the ALARM to end", bench_s=5.0, block=100)
+    assert "loop closed" in live.close_loop()
+
+
 def test_an_intermittently_clipping_excitation_gives_few_state_changes(
         live: LiveBench) -> None:
     # Case 3.4: 86 State events in 10 s under an accepted excitation.

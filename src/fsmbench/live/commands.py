@@ -23,6 +23,8 @@ from dataclasses import replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Concatenate, ParamSpec
 
+import numpy as np
+
 from fsmbench.io.signals import EXPERIMENTS
 from fsmbench.live.arguments import parse_excitation, parse_experiment, parse_record
 from fsmbench.live.backend import TwinBackend
@@ -39,7 +41,7 @@ if TYPE_CHECKING:
     from fsmbench.live.loop import PacedLoop
     from fsmbench.live.monitor import LiveMonitor
     from fsmbench.live.spectra import FrfSnapshot
-    from fsmbench.live.states import Ringdown
+    from fsmbench.live.states import AlarmHysteresis, Ringdown
     from fsmbench.sim.engine import DiscreteController
 
 __all__ = ["CLOSE_WAIT_S", "COMMAND_WAIT_S", "BenchCommands", "Job"]
@@ -115,6 +117,7 @@ class BenchCommands:
         thread_init: Callable[[], Any] | None
         monitor: LiveMonitor
         ringdown: Ringdown
+        alarm_rule: AlarmHysteresis
         loop: PacedLoop
         _lock: threading.RLock
         _loaded: DiscreteController | None
@@ -136,6 +139,8 @@ class BenchCommands:
         def _stop_frf(self) -> None: ...
         def _state_line(self, state: str, *, with_numbers: bool) -> str: ...
         def _fault_sentence(self) -> str: ...
+        @property
+        def bench_time_s(self) -> float: ...
         def _ringing_sentence(self) -> str: ...
         @property
         def state(self) -> str: ...
@@ -210,13 +215,14 @@ class BenchCommands:
         """
         with self._locked("CloseLoop"):
             self.check_allowed("CloseLoop")
-            ringing = self.command_state == "ALARM"
-            if ringing:
+            settling = self.command_state == "ALARM"
+            if settling:
                 self._refuse_unsettled()
         waited = 0.0
-        if ringing:
+        if settling:
             t0 = time.monotonic()
-            while self._ringing and time.monotonic() - t0 < CLOSE_WAIT_S + 0.5:
+            while (self._ringing or self._alarm[0]) and \
+                    time.monotonic() - t0 < CLOSE_WAIT_S + 0.5:
                 time.sleep(0.01)
             waited = time.monotonic() - t0
         with self._locked("CloseLoop"):
@@ -229,13 +235,32 @@ class BenchCommands:
         return f"loop closed with {k.name}{settled}"
 
     def _refuse_unsettled(self, *, wait: bool = True) -> None:
-        if not self._ringing:
-            raise Refused("FSM_NotAllowed", "CloseLoop refused in ALARM: "
-                                            f"{self._state_line('ALARM', with_numbers=True)} "
-                                            "Stop the excitation and wait for ON.")
-        left = self.ringdown.time_left_s(self.monitor.qd_deviation_v(self.ringdown.window_s))
+        """Refuse CloseLoop in ALARM unless the bench settles by itself within
+        :data:`CLOSE_WAIT_S` (the mirror ringing after a trip, or the saturation alarm's
+        hysteresis running out with no converter on a rail any more)."""
+        if self._ringing:
+            left = self.ringdown.time_left_s(
+                self.monitor.qd_deviation_v(self.ringdown.window_s))
+            why = self._ringing_sentence()
+        else:
+            rule = self.alarm_rule
+            rails = self.monitor.rail_flags(rule.leave_window_s)
+            if self._excitation is not None or (len(rails) and rails[-1]):
+                held = ("" if self._excitation is not None else
+                        " No excitation runs: the held DAC command or the beam keeps a "
+                        "converter on its rail (Reset sets the commands to zero).")
+                raise Refused("FSM_NotAllowed", "CloseLoop refused in ALARM: "
+                                                f"{self._state_line('ALARM', with_numbers=True)}"
+                                                + (held or " Stop the excitation and wait for "
+                                                            "ON."))
+            left = rule.time_left_s(since_s=self._alarm[1], now_s=self.bench_time_s,
+                                    rails=rails, fs_hz=self.fs_hz)
+            why = (f"A converter was on a rail {100 * float(np.mean(rails)):.1f} % of the last "
+                   f"{rule.leave_window_s:g} s and is no more (the ALARM ends below "
+                   f"{100 * rule.leave_fraction:g} %, at least {rule.min_dwell_s:g} s after it "
+                   f"began): about {left:.1f} s of bench time left.")
         if not wait or not self.loop.running or left / self._speed > CLOSE_WAIT_S:
-            raise Refused("FSM_Settling", f"CloseLoop refused: {self._ringing_sentence()} "
+            raise Refused("FSM_Settling", f"CloseLoop refused: {why} "
                                           f"({left / self._speed:.1f} s of wall clock at speed "
                                           f"{self._speed:g}); try again then.")
 

@@ -203,6 +203,12 @@ class LiveMonitor:
         w = self._window(seconds)
         return float(np.mean(np.maximum(w[:, 3], w[:, 4]))) if len(w) else 0.0
 
+    def rail_flags(self, seconds: float) -> np.ndarray:
+        """Each of the last ``seconds`` of samples, oldest first: a controlled DAC command or a
+        4QD reading on a rail (bool, shape (N,))."""
+        w = self._window(seconds)
+        return np.maximum(w[:, 3], w[:, 4]) > 0 if len(w) else np.zeros(0, dtype=bool)
+
     def qd_deviation_v(self, seconds: float) -> tuple[float, float]:
         """Largest deviation of ``Vph``, ``Vpv`` from their mean over the last ``seconds``
         [V] (the mirror's ringing amplitude in open loop; NaN before any sample)."""

@@ -25,6 +25,8 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+import numpy as np
+
 __all__ = ["ALLOWED", "COMMANDS", "REASONS", "STATES", "AlarmHysteresis", "Refused",
            "Ringdown", "plain"]
 
@@ -140,6 +142,28 @@ class AlarmHysteresis:
         if leave_measure < self.leave_fraction and now_s - since_s >= self.min_dwell_s:
             return False, since_s
         return True, since_s
+
+    def time_left_s(self, *, since_s: float, now_s: float, rails: np.ndarray,
+                    fs_hz: float) -> float:
+        """Bench time until an active alarm ends if no converter touches a rail again [s].
+
+        Parameters
+        ----------
+        since_s, now_s : float
+            When the alarm began and the bench time now [s].
+        rails : array of bool, shape (N,)
+            The last ``leave_window_s`` of samples, oldest first: on a rail or not.
+        fs_hz : float
+            Sample rate [Hz].
+        """
+        n = max(1, round(self.leave_window_s * fs_hz))
+        flags = np.asarray(rails, dtype=bool)[-n:]
+        # Samples that must leave the window before fewer than leave_fraction of it are rails:
+        # the k oldest go first as new rail-free samples come in.
+        tail = np.cumsum(flags[::-1])[::-1]  # rails in flags[k:], for each k
+        allowed = self.leave_fraction * n
+        k = int(np.argmax(np.append(tail, 0) < allowed))
+        return max(since_s + self.min_dwell_s - now_s, k / fs_hz, 0.0)
 
 
 @dataclass(frozen=True)
