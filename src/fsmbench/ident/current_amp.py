@@ -40,7 +40,7 @@ from dataclasses import dataclass
 import numpy as np
 import xarray as xr
 from numpy.typing import NDArray
-from scipy.optimize import minimize_scalar
+from scipy.optimize import brentq, minimize_scalar
 
 from fsmbench.bench.params import BenchParams
 from fsmbench.ident.calibration import CurrentAmplifierGain, require_signals, trim_recording
@@ -53,7 +53,8 @@ from fsmbench.ident.frf.periodic import PeriodicOptions, periodic_frf
 from fsmbench.ident.frf.response import spectral_matrix
 from fsmbench.ident.frf.welch import hanning
 
-__all__ = ["AmplifierFit", "amplifier_path", "fit_amplifier", "identify_current_amplifier"]
+__all__ = ["AmplifierFit", "amplifier_path", "fit_amplifier", "identify_current_amplifier",
+           "kink_interval_variance"]
 
 FloatArray = NDArray[np.float64]
 _CURRENT = {"h": ("Uch", "Vch"), "v": ("Ucv", "Vcv")}
@@ -163,13 +164,15 @@ def fit_amplifier(f_hz: FloatArray, h: NDArray[np.complex128], var: FloatArray, 
     # One-sided slopes: at a whole number of samples (the default twin's DAC delay) the
     # sampled response has a kink in the delay (the path's output has a corner at the
     # sampling instant), its phase slope 3-5x steeper on one side than -omega and 0.7x on
-    # the other; a central difference read the mean and gave a std 3x optimistic. The
-    # estimate lies on either side about half the time: its variance is the mean of the
-    # two sides' (the shallow side dominates); at a smooth point they agree.
+    # the other; a central difference read the mean and gave a std 3x optimistic.
+    # Each side's information on the delay with the gain profiled out: at a kink a side's
+    # slope has a magnitude part the gain can absorb (at a smooth point, -iωm, it has none).
     step = 1e-3 * ts
-    fisher_sides = [float(np.sum(2.0 * w * np.abs(g * (model(tau + step) - m) / step) ** 2)),
-                    float(np.sum(2.0 * w * np.abs(g * (m - model(tau - step)) / step) ** 2))]
-    inv_fisher_tau = 0.5 * sum(1.0 / max(fs_, 1e-300) for fs_ in fisher_sides)
+    fisher_sides = []
+    for dm in (g * (model(tau + step) - m) / step, g * (m - model(tau - step)) / step):
+        cross = float(np.sum(2.0 * w * np.real(np.conj(m) * dm)))
+        fisher_sides.append(float(np.sum(2.0 * w * np.abs(dm) ** 2)) - cross**2 / fisher_g)
+    inv_fisher_tau = kink_interval_variance([1.0 / max(f_, 1e-300) for f_ in fisher_sides])
     corr_g = corr_tau = correlated_lines
     if correlated_lines > 1.0:
         # Correlated lines (Welch): the factor each parameter's variance takes from the
@@ -187,6 +190,36 @@ def fit_amplifier(f_hz: FloatArray, h: NDArray[np.complex128], var: FloatArray, 
         delay_std_s=math.sqrt(corr_tau * max(chi2, 1.0) * inv_fisher_tau),
         reduced_chi2=chi2, frequency_hz=tuple(float(x) for x in f),
         gain_per_line_a_per_v=tuple(float(x) for x in np.real(h / m)))
+
+
+def kink_interval_variance(side_variances: list[float]) -> float:
+    """The variance whose ±1.96 std holds 95 % of an estimate at a kink of its model.
+
+    At a kink the estimate lies on either side about half the time, each side a
+    half-normal of its own variance (``1/Fisher`` of that side's slope). Their
+    mixture is skewed: the mean of the two variances (this function's former
+    rule) put ±1.96 std around 92 % of it when one side is 4x steeper, and the
+    independent simulator's benches showed 35-37 of 40 seeds within ±1.96 and a
+    mean z of +0.6 to +0.8. The half-width ``c`` that holds 95 % solves
+    ``½ erf(c/σ₁√2) + ½ erf(c/σ₂√2) = 0.95``; the variance returned is
+    ``(c/1.96)²``, so that ``±1.96 std`` is the 95 % interval (it is the spread
+    of a normal estimate, ``σ₁ = σ₂``, at a smooth point).
+
+    Parameters
+    ----------
+    side_variances : list of float
+        The two sides' variances [unit²] (> 0).
+    """
+    lo, hi = sorted(math.sqrt(v) for v in side_variances)
+    if hi <= lo * (1.0 + 1e-9):
+        return hi * hi
+
+    def held(c: float) -> float:
+        return 0.5 * (math.erf(c / (lo * math.sqrt(2.0))) + math.erf(c / (hi * math.sqrt(2.0)))) \
+            - 0.95
+
+    c = float(brentq(held, 1.96 * lo, 1.96 * hi, xtol=1e-12 * hi))
+    return (c / 1.96) ** 2
 
 
 #: Bartlett lags per correlated line in :func:`_hac_factor`. Measured on the default twin
