@@ -341,6 +341,34 @@ def test_monitors_value_and_archive(ioc: Ioc, parts: SimpleNamespace) -> None:
             pv.disconnect()
 
 
+def test_string_pvs_post_only_on_change(ioc: Ioc, parts: SimpleNamespace) -> None:
+    # Issue 31: 139 monitor updates of one value in 20 s (an archiver in monitor mode keeps
+    # each). With the loop open and nothing running these texts do not change: each PV
+    # posts its value at subscription and then only when the text changes.
+    epics = ioc.epics
+    names = ["Controller", "Excitation", "Task", "WatchVerdict", "WatchCause", "Status",
+             "ReplyCode"]
+    seen: dict[str, list[str]] = {n: [] for n in names}
+    pvs = [epics.PV(ioc.pv(n), auto_monitor=epics.dbr.DBE_VALUE | epics.dbr.DBE_LOG,
+                    callback=lambda char_value, n=n, **kw: seen[n].append(char_value))
+           for n in names]
+    try:
+        t0 = ioc.get("BenchTime")
+        for _ in range(2):  # 2 x 1 s of bench time, each with at least 1.5 s of wall clock
+            start = time.monotonic()
+            parts.wait_until(lambda t=t0: ioc.get("BenchTime") > t + 1.0, "1 s of bench time")
+            time.sleep(max(0.0, 1.5 - (time.monotonic() - start)))
+            t0 = ioc.get("BenchTime")
+        epics.ca.poll()
+        for name in names:
+            changes = sum(a != b for a, b in zip(seen[name], seen[name][1:], strict=False))
+            assert len(seen[name]) <= 1 + changes, (name, seen[name][:5])
+            assert seen[name], f"{name}: no monitor at all"
+    finally:
+        for pv in pvs:
+            pv.disconnect()
+
+
 def test_three_readers_and_a_commander(ioc: Ioc, parts: SimpleNamespace) -> None:
     epics = ioc.epics
     stop = threading.Event()

@@ -156,6 +156,7 @@ class BenchIoc:
         self._latch = QualityLatch()
         self._records: dict[str, Any] = {}
         self._last_arrays: dict[str, Any] = {}
+        self._posted: dict[str, tuple[Any, ...]] = {}
         self._lengths: dict[str, int] = {}
         self._stop = threading.Event()
         self._wake = threading.Event()
@@ -288,6 +289,19 @@ class BenchIoc:
 
     # -- updates -------------------------------------------------------------------
 
+    def _post(self, name: str, value: Any, **alarm: Any) -> None:
+        """Set a record only when its value or alarm changes.
+
+        Each ``set`` processes the record, and softioc's string records then post a
+        monitor whatever the value: 7 a second of one text (an archiver in monitor mode
+        keeps each). The numbers have their deadbands (MDEL, ADEL) as well.
+        """
+        key = (value, tuple(sorted(alarm.items())))
+        if self._posted.get(name) == key:
+            return
+        self._records[name].set(value, **alarm)
+        self._posted[name] = key
+
     def start(self) -> None:
         """Refresh the records from the bench, in a thread, until :meth:`stop`."""
         self._thread = threading.Thread(target=self._updates, name="fsmbench-ioc", daemon=True)
@@ -341,16 +355,16 @@ class BenchIoc:
             if spec.writable:
                 continue  # SpeedFactor: its own record
             if spec.kind == "str":
-                rec[spec.name].set(plain(str(value))[:_STRING - 1])
+                self._post(spec.name, plain(str(value))[:_STRING - 1])
             elif spec.kind == "bool":
-                rec[spec.name].set(bool(value))
+                self._post(spec.name, bool(value))
             elif quality == "INVALID":
                 stale = value is not None and math.isfinite(float(value))
-                rec[spec.name].set(float(value) if stale else 0.0,
-                                   severity=alarm.INVALID_ALARM,
-                                   alarm=alarm.TIMEOUT_ALARM if stale else alarm.UDF_ALARM)
+                self._post(spec.name, float(value) if stale else 0.0,
+                           severity=alarm.INVALID_ALARM,
+                           alarm=alarm.TIMEOUT_ALARM if stale else alarm.UDF_ALARM)
             else:
-                rec[spec.name].set(value)
+                self._post(spec.name, value)
         self._update_state()
 
     def _update_state(self) -> None:
@@ -365,14 +379,14 @@ class BenchIoc:
             state = self.bench.state
             status = self.bench.status
             severity = {"ALARM": alarm.MINOR_ALARM, "FAULT": alarm.MAJOR_ALARM}.get(state, 0)
-            self._records["State"].set(STATES.index(state), severity=severity,
-                                       alarm=alarm.STATE_ALARM if severity else alarm.NO_ALARM)
-            self._records["Status"].set(plain(status)[:_STRING - 1])
+            self._post("State", STATES.index(state), severity=severity,
+                       alarm=alarm.STATE_ALARM if severity else alarm.NO_ALARM)
+            self._post("Status", plain(status)[:_STRING - 1])
             for spec in _WITH_STATE:
                 value = values[spec.name]
                 if value is not None:
-                    self._records[spec.name].set(value if spec.kind == "bool"
-                                                 else plain(str(value))[:_STRING - 1])
+                    self._post(spec.name, value if spec.kind == "bool"
+                               else plain(str(value))[:_STRING - 1])
 
 
 def serve_epics(options: ServeOptions, *, ready: str = "") -> int:
