@@ -479,7 +479,19 @@ class TestTwinDevice:
         eid = proxy.subscribe_event("State", tango.EventType.CHANGE_EVENT, events)
         try:
             wait_until(lambda: tango.DevState.RUNNING in events.of("State"), "RUNNING")
-            proxy.Init()
+            # Issue 31: Init on a closed loop opened it, cut a Record and took more than the
+            # client's 3 s. It is refused on the call; the loop runs on.
+            err = refusal(proxy, "Init")
+            assert err.reason == "FSM_NotAllowed" and "OpenLoop first" in err.desc, err.desc
+            assert proxy.LoopClosed is True and proxy.state() == tango.DevState.RUNNING
+            proxy.OpenLoop()
+            proxy.Record(json.dumps({"signals": ["Vph"], "duration_s": 600, "name": "kept",
+                                     "format": "nexus"}))
+            err = refusal(proxy, "Init")
+            assert err.reason == "FSM_NotAllowed" and "Abort it" in err.desc, err.desc
+            proxy.Abort()
+            wait_until(lambda: proxy.state() == tango.DevState.ON, "ON after Abort")
+            proxy.Init()  # nothing runs: Init restarts the bench
             wait_until(lambda: events.of("State")[-1] == tango.DevState.ON, "ON after Init")
         finally:
             proxy.unsubscribe_event(eid)

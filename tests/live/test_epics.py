@@ -35,7 +35,7 @@ pytest.importorskip("epics")
 from fsmbench.bench.params import default_bench
 from fsmbench.io.recording import read_recording
 from fsmbench.live.attributes import ATTRIBUTES, precision
-from fsmbench.live.epics import MAX_ARRAY_BYTES
+from fsmbench.live.epics import ACTIONS, MAX_ARRAY_BYTES, ca_units
 from fsmbench.twin.simulate import simulate_bench
 
 LOAD_S = float(os.environ.get("FSMBENCH_LIVE_LOAD_S", "10"))
@@ -148,7 +148,7 @@ def test_records_carry_the_attribute_table(ioc: Ioc) -> None:
         if spec.kind != "float" or spec.writable:
             continue
         pv = ioc.pv(spec.name)
-        assert ioc.text(f"{spec.name}.EGU") == spec.egu, spec.name
+        assert ioc.text(f"{spec.name}.EGU") == ca_units(spec.egu), spec.name
         assert ioc.get(f"{spec.name}.PREC") == precision(spec.fmt), spec.name
         lim, ev = spec.limits, spec.events
         for field, value in (("HIHI", lim.high_alarm), ("HIGH", lim.high_warning),
@@ -163,7 +163,16 @@ def test_records_carry_the_attribute_table(ioc: Ioc) -> None:
     assert ioc.text("BeamAngleH.HHSV") == "MAJOR" and ioc.text("BeamAngleH.HSV") == "MINOR"
     assert ioc.text("State") == "ON" and ioc.text("State.FRSV") == "MAJOR"
     assert ioc.get("AsdVph.NELM") == 8193  # 1 s Hann window at 10 kHz: nfft 16384
-    assert ioc.text("AsdVa.EGU") == "nm/sqrt(Hz)"
+    # Issue 31: units reached CA clients cut to 7 characters ('V/sqrt(').
+    assert ioc.text("AsdVa.EGU") == "nm/rtHz"
+    asd = ioc.epics.PV(ioc.pv("AsdVph"), form="ctrl")
+    assert asd.wait_for_connection(timeout=10.0) and asd.get_ctrlvars(timeout=10.0)
+    units = asd.units
+    asd.disconnect()
+    assert units == "V/rtHz", units
+    # Issue 31: the action records were SEVR INVALID (UDF) until first used.
+    for name in ACTIONS:
+        assert ioc.text(f"{name}.SEVR") == "NO_ALARM", name
     assert (ioc.get("SpeedFactor.LOPR"), ioc.get("SpeedFactor.HOPR")) == (0.01, 100.0)
     # The values themselves, with their alarm state.
     angle = ioc.epics.PV(ioc.pv("BeamAngleH"), form="ctrl")

@@ -534,3 +534,14 @@ def test_an_excitation_in_running_is_added_at_the_controller_output(tmp_path: Pa
     assert np.abs(added[:, 0] - basis @ coef).max() <= 1.001 * lsb
     assert np.abs(added[:, 1]).max() <= 1.001 * lsb  # nothing added to Ucv
     assert abs(np.hypot(*coef) - 0.2) < lsb
+
+
+@pytest.mark.parametrize("command", ["start_excitation", "run_experiment", "record",
+                                     "load_controller"])
+def test_deeply_nested_json_is_a_bad_argument(live: LiveBench, command: str) -> None:
+    # Issue 31: "[[[[…]]]]" 100 000 deep answered FSM_Internal "RecursionError".
+    deep = "{\"a\": " + "[" * 100_000 + "]" * 100_000 + "}"
+    state = live.state
+    sentence = refused(getattr(live, command), deep, reason="FSM_BadArgument")
+    assert "nests too deeply" in sentence, sentence
+    assert live.state == state

@@ -48,6 +48,8 @@ def _json(argument: str, command: str, example: str, keys: tuple[str, ...]) -> d
         doc = json.loads(argument)
     except json.JSONDecodeError as exc:
         raise _bad(command, f"the argument is not valid JSON ({exc}); give {example}") from None
+    except RecursionError:  # "[[[[…]]]]" thousands deep: the parser's stack, not a bug
+        raise _bad(command, f"the argument's JSON nests too deeply; give {example}") from None
     if not isinstance(doc, dict):
         raise _bad(command, f"give {example}")
     unknown = sorted(set(doc) - set(keys))

@@ -406,6 +406,24 @@ class LiveBench(ControllerCommands, BenchCommands):
             return "ALARM"  # the loop's watch warns; commands are allowed as in RUNNING
         return "RUNNING" if self.backend.controller is not None else "ON"
 
+    def check_init(self) -> None:
+        """Refuse a restart (Tango's ``Init``) that would cut what runs, with what to do.
+
+        ``Init`` rebuilds the bench: the loop opens, BenchTime starts again at 0 and the
+        remembered controller is loaded again. On a closed loop or a running job that is
+        a surprise to whoever relies on them, so it is refused on the call.
+        """
+        what = self.task_text or (self._job.plan.name if self._job is not None else "")
+        if self._job is not None or self._task is not None:
+            raise Refused("FSM_NotAllowed", f"Init refused: {what or 'a job'} runs and Init "
+                                            "would cut it (Init restarts the bench). Abort it "
+                                            "or wait for it to end.")
+        if self.backend.controller is not None:
+            raise Refused("FSM_NotAllowed", "Init refused: the loop is closed (Init restarts "
+                                            "the bench: the loop opens, BenchTime starts "
+                                            "again at 0, the remembered controller is "
+                                            "loaded again). OpenLoop first.")
+
     @property
     def watch_view(self) -> WatchView:
         """The loop's watch now (:mod:`fsmbench.live.watching`)."""

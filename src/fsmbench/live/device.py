@@ -221,6 +221,10 @@ class FsmBench(Device):
 
     def delete_device(self) -> None:
         bench = getattr(self, "bench", None)
+        if bench is not None and not tango.Util.instance().is_svr_shutting_down():
+            # Init (and the admin's DevRestart) run delete_device first: refused here, the
+            # device goes on untouched. A server shutting down stops whatever runs.
+            self._call("Init", bench.check_init, log=True)
         if bench is not None:
             bench.stop()
         pusher = getattr(self, "_pusher", None)

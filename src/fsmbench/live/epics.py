@@ -54,8 +54,8 @@ if TYPE_CHECKING:
     from fsmbench.live.core import LiveBench
     from fsmbench.live.serve import ServeOptions
 
-__all__ = ["ACTIONS", "ARGUMENT_COMMANDS", "MAX_ARRAY_BYTES", "BenchIoc", "check_prefix",
-           "pv_table", "serve_epics"]
+__all__ = ["ACTIONS", "ARGUMENT_COMMANDS", "MAX_ARRAY_BYTES", "BenchIoc", "ca_units",
+           "check_prefix", "pv_table", "serve_epics"]
 
 #: Commands without argument (an Action record each) and with one (a long string).
 ACTIONS = ("CloseLoop", "OpenLoop", "StopExcitation", "Abort", "Reset")
@@ -79,6 +79,15 @@ def check_prefix(prefix: str) -> str:
         raise ValueError(f"--prefix {prefix!r}: use 1 to 40 letters, digits, _, - or : (not "
                          "ending with :); the PVs are PREFIX:BeamAngleH, ...")
     return prefix
+
+
+def ca_units(egu: str) -> str:
+    """``egu`` as Channel Access carries it: at most 7 characters (``MAX_UNITS_SIZE`` of a
+    DBR_CTRL reply is 8 with its NUL; ``V/sqrt(Hz)`` reached clients as ``V/sqrt(``)."""
+    short = egu.replace("sqrt(Hz)", "rtHz")
+    if len(short) > 7:
+        raise ValueError(f"unit {egu!r} has no Channel Access form of 7 characters")
+    return short
 
 
 def pv_table() -> str:
@@ -175,8 +184,9 @@ class BenchIoc:
         self._records["ReplyCode"] = builder.stringIn("ReplyCode", initial_value="OK")
         self._records["ReplyCount"] = builder.longIn("ReplyCount", initial_value=0)
         for name in ACTIONS:
+            # initial_value: defined from the start (UDF made each SEVR INVALID until used).
             self._records[name] = builder.Action(
-                name, on_update=self._action(name), blocking=True,
+                name, on_update=self._action(name), blocking=True, initial_value=False,
                 DESC=f"process to run {name}")
         for name in ARGUMENT_COMMANDS:
             self._records[name] = builder.longStringOut(
@@ -192,7 +202,7 @@ class BenchIoc:
         lim, ev = spec.limits, spec.events
         fields: dict[str, Any] = {"DESC": spec.doc[:40]}
         if spec.kind in ("float", "int", "spectrum", "image"):
-            fields["EGU"] = spec.egu
+            fields["EGU"] = ca_units(spec.egu)
         if spec.display is not None:
             fields.update(LOPR=spec.display[0], HOPR=spec.display[1])
         if spec.kind == "float" and not spec.writable:
