@@ -34,8 +34,8 @@ pytest.importorskip("epics")
 
 from fsmbench.bench.params import default_bench
 from fsmbench.io.recording import read_recording
-from fsmbench.live.attributes import ATTRIBUTES, precision
-from fsmbench.live.epics import ACTIONS, MAX_ARRAY_BYTES, ca_units
+from fsmbench.live.attributes import ATTRIBUTES, ca_units, precision
+from fsmbench.live.epics import ACTIONS, MAX_ARRAY_BYTES
 from fsmbench.twin.simulate import simulate_bench
 
 LOAD_S = float(os.environ.get("FSMBENCH_LIVE_LOAD_S", "10"))

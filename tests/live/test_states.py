@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import errno
 import json
+import math
 import shutil
 import threading
 import time
@@ -26,6 +27,7 @@ from fsmbench.io.recording import read_recording
 from fsmbench.live import commands, jobs
 from fsmbench.live.attributes import QualityLatch, by_name, evaluate
 from fsmbench.live.core import LiveBench
+from fsmbench.live.loop import PacedLoop
 from fsmbench.live.states import AlarmHysteresis, Refused, Ringdown
 from fsmbench.live.tasks import TaskControl
 
@@ -545,3 +547,49 @@ def test_deeply_nested_json_is_a_bad_argument(live: LiveBench, command: str) -> 
     sentence = refused(getattr(live, command), deep, reason="FSM_BadArgument")
     assert "nests too deeply" in sentence, sentence
     assert live.state == state
+
+
+def test_paced_loop_measures_the_speed_it_reaches() -> None:
+    # Issue 31: SpeedFactor 10 ran at 1.88x and nothing said so. A step that takes at least
+    # as long in wall clock as in bench time caps the loop at 1x whatever is asked (sleeps
+    # only lengthen), so asking 4x must read at most ~1x.
+    bench_time = [0.0]
+
+    def step() -> float:
+        time.sleep(0.01)
+        bench_time[0] += 0.01
+        loop.beat()
+        return bench_time[0]
+
+    loop = PacedLoop(step=step, speed=lambda: 4.0, block_s=lambda: 0.01, watchdog_s=30.0,
+                     on_stall=lambda lag: None, on_death=lambda exc: None)
+    assert math.isnan(loop.reached_speed)  # nothing run yet
+    loop.start()
+    try:
+        wait = time.monotonic()
+        while math.isnan(loop.reached_speed) and time.monotonic() - wait < 60.0:
+            time.sleep(0.05)
+        reached = loop.reached_speed
+    finally:
+        loop.stop()
+    # 2 s of pairs, each step's clock read after its sleep: at most 1x, plus one step's
+    # worth of the window's ends (0.01 s over >= 1 s).
+    assert 0.0 < reached <= 1.02, reached
+
+
+def test_a_slow_pace_is_a_warning_once_and_cleared_once(
+        live: LiveBench, monkeypatch: pytest.MonkeyPatch) -> None:
+    logged: list[tuple[str, str]] = []
+    monkeypatch.setattr(live, "log", lambda level, message: logged.append((level, message)))
+    reached = [float("nan")]
+    monkeypatch.setattr(PacedLoop, "reached_speed", property(lambda self: reached[0]))
+    live.speed = 10.0
+    logged.clear()
+    for value in (9.5, 1.88, 1.9, 8.0, 9.6, 9.7, 1.0):  # SpeedFactor 10
+        reached[0] = value
+        live.advance(round(FS))  # one bench second: one look at the pace
+    warnings = [m for level, m in logged if level == "WARNING"]
+    back = [m for level, m in logged if "again" in m]
+    assert len(warnings) == 2 and "1.88x, 19 % of the SpeedFactor 10" in warnings[0], logged
+    assert len(back) == 1 and "9.6x again" in back[0], logged  # 8.0 is not yet 95 %
+    assert live.speed_reached == 1.0

@@ -30,7 +30,7 @@ if TYPE_CHECKING:
     from fsmbench.live.core import LiveBench
 
 __all__ = ["ATTRIBUTES", "PUSHED", "QUALITIES", "AttributeSpec", "Events", "Limits",
-           "QualityLatch", "by_name", "evaluate", "precision", "readme_table"]
+           "QualityLatch", "by_name", "ca_units", "evaluate", "precision", "readme_table"]
 
 QUALITIES = ("VALID", "WARNING", "ALARM", "INVALID")
 #: Views the bench pushes itself when they change (LiveBench.on_change), with State and
@@ -224,6 +224,12 @@ ATTRIBUTES: tuple[AttributeSpec, ...] = (
                   "bench seconds per wall-clock second (1: real time)", "", "", 1.0, "%.3g",
                   events=Events(abs_change=1e-6, archive_abs_change=1e-6, polling_ms=None),
                   display=(0.01, 100.0), writable=True, min_value=0.01, max_value=100.0),
+    AttributeSpec("SpeedReached", "float", lambda b: b.speed_reached,
+                  "bench seconds per wall-clock second the loop ran over the last 2 s (below "
+                  "90 % of SpeedFactor, a busy machine: a WARNING in the log; INVALID until "
+                  "1 s has run)", "", "", 1.0, "%.3g",
+                  events=Events(abs_change=0.05, archive_abs_change=0.5),
+                  display=(0.0, 100.0)),
     AttributeSpec("LoopClosed", "bool", lambda b: b.loop_closed, "the Sercalo loop is closed",
                   events=Events(polling_ms=None)),
     AttributeSpec("Controller", "str", lambda b: b.controller_name,
@@ -325,6 +331,15 @@ def _num(x: float | None) -> str:
     return "–" if x is None else f"{x:g}"
 
 
+def ca_units(egu: str) -> str:
+    """``egu`` as Channel Access carries it: at most 7 characters (``MAX_UNITS_SIZE`` of a
+    DBR_CTRL reply is 8 with its NUL; ``V/sqrt(Hz)`` reached clients as ``V/sqrt(``)."""
+    short = egu.replace("sqrt(Hz)", "rtHz")
+    if len(short) > 7:
+        raise ValueError(f"unit {egu!r} has no Channel Access form of 7 characters")
+    return short
+
+
 def readme_table() -> str:
     """The attribute configuration table of the README (Markdown), from :data:`ATTRIBUTES`."""
     lines = ["| attribute / PV | type | unit (EPICS EGU) | format | warning | alarm | "
@@ -362,8 +377,8 @@ def readme_table() -> str:
         if s.writable:
             kind += f", writable {s.min_value:g}–{s.max_value:g}"
         unit = s.unit or "–"
-        if s.egu and s.egu != s.unit:
-            unit += f" ({s.egu})"
+        if s.egu and ca_units(s.egu) != s.unit:
+            unit += f" ({ca_units(s.egu)})"
         fmt = f"`{s.fmt}`" if s.fmt else "–"
         doc = s.doc.replace("|", "\\|")  # |H1| would end the cell
         lines.append(f"| `{s.name}` | {kind} | {unit} | {fmt} | {warn} | {alarm} "

@@ -22,6 +22,7 @@ from __future__ import annotations
 import contextlib
 import json
 import logging
+import math
 import threading
 import time
 from collections.abc import Callable
@@ -43,8 +44,8 @@ from fsmbench.live.tasks import Task
 from fsmbench.live.watching import LiveWatch, WatchView
 from fsmbench.sim.engine import DiscreteController
 
-__all__ = ["ASD_SIGNALS", "MAX_SPEED", "MIN_SPEED", "ControllerMemory", "FileMemory",
-           "LiveBench"]
+__all__ = ["ASD_SIGNALS", "MAX_SPEED", "MIN_SPEED", "SLOW_PACE", "SLOW_PACE_CLEAR",
+           "ControllerMemory", "FileMemory", "LiveBench"]
 
 #: Signals whose amplitude spectral density the device publishes.
 ASD_SIGNALS = ("Vph", "Vpv", "Va")
@@ -52,6 +53,9 @@ FRF_OUTPUTS = ("Vph", "Vpv")
 #: Bounds of the speed factor (bench seconds per wall-clock second).
 MIN_SPEED = 0.01
 MAX_SPEED = 100.0
+#: Speed reached over asked below which the bench logs a WARNING, and above which it clears.
+SLOW_PACE = 0.9
+SLOW_PACE_CLEAR = 0.95
 #: Longest wait of a view read for the loop's lock [s] (a stuck loop: the value is stale).
 _READ_WAIT_S = 0.5
 
@@ -150,6 +154,7 @@ class LiveBench(ControllerCommands, BenchCommands):
         self._spectra_due = False
         self._excitation: dict[str, Any] | None = None
         self._next_second = 1
+        self._slow = False  # running below SLOW_PACE of the speed asked (warned once)
         self._loaded: DiscreteController | None = None
         self._loaded_doc: dict[str, str] | None = None
         #: Loaded controllers that have not tripped, oldest first, with their source.
@@ -308,6 +313,7 @@ class LiveBench(ControllerCommands, BenchCommands):
         if end >= self._next_second * self.fs_hz:
             self._next_second = int(end // self.fs_hz) + 1
             self._spectra_due = True  # computed after the lock is released (advance)
+            self._check_pace()
         m = self.monitor
         self._alarm = self.alarm_rule.next(
             active=self._alarm[0], since_s=self._alarm[1], now_s=end_s,
@@ -532,6 +538,29 @@ class LiveBench(ControllerCommands, BenchCommands):
     def heartbeat(self) -> int:
         """Blocks run since the start."""
         return self.loop.heartbeat
+
+    @property
+    def speed_reached(self) -> float:
+        """Bench seconds per wall-clock second the loop ran over its last 2 s (NaN until it has
+        run 1 s at the present speed, or without the loop thread)."""
+        return self.loop.reached_speed
+
+    def _check_pace(self) -> None:
+        """A WARNING when the loop runs below 90 % of the speed asked, once, and an INFO when
+        it is back above 95 % (hysteresis: one message per episode, not one per second)."""
+        reached = self.loop.reached_speed
+        if not math.isfinite(reached):
+            return
+        ratio = reached / self._speed
+        if not self._slow and ratio < SLOW_PACE:
+            self._slow = True
+            self.log("WARNING", f"the bench runs at {reached:.3g}x, {100 * ratio:.0f} % of the "
+                                f"SpeedFactor {self._speed:g} asked: the machine is busy; a "
+                                "lower SpeedFactor keeps bench time regular")
+        elif self._slow and ratio >= SLOW_PACE_CLEAR:
+            self._slow = False
+            self.log("INFO", f"the bench runs at {reached:.3g}x again, "
+                             f"{100 * ratio:.0f} % of the SpeedFactor {self._speed:g}")
 
     @property
     def loop_lag_s(self) -> float:

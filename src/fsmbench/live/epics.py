@@ -47,15 +47,22 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from fsmbench.live.attributes import ATTRIBUTES, AttributeSpec, QualityLatch, evaluate, precision
+from fsmbench.live.attributes import (
+    ATTRIBUTES,
+    AttributeSpec,
+    QualityLatch,
+    ca_units,
+    evaluate,
+    precision,
+)
 from fsmbench.live.states import STATES, Refused, plain
 
 if TYPE_CHECKING:
     from fsmbench.live.core import LiveBench
     from fsmbench.live.serve import ServeOptions
 
-__all__ = ["ACTIONS", "ARGUMENT_COMMANDS", "MAX_ARRAY_BYTES", "BenchIoc", "ca_units",
-           "check_prefix", "pv_table", "serve_epics"]
+__all__ = ["ACTIONS", "ARGUMENT_COMMANDS", "MAX_ARRAY_BYTES", "BenchIoc", "check_prefix",
+           "pv_table", "serve_epics"]
 
 #: Commands without argument (an Action record each) and with one (a long string).
 ACTIONS = ("CloseLoop", "OpenLoop", "StopExcitation", "Abort", "Reset")
@@ -79,15 +86,6 @@ def check_prefix(prefix: str) -> str:
         raise ValueError(f"--prefix {prefix!r}: use 1 to 40 letters, digits, _, - or : (not "
                          "ending with :); the PVs are PREFIX:BeamAngleH, ...")
     return prefix
-
-
-def ca_units(egu: str) -> str:
-    """``egu`` as Channel Access carries it: at most 7 characters (``MAX_UNITS_SIZE`` of a
-    DBR_CTRL reply is 8 with its NUL; ``V/sqrt(Hz)`` reached clients as ``V/sqrt(``)."""
-    short = egu.replace("sqrt(Hz)", "rtHz")
-    if len(short) > 7:
-        raise ValueError(f"unit {egu!r} has no Channel Access form of 7 characters")
-    return short
 
 
 def pv_table() -> str:

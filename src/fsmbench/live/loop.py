@@ -5,6 +5,10 @@ sleeping so that bench time runs ``speed`` times the wall clock. It sleeps in
 short slices, so a new speed acts at once (a ``SpeedFactor`` of 1e-6 once
 put the loop to sleep for ~10^4 s). Each step is a heartbeat.
 
+The loop measures the speed it reaches (:attr:`PacedLoop.reached_speed`): bench
+time over wall clock across the last :data:`REACHED_WINDOW_S`; a busy machine
+runs slower than asked, and a client must be able to see it.
+
 The watchdog is a second thread: when no heartbeat came for
 :meth:`PacedLoop.stall_limit_s` of wall clock, or the loop thread died, it
 reports it once (``on_stall``, ``on_death``); the bench then says FAULT with
@@ -14,8 +18,10 @@ the reason, never ON or RUNNING.
 from __future__ import annotations
 
 import contextlib
+import math
 import threading
 import time
+from collections import deque
 from collections.abc import Callable
 from typing import Any
 
@@ -27,6 +33,9 @@ _SLICE_S = 0.05
 _YIELD_S = 0.001
 #: How often the watchdog looks [s].
 _WATCH_S = 0.1
+#: Wall clock over which the speed reached is measured [s] (blocks of 10 ms of bench time
+#: at 1x come 100 a second: a few hundred pairs).
+REACHED_WINDOW_S = 2.0
 
 
 class PacedLoop:
@@ -68,8 +77,25 @@ class PacedLoop:
         self.last_beat = time.monotonic()
         self.error: BaseException | None = None
         self._stalled = False
+        self._paces: deque[tuple[float, float]] = deque()  # (wall, bench) since the speed
 
     # -- views ---------------------------------------------------------------------
+
+    @property
+    def reached_speed(self) -> float:
+        """Bench seconds per wall-clock second over the last :data:`REACHED_WINDOW_S` (NaN
+        until half of it has run at the present speed)."""
+        paces = list(self._paces)
+        if len(paces) < 2 or paces[-1][0] - paces[0][0] < 0.5 * REACHED_WINDOW_S:
+            return math.nan
+        return (paces[-1][1] - paces[0][1]) / (paces[-1][0] - paces[0][0])
+
+    def _paced(self, wall: float, bench: float, *, reset: bool) -> None:
+        if reset:
+            self._paces.clear()
+        self._paces.append((wall, bench))
+        while self._paces and wall - self._paces[0][0] > REACHED_WINDOW_S:
+            self._paces.popleft()
 
     @property
     def running(self) -> bool:
@@ -145,7 +171,9 @@ class PacedLoop:
                     if bench0 is None or self._speed() != speed:
                         speed = self._speed()
                         wall0, bench0 = time.monotonic(), now_bench
+                        self._paced(wall0, now_bench, reset=True)
                         continue
+                    self._paced(time.monotonic(), now_bench, reset=False)
                     ahead = wall0 + (now_bench - bench0) / speed - time.monotonic()
                     while ahead > 0 and not self._stop.is_set() and self._speed() == speed:
                         self._stop.wait(min(ahead, _SLICE_S))
