@@ -2,9 +2,11 @@
 
 from __future__ import annotations
 
+import datetime
 import itertools
 from pathlib import Path
 
+import h5py
 import numpy as np
 import pytest
 from hypothesis import given, settings
@@ -60,6 +62,22 @@ def test_failed_append_leaves_no_file(tmp_path: Path) -> None:
         nx.append({"Vph": np.zeros(10), "Va": np.zeros(10)})
         nx.append({"Vph": np.zeros(10)})
     assert list(tmp_path.iterdir()) == []
+
+
+def test_an_appended_archive_has_its_start_and_end_time(tmp_path: Path) -> None:
+    # NXentry's start_time and end_time: the wall clock around the samples, with its offset.
+    path = tmp_path / "timed.h5"
+    before = datetime.datetime.now().astimezone()
+    with NexusAppender(path, signals=["Vph"], fs_hz=10_000.0, attrs={}) as app:
+        app.append({"Vph": np.zeros(100)})
+        app.note(ended="complete")
+    after = datetime.datetime.now().astimezone()
+    with h5py.File(path, "r") as f:
+        start, end = (datetime.datetime.fromisoformat(f["entry"][k][()].decode())
+                      for k in ("start_time", "end_time"))
+        assert f["entry"].attrs["ended"] == "complete"
+    assert before <= start <= end <= after
+    assert read_recording(path, require=()).sizes["t"] == 100  # the fields do not disturb it
 
 
 @pytest.mark.parametrize("fmt", ["nexus", "mat73"])

@@ -8,6 +8,7 @@ wall-clock durations). Each test names the case it covers.
 
 from __future__ import annotations
 
+import datetime
 import errno
 import json
 import math
@@ -19,6 +20,7 @@ from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
+import h5py
 import numpy as np
 import pytest
 
@@ -321,6 +323,15 @@ def test_abort_keeps_what_was_recorded(live: LiveBench) -> None:
     idle(live)
     assert live.state == "ON" and "stopped by Abort after 2.0 of 60.0 s" in live.status
     assert read_recording(path).sizes["t"] == round(2.0 * FS)
+    # Issue 31: the NeXus file had no start or end time and no mark that it was cut short.
+    with h5py.File(path, "r") as f:
+        entry = f["entry"]
+        start, end = (datetime.datetime.fromisoformat(entry[k][()].decode())
+                      for k in ("start_time", "end_time"))
+        assert start.tzinfo is not None and start <= end
+        assert entry.attrs["ended"] == "stopped by Abort"
+        assert entry.attrs["planned_duration_s"] == 60.0
+        assert entry.attrs["recorded_duration_s"] == 2.0
     assert live.abort() == "nothing was running"
 
 

@@ -77,6 +77,7 @@ class NexusAppender:
         self._stack = contextlib.ExitStack()
         self._file: h5py.File | None = None
         self._data: h5py.Group | None = None
+        self._entry: h5py.Group | None = None
 
     def __enter__(self) -> NexusAppender:
         from fsmbench import __version__
@@ -97,6 +98,9 @@ class NexusAppender:
         entry.attrs["default"] = "data"
         for key, value in self._attrs.items():
             entry.attrs[key] = value
+        # NXentry's own fields: the wall clock of the first and (at the end) the last sample.
+        entry.create_dataset("start_time", data=_now_iso())
+        self._entry = entry
         data = entry.create_group("data")
         data.attrs["NX_class"] = "NXdata"
         data.attrs["axes"] = TIME
@@ -112,6 +116,13 @@ class NexusAppender:
                 dset.attrs[key] = value
         self._data = data
         return self
+
+    def note(self, **attrs: Any) -> None:
+        """More attributes of the entry, written now (e.g. how a record ended)."""
+        if self._entry is None:
+            raise RuntimeError("NexusAppender.note outside its with-block")
+        for key, value in attrs.items():
+            self._entry.attrs[key] = value
 
     def append(self, block: Mapping[str, np.ndarray]) -> None:
         """Append the next samples: every signal, arrays of equal length (n,)."""
@@ -171,6 +182,14 @@ class NexusAppender:
             except ValueError as err:
                 self._stack.__exit__(type(err), err, err.__traceback__)
                 raise
+        if exc is None and self._entry is not None:
+            self._entry.create_dataset("end_time", data=_now_iso())
         self._data = None
+        self._entry = None
         self._file = None
         self._stack.__exit__(exc_type, exc, tb)
+
+
+def _now_iso() -> str:
+    """The wall clock now, ISO 8601 with its UTC offset (NeXus ``NX_DATE_TIME``)."""
+    return datetime.datetime.now().astimezone().isoformat()

@@ -286,6 +286,10 @@ class JobWriter:
                 if written == 0:
                     # NexusAppender refuses an empty file; leave none, say so below.
                     raise _NoSamplesError
+                # How it ended, in the file: a record cut short says so and by what.
+                app.note(planned_duration_s=p.duration_s, recorded_duration_s=written / p.fs_hz,
+                         ended=(f"stopped by {self._aborted}" if self._aborted else
+                                f"ended early: {self._error}" if self._error else "complete"))
         except _NoSamplesError:
             return JobOutcome(p, 0, None, error=self._error, aborted=self._aborted)
         except Exception as exc:
