@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import json
 import os
+import pwd
 import shutil
 import signal
 import sys
@@ -431,6 +432,52 @@ def test_three_readers_and_a_commander(ioc: Ioc, parts: SimpleNamespace) -> None
     ioc.wait_state(parts, "ON", "RUNNING", "ALARM")
     if ioc.get("LoopClosed"):
         ioc.command("OpenLoop")
+
+
+def _acf(folder: Path, writers: str) -> Path:
+    path = folder / f"{writers.replace(' ', '_')}.acf"
+    path.write_text(f"UAG(operators) {{ {writers} }}\n"
+                    "ASG(DEFAULT) {\n    RULE(1, READ)\n"
+                    "    RULE(1, WRITE) { UAG(operators) }\n}\n", encoding="ascii")
+    return path
+
+
+def test_access_security_lets_only_its_users_put(parts: SimpleNamespace, ca: Any,
+                                                 tmp_path: Path) -> None:
+    # Issue 31: an access-security file for the IOC: the users it names may put, everyone
+    # else reads. libca names this client by its uid's login (osiGetUserName).
+    me = pwd.getpwuid(os.getuid()).pw_name
+    bad = tmp_path / "bad.acf"
+    bad.write_text("ASG(DEFAULT) {\n    RULE(1, READ\n", encoding="ascii")
+    status, err = parts.run_cli([sys.executable, "-m", "fsmbench.cli", "serve", "--protocol",
+                                 "epics", "--prefix", "FSMTBADACF", "--access-security",
+                                 str(bad)], env=ca.env, cwd=tmp_path)
+    assert status == 2 and "cannot parse it" in err.strip().splitlines()[-1], err
+    epics = ca.epics
+    for writers, may_put in ((f"someone_else_{uuid.uuid4().hex[:6]}", False),
+                             (f"someone_else, {me}", True)):
+        prefix = f"FSMA{uuid.uuid4().hex[:6].upper()}"
+        server = parts.start([sys.executable, "-m", "fsmbench.cli", "serve", "--protocol",
+                              "epics", "--prefix", prefix, "--speed", str(SPEED), "--out",
+                              str(tmp_path / "out"), "--access-security",
+                              str(_acf(tmp_path, writers))], env=ca.env, folder=tmp_path,
+                             name=prefix, ready="fsmbench serve: IOC")
+        pvs = [epics.PV(f"{prefix}:{n}") for n in ("BenchTime", "OpenLoop", "SpeedFactor")]
+        try:
+            assert all(pv.wait_for_connection(timeout=10.0) for pv in pvs)
+            assert pvs[0].get(timeout=10.0) is not None and pvs[0].read_access
+            assert [pv.write_access for pv in pvs[1:]] == [may_put, may_put], writers
+            if not may_put:
+                with pytest.raises(epics.ca.CASeverityException, match="Write access denied"):
+                    pvs[2].put(1.0, wait=True, timeout=10.0)
+                assert pvs[2].get(timeout=10.0, use_monitor=False) == SPEED  # untouched
+            else:
+                assert pvs[2].put(10.0, wait=True, timeout=10.0) == 1
+                parts.wait_until(lambda pv=pvs[2]: pv.get(use_monitor=False) == 10.0, "the put")
+        finally:
+            for pv in pvs:
+                pv.disconnect()
+            server.stop()
 
 
 def test_second_start_refused_and_a_restart_remembers(

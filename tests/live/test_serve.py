@@ -198,6 +198,9 @@ def test_starter_entry_point_needs_an_instance(capsys: pytest.CaptureFixture[str
 @pytest.mark.parametrize(("args", "words"), [
     (("--protocol", "epics"), "needs --prefix PREFIX"),
     (("--prefix", "BL1"), "--prefix is for --protocol epics"),
+    (("--access-security", "x.acf"), "--access-security is for --protocol epics"),
+    (("--protocol", "epics", "--prefix", "BL1", "--access-security", "/nonexistent.acf"),
+     "cannot be read"),
     (("--protocol", "epics", "--prefix", "BL1", "--nodb"), "INSTANCE, --device and --nodb"),
     (("--protocol", "epics", "--prefix", "BL 1"), "--prefix 'BL 1'"),
     (("--device", "nodomain"), "not a Tango device name"),

@@ -43,6 +43,7 @@ import sys
 import threading
 import time
 from collections.abc import Callable
+from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -144,6 +145,47 @@ def _already_served(prefix: str) -> str:
     except (OSError, subprocess.TimeoutExpired):
         return ""
     return out.stdout.strip() if out.returncode == 0 else ""
+
+
+def _readable_acf(path: Path) -> Path:
+    """The access-security file, checked before anything starts (EPICS reads it in
+    ``iocInit`` and, when it cannot, refuses every put)."""
+    path = Path(path).resolve()
+    try:
+        text = path.read_text(encoding="ascii")
+    except (OSError, UnicodeDecodeError) as exc:
+        raise ValueError(f"--access-security {path}: cannot be read as an ASCII access-"
+                         f"security file ({exc})") from None
+    if "ASG(" not in text.replace(" ", ""):
+        raise ValueError(f"--access-security {path}: no ASG(...) group; the records use "
+                         "ASG(DEFAULT), e.g. ASG(DEFAULT) { RULE(1, READ) RULE(1, WRITE) "
+                         "{ UAG(operators) } }")
+    return path
+
+
+def _access_security(path: Path) -> None:
+    """Hand the file to EPICS before ``iocInit``, which parses it (``asInit``)."""
+    import ctypes
+
+    from softioc import imports
+
+    set_filename = imports.dbCore.asSetFilename
+    set_filename.argtypes = (ctypes.c_char_p,)
+    set_filename.restype = ctypes.c_int
+    if set_filename(str(path).encode()) != 0:
+        raise ValueError(f"--access-security {path}: EPICS refused the file name")
+
+
+def _access_security_active(path: Path) -> None:
+    """After ``iocInit``: a file EPICS could not parse leaves the IOC serving nothing (its
+    ``asInit`` failed), so the server stops with EPICS's message above ours."""
+    import ctypes
+
+    from softioc import imports
+
+    if not ctypes.c_int.in_dll(imports.dbCore, "asActive").value:
+        raise ValueError(f"--access-security {path}: EPICS cannot parse it (its message "
+                         "above names the line); the IOC is not served")
 
 
 class BenchIoc:
@@ -412,6 +454,7 @@ def serve_epics(options: ServeOptions, *, ready: str = "") -> int:
         logging.basicConfig(level=logging.INFO, stream=sys.stderr,
                             format="%(asctime)s %(levelname)s %(name)s: %(message)s")
     os.environ.setdefault("EPICS_CA_MAX_ARRAY_BYTES", str(MAX_ARRAY_BYTES))
+    acf = _readable_acf(options.access_security) if options.access_security else None
     host = _already_served(prefix)
     if host:
         raise ValueError(f"{prefix}:Heartbeat already answers (an IOC at {host}): stop it, or "
@@ -433,8 +476,12 @@ def serve_epics(options: ServeOptions, *, ready: str = "") -> int:
                      on_change=lambda view: ioc.changed(view) if ioc is not None else None)
     ioc = BenchIoc(live, prefix)
     builder.LoadDatabase()
+    if acf is not None:
+        _access_security(acf)
     dispatcher = asyncio_dispatcher.AsyncioDispatcher()
     softioc.iocInit(dispatcher)
+    if acf is not None:
+        _access_security_active(acf)
     stop = threading.Event()
     # kill -USR1 <pid>: every thread's stack on stderr (what a stuck IOC is doing).
     faulthandler.register(signal.SIGUSR1, all_threads=True)

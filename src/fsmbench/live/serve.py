@@ -72,6 +72,9 @@ class ServeOptions:
     drift_pct_per_h : float
         Twin: the Sercalo resonance drifts this fast [%/h], from ``drift_start_s`` [s] of
         bench time.
+    access_security : Path or None
+        EPICS: an access-security file (``.acf``) for every record (ASG ``DEFAULT``):
+        who may put (``UAG``/``HAG`` rules), everyone else reads.
     given : frozenset of str
         Properties the command line set explicitly (checked against the database).
     """
@@ -93,6 +96,7 @@ class ServeOptions:
     drift_pct_per_h: float = 0.0
     drift_start_s: float = 0.0
     controllers_folder: Path | None = None
+    access_security: Path | None = None
     given: frozenset[str] = field(default_factory=frozenset)
 
     def properties(self) -> dict[str, str]:
@@ -387,6 +391,10 @@ def add_serve_command(sub: Any, *, factor: Callable[[str], float]) -> None:
     p.add_argument("--controllers", metavar="DIR", default=None,
                    help="the only folder LoadController reads controller files from (a "
                         "relative path is taken inside it; default: the --out folder)")
+    p.add_argument("--access-security", metavar="FILE.acf", default=None,
+                   dest="access_security",
+                   help="EPICS: an access-security file for the IOC's records (ASG DEFAULT: "
+                        "the users and hosts that may put; everyone else reads)")
     p.set_defaults(func=_command)
 
 
@@ -417,6 +425,9 @@ def _command(args: argparse.Namespace) -> int:
                              "--prefix")
     elif args.prefix:
         raise ValueError("--prefix is for --protocol epics")
+    elif args.access_security:
+        raise ValueError("--access-security is for --protocol epics (Tango's own access "
+                         "control is the TangoAccessControl device: README)")
     if args.device.count("/") != 2 or not all(args.device.split("/")):
         raise ValueError(f"--device {args.device!r} is not a Tango device name "
                          "(domain/family/member)")
@@ -431,4 +442,5 @@ def _command(args: argparse.Namespace) -> int:
         drift_pct_per_h=0.0 if args.drift_rate is None else args.drift_rate,
         drift_start_s=0.0 if args.drift_start is None else args.drift_start,
         controllers_folder=Path(args.controllers) if args.controllers else None,
+        access_security=Path(args.access_security) if args.access_security else None,
         given=frozenset(given)))
