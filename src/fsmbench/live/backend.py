@@ -16,6 +16,7 @@ import numpy as np
 
 from fsmbench.bench.params import Bench
 from fsmbench.io.folder import load_recordings
+from fsmbench.live.states import MAX_DRIFT_PCT_PER_H
 from fsmbench.sim.engine import DiscreteController
 from fsmbench.sim.excitation import Excitation
 from fsmbench.sim.plant import ADC_CHANNELS, DAC_CHANNELS, bench_discrete
@@ -29,7 +30,6 @@ __all__ = ["DRIFT_STEP_PCT", "LIVE_SIGNALS", "MAX_DRIFT_PCT_PER_H", "LiveBlock",
 #: plant costs ~70 ms: every second at 50x real time would slow the bench).
 DRIFT_STEP_PCT = 0.05
 #: Largest drift rate of the twin's resonance [%/h].
-MAX_DRIFT_PCT_PER_H = 10_000.0
 
 #: Signals a live block may carry, in the seed's names.
 LIVE_SIGNALS = (*DAC_CHANNELS, *ADC_CHANNELS, "Va")

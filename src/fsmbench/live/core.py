@@ -39,7 +39,7 @@ from fsmbench.live.loading import ControllerCommands, ControllerMemory, FileMemo
 from fsmbench.live.loop import PacedLoop
 from fsmbench.live.monitor import LiveMonitor
 from fsmbench.live.spectra import AccumulatingFrf, FrfSnapshot, RollingAsd
-from fsmbench.live.states import AlarmHysteresis, Refused, Ringdown
+from fsmbench.live.states import MAX_SPEED, MIN_SPEED, AlarmHysteresis, Refused, Ringdown
 from fsmbench.live.tasks import Task
 from fsmbench.live.watching import LiveWatch, WatchView
 from fsmbench.sim.engine import DiscreteController
@@ -51,8 +51,6 @@ __all__ = ["ASD_SIGNALS", "MAX_SPEED", "MIN_SPEED", "SLOW_PACE", "SLOW_PACE_CLEA
 ASD_SIGNALS = ("Vph", "Vpv", "Va")
 FRF_OUTPUTS = ("Vph", "Vpv")
 #: Bounds of the speed factor (bench seconds per wall-clock second).
-MIN_SPEED = 0.01
-MAX_SPEED = 100.0
 #: Speed reached over asked below which the bench logs a WARNING, and above which it clears.
 SLOW_PACE = 0.9
 SLOW_PACE_CLEAR = 0.95

@@ -33,6 +33,7 @@ from __future__ import annotations
 
 import contextlib
 import faulthandler
+import importlib.util
 import logging
 import math
 import os
@@ -441,24 +442,24 @@ class BenchIoc:
 
 def serve_epics(options: ServeOptions, *, ready: str = "") -> int:
     """Run the IOC until SIGTERM or Ctrl-C; returns the exit status."""
-    try:
-        from softioc import asyncio_dispatcher, builder, softioc
-    except ImportError:
-        raise ValueError("--protocol epics needs pythonSoftIOC: pip install "
-                         "'fsmbench[epics]'") from None
-    from fsmbench.bench.params import default_bench, load_bench
-    from fsmbench.live.core import FileMemory, LiveBench
-
+    if importlib.util.find_spec("softioc") is None:
+        raise ValueError("--protocol epics needs pythonSoftIOC: pip install 'fsmbench[epics]'")
     prefix = check_prefix(options.prefix)
     if not logging.getLogger().handlers:
         logging.basicConfig(level=logging.INFO, stream=sys.stderr,
                             format="%(asctime)s %(levelname)s %(name)s: %(message)s")
     os.environ.setdefault("EPICS_CA_MAX_ARRAY_BYTES", str(MAX_ARRAY_BYTES))
     acf = _readable_acf(options.access_security) if options.access_security else None
+    # Before the heavy imports (EPICS base, the bench's models): a prefix already served is
+    # refused in the time a CA client takes to find it.
     host = _already_served(prefix)
     if host:
         raise ValueError(f"{prefix}:Heartbeat already answers (an IOC at {host}): stop it, or "
                          "choose another --prefix")
+    from softioc import asyncio_dispatcher, builder, softioc
+
+    from fsmbench.bench.params import default_bench, load_bench
+    from fsmbench.live.core import FileMemory, LiveBench
     bench = load_bench(options.params_file) if options.params_file else default_bench()
     if options.bench_folder is not None:
         from fsmbench.sim.identified import identified_bench

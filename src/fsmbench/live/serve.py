@@ -334,7 +334,7 @@ def starter_main(argv: Sequence[str] | None = None) -> int:
 
 
 def _drift_rate(text: str) -> float:
-    from fsmbench.live.backend import MAX_DRIFT_PCT_PER_H
+    from fsmbench.live.states import MAX_DRIFT_PCT_PER_H
 
     try:
         value = float(text)
@@ -405,7 +405,7 @@ _OPTION_PROPERTY = {"backend": "Backend", "params": "ParamsFile", "bench_dir": "
 
 
 def _command(args: argparse.Namespace) -> int:
-    from fsmbench.live.core import MAX_SPEED, MIN_SPEED
+    from fsmbench.live.states import MAX_SPEED, MIN_SPEED
 
     kind, *rest = args.backend or ["twin"]
     if kind not in ("twin", "playback") or (kind == "twin" and rest) or len(rest) > 1:

@@ -27,10 +27,16 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["ALLOWED", "COMMANDS", "REASONS", "STATES", "AlarmHysteresis", "Refused",
-           "Ringdown", "plain"]
+__all__ = ["ALLOWED", "COMMANDS", "MAX_DRIFT_PCT_PER_H", "MAX_SPEED", "MIN_SPEED", "REASONS",
+           "STATES", "AlarmHysteresis", "Refused", "Ringdown", "plain"]
 
 STATES = ("ON", "RUNNING", "MOVING", "ALARM", "FAULT")
+
+#: SpeedFactor's range [bench seconds per wall-clock second].
+MIN_SPEED = 0.01
+MAX_SPEED = 100.0
+#: Largest drift rate of the twin's Sercalo resonance a server accepts [%/h].
+MAX_DRIFT_PCT_PER_H = 10_000.0
 
 #: Reason codes of refusals (the ``DevFailed`` reason; the IOC's ``ReplyCode``).
 REASONS = {

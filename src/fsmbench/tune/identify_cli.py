@@ -13,17 +13,11 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Mapping
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-from fsmbench.bench.params import Bench
-from fsmbench.ident.closed_loop import (
-    ClosedLoopIdentification,
-    ClosedLoopIdentifyOptions,
-    find_closed_loop_records,
-    identify_closed_loop,
-    read_closed_loop_records,
-    write_closed_loop_identification,
-)
+if TYPE_CHECKING:  # the identification is imported when a command runs, not with the CLI
+    from fsmbench.bench.params import Bench
+    from fsmbench.ident.closed_loop import ClosedLoopIdentification
 
 __all__ = ["check_closed_loop_folder", "identify_closed_loop_folder", "is_closed_loop_folder",
            "summary_lines"]
@@ -34,6 +28,8 @@ _SUFFIXES = (".mat", ".h5", ".nxs")
 
 def is_closed_loop_folder(folder: str | Path) -> bool:
     """Both closed-loop records and neither open-loop Sercalo record."""
+    from fsmbench.ident.closed_loop import find_closed_loop_records
+
     root = Path(folder)
     if not root.is_dir() or len(find_closed_loop_records(root)) < 2:
         return False
@@ -48,6 +44,8 @@ def check_closed_loop_folder(folder: str | Path) -> None:
     ValueError
         One line: the folder holds no ``data_cl_*`` record (what it holds instead).
     """
+    from fsmbench.ident.closed_loop import find_closed_loop_records
+
     root = Path(folder)
     if root.is_dir() and find_closed_loop_records(root):
         return
@@ -73,6 +71,13 @@ def identify_closed_loop_folder(folder: str | Path, *, bench: Bench, out_dir: Pa
     RecordingError, ValueError
         A record missing, unreadable or failing its checks (named).
     """
+    from fsmbench.ident.closed_loop import (
+        ClosedLoopIdentifyOptions,
+        identify_closed_loop,
+        read_closed_loop_records,
+        write_closed_loop_identification,
+    )
+
     say = progress or (lambda _m: None)
     why = ("identify --closed-loop" if asked
            else "no open-loop Sercalo record")
