@@ -11,7 +11,6 @@ meets the 6.1 objective. Nothing asserts on wall clock.
 from __future__ import annotations
 
 import json
-from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -20,28 +19,14 @@ import pytest
 
 tango = pytest.importorskip("tango")
 
-from tango.test_context import DeviceTestContext  # noqa: E402
-
 from fsmbench.bench.params import Bench  # noqa: E402
 from fsmbench.cli import main  # noqa: E402
 from fsmbench.control.seed import seed_decentralised_controller  # noqa: E402
-from fsmbench.live.device import FsmBench  # noqa: E402
 from fsmbench.tune.device import DeviceTarget  # noqa: E402
 from fsmbench.tune.guarded import TuneOptions, loop_of, tune_guarded  # noqa: E402
 from fsmbench.tune.measure import MeasurementOptions  # noqa: E402
 
-DEVICE = "fsmbench/bench/1"
 SEED_NAME = "the ESRF study's controller (9.2)"  # what the device calls it
-
-
-@pytest.fixture()
-def device(tmp_path: Path) -> Iterator[tuple[Any, str]]:
-    ctx = DeviceTestContext(FsmBench, device_name=DEVICE, process=False,
-                            properties={"Speed": 50.0, "OutputFolder": str(tmp_path / "live")})
-    with ctx as proxy:
-        proxy.set_source(tango.DevSource.DEV)
-        proxy.CloseLoop()
-        yield proxy, ctx.get_device_access()
 
 
 def _seed_loop(bench: Bench, gain: float, name: str) -> Any:
@@ -89,13 +74,35 @@ def test_a_worse_candidate_is_refused_through_the_device(device: tuple[Any, str]
 
 
 def test_tune_device_loads_a_better_controller(device: tuple[Any, str], bench: Bench,
-                                               tmp_path: Path) -> None:
+                                               tmp_path: Path,
+                                               monkeypatch: pytest.MonkeyPatch) -> None:
     proxy, address = device
     out = tmp_path / "tune"
+    load = DeviceTarget.load
+    records: list[dict[str, Any]] = []
+
+    def load_seen(self: DeviceTarget, loop: Any) -> dict[str, Any]:
+        # What tune.json says at the moment of the load (issue 31: the decision first).
+        records.append(json.loads((out / "tune.json").read_text()))
+        return load(self, loop)
+
+    monkeypatch.setattr(DeviceTarget, "load", load_seen)
     assert main(["tune", "--device", address, "--out", str(out), "--watch-s", "6",
                  "--periods", "4", "--seed", "1"]) == 0
+    # Written before the load: the measurement, the candidate, why, and the controller
+    # that ran before with how the device's LoadController returns to it.
+    first = records[0]
+    assert first["decision"] == "loading" and first["transaction"]["outcome"] is None
+    assert first["transaction"]["candidate"].startswith("fsmbench's controller")
+    assert "better by more than 10 %" in first["transaction"]["why"]
+    assert first["transaction"]["running_before"]["name"] == SEED_NAME
+    assert first["transaction"]["running_before"]["restore_with"][0] == "seed"
+    assert set(first["before"]["measured_rms_rad"]) == {"h", "v"}
+    assert first["identified"]["h"]["resonance_hz"] > 0.0
     js = json.loads((out / "tune.json").read_text())
     assert js["decision"] == "loaded", js["reason"]
+    assert js["transaction"]["outcome"] == "loaded"
+    assert js["transaction"]["left_on"] == proxy.Controller
     assert js["target"] == f"the live device {address}"
     for a in ("h", "v"):
         assert js["before"]["sensitivity_at_1hz"][a] > js["objective_sensitivity_bound_at_1hz"]

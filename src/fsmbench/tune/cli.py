@@ -18,7 +18,12 @@ identification, a ``--bench DIR`` for other commands) and ``DIR/report.html``; w
 ``--device``, the excitations and controllers played through the device are kept in
 ``DIR-device/`` (the device remembers the loaded controller's file; the controllers go to
 a ``DIR-device/`` in the device's controllers folder, ``ControllersPath``, when DIR is not
-in it). With
+in it). On the device the load is a transaction (:mod:`fsmbench.tune.transaction`):
+``DIR/tune.json`` holds the measurement and the decision before anything is loaded, then
+the outcome (``loaded``, ``rolled_back``, ``interrupted``); Ctrl-C, SIGTERM, a lost
+connection or any error once the load has started rolls the device back to the controller
+it ran before through its ``LoadController``, and the output says which controller the
+device is left on (exit status 130 for Ctrl-C, 143 for SIGTERM). With
 ``--drift-rate`` (twin) the controller that runs afterwards is watched while the
 resonance drifts (:mod:`fsmbench.tune.watch_twin`), the warnings in ``tune.json``'s
 ``watch``; the device watches itself (``WatchVerdict``, ``WatchCause``).
@@ -234,6 +239,8 @@ def _command(args: argparse.Namespace) -> int:
                        measurement=MeasurementOptions(max_error_rad=args.max_error_urad * 1e-6,
                                                       periods=int(args.periods)))
     running = _running(args.running, bench)
+    out = str(args.out)
+    argv = [("." if a == out else a) for a in getattr(args, "argv", [])]
     if args.device is None:
         result = tune_twin(bench=bench, running=running, drift_pct=args.drift_pct,
                            options=opts, seed=args.seed, progress=say)
@@ -244,14 +251,16 @@ def _command(args: argparse.Namespace) -> int:
         out_dir = Path(args.out).resolve()
         target = DeviceTarget(device_proxy(args.device), bench=bench, running=running,
                               folder=out_dir.with_name(out_dir.name + "-device"),
-                              address=args.device)
-        result = tune_guarded(target=target, bench=bench, running=running, options=opts,
-                              seed=args.seed, progress=say)
+                              address=args.device, running_source=args.running)
+        journal = _Journal(out, arguments=argv, inputs=inputs)
+        try:
+            result = tune_guarded(target=target, bench=bench, running=running, options=opts,
+                                  seed=args.seed, progress=say, journal=journal)
+        except BaseException as exc:
+            return _interrupted(exc, journal, out)
     payload = result.to_json()
     if args.drift_rate is not None:
         payload["watch"] = _watch(args, bench, result, running, say)
-    out = str(args.out)
-    argv = [("." if a == out else a) for a in getattr(args, "argv", [])]
     with output_transaction(out, command="tune", arguments=argv, need_bytes=2**23,
                             inputs=inputs) as run:
         paths = [atomic_write_text(run.staging / "tune.json",
@@ -264,6 +273,8 @@ def _command(args: argparse.Namespace) -> int:
                                   sections=[tune_section(result)],
                                   meta=[f"bench: {bench.label}"]))
     print(f"decision: {result.decision.replace('_', ' ')}: {result.reason}")
+    if result.transaction is not None:
+        print(result.transaction["sentence"])
     for label, fig in (("before", result.before), ("after", result.after)):
         s1 = ", ".join(f"{a} {v:.3g}" for a, v in fig.sensitivity_at_1hz.items())
         meas = ("" if fig.measured_rms_rad is None else "; measured tracking error " + ", ".join(
@@ -275,6 +286,58 @@ def _command(args: argparse.Namespace) -> int:
     for path in paths:
         print(f"wrote {run.final_path(Path(path))}", file=sys.stderr)
     return 0
+
+
+class _Journal:
+    """``tune.json`` in ``--out`` as the loop change goes (``tune_guarded``'s journal).
+
+    Each record is a complete run of its own (:func:`fsmbench.io.outdir.output_transaction`:
+    ``tune.json`` written to a temporary file and renamed, the folder swapped in one
+    rename, ``run.json`` listing it), so ``--out`` holds either the previous record or the
+    new one, and the run's final write replaces it as a whole.
+
+    Parameters
+    ----------
+    out : str
+        The ``--out`` folder.
+    arguments : list of str
+        The command line, for ``run.json``.
+    inputs : list of (str, str or None)
+        The command line's inputs (never inside ``--out``).
+    """
+
+    def __init__(self, out: str, *, arguments: list[str], inputs: list[Any]) -> None:
+        self.out, self.arguments, self.inputs = out, arguments, inputs
+        self.last: Any = None
+
+    def __call__(self, result: Any) -> None:
+        from fsmbench.io.atomic import atomic_write_text
+        from fsmbench.io.outdir import output_transaction
+
+        text = json.dumps(result.to_json(), indent=2, sort_keys=True, allow_nan=False) + "\n"
+        with output_transaction(self.out, command="tune", arguments=self.arguments,
+                                need_bytes=2**20, inputs=self.inputs) as run:
+            atomic_write_text(run.staging / "tune.json", text)
+        self.last = result
+
+
+def _interrupted(exc: BaseException, journal: _Journal, out: str) -> int:
+    """After an interrupted loop change: its outcome on stdout, the exit status (130 for
+    Ctrl-C, 143 for SIGTERM); an error is raised again (its message says the same)."""
+    from fsmbench.cli import EXIT_SIGINT, EXIT_SIGTERM, Terminated
+
+    last = journal.last
+    if last is None or last.decision != "interrupted":
+        raise exc
+    print(f"decision: interrupted: {last.reason}")
+    where = f"{Path(out) / 'tune.json'} records the decision and the outcome"
+    if isinstance(exc, KeyboardInterrupt):
+        print(f"fsmbench tune: error: {out}: interrupted (Ctrl-C); {where}", file=sys.stderr)
+        return EXIT_SIGINT
+    if isinstance(exc, Terminated):
+        print(f"fsmbench tune: error: {out}: terminated (SIGTERM); {where}", file=sys.stderr)
+        return EXIT_SIGTERM
+    raise exc
 
 
 def _watch(args: argparse.Namespace, bench: Any, result: Any, running: Any,

@@ -16,7 +16,16 @@ all along:
   written in the device's controllers folder (``ControllersPath``: the only folder
   ``LoadController`` reads), and ``LoadController``, which checks it on the device's
   bench and swaps it in bumplessly in RUNNING, on the call; the device's ``Controller``
-  then names it.
+  then names it;
+* **roll back** to the controller the device ran when tune started, by the device's own
+  ``LoadController`` of what it was loaded from (``seed``, or its file with ``--running
+  FILE::NAME``), else ``last-good`` (the latest controller before the one in effect that
+  ran without tripping), once any excitation and record tune started are stopped
+  (``StopExcitation``, ``Abort``): the device checks it again on the call.
+
+Every attribute read goes through :func:`fsmbench.tune.reads.read_valid`: the device
+answers INVALID (PyTango's value None) when it cannot take its bench's lock in 0.5 s, and
+such a reading is read again for a bounded wall-clock time, then named in an error.
 
 The device and ``tune`` share a filesystem (the excitation and controller files
 ``tune`` writes, the records the device writes). The device's own watch
@@ -39,6 +48,7 @@ from fsmbench.io.recording import make_recording, read_recording
 from fsmbench.sim.excitation import SampledExcitation, samples_sha256
 from fsmbench.sim.loaded import RunningController
 from fsmbench.tune.guarded import Loop
+from fsmbench.tune.reads import INVALID_WAIT_S, read_valid
 from fsmbench.twin.closed_loop import CLOSED_LOOP_SIGNALS, ClosedLoopPlay, excitation_variable
 from fsmbench.twin.experiments import ExperimentSpec
 from fsmbench.twin.simulate import TwinRun
@@ -77,14 +87,34 @@ def device_proxy(address: str) -> Any:
     return proxy
 
 
-def _controllers_folder(proxy: Any, folder: Path) -> Path:
+def _controllers_folder(where: str | None, folder: Path) -> Path:
     """Where the controllers tune loads are written: ``folder`` when the device's controllers
-    folder (``ControllersPath``) holds it, else a folder of the same name in there."""
-    try:
-        where = Path(str(proxy.ControllersPath))
-    except AttributeError:  # a device that reads a controller from any path
+    folder (``ControllersPath``, None: a device that reads a controller from any path)
+    holds it, else a folder of the same name in there."""
+    if where is None:
         return folder
-    return folder if folder.resolve().is_relative_to(where.resolve()) else where / folder.name
+    return folder if folder.resolve().is_relative_to(Path(where).resolve()) \
+        else Path(where) / folder.name
+
+
+def _restore_requests(source: str | None) -> list[Any]:
+    """The ``LoadController`` arguments that bring back the controller ``--running`` named
+    (``seed``, or ``PATH[::NAME]``), then ``last-good``."""
+    if source == "seed":
+        return ["seed", "last-good"]
+    if source is None or source == "fsmbench":
+        return ["last-good"]
+    path, sep, name = source.partition("::")
+    doc = {"path": str(Path(path).resolve())}
+    if sep:
+        doc["controller"] = name
+    return [doc, "last-good"]
+
+
+def _words(exc: BaseException) -> str:
+    """A device's refusal (DevFailed's description) or an error, in one line."""
+    desc = getattr(exc.args[0], "desc", None) if exc.args else None
+    return " ".join(str(desc if isinstance(desc, str) else exc).split())
 
 
 class DeviceTarget:
@@ -105,34 +135,52 @@ class DeviceTarget:
         when ``folder`` is not in it.
     address : str
         In words, for the log and ``tune.json``.
+    running_source : str, optional
+        How ``running`` was named on tune's command line (``seed``, ``PATH[::NAME]``): what
+        the roll-back asks ``LoadController`` for first (``last-good`` after it).
+    invalid_wait_s : float
+        Wall-clock time an INVALID attribute is read again for before it is an error [s].
 
     Raises
     ------
     ValueError
         The loop is not closed, or the device runs another controller (both named).
+    fsmbench.tune.reads.DeviceReadError
+        An attribute stayed INVALID for ``invalid_wait_s``.
     """
 
     def __init__(self, proxy: Any, *, bench: Bench, running: Loop, folder: Path,
-                 address: str) -> None:
+                 address: str, running_source: str | None = None,
+                 invalid_wait_s: float = INVALID_WAIT_S) -> None:
         self.proxy = proxy
         self.fs_hz = float(bench.true.converter.fs_hz)
+        self.address = address
         self.label = f"the live device {address}"
         self.drift_pct = 0.0
+        self.invalid_wait_s = float(invalid_wait_s)
         self.folder = Path(folder)
         self.folder.mkdir(parents=True, exist_ok=True)
-        self.controllers = _controllers_folder(proxy, self.folder)
+        where = (str(self._attr("ControllersPath"))
+                 if "ControllersPath" in proxy.get_attribute_list() else None)
+        self.controllers = _controllers_folder(where, self.folder)
         self.gd = running.gd_v_per_rad
+        self.restore_requests = _restore_requests(running_source)
         self._n = 0
         state = str(proxy.state())
-        if not proxy.LoopClosed or state not in ("RUNNING", "ALARM"):
+        if not self._attr("LoopClosed") or state not in ("RUNNING", "ALARM"):
             raise ValueError(f"{address}: the loop is not running (state {state}: "
                              f"{proxy.status()}); tune works with the loop closed: CloseLoop "
                              "first")
-        if proxy.Controller != running.name:
-            raise ValueError(f"{address} runs {proxy.Controller!r}, not {running.name!r}: name "
-                             "the running controller (--running)")
+        now = self._attr("Controller")
+        if now != running.name:
+            raise ValueError(f"{address} runs {now!r}, not {running.name!r}: name the running "
+                             "controller (--running)")
 
     # -- helpers -------------------------------------------------------------------
+
+    def _attr(self, name: str) -> Any:
+        """The attribute ``name``'s value, INVALID readings read again (module notes)."""
+        return read_valid(self.proxy, name, device=self.label, wait_s=self.invalid_wait_s)
 
     def _name(self, what: str) -> str:
         self._n += 1
@@ -140,7 +188,8 @@ class DeviceTarget:
 
     def _wait(self, check: Callable[[], bool], what: str, bench_s: float) -> None:
         """Poll until ``check()``; a wall-clock limit from the bench time it needs."""
-        limit = _SLACK_S + bench_s / max(float(self.proxy.SpeedFactor), 1e-3)
+        limit = _SLACK_S if bench_s <= 0.0 else \
+            _SLACK_S + bench_s / max(float(self._attr("SpeedFactor")), 1e-3)
         t0 = time.monotonic()
         while not check():
             if time.monotonic() - t0 > limit:
@@ -156,7 +205,7 @@ class DeviceTarget:
         """
         path = self.proxy.Record(json.dumps({"signals": list(signals), "duration_s": duration_s,
                                              "name": self._name("record"), "overwrite": True}))
-        start_s = float(self.proxy.BenchTime)
+        start_s = float(self._attr("BenchTime"))
         out = during(start_s) if during is not None else None
         self._wait(lambda: str(self.proxy.state()) != "MOVING" and Path(path).exists(),
                    f"the record {path}", duration_s)
@@ -183,16 +232,65 @@ class DeviceTarget:
                        scaling=InputScaling(qd_gain_v_per_rad=loop.gd_v_per_rad,
                                             plant_source=f"identified ({loop.name})"),
                        ts_s=1.0 / self.fs_hz, descriptions={key: loop.name})
-        before = self.proxy.Controller
+        before = self._attr("Controller")
         reply = self.proxy.LoadController(json.dumps({"path": str(where), "controller": key}))
-        self._wait(lambda: self.proxy.Task == "", "the controller's load", 0.0)
-        now = self.proxy.Controller
+        self._wait(lambda: self._attr("Task") == "", "the controller's load", 0.0)
+        now = self._attr("Controller")
         if now == before or not now.startswith(key):
             raise ValueError(f"{self.label}: LoadController did not load {loop.name} (the "
                              f"device runs {now!r}): {self.proxy.status()}")
         self.gd = loop.gd_v_per_rad
-        return {"bench_time_s": float(self.proxy.BenchTime), "from": before, "to": now,
+        return {"bench_time_s": float(self._attr("BenchTime")), "from": before, "to": now,
                 "file": str(where), "reply": reply}
+
+    def running_controller(self) -> str:
+        """The device's ``Controller``."""
+        return str(self._attr("Controller"))
+
+    def checkpoint(self, loop: Loop) -> dict[str, Any]:
+        """``loop``, running now: the device's name for it and how :meth:`roll_back` asks
+        ``LoadController`` for it again."""
+        return {"name": loop.name, "device": self.label, "noun": "The device",
+                "checked": "the device runs it: its LoadController checked it on the device's "
+                           "bench when it was loaded (or it is the ESRF study's seed)",
+                "restore_with": list(self.restore_requests)}
+
+    def roll_back(self, loop: Loop) -> dict[str, Any]:
+        """Return the device to ``loop``, the controller it ran when tune started (module notes).
+
+        Returns
+        -------
+        dict
+            The switch: from, to, the ``LoadController`` argument that did it (``request``),
+            the device's reply.
+
+        Raises
+        ------
+        ValueError
+            No argument brought ``loop`` back (each refusal named).
+        """
+        before = self.running_controller()
+        if before == loop.name:
+            return {"from": before, "to": before, "reply": "already running"}
+        self.proxy.StopExcitation()
+        if str(self.proxy.state()) == "MOVING":
+            self.proxy.Abort()
+        self._wait(lambda: str(self.proxy.state()) != "MOVING", "the end of tune's record", 0.0)
+        tried = []
+        for request in self.restore_requests:
+            text = request if isinstance(request, str) else json.dumps(request)
+            try:
+                reply = self.proxy.LoadController(text)
+                self._wait(lambda: self._attr("Task") == "", "the controller's load", 0.0)
+            except Exception as exc:  # a refusal: the next way back
+                tried.append(f"LoadController {text!r}: {_words(exc)}")
+                continue
+            now = self.running_controller()
+            if now == loop.name:
+                self.gd = loop.gd_v_per_rad
+                return {"from": before, "to": now, "request": text, "reply": reply}
+            tried.append(f"LoadController {text!r} loaded {now!r}")
+        raise ValueError(f"{self.label}: could not load {loop.name} back: {'; '.join(tried)}")
 
     def play(self, plays: Sequence[ClosedLoopPlay], *, controller: RunningController,
              settle_s: float, seed: int,
@@ -210,7 +308,7 @@ class DeviceTarget:
             npy = self.folder / f"{self._name(play.name)}.npy"
             np.save(npy, x)
             n_settle = round(settle_s * fs)
-            late_s = max(_LATE_S, _LATE_WALL_S * float(self.proxy.SpeedFactor))
+            late_s = max(_LATE_S, _LATE_WALL_S * float(self._attr("SpeedFactor")))
             duration = 2 * settle_s + late_s + x.size / fs
             if progress is not None:
                 progress(f"playing {play.description} on {play.channel} through "
@@ -218,14 +316,14 @@ class DeviceTarget:
                          f"({duration:g} s recorded)")
 
             def excite(start_s: float, play: ClosedLoopPlay = play, npy: Path = npy) -> float:
-                self._wait(lambda: float(self.proxy.BenchTime) >= start_s + settle_s,
+                self._wait(lambda: float(self._attr("BenchTime")) >= start_s + settle_s,
                            "the settling before the excitation", settle_s)
                 doc: dict[str, Any] = {"input": play.channel, "kind": "samples",
                                        "path": str(npy)}
                 if play.loop_from is not None:
                     doc["loop_from"] = int(play.loop_from)
                 self.proxy.StartExcitation(json.dumps(doc))
-                return float(json.loads(self.proxy.Excitation)["start_time_s"])
+                return float(json.loads(self._attr("Excitation"))["start_time_s"])
 
             for attempt in range(1, _ATTEMPTS + 1):
                 rec, e_start_s = self._record(CLOSED_LOOP_SIGNALS, duration, during=excite)

@@ -20,9 +20,15 @@ On the twin (:func:`tune_twin`), every step logged:
    new controller's state set so that its first command is the last one) and
    **watch** for ``watch_s``: if the measured tracking error exceeds the prediction
    by more than ``rollback_tolerance`` on an axis, the running controller is
-   loaded back (bumplessly) and watched again.
+   loaded back (bumplessly) and watched again. Step 6 is a transaction
+   (:func:`fsmbench.tune.transaction.load_and_watch`): the measurement and the
+   decision are handed to ``journal`` before anything is loaded, the outcome after the
+   watch; an interruption or error once the load has started (Ctrl-C, a lost
+   connection, a crash) rolls back to the running controller through the target's own
+   means (:meth:`TuneTarget.roll_back`) and says which controller the bench is left on.
 
-The decision is ``loaded``, ``refused`` or ``rolled_back``, with its reason.
+The decision is ``loaded``, ``refused``, ``rolled_back`` or ``interrupted``, with its
+reason (``loading`` in the record written before the load).
 """
 
 from __future__ import annotations
@@ -186,7 +192,10 @@ class TuneResult:
 
     Attributes
     ----------
-    decision : {"loaded", "refused", "rolled_back"}
+    decision : {"loaded", "refused", "rolled_back", "interrupted", "loading"}
+        ``loading``: the record written before the load (the candidate, why, and the
+        controller running before); ``interrupted``: the load or its watch was cut short
+        and the bench rolled back (``transaction`` says to which controller).
     reason : str
         In words, with the numbers.
     before : ControllerFigures
@@ -214,6 +223,12 @@ class TuneResult:
         The candidate as designed and wired (to offer it again, or export it).
     target : str
         What was tuned, in words (the twin, or the device's address).
+    transaction : dict or None
+        Step 6's record (:func:`fsmbench.tune.transaction.load_and_watch`): ``state``
+        (decided, done), ``outcome`` (loaded, rolled_back, interrupted; None before the
+        load), the candidate, ``why``, ``running_before`` (its name and how the target
+        returns to it), ``left_on`` (the controller the bench is left on) and
+        ``sentence`` (that, in words); None when nothing was to be loaded.
     """
 
     decision: str
@@ -232,6 +247,7 @@ class TuneResult:
     options: TuneOptions
     candidate_loop: Loop
     target: str = "the digital twin"
+    transaction: Mapping[str, Any] | None = None
 
     def to_json(self) -> dict[str, Any]:
         """``tune.json``'s content (SI units)."""
@@ -246,7 +262,8 @@ class TuneResult:
             "measurement": self.measurement.to_json(),
             "identified": self.measurement.identification.to_json().get("sercalo"),
             "switches": list(self.switches), "log": list(self.log),
-            "options": self.options.to_json()})
+            "options": self.options.to_json(),
+            **({} if self.transaction is None else {"transaction": dict(self.transaction)})})
 
 
 def _figures(loop: Loop, *, plant: PlantModel, bench: Bench, objective: Any,
@@ -297,6 +314,17 @@ class TuneTarget(Protocol):
 
     def load(self, loop: Loop) -> dict[str, Any]:
         """Load ``loop`` bumplessly in the running loop; the switch, JSON-ready."""
+
+    def roll_back(self, loop: Loop) -> dict[str, Any]:
+        """Return to ``loop``, the controller that ran when tune started, by the means that
+        put it there (the device: its own ``LoadController``); the switch, JSON-ready."""
+
+    def running_controller(self) -> str:
+        """The name of the controller the bench runs now."""
+
+    def checkpoint(self, loop: Loop) -> dict[str, Any]:
+        """``loop`` (running now) as the record names it: its name, what checked it and how
+        :meth:`roll_back` returns to it, JSON-ready."""
 
     def play(self, plays: Sequence[ClosedLoopPlay], *, controller: RunningController,
              settle_s: float, seed: int,
@@ -391,7 +419,8 @@ def tune_guarded(*, target: TuneTarget, bench: Bench, running: Loop,
                  options: TuneOptions | None = None, seed: int = 0,
                  candidate: Loop | None = None,
                  after_load: Callable[[TuneTarget], str] | None = None,
-                 progress: Callable[[str], None] | None = None) -> TuneResult:
+                 progress: Callable[[str], None] | None = None,
+                 journal: Callable[[TuneResult], None] | None = None) -> TuneResult:
     """One guarded tuning step on ``target``, the twin or the live device (module notes).
 
     Parameters
@@ -410,15 +439,26 @@ def tune_guarded(*, target: TuneTarget, bench: Bench, running: Loop,
     candidate : Loop, optional
     after_load : callable, optional
         ``after_load(target)`` when the candidate is loaded; returns the change in words.
+    journal : callable, optional
+        ``journal(result)`` with the record of the decision before the candidate is loaded
+        (decision ``loading``), with the outcome after the watch, and with ``interrupted``
+        after an interruption's roll-back (:func:`fsmbench.tune.transaction.load_and_watch`);
+        ``tune --device`` writes each as ``tune.json``.
 
     Raises
     ------
     ValueError
         The Sercalo cannot be identified in closed loop, or the target refuses (named).
+    fsmbench.tune.transaction.LoopChangeError
+        An error once the load had started (a lost connection, an attribute that stayed
+        INVALID): rolled back first, the controller the bench is left on in the message.
+    KeyboardInterrupt
+        Ctrl-C once the load had started, raised again after the roll-back.
     """
     from fsmbench.control.analysis import control_objective
     from fsmbench.control.design import robustness
     from fsmbench.control.study import design_study
+    from fsmbench.tune.transaction import load_and_watch
 
     opts = options or TuneOptions()
     log: list[str] = []
@@ -479,7 +519,6 @@ def tune_guarded(*, target: TuneTarget, bench: Bench, running: Loop,
         + f"; predicted tracking error {_urad(cand.predicted_rms_rad)} rms")
     refusal = _refusal(cand, measured_before, opts)
     f_asd, asd_before = _asd(e_before, watch.fs_hz)
-    switches: list[dict[str, Any]] = []
     if refusal:
         say(f"refused: {refusal}")
         return TuneResult(target=target.label, decision="refused", reason=refusal,
@@ -488,51 +527,25 @@ def tune_guarded(*, target: TuneTarget, bench: Bench, running: Loop,
                           drift_pct=drift_pct, measurement=measurement, log=tuple(log),
                           psd_f_hz=f_asd, psd_before=asd_before, psd_after=asd_before,
                           switches=(), options=opts, candidate_loop=candidate)
-    switches.append(watch.load(candidate))
-    sw = switches[-1]
-    say(f"loaded {candidate.name} bumplessly ("
-        + (f"command {sw['command_before_v'][:2]} V -> {sw['command_after_v'][:2]} V)"
-           if "command_before_v" in sw else f"the device: {sw.get('reply', '')})"))
-    if after_load is not None:
-        say(f"the bench changed as the controller was loaded: {after_load(target)}")
-    e_after = watch.run(opts.watch_s, settle_s=opts.settle_s)
-    measured_after = _rms(e_after)
-    cand = _replace(cand, measured_rms_rad=measured_after)
-    say(f"watched {candidate.name} for {opts.watch_s:g} s: {_urad(measured_after)} rms "
-        f"(predicted {_urad(cand.predicted_rms_rad)})")
-    worse = [a for a in AXES if not measured_after[a]
-             <= (1.0 + opts.rollback_tolerance) * cand.predicted_rms_rad[a]]
-    if worse:
-        reason = ("the measured tracking error exceeds the prediction by more than "
-                  f"{100 * opts.rollback_tolerance:g} % on " + ", ".join(
-                      f"{a} ({1e6 * measured_after[a]:.3g} µrad measured, "
-                      f"{1e6 * cand.predicted_rms_rad[a]:.3g} µrad predicted)" for a in worse)
-                  + f": {running.name} loaded back")
-        switches.append(watch.load(running))
-        e_back = watch.run(opts.watch_s, settle_s=opts.settle_s)
-        after = _replace(before, measured_rms_rad=_rms(e_back))
-        say(f"rolled back: {reason}; measured again {_urad(_rms(e_back))} rms")
-        f_asd, asd_after = _asd(e_back, watch.fs_hz)
-        return TuneResult(target=target.label, decision="rolled_back", reason=reason,
-                          before=before, candidate=cand,
-                          after=after, objective_bound=objective.sensitivity_bound,
+    why = (f"{candidate.name} predicted {_urad(cand.predicted_rms_rad)} rms against "
+           f"{_urad(measured_before)} measured with {running.name} (better by more than "
+           f"{100 * opts.better_by:g} % on both axes), margins and robust stability met")
+
+    def make(decision: str, reason: str, *, candidate_figures: ControllerFigures,
+             after: ControllerFigures, switches: Sequence[Mapping[str, Any]],
+             transaction: Mapping[str, Any], e_after: np.ndarray | None = None) -> TuneResult:
+        f, asd_after = (f_asd, asd_before) if e_after is None else _asd(e_after, watch.fs_hz)
+        return TuneResult(target=target.label, decision=decision, reason=reason,
+                          before=before, candidate=candidate_figures, after=after,
+                          objective_bound=objective.sensitivity_bound,
                           drift_pct=drift_pct, measurement=measurement, log=tuple(log),
-                          psd_f_hz=f_asd, psd_before=asd_before, psd_after=asd_after,
-                          switches=tuple(switches), options=opts,
-                          candidate_loop=candidate)
-    reason = (f"{candidate.name} predicted {_urad(cand.predicted_rms_rad)} rms against "
-              f"{_urad(measured_before)} measured with {running.name} (better by more than "
-              f"{100 * opts.better_by:g} % on both axes), margins and robust stability met; "
-              f"measured {_urad(measured_after)} after loading, within "
-              f"{100 * opts.rollback_tolerance:g} % of the prediction")
-    say(f"kept: {reason}")
-    _f, asd_after = _asd(e_after, watch.fs_hz)
-    return TuneResult(target=target.label, decision="loaded", reason=reason,
-                      before=before, candidate=cand, after=cand,
-                      objective_bound=objective.sensitivity_bound,
-                      drift_pct=drift_pct, measurement=measurement, log=tuple(log),
-                      psd_f_hz=f_asd, psd_before=asd_before, psd_after=asd_after,
-                      switches=tuple(switches), options=opts, candidate_loop=candidate)
+                          psd_f_hz=f, psd_before=asd_before, psd_after=asd_after,
+                          switches=tuple(dict(s) for s in switches), options=opts,
+                          candidate_loop=candidate, transaction=dict(transaction))
+
+    return load_and_watch(target=target, running=running, candidate=candidate, before=before,
+                          candidate_figures=cand, options=opts, why=why, make=make,
+                          journal=journal, say=say, after_load=after_load)
 
 
 def _replace(fig: ControllerFigures, **changes: Any) -> ControllerFigures:

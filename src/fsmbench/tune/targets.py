@@ -79,6 +79,20 @@ class TwinTarget:
                 "command_before_v": [float(x) for x in sw.command_before_v],
                 "command_after_v": [float(x) for x in sw.command_after_v]}
 
+    def roll_back(self, loop: Loop) -> dict[str, Any]:
+        """Swap ``loop`` (the controller that ran before) back in bumplessly: :meth:`load`."""
+        return self.load(loop)
+
+    def running_controller(self) -> str:
+        """The name of the controller in the twin's loop."""
+        k = self.stream.controller
+        return "none (loop open)" if k is None else str(k.name)
+
+    def checkpoint(self, loop: Loop) -> dict[str, Any]:
+        """``loop`` as the record names it (the twin swaps the same controller back)."""
+        return {"name": loop.name, "device": self.label, "noun": "The twin",
+                "checked": "running when tune started", "restore_with": []}
+
     def play(self, plays: Sequence[ClosedLoopPlay], *, controller: RunningController,
              settle_s: float, seed: int,
              progress: Callable[[str], None] | None) -> TwinRun:

@@ -1,0 +1,272 @@
+"""A loop change as a transaction: step 6 of :func:`fsmbench.tune.guarded.tune_guarded`.
+
+:func:`load_and_watch` changes the running loop in four steps, each one recorded:
+
+1. **decided**: the measurement and the decision (the candidate, why it is to be
+   loaded, and the controller running before, with what checked it and how the target
+   returns to it) go to ``journal`` *before* anything is loaded (``tune --device``
+   writes them as ``tune.json``, atomically);
+2. **load** the candidate bumplessly (the device: its own ``LoadController``, which
+   checks it on the device's bench on the call);
+3. **watch** it for ``watch_s``: a measured tracking error above the prediction by more
+   than ``rollback_tolerance`` on an axis rolls back (:meth:`TuneTarget.roll_back
+   <fsmbench.tune.guarded.TuneTarget.roll_back>`, the device's ``LoadController`` of
+   the controller it ran before), which is watched again;
+4. **done**: the outcome (``loaded``, ``rolled_back``) and the controller the bench is
+   left on go to ``journal``.
+
+Anything that cuts steps 1-3 short (Ctrl-C, SIGTERM, a lost connection, an attribute
+that stays INVALID, a bug) rolls back to the controller that ran before (it passed the
+device's check: it was running) unless the bench already runs it, with Ctrl-C held while
+it does, and records ``interrupted`` with the controller the bench is left on, in one
+sentence. A roll-back that fails says so, with the ``LoadController`` argument that
+returns the device by hand. A ``KeyboardInterrupt`` (or another ``BaseException``) is
+raised again; an ``Exception`` as :class:`LoopChangeError` carrying the sentence.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import signal
+import threading
+from collections.abc import Callable, Iterator, Mapping
+from types import FrameType
+from typing import TYPE_CHECKING, Any
+
+from fsmbench.tune.guarded import AXES, _replace, _rms, _urad
+
+if TYPE_CHECKING:
+    from fsmbench.tune.guarded import ControllerFigures, Loop, TuneOptions, TuneResult, TuneTarget
+
+__all__ = ["OUTCOMES", "LoopChangeError", "load_and_watch"]
+
+#: What a loop change ends as (``tune.json``'s ``transaction.outcome``).
+OUTCOMES = ("loaded", "rolled_back", "interrupted")
+
+
+class LoopChangeError(ValueError):
+    """An error cut the load or its watch short; the bench was rolled back (or the
+    roll-back failed), as the message's last sentence says.
+
+    Attributes
+    ----------
+    sentence : str
+        Which controller the bench is left on, in one sentence.
+    """
+
+    def __init__(self, message: str, sentence: str) -> None:
+        super().__init__(message)
+        self.sentence = sentence
+
+
+#: A function building the tune result from the step's figures (``tune_guarded``'s).
+Make = Callable[..., "TuneResult"]
+
+
+def _cause(exc: BaseException) -> str:
+    """What cut the change short, in words."""
+    if isinstance(exc, KeyboardInterrupt):
+        return "interrupted (Ctrl-C)"
+    if type(exc).__name__ == "Terminated":
+        return "terminated (SIGTERM)"
+    desc = getattr(exc.args[0], "desc", None) if exc.args else None
+    if type(exc).__name__ == "DevFailed" and isinstance(desc, str):
+        return f"the device failed or the connection was lost ({' '.join(desc.split())})"
+    text = " ".join(str(exc).split())
+    return f"{type(exc).__name__}: {text}" if text else type(exc).__name__
+
+
+@contextlib.contextmanager
+def _ctrl_c_held(say: Callable[[str], None], what: str) -> Iterator[None]:
+    """Ctrl-C ignored (with a line saying so) while the bench is rolled back."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+
+    def hold(_signum: int, _frame: FrameType | None) -> None:
+        say(f"Ctrl-C held: {what} first (SIGTERM or SIGKILL stop tune at once)")
+
+    saved = signal.signal(signal.SIGINT, hold)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, saved)
+
+
+def _by_hand(point: Mapping[str, Any]) -> str:
+    """The ``LoadController`` arguments that return the device to the checkpoint."""
+    ways = [w if isinstance(w, str) else json.dumps(w) for w in point.get("restore_with", ())]
+    return " or ".join(f"LoadController {w!r}" for w in ways)
+
+
+def _recover(target: TuneTarget, running: Loop, point: Mapping[str, Any],
+             say: Callable[[str], None]) -> tuple[str | None, dict[str, Any], str]:
+    """Roll back to ``running`` unless the target runs it: (left on, roll-back, sentence)."""
+    noun = str(point.get("noun", "The bench"))
+    with _ctrl_c_held(say, f"the roll-back to {running.name}"):
+        try:
+            now: str | None = target.running_controller()
+        except Exception as exc:  # the device gone: try the roll-back all the same
+            now, seen = None, _cause(exc)
+        else:
+            seen = ""
+        if now == running.name:
+            return now, {"needed": False}, (
+                f"{noun} is left on {running.name}, the controller it ran before tune "
+                "(the candidate is not in the loop).")
+        try:
+            switch = target.roll_back(running)
+        except Exception as exc:
+            why = _cause(exc)
+            try:
+                now = target.running_controller()
+            except Exception as again:
+                now, seen = None, _cause(again)
+            hand = _by_hand(point)
+            seed = "" if "seed" in point.get("restore_with", ()) else \
+                " (or LoadController 'seed' for the ESRF study's controller)"
+            todo = (f"return it with {hand}{seed}, then read its Controller attribute"
+                    if hand else "load it again")
+            where = (f"{noun.lower()} is left on {now} (it passed the device's check when "
+                     "it was loaded)" if now is not None else
+                     f"which controller {noun.lower()} runs is unknown ({seen})")
+            return now, {"needed": True, "done": False, "error": why}, (
+                f"The roll-back to {running.name} FAILED ({why}): {where}; {todo}.")
+        how = (f" by LoadController {switch['request']!r} (checked by the device)"
+               if "request" in switch else "")
+        return running.name, {"needed": True, "done": True, "switch": switch}, (
+            f"{noun} is left on {running.name}, the controller it ran before tune, "
+            f"loaded back{how}.")
+
+
+def load_and_watch(*, target: TuneTarget, running: Loop, candidate: Loop,
+                   before: ControllerFigures, candidate_figures: ControllerFigures,
+                   options: TuneOptions, why: str, make: Make,
+                   journal: Callable[[TuneResult], None] | None,
+                   say: Callable[[str], None],
+                   after_load: Callable[[TuneTarget], str] | None = None) -> TuneResult:
+    """Load ``candidate``, watch it, roll back on a worse tracking error (module notes).
+
+    Parameters
+    ----------
+    target : TuneTarget
+        The running bench, on ``running`` now.
+    running : Loop
+        The controller running (measured as ``before``).
+    candidate : Loop
+        The controller to load (its figures ``candidate_figures``, predicted).
+    before, candidate_figures : ControllerFigures
+    options : TuneOptions
+        ``watch_s``, ``settle_s`` [s] and ``rollback_tolerance`` [1].
+    why : str
+        Why the candidate is to be loaded, in words with the numbers.
+    make : callable
+        ``make(decision, reason, candidate_figures=, after=, switches=, transaction=,
+        e_after=None)``: the :class:`~fsmbench.tune.guarded.TuneResult` of a step
+        (``e_after``: the last watch's tracking error [rad], (n, 2)).
+    journal : callable or None
+        Receives the record before the load (``loading``), after the watch, and after an
+        interruption (``interrupted``).
+    say : callable
+        The log.
+    after_load : callable, optional
+        ``after_load(target)`` once loaded: the change it made to the bench, in words.
+
+    Returns
+    -------
+    TuneResult
+        Decision ``loaded`` or ``rolled_back``, its ``transaction`` record done.
+
+    Raises
+    ------
+    LoopChangeError
+        An ``Exception`` once the record was being written: rolled back first; the
+        message ends with the sentence saying which controller the bench is left on.
+    BaseException
+        ``KeyboardInterrupt`` or SIGTERM's, raised again after the roll-back.
+    """
+    opts = options
+    point = target.checkpoint(running)
+    noun = str(point.get("noun", "The bench"))
+    tx: dict[str, Any] = {
+        "state": "decided", "outcome": None, "candidate": candidate.name, "why": why,
+        "running_before": dict(point), "left_on": running.name, "load_started": False,
+        "sentence": f"Decided to load {candidate.name}; the bench runs {running.name} until "
+                    "it is loaded."}
+    cand = candidate_figures
+    switches: list[dict[str, Any]] = []
+    try:
+        if journal is not None:
+            journal(make("loading", why, candidate_figures=cand, after=before, switches=(),
+                         transaction=tx))
+            say(f"decision recorded before the load: {candidate.name} to replace "
+                f"{running.name}")
+        tx["load_started"] = True
+        switches.append(target.load(candidate))
+        sw = switches[-1]
+        say(f"loaded {candidate.name} bumplessly ("
+            + (f"command {sw['command_before_v'][:2]} V -> {sw['command_after_v'][:2]} V)"
+               if "command_before_v" in sw else f"the device: {sw.get('reply', '')})"))
+        if after_load is not None:
+            say(f"the bench changed as the controller was loaded: {after_load(target)}")
+        e_after = target.run(opts.watch_s, settle_s=opts.settle_s)
+        measured_after = _rms(e_after)
+        cand = _replace(cand, measured_rms_rad=measured_after)
+        say(f"watched {candidate.name} for {opts.watch_s:g} s: {_urad(measured_after)} rms "
+            f"(predicted {_urad(cand.predicted_rms_rad)})")
+        worse = [a for a in AXES if not measured_after[a]
+                 <= (1.0 + opts.rollback_tolerance) * cand.predicted_rms_rad[a]]
+        if worse:
+            reason = ("the measured tracking error exceeds the prediction by more than "
+                      f"{100 * opts.rollback_tolerance:g} % on " + ", ".join(
+                          f"{a} ({1e6 * measured_after[a]:.3g} µrad measured, "
+                          f"{1e6 * cand.predicted_rms_rad[a]:.3g} µrad predicted)"
+                          for a in worse) + f": {running.name} loaded back")
+            switches.append(target.roll_back(running))
+            e_back = target.run(opts.watch_s, settle_s=opts.settle_s)
+            say(f"rolled back: {reason}; measured again {_urad(_rms(e_back))} rms")
+            tx.update(state="done", outcome="rolled_back", left_on=running.name,
+                      sentence=f"{noun} is left on {running.name}, the controller it ran "
+                               "before tune (rolled back).")
+            result = make("rolled_back", reason, candidate_figures=cand,
+                          after=_replace(before, measured_rms_rad=_rms(e_back)),
+                          switches=switches, transaction=tx, e_after=e_back)
+        else:
+            reason = (f"{why}; measured {_urad(measured_after)} after loading, within "
+                      f"{100 * opts.rollback_tolerance:g} % of the prediction")
+            say(f"kept: {reason}")
+            named = str(switches[0].get("to") or candidate.name)  # the target's name for it
+            tx.update(state="done", outcome="loaded", left_on=named,
+                      sentence=f"{noun} is left on {named}"
+                               + ("" if named == candidate.name else f" ({candidate.name})")
+                               + f", loaded and watched for {opts.watch_s:g} s.")
+            result = make("loaded", reason, candidate_figures=cand, after=cand,
+                          switches=switches, transaction=tx, e_after=e_after)
+    except BaseException as exc:
+        cause = _cause(exc)
+        when = (f"after the load of {candidate.name} had started" if tx["load_started"] else
+                f"before {candidate.name} was loaded")
+        say(f"{cause} {when}: returning to {running.name}")
+        left, rollback, sentence = _recover(target, running, point, say)
+        if rollback.get("done"):
+            switches.append(rollback["switch"])
+        tx.update(state="done", outcome="interrupted", cause=cause, left_on=left,
+                  rollback=rollback, sentence=sentence)
+        say(sentence)
+        reason = f"{cause} {when}; {sentence}"
+        after = before if left == running.name else cand
+        try:
+            if journal is not None:
+                journal(make("interrupted", reason, candidate_figures=cand, after=after,
+                             switches=switches, transaction=tx))
+        except Exception as again:
+            say(f"the record of the interruption could not be written: {_cause(again)}")
+        if isinstance(exc, Exception):
+            raise LoopChangeError(f"{cause}; {sentence}", sentence) from exc
+        raise
+    if journal is not None:
+        journal(result)
+    say(str(tx["sentence"]))
+    return result
+
