@@ -146,3 +146,41 @@ def test_tune_device_interrupted_after_the_load_returns_to_the_previous_controll
     captured = capsys.readouterr()
     assert f"The device is left on {SEED_NAME}" in captured.out
     assert "interrupted (Ctrl-C)" in captured.err and "left as it was" not in captured.err
+
+
+def test_a_trip_under_the_watch_is_said_and_nothing_is_loaded_on_a_faulted_device(
+        device: tuple[Any, str], bench: Bench, fsmbench_loop: Loop, tmp_path: Path,
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    # The protection trips the candidate while tune watches it (a 3 V sine at the h mode
+    # added to its command, as the live trip tests do). The device opens the loop itself;
+    # tune must say so and what to do, not load a controller into a FAULT (refused) nor
+    # report the candidate as watched.
+    proxy, address = device
+    target = DeviceTarget(proxy, bench=bench, running=_seed(bench), folder=tmp_path / "files",
+                          address=address, running_source="seed")
+    load = target.load
+    loads: list[str] = []
+
+    def load_then_trip(loop: Loop) -> dict[str, Any]:
+        switch = load(loop)
+        proxy.StartExcitation(json.dumps({"input": "Uch", "kind": "sine", "amplitude_v": 3.0,
+                                          "frequency_hz": 411.5}))
+        return switch
+
+    roll_back = target.roll_back
+    monkeypatch.setattr(target, "load", load_then_trip)
+    monkeypatch.setattr(target, "roll_back",
+                        lambda loop: loads.append(loop.name) or roll_back(loop))
+    records: list[TuneResult] = []
+    with pytest.raises(LoopChangeError) as err:
+        tune_guarded(target=target, bench=bench, running=_seed(bench), options=OPTIONS,
+                     seed=1, candidate=fsmbench_loop, journal=records.append)
+    assert str(proxy.state()) == "FAULT" and not proxy.LoopClosed
+    sentence = err.value.sentence
+    assert "protection tripped" in sentence and "Reset" in sentence, sentence
+    assert f"holding {proxy.Controller}" in sentence, sentence
+    assert loads == []  # no LoadController into the faulted device
+    last = records[-1]
+    assert [rec.decision for rec in records] == ["loading", "interrupted"]
+    assert last.transaction is not None and last.transaction["outcome"] == "loop_opened"
+    assert last.transaction["left_on"] == proxy.Controller

@@ -20,11 +20,11 @@ identification, a ``--bench DIR`` for other commands) and ``DIR/report.html``; w
 a ``DIR-device/`` in the device's controllers folder, ``ControllersPath``, when DIR is not
 in it). On the device the load is a transaction (:mod:`fsmbench.tune.transaction`):
 ``DIR/tune.json`` holds the measurement and the decision before anything is loaded, then
-the outcome (``loaded``, ``rolled_back``, ``interrupted``); Ctrl-C, SIGTERM, a lost
-connection or any error once the load has started rolls the device back to the controller
-it ran before through its ``LoadController``, and the output says which controller the
-device is left on (exit status 130 for Ctrl-C, 143 for SIGTERM). With
-``--drift-rate`` (twin) the controller that runs afterwards is watched while the
+the outcome (``loaded``, ``rolled_back``, ``interrupted``, ``loop_opened`` after a
+trip); Ctrl-C, SIGTERM, a lost connection or any error once the load has started rolls
+the device back to the controller it ran before through its ``LoadController``, and the
+output says which controller the device is left on (exit status 130 for Ctrl-C, 143 for
+SIGTERM). With ``--drift-rate`` (twin) the controller that runs afterwards is watched while the
 resonance drifts (:mod:`fsmbench.tune.watch_twin`), the warnings in ``tune.json``'s
 ``watch``; the device watches itself (``WatchVerdict``, ``WatchCause``).
 """

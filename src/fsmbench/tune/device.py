@@ -49,6 +49,7 @@ from fsmbench.sim.excitation import SampledExcitation, samples_sha256
 from fsmbench.sim.loaded import RunningController
 from fsmbench.tune.guarded import Loop
 from fsmbench.tune.reads import INVALID_WAIT_S, read_valid
+from fsmbench.tune.transaction import LoopOpenedError
 from fsmbench.twin.closed_loop import CLOSED_LOOP_SIGNALS, ClosedLoopPlay, excitation_variable
 from fsmbench.twin.experiments import ExperimentSpec
 from fsmbench.twin.simulate import TwinRun
@@ -207,15 +208,30 @@ class DeviceTarget:
                                              "name": self._name("record"), "overwrite": True}))
         start_s = float(self._attr("BenchTime"))
         out = during(start_s) if during is not None else None
-        self._wait(lambda: str(self.proxy.state()) != "MOVING" and Path(path).exists(),
-                   f"the record {path}", duration_s)
+        # The record ends (MOVING left) with its file, or without one when a trip cut it
+        # before its first sample: then the loop is open, said as such.
+        self._wait(lambda: str(self.proxy.state()) != "MOVING", f"the record {path}",
+                   duration_s)
+        if not Path(path).exists():
+            if not self._attr("LoopClosed"):
+                self._loop_opened()
+            raise ValueError(f"{self.label}: the record {path} ended without a file: "
+                             f"{self.proxy.status()}")
         return read_recording(path, require=()), out
 
     # -- the target ----------------------------------------------------------------
 
     def run(self, duration_s: float, *, settle_s: float) -> np.ndarray:
-        """The device's tracking error after ``settle_s`` of ``duration_s`` [rad], (n, 2)."""
+        """The device's tracking error after ``settle_s`` of ``duration_s`` [rad], (n, 2).
+
+        Raises
+        ------
+        LoopOpenedError
+            The loop was open at the end of the record (a protection trip, an OpenLoop).
+        """
         rec, _ = self._record(("Vph", "Vpv"), duration_s)
+        if not self._attr("LoopClosed"):
+            self._loop_opened()
         e = np.column_stack([np.asarray(rec["Vph"].values, dtype=float) / self.gd[0],
                              np.asarray(rec["Vpv"].values, dtype=float) / self.gd[1]])
         e = e[round(settle_s * self.fs_hz):]
@@ -242,6 +258,19 @@ class DeviceTarget:
         self.gd = loop.gd_v_per_rad
         return {"bench_time_s": float(self._attr("BenchTime")), "from": before, "to": now,
                 "file": str(where), "reply": reply}
+
+    def _loop_opened(self) -> None:
+        state, status, holds = str(self.proxy.state()), str(self.proxy.status()), \
+            str(self._attr("Controller"))
+        tripped = state == "FAULT" or "Protection opened the loop" in status
+        what = "The protection tripped and opened the loop" if tripped else \
+            "The loop was opened"
+        todo = ("Reset, wait for ON (the mirror settles), then CloseLoop" if tripped
+                else "CloseLoop when it should run again")
+        sentence = (f"{what} while tune watched it: the device is in {state} with the loop "
+                    f"open, holding {holds} for its next CloseLoop; {todo}.")
+        raise LoopOpenedError(f"{self.label}: the loop is open ({status})", holds=holds,
+                              sentence=sentence)
 
     def running_controller(self) -> str:
         """The device's ``Controller``."""

@@ -39,10 +39,30 @@ from fsmbench.tune.guarded import AXES, _replace, _rms, _urad
 if TYPE_CHECKING:
     from fsmbench.tune.guarded import ControllerFigures, Loop, TuneOptions, TuneResult, TuneTarget
 
-__all__ = ["OUTCOMES", "LoopChangeError", "load_and_watch"]
+__all__ = ["OUTCOMES", "LoopChangeError", "LoopOpenedError", "load_and_watch"]
 
 #: What a loop change ends as (``tune.json``'s ``transaction.outcome``).
-OUTCOMES = ("loaded", "rolled_back", "interrupted")
+OUTCOMES = ("loaded", "rolled_back", "interrupted", "loop_opened")
+
+
+class LoopOpenedError(ValueError):
+    """The loop was opened under tune (a protection trip, or an operator's OpenLoop).
+
+    Nothing is loaded back: the device chose what it holds (after a trip, the last
+    controller that ran without tripping) and a closed loop waits for an operator.
+
+    Attributes
+    ----------
+    holds : str or None
+        The controller the device holds for its next CloseLoop.
+    sentence : str
+        The state it is left in and what to do, in words.
+    """
+
+    def __init__(self, message: str, *, holds: str | None, sentence: str) -> None:
+        super().__init__(message)
+        self.holds = holds
+        self.sentence = sentence
 
 
 class LoopChangeError(ValueError):
@@ -247,12 +267,21 @@ def load_and_watch(*, target: TuneTarget, running: Loop, candidate: Loop,
         cause = _cause(exc)
         when = (f"after the load of {candidate.name} had started" if tx["load_started"] else
                 f"before {candidate.name} was loaded")
-        say(f"{cause} {when}: returning to {running.name}")
-        left, rollback, sentence = _recover(target, running, point, say)
+        rollback: dict[str, Any]
+        if isinstance(exc, LoopOpenedError):
+            # A trip (or an OpenLoop) already took the candidate out; a LoadController now
+            # would be refused in FAULT, and closing the loop is the operator's call.
+            say(f"{cause} {when}")
+            left, rollback, sentence = exc.holds, {"needed": False, "loop": "open"}, \
+                exc.sentence
+        else:
+            say(f"{cause} {when}: returning to {running.name}")
+            left, rollback, sentence = _recover(target, running, point, say)
         if rollback.get("done"):
             switches.append(rollback["switch"])
-        tx.update(state="done", outcome="interrupted", cause=cause, left_on=left,
-                  rollback=rollback, sentence=sentence)
+        tx.update(state="done", cause=cause, left_on=left, rollback=rollback,
+                  sentence=sentence, outcome="loop_opened" if isinstance(
+                      exc, LoopOpenedError) else "interrupted")
         say(sentence)
         reason = f"{cause} {when}; {sentence}"
         after = before if left == running.name else cand
