@@ -20,7 +20,7 @@ import pytest
 pytest.importorskip("tango")
 
 from fsmbench.bench.params import Bench
-from fsmbench.cli import EXIT_SIGINT, main
+from fsmbench.cli import EXIT_SIGINT, EXIT_SIGTERM, Terminated, main
 from fsmbench.control.seed import seed_decentralised_controller
 from fsmbench.tune.device import DeviceTarget
 from fsmbench.tune.guarded import Loop, TuneOptions, TuneResult, loop_of, tune_guarded
@@ -112,9 +112,18 @@ def test_an_attribute_invalid_beyond_the_bound_is_named_and_rolled_back(
     assert last.transaction["rollback"]["switch"]["request"] == "seed"
 
 
+@pytest.mark.parametrize(("signal_name", "exit_status", "cause"), [
+    ("SIGINT", EXIT_SIGINT, "interrupted (Ctrl-C)"),
+    ("SIGTERM", EXIT_SIGTERM, "terminated (SIGTERM)"),
+])
 def test_tune_device_interrupted_after_the_load_returns_to_the_previous_controller(
         device: tuple[Any, str], tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
-        capsys: pytest.CaptureFixture[str]) -> None:
+        capsys: pytest.CaptureFixture[str], signal_name: str, exit_status: int,
+        cause: str) -> None:
+    # The signal as the CLI receives it: Ctrl-C is a KeyboardInterrupt, SIGTERM the CLI's
+    # handler's Terminated.
+    interruption: BaseException = KeyboardInterrupt() if signal_name == "SIGINT" \
+        else Terminated()
     proxy, address = device
     out = tmp_path / "tune"
     load = DeviceTarget.load
@@ -124,11 +133,11 @@ def test_tune_device_interrupted_after_the_load_returns_to_the_previous_controll
         seen["record"] = json.loads((out / "tune.json").read_text())  # before the load
         seen["switch"] = load(self, loop)
         seen["in_loop"] = proxy.Controller
-        raise KeyboardInterrupt  # Ctrl-C the moment the candidate is in the loop
+        raise interruption  # the moment the candidate is in the loop
 
     monkeypatch.setattr(DeviceTarget, "load", load_then_interrupt)
     assert main(["tune", "--device", address, "--out", str(out), "--watch-s", "6",
-                 "--periods", "4", "--seed", "1"]) == EXIT_SIGINT
+                 "--periods", "4", "--seed", "1"]) == exit_status
     # The record before the load: the decision, the measurement, the controller before.
     first = seen["record"]
     assert first["decision"] == "loading"
@@ -141,11 +150,11 @@ def test_tune_device_interrupted_after_the_load_returns_to_the_previous_controll
     js = json.loads((out / "tune.json").read_text())
     assert js["decision"] == "interrupted"
     tx = js["transaction"]
-    assert tx["outcome"] == "interrupted" and tx["cause"] == "interrupted (Ctrl-C)"
+    assert tx["outcome"] == "interrupted" and tx["cause"] == cause
     assert tx["left_on"] == SEED_NAME and tx["rollback"]["done"] is True
     captured = capsys.readouterr()
     assert f"The device is left on {SEED_NAME}" in captured.out
-    assert "interrupted (Ctrl-C)" in captured.err and "left as it was" not in captured.err
+    assert cause in captured.err and "left as it was" not in captured.err
 
 
 def test_a_trip_under_the_watch_is_said_and_nothing_is_loaded_on_a_faulted_device(
