@@ -18,7 +18,7 @@ import xarray as xr
 from fsmbench.bench.params import Bench
 from fsmbench.ident.fit.quality import MAX_DIRECT_FIT_ERROR, MIN_DIRECT_VAF
 from fsmbench.ident.newport import NewportIdentification
-from fsmbench.ident.pipeline import SEED_TRIMS_S, Identification
+from fsmbench.ident.result import SEED_TRIMS_S, Identification
 from fsmbench.ident.sercalo import SercaloIdentification
 from fsmbench.io.signals import EXPERIMENTS
 from fsmbench.report.figures.ident import (

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import math
 
-from fsmbench.ident.pipeline import Identification
+from fsmbench.ident.result import Identification
 from fsmbench.ident.uncertainty import Uncertain
 from fsmbench.report.html import Table
 
