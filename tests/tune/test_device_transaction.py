@@ -11,6 +11,7 @@ target's ``load`` once the device runs the candidate. Nothing asserts on wall cl
 from __future__ import annotations
 
 import json
+import time
 from pathlib import Path
 from typing import Any
 
@@ -174,6 +175,11 @@ def test_a_trip_under_the_watch_is_said_and_nothing_is_loaded_on_a_faulted_devic
         switch = load(loop)
         proxy.StartExcitation(json.dumps({"input": "Uch", "kind": "sine", "amplitude_v": 3.0,
                                           "frequency_hz": 411.5}))
+        # Tripped before the watch's Record: the device refuses it in FAULT (the other
+        # order, a trip cutting the Record, leaves no file: the same LoopOpenedError).
+        deadline = time.monotonic() + 60.0
+        while str(proxy.state()) != "FAULT" and time.monotonic() < deadline:
+            time.sleep(0.01)
         return switch
 
     roll_back = target.roll_back

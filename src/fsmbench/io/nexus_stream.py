@@ -99,7 +99,7 @@ class NexusAppender:
         for key, value in self._attrs.items():
             entry.attrs[key] = value
         # NXentry's own fields: the wall clock of the first and (at the end) the last sample.
-        entry.create_dataset("start_time", data=_now_iso())
+        entry.create_dataset("start_time", data=self._time_iso())
         self._entry = entry
         data = entry.create_group("data")
         data.attrs["NX_class"] = "NXdata"
@@ -116,6 +116,13 @@ class NexusAppender:
                 dset.attrs[key] = value
         self._data = data
         return self
+
+    def _time_iso(self) -> str:
+        """The wall clock now, or ``created`` when the caller fixed the file's time (a
+        reproducible run's files are byte-identical: its start and end time are that one)."""
+        if self._created is not None:
+            return datetime.datetime.fromtimestamp(self._created, tz=datetime.UTC).isoformat()
+        return _now_iso()
 
     def note(self, **attrs: Any) -> None:
         """More attributes of the entry, written now (e.g. how a record ended)."""
@@ -183,7 +190,7 @@ class NexusAppender:
                 self._stack.__exit__(type(err), err, err.__traceback__)
                 raise
         if exc is None and self._entry is not None:
-            self._entry.create_dataset("end_time", data=_now_iso())
+            self._entry.create_dataset("end_time", data=self._time_iso())
         self._data = None
         self._entry = None
         self._file = None

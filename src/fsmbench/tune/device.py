@@ -204,8 +204,16 @@ class DeviceTarget:
 
         Returns the record (xarray) and what ``during`` returned.
         """
-        path = self.proxy.Record(json.dumps({"signals": list(signals), "duration_s": duration_s,
-                                             "name": self._name("record"), "overwrite": True}))
+        try:
+            path = self.proxy.Record(json.dumps({"signals": list(signals),
+                                                 "duration_s": duration_s,
+                                                 "name": self._name("record"),
+                                                 "overwrite": True}))
+        except Exception:
+            # Refused because a trip opened the loop (FAULT) before the record: said as such.
+            if not self._attr("LoopClosed"):
+                self._loop_opened()
+            raise
         start_s = float(self._attr("BenchTime"))
         out = during(start_s) if during is not None else None
         # The record ends (MOVING left) with its file, or without one when a trip cut it
