@@ -85,10 +85,13 @@ class PacedLoop:
     def reached_speed(self) -> float:
         """Bench seconds per wall-clock second over the last :data:`REACHED_WINDOW_S` (NaN
         until half of it has run at the present speed)."""
-        paces = list(self._paces)
-        if len(paces) < 2 or paces[-1][0] - paces[0][0] < 0.5 * REACHED_WINDOW_S:
+        try:  # the window's two ends (a deque's ends are O(1); a reset may empty it)
+            (wall0, bench0), (wall1, bench1) = self._paces[0], self._paces[-1]
+        except IndexError:
             return math.nan
-        return (paces[-1][1] - paces[0][1]) / (paces[-1][0] - paces[0][0])
+        if wall1 - wall0 < 0.5 * REACHED_WINDOW_S:
+            return math.nan
+        return (bench1 - bench0) / (wall1 - wall0)
 
     def _paced(self, wall: float, bench: float, *, reset: bool) -> None:
         if reset:
