@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -11,10 +12,20 @@ from scipy.optimize import brentq
 from fsmbench.bench.params import default_bench, real_bench
 from fsmbench.ident.delay.joint import fit_jointly
 from fsmbench.ident.delay.sampled import SensorLowpass, second_order
+from fsmbench.ident.evidence.amplifier import decide_amplifier
 from fsmbench.ident.evidence.sensor_shifts import unresolved_sensor_shifts
 from fsmbench.ident.frf.experiment import experiment_frf
-from fsmbench.ident.newport import NewportAxisFit, fit_newport_dynamics, newport_checks
+from fsmbench.ident.frf.response import FrequencyResponse
+from fsmbench.ident.newport import (
+    NewportAxisFit,
+    fit_newport_axis,
+    fit_newport_dynamics,
+    identify_newport,
+    newport_checks,
+)
 from fsmbench.ident.pipeline import SEED_TRIMS_S
+from fsmbench.ident.totals import uncertainty_tree
+from fsmbench.ident.uncertainty import bounded
 from fsmbench.sim.plant import twin_discrete
 from fsmbench.twin.simulate import simulate_bench
 
@@ -148,10 +159,17 @@ def _exact_shift_hz(order: int) -> float:
         - fit(SensorLowpass())
 
 
-def test_an_unresolved_amplifier_bounds_the_newports_parameters() -> None:
+@pytest.fixture(scope="module")
+def real_frf() -> FrequencyResponse:
+    """The real-bench twin's Newport matrix (its 10 kHz Butterworth 4QD amplifier), seed 3."""
     run = simulate_bench(REAL, seed=3, experiments=["data_unh", "data_unv"])
-    frf = experiment_frf(run.recordings, columns=[("data_unh", "Unh"), ("data_unv", "Unv")],
-                         trims_s=SEED_TRIMS_S)
+    return experiment_frf(run.recordings, columns=[("data_unh", "Unh"), ("data_unv", "Unv")],
+                          trims_s=SEED_TRIMS_S)
+
+
+def test_an_unresolved_amplifier_bounds_the_newports_parameters(
+        real_frf: FrequencyResponse) -> None:
+    frf = real_frf
     dyn = fit_newport_dynamics(frf)
     assert dyn.axes["h"].sensor is not None and dyn.axes["h"].sensor.source == "unlimited"
     shifts = unresolved_sensor_shifts(frf, dyn, lag_s=REAL_LAG_S)
@@ -167,3 +185,43 @@ def test_an_unresolved_amplifier_bounds_the_newports_parameters() -> None:
     assert unresolved_sensor_shifts(frf, dyn, lag_s=0.0) == {}
     modelled = fit_newport_dynamics(frf, sensor=SensorLowpass(bandwidth_hz=1e4, order=2))
     assert unresolved_sensor_shifts(frf, modelled, lag_s=REAL_LAG_S) == {}
+
+
+def test_a_decided_amplifiers_measured_lag_is_a_random_part_of_the_newport(
+        real_frf: FrequencyResponse) -> None:
+    """The lag the delays measure has noise: its std moves the Newport's parameters at
+    random, a one-sigma part (``qd_amplifier_lag``), where a bound's 1/sqrt(3) understated
+    it (the independent simulator's 5 kHz Butterworth bench: the gains' std(z) 1.17)."""
+    frf = real_frf
+    lag_std_s = 2e-6  # about a tenth of the 22.5 us lag: the fits stay near-linear in it
+    decision = decide_amplifier(frf, fit_newport_dynamics(frf), lag_s=REAL_LAG_S,
+                                lag_std_s=lag_std_s, model=SensorLowpass())
+    assert decision.resolved and decision.sensor is not None and decision.sensor.order == 2
+    shift = decision.shifts["h"]
+    assert shift.measured
+    # Independent of the two sigma points: the spread of the gain over lags drawn at ten
+    # stratified normal quantiles (their sample std is the lag's std within 4 %), each a
+    # refit with the Butterworth of that lag; 25 % for that and the response's curvature.
+    quantiles = np.array([-1.645, -1.036, -0.674, -0.385, -0.126, 0.126, 0.385, 0.674,
+                          1.036, 1.645])
+    gains = [fit_newport_axis(frf, "h", sensor=SensorLowpass(
+        bandwidth_hz=math.sqrt(2) / (2 * math.pi * (REAL_LAG_S + q * lag_std_s)), order=2),
+        resolve_sensor=False).gain_v_per_v for q in quantiles]
+    spread = float(np.std(gains, ddof=1)) / float(np.std(quantiles, ddof=1))
+    assert shift.half_width["gain_v_per_v"] == pytest.approx(spread, rel=0.25)
+    # The totals carry it as a random part, whole; an undecided order stays a bound.
+    nid = identify_newport(frf, sensor=decision.sensor, resolve_sensor=False)
+    for measured in (True, False):
+        shifts = {a: replace(s, measured=measured) for a, s in decision.shifts.items()}
+        tree = uncertainty_tree(qd={}, current_amp={}, sercalo=None, modes={},
+                                newport=replace(nid, sensor_shifts=shifts), compression={},
+                                nominal=REAL.nominal)
+        gain = tree["newport_gain_v_per_v.h"]
+        width = shift.half_width["gain_v_per_v"]
+        if measured:
+            assert gain.parts["qd_amplifier_lag"] == pytest.approx(width, rel=1e-12)
+            assert "qd_amplifier_lag" not in gain.bounded_parts
+            assert "unresolved_sensor" not in gain.parts
+        else:
+            assert gain.parts["unresolved_sensor"] == pytest.approx(bounded(width), rel=1e-12)
+            assert gain.bounded_parts == ("unresolved_sensor",)

@@ -418,30 +418,38 @@ def newport_checks(dyn: NewportDynamics, *, amplitude_bandwidth_hz: float,
 
 @dataclass(frozen=True)
 class SensorShift:
-    """How much a 4QD amplifier the fit lacked would move one axis's parameters.
+    """How much the 4QD amplifier's uncertain shape or lag moves one axis's parameters.
 
     Attributes
     ----------
     axis : str
     lag_s : float
         The amplifier's group delay assumed [s] (the delays' measured lag, plus
-        1.96 of its std).
+        1.96 of its std when nothing decides the amplifier).
     half_width : dict
-        The largest shift of each parameter over the orders tried
-        (``gain_v_per_v`` [V/V], ``natural_freq_hz`` [Hz], ``damping_ratio``).
+        Per parameter (``gain_v_per_v`` [V/V], ``natural_freq_hz`` [Hz],
+        ``damping_ratio`` [1], ``effective_delay_s`` [s]): the largest shift over
+        the orders tried (a bound), or, when ``measured``, its one-sigma response to
+        the measured lag's std.
     by_order : dict int -> dict
         The shifts per amplifier order (1: first order, 2: Butterworth).
+    measured : bool
+        True when the amplifier is decided (its order by the lines, its lag by the
+        delays): ``half_width`` is then a random one-sigma part (the lag is measured,
+        with noise, on other records than the Newport's), not a uniform bound.
     """
 
     axis: str
     lag_s: float
     half_width: dict[str, float]
     by_order: dict[int, dict[str, float]]
+    measured: bool = False
 
     def summary(self) -> dict[str, Any]:
         """JSON-ready values."""
         return {"axis": self.axis, "lag_s": self.lag_s, "half_width": dict(self.half_width),
-                "by_order": {str(k): dict(v) for k, v in self.by_order.items()}}
+                "by_order": {str(k): dict(v) for k, v in self.by_order.items()},
+                "measured": self.measured}
 
 
 @dataclass(frozen=True, eq=False)

@@ -37,7 +37,9 @@ than the data determine it, both are given:
     the lines do not resolve is a lag the delays measure (``τ_4QD``) but whose
     shape they do not: the ``unresolved_sensor`` part bounds what a first- or
     second-order amplifier of that lag would change
-    (:func:`fsmbench.ident.evidence.sensor_shifts.unresolved_sensor_shifts`).
+    (:func:`fsmbench.ident.evidence.sensor_shifts.unresolved_sensor_shifts`); an
+    amplifier the records decide carries its measured lag's std as the random
+    ``qd_amplifier_lag`` part (:func:`fsmbench.ident.evidence.amplifier.decide_amplifier`).
 ``sercalo.{h,v}.dc_gain_v_per_a``
     ``Gc(0)``: the fit's static gain over the current-amplifier gain, the
     4QD's compression corrected (:mod:`fsmbench.ident.frf.compression`); parts
@@ -48,7 +50,7 @@ than the data determine it, both are given:
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -61,7 +63,7 @@ from fsmbench.ident.uncertainty import Uncertain, bounded
 
 if TYPE_CHECKING:
     from fsmbench.ident.fit.modes import ModeRefinement
-    from fsmbench.ident.newport import NewportIdentification
+    from fsmbench.ident.newport import NewportIdentification, SensorShift
     from fsmbench.ident.sercalo import SercaloIdentification
 
 __all__ = ["coil_lag_s", "qd_amplifier_lag_s", "qd_amplifier_lags_by_axis", "uncertainty_tree"]
@@ -243,16 +245,15 @@ def _delays(out: dict[str, Uncertain], *, sid: SercaloIdentification | None,
     eff_n_std = math.hypot(*(axes[a].delay_std_s for a in known)) / len(known)
     f_top_n = max(axes[a].band_hz[1] for a in known)
     bound_n = _curvature_bound(lag, f_top_n)
-    # An amplifier whose order the lines could not decide moves the Newport's delay too
-    # (ident.evidence.amplifier): its half-width is a bounded part of every Newport delay.
-    order = max((newport.sensor_shifts[a].half_width.get("effective_delay_s", 0.0)
-                 for a in known if a in newport.sensor_shifts), default=0.0)
-    sensor = {"unresolved_sensor": bounded(order)} if order > 0 else {}
+    # The amplifier's uncertain order (a bound) or measured lag (random) moves the Newport's
+    # delay too (ident.evidence.amplifier): a part of every Newport delay.
+    sensor = _sensor_part([newport.sensor_shifts[a] for a in known
+                           if a in newport.sensor_shifts], "effective_delay_s")
     out["effective_delay_s.newport"] = Uncertain(
         eff_n, "s", "effective delay of Un → Vp: the Newport's pure delay with the 4QD "
         "amplifier's lag, the mean of the axes identified",
         {"noise": eff_n_std, "unresolved_lags": bounded(bound_n)} | sensor,
-        bounded_parts=("unresolved_lags", *sensor))
+        bounded_parts=("unresolved_lags", *_bounded(sensor)))
     if not math.isfinite(eff_s):
         return
     both = bounded(max(bound_n, lag_bound))
@@ -264,14 +265,31 @@ def _delays(out: dict[str, Uncertain], *, sid: SercaloIdentification | None,
              "unresolved_lags": both} | sensor,
             derived="the effective delay less the 4QD amplifier's lag, which the Sercalo's "
                     "effective and pure delays give",
-            bounded_parts=("unresolved_lags", *sensor))
+            bounded_parts=("unresolved_lags", *_bounded(sensor)))
     for a in known:
         out[f"newport.{a}.internal_delay_s"] = Uncertain(
             axes[a].effective_delay_s - eff_s + coil, "s",
             f"the Newport's own lag, axis {a}: its effective delay less the Sercalo's, "
             "plus the coil's lag (on the Sercalo's path only)",
             {"noise": math.hypot(axes[a].delay_std_s, eff_s_std), "unresolved_lags": both}
-            | sensor, bounded_parts=("unresolved_lags", *sensor))
+            | sensor, bounded_parts=("unresolved_lags", *_bounded(sensor)))
+
+
+def _sensor_part(shifts: Sequence[SensorShift], key: str) -> dict[str, float]:
+    """The 4QD amplifier's part of a Newport value: its measured lag's (random,
+    ``qd_amplifier_lag``) or its undecided order's (a bound, ``unresolved_sensor``), the
+    largest over ``shifts`` (the axes'); empty when nothing moves it."""
+    width = max((s.half_width.get(key, 0.0) for s in shifts), default=0.0)
+    if not width > 0:
+        return {}
+    if any(s.measured for s in shifts):
+        return {"qd_amplifier_lag": width}
+    return {"unresolved_sensor": bounded(width)}
+
+
+def _bounded(parts: Mapping[str, float]) -> tuple[str, ...]:
+    """The names among ``parts`` that are bounds (uniform), not random parts."""
+    return tuple(k for k in parts if k == "unresolved_sensor")
 
 
 def _newport(out: dict[str, Uncertain], newport: NewportIdentification,
@@ -287,21 +305,24 @@ def _newport(out: dict[str, Uncertain], newport: NewportIdentification,
             factor, f_std = compression.element(*_NEWPORT[axis])
             parts["compression"] = abs(fit.gain_v_per_v) * f_std / factor
         shift = newport.sensor_shifts.get(axis)
-        sensor = ({} if shift is None else
-                  {"unresolved_sensor": bounded(shift.half_width["gain_v_per_v"])})
+        shifts = [] if shift is None else [shift]
+        sensor = _sensor_part(shifts, "gain_v_per_v")
         out[f"newport_gain_v_per_v.{axis}"] = Uncertain(
             fit.gain_v_per_v, "V/V", f"Newport static gain {_NEWPORT[axis][1]} → "
             f"{_NEWPORT[axis][0]}, signed (the 4QD's small-signal gain in)", parts | sensor,
-            bounded_parts=tuple(sensor))
+            bounded_parts=_bounded(sensor))
         for key, unit, words, std in (
                 ("natural_freq_hz", "Hz", "natural frequency", fit.natural_freq_std_hz),
                 ("damping_ratio", "1", "damping ratio", fit.damping_std)):
-            extra = {} if shift is None else {"unresolved_sensor": bounded(shift.half_width[key])}
+            extra = _sensor_part(shifts, key)
+            note = ("" if shift is None else
+                    f" (with the 4QD amplifier the records decide, its lag "
+                    f"{shift.lag_s * 1e6:.3g} µs measured with its std)" if shift.measured else
+                    f" (the delays put the 4QD amplifier's lag at up to "
+                    f"{shift.lag_s * 1e6:.3g} µs, not its order)")
             out[f"newport.{axis}.{key}"] = Uncertain(
-                getattr(fit, key), unit, f"Newport {words}, axis {axis}"
-                + ("" if shift is None else f" (with no 4QD amplifier in the model: the "
-                   f"delays put its lag at up to {shift.lag_s * 1e6:.3g} µs, not its order)"),
-                {"noise": std} | extra, bounded_parts=tuple(extra))
+                getattr(fit, key), unit, f"Newport {words}, axis {axis}{note}",
+                {"noise": std} | extra, bounded_parts=_bounded(extra))
 
 
 def uncertainty_tree(*, qd: Mapping[str, QdCalibration],

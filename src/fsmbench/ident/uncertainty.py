@@ -26,6 +26,9 @@ value's unit:
                          neither the bench model nor the lines give the shape of:
                          the shift a first or second order of that lag causes
                          (the Newport's parameters; bounded)
+``qd_amplifier_lag``     a 4QD amplifier the records decide (its order by the
+                         Newport's lines, its lag by the delays): the measured
+                         lag's std carried into the Newport's parameters (random)
 ``truncation``           modes above a fitted band that its model leaves out
                          (:mod:`fsmbench.ident.fit.truncation`): bounded
 ``definition``           what the quantity's definition adds (a rotation, a
@@ -49,8 +52,8 @@ from typing import Any
 __all__ = ["PARTS", "Uncertain", "bounded", "largest_part", "total_std"]
 
 PARTS = ("noise", "misfit", "sampled_model", "leakage", "transient", "compression",
-         "distortion", "unresolved_lags", "unresolved_sensor", "truncation", "definition",
-         "current_amp", "calibration")
+         "distortion", "unresolved_lags", "unresolved_sensor", "qd_amplifier_lag", "truncation",
+         "definition", "current_amp", "calibration")
 
 
 def total_std(parts: Mapping[str, float]) -> float:

@@ -22,8 +22,8 @@ Newport at 1174 Hz for 1077). So the amplifier is decided by both:
    the axes);
 3. determined: the amplifier is reported on its own (a finding on
    ``quad_diode.bandwidth_hz`` and ``bandwidth_order``), the Newport fitted with
-   it, and the lag's std carried into the Newport's parameters as a bounded
-   part (refits at the lag ± its std);
+   it, and the lag's std carried into the Newport's parameters as a random
+   part, ``qd_amplifier_lag`` (refits at the lag ± its std, their rms shift);
 4. not determined: no amplifier is claimed; the Newport is fitted with the order
    that fits better, and the other order's difference is a bounded part of its
    parameters.
@@ -80,7 +80,8 @@ class AmplifierDecision:
     order_lr : float
         How much worse the other order fits, in noise units (0 when not compared).
     shifts : dict of axis to SensorShift
-        The Newport parameters' bounded parts (the lag's std, or the other order).
+        The Newport parameters' parts: the lag's std (random, ``measured``), or the
+        other order (a bound).
     words : str
         The decision in words, with the evidence.
     findings : tuple of Finding
@@ -185,11 +186,17 @@ def decide_amplifier(frf: FrequencyResponse, dyn: NewportDynamics, *, lag_s: flo
     shifts = {}
     for a in fitted:
         moved = [_shift(e[a], by_order[best][a]) for e in edges.values()]
+        # The lag is measured on the Sercalo's records, with their noise: its std moves the
+        # Newport's parameters at random from run to run. The two sigma points' rms shift is
+        # that one-sigma part (a bound's uniform 1/sqrt(3) understated it: the Newport's
+        # gains on the independent simulator's 5 kHz Butterworth bench, std(z) 1.17).
         shifts[a] = SensorShift(axis=a, lag_s=lag_s,
-                                half_width={k: max((abs(m[k]) for m in moved), default=0.0)
+                                half_width={k: math.sqrt(sum(m[k] ** 2 for m in moved)
+                                                         / len(moved)) if moved else 0.0
                                             for k in _SHIFTED},
                                 by_order={best: moved[-1] if moved else dict.fromkeys(_SHIFTED,
-                                                                                    0.0)})
+                                                                                    0.0)},
+                                measured=True)
     bw = sensor.bandwidth_hz
     bw_std = bw * lag_std_s / lag_s
     findings: list[Finding] = []
@@ -210,7 +217,7 @@ def decide_amplifier(frf: FrequencyResponse, dyn: NewportDynamics, *, lag_s: flo
         words=(f"{lag_words}; the Newport's lines choose a {_ORDER_WORDS[best]} low pass "
                f"(the other order fits {lr:.3g} noise units worse): the 4QD amplifier is a "
                f"{_ORDER_WORDS[best]} low pass at {bw:.4g} ± {bw_std:.2g} Hz, and the "
-               "Newport's parameters carry the lag's std as a bound"),
+               "Newport's parameters carry the lag's std"),
         findings=tuple(findings))
 
 

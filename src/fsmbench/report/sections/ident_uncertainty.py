@@ -28,6 +28,7 @@ PART_WORDS = {
     "distortion": "nonlinear distortion",
     "unresolved_lags": "lags a delay fit cannot tell from a delay (a bound)",
     "unresolved_sensor": "the 4QD amplifier's unknown order (a bound)",
+    "qd_amplifier_lag": "the 4QD amplifier's measured lag",
     "definition": "the quantity's definition",
     "current_amp": "the current-amplifier gain",
     "calibration": "another calibration",
