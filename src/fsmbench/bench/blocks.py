@@ -39,6 +39,7 @@ import numpy as np
 import xarray as xr
 
 from fsmbench.bench.params import BenchParams
+from fsmbench.bench.realization import DEFAULT_TOL, Delays, plant_model
 
 __all__ = [
     "PLANT_INPUTS",
@@ -507,6 +508,29 @@ class PlantModel:
                                outlist=list(self.sys.output_labels),
                                inputs=list(self.sys.input_labels),
                                outputs=list(self.sys.output_labels))
+
+    def to_control(self, *, delays: Delays = "pade", order: int = 6, dt: float | None = None,
+                   outputs: Sequence[str] | None = None, inputs: Sequence[str] | None = None,
+                   tol: float = DEFAULT_TOL) -> ct.StateSpace:
+        """Minimal python-control model of the path ``inputs -> outputs`` with its delays.
+
+        ``delays="pade"`` (continuous, Padé of ``order``), ``"exact"`` (sampled at
+        ``dt`` through a zero-order hold, delays exact) or ``"none"``; signals
+        named; see :func:`fsmbench.bench.realization.plant_model`.
+        """
+        sub = self.subsystem(outputs=list(self.sys.output_labels if outputs is None else outputs),
+                             inputs=list(self.sys.input_labels if inputs is None else inputs))
+        return plant_model(sub, self.input_delay_s, delays=delays, order=order, dt=dt, tol=tol,
+                           name="G")
+
+    def to_frd(self, f_hz: np.ndarray, *, outputs: Sequence[str] | None = None,
+               inputs: Sequence[str] | None = None) -> ct.FrequencyResponseData:
+        """The exact response with its delays at ``f_hz`` [Hz] as a named python-control FRD
+        (frequencies in rad/s, as python-control keeps them)."""
+        h = self.frequency_response(f_hz, outputs=outputs, inputs=inputs)
+        return ct.frd(np.moveaxis(h.values, 0, -1), 2 * np.pi * h["frequency"].values,
+                      inputs=[str(x) for x in h["input"].values],
+                      outputs=[str(x) for x in h["output"].values], name="G")
 
     def summary(self) -> dict[str, Any]:
         """JSON-ready description: source, sizes, delays, DC gains of the main paths."""
