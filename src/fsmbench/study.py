@@ -11,6 +11,8 @@ Outputs (all atomic): ``report.html``, ``summary.json`` (the verdict),
 is the same wherever the folder goes), ``timings.json`` (wall time per
 stage: the one output that differs between two identical runs), plus each
 stage's files and, with ``figures``, ``figures/<key>.png|pdf``.
+
+Called, ``fsmbench.study(out_dir=...)`` is the public :func:`fsmbench.api.study`.
 """
 
 from __future__ import annotations
@@ -23,6 +25,7 @@ from pathlib import Path
 from typing import Any
 
 from fsmbench import __version__
+from fsmbench.api import callable_module
 from fsmbench.bench.params import Bench, default_bench
 from fsmbench.ident.pipeline import Identification, IdentifyOptions
 from fsmbench.io.atomic import atomic_write_text
@@ -405,3 +408,7 @@ def run_study(*, out_dir: str | Path, data_dir: str | Path | None = None,
         {"format": "fsmbench.timings", "format_version": 1, "seconds": timings}, indent=2)
         + "\n")
     return result
+
+
+# fsmbench.study is also the API's study(): importing this module rebinds the name.
+callable_module(__name__)

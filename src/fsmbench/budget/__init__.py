@@ -3,6 +3,7 @@
 Entry point: :func:`budget_study` (everything on the recordings present). The
 numerics draw nothing: the report's figures are built in
 :mod:`fsmbench.report.figures.budget` and :mod:`fsmbench.report.figures.repeatability`.
+Called, ``fsmbench.budget(recordings, ...)`` is the public :func:`fsmbench.api.budget`.
 """
 
 from fsmbench.budget.environment import (
@@ -90,3 +91,8 @@ __all__ = [
     "seed_welch",
     "trim_huddle",
 ]
+
+# fsmbench.budget is also the API's budget(): importing this package rebinds the name.
+from fsmbench.api import callable_module as _callable
+
+_callable(__name__)
