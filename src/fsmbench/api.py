@@ -13,7 +13,6 @@ from __future__ import annotations
 
 import os
 import sys
-import tempfile
 import types
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
@@ -390,6 +389,8 @@ def budget(recordings: RecordingSet | TwinRun | Mapping[str, xr.Dataset], *,
     >>> sorted(result.skipped)
     ['data_rep_h', 'data_rep_v']
     """
+    import tempfile
+
     from fsmbench.bench.params import default_bench
     from fsmbench.stages import budget_stage
 
@@ -449,6 +450,8 @@ def design(plant: PlantModel | Identification | None = None, *, bench: Bench | N
     >>> stage.result.fsmbench.axes["h"].margins.phase_margin_deg > 30
     True
     """
+    import tempfile
+
     from fsmbench.bench.params import default_bench
     from fsmbench.stages import SimulationBench, design_stage
 
