@@ -24,7 +24,7 @@ if TYPE_CHECKING:
 
     from fsmbench.bench.blocks import PlantModel
     from fsmbench.bench.params import Bench
-    from fsmbench.budget.study import BudgetResult
+    from fsmbench.budget import BudgetResult
     from fsmbench.control.feedback import LoopMargins
     from fsmbench.ident.result import Identification, IdentifyOptions
     from fsmbench.io.folder import RecordingSet
