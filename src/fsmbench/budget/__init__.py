@@ -44,8 +44,9 @@ from fsmbench.budget.repeatability import (
     align_periods,
     analyse_repeatability,
 )
+from fsmbench.budget.result import BudgetResult, NonRepeatability
 from fsmbench.budget.spectra import cumulative_power, first_order_lowpass, seed_welch
-from fsmbench.budget.study import BudgetResult, NonRepeatability, budget_study
+from fsmbench.budget.study import budget_study
 from fsmbench.budget.table import BudgetRow, ErrorBudget, error_budget
 
 __all__ = [

@@ -21,7 +21,7 @@ from collections.abc import Mapping
 import numpy as np
 
 from fsmbench.budget.repeatability import RepeatabilityRecord
-from fsmbench.budget.study import NonRepeatability
+from fsmbench.budget.result import NonRepeatability
 from fsmbench.report.figures.budget import asd_line, cumulative_line
 from fsmbench.report.figures.spec import (
     H_COLOR,

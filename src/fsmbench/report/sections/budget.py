@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from fsmbench.budget.environment import SEED_4_3, DriftTerm
-from fsmbench.budget.study import BudgetResult
+from fsmbench.budget.result import BudgetResult
 from fsmbench.budget.table import BudgetRow, ErrorBudget
 from fsmbench.report.figures.budget import (
     angle_asd_figure,

@@ -7,7 +7,7 @@ from collections.abc import Mapping
 import xarray as xr
 
 from fsmbench.budget.huddle import HUDDLE_CONFIGS, HuddleRecord
-from fsmbench.budget.study import BudgetResult
+from fsmbench.budget.result import BudgetResult
 from fsmbench.report.figures.budget import (
     huddle_attocube_asd_figure,
     huddle_attocube_time_figure,

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from fsmbench.budget.repeatability import SEED_11
-from fsmbench.budget.study import BudgetResult
+from fsmbench.budget.result import BudgetResult
 from fsmbench.report.figures.budget import huddle_config_words
 from fsmbench.report.figures.repeatability import (
     direction_words,
