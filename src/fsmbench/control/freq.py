@@ -127,6 +127,9 @@ class Margins:
         Frequency of the gain margin [Hz]; NaN if none.
     modulus_frequency_hz : float
         Frequency of ``min |1 + L|`` [Hz].
+    gain_reduction_crossover_hz : float
+        Frequency of the gain-reduction margin [Hz] (the negative-real-axis
+        crossing with ``|L| > 1`` nearest to ``|L| = 1``); NaN if none.
     """
 
     gain_margin_db: float
@@ -137,6 +140,7 @@ class Margins:
     crossovers_hz: tuple[float, ...]
     phase_crossover_hz: float
     modulus_frequency_hz: float
+    gain_reduction_crossover_hz: float = math.nan
 
     def to_json(self) -> dict[str, Any]:
         """Plain floats; inf and NaN become None."""
@@ -194,7 +198,7 @@ def siso_margins(loop: ResponseFn, f_hz: np.ndarray, *, refine: bool = True,
         db = -20.0 * math.log10(mag_x)
         (gm_up if db > 0 else gm_down).append((db, x))
     gm, f_gm = min(gm_up, default=(math.inf, math.nan))
-    gr = min((-db for db, _ in gm_down), default=math.inf)
+    gr, f_gr = min(((-db, x) for db, x in gm_down), default=(math.inf, math.nan))
     if not gm_up and gm_down:
         f_gm = min(gm_down, key=lambda t: -t[0])[1]
     # Modulus margin.
@@ -213,7 +217,8 @@ def siso_margins(loop: ResponseFn, f_hz: np.ndarray, *, refine: bool = True,
                    phase_margin_deg=float(pm), modulus_margin=mm,
                    crossover_hz=float(fc_list[0]) if fc_list else math.nan,
                    crossovers_hz=tuple(float(x) for x in fc_list),
-                   phase_crossover_hz=float(f_gm), modulus_frequency_hz=f_mm)
+                   phase_crossover_hz=float(f_gm), modulus_frequency_hz=f_mm,
+                   gain_reduction_crossover_hz=float(f_gr))
 
 
 @dataclass(frozen=True)
