@@ -209,3 +209,110 @@ def test_control_numerics_do_not_draw() -> None:
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                          check=True)
     assert out.stdout.strip() == "[]"
+
+
+# ------------------------------------------------- Bode figures (issue 33, "Figures")
+
+LOOP_GAIN_FIGURES = {"fig41_seed_loop_gain": "seed", "fsmbench_controller_loop_gain": "fsmbench",
+                     "fig43_newport_loop_gain": "newport"}
+BODE_FIGURES = (*LOOP_GAIN_FIGURES, "iff_uc_to_vp")
+
+
+def _figures(sections: list[Section]) -> dict[str, Figure]:
+    return {f.key: f for f in iter_figures(sections)}
+
+
+def test_bode_phase_spans_the_band_of_its_magnitude(sections: list[Section]) -> None:
+    figs = _figures(sections)
+    for key in BODE_FIGURES:
+        fig = figs[key]
+        n = fig.columns
+        mags, phases = fig.panels[:n], fig.panels[n:]
+        assert all("Phase" in p.y_label for p in phases), key
+        for mag, ph in zip(mags, phases, strict=True):
+            curves = [(m, p) for m, p in zip(mag.traces, ph.traces, strict=False)
+                      if m.x.size > 2]
+            assert curves, key
+            for m, p in curves:
+                drawn = p.x[np.isfinite(p.y)]
+                assert drawn.min() == m.x.min() and drawn.max() == m.x.max(), (key, p.name)
+        lo, hi = mags[0].traces[0].x[[0, -1]]
+        assert f"from {lo:.3g} Hz to {hi:.4g} Hz" in fig.caption, key
+
+
+def test_loop_phase_anchored_at_the_crossover_reads_the_margins(sections: list[Section],
+                                                                stage: DesignStage) -> None:
+    figs = _figures(sections)
+    for key, attr in LOOP_GAIN_FIGURES.items():
+        lp = getattr(stage.result, attr)
+        for i, axis in enumerate("hv"):
+            m = lp.axes[axis].margins
+            phase = figs[key].panels[2 + i].traces[0]
+            at = float(np.interp(np.log(m.crossover_hz), np.log(phase.x), phase.y))
+            assert at + 180.0 == pytest.approx(m.phase_margin_deg, abs=2.0), (key, axis)
+    # fsmbench's loop is conditionally stable: its phase is below −180° where |L| ≫ 1,
+    # and that region is drawn.
+    fig = figs["fsmbench_controller_loop_gain"]
+    mag, phase = fig.panels[0].traces[0], fig.panels[2].traces[0]
+    low = mag.x < 1.0
+    assert np.all(mag.y[low] > 40.0) and np.all(phase.y[low] < -180.0)
+
+
+def test_loop_gain_magnitude_in_db_with_its_margins_marked(sections: list[Section],
+                                                           stage: DesignStage) -> None:
+    figs = _figures(sections)
+    n_reduction = 0
+    for key, attr in LOOP_GAIN_FIGURES.items():
+        lp = getattr(stage.result, attr)
+        fig = figs[key]
+        for i, axis in enumerate("hv"):
+            mag, phase = fig.panels[i], fig.panels[2 + i]
+            assert mag.y_label == f"|L{axis}| [dB]" and not mag.y_log
+            assert [r.value for r in mag.rules if r.axis == "y"] == [0.0]
+            inband = lp.f_hz <= lp.nyquist_hz
+            np.testing.assert_allclose(mag.traces[0].y,
+                                       20 * np.log10(np.abs(lp.loop[inband, i, i])))
+            m = lp.axes[axis].margins
+            marks = {t.name.split(" margin")[0]: t for t in mag.traces[1:]}
+            gm = marks[f"{axis}: gain"]
+            assert f"{m.gain_margin_db:.1f} dB" in gm.name
+            np.testing.assert_allclose(gm.x, [m.phase_crossover_hz] * 2)
+            np.testing.assert_allclose(gm.y, [-m.gain_margin_db, 0.0])
+            # the segment ends on the drawn |L| (within the grid's interpolation)
+            on = np.interp(np.log(m.phase_crossover_hz), np.log(mag.traces[0].x),
+                           mag.traces[0].y)
+            assert on == pytest.approx(-m.gain_margin_db, abs=0.5)
+            if np.isfinite(m.gain_reduction_margin_db):
+                n_reduction += 1
+                gr = marks[f"{axis}: gain-reduction"]
+                assert f"{m.gain_reduction_margin_db:.1f} dB" in gr.name
+                np.testing.assert_allclose(gr.x, [m.gain_reduction_crossover_hz] * 2)
+                np.testing.assert_allclose(gr.y, [0.0, m.gain_reduction_margin_db])
+                at = np.interp(np.log(m.gain_reduction_crossover_hz),
+                               np.log(mag.traces[0].x), mag.traces[0].y)
+                assert at == pytest.approx(m.gain_reduction_margin_db, abs=0.5)
+            else:
+                assert f"{axis}: gain-reduction" not in marks
+            pm = phase.traces[1]
+            assert f"phase margin {m.phase_margin_deg:.1f}°" in pm.name
+            np.testing.assert_allclose(pm.y, [-180.0, -180.0 + m.phase_margin_deg])
+    assert n_reduction == 2  # fsmbench's controller, both axes
+
+
+def test_gain_reduction_margin_is_read_on_the_negative_real_axis(stage: DesignStage) -> None:
+    for axis in "hv":
+        lp = stage.result.fsmbench
+        m = lp.axes[axis].margins
+        assert 1.0 < m.gain_reduction_crossover_hz < m.crossover_hz
+        i = "hv".index(axis)
+        li = np.interp(np.log(m.gain_reduction_crossover_hz), np.log(lp.f_hz),
+                       lp.loop[:, i, i].real)
+        # on the negative real axis, |L| = 10^(gr / 20)
+        assert li == pytest.approx(-10 ** (m.gain_reduction_margin_db / 20), rel=0.02)
+
+
+def test_robustness_loop_gains_in_db(sections: list[Section]) -> None:
+    figs = _figures(sections)
+    for key in ("seed_controller_robustness", "fsmbench_controller_robustness"):
+        for p in figs[key].panels:
+            assert p.y_label.endswith("[dB]") and not p.y_log

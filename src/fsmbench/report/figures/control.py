@@ -7,9 +7,9 @@ or draws; the report's renderers draw.
 
 The loops are sampled: their curves end at the Nyquist frequency the
 results carry (``LoopAnalysis.nyquist_hz``, ``PlantAnalysis.nyquist_hz``).
-A loop's phase is drawn unwrapped, placed at the crossover, over the band
-where the margins are read (a decade around the crossovers, and the gain
-margin's frequency). Panels of one quantity share their y axis, so h and v
+A loop's magnitude is in dB and its phase is drawn unwrapped, placed at the
+crossover, over the whole band of the magnitude, with its margins marked
+(:func:`margin_markers`). Panels of one quantity share their y axis, so h and v
 compare at a glance.
 """
 
@@ -34,14 +34,15 @@ __all__ = [
     "AXIS_WORDS",
     "FSM_COLOR",
     "SEED_COLOR",
+    "band_words",
     "bode_phase_deg",
     "controllers_figure",
     "iff_figure",
     "loop_gain_figure",
+    "margin_markers",
     "newport_to_beam_figure",
     "nyquist_figure",
     "perturbation_factors",
-    "phase_band_hz",
     "plant_figure",
     "robustness_figure",
     "scaled_plant_figure",
@@ -90,28 +91,67 @@ def _fmt_margin(x: float, spec: str) -> str:
     return format(x, spec) if np.isfinite(x) else "∞"
 
 
-def phase_band_hz(m: Margins, f_hz: np.ndarray, *, nyquist_hz: float) -> tuple[float, float]:
-    """Where a loop's phase is read [Hz]: a decade below its first gain crossover to a decade
-    above its last, and past the gain margin's frequency, within the grid and Nyquist."""
-    f_lo, f_hi = float(f_hz[0]), min(float(f_hz[-1]), nyquist_hz)
-    cross = [c for c in (*m.crossovers_hz, m.crossover_hz) if np.isfinite(c)]
-    if not cross:
-        return f_lo, f_hi
-    hi = 10.0 * max(cross)
-    if np.isfinite(m.phase_crossover_hz):
-        hi = max(hi, 1.5 * m.phase_crossover_hz)  # the −180° crossing and a little beyond
-    return max(f_lo, 0.1 * min(cross)), min(f_hi, hi)
+def _phase_from_low(x: np.ndarray) -> np.ndarray:
+    """Unwrapped phase [deg], its first value in (−180°, 180°]."""
+    ph = np.degrees(np.unwrap(np.angle(x)))
+    return np.asarray(ph - 360.0 * np.round(ph[0] / 360.0), dtype=float)
+
+
+def _db(x: np.ndarray) -> np.ndarray:
+    """``20 log10 |x|`` [dB]; −inf where ``x`` is zero."""
+    with np.errstate(divide="ignore"):
+        return np.asarray(20.0 * np.log10(np.abs(x)), dtype=float)
+
+
+def band_words(f_hz: np.ndarray) -> str:
+    """The drawn band in words: "from 0.01 Hz to 5000 Hz"."""
+    return f"from {float(f_hz[0]):.3g} Hz to {float(f_hz[-1]):.4g} Hz"
+
+
+def margin_markers(m: Margins, *, axis: str, color: str) -> tuple[tuple[Line, ...],
+                                                                  tuple[Line, ...]]:
+    """The margins drawn as MATLAB's ``margin`` does: (magnitude-panel traces, phase-panel traces).
+
+    The gain margin is a vertical segment [dB] from ``|L|`` up to 0 dB at its
+    −180° crossing; the gain-reduction margin (conditionally stable loops) a
+    segment from 0 dB up to ``|L|`` at the −180° crossing where ``|L| > 1``;
+    the phase margin a segment from −180° to the phase at the crossover.
+    Absent margins (∞) draw nothing.
+    """
+    mag: list[Line] = []
+    phase: list[Line] = []
+    if np.isfinite(m.gain_margin_db) and np.isfinite(m.phase_crossover_hz):
+        f = m.phase_crossover_hz
+        mag.append(Line(np.array([f, f]), np.array([-m.gain_margin_db, 0.0]),
+                        name=f"{axis}: gain margin {m.gain_margin_db:.1f} dB at {f:.4g} Hz",
+                        color=color, width=3.0))
+    if np.isfinite(m.gain_reduction_margin_db) and np.isfinite(m.gain_reduction_crossover_hz):
+        f = m.gain_reduction_crossover_hz
+        mag.append(Line(np.array([f, f]), np.array([0.0, m.gain_reduction_margin_db]),
+                        name=(f"{axis}: gain-reduction margin {m.gain_reduction_margin_db:.1f} dB "
+                              f"at {f:.4g} Hz (conditionally stable)"),
+                        color=_UNSTABLE_COLOR, width=3.0))
+    if np.isfinite(m.phase_margin_deg) and np.isfinite(m.crossover_hz):
+        f = m.crossover_hz
+        phase.append(Line(np.array([f, f]), np.array([-180.0, -180.0 + m.phase_margin_deg]),
+                          name=(f"{axis}: phase margin {m.phase_margin_deg:.1f}° at "
+                                f"{f:.4g} Hz"),
+                          color=color, width=3.0))
+    return tuple(mag), tuple(phase)
 
 
 def loop_gain_figure(lp: LoopAnalysis, *, key: str, title: str, caption: str,
                      seed_ref: str = "", note: str = "") -> Figure:
     """Bode plot of the diagonal loop gains ``L_ii = (G K)_ii``: one column per axis.
 
-    Up to the loop's Nyquist frequency. The phase is unwrapped, placed in
-    (−360°, 0] at the crossover, and drawn over the band where the margins
-    are read (:func:`phase_band_hz`), so its axis spans what matters; a
-    dotted line marks the crossover on both panels. The legend holds each
-    axis' margins (the figure's only statement of them).
+    Magnitude in dB and phase over the same band, up to the loop's Nyquist
+    frequency. The phase is unwrapped and shifted by whole turns to lie in
+    (−360°, 0] at the crossover (:func:`bode_phase_deg`), so the −180° line
+    reads the phase margin there, and a conditionally stable loop shows its
+    phase below −180° where ``|L| > 1``. The margins are drawn as segments
+    (:func:`margin_markers`): the gain margin, the gain-reduction margin when
+    the loop has one, the phase margin; the legend names each with its value.
+    The caption is completed with the band drawn.
 
     Parameters
     ----------
@@ -126,25 +166,27 @@ def loop_gain_figure(lp: LoopAnalysis, *, key: str, title: str, caption: str,
     for i, axis in enumerate(AXES):
         li = lp.loop[inband, i, i]
         m = lp.axes[axis].margins
-        legend = (f"{axis}: gain margin {_fmt_margin(m.gain_margin_db, '.1f')} dB, "
-                  f"phase margin {m.phase_margin_deg:.1f}°, crossover {m.crossover_hz:.1f} Hz")
+        color = _AXIS_COLOR[axis]
         marks: tuple[Rule, ...] = ()
         if np.isfinite(m.crossover_hz):
             marks = (Rule(m.crossover_hz, axis="x", dash="dot", color="#555555"),)
-        lo, hi = phase_band_hz(m, f, nyquist_hz=lp.nyquist_hz)
-        band = (f >= lo) & (f <= hi)
         phase = bode_phase_deg(li, f_hz=f, anchor_hz=m.crossover_hz)
-        mags.append(Panel(traces=(Line(f, np.abs(li), name=legend, color=_AXIS_COLOR[axis]),),
-                          x_label=FREQ, y_label=f"|L{axis}| [1]", x_log=True, y_log=True,
+        mag_marks, phase_marks = margin_markers(m, axis=axis, color=color)
+        mags.append(Panel(traces=(Line(f, _db(li), name=f"{axis}: loop gain L{axis}",
+                                       color=color, group=f"L{axis}"), *mag_marks),
+                          x_label=FREQ, y_label=f"|L{axis}| [dB]", x_log=True,
                           title=f"Loop gain, {AXIS_WORDS[axis]}",
-                          rules=(Rule(1.0, name="|L| = 1", dash="dash"), *marks), height=2.0,
-                          share_y="gain"))
-        phases.append(Panel(traces=(Line(f[band], phase[band], name=legend,
-                                         color=_AXIS_COLOR[axis], legend=False),),
+                          rules=(Rule(0.0, name="|L| = 1 (0 dB)", dash="dash"), *marks),
+                          height=2.0, share_y="gain"))
+        phases.append(Panel(traces=(Line(f, phase, name=f"{axis}: loop gain L{axis}",
+                                         color=color, group=f"L{axis}", legend=False),
+                                    *phase_marks),
                             x_label=FREQ, y_label=f"Phase of L{axis} [deg]", x_log=True,
                             rules=(Rule(-180.0, name="−180°", dash="dash"), *marks),
                             share_y="phase"))
-    return Figure(key=key, title=title, caption=caption, seed_ref=seed_ref, note=note,
+    band = (f" Magnitude and phase are drawn over the same band, {band_words(f)} "
+            f"(the Nyquist frequency of the sampled loop).")
+    return Figure(key=key, title=title, caption=caption + band, seed_ref=seed_ref, note=note,
                   panels=(mags[0], mags[1], phases[0], phases[1]), columns=2, share_x=True)
 
 
@@ -303,14 +345,14 @@ def robustness_figure(rob: Robustness, *, factors: Sequence[tuple[float, float]]
                     name = f"resonance ×{f_s:g}, damping ×{d_s:g}: closed loop UNSTABLE"
                 sel = ((lp.f_hz >= band_hz[0]) & (lp.f_hz <= band_hz[1])
                        & (lp.f_hz <= lp.nyquist_hz))
-                traces.append(Line(lp.f_hz[sel], np.abs(lp.loop[sel, i, i]), name=name,
+                traces.append(Line(lp.f_hz[sel], _db(lp.loop[sel, i, i]), name=name,
                                    color=ds_color[d_s] if stable else _UNSTABLE_COLOR,
                                    width=1.2 if stable else 2.4,
                                    dash="solid" if stable else "dash"))
             panels.append(Panel(traces=tuple(traces), x_label=FREQ,
-                                y_label=f"|L{axis}| [1]", x_log=True, y_log=True,
+                                y_label=f"|L{axis}| [dB]", x_log=True,
                                 title=f"{axis}, resonances ×{fs:g}",
-                                rules=(Rule(1.0, dash="dot", color="#555555"),),
+                                rules=(Rule(0.0, dash="dot", color="#555555"),),
                                 share_y="gain"))
     return Figure(key=key, title=title, caption=caption, note=note, panels=tuple(panels),
                   columns=len(fs_values), share_x=True, height_px=640)
@@ -375,6 +417,7 @@ def iff_figure(iff: IffAnalysis, *, key: str, title: str, caption: str,
                note: str = "") -> Figure:
     """``Uc_i → Vp_i`` without and with the ESRF study's IFF: one column per axis."""
     mags, phases = [], []
+    f_lo = float(iff.f_hz[0])
     for i, axis in enumerate(AXES):
         open_i, closed_i = iff.open_loop[:, i, i], iff.closed_loop[:, i, i]
         closed_name = ("with the ESRF study's IFF (closed loop stable)" if iff.loop_stable else
@@ -388,12 +431,16 @@ def iff_figure(iff: IffAnalysis, *, key: str, title: str, caption: str,
             x_label=FREQ, y_label=f"|Vp{axis} / Uc{axis}| [V/V]", x_log=True, y_log=True,
             title=f"Uc{axis} → Vp{axis}, {AXIS_WORDS[axis]}", height=2.0, share_y="gain"))
         phases.append(Panel(
-            traces=(Line(iff.f_hz, np.degrees(np.unwrap(np.angle(open_i))),
+            traces=(Line(iff.f_hz, _phase_from_low(open_i),
                          name=f"without IFF, {axis}",
                          color=_AXIS_COLOR[axis], group=f"open {axis}", legend=False),
-                    Line(iff.f_hz, np.degrees(np.unwrap(np.angle(closed_i))), name=closed_name,
+                    Line(iff.f_hz,
+                         _phase_from_low(closed_i),
+                         name=closed_name,
                          color="#000000", dash="dash", group="closed", legend=False)),
             x_label=FREQ, y_label=f"Phase of Vp{axis} / Uc{axis} [deg]", x_log=True,
             share_y="phase"))
-    return Figure(key=key, title=title, caption=caption, note=note,
+    band = (f" Magnitude and phase over the same band, {band_words(iff.f_hz)}; the phase is "
+            f"unwrapped from its value at {f_lo:.3g} Hz, taken in (−180°, 180°].")
+    return Figure(key=key, title=title, caption=caption + band, note=note,
                   panels=(mags[0], mags[1], phases[0], phases[1]), columns=2, share_x=True)
