@@ -294,3 +294,33 @@ def test_fig50_draws_the_huddle_window_the_budget_stage_read(result, figures, ru
     fig = next(f for f in figures if f.key == "fig50_nonrepeatable_contributions")
     assert f"{win.va_rms_m * 1e9:.3g} nm rms over {win.duration_s:g} s" in fig.panels[-1].title
     assert result.nonrep[next(iter(result.nonrep))].to_json()["huddle_window"]["name"] == name
+
+
+def test_fig23_cumulative_panels_end_with_the_total(figures, result):
+    """The cumulative-rms panels carry all sources together, the RSS of the parts (issue 33)."""
+    fig = next(f for f in figures if f.key == "budget_beam_angle_per_source")
+    cum = [p for p in fig.panels if p.y_label.startswith("Cumulative rms")]
+    assert len(cum) == 2
+    for i, p in enumerate(cum):
+        total = [t for t in p.traces if t.name.startswith("all sources together")]
+        assert len(total) == 1 and total[0].name.endswith("[µrad]")
+        parts = [t for t in p.traces if t is not total[0]]
+        assert len(parts) == len(result.budget.sources)
+        rss = np.sqrt(sum(t.y[-1] ** 2 for t in parts))
+        assert total[0].y[-1] == pytest.approx(rss, rel=1e-9)
+        assert total[0].x[-1] == parts[0].x[-1]
+        # and the sources' own rms (rectangle rule): the same to the grid's step
+        own = np.sqrt(sum(s.angle_rms_rad[i] ** 2 for s in result.budget.sources.values()))
+        assert total[0].y[-1] == pytest.approx(1e6 * own, rel=1e-2)
+
+
+def test_every_legend_entry_is_one_colour(figures):
+    """Traces that share a legend entry share its colour (issue 33: Fig. 46 had one
+    "recorded" entry for two colours)."""
+    for fig in figures:
+        colours: dict[str, set[str]] = {}
+        for _, t in _lines(fig):
+            if t.color is not None:
+                colours.setdefault(t.group or t.name, set()).add(t.color)
+        bad = {g: c for g, c in colours.items() if len(c) > 1}
+        assert not bad, (fig.key, bad)

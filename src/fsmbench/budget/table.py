@@ -138,6 +138,16 @@ class ErrorBudget:
     limiting: str
 
     @property
+    def angle_psd_all(self) -> NDArray[np.complex128]:
+        """Beam-angle PSD of all sources together [rad²/Hz], shape (F, 2, 2).
+
+        The sources are independent, so their spectra add; on the grid every
+        source shares (``sources[...].f_hz``). Its diagonal's cumulative rms ends
+        at the root sum of squares of the sources' angle rms.
+        """
+        return np.asarray(sum(s.angle_psd for s in self.sources.values()), dtype=complex)
+
+    @property
     def configuration(self) -> str:
         """E.g. ``"closed loop, compensation unit, aluminium shielding"``."""
         parts = ["closed loop" if self.closed_loop else "open loop"]

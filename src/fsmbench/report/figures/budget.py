@@ -346,6 +346,12 @@ def angle_asd_figure(b: ErrorBudget) -> Figure:
                       "width": 1.0}
                 lines.append(asd_line(s.f_hz, psd, scale=UM, **kw) if kind == "asd"
                              else cumulative_line(s.f_hz, psd, scale=UM, **kw))
+            if kind == "cum":
+                f_all = next(iter(b.sources.values())).f_hz
+                lines.append(cumulative_line(f_all, np.real(b.angle_psd_all[:, i, i]), scale=UM,
+                                             name="all sources together, cumulative rms [µrad]",
+                                             color="#000000", dash="dash", width=2.0,
+                                             group="total"))
             ax = "Rh" if i == 0 else "Rv"
             if kind == "asd":
                 panels.append(Panel(tuple(lines), "Frequency [Hz]",
@@ -361,8 +367,10 @@ def angle_asd_figure(b: ErrorBudget) -> Figure:
         caption=f"Each of the {len(names)} sources of 4.5 through the plant and the loop "
                 f"({b.configuration}; U = −K R) to the beam angle at the 4QD, horizontal left, "
                 "vertical right; cumulative rms from 0 Hz below (stationary, no record "
-                "length). The fall of the 4QD sources (ADC, electronic noise) towards 5 kHz "
-                "is the discrete controller's zero at half the sampling frequency.",
+                "length), with all sources together (dashed black): it ends at the root sum of "
+                "squares of the sources' rms. The fall of the 4QD sources (ADC, electronic "
+                "noise) towards 5 kHz is the discrete controller's zero at half the sampling "
+                "frequency.",
         panels=tuple(panels), seed_ref="4.5", columns=2, share_x=True)
 
 

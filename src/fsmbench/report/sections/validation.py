@@ -24,8 +24,10 @@ def validation_figure(v: Any) -> Figure:
     """Recorded and predicted ASD of the tracking error, with the predicted sources, per axis."""
     panels = []
     for i, (axis, name, words, color) in enumerate(_AXES):
-        lines = [asd_line(v.f_hz, v.measured_psd[:, i], scale=UM, name="recorded",
-                          color=color, group="recorded", width=1.5),
+        # One legend entry per colour: the recorded curve is named by its axis.
+        lines = [asd_line(v.f_hz, v.measured_psd[:, i], scale=UM,
+                          name=f"recorded ASD of {name} ({words}) [µrad/√Hz]",
+                          color=color, group=f"recorded {axis}", width=1.5),
                  asd_line(v.f_hz, v.predicted_psd[:, i], scale=UM,
                           name="predicted (simulated on the bench model)", color="#333333",
                           group="predicted", dash="dash", width=1.2)]
