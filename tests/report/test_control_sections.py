@@ -8,6 +8,7 @@ import re
 import subprocess
 import sys
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -316,3 +317,78 @@ def test_robustness_loop_gains_in_db(sections: list[Section]) -> None:
     for key in ("seed_controller_robustness", "fsmbench_controller_robustness"):
         for p in figs[key].panels:
             assert p.y_label.endswith("[dB]") and not p.y_log
+
+
+# ------------------------------------- closed-loop step and sample-motion responses
+
+def _balanced(sys: Any) -> Any:
+    """``sys`` with its state scaled by scipy's ``matrix_balance`` (the SI plant spans ~30
+    decades; python-control's step simulation needs it balanced)."""
+    import control as ct
+    from scipy.linalg import matrix_balance
+
+    a, (sc, _) = matrix_balance(np.asarray(sys.A), permute=False, separate=True)
+    return ct.ss(a, np.asarray(sys.B) / sc[:, None], np.asarray(sys.C) * sc[None, :], sys.D)
+
+
+def test_step_responses_against_python_control(stage: DesignStage,
+                                               nominal_plant: PlantModel) -> None:
+    """The responses against an independent construction of the same loop:
+    python-control's ``feedback`` and ``step_response`` on the Padé loop, and the
+    frequency responses' DC values in closed form."""
+    import control as ct
+
+    from fsmbench.control.loops import delayed_subsystem
+
+    res = stage.result
+    assert set(res.responses) == {"seed_controller", "fsmbench_controller"}
+    for name, r in res.responses.items():
+        k = res.controllers[name]
+        g = delayed_subsystem(nominal_plant, outputs=["Rh", "Rv"],
+                              inputs=["Uch", "Ucv", "Unh", "Unv"], pade_order=r.pade_order)
+        gu, gd = g[:, :2], g[:, 2:]
+        # T = feedback(G K, I); S Gn = feedback(Gn, K G) seen from d: y = Gn d − G K y
+        t_sys = ct.feedback(gu * k, ct.ss([], [], [], np.eye(2)))
+        sgn_sys = ct.feedback(ct.ss([], [], [], np.eye(2)), gu * k) * gd
+        _, y_t = ct.step_response(_balanced(t_sys), T=r.t_s)
+        _, y_d = ct.step_response(_balanced(sgn_sys), T=r.t_s)
+        for i in range(2):
+            np.testing.assert_allclose(r.reference_step[:, i], y_t[i, i], atol=1e-6)
+            np.testing.assert_allclose(r.disturbance_step_rad_per_v[:, i], y_d[i, i],
+                                       atol=1e-6 * np.max(np.abs(y_d[i, i])))
+        # final values: integral action, T(0) = 1 and (S Gn)(0) = 0; the curves settle there
+        np.testing.assert_allclose(r.reference_final, 1.0, atol=1e-9)
+        np.testing.assert_allclose(r.disturbance_final_rad_per_v, 0.0, atol=1e-9)
+        np.testing.assert_allclose(r.reference_step[-1], 1.0, atol=2e-3)
+        # the frequency responses are the loop analysis' own T and Fig. 42's S Gn
+        lp = res.loops[name]
+        for i in range(2):
+            t_lp = np.interp(np.log(r.f_hz[:50]), np.log(lp.f_hz),
+                             np.abs(lp.complementary[:, i, i]))
+            np.testing.assert_allclose(np.abs(r.complementary[:50, i]), t_lp, rtol=1e-3)
+        np.testing.assert_allclose(
+            r.disturbance_rad_per_v,
+            np.stack([res.newport_to_beam.closed[name][:, i, i] for i in range(2)], axis=1))
+        assert np.all(np.isfinite(r.reference_step)) and r.reference_step[0, 0] == 0.0
+
+
+def test_step_response_figure(sections: list[Section], stage: DesignStage) -> None:
+    fig = _figures(sections)["closed_loop_step_responses"]
+    assert fig.key in [b.key for b in sections[4].blocks if isinstance(b, Figure)]
+    assert len(fig.panels) == 8 and fig.columns == 2
+    res = stage.result
+    names = {t.name for p in fig.panels for t in p.traces}
+    assert names == {"with the ESRF study's controller", "with fsmbench's controller",
+                     "Sercalo loop open"}
+    for i, p in enumerate(fig.panels[:2]):
+        assert p.y_label.endswith("[1]")
+        seed = p.traces[0]
+        np.testing.assert_allclose(seed.y, res.responses["seed_controller"].reference_step[:, i])
+        np.testing.assert_allclose(seed.x, 1e3 * res.responses["seed_controller"].t_s)
+    for p in fig.panels[2:4]:
+        assert p.y_label.endswith("[µrad/V]")
+    for p in fig.panels[4:]:
+        assert "[dB" in p.y_label and p.x_log
+    text = " ".join(b for b in sections[4].blocks if isinstance(b, str))
+    over = res.responses["fsmbench_controller"].overshoot()
+    assert f"fsmbench's controller: {100 * over[0]:.0f} % (h)" in text

@@ -53,6 +53,7 @@ from fsmbench.control.export import (
 from fsmbench.control.freq import evaluate_ss, plain_json
 from fsmbench.control.iff import IffAnalysis, iff_analysis
 from fsmbench.control.loops import LoopAnalysis, LoopOptions, analyse_loop, newport_to_beam
+from fsmbench.control.responses import ClosedLoopResponses, closed_loop_responses
 from fsmbench.control.seed import iff_controller, newport_controller, seed_decentralised_controller
 from fsmbench.io.atomic import atomic_write_text
 
@@ -60,6 +61,7 @@ __all__ = [
     "CONTROLLERS_MAT",
     "CONTROLLERS_SOS_JSON",
     "MATLAB_LOADER",
+    "RESPONSE_DURATION_S",
     "DesignResult",
     "NewportToBeam",
     "StudyOptions",
@@ -69,6 +71,8 @@ __all__ = [
 CONTROLLERS_MAT = "controllers.mat"
 CONTROLLERS_SOS_JSON = "controllers_sos.json"
 MATLAB_LOADER = "fsmbench_load.m"
+#: Length of the closed-loop step responses [s]: the settling of both controllers.
+RESPONSE_DURATION_S = 0.25
 
 _DESCRIPTIONS = {
     "seed_controller": "ESRF study 9.2 decentralised controller (restored Kh, Kv); Rh,Rv -> "
@@ -166,6 +170,10 @@ class DesignResult:
     qd_gain_v_per_rad : tuple of 2 floats
         4QD gain ``Gd`` (h, v) of ``plant`` [V/rad]: a target reading the 4QD
         voltage divides by it to get the controllers' input ``R``.
+    responses : dict name -> ClosedLoopResponses
+        Closed-loop step and Newport-disturbance responses, time and frequency,
+        of ``seed_controller`` and ``fsmbench_controller``
+        (:func:`fsmbench.control.responses.closed_loop_responses`).
     """
 
     plant_source: str
@@ -182,6 +190,7 @@ class DesignResult:
     controllers: dict[str, ct.StateSpace]
     options: StudyOptions
     qd_gain_v_per_rad: tuple[float, float]
+    responses: dict[str, ClosedLoopResponses] = field(default_factory=dict)
 
     @property
     def loops(self) -> dict[str, LoopAnalysis]:
@@ -331,8 +340,14 @@ def design_study(plant: PlantModel, *, bench: Bench,
                                                                        f)})
     controllers = {"seed_controller": k_seed, "fsmbench_controller": design.controller,
                    "newport_controller": k_newport, "iff_controller": iff_controller()}
+    responses = {
+        name: closed_loop_responses(plant, controllers[name], name=words, f_hz=f,
+                                    duration_s=RESPONSE_DURATION_S, dt_s=opts.loop.ts_s,
+                                    pade_order=opts.loop.pade_order)
+        for name, words in (("seed_controller", "the ESRF study's controller"),
+                            ("fsmbench_controller", "fsmbench's controller"))}
     return DesignResult(plant_source=plant.source, objective=objective, plant=plant_an,
                         seed=seed, fsmbench=fsm, design=design, newport=newport, iff=iff,
                         robustness=rob, seed_robustness=seed_rob, newport_to_beam=n2b,
                         controllers=controllers, options=opts,
-                        qd_gain_v_per_rad=_qd_gain(plant))
+                        qd_gain_v_per_rad=_qd_gain(plant), responses=responses)

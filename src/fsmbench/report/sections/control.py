@@ -34,6 +34,7 @@ from fsmbench.report.figures.control import (
     sensitivity_figure,
 )
 from fsmbench.report.html import Block, Note, Section, Table
+from fsmbench.report.sections.responses import response_blocks
 
 if TYPE_CHECKING:
     from fsmbench.stages import DesignStage
@@ -506,6 +507,7 @@ def _section9(res: DesignResult, check: Any, *, skipped: str = "") -> Section:
                      "instead, leaving the resonance in the loop.")),
         *_controller_blocks(fsm, who="fsmbench's controller", prefix="fsmbench_controller",
                             seed_ref="", bode_key="fsmbench_controller_loop_gain"),
+        *response_blocks(res, colors=(SEED_COLOR, FSM_COLOR)),
         *_robustness_blocks(res.robustness, res, who="fsmbench's controller",
                             key="fsmbench_controller_robustness",
                             title="fsmbench's controller over the perturbed plants"),
