@@ -6,26 +6,28 @@
                   [--rollback-tolerance-pct P] [--periods N] [--seed N] [--params TOML]
                   [--drift-rate PCT_PER_H [--watch-duration S]]
 
-One guarded procedure (:func:`fsmbench.tune.guarded.tune_guarded`) on one of two
-targets: the digital twin (:class:`fsmbench.tune.targets.TwinTarget`; with
-``--bench DIR`` the twin simulates the bench identified in DIR, as ``simulate
---bench``) or the live Tango device at ADDRESS (:class:`fsmbench.tune.device.DeviceTarget`,
-through its commands, the loop closed). Measure the running controller, identify the
-Sercalo with the loop closed, design (the same study as ``fsmbench design``), verify,
-compare, load only a better controller, watch it, roll back when it does worse than
+One guarded procedure (:func:`fsmbench.tune.guarded.tune_guarded`) on one of two targets:
+the digital twin (:class:`fsmbench.tune.targets.TwinTarget`; with ``--bench DIR`` the twin
+simulates the bench identified in DIR, as ``simulate --bench``) or the live device at
+ADDRESS (:class:`fsmbench.tune.device.DeviceTarget`, through its commands, the loop closed):
+the Tango device ``tango://HOST:PORT/dom/fam/member`` or the EPICS IOC ``ca://PREFIX`` of
+``fsmbench serve --protocol epics --prefix PREFIX`` (Channel Access,
+:mod:`fsmbench.tune.ca_device`), with the same transaction. Measure the running controller,
+identify the Sercalo with the loop closed, design (the same study as ``fsmbench design``),
+verify, compare, load only a better controller, watch it, roll back when it does worse than
 predicted. Writes ``DIR/tune.json``, ``DIR/identification/`` (the closed-loop
 identification, a ``--bench DIR`` for other commands) and ``DIR/report.html``; with
 ``--device``, the excitations and controllers played through the device are kept in
-``DIR-device/`` (the device remembers the loaded controller's file; the controllers go to
-a ``DIR-device/`` in the device's controllers folder, ``ControllersPath``, when DIR is not
-in it). On the device the load is a transaction (:mod:`fsmbench.tune.transaction`):
-``DIR/tune.json`` holds the measurement and the decision before anything is loaded, then
-the outcome (``loaded``, ``rolled_back``, ``interrupted``, ``loop_opened`` after a
-trip); Ctrl-C, SIGTERM, a lost connection or any error once the load has started rolls
+``DIR-device/`` (the device remembers the loaded controller's file; the controllers go to a
+``DIR-device/`` in the device's controllers folder, ``ControllersPath``, when DIR is not in
+it). On the device the load is a transaction (:mod:`fsmbench.tune.transaction`):
+``DIR/tune.json`` holds the measurement and the decision before anything is loaded, then the
+outcome (``loaded``, ``rolled_back``, ``interrupted``, ``loop_opened`` after a trip);
+Ctrl-C, SIGTERM, a lost connection, a refusal or any error once the load has started rolls
 the device back to the controller it ran before through its ``LoadController``, and the
 output says which controller the device is left on (exit status 130 for Ctrl-C, 143 for
-SIGTERM). With ``--drift-rate`` (twin) the controller that runs afterwards is watched while the
-resonance drifts (:mod:`fsmbench.tune.watch_twin`), the warnings in ``tune.json``'s
+SIGTERM). With ``--drift-rate`` (twin) the controller that runs afterwards is watched while
+the resonance drifts (:mod:`fsmbench.tune.watch_twin`), the warnings in ``tune.json``'s
 ``watch``; the device watches itself (``WatchVerdict``, ``WatchCause``).
 """
 
@@ -96,9 +98,11 @@ def add_tune_command(sub: Any) -> None:
     where = p.add_mutually_exclusive_group(required=True)
     where.add_argument("--twin", action="store_true", help="tune the digital twin")
     where.add_argument("--device", metavar="ADDRESS", default=None,
-                       help="tune the live Tango device at ADDRESS (tango://HOST:PORT/dom/fam/"
-                            "member, #dbase=no without a database) through its commands, the "
-                            "loop closed; it must share this filesystem")
+                       help="tune the live device at ADDRESS through its commands, the loop "
+                            "closed: the Tango device tango://HOST:PORT/dom/fam/member "
+                            "(#dbase=no without a database), or the EPICS IOC ca://PREFIX of "
+                            "fsmbench serve --protocol epics --prefix PREFIX (Channel Access, "
+                            "found through EPICS_CA_ADDR_LIST); it must share this filesystem")
     p.add_argument("--bench", metavar="DIR", dest="bench_dir", default=None,
                    help="with --twin: the twin simulates the bench identified in DIR (the "
                         "output of fsmbench identify or study), the model tune starts from")
@@ -204,6 +208,27 @@ def _running_file(spec: str, bench: Any) -> Any:
 
 
 def _command(args: argparse.Namespace) -> int:
+    if args.device is None:
+        return _tune(args, None)
+    twin_only = [name for name, given in (("--drift-resonance", args.drift_pct != 0.0),
+                                          ("--drift-rate", args.drift_rate is not None),
+                                          ("--bench", args.bench_dir is not None)) if given]
+    if twin_only:
+        raise ValueError(f"{', '.join(twin_only)}: for --twin; the device runs the bench it "
+                         "serves (fsmbench serve --bench, --drift-rate)")
+    from fsmbench.tune.proxy import device_proxy, release_proxy
+
+    # The device first, before the numerics load: an address that does not answer is said
+    # in the connection's time (3 s for an absent IOC), not after seconds of imports.
+    proxy = device_proxy(args.device)
+    try:
+        return _tune(args, proxy)
+    finally:
+        release_proxy(proxy)  # the EPICS channels, before pyepics' exit handler
+
+
+def _tune(args: argparse.Namespace, proxy: Any) -> int:
+    """One tune on the twin (``proxy`` None) or on the device ``proxy`` reaches."""
     from fsmbench.bench.params import load_bench
     from fsmbench.ident.closed_loop import write_closed_loop_identification
     from fsmbench.io.atomic import atomic_write_text
@@ -215,13 +240,6 @@ def _command(args: argparse.Namespace) -> int:
     from fsmbench.tune.measure import MeasurementOptions
     from fsmbench.twin.experiments import REP_AMPLITUDE_V
 
-    if args.device is not None:
-        twin_only = [name for name, given in (("--drift-resonance", args.drift_pct != 0.0),
-                                              ("--drift-rate", args.drift_rate is not None),
-                                              ("--bench", args.bench_dir is not None)) if given]
-        if twin_only:
-            raise ValueError(f"{', '.join(twin_only)}: for --twin; the device runs the bench it "
-                             "serves (fsmbench serve --bench, --drift-rate)")
     inputs = [("--params", args.params), ("--bench", args.bench_dir)]
     if args.running not in ("seed", "fsmbench"):
         inputs.append(("--running", args.running.partition("::")[0]))
@@ -245,11 +263,11 @@ def _command(args: argparse.Namespace) -> int:
         result = tune_twin(bench=bench, running=running, drift_pct=args.drift_pct,
                            options=opts, seed=args.seed, progress=say)
     else:
-        from fsmbench.tune.device import DeviceTarget, device_proxy
+        from fsmbench.tune.device import DeviceTarget
         from fsmbench.tune.guarded import tune_guarded
 
         out_dir = Path(args.out).resolve()
-        target = DeviceTarget(device_proxy(args.device), bench=bench, running=running,
+        target = DeviceTarget(proxy, bench=bench, running=running,
                               folder=out_dir.with_name(out_dir.name + "-device"),
                               address=args.device, running_source=args.running)
         journal = _Journal(out, arguments=argv, inputs=inputs)

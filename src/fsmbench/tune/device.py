@@ -1,4 +1,15 @@
-"""The live Tango device as :func:`fsmbench.tune.guarded.tune_guarded`'s target.
+"""The live device as :func:`fsmbench.tune.guarded.tune_guarded`'s target, over Tango or EPICS.
+
+:func:`device_proxy` (:mod:`fsmbench.tune.proxy`) reaches the device:
+``tango://HOST:PORT/dom/fam/member`` (or a bare Tango name) through PyTango's
+``DeviceProxy``; ``ca://PREFIX``, the EPICS IOC of ``fsmbench serve --protocol epics
+--prefix PREFIX``, through :class:`fsmbench.tune.ca_device.CaDevice`, which gives the same
+calls over Channel Access (its PVs ``PREFIX:<Attribute>``, a command a put whose reply is
+``PREFIX:Reply``). A refusal is PyTango's ``DevFailed`` or
+:class:`~fsmbench.tune.device_errors.DeviceRefused`, a lost connection ``DevFailed`` or
+:class:`~fsmbench.tune.device_errors.DeviceLost`; both read the same
+(:func:`~fsmbench.tune.device_errors.device_failure`), so the transaction below is the same
+on both protocols.
 
 :class:`DeviceTarget` acts only through the device's own commands, the loop closed
 all along:
@@ -24,8 +35,12 @@ all along:
   (``StopExcitation``, ``Abort``): the device checks it again on the call.
 
 Every attribute read goes through :func:`fsmbench.tune.reads.read_valid`: the device
-answers INVALID (PyTango's value None) when it cannot take its bench's lock in 0.5 s, and
-such a reading is read again for a bounded wall-clock time, then named in an error.
+answers INVALID (PyTango's value None; over EPICS, SEVR INVALID) when it cannot take its
+bench's lock in 0.5 s, and such a reading is read again for a bounded wall-clock time,
+then named in an error. Over EPICS a value can also be up to one refresh of the IOC's
+records old (0.1 s of wall clock): the record's start and the excitation's are read once
+they have moved and name this excitation (:meth:`DeviceTarget._bench_time_now`,
+:meth:`DeviceTarget._started`).
 
 The device and ``tune`` share a filesystem (the excitation and controller files
 ``tune`` writes, the records the device writes). The device's own watch
@@ -47,14 +62,16 @@ from fsmbench.bench.params import Bench
 from fsmbench.io.recording import make_recording, read_recording
 from fsmbench.sim.excitation import SampledExcitation, samples_sha256
 from fsmbench.sim.loaded import RunningController
+from fsmbench.tune.device_errors import device_failure
 from fsmbench.tune.guarded import Loop
+from fsmbench.tune.proxy import device_proxy, release_proxy
 from fsmbench.tune.reads import INVALID_WAIT_S, read_valid
 from fsmbench.tune.transaction import LoopOpenedError
 from fsmbench.twin.closed_loop import CLOSED_LOOP_SIGNALS, ClosedLoopPlay, excitation_variable
 from fsmbench.twin.experiments import ExperimentSpec
 from fsmbench.twin.simulate import TwinRun
 
-__all__ = ["DeviceTarget", "device_proxy"]
+__all__ = ["DeviceTarget", "device_proxy", "release_proxy"]
 
 #: Bench time the excitation may start late in its record [s], at least, and in wall clock
 #: at the device's speed [s] (the client's round trips: 20 ms of wall clock is 1 s of bench
@@ -64,28 +81,6 @@ _LATE_WALL_S = 0.25
 _ATTEMPTS = 3
 #: Wall clock a command's work may take beyond its bench time at the device's speed [s].
 _SLACK_S = 120.0
-
-
-def device_proxy(address: str) -> Any:
-    """A PyTango proxy to ``address`` (``tango://HOST:PORT/dom/fam/member[#dbase=no]``).
-
-    Raises
-    ------
-    ValueError
-        PyTango missing, or the device not reachable (one line).
-    """
-    try:
-        import tango
-    except ImportError:
-        raise ValueError("tune --device needs PyTango: pip install 'fsmbench[tango]'") from None
-    try:
-        proxy = tango.DeviceProxy(address)
-        proxy.set_source(tango.DevSource.DEV)
-        proxy.ping()
-    except tango.DevFailed as exc:
-        raise ValueError(f"--device {address}: not reachable "
-                         f"({' '.join(exc.args[0].desc.split())})") from None
-    return proxy
 
 
 def _controllers_folder(where: str | None, folder: Path) -> Path:
@@ -113,9 +108,10 @@ def _restore_requests(source: str | None) -> list[Any]:
 
 
 def _words(exc: BaseException) -> str:
-    """A device's refusal (DevFailed's description) or an error, in one line."""
-    desc = getattr(exc.args[0], "desc", None) if exc.args else None
-    return " ".join(str(desc if isinstance(desc, str) else exc).split())
+    """A device's refusal (its sentence and reason code, on either protocol) or an error, in
+    one line."""
+    failure = device_failure(exc)
+    return failure.sentence() if failure is not None else " ".join(str(exc).split())
 
 
 class DeviceTarget:
@@ -123,8 +119,8 @@ class DeviceTarget:
 
     Parameters
     ----------
-    proxy : tango.DeviceProxy
-        The ``FsmBench`` device.
+    proxy : tango.DeviceProxy or fsmbench.tune.ca_device.CaDevice
+        The ``FsmBench`` device, or its EPICS IOC (:func:`device_proxy`).
     bench : Bench
         The bench file (the converter rate, the 4QD gains).
     running : Loop
@@ -214,8 +210,7 @@ class DeviceTarget:
             if not self._attr("LoopClosed"):
                 self._loop_opened()
             raise
-        start_s = float(self._attr("BenchTime"))
-        out = during(start_s) if during is not None else None
+        out = during(self._bench_time_now()) if during is not None else None
         # The record ends (MOVING left) with its file, or without one when a trip cut it
         # before its first sample: then the loop is open, said as such.
         self._wait(lambda: str(self.proxy.state()) != "MOVING", f"the record {path}",
@@ -226,6 +221,47 @@ class DeviceTarget:
             raise ValueError(f"{self.label}: the record {path} ended without a file: "
                              f"{self.proxy.status()}")
         return read_recording(path, require=()), out
+
+    def _bench_time_now(self) -> float:
+        """The device's ``BenchTime`` as it is now [s]: read until it moves.
+
+        The IOC refreshes its records every 0.1 s of wall clock (5 s of bench time at 50x);
+        the value just after a command can be that old, and a record's start taken from it
+        put the excitation before the end of its settling. A value that has just moved is
+        fresh (PyTango's are fresh at once: the second read has moved).
+        """
+        first = float(self._attr("BenchTime"))
+        now = [first]
+
+        def moved() -> bool:
+            now.append(float(self._attr("BenchTime")))
+            return now[-1] > first
+
+        self._wait(moved, "the bench time to advance", 0.0)
+        return now[-1]
+
+    def _started(self, sha: str, since_s: float) -> float:
+        """The bench time the excitation of samples ``sha`` started [s], from the device's
+        ``Excitation``, once it names them and a start at or after ``since_s``.
+
+        Waited for: the IOC refreshes ``Excitation`` every 0.1 s of wall clock, not within
+        the put, so a read just after ``StartExcitation`` can still give the previous
+        excitation (an earlier start: a record cut from it would be misplaced).
+        """
+        start: list[float] = []
+
+        def ours() -> bool:
+            try:
+                doc = json.loads(str(self._attr("Excitation")))
+            except ValueError:
+                return False
+            if not isinstance(doc, dict) or doc.get("samples_sha256") != sha:
+                return False
+            start.append(float(doc.get("start_time_s", -np.inf)))
+            return start[-1] >= since_s
+
+        self._wait(ours, "the excitation's start (Excitation naming its samples)", 0.0)
+        return start[-1]
 
     # -- the target ----------------------------------------------------------------
 
@@ -352,7 +388,8 @@ class DeviceTarget:
                          f"{self.label} with the loop closed by {controller.name} "
                          f"({duration:g} s recorded)")
 
-            def excite(start_s: float, play: ClosedLoopPlay = play, npy: Path = npy) -> float:
+            def excite(start_s: float, play: ClosedLoopPlay = play, npy: Path = npy,
+                       sha: str = samples_sha256(x)) -> float:
                 self._wait(lambda: float(self._attr("BenchTime")) >= start_s + settle_s,
                            "the settling before the excitation", settle_s)
                 doc: dict[str, Any] = {"input": play.channel, "kind": "samples",
@@ -360,7 +397,7 @@ class DeviceTarget:
                 if play.loop_from is not None:
                     doc["loop_from"] = int(play.loop_from)
                 self.proxy.StartExcitation(json.dumps(doc))
-                return float(json.loads(self._attr("Excitation"))["start_time_s"])
+                return self._started(sha, start_s)
 
             for attempt in range(1, _ATTEMPTS + 1):
                 rec, e_start_s = self._record(CLOSED_LOOP_SIGNALS, duration, during=excite)

@@ -59,7 +59,9 @@ def read_valid(proxy: Any, attribute: str, *, device: str,
     Parameters
     ----------
     proxy : tango.DeviceProxy
-        Or anything with ``read_attribute(name)`` returning ``.value`` and ``.quality``.
+        Or anything with ``read_attribute(name)`` returning ``.value`` and ``.quality``
+        (:class:`fsmbench.tune.ca_device.CaDevice`: quality ``ATTR_INVALID`` for SEVR
+        INVALID).
     attribute : str
         The attribute's name (``SpeedFactor``, ``BenchTime``, ``Controller``, ...).
     device : str
@@ -78,7 +80,7 @@ def read_valid(proxy: Any, attribute: str, *, device: str,
     ------
     DeviceReadError
         Still INVALID after ``wait_s``, naming ``attribute`` and ``device``.
-    tango.DevFailed
+    tango.DevFailed or fsmbench.tune.device_errors.DeviceLost
         The read itself failed (the device gone, the connection lost): not retried.
     """
     t0 = time.monotonic()

@@ -15,13 +15,14 @@
 4. **done**: the outcome (``loaded``, ``rolled_back``) and the controller the bench is
    left on go to ``journal``.
 
-Anything that cuts steps 1-3 short (Ctrl-C, SIGTERM, a lost connection, an attribute
-that stays INVALID, a bug) rolls back to the controller that ran before (it passed the
-device's check: it was running) unless the bench already runs it, with Ctrl-C held while
-it does, and records ``interrupted`` with the controller the bench is left on, in one
-sentence. A roll-back that fails says so, with the ``LoadController`` argument that
-returns the device by hand. A ``KeyboardInterrupt`` (or another ``BaseException``) is
-raised again; an ``Exception`` as :class:`LoopChangeError` carrying the sentence.
+Anything that cuts steps 1-3 short (Ctrl-C, SIGTERM, a lost connection, a refused
+command, an attribute that stays INVALID, a bug) rolls back to the controller that ran
+before (it passed the device's check: it was running) unless the bench already runs it,
+with Ctrl-C held while it does, and records ``interrupted`` with the controller the bench
+is left on, in one sentence. A roll-back that fails says so, with the ``LoadController``
+argument that returns the device by hand. A ``KeyboardInterrupt`` (or another
+``BaseException``) is raised again; an ``Exception`` as :class:`LoopChangeError` carrying
+the sentence.
 """
 
 from __future__ import annotations
@@ -34,6 +35,7 @@ from collections.abc import Callable, Iterator, Mapping
 from types import FrameType
 from typing import TYPE_CHECKING, Any
 
+from fsmbench.tune.device_errors import device_failure
 from fsmbench.tune.guarded import AXES, _replace, _rms, _urad
 
 if TYPE_CHECKING:
@@ -90,9 +92,9 @@ def _cause(exc: BaseException) -> str:
         return "interrupted (Ctrl-C)"
     if type(exc).__name__ == "Terminated":
         return "terminated (SIGTERM)"
-    desc = getattr(exc.args[0], "desc", None) if exc.args else None
-    if type(exc).__name__ == "DevFailed" and isinstance(desc, str):
-        return f"the device failed or the connection was lost ({' '.join(desc.split())})"
+    failure = device_failure(exc)  # Tango's DevFailed, or a refusal or lost IOC over CA
+    if failure is not None:
+        return failure.cause()
     text = " ".join(str(exc).split())
     return f"{type(exc).__name__}: {text}" if text else type(exc).__name__
 
