@@ -59,6 +59,7 @@ from fsmbench.ident.calibration import (
     current_amp_checks,
     qd_checks,
 )
+from fsmbench.ident.compare import compare_records
 from fsmbench.ident.consistency import screen_recordings
 from fsmbench.ident.crosscheck import (
     NOISE_CHECKS,
@@ -107,6 +108,7 @@ from fsmbench.ident.frf.compression import (
     correct_compression,
 )
 from fsmbench.ident.frf.experiment import OUTPUTS, choose_estimator, experiment_frf
+from fsmbench.ident.model_band import model_band
 from fsmbench.ident.newport import (
     NewportIdentification,
     identify_newport,
@@ -207,6 +209,14 @@ def identify(recordings: Mapping[str, xr.Dataset], *, bench: Bench,
     result = replace(result, findings=found, matching=replace(
         bench, nominal=matching_params(bench.nominal, measured, result.findings),
         datasheet=matching_datasheet(bench.datasheet, result.findings)))
+    if result.plant is not None and result.matching is not None:
+        # The model against the records (MATLAB's compare) and its Bode band from the
+        # parameters' stds (bode(sys, 'sd', 3)): ident.compare, ident.model_band.
+        result = replace(result, comparison=compare_records(
+            recordings, plant=result.plant, trims_s=result.options.trims_s),
+            bode_band=model_band(result.plant, params=result.matching.nominal,
+                                 measured=measured, f_hz=np.geomspace(
+                                     1.0, 0.5 * used.converter.fs_hz, 300)))
     # Records against each other and against the physical model (ident.crosscheck): a
     # failed one makes the identification untrusted, as a quality warning does.
     crossed = [*cross_checks(result.to_json(), params=used,

@@ -21,12 +21,14 @@ from fsmbench.bench.blocks import PlantModel
 from fsmbench.bench.params import Bench, BenchParams
 from fsmbench.checks import Check, Finding, Notice
 from fsmbench.ident.calibration import CurrentAmplifierGain, QdCalibration
+from fsmbench.ident.compare import ModelComparison
 from fsmbench.ident.evidence.matching import MATCHING_BENCH, write_matching_bench
 from fsmbench.ident.evidence.recorded_loop import RecordedController
 from fsmbench.ident.export import write_frf_mat, write_plant_mat
 from fsmbench.ident.fit.modes import ModeRefinement
 from fsmbench.ident.fit.truncation import TruncationCheck
 from fsmbench.ident.frf.compression import CompressionFactors
+from fsmbench.ident.model_band import ModelBand
 from fsmbench.ident.newport import NewportIdentification
 from fsmbench.ident.noise_model import NoiseModelFit
 from fsmbench.ident.sercalo import SercaloFitOptions, SercaloIdentification
@@ -162,6 +164,12 @@ class Identification:
     matching : Bench or None
         The bench file with every value the records measured: what
         ``bench_identified.toml`` holds.
+    comparison : ModelComparison or None
+        The identified model against each open-loop identification record, with its
+        NRMSE fit (:mod:`fsmbench.ident.compare`, MATLAB's ``compare``).
+    bode_band : ModelBand or None
+        The identified model's response on its direct paths with the std its parameters'
+        total stds give (:mod:`fsmbench.ident.model_band`, MATLAB's ``bode(sys, 'sd')``).
     """
 
     qd: dict[str, QdCalibration]
@@ -186,6 +194,8 @@ class Identification:
     recorded_loop: dict[str, RecordedController] = field(default_factory=dict)
     params: BenchParams | None = None
     matching: Bench | None = None
+    comparison: ModelComparison | None = None
+    bode_band: ModelBand | None = None
 
     def uncertain(self, key: str) -> Uncertain | None:
         """The value of ``key`` (``"sercalo.h.dc_gain_v_per_a"``) with its std and parts."""
@@ -279,6 +289,8 @@ class Identification:
             "sercalo_modes": self.sercalo_modes(),
             "mode_refinement": None if self.modes is None else self.modes.to_json(),
             "validation": [v.to_json() for v in self.validation],
+            "model_fit": None if self.comparison is None else self.comparison.to_json(),
+            "bode_band": None if self.bode_band is None else self.bode_band.to_json(),
             "newport": None if self.newport is None else self.newport.summary(),
             "frf_estimator": {name: part.frf.estimator
                               for name, part in (("sercalo", self.sercalo),

@@ -34,6 +34,7 @@ from fsmbench.report.figures.ident import (
     sercalo_model,
     weights_figure,
 )
+from fsmbench.report.figures.ident_model import model_band_figure, model_compare_figure
 from fsmbench.report.figures.spec import Figure
 from fsmbench.report.figures.time import SEED_TIME_FIGURES, experiment_figure
 from fsmbench.report.html import Block, Note, Section, Table
@@ -503,6 +504,13 @@ def _system(result: Identification | None) -> Section:
                            "identified" if part is not None else "nominal"))
         blocks.append(Table(caption="Pure delays of the assembled system",
                             header=("input", "delay [ms]", "source"), rows=tuple(rows_d)))
+    if result.bode_band is not None:
+        blocks.append(model_band_figure(result.bode_band))
+    if result.comparison is not None and (fig := model_compare_figure(result.comparison)):
+        blocks.append("The assembled model against the records it was identified from: each "
+                      "open-loop record's command drives the model, and its outputs are "
+                      "compared with the recorded ones (NRMSE fit, as MATLAB's compare).")
+        blocks.append(fig)
     return Section(title="2.5 Full system", blocks=tuple(blocks))
 
 
