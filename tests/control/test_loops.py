@@ -78,6 +78,36 @@ def test_closed_loop_poles_match_python_control(true_plant: PlantModel) -> None:
     np.testing.assert_allclose(np.sort_complex(ours), np.sort_complex(ref), rtol=1e-7, atol=1e-6)
 
 
+class _PadePlant:
+    """A plant whose rational path (delays as Padé) is ``g``: what closed_loop_poles reads."""
+
+    def __init__(self, g: ct.StateSpace) -> None:
+        self.g = g
+
+    def with_pade(self, *, order: int) -> ct.StateSpace:
+        return self.g
+
+
+def test_closed_loop_poles_with_feedthrough_on_both_sides(true_plant: PlantModel) -> None:
+    # A retune runs a controller read back from its SOS file (biproper) on a plant whose
+    # Padé paths pass some of each command straight through: a well-posed loop (I + Dk Dg
+    # invertible) that was refused as "algebraic". python-control closes it independently.
+    g0 = delayed_subsystem(true_plant, outputs=["Rh", "Rv"], inputs=["Uch", "Ucv"])
+    d_g = np.array([[2e-3, 1e-4], [-1e-4, 3e-3]])
+    g = ct.ss(g0.A, g0.B, g0.C, d_g, inputs=["Uch", "Ucv"], outputs=["Rh", "Rv"])
+    k0 = seed_decentralised_controller()
+    k = ct.ss(k0.A, k0.B, k0.C, np.asarray(k0.D) + 50.0 * np.eye(2),
+              inputs=list(k0.input_labels), outputs=list(k0.output_labels))
+    ours = closed_loop_poles(_PadePlant(g), k)  # type: ignore[arg-type]
+    ref = ct.feedback(g, k, sign=-1).poles()
+    np.testing.assert_allclose(np.sort_complex(ours), np.sort_complex(ref), rtol=1e-7, atol=1e-6)
+    # Feedthrough that cancels (Dk Dg = -I) is refused: the loop is not well posed.
+    k_bad = ct.ss(k0.A, k0.B, k0.C, -np.linalg.inv(d_g),
+                  inputs=list(k0.input_labels), outputs=list(k0.output_labels))
+    with pytest.raises(ValueError, match="not well posed"):
+        closed_loop_poles(_PadePlant(g), k_bad)  # type: ignore[arg-type]
+
+
 @pytest.mark.parametrize(("label", "unstable"), [("f×1 ξ×1", 0), ("f×1.05 ξ×1", 2),
                                                  ("f×1.05 ξ×0.5", 2), ("f×0.95 ξ×0.5", 0)],
                          ids=["unperturbed", "f+5%", "f+5%_xi/2", "f-5%_xi/2"])

@@ -8,6 +8,8 @@ the Monte Carlo costs one call.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pytest
 import scipy.signal as ss
@@ -177,3 +179,19 @@ def test_bad_input_is_named(rng: np.random.Generator) -> None:
     with pytest.raises(ValueError, match="at least 2 are needed"):
         periodic_frf(multisine(rng, 2), multisine(rng, 2), fs_hz=FS, input_name="u",
                      output_names=["y"], options=PeriodicOptions(period_samples=N))
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_a_record_that_nearly_repeats_before_its_period_gives_the_period(seed: int) -> None:
+    # Mostly low lines (3-39 of 40000) with one line near a 140-sample period: the record
+    # at lag N - 140 correlates at 0.99 with a local maximum there, as a retune's stage-1
+    # multisine did (rho 0.91 at 39860, exactly 1 at its 40000). The first local maximum
+    # stopped there and the two commands' periods then disagreed.
+    n = 40_000
+    rng = np.random.default_rng(seed)
+    spec = np.zeros(n // 2 + 1, dtype=complex)
+    low = np.arange(3, 40)
+    spec[low] = np.exp(1j * rng.uniform(0, 2 * np.pi, low.size))
+    spec[286] = math.sqrt(0.3 * low.size) * np.exp(1j * rng.uniform(0, 2 * np.pi))
+    x = np.tile(np.fft.irfft(spec, n), 6)
+    assert detect_period(x) == n

@@ -273,10 +273,15 @@ def closed_loop_poles(plant: PlantModel, k: ct.StateSpace, *, pade_order: int = 
                           pade_order=pade_order)
     a_k, b_k, c_k, d_k = (np.asarray(x, dtype=float) for x in (k.A, k.B, k.C, k.D))
     a_g, b_g, c_g, d_g = (np.asarray(x, dtype=float) for x in (g.A, g.B, g.C, g.D))
-    if np.any(d_g) and np.any(d_k):
-        raise ValueError("algebraic loop: both plant and controller have feedthrough")
-    # y = Cg xg + Dg u, u = -(Ck xk + Dk y)
-    e = np.linalg.inv(np.eye(d_k.shape[0]) + d_k @ d_g)  # u = -e (Ck xk + Dk Cg xg)
+    # y = Cg xg + Dg u, u = -(Ck xk + Dk y): well posed while I + Dk Dg is invertible. Both
+    # have feedthrough when a controller read back from its SOS file (biproper) runs on a
+    # plant whose Padé delays pass high frequencies through (a retune from a tuned file).
+    loop = np.eye(d_k.shape[0]) + d_k @ d_g
+    scale = max(1.0, float(np.linalg.norm(d_k, 2) * np.linalg.norm(d_g, 2)))
+    if float(np.linalg.svd(loop, compute_uv=False)[-1]) < 1e-9 * scale:
+        raise ValueError("algebraic loop: I + Dk Dg is singular (the controller's and the "
+                         "plant's feedthrough cancel); the loop is not well posed")
+    e = np.linalg.inv(loop)  # u = -e (Ck xk + Dk Cg xg)
     u_x = -e @ np.hstack([d_k @ c_g, c_k])
     y_x = np.hstack([c_g, np.zeros((c_g.shape[0], a_k.shape[0]))]) + d_g @ u_x
     a = np.block([[a_g, np.zeros((a_g.shape[0], a_k.shape[0]))],
