@@ -199,3 +199,39 @@ def test_a_trip_under_the_watch_is_said_and_nothing_is_loaded_on_a_faulted_devic
     assert [rec.decision for rec in records] == ["loading", "interrupted"]
     assert last.transaction is not None and last.transaction["outcome"] == "loop_opened"
     assert last.transaction["left_on"] == proxy.Controller
+
+
+def test_tune_device_stopped_before_a_decision_stops_its_work_and_says_what_runs(
+        device: tuple[Any, str], tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+        capsys: pytest.CaptureFixture[str]) -> None:
+    # Ctrl-C while tune plays its first closed-loop excitation: nothing was loaded, so
+    # nothing is rolled back, but the excitation and the record tune started must stop,
+    # and the output must say which controller the device runs (the soak's first finding:
+    # "interrupted (Ctrl-C)" and nothing else, the excitation left to the device).
+    proxy, address = device
+    out = tmp_path / "tune"
+    seen: dict[str, Any] = {}
+
+    def play_then_interrupt(self: DeviceTarget, plays: Any, **_: Any) -> Any:
+        self.proxy.Record(json.dumps({"signals": ["Vph", "Vpv"], "duration_s": 200.0,
+                                      "name": "cut_short", "overwrite": True}))
+        self.proxy.StartExcitation(json.dumps({"input": "Uch", "kind": "sine",
+                                               "amplitude_v": 0.01, "frequency_hz": 37.0}))
+        seen["state"] = str(self.proxy.state())
+        seen["excitation"] = json.loads(self.proxy.Excitation)
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(DeviceTarget, "play", play_then_interrupt)
+    assert main(["tune", "--device", address, "--out", str(out), "--watch-s", "6",
+                 "--periods", "4", "--seed", "1"]) == EXIT_SIGINT
+    assert seen["state"] == "MOVING" and seen["excitation"]  # tune's work was running
+    deadline = time.monotonic() + 60.0
+    while str(proxy.state()) == "MOVING" and time.monotonic() < deadline:
+        time.sleep(0.01)
+    assert json.loads(proxy.Excitation) == {} and str(proxy.state()) != "MOVING"
+    assert proxy.Controller == SEED_NAME and proxy.LoopClosed
+    captured = capsys.readouterr()
+    said = f"Nothing was loaded: the device still runs {SEED_NAME}, as before tune"
+    assert said in captured.out and "stopped its excitation and its record" in captured.out
+    assert "interrupted (Ctrl-C) before a decision" in captured.err
+    assert not out.exists()  # no decision, no record of one

@@ -275,7 +275,7 @@ def _tune(args: argparse.Namespace, proxy: Any) -> int:
             result = tune_guarded(target=target, bench=bench, running=running, options=opts,
                                   seed=args.seed, progress=say, journal=journal)
         except BaseException as exc:
-            return _interrupted(exc, journal, out)
+            return _interrupted(exc, journal, out, target=target)
     payload = result.to_json()
     if args.drift_rate is not None:
         payload["watch"] = _watch(args, bench, result, running, say)
@@ -339,13 +339,36 @@ class _Journal:
         self.last = result
 
 
-def _interrupted(exc: BaseException, journal: _Journal, out: str) -> int:
+def _interrupted(exc: BaseException, journal: _Journal, out: str, *,
+                 target: Any = None) -> int:
     """After an interrupted loop change: its outcome on stdout, the exit status (130 for
-    Ctrl-C, 143 for SIGTERM); an error is raised again (its message says the same)."""
+    Ctrl-C, 143 for SIGTERM); an error is raised again (its message says the same).
+
+    Stopped before any decision (measuring, identifying, designing) on the device:
+    tune's excitation and record are stopped (Ctrl-C held meanwhile) and the output says
+    what the device runs, which tune never changed."""
     from fsmbench.cli import EXIT_SIGINT, EXIT_SIGTERM, Terminated
+    from fsmbench.tune.transaction import ctrl_c_held
 
     last = journal.last
     if last is None or last.decision != "interrupted":
+        if target is None:
+            raise exc
+        with ctrl_c_held(lambda line: print(line, file=sys.stderr), "stopping tune's work"):
+            try:
+                sentence = target.stand_down()
+            except Exception as again:
+                sentence = (f"Nothing was loaded; the device could not be read afterwards "
+                            f"({' '.join(str(again).split())}): check its Controller")
+        print(f"decision: none: stopped before a decision; {sentence}")
+        if isinstance(exc, KeyboardInterrupt):
+            print(f"fsmbench tune: error: {out}: interrupted (Ctrl-C) before a decision; "
+                  f"{sentence}", file=sys.stderr)
+            return EXIT_SIGINT
+        if isinstance(exc, Terminated):
+            print(f"fsmbench tune: error: {out}: terminated (SIGTERM) before a decision; "
+                  f"{sentence}", file=sys.stderr)
+            return EXIT_SIGTERM
         raise exc
     print(f"decision: interrupted: {last.reason}")
     where = f"{Path(out) / 'tune.json'} records the decision and the outcome"

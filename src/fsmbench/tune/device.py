@@ -316,6 +316,30 @@ class DeviceTarget:
         raise LoopOpenedError(f"{self.label}: the loop is open ({status})", holds=holds,
                               sentence=sentence)
 
+    def stand_down(self) -> str:
+        """After tune stopped before it loaded anything: the excitation and the record it
+        started stopped (``StopExcitation``, ``Abort``), and what the device runs, in one
+        sentence (the loop's state said when it is not closed)."""
+        stopped = []
+        try:
+            if json.loads(str(self._attr("Excitation")) or "{}"):
+                self.proxy.StopExcitation()
+                stopped.append("its excitation")
+            if str(self.proxy.state()) == "MOVING":
+                self.proxy.Abort()
+                stopped.append("its record")
+                self._wait(lambda: str(self.proxy.state()) != "MOVING",
+                           "the end of tune's record", 0.0)
+        except Exception as exc:  # say what could not be stopped, then what runs
+            stopped.append(f"(stopping failed: {_words(exc)})")
+        holds = self.running_controller()
+        closed = bool(self._attr("LoopClosed"))
+        what = (f"the device still runs {holds}, as before tune" if closed else
+                f"the device holds {holds} with the loop open (state "
+                f"{self.proxy.state()}: {' '.join(str(self.proxy.status()).split())})")
+        return (f"Nothing was loaded: {what}"
+                + (f"; tune stopped {' and '.join(stopped)}." if stopped else "."))
+
     def running_controller(self) -> str:
         """The device's ``Controller``."""
         return str(self._attr("Controller"))

@@ -41,7 +41,7 @@ from fsmbench.tune.guarded import AXES, _replace, _rms, _urad
 if TYPE_CHECKING:
     from fsmbench.tune.guarded import ControllerFigures, Loop, TuneOptions, TuneResult, TuneTarget
 
-__all__ = ["OUTCOMES", "LoopChangeError", "LoopOpenedError", "load_and_watch"]
+__all__ = ["OUTCOMES", "LoopChangeError", "LoopOpenedError", "ctrl_c_held", "load_and_watch"]
 
 #: What a loop change ends as (``tune.json``'s ``transaction.outcome``).
 OUTCOMES = ("loaded", "rolled_back", "interrupted", "loop_opened")
@@ -100,7 +100,7 @@ def _cause(exc: BaseException) -> str:
 
 
 @contextlib.contextmanager
-def _ctrl_c_held(say: Callable[[str], None], what: str) -> Iterator[None]:
+def ctrl_c_held(say: Callable[[str], None], what: str) -> Iterator[None]:
     """Ctrl-C ignored (with a line saying so) while the bench is rolled back."""
     if threading.current_thread() is not threading.main_thread():
         yield
@@ -126,7 +126,7 @@ def _recover(target: TuneTarget, running: Loop, point: Mapping[str, Any],
              say: Callable[[str], None]) -> tuple[str | None, dict[str, Any], str]:
     """Roll back to ``running`` unless the target runs it: (left on, roll-back, sentence)."""
     noun = str(point.get("noun", "The bench"))
-    with _ctrl_c_held(say, f"the roll-back to {running.name}"):
+    with ctrl_c_held(say, f"the roll-back to {running.name}"):
         try:
             now: str | None = target.running_controller()
         except Exception as exc:  # the device gone: try the roll-back all the same
