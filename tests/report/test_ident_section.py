@@ -53,7 +53,8 @@ def test_twin_section_has_every_seed_figure_and_the_truth_table(
     assert [f.seed_ref for f in figs] == [
         "Fig. 8", "Fig. 9", "Fig. 10", "Fig. 15", "Fig. 16", "Figs. 12–14", "Fig. 17",
         "Figs. 18, 19, 21, 22", "Fig. 20", "Fig. 23", "Fig. 24", "Fig. 25", "Figs. 26, 27",
-        "Fig. 28"]
+        "Fig. 28", "", ""]  # the model's Bode band and the model against the records
+    assert [f.key for f in figs[-2:]] == ["ident_model_bode_band", "ident_model_compare"]
     assert [s.title[:3] for s in sec.subsections] == ["2.1", "2.2", "2.3", "2.4", "2.5"]
     table = _tables(sec)[0]
     assert table.header == ("quantity", "identified", "± total",

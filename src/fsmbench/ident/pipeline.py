@@ -209,9 +209,10 @@ def identify(recordings: Mapping[str, xr.Dataset], *, bench: Bench,
     result = replace(result, findings=found, matching=replace(
         bench, nominal=matching_params(bench.nominal, measured, result.findings),
         datasheet=matching_datasheet(bench.datasheet, result.findings)))
-    if result.plant is not None and result.matching is not None:
-        # The model against the records (MATLAB's compare) and its Bode band from the
-        # parameters' stds (bode(sys, 'sd', 3)): ident.compare, ident.model_band.
+    if result.plant is not None and result.matching is not None and (
+            result.sercalo is not None or result.newport is not None):
+        # The model's dynamics against the records (MATLAB's compare) and its Bode band
+        # from the parameters' stds (bode(sys, 'sd', 3)): ident.compare, ident.model_band.
         result = replace(result, comparison=compare_records(
             recordings, plant=result.plant, trims_s=result.options.trims_s),
             bode_band=model_band(result.plant, params=result.matching.nominal,
