@@ -137,7 +137,17 @@ class EpicsDevice(Device):
         return str(self.read("State"))
 
     def close_loop(self) -> None:
-        self._pv("CloseLoop").put(1, wait=True, timeout=60.0)
+        # The put completes when the command has run; a refusal (FSM_Settling on a busy
+        # machine) is in ReplyCode: tried again, as an operator would.
+        for _ in range(30):
+            count = int(self.read("ReplyCount") or 0)
+            self._pv("CloseLoop").put(1, wait=True, timeout=60.0)
+            _wait(lambda c=count: int(self.read("ReplyCount") or 0) > c, "CloseLoop's reply",
+                  60.0)
+            if str(self.read("ReplyCode")) == "OK":
+                return
+            time.sleep(1.0)
+        raise SystemExit(f"tune_soak: CloseLoop refused: {self.read('Reply')}")
 
     def close(self) -> None:
         for pv in self.pvs.values():
@@ -287,7 +297,8 @@ def soak(protocol: str, *, runs: int, interrupt: float, busy: int, seed: int, sp
     try:
         _wait(lambda: device.state() == "ON", "the device ON", START_WAIT_S)
         device.close_loop()
-        _wait(lambda: device.state() in ("RUNNING", "ALARM"), "the loop closed", START_WAIT_S)
+        _wait(lambda: device.state() in ("RUNNING", "ALARM"),
+              f"the loop closed (the device says {device.read('Status')!r})", START_WAIT_S)
         seed_name = str(device.read("Controller"))
         loaded: set[str] = set()
         running = "seed"
