@@ -137,7 +137,8 @@ def model_band_figure(band: ModelBand, *, key: str = "ident_model_bode_band") ->
         "moved by ±1 std in turn (central differences), the parameters taken independent "
         "(no covariance between them), the stds added in quadrature; the relative "
         "magnitude std so found is laid on the identified model's own response. At DC the "
-        "half-width is the static gain's std. The bottom row gives the band's half-width: "
+        f"band's half-width is {n:g} times the static gain's std. The bottom row gives the "
+        "band's half-width: "
         f"the magnitude's in percent, the phase's in degrees. Widest: {widest}.")
     return Figure(key=key, title="The identified model's Bode with its uncertainty band",
                   caption=caption, panels=(*mags, *phases, *widths),
