@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -151,3 +152,23 @@ def test_a_device_running_a_file_s_controller_is_accepted(bench: Bench, tmp_path
         target = DeviceTarget(proxy, bench=bench, running=loop, folder=tmp_path / "files",
                               address=ctx.get_device_access())
         assert target.gd == loop.gd_v_per_rad
+
+
+def test_a_controller_tune_loaded_is_retuned_from(bench: Bench, fsmbench_loop: Any,
+                                                 tmp_path: Path,
+                                                 capsys: pytest.CaptureFixture[str]) -> None:
+    # fsmbench's controller written as tune writes the one it loads (DeviceTarget.load:
+    # named "tuned", the 4QD gains it was designed with), then a whole tune from it. Its
+    # stage-1 multisine repeats every 40000 samples but nearly repeats 140 earlier, and
+    # the controller read back is biproper: the two made a retune fail before a decision.
+    path = tmp_path / "controllers_sos.json"
+    write_sos_json(path, {"tuned": fsmbench_loop.k},
+                   scaling=InputScaling(qd_gain_v_per_rad=fsmbench_loop.gd_v_per_rad,
+                                        plant_source="identified (a previous tune)"),
+                   ts_s=bench.true.converter.ts_s, descriptions={"tuned": fsmbench_loop.name})
+    out = tmp_path / "retuned"
+    assert main(["tune", "--twin", "--running", f"{path}::tuned", "--out", str(out),
+                 "--periods", "4", "--seed", "1"]) == 0, capsys.readouterr().err[-800:]
+    js = json.loads((out / "tune.json").read_text())
+    assert js["decision"] in ("loaded", "refused", "rolled_back")
+    assert js["before"]["name"] == "tuned (controllers_sos.json)"
