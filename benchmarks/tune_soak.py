@@ -15,9 +15,10 @@ before there is one), so it lands before, during and after the load.
 
 After each run the script checks, and prints one row per run:
 
-* the run gave a decision: exit status 0 with ``tune.json`` (loaded, kept, rolled back), or
-  130 after SIGINT with a sentence on stdout or stderr naming the controller the device is
-  left on;
+* the run gave a decision: exit status 0 with ``tune.json`` (loaded, refused, rolled back),
+  or 130 after SIGINT with a sentence on stdout or stderr naming the controller the device
+  is left on (or, interrupted while tune was still loading, that it had contacted no
+  device);
 * the device runs a checked controller: its ``Controller`` is the ESRF study's or one that
   a tune run loaded through ``LoadController`` (which checks a controller on the device's
   bench before it touches the loop), the loop closed, the device not in FAULT, no
@@ -251,7 +252,8 @@ def _check(device: Device, *, index: int, running: str, status: int, text: str,
         if tune_json is None or not decision:
             problems.append("exit 0 without a decision in tune.json")
     elif interrupted_at_s is not None and status == 130:
-        if "left on" not in text and "still runs" not in text:
+        if not any(words in text for words in ("left on", "still runs",
+                                                 "before it contacted any device")):
             problems.append("interrupted without saying which controller the device runs")
     else:
         tail = " | ".join(text.strip().splitlines()[-3:])

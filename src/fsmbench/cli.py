@@ -54,32 +54,39 @@ from pathlib import Path
 from types import FrameType
 from typing import Any
 
-from fsmbench import __version__
-from fsmbench.bench.params import Bench, ParamsError, load_bench, param_rows, save_bench
-from fsmbench.cli_args import (
-    EXIT_USER_ERROR,
-    Parser,
-    add_identify_options,
-    default_noted,
-    factor,
-    figure_formats,
-    identify_options,
-    nanometres,
-    seconds,
-    seed,
-    typed_option,
-)
-from fsmbench.excite.cli import add_excite_command
-from fsmbench.io.convert_cli import add_convert_command
-from fsmbench.live.serve import add_serve_command
-from fsmbench.scale.mc_cli import add_montecarlo_command
-from fsmbench.tune.cli import add_closed_loop_options, add_tune_command, closed_loop_simulation
-from fsmbench.tune.identify_cli import (
-    check_closed_loop_folder,
-    identify_closed_loop_folder,
-    is_closed_loop_folder,
-    summary_lines,
-)
+# Ctrl-C while the command line loads (its imports take about a second): one line, the
+# shell's 130, not a traceback; nothing has run, so no device, file or folder was touched.
+try:
+    from fsmbench import __version__
+    from fsmbench.bench.params import Bench, ParamsError, load_bench, param_rows, save_bench
+    from fsmbench.cli_args import (
+        EXIT_USER_ERROR,
+        Parser,
+        add_identify_options,
+        default_noted,
+        factor,
+        figure_formats,
+        identify_options,
+        nanometres,
+        seconds,
+        seed,
+        typed_option,
+    )
+    from fsmbench.excite.cli import add_excite_command
+    from fsmbench.io.convert_cli import add_convert_command
+    from fsmbench.live.serve import add_serve_command
+    from fsmbench.scale.mc_cli import add_montecarlo_command
+    from fsmbench.tune.cli import add_closed_loop_options, add_tune_command, closed_loop_simulation
+    from fsmbench.tune.identify_cli import (
+        check_closed_loop_folder,
+        identify_closed_loop_folder,
+        is_closed_loop_folder,
+        summary_lines,
+    )
+except KeyboardInterrupt:
+    print("fsmbench: interrupted (Ctrl-C) while starting, before it contacted any device or "
+          "wrote any file: nothing was changed", file=sys.stderr)
+    raise SystemExit(130) from None
 
 __all__ = ["EXIT_BUG", "EXIT_SIGINT", "EXIT_SIGTERM", "EXIT_USER_ERROR", "main"]
 

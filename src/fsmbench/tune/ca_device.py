@@ -42,6 +42,7 @@ from fsmbench.live.attributes import ATTRIBUTES
 from fsmbench.live.epics import ACTIONS, ARGUMENT_COMMANDS, MAX_ARRAY_BYTES, check_prefix
 from fsmbench.live.states import STATES
 from fsmbench.tune.device_errors import DeviceError, DeviceLost, DeviceRefused
+from fsmbench.tune.reads import INVALID_WAIT_S
 
 __all__ = ["CONNECT_S", "GET_S", "PUT_S", "REPLY_S", "CaDevice", "CaReading", "ca_device"]
 
@@ -170,14 +171,19 @@ class CaDevice:
         return data if isinstance(data, dict) else None
 
     def _text(self, name: str) -> str:
-        """A string PV's value; no answer within ``get_s`` is a lost device (PyTango's
-        timeout)."""
-        data = self._get(name, as_string=True)
-        if data is None or data.get("value") is None:
-            raise DeviceLost(f"ca://{self.prefix}: {self.prefix}:{name} gave no value within "
-                             f"{self.get_s:g} s of wall clock", command=name,
-                             reason="CA_Timeout", words=f"{self.prefix}:{name} did not answer")
-        return str(data["value"])
+        """A string PV's value; read again while its channel stays connected, for up to
+        :data:`~fsmbench.tune.reads.INVALID_WAIT_S` (an IOC on a busy machine let one get
+        of ``State`` pass 3 s in the soak, and tune stopped on it), then a lost device."""
+        deadline = time.monotonic() + INVALID_WAIT_S
+        while True:
+            data = self._get(name, as_string=True)
+            if data is not None and data.get("value") is not None:
+                return str(data["value"])
+            if time.monotonic() >= deadline:
+                raise DeviceLost(f"ca://{self.prefix}: {self.prefix}:{name} gave no value "
+                                 f"within {INVALID_WAIT_S:g} s of wall clock", command=name,
+                                 reason="CA_Timeout",
+                                 words=f"{self.prefix}:{name} did not answer")
 
     def close(self) -> None:
         """Disconnect every channel this device made (idempotent)."""
