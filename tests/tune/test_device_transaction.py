@@ -235,3 +235,23 @@ def test_tune_device_stopped_before_a_decision_stops_its_work_and_says_what_runs
     assert said in captured.out and "stopped its excitation and its record" in captured.out
     assert "interrupted (Ctrl-C) before a decision" in captured.err
     assert not out.exists()  # no decision, no record of one
+
+
+def test_tune_device_stopped_while_it_loads_says_what_the_device_runs(
+        device: tuple[Any, str], tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+        capsys: pytest.CaptureFixture[str]) -> None:
+    # Ctrl-C after tune reached the device but before it sent a command (its models still
+    # loading: the soak's SIGINT 4 s in over Channel Access): the device's controller,
+    # read then, is said; the generic "left as it was" said nothing about the device.
+    import fsmbench.bench.params as params
+
+    def interrupted(*_: Any, **__: Any) -> Any:
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(params, "load_bench", interrupted)
+    proxy, address = device
+    assert main(["tune", "--device", address, "--out", str(tmp_path / "tune")]) == EXIT_SIGINT
+    captured = capsys.readouterr()
+    said = f"Nothing was loaded: the device still runs {SEED_NAME}, as before tune."
+    assert said in captured.out and "interrupted (Ctrl-C) before a decision" in captured.err
+    assert proxy.Controller == SEED_NAME and proxy.LoopClosed

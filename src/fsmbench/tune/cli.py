@@ -216,15 +216,49 @@ def _command(args: argparse.Namespace) -> int:
     if twin_only:
         raise ValueError(f"{', '.join(twin_only)}: for --twin; the device runs the bench it "
                          "serves (fsmbench serve --bench, --drift-rate)")
+    from fsmbench.cli import EXIT_SIGINT, EXIT_SIGTERM, Terminated
     from fsmbench.tune.proxy import device_proxy, release_proxy
 
     # The device first, before the numerics load: an address that does not answer is said
     # in the connection's time (3 s for an absent IOC), not after seconds of imports.
-    proxy = device_proxy(args.device)
+    try:
+        proxy = device_proxy(args.device)
+    except (KeyboardInterrupt, Terminated) as exc:
+        print(f"fsmbench tune: error: {args.out}: {_stop_words(exc)} while connecting to "
+              f"{args.device}: no command was sent to it, nothing was changed",
+              file=sys.stderr)
+        return EXIT_SIGINT if isinstance(exc, KeyboardInterrupt) else EXIT_SIGTERM
     try:
         return _tune(args, proxy)
+    except (KeyboardInterrupt, Terminated) as exc:
+        # Stopped while tune loaded its models, before it sent the device a command (once
+        # it has, _interrupted answers): what the device runs, read now.
+        sentence = _still_runs(proxy, args.device)
+        print(f"decision: none: stopped before a decision; {sentence}")
+        print(f"fsmbench tune: error: {args.out}: {_stop_words(exc)} before a decision; "
+              f"{sentence}", file=sys.stderr)
+        return EXIT_SIGINT if isinstance(exc, KeyboardInterrupt) else EXIT_SIGTERM
     finally:
         release_proxy(proxy)  # the EPICS channels, before pyepics' exit handler
+
+
+def _stop_words(exc: BaseException) -> str:
+    return "interrupted (Ctrl-C)" if isinstance(exc, KeyboardInterrupt) else \
+        "terminated (SIGTERM)"
+
+
+def _still_runs(proxy: Any, address: str) -> str:
+    """What the device runs, in a sentence, read with Ctrl-C held (nothing was loaded)."""
+    from fsmbench.tune.reads import read_valid
+    from fsmbench.tune.transaction import ctrl_c_held
+
+    with ctrl_c_held(lambda line: print(line, file=sys.stderr), "reading what the device runs"):
+        try:
+            holds = read_valid(proxy, "Controller", device=address, wait_s=5.0)
+        except Exception as exc:
+            return (f"Nothing was loaded; the device could not be read afterwards "
+                    f"({' '.join(str(exc).split())}): check its Controller")
+    return f"Nothing was loaded: the device still runs {holds}, as before tune."
 
 
 def _tune(args: argparse.Namespace, proxy: Any) -> int:
