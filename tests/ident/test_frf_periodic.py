@@ -195,3 +195,16 @@ def test_a_record_that_nearly_repeats_before_its_period_gives_the_period(seed: i
     spec[286] = math.sqrt(0.3 * low.size) * np.exp(1j * rng.uniform(0, 2 * np.pi))
     x = np.tile(np.fft.irfft(spec, n), 6)
     assert detect_period(x) == n
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_a_narrowband_multisine_is_not_taken_for_its_carrier(seed: int) -> None:
+    # One ±5 % band around 251 Hz: the record correlates at 0.9 or more with itself one
+    # carrier period (about 40 samples) later, but drifts away over its multiples; a
+    # retune's stage-1 record on Ucv was read as repeating every 50 samples for 40000.
+    n, fs = 40_000, 1e4
+    rng = np.random.default_rng(seed)
+    spec = np.zeros(n // 2 + 1, dtype=complex)
+    band = np.arange(int(0.95 * 251 * n / fs), int(1.05 * 251 * n / fs) + 1)
+    spec[band] = np.exp(1j * rng.uniform(0, 2 * np.pi, band.size))
+    assert detect_period(np.tile(np.fft.irfft(spec, n), 6)) == n

@@ -119,9 +119,11 @@ def detect_period(signal: ArrayLike, *, min_period: int = 16,
     record is periodic with period ``N`` when ``rho(N) >= threshold`` after
     ``rho`` has fallen below 0.5 at a shorter lag (a slowly varying signal
     correlates at short lags without repeating) and at least two whole
-    periods fit. Of the qualifying lags (``N``, ``2N``, ...
-    and their near neighbours) the best within twice the decorrelation lag of the
-    first is returned (a narrowband signal nearly repeats just before its period).
+    periods fit, and ``rho`` stays at or above the threshold at every multiple of ``N``
+    (a narrowband signal nearly repeats at its carrier's period and drifts away at the
+    multiples). Of the first such lag and its near neighbours (within twice the lag where
+    ``rho`` first fell below one half: a signal nearly repeats just before its period)
+    the best is returned.
 
     Parameters
     ----------
@@ -160,21 +162,24 @@ def detect_period(signal: ArrayLike, *, min_period: int = 16,
     if below.size == 0:
         return None
     rho[: max(min_period, int(below[0]))] = -np.inf
-    good = np.flatnonzero(rho >= threshold)
-    if good.size == 0:
-        return None
-    k = int(good[0])
-    # A narrowband excitation (a multisine in a few ±5 % bands) nearly repeats a little
-    # before its period: x(t + N - d) = x(t - d) still correlates with x(t) while d is
-    # within its envelope's correlation width (rho 0.91 at N - 140 on a tuned loop's
-    # stage-1 record, where the first local maximum stopped). The period is the best
-    # lag within twice that width after the first qualifying one.
+    # Candidates: the local maxima of the correlation at or above the threshold, shortest
+    # first. A narrowband excitation (a multisine in a few ±5 % bands) nearly repeats at
+    # its carrier's period (a tuned loop's stage-1 record on Ucv: 50 samples for 40000),
+    # and a little before its own period while the lag is within its envelope's
+    # correlation width (rho 0.91 at 39860 on Uch). A true period repeats at every
+    # multiple, where a carrier's phase drifts away; and the period is then the best lag
+    # within twice that width.
+    inner = rho[1:-1]
+    peaks = np.flatnonzero((inner >= threshold) & (inner >= rho[:-2]) & (inner >= rho[2:])) + 1
     width = 2 * max(int(below[0]), 1)
-    window = rho[k:min(k + width + 1, rho.size)]
-    k += int(np.argmax(window))
-    while k + 1 < rho.size and rho[k + 1] > rho[k]:  # climb to the local maximum
-        k += 1
-    return k
+    for k in peaks:
+        if float(np.min(rho[k::k])) < threshold:
+            continue
+        k = int(k) + int(np.argmax(rho[k:min(k + width + 1, rho.size)]))
+        while k + 1 < rho.size and rho[k + 1] > rho[k]:  # climb to the local maximum
+            k += 1
+        return k
+    return None
 
 
 def excited_lines(input_mean_power: ArrayLike, mean_noise_variance: ArrayLike) -> NDArray[np.intp]:
