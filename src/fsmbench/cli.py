@@ -10,7 +10,7 @@
     fsmbench budget   DATA --out OUT [--params FILE] [--bench DIR]
     fsmbench design   DATA --out OUT [--params FILE] [--seed N] [--bench DIR]
     fsmbench study    [--data DIR] --out OUT [--seed N] [--duration S] [--params FILE]
-                      [--figures png,pdf]
+                      [--figures png,pdf] [--montecarlo DIR]
     fsmbench convert  IN OUT [--fs HZ]
     fsmbench serve    [--backend twin|playback DIR] [--params FILE] [--bench DIR] [--seed N]
                       [--speed X] [--nodb --port N] [--out DIR]
@@ -654,6 +654,11 @@ def _cmd_study(args: argparse.Namespace) -> int:
         check_out_dir(Path(args.out), data)
         _check_data(data)
     bench = _bench(args)
+    montecarlo = None
+    if args.montecarlo is not None:
+        from fsmbench.scale.mc_cli import read_montecarlo
+
+        montecarlo = read_montecarlo(args.montecarlo)  # read before --out may be replaced
     need = _STUDY_BYTES + _FIGURE_BYTES * len(args.figures)
     if data is None:
         need += _twin_bytes(args, "mat5")
@@ -663,7 +668,8 @@ def _cmd_study(args: argparse.Namespace) -> int:
         result = run_study(out_dir=run.staging, data_dir=data, bench=bench, seed=args.seed,
                            duration_s=args.duration, progress=say, figures=args.figures,
                            spec=Specification(distance_error_max_m=args.distance_target_m),
-                           identify_options=identify_options(args, data=data))
+                           identify_options=identify_options(args, data=data),
+                           montecarlo=montecarlo)
     print(run.final_path(result.report))
     # Once each, one line each: what was not used, what failed a check, what to know.
     for name, why in result.skipped_experiments.items():
@@ -772,6 +778,10 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--distance-target", metavar="NM", type=nanometres, default=5e-9,
                    dest="distance_target_m",
                    help="largest acceptable Attocube distance error, rms [nm] (default 5)")
+    p.add_argument("--montecarlo", metavar="DIR", default=None,
+                   help="a fsmbench montecarlo output (or its montecarlo.json): the report lists "
+                        "the draws that break each requirement, the robustness row names one "
+                        "broken by 5 %% of the draws or more")
     add_identify_options(p)
     p.set_defaults(func=_cmd_study)
 

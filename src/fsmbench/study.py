@@ -180,13 +180,15 @@ def _loop_blocks_missing(ident: Identification | None) -> str:
 def _sections(*, bench: Bench, loaded: RecordingSet, source: str, is_twin: bool,
               ident: Identification | None, truth: Mapping[str, Any] | None,
               budget: Any, design: Any, plant_source: str, validation: Any = None,
-              validation_skipped: str = "") -> list[Section]:
+              validation_skipped: str = "",
+              montecarlo: Mapping[str, Any] | None = None) -> list[Section]:
     """Every chapter in the ESRF study's order (1–11), then the parameters appendix."""
     from fsmbench.report.sections.bench import bench_section, parameters_appendix
     from fsmbench.report.sections.budget import budget_section
     from fsmbench.report.sections.control import control_sections
     from fsmbench.report.sections.huddle import huddle_section
     from fsmbench.report.sections.ident import identification_section
+    from fsmbench.report.sections.montecarlo import montecarlo_section
     from fsmbench.report.sections.noise import noise_subsection
     from fsmbench.report.sections.repeatability import repeatability_section
     from fsmbench.report.sections.validation import validation_subsection
@@ -204,7 +206,8 @@ def _sections(*, bench: Bench, loaded: RecordingSet, source: str, is_twin: bool,
         budget_section(budget, plant_source=plant_source),
         *control_sections(design, plant_source=plant_source),
         replace(chapter11, subsections=(*chapter11.subsections, validation_subsection(
-            validation, skipped=validation_skipped))),
+            validation, skipped=validation_skipped),
+            *(() if montecarlo is None else (montecarlo_section(montecarlo),)))),
         parameters_appendix(bench, is_twin=is_twin),
     ]
     if len(sections) != len(_ANCHORS):
@@ -216,7 +219,8 @@ def run_study(*, out_dir: str | Path, data_dir: str | Path | None = None,
               bench: Bench | None = None, seed: int = 0, duration_s: float | None = None,
               progress: Progress | None = None, figures: Sequence[str] = (),
               spec: Specification | None = None,
-              identify_options: IdentifyOptions | None = None) -> StudyResult:
+              identify_options: IdentifyOptions | None = None,
+              montecarlo: Mapping[str, Any] | None = None) -> StudyResult:
     """Run the study and write its report and results into ``out_dir``.
 
     Parameters
@@ -240,6 +244,10 @@ def run_study(*, out_dir: str | Path, data_dir: str | Path | None = None,
         The requirements of the verdict (default: the ESRF study's, 5 nm distance error).
     identify_options : IdentifyOptions, optional
         FRF estimator and fit weights of the identification (default: ``auto``, the ESRF study's).
+    montecarlo : mapping, optional
+        A ``montecarlo.json``'s content (:func:`fsmbench.scale.mc_cli.read_montecarlo`):
+        chapter 11 lists its draws that break a requirement, and the robustness row names
+        a requirement ≥ 5 % of them break.
     """
     say = progress or (lambda _msg: None)
     bench = default_bench() if bench is None else bench
@@ -373,11 +381,13 @@ def run_study(*, out_dir: str | Path, data_dir: str | Path | None = None,
         disturbance_missing=_disturbance_blocks_missing(plant.identification),
         budget=budget, design=design.payload, validation=validation.result,
         validation_skipped=validation.skipped or identified.reason,
-        simulated_bench="" if simulated.bench is None else simulated.bench.label)
+        simulated_bench="" if simulated.bench is None else simulated.bench.label,
+        montecarlo=montecarlo)
     sections = _sections(bench=bench, loaded=loaded, source=source, is_twin=is_twin,
                          ident=ident, truth=truth, budget=budget, design=design,
                          plant_source=plant.source, validation=validation.result,
-                         validation_skipped=validation.skipped or identified.reason)
+                         validation_skipped=validation.skipped or identified.reason,
+                         montecarlo=montecarlo)
     summary_json = summary.to_json()
     report_path = write_report(
         out / "report.html", title="Sercalo test bench study", sections=sections,

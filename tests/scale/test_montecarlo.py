@@ -211,7 +211,7 @@ def test_destabilising_range_marks_draws_unstable(bench: Bench,
 
 def test_json_is_stamped_and_documented(reference: Any) -> None:
     doc = reference.to_json()
-    assert (doc["format"], doc["format_version"]) == ("fsmbench.montecarlo", 2)
+    assert (doc["format"], doc["format_version"]) == ("fsmbench.montecarlo", 3)
     assert list(doc)[:2] == ["format", "format_version"]
     json.dumps(doc, allow_nan=False)
     for key in ("fsmbench_version", "seed", "n", "controller", "ranges", "duration_s",

@@ -461,7 +461,8 @@ def build_summary(*, source: str, is_twin: bool, spec: Specification,
                   budget: Any | None, design: Mapping[str, Any] | None,
                   plant_missing: str = "", disturbance_missing: str = "",
                   validation: Any | None = None, validation_skipped: str = "",
-                  simulated_bench: str = "") -> Summary:
+                  simulated_bench: str = "",
+                  montecarlo: Mapping[str, Any] | None = None) -> Summary:
     """The verdict of a study.
 
     Parameters
@@ -500,6 +501,9 @@ def build_summary(*, source: str, is_twin: bool, spec: Specification,
         Why there is none.
     simulated_bench : str
         The bench the study's simulations ran on, in words.
+    montecarlo : mapping, optional
+        ``montecarlo.json``'s content: a requirement broken by ≥ 5 % of its draws is
+        named in the robustness row (or in the findings without one).
     """
     reqs: list[Requirement] = []
     stages: list[StageLine] = []
@@ -559,6 +563,8 @@ def build_summary(*, source: str, is_twin: bool, spec: Specification,
         stages.append(StageLine("design", "skipped", "not run", "#decentralised-control"))
     if design is not None or validation is not None:
         reqs.append(_validation_requirement(validation, validation_skipped))
+    if montecarlo is not None:
+        reqs = _with_montecarlo(reqs, montecarlo, findings)
     if disturbance_missing and plant_identified:
         reqs = [_assumed(r, disturbance_missing) if r.name in _DISTURBANCE_ROWS else r
                 for r in reqs]
@@ -587,6 +593,22 @@ def build_summary(*, source: str, is_twin: bool, spec: Specification,
                    failed_checks=failed_checks, notices=tuple(notices), specification=spec,
                    verdict_status=status, next_step=step, simulated_bench=simulated_bench,
                    reasons=tuple(reasons))
+
+
+def _with_montecarlo(reqs: list[Requirement], montecarlo: Mapping[str, Any],
+                     findings: list[str]) -> list[Requirement]:
+    """The robustness row with the Monte Carlo's sentence added to its explanation (the
+    verdict stays the design's robust set's: the draws are another test of the same)."""
+    from fsmbench.report.sections.montecarlo import robustness_sentence
+
+    sentence = robustness_sentence(montecarlo)
+    if not sentence:
+        return reqs
+    if not any(r.name == "robust_stability" for r in reqs):
+        findings.append(sentence)
+        return reqs
+    return [replace(r, explanation=" ".join(x for x in (r.explanation, sentence) if x))
+            if r.name == "robust_stability" else r for r in reqs]
 
 
 #: The requirements whose chain runs through the Newport's block (its drive moves the

@@ -33,8 +33,9 @@ left out keep their default (:class:`fsmbench.scale.montecarlo.Ranges`,
     dac_delay_s = [-1e-4, 1e-4]             # DAC delay, + s
     newport_delay_s = [-1e-4, 1e-4]         # Newport internal delay, + s
 
-Writes ``OUT/montecarlo.json`` (format ``fsmbench.montecarlo`` version 1:
-quantiles, unstable fraction, worst draws, and every draw as a row) and
+Writes ``OUT/montecarlo.json`` (format ``fsmbench.montecarlo`` version 3:
+quantiles, unstable fraction, worst draws, per requirement of the design every
+draw that breaks it, and every draw as a row) and
 ``OUT/timings.json`` (workers, scheduler, wall time: not reproducible), and
 prints a short table.
 """
@@ -64,7 +65,7 @@ if TYPE_CHECKING:
     from fsmbench.scale.montecarlo import ControllerChoice, Ranges
 
 __all__ = ["add_montecarlo_command", "dask_client", "designed_controller", "format_table",
-           "loaded_controller", "read_ranges"]
+           "loaded_controller", "read_montecarlo", "read_ranges"]
 
 # Bytes of montecarlo.json per draw (a row of ~45 numbers, indent 2): measured 3.0 kB.
 _BYTES_PER_DRAW = 4e3
@@ -177,6 +178,36 @@ def read_ranges(path: str | Path) -> Ranges:
         raise ValueError(f"{p}: {exc}") from None
 
 
+def read_montecarlo(path: str | Path) -> dict[str, Any]:
+    """Read a ``montecarlo.json`` (or the folder holding it) for the study's report.
+
+    Raises
+    ------
+    ValueError
+        One line naming the file: missing, not JSON, not ``fsmbench.montecarlo``, or a
+        version without ``requirements`` (before 3: run ``fsmbench montecarlo`` again).
+    """
+    from fsmbench.scale.montecarlo import MONTECARLO_FORMAT
+
+    p = Path(path)
+    p = p / "montecarlo.json" if p.is_dir() else p
+    try:
+        doc = json.loads(p.read_text("utf-8"))
+    except FileNotFoundError:
+        raise ValueError(f"{p}: no such file (the output of fsmbench montecarlo)") from None
+    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+        raise ValueError(f"{p}: not valid JSON ({exc})") from None
+    name, version = MONTECARLO_FORMAT
+    found = (doc.get("format"), doc.get("format_version")) if isinstance(doc, dict) else None
+    if found is None or found[0] != name:
+        raise ValueError(f"{p}: not a {name} file (format {None if found is None else found[0]})")
+    if found[1] != version:
+        raise ValueError(f"{p}: {name} version {found[1]}, this fsmbench reads version "
+                         f"{version} (it lists the draws that break each requirement): run "
+                         "fsmbench montecarlo again")
+    return doc
+
+
 def designed_controller(bench: Bench, *, plant: Any = None,
                         plant_source: str = "physical (nominal)") -> ControllerChoice:
     """fsmbench's controller designed on ``plant`` (default the nominal physical plant),
@@ -265,36 +296,43 @@ def dask_client(*, scheduler: str | None, workers: int) -> Iterator[Any]:
         yield client
 
 
-def _passes(result: Any) -> list[tuple[str, int]]:
-    """Draws meeting each requirement of the design (stable, margins, |S| is not simulated)."""
-    from fsmbench.control.design import DesignOptions
+#: Breaches printed in full per requirement; the rest are named by index (all in the JSON).
+_BREACHES_SHOWN = 20
 
-    gm, pm = DesignOptions().gain_margin_db, DesignOptions().phase_margin_deg
-    draws = result.draws
 
-    def both(key: str, low: float) -> int:
-        return sum(1 for d in draws if d.stable and all(
-            (math.isfinite(d.metrics[f"{key}.{a}"]) and d.metrics[f"{key}.{a}"] >= low)
-            or d.metrics[f"{key}.{a}"] == math.inf for a in "hv"))
+def _requirement_lines(result: Any) -> list[str]:
+    """Per requirement: draws meeting it, then every draw that breaks it, named."""
+    from fsmbench.scale.breaches import breach_sentence
 
-    return [("closed loop stable", sum(1 for d in draws if d.stable)),
-            (f"gain margin ≥ {gm:g} dB", both("gain_margin_db", gm)),
-            (f"phase margin ≥ {pm:g}°", both("phase_margin_deg", pm))]
+    n = len(result.draws)
+    lines = ["requirements over the draws (a draw passes when both axes do):"]
+    for outcome in result.requirements():
+        req = outcome.to_json()
+        ok = n - outcome.n_broken
+        lines.append(f"  {req['description']:<58} {ok:>4} of {n} ({100 * ok / n:.0f} %)")
+        if not outcome.breaches:
+            continue
+        indices = ", ".join(str(b.index) for b in outcome.breaches)
+        lines.append(f"    broken by {outcome.n_broken} of {n} ({100 * outcome.share:.0f} %): "
+                     f"draws {indices}")
+        lines += [f"    {breach_sentence(req, b)}" for b in req["breaches"][:_BREACHES_SHOWN]]
+        if outcome.n_broken > _BREACHES_SHOWN:
+            lines.append(f"    … {outcome.n_broken - _BREACHES_SHOWN} more in montecarlo.json "
+                         "(requirements[].breaches)")
+    return lines
 
 
 def format_table(result: Any) -> str:
-    """The short table: quantiles of each metric in display units, the unstable fraction
-    and the worst draws."""
-    from fsmbench.scale.montecarlo import METRICS, summarise
+    """The short table: per requirement the draws that meet it and every draw that breaks
+    it (with its factors), quantiles of each metric in display units, the worst draws."""
+    from fsmbench.scale.breaches import factors_sentence
+    from fsmbench.scale.montecarlo import METRICS, nested, summarise
 
     s = summarise(result)
     n = len(result.draws)
     lines = [f"{n} draws, random seed {result.seed}, controller {result.setup.controller.name}, "
              f"around {result.setup.bench.label}; not settled before the metrics: "
-             f"{s['unsettled_draws']}",
-             "requirements over the draws (a draw passes when both axes do):"]
-    for words, ok in _passes(result):
-        lines.append(f"  {words:<58} {ok:>4} of {n} ({100 * ok / n:.0f} %)")
+             f"{s['unsettled_draws']}", *_requirement_lines(result)]
     lines.append(f"{'metric':<50} {'unit':<9} {'5 %':>10} {'median':>10} {'95 %':>10} "
                  f"{'max':>10}")
 
@@ -311,11 +349,7 @@ def format_table(result: Any) -> str:
         what = (f"unstable, spectral radius {num(m['spectral_radius'], 1.0)}" if not row.stable
                 else f"tracking error h {num(m['tracking_error_rms_rad.h'], 1e6)}, "
                      f"v {num(m['tracking_error_rms_rad.v'], 1e6)} µrad rms")
-        lines.append(
-            f"  draw {row.index}: {what}; resonance ×{f['resonance_scale.h']:.3f}/"
-            f"{f['resonance_scale.v']:.3f}, damping ×{f['damping_scale.h']:.2f}/"
-            f"{f['damping_scale.v']:.2f}, 4QD gain ×{f['qd_gain_scale.h']:.3f}/"
-            f"{f['qd_gain_scale.v']:.3f}, DAC delay {1e6 * f['dac_delay_offset_s']:+.0f} µs")
+        lines.append(f"  draw {row.index}: {what}; {factors_sentence(nested(f))}")
     return "\n".join(lines)
 
 

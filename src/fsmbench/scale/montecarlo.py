@@ -63,6 +63,7 @@ import numpy as np
 from fsmbench.bench.blocks import physical_plant
 from fsmbench.bench.params import Bench, PerAxis
 from fsmbench.jsonutil import plain_json, stamped
+from fsmbench.scale.breaches import Limits, RequirementOutcome, requirement_outcomes
 from fsmbench.scale.draws import (
     PARAMETERS,
     RANGE_OF_PARAMETER,
@@ -84,9 +85,11 @@ __all__ = [
     "ControllerChoice",
     "Draw",
     "DrawResult",
+    "Limits",
     "MonteCarloResult",
     "MonteCarloSetup",
     "Ranges",
+    "RequirementOutcome",
     "discrete_feedback",
     "draw_parameters",
     "nested",
@@ -99,7 +102,8 @@ __all__ = [
 
 #: ``montecarlo.json``'s format and version.
 #: 2: `bench` and `bench_kind`: the bench the draws move (packaged or identified).
-MONTECARLO_FORMAT = ("fsmbench.montecarlo", 2)
+#: 3: `limits` and `requirements`: every draw that breaks each requirement, with its factors.
+MONTECARLO_FORMAT = ("fsmbench.montecarlo", 3)
 
 _EXPERIMENTS = (("h", "data_rep_h", "Vph"), ("v", "data_rep_v", "Vpv"))
 
@@ -197,6 +201,9 @@ class MonteCarloSetup:
         and the metrics holds 18 of them (``e^−18``: 1.5e-8 of the start
         transient left); 4 whole periods remain for the rms and the period
         mean. Each row records its own number of time constants.
+    limits : Limits
+        What each draw is judged against (default the design's requirements:
+        6 dB, 30°, modulus 0.4); the simulation does not depend on it.
     """
 
     bench: Bench
@@ -204,15 +211,16 @@ class MonteCarloSetup:
     ranges: Ranges = field(default_factory=Ranges)
     duration_s: float = 6.0
     settle_s: float = 2.0
+    limits: Limits = field(default_factory=Limits)
 
     def to_json(self) -> dict[str, Any]:
-        """The bench drawn around, controller, ranges, record length."""
+        """The bench drawn around, controller, ranges, record length, limits."""
         return plain_json({"bench": self.bench.label,
                            "bench_kind": "identified" if self.bench.is_identified
                            else "packaged",
                            "controller": self.controller.to_json(),
                            "ranges": self.ranges.to_json(), "duration_s": self.duration_s,
-                           "settle_s": self.settle_s})
+                           "settle_s": self.settle_s, "limits": self.limits.to_json()})
 
 
 @dataclass(frozen=True)
@@ -352,6 +360,10 @@ class MonteCarloResult:
         """One metric over the draws, shape (n,), SI (NaN for unstable draws)."""
         return np.array([d.metrics[key] for d in self.draws], dtype=float)
 
+    def requirements(self) -> tuple[RequirementOutcome, ...]:
+        """Per requirement of ``setup.limits``, every draw that breaks it (stability first)."""
+        return requirement_outcomes(self.draws, limits=self.setup.limits)
+
     def to_json(self) -> dict[str, Any]:
         """``montecarlo.json``'s content: summary, setup and one row per draw."""
         from fsmbench import __version__
@@ -364,6 +376,7 @@ class MonteCarloResult:
             "fraction_unstable": s["fraction_unstable"], "unstable_draws": s["unstable_draws"],
             "unsettled_draws": s["unsettled_draws"],
             "worst_draws": [d.to_json() for d in s["worst_draws"]],
+            "requirements": [r.to_json() for r in self.requirements()],
             "metric_descriptions": nested({k: f"{w} [{u}]" for k, (w, u, _f)
                                            in METRICS.items()}),
             "parameter_descriptions": nested(PARAMETERS),
