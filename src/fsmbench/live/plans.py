@@ -1,0 +1,372 @@
+"""Bluesky plans for the live bench: the study's identification experiments, in open and
+closed loop, through a RunEngine, and the identification of their files.
+
+- :func:`identification_experiments`: the six open-loop experiments of the ESRF study's
+  identification (section 2: ``data_cal_pd_h``/``_v``, ``data_uch``/``_ucv``,
+  ``data_unh``/``_unv``), each by the device's ``RunExperiment`` with the study's
+  protocol; the files (the study's ``.mat`` layout) gathered into a folder;
+- :func:`closed_loop_experiments`: with the loop closed, a beam-bounded multisine on each
+  Sercalo command (:func:`fsmbench.excite.shaped.beam_bounded_measurement`, as ``fsmbench
+  simulate --closed-loop``) played by ``StartExcitation`` and recorded by ``Record``;
+  written as ``data_cl_uch.mat`` and ``data_cl_ucv.mat``, the layout
+  :func:`fsmbench.ident.closed_loop.identify_closed_loop` reads;
+- :func:`identify_records`: the follow-up call, the folder's records to
+  :func:`fsmbench.api.identify` (open loop) or to the closed-loop identification.
+
+Each plan is one Bluesky run (start, an event of the bench's readings after each
+experiment, stop) and returns :class:`BenchRecords` (``RE(plan).plan_result`` with
+``RunEngine(call_returns_result=True)``). A refused command fails the plan with the
+device's :class:`~fsmbench.live.ophyd.CommandRefusedError`.
+
+The device writes its files in its own output folder (``fsmbench serve --out``); the
+plans read them from there, so the folder must be reachable from where the RunEngine runs
+(the same host, or a shared file system), and the closed-loop excitation files the plan
+writes in ``folder`` must be readable by the device.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import functools
+import json
+import shutil
+import time
+from collections.abc import Callable, Generator, Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import bluesky.plan_stubs as bps
+import numpy as np
+
+from fsmbench.live.ophyd import BenchCommand, BenchState, FsmBenchDevice
+
+__all__ = ["IDENTIFICATION_EXPERIMENTS", "BenchRecords", "closed_loop_experiments",
+           "identification_experiments", "identify_records"]
+
+#: The ESRF study's identification experiments (section 2), as the twin plays them.
+IDENTIFICATION_EXPERIMENTS = ("data_cal_pd_h", "data_cal_pd_v", "data_uch", "data_ucv",
+                              "data_unh", "data_unv")
+#: Longest wall-clock time the bench may stand still while a plan waits on it [s]: a
+#: stalled bench fails the plan, a slow one does not.
+STALL_S = 60.0
+_POLL_S = 0.05
+_SETTLE_S = 1.0  # bench time between the excitation's start and its record [s]
+
+Plan = Generator[Any, Any, Any]
+
+
+@dataclass(frozen=True)
+class BenchRecords:
+    """What a plan recorded.
+
+    Attributes
+    ----------
+    folder : Path
+        Where the records are (``<experiment>.mat``).
+    files : dict of str to Path
+        Each experiment's file in ``folder``.
+    kind : {"open loop", "closed loop"}
+    address : str
+        The device.
+    controller : str
+        The device's controller during the records (closed loop) or as found.
+    bench_s : float
+        Bench time the plan took [s].
+    """
+
+    folder: Path
+    files: dict[str, Path]
+    kind: str
+    address: str
+    controller: str
+    bench_s: float
+    excitations: dict[str, Path] = field(default_factory=dict)
+
+
+def execute(command: BenchCommand, *args: str) -> Plan:
+    """Run ``command`` on the device; the device's reply (a plan stub).
+
+    Raises
+    ------
+    fsmbench.live.ophyd.CommandRefusedError
+        The device refused it (its reason code and sentence).
+    """
+
+    async def run() -> str:
+        return str(await command.execute(*args))
+
+    (task,) = yield from bps.wait_for([run])
+    return task.result()
+
+
+def _in_thread(fn: Callable[[], Any]) -> Plan:
+    """``fn()`` off the RunEngine's loop (a computation of seconds), its result."""
+
+    async def run() -> Any:
+        return await asyncio.to_thread(fn)
+
+    (task,) = yield from bps.wait_for([run])
+    return task.result()
+
+
+def wait_until_done(bench: FsmBenchDevice, what: str) -> Plan:
+    """Wait while the device is MOVING (its experiment or record runs); its state after.
+
+    Fails when the bench time stands still for :data:`STALL_S` of wall clock, or the
+    device ends in FAULT (its status named).
+    """
+    last = yield from bps.rd(bench.bench_time)
+    moved = time.monotonic()
+    while (state := (yield from bps.rd(bench.state))) == BenchState.MOVING:
+        yield from bps.sleep(_POLL_S)
+        now = yield from bps.rd(bench.bench_time)
+        if now != last:
+            last, moved = now, time.monotonic()
+        elif time.monotonic() - moved > STALL_S:
+            status = yield from bps.rd(bench.status)
+            raise TimeoutError(f"{bench.address}: the bench time stood still for {STALL_S:g} s "
+                               f"(wall clock) during {what}: {status}")
+    if state == BenchState.FAULT:
+        status = yield from bps.rd(bench.status)
+        raise RuntimeError(f"{bench.address}: FAULT during {what}: {status}")
+    return state
+
+
+def _gather(path: Path, folder: Path, name: str) -> Path:
+    """The device's file copied into ``folder`` as ``name.mat`` (unless it is there)."""
+    if not path.is_file():
+        raise FileNotFoundError(f"the device's file {path} is not readable here: run the "
+                                "plan where the device's output folder is reachable")
+    target = folder / f"{name}{path.suffix}"
+    if target.resolve() != path.resolve():
+        shutil.copyfile(path, target)
+    return target
+
+
+def identification_experiments(bench: FsmBenchDevice, folder: str | Path, *,
+                               experiments: Sequence[str] = IDENTIFICATION_EXPERIMENTS,
+                               md: Mapping[str, Any] | None = None) -> Plan:
+    """The ESRF study's open-loop identification experiments on the live bench (a plan).
+
+    Parameters
+    ----------
+    bench : FsmBenchDevice
+        Connected (:func:`fsmbench.live.ophyd.bench_device`).
+    folder : str or Path
+        Where the records are gathered (made if missing).
+    experiments : sequence of str
+        The experiments, each by the device's ``RunExperiment`` (the study's protocol:
+        excitation, length, environment; the loop as the experiment needs, then restored).
+    md : mapping, optional
+        Added to the run's start document.
+
+    Returns
+    -------
+    BenchRecords
+        As the plan's result; identify them with :func:`identify_records`.
+
+    Examples
+    --------
+    >>> from bluesky import RunEngine                                    # doctest: +SKIP
+    >>> from ophyd_async.plan_stubs import ensure_connected              # doctest: +SKIP
+    >>> RE = RunEngine(call_returns_result=True)                         # doctest: +SKIP
+    >>> bench = bench_device("ca://BL1")                                 # doctest: +SKIP
+    >>> RE(ensure_connected(bench))                                      # doctest: +SKIP
+    >>> records = RE(identification_experiments(bench, "ident")).plan_result  # doctest: +SKIP
+    >>> result = identify_records(records)                               # doctest: +SKIP
+    """
+    out = Path(folder)
+    out.mkdir(parents=True, exist_ok=True)
+    controller = yield from bps.rd(bench.controller)
+    t0 = yield from bps.rd(bench.bench_time)
+    yield from bps.open_run({"plan_name": "fsmbench_identification_experiments",
+                             "experiments": list(experiments), "folder": str(out),
+                             "device": bench.address, **(md or {})})
+    files: dict[str, Path] = {}
+    for name in experiments:
+        path = yield from execute(bench.run_experiment,
+                                  json.dumps({"name": name, "overwrite": True}))
+        yield from wait_until_done(bench, f"RunExperiment {name}")
+        files[name] = _gather(Path(path), out, name)
+        yield from bps.trigger_and_read([bench], name="experiments")
+    yield from bps.close_run()
+    t1 = yield from bps.rd(bench.bench_time)
+    return BenchRecords(folder=out, files=files, kind="open loop", address=bench.address,
+                        controller=str(controller), bench_s=float(t1 - t0))
+
+
+def _design(model: Any, controller: Any, channel: str, *, max_error_rad: float,
+            resolution_hz: float, periods: int) -> np.ndarray:
+    from fsmbench.excite.shaped import beam_bounded_measurement
+
+    m = beam_bounded_measurement(
+        bench=model, params=model.nominal if model.model is None else model.true,
+        controller=controller.feedback, channel=channel, max_error_rad=max_error_rad,
+        resolution_hz=resolution_hz, periods=periods, transient_periods=0,
+        controller_name=controller.name)
+    return np.asarray(m.design.samples_v, dtype=float)
+
+
+def _excitation_start(bench: FsmBenchDevice, sha: str) -> Plan:
+    """The bench time the excitation of samples ``sha`` started [s] (the device's
+    ``Excitation``, once it names them: the IOC refreshes it 10 times a second)."""
+    moved = time.monotonic()
+    while True:
+        text = yield from bps.rd(bench.excitation)
+        try:
+            doc = json.loads(str(text) or "{}")
+        except ValueError:
+            doc = {}
+        if isinstance(doc, dict) and doc.get("samples_sha256") == sha:
+            return float(doc["start_time_s"])
+        if time.monotonic() - moved > STALL_S:
+            raise TimeoutError(f"{bench.address}: Excitation never named the samples played: "
+                               f"{text}")
+        yield from bps.sleep(_POLL_S)
+
+
+def closed_loop_experiments(bench: FsmBenchDevice, folder: str | Path, *,
+                            model: Any = None, controller: str | Path | None = None,
+                            max_error_rad: float = 30e-6, resolution_hz: float = 0.25,
+                            periods: int = 6,
+                            md: Mapping[str, Any] | None = None) -> Plan:
+    """A closed-loop identification's records on the live bench (a plan).
+
+    With the loop closed (``CloseLoop`` when it is open), for each command ``Uch`` and
+    ``Ucv``: a beam-bounded multisine designed for ``model`` and ``controller`` (its
+    added rms beam error within ``max_error_rad`` on the model) is written to
+    ``folder/excitation_<ch>.npy`` and played by ``StartExcitation`` as a ``samples``
+    excitation repeated from its first sample; after :data:`_SETTLE_S` of bench time
+    ``Record`` takes ``periods`` whole periods of the loop's signals; ``StopExcitation``.
+    The record and the excitation as it was played during it (from the device's
+    ``Excitation``: the bench time it started) are written as ``data_cl_uch.mat`` /
+    ``data_cl_ucv.mat`` (``t``, ``Xch``/``Xcv``, ``Uch``, ``Ucv``, ``Vph``, ``Vpv``,
+    ``Vch``, ``Vcv``). The excitation is in steady state from the record's first sample,
+    so the record holds no loop before it.
+
+    Parameters
+    ----------
+    bench : FsmBenchDevice
+    folder : str or Path
+    model : Bench, optional
+        The bench model the excitation is designed on (default: the packaged bench).
+    controller : str or Path, optional
+        The loop's controller for the design, as ``fsmbench simulate --closed-loop``
+        takes it (default: the ESRF study's, which the device closes with when it has
+        none loaded).
+    max_error_rad : float
+        The bound on the rms beam error the excitation adds, on the model [rad].
+    resolution_hz : float
+        The multisine's line spacing [Hz]: its period is ``1 / resolution_hz``.
+    periods : int
+        Whole periods recorded per command.
+    md : mapping, optional
+
+    Returns
+    -------
+    BenchRecords
+    """
+    from fsmbench.bench.params import default_bench
+    from fsmbench.io.recording import make_recording, read_recording, write_recording
+    from fsmbench.sim.excitation import samples_sha256
+    from fsmbench.sim.loaded import running_controller
+    from fsmbench.twin.closed_loop import (
+        CLOSED_LOOP_EXPERIMENTS,
+        CLOSED_LOOP_SIGNALS,
+        excitation_variable,
+    )
+
+    out = Path(folder)
+    out.mkdir(parents=True, exist_ok=True)
+    bench_model = model if model is not None else default_bench()
+    k = running_controller(None if controller is None else str(controller), bench=bench_model)
+    fs = float(bench_model.true.converter.fs_hz)
+    designs: dict[str, np.ndarray] = {}
+    for ch in CLOSED_LOOP_EXPERIMENTS:
+        design = functools.partial(_design, bench_model, k, ch, max_error_rad=max_error_rad,
+                                   resolution_hz=resolution_hz, periods=periods)
+        designs[ch] = yield from _in_thread(design)
+    t0 = yield from bps.rd(bench.bench_time)
+    yield from bps.open_run({"plan_name": "fsmbench_closed_loop_experiments",
+                             "folder": str(out), "device": bench.address,
+                             "max_error_rad": max_error_rad, "resolution_hz": resolution_hz,
+                             "periods": periods, **(md or {})})
+    if not (yield from bps.rd(bench.loop_closed)):
+        yield from execute(bench.close_loop)
+    running = str((yield from bps.rd(bench.controller)))
+    files: dict[str, Path] = {}
+    npys: dict[str, Path] = {}
+    for ch, name in CLOSED_LOOP_EXPERIMENTS.items():
+        x = designs[ch]
+        npys[ch] = out / f"excitation_{ch}.npy"
+        np.save(npys[ch], x)
+        yield from execute(bench.start_excitation, json.dumps(
+            {"input": ch, "kind": "samples", "path": str(npys[ch].resolve()), "loop_from": 0}))
+        e0 = yield from _excitation_start(bench, samples_sha256(x))
+        while (yield from bps.rd(bench.bench_time)) < e0 + _SETTLE_S:
+            yield from bps.sleep(_POLL_S)
+        path = yield from execute(bench.record, json.dumps(
+            {"signals": list(CLOSED_LOOP_SIGNALS), "name": f"bluesky_{name}",
+             "duration_s": periods / resolution_hz, "overwrite": True}))
+        yield from wait_until_done(bench, f"the record of {name}")
+        yield from execute(bench.stop_excitation)
+        rec = read_recording(path, require=())
+        n = rec.sizes["t"]
+        r0 = round(float(rec["t"].values[0]) * fs)
+        # The sample of the (repeated) excitation each recorded sample was played with.
+        played = x[(r0 - round(e0 * fs) + np.arange(n)) % x.size]
+        signals = {s: np.asarray(rec[s].values, dtype=float) for s in CLOSED_LOOP_SIGNALS}
+        signals[excitation_variable(ch, "output")] = played
+        ds = make_recording(signals, fs_hz=fs, experiment=name,
+                            source=f"fsmbench Bluesky plan through {bench.address} (loop "
+                                   f"closed by {running})")
+        files[name] = write_recording(ds, out / f"{name}.mat")
+        yield from bps.trigger_and_read([bench], name="experiments")
+    yield from bps.close_run()
+    t1 = yield from bps.rd(bench.bench_time)
+    return BenchRecords(folder=out, files=files, kind="closed loop", address=bench.address,
+                        controller=running, bench_s=float(t1 - t0), excitations=npys)
+
+
+def identify_records(records: BenchRecords, *, model: Any = None,
+                     out_dir: str | Path | None = None) -> Any:
+    """Identify the plant from a plan's records (the follow-up call).
+
+    Parameters
+    ----------
+    records : BenchRecords
+        From :func:`identification_experiments` (open loop: :func:`fsmbench.api.identify`
+        on the folder's records) or :func:`closed_loop_experiments`
+        (:func:`fsmbench.ident.closed_loop.identify_closed_loop`, the bench's 4QD gains
+        from ``model``).
+    model : Bench, optional
+        The bench file (default: the packaged bench).
+    out_dir : str or Path, optional
+        Also write the identification's files there (open loop: ``identification.json``,
+        ``plant.mat``, ``frf.mat``; closed loop: its JSON and plant).
+
+    Returns
+    -------
+    Identification or ClosedLoopIdentification
+    """
+    from fsmbench.bench.params import default_bench
+
+    bench = model if model is not None else default_bench()
+    if records.kind == "closed loop":
+        from fsmbench.ident.closed_loop import (
+            identify_closed_loop,
+            read_closed_loop_records,
+            write_closed_loop_identification,
+        )
+
+        result = identify_closed_loop(read_closed_loop_records(records.folder), bench=bench,
+                                      source=f"{records.folder} ({records.address})")
+        if out_dir is not None:
+            write_closed_loop_identification(result, Path(out_dir))
+        return result
+    from fsmbench import api
+
+    loaded = api.load_recordings(records.folder, bench=bench)
+    recordings = {k: v for k, v in loaded.recordings.items() if k in records.files}
+    return api.identify(recordings, bench=bench, out_dir=out_dir)
