@@ -72,3 +72,32 @@ def test_state_space_check_agrees_with_the_sections_on_a_well_scaled_model() -> 
     # float32 eps is 6e-8: a section with poles 0.6 ± 0.3j amplifies it by < 100.
     assert ss.max_relative_error < 1e-5 and so.max_relative_error < 1e-5
     assert ss.passes and so.passes
+
+
+def test_sos_document_carries_the_float32_check_antiwindup_and_note() -> None:
+    import json
+
+    from scipy import signal
+
+    from fsmbench.control.export import DAC_RAILS_V, InputScaling, sos_document
+
+    doc = sos_document({"seed_controller": seed_decentralised_controller()},
+                       scaling=InputScaling(qd_gain_v_per_rad=(-31.0, 36.3),
+                                            plant_source="physical (nominal)"), ts_s=TS)
+    json.dumps(doc, allow_nan=False)  # the file's own rule: no NaN or inf
+    assert doc["dac_rails_v"] == list(DAC_RAILS_V)
+    f = np.logspace(0, 3.6, 40)
+    for axis in ("h", "v"):
+        ch = doc["controllers"]["seed_controller"][axis]
+        own = float32_sos_check(ch["sos"], ts_s=TS).to_json()
+        assert ch["float32"]["max_relative_error"] == own["max_relative_error"]
+        aw = ch["antiwindup"]
+        assert aw["scheme"] == "back-calculation" and len(aw["gain_on_registers"]) == 2
+        # Reordering the sections leaves the filter as it was (sections commute).
+        _, h0 = signal.sosfreqz(np.array(ch["sos"]), worN=f, fs=1 / TS)
+        _, h1 = signal.sosfreqz(np.array(aw["sos_integrators_last"]), worN=f, fs=1 / TS)
+        np.testing.assert_allclose(h1, h0, rtol=1e-12)  # same products, another order
+    note = " ".join(doc["implementation_note"])
+    for words in ("direct form II transposed", "-10 V .. 10 V", "back-calculation",
+                  "float32, seed_controller h", "Tracking time"):
+        assert words in note

@@ -38,6 +38,8 @@ from scipy import signal
 from scipy.linalg import eigvals
 
 from fsmbench import __version__
+from fsmbench.control.antiwindup import DEFAULT_TRACKING_TIME_S, antiwindup_channel
+from fsmbench.control.export_check import float32_sos_check, float32_state_space_check
 from fsmbench.control.realize import (
     DiscreteSection,
     Section,
@@ -52,6 +54,7 @@ from fsmbench.io.atomic import atomic_write_text
 from fsmbench.io.matwrite import save_mat
 
 __all__ = [
+    "DAC_RAILS_V",
     "DEFAULT_DISCRETISATION",
     "DISCRETISATIONS",
     "SOS_FORMAT",
@@ -60,6 +63,7 @@ __all__ = [
     "channel_sections",
     "discretise",
     "discretise_channel",
+    "implementation_note",
     "siso_zpk",
     "sos_document",
     "sos_response",
@@ -99,6 +103,8 @@ _SIGNALS: dict[str, tuple[str, str]] = {
     "Vch": ("V", "Sercalo force-sensor voltage, horizontal"),
     "Vcv": ("V", "Sercalo force-sensor voltage, vertical"),
 }
+#: The DAC's rails the commands are clipped to [V] (ESRF study 1.6: 16 bit over -10 .. +10 V).
+DAC_RAILS_V = (-10.0, 10.0)
 _CHECK_F_HZ = (1.0, 10.0, 100.0, 1000.0)  # response stated at these, plus each prewarp frequency
 
 
@@ -307,15 +313,27 @@ def write_controllers_mat(path: str | Path, controllers: Mapping[str, ct.StateSp
     _check_method(method)
     desc = dict(descriptions or {})
     variables: dict[str, Any] = {}
+    float32: dict[str, Any] = {}
     for name, k in controllers.items():
         text = desc.get(name, "")
+        kd = discretise(k, ts_s=ts_s, method=method)
         variables[name] = {"K": state_space_struct(k, description=text),
-                           "Kd": state_space_struct(discretise(k, ts_s=ts_s, method=method),
-                                                    description=text)}
+                           "Kd": state_space_struct(kd, description=text)}
+        # Each diagonal channel of Kd rounded to float32 (the MAT-file is for float64 tools).
+        float32[name] = {
+            str(kd.output_labels[i]): float32_state_space_check(
+                kd.A, np.asarray(kd.B)[:, [i]], np.asarray(kd.C)[[i]],
+                np.asarray(kd.D)[[i]][:, [i]], ts_s=ts_s).sentence()
+            for i in range(min(kd.ninputs, kd.noutputs))}
     meta: dict[str, Any] = {"version": __version__, "Ts": float(ts_s),
                             "discretisation": method,
                             "discretisation_text": DISCRETISATIONS[method],
-                            "feedback": "u = -K y", "controllers": list(controllers)}
+                            "feedback": "u = -K y", "controllers": list(controllers),
+                            "float32_Kd": float32,
+                            "implementation_note": "Kd is for float64 tools (MATLAB, Octave); "
+                                                   "a real-time target runs controllers_sos.json "
+                                                   "(its implementation_note: section order, "
+                                                   "float32 check, anti-windup)"}
     if scaling is not None:
         meta["qd_gain_v_per_rad"] = {a: float(g) for a, g in
                                      zip(AXES, scaling.qd_gain_v_per_rad, strict=True)}
@@ -334,12 +352,13 @@ def _complex_lists(h: np.ndarray) -> dict[str, list[float]]:
 
 
 def _channel_entry(k: ct.StateSpace, i: int, *, ts_s: float, method: str,
-                   scaling: InputScaling) -> dict[str, Any]:
+                   scaling: InputScaling, tracking_time_s: float) -> dict[str, Any]:
     inp, outp = str(k.input_labels[i]), str(k.output_labels[i])
     if inp not in _MEASURED:
         raise ValueError(f"controller input {inp!r} is not a beam angle (Rh, Rv); the SOS "
                          "document scales from the 4QD output")
     secs = discretise_channel(k, ts_s=ts_s, output=i, input=i, method=method)
+    sos = np.array([s.sos for s in secs], dtype=float)
     warps = [s.prewarp_rad_s for s in secs]
     nyq = 0.5 / ts_s
     f = np.array(sorted({*(x for x in _CHECK_F_HZ if x < nyq),
@@ -370,12 +389,17 @@ def _channel_entry(k: ct.StateSpace, i: int, *, ts_s: float, method: str,
         "response_v_per_rad": {"f_hz": [float(x) for x in f],
                                "discrete": _complex_lists(hd),
                                "continuous": _complex_lists(hc)},
+        "float32": float32_sos_check(sos, ts_s=ts_s).to_json(),
+        "antiwindup": antiwindup_channel(sos, ts_s=ts_s,
+                                         tracking_time_s=tracking_time_s).to_json(),
     }
 
 
 def sos_document(controllers: Mapping[str, ct.StateSpace], *, scaling: InputScaling,
                  ts_s: float = SEED_TS_S, method: str = DEFAULT_DISCRETISATION,
-                 descriptions: Mapping[str, str] | None = None) -> dict[str, Any]:
+                 descriptions: Mapping[str, str] | None = None,
+                 dac_rails_v: tuple[float, float] = DAC_RAILS_V,
+                 tracking_time_s: float = DEFAULT_TRACKING_TIME_S) -> dict[str, Any]:
     """JSON-ready SOS description of the diagonal channels of each controller.
 
     Parameters
@@ -389,14 +413,22 @@ def sos_document(controllers: Mapping[str, ct.StateSpace], *, scaling: InputScal
     method : {"tustin_prewarp", "tustin"}
         See :data:`DISCRETISATIONS`.
     descriptions : mapping of name to str, optional
+    dac_rails_v : (float, float)
+        The DAC's rails [V], where the anti-windup acts.
+    tracking_time_s : float
+        Back-calculation tracking time [s] (:mod:`fsmbench.control.antiwindup`).
 
     Returns
     -------
     dict
-        ``format``, ``format_version``, ``discretisation``, ``input_scaling`` and
-        per controller and axis (``h``, ``v``) the signals, ``sos``,
-        ``prewarp_frequency_hz`` and ``response_v_per_rad`` (the sections'
-        response and the continuous controller's at a few frequencies).
+        ``format``, ``format_version``, ``discretisation``, ``input_scaling``,
+        ``dac_rails_v``, per controller and axis (``h``, ``v``) the signals,
+        ``sos``, ``prewarp_frequency_hz``, ``response_v_per_rad`` (the sections'
+        response and the continuous controller's at a few frequencies),
+        ``float32`` (:class:`fsmbench.control.export_check.Float32Check`) and
+        ``antiwindup`` (the sections reordered integrators last and the
+        back-calculation gain on their registers); and ``implementation_note``
+        (list of lines: :func:`implementation_note`).
     """
     _check_method(method)
     desc = dict(descriptions or {})
@@ -408,6 +440,7 @@ def sos_document(controllers: Mapping[str, ct.StateSpace], *, scaling: InputScal
         "difference_equation": "a0 y[k] = b0 x[k] + b1 x[k-1] + b2 x[k-2] - a1 y[k-1] - a2 y[k-2]",
         "feedback": "u = -K y: apply the negative of the cascade's output to the command",
         "input_scaling": scaling.to_json(),
+        "dac_rails_v": [float(x) for x in dac_rails_v],
         "controllers": {},
     }
     for name, k in controllers.items():
@@ -416,18 +449,24 @@ def sos_document(controllers: Mapping[str, ct.StateSpace], *, scaling: InputScal
             raise ValueError(f"controller {name!r} has {k.ninputs} inputs; expected h and v")
         entry: dict[str, Any] = {"description": desc.get(name, "")}
         for i, axis in enumerate(AXES):
-            entry[axis] = _channel_entry(k, i, ts_s=ts_s, method=method, scaling=scaling)
+            entry[axis] = _channel_entry(k, i, ts_s=ts_s, method=method, scaling=scaling,
+                                         tracking_time_s=tracking_time_s)
         out["controllers"][name] = entry
+    out["implementation_note"] = implementation_note(
+        out, dac_rails_v=dac_rails_v, tracking_time_s=tracking_time_s)
     return out
 
 
 def write_sos_json(path: str | Path, controllers: Mapping[str, ct.StateSpace], *,
                    scaling: InputScaling, ts_s: float = SEED_TS_S,
                    method: str = DEFAULT_DISCRETISATION,
-                   descriptions: Mapping[str, str] | None = None) -> Path:
+                   descriptions: Mapping[str, str] | None = None,
+                   dac_rails_v: tuple[float, float] = DAC_RAILS_V,
+                   tracking_time_s: float = DEFAULT_TRACKING_TIME_S) -> Path:
     """Write :func:`sos_document` as JSON, atomically."""
     doc = sos_document(controllers, scaling=scaling, ts_s=ts_s, method=method,
-                       descriptions=descriptions)
+                       descriptions=descriptions, dac_rails_v=dac_rails_v,
+                       tracking_time_s=tracking_time_s)
     return atomic_write_text(path, json.dumps(doc, indent=1, allow_nan=False) + "\n")
 
 
@@ -452,3 +491,51 @@ def sos_response(sos: Sequence[Sequence[float]], f_hz: np.ndarray, *,
     _, h = signal.sosfreqz(np.asarray(sos, dtype=float), worN=np.asarray(f_hz, dtype=float),
                            fs=1.0 / ts_s)
     return np.asarray(h)
+
+
+def implementation_note(doc: Mapping[str, Any], *, dac_rails_v: tuple[float, float],
+                        tracking_time_s: float) -> list[str]:
+    """Lines a target's programmer reads first: form, rate, order, float32, anti-windup, rails.
+
+    Parameters
+    ----------
+    doc : mapping
+        A :func:`sos_document` with its ``controllers`` filled in.
+    dac_rails_v : (float, float)
+        The DAC's rails [V].
+    tracking_time_s : float
+        Back-calculation tracking time [s].
+    """
+    ts = float(doc["sample_time_s"])
+    lines = [
+        f"Form: cascaded second-order sections per axis, direct form II transposed "
+        f"(scipy.signal.sosfilt's recursion: y = b0 w + s1; s1 <- s2 + b1 w - a1 y; "
+        f"s2 <- b2 w - a2 y), at {1.0 / ts:g} Hz (Ts = {ts:g} s); the overall gain is in "
+        "section 0; sections commute, so 'antiwindup.sos_integrators_last' is the same "
+        "filter with the integrator sections (denominator 1 - 2 z^-1 + z^-2) last.",
+        "State order: section by section in the listed order, two registers (s1, s2) each "
+        "(one for a first-order section).",
+        f"DAC limits: {dac_rails_v[0]:g} V .. {dac_rails_v[1]:g} V on every command.",
+        f"Anti-windup (back-calculation): with the sections in 'sos_integrators_last' order, "
+        f"compute v = the cascade's output and u_applied = -clip(v, rails) as the DAC "
+        f"applies it; after each section's usual update add gain_on_registers[i] * "
+        f"(clip(v) - v) to the integrator registers (zero while v is within the rails). "
+        f"Tracking time {tracking_time_s:g} s: saturated, the integrators' poles sit at "
+        f"exp(-i Ts / Tt), i = 1..n.",
+    ]
+    for name, entry in doc["controllers"].items():
+        for axis in ("h", "v"):
+            f32 = entry[axis]["float32"]
+            verdict = "passes" if f32["passes"] else "does NOT pass"
+            bound = ("any |T|" if f32["t_peak_bound"] is None
+                     else f"|T| < {f32['t_peak_bound']:.3g}")
+            lines.append(
+                f"float32, {name} {axis}: coefficients rounded to float32 give a response within "
+                f"{f32['max_relative_error']:.2g} relative and {f32['max_phase_error_deg']:.2g} "
+                f"deg of float64 ({f32['f_min_hz']:g}-{f32['f_max_hz']:.4g} Hz, worst at "
+                f"{f32['worst_f_hz']:.3g} Hz); integrators stay on z = 1: "
+                f"{'yes' if f32['integrators_exact'] else 'no'}; other poles stay inside the "
+                f"unit circle: {'yes' if f32['stable_poles_kept'] else 'no'}; a loop with "
+                f"{bound} stays stable; {verdict} the "
+                f"{f32['tolerance']:g} tolerance. Arithmetic roundoff was not simulated.")
+    return lines

@@ -113,7 +113,9 @@ class Float32Check:
                 "max_pole_radius": float(self.max_pole_radius),
                 "stable_poles_kept": bool(self.stable_poles_kept),
                 "integrators_exact": bool(self.integrators_exact),
-                "t_peak_bound": float(self.t_peak_bound),
+                # No error at all: no bound (JSON has no inf).
+                "t_peak_bound": (float(self.t_peak_bound) if np.isfinite(self.t_peak_bound)
+                                 else None),
                 "tolerance": FLOAT32_REL_TOL, "passes": bool(self.passes),
                 "scope": "coefficients rounded to float32; arithmetic roundoff not simulated"}
 
@@ -147,7 +149,7 @@ def _sos_poles(sos: np.ndarray) -> np.ndarray:
     return np.concatenate(roots) if roots else np.zeros(0, dtype=complex)
 
 
-def float32_sos_check(sos: Sequence[Sequence[float]], *, ts_s: float,
+def float32_sos_check(sos: Sequence[Sequence[float]] | np.ndarray, *, ts_s: float,
                       f_hz: np.ndarray | None = None) -> Float32Check:
     """Round a cascade of sections ``[b0, b1, b2, a0, a1, a2]`` to float32 and compare.
 
