@@ -57,18 +57,22 @@ def robustness_sentence(payload: Mapping[str, Any]) -> str:
              f"({_share(r)}: draws {_indices(r)})" for r in notable]
     controller = (payload.get("controller") or {}).get("name", "the controller")
     return (f"Monte Carlo of {controller} over {payload['n']} plants drawn around "
-            f"{payload.get('bench', 'the bench')} (seed {payload['seed']}): "
+            f"{payload.get('bench', 'the bench')}, seed {payload['seed']}: "
             + "; ".join(parts) + " (the Monte Carlo section lists them with their factors).")
+
+
+_RANGE_WORDS = {"resonance_scale": "Sercalo resonances", "damping_scale": "Sercalo damping",
+                "qd_gain_scale": "4QD gains", "current_amp_gain_scale": "current-amplifier gains",
+                "newport_gain_scale": "Newport gains", "dac_delay_s": "DAC delay",
+                "newport_delay_s": "Newport delay"}
 
 
 def _range_words(ranges: Mapping[str, Sequence[float]]) -> str:
     words = []
     for key, (lo, hi) in ranges.items():
-        if key.endswith("_s"):
-            words.append(f"{key.removesuffix('_s').replace('_', ' ')} "
-                         f"{1e6 * lo:+.0f} to {1e6 * hi:+.0f} µs")
-        else:
-            words.append(f"{key.removesuffix('_scale').replace('_', ' ')} ×{lo:g}–{hi:g}")
+        name = _RANGE_WORDS.get(key, key)
+        words.append(f"{name} {1e6 * lo:+.0f} to {1e6 * hi:+.0f} µs" if key.endswith("_s")
+                     else f"{name} ×{lo:g}–{hi:g}")
     return "; ".join(words)
 
 
