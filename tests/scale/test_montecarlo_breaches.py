@@ -234,3 +234,20 @@ def test_the_verdict_robustness_row_names_a_requirement_five_percent_break(
     assert f"phase margin ≥ 30° 20{n - broken}" not in text  # cells are apart, not joined
     assert f"Draws breaking: phase margin ≥ 30° ({broken} of {n}" in text
     assert ", ".join(map(str, range(broken))) in text
+
+
+def test_the_study_reads_version_3_only(tmp_path: Any) -> None:
+    from fsmbench.scale.mc_cli import read_montecarlo
+
+    doc = {"format": "fsmbench.montecarlo", "format_version": 3, **_payload(20, 1)}
+    (tmp_path / "montecarlo.json").write_text(json.dumps(doc))
+    assert read_montecarlo(tmp_path) == read_montecarlo(tmp_path / "montecarlo.json") == doc
+    (tmp_path / "old.json").write_text(json.dumps({**doc, "format_version": 2}))
+    with pytest.raises(ValueError, match=r"old\.json: fsmbench\.montecarlo version 2, .* run "
+                                         "fsmbench montecarlo again"):
+        read_montecarlo(tmp_path / "old.json")
+    (tmp_path / "other.json").write_text(json.dumps({"format": "fsmbench.budget"}))
+    with pytest.raises(ValueError, match=r"other\.json: not a fsmbench\.montecarlo file"):
+        read_montecarlo(tmp_path / "other.json")
+    with pytest.raises(ValueError, match="no such file"):
+        read_montecarlo(tmp_path / "absent")
