@@ -64,20 +64,40 @@ def test_failed_append_leaves_no_file(tmp_path: Path) -> None:
     assert list(tmp_path.iterdir()) == []
 
 
-def test_an_appended_archive_has_its_start_and_end_time(tmp_path: Path) -> None:
-    # NXentry's start_time and end_time: the wall clock around the samples, with its offset.
+def test_an_appended_archive_has_the_start_and_end_time_it_is_told(tmp_path: Path) -> None:
+    # NXentry's start_time and end_time: what the writer is told (a live record says when
+    # its samples were taken), with its offset, never the clock of the writing.
     path = tmp_path / "timed.h5"
-    before = datetime.datetime.now().astimezone()
+    start = datetime.datetime(2026, 3, 1, 9, 30, tzinfo=datetime.timezone(
+        datetime.timedelta(hours=1)))
+    end = start + datetime.timedelta(seconds=0.01)
     with NexusAppender(path, signals=["Vph"], fs_hz=10_000.0, attrs={}) as app:
         app.append({"Vph": np.zeros(100)})
+        app.set_times(start=start.isoformat(), end=end.isoformat())
         app.note(ended="complete")
-    after = datetime.datetime.now().astimezone()
     with h5py.File(path, "r") as f:
-        start, end = (datetime.datetime.fromisoformat(f["entry"][k][()].decode())
-                      for k in ("start_time", "end_time"))
+        got = [datetime.datetime.fromisoformat(f["entry"][k][()].decode())
+               for k in ("start_time", "end_time")]
         assert f["entry"].attrs["ended"] == "complete"
-    assert before <= start <= end <= after
-    assert read_recording(path, require=()).sizes["t"] == 100  # the fields do not disturb it
+        assert "start_time_note" not in f["entry"].attrs
+    assert got == [start, end] and got[0].utcoffset() == datetime.timedelta(hours=1)
+    back = read_recording(path, require=())
+    assert back.sizes["t"] == 100 and back.attrs["start_time"] == start.isoformat()
+
+
+def test_an_appended_archive_without_times_says_so(tmp_path: Path) -> None:
+    path = tmp_path / "untimed.h5"
+    with NexusAppender(path, signals=["Vph"], fs_hz=10_000.0, attrs={},
+                       times_unknown="none: simulated") as app:
+        app.append({"Vph": np.zeros(100)})
+    with h5py.File(path, "r") as f:
+        assert "start_time" not in f["entry"] and "end_time" not in f["entry"]
+        assert f["entry"].attrs["start_time_note"] == "none: simulated"
+    assert "start_time_note" not in read_recording(path, require=()).attrs  # the file's, not
+    with pytest.raises(ValueError, match="no UTC offset"), \
+            NexusAppender(tmp_path / "naive.h5", signals=["Vph"], fs_hz=1.0, attrs={}) as app:
+        app.set_times(start="2026-03-01T09:30:00", end=None)  # which 09:30? refused
+    assert not (tmp_path / "naive.h5").exists()
 
 
 @pytest.mark.parametrize("fmt", ["nexus", "mat73"])

@@ -9,9 +9,9 @@ from the same IN (its root records IN's absolute path), so a typo such as
 ``convert data_uch.mat data_ucv.mat`` cannot destroy another recording. OUT
 must be named ``.h5`` or ``.nxs`` (what a data folder is read by): the readers
 tell formats by content, but a person, MATLAB's ``load`` and the folder reader
-go by the name. The archive's
-``file_time`` is the epoch unless ``--timestamp``, so the same IN gives the
-same bytes.
+go by the name. The archive
+has no ``file_time`` unless ``--timestamp`` (a root note says so), so the same
+IN gives the same bytes.
 """
 
 from __future__ import annotations
@@ -30,8 +30,8 @@ __all__ = ["NEXUS_SUFFIXES", "add_convert_command"]
 #: Names an archive written by ``convert`` may have: those a data folder is read by
 #: (:data:`fsmbench.io.folder._SUFFIXES` less ``.mat``).
 NEXUS_SUFFIXES = (".h5", ".nxs")
-#: ``file_time`` of an archive without ``--timestamp``: the epoch, as the twin's files
-#: (:data:`fsmbench.twin.simulate.TWIN_CREATED_S`).
+#: ``created`` of an archive without ``--timestamp``: the epoch, which the NeXus writers
+#: take as "no file_time" (:data:`fsmbench.io.nexus_meta.UNSTAMPED_S`), as the twin's files.
 _FIXED_CREATED_S = 0.0
 
 
@@ -90,6 +90,6 @@ def add_convert_command(sub: Any, *, progress: Callable[[], Callable[[str], None
                    help="sampling rate [Hz] (default: from t; when given, it must agree with "
                         "t within 0.1 %%)")
     p.add_argument("--timestamp", action="store_true",
-                   help="write the wall-clock time into the archive's file_time (default: the "
-                        "epoch, so that the same IN gives the same bytes)")
+                   help="write the wall-clock time into the archive's file_time (default: "
+                        "none, so that the same IN gives the same bytes)")
     p.set_defaults(func=run)

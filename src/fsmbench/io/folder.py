@@ -418,7 +418,8 @@ def _sample_bytes(path: Path, fmt: str) -> int:
             total += 8 * int(obj.size)
 
     with h5py.File(path, "r") as f:
-        f.visititems(visit)
+        data = f.get("entry/data")  # NeXus: the samples, not the instrument's numbers
+        (data if isinstance(data, h5py.Group) else f).visititems(visit)
     return total
 
 

@@ -31,6 +31,7 @@ import xarray as xr
 from fsmbench.io.errors import RecordingError
 from fsmbench.io.matfile import available_memory_bytes, detect_format
 from fsmbench.io.nexus import _plain, is_nexus
+from fsmbench.io.nexus_meta import FILE_ATTRS, read_times
 from fsmbench.io.nexus_stream import DEFAULT_CHUNK_SAMPLES, NexusAppender
 from fsmbench.io.notes import READ_NOTES, TIME_JITTER, TRAILING_BYTES, clear_notes
 from fsmbench.io.signals import TIME
@@ -119,8 +120,8 @@ def _open_nexus(path: Path, chunk_samples: int) -> xr.Dataset:
             raise RecordingError(path, "is missing from /entry/data", variable=TIME)
         lengths = {k: _vector_length(path, data[k], k, False) for k in [TIME, *order]}
         attrs_of = {k: {a: _plain(v) for a, v in data[k].attrs.items()} for k in [TIME, *order]}
-        attrs = {k: _plain(v) for k, v in entry.attrs.items()
-                 if k not in ("NX_class", "default")}
+        attrs = {k: _plain(v) for k, v in entry.attrs.items() if k not in FILE_ATTRS}
+        attrs.update(read_times(entry))
     return _lazy_dataset(path, order, lengths, attrs_of, attrs, matlab=False,
                          chunk_samples=chunk_samples, prefix="entry/data/")
 
@@ -443,7 +444,10 @@ def convert_recording(source: str | os.PathLike[str], dest: str | os.PathLike[st
     progress : callable, optional
         Called with a line per signal.
     created : float, optional
-        ``file_time`` of the archive [s since the epoch]; default now.
+        ``file_time`` of the archive [s since the epoch]; default now;
+        :data:`~fsmbench.io.nexus_meta.UNSTAMPED_S`: none. The recording's own
+        ``start_time`` and ``end_time`` are copied from a NeXus source, never
+        taken from the clock.
 
     Raises
     ------
@@ -500,7 +504,9 @@ def convert_recording(source: str | os.PathLike[str], dest: str | os.PathLike[st
     # column (HDF5 datasets grow independently), time first.
     with NexusAppender(out, signals=signals, fs_hz=rate, attrs=attrs,
                        t0_s=float(first_t[0]) if first_t.size else 0.0, created=created,
-                       root_attrs={CONVERTED_FROM: str(src.resolve())}) as nx:
+                       root_attrs={CONVERTED_FROM: str(src.resolve())},
+                       times_unknown=f"not known: {src.name} does not say when it was "
+                                     "taken") as nx:
         nx.write_columns({TIME: pieces(TIME), **{name: pieces(name) for name in signals}},
                          n_samples=n)
         say(f"{src.name}: {n} samples of {', '.join(signals)} into {out}")

@@ -2,25 +2,31 @@
 
 Layout (NeXus: NXentry holding an NXdata group, https://manual.nexusformat.org)::
 
-    /                   attrs default="entry", creator, file_time, HDF5_Version
+    /                   attrs default="entry", creator, format="fsmbench.nexus_recording",
+                        format_version=2, file_time (or file_time_note), HDF5_Version
     /entry              NX_class="NXentry", default="data",
-                        experiment, fs_hz (Hz), source, and any other dataset attrs
+                        experiment, fs_hz (Hz), source, and any other dataset attrs;
+                        start_time, end_time (ISO 8601 with offset) when the recording
+                        has them, else @start_time_note
+    /entry/instrument   NXinstrument: converters and bench parts with units
+                        (:func:`fsmbench.io.nexus_meta.write_instrument`)
     /entry/data         NX_class="NXdata", signal=<first signal>, axes="t",
                         t_indices=0, auxiliary_signals=[<other signals>]
     /entry/data/t       float64 (N,), units="s", long_name="Time"
     /entry/data/<name>  float64 (N,), units, long_name (and note) as in the Dataset
 
-Every attribute of the Dataset, of ``t`` and of each signal is stored and read
-back, so ``read_nexus(write_nexus(ds, path))`` is identical to ``ds``, samples
-bit for bit and variables in the same order.
+The samples are chunked and gzip-compressed (see :mod:`fsmbench.io.nexus_meta`
+for why gzip). Every attribute of the Dataset, of ``t`` and of each signal is
+stored and read back (``start_time`` and ``end_time`` as NXentry fields), so
+``read_nexus(write_nexus(ds, path))`` is identical to ``ds``, samples bit for
+bit and variables in the same order.
 """
 
 from __future__ import annotations
 
-import datetime
 import os
 from pathlib import Path
-from typing import Any, Final
+from typing import TYPE_CHECKING, Any, Final
 
 import h5py
 import numpy as np
@@ -28,17 +34,31 @@ import xarray as xr
 
 from fsmbench.io.atomic import atomic_path
 from fsmbench.io.errors import RecordingError
+from fsmbench.io.nexus_meta import (
+    END_TIME,
+    FILE_ATTRS,
+    START_TIME,
+    compression_options,
+    read_times,
+    write_instrument,
+    write_root,
+    write_times,
+)
 from fsmbench.io.notes import READ_NOTES
 from fsmbench.io.recording import _as_vector, _check_lengths, _validate
 from fsmbench.io.signals import TIME
+
+if TYPE_CHECKING:
+    from fsmbench.bench.params import Bench
 
 __all__ = ["is_nexus", "read_nexus", "write_nexus"]
 
 _ENTRY: Final = "entry"
 _DATA: Final = "data"
 # Attributes that describe the NeXus layout itself, not the recording.
-_LAYOUT_ATTRS: Final = frozenset({"NX_class", "default", "signal", "axes", "auxiliary_signals",
-                                  f"{TIME}_indices"})
+_LAYOUT_ATTRS: Final = FILE_ATTRS | {"signal", "axes", "auxiliary_signals", f"{TIME}_indices"}
+#: Samples per chunk of a compressed dataset: 512 KiB of float64, as the streaming writer.
+_CHUNK_SAMPLES: Final = 1 << 16
 
 
 def _plain(value: Any) -> Any:
@@ -75,51 +95,63 @@ def is_nexus(path: str | os.PathLike[str]) -> bool:
         return False
 
 
-def write_nexus(ds: xr.Dataset, path: str | os.PathLike[str], *, compress: bool = False,
-                created: float | None = None) -> Path:
+def write_nexus(ds: xr.Dataset, path: str | os.PathLike[str], *, compress: bool = True,
+                created: float | None = None, bench: Bench | None = None) -> Path:
     """Write a recording as a NeXus archive, atomically.
 
     Parameters
     ----------
     ds : xarray.Dataset
         A valid recording (see :mod:`fsmbench.io.recording`), N samples.
-        Checked first; nothing is written if it fails.
+        Checked first; nothing is written if it fails. Attributes ``start_time``
+        and ``end_time`` (ISO 8601 with a UTC offset), when present, become the
+        NXentry's fields; without ``start_time`` the file says it is not known.
     path : str or os.PathLike
         Destination (``.nxs`` by convention); its folder must exist.
-    compress : bool, default False
-        gzip (level 1) with byte shuffling: about half the size for 16-bit ADC
-        data, several times slower to write.
+    compress : bool, default True
+        gzip (level 1) with byte shuffling, chunks of 65536 samples: about half
+        the size for 16-bit ADC data. False: contiguous, raw.
     created : float, optional
-        ``file_time`` [s since the epoch]; default now. A fixed value makes
-        the file a pure function of ``ds``.
+        ``file_time`` [s since the epoch]; default now.
+        :data:`~fsmbench.io.nexus_meta.UNSTAMPED_S` (the epoch): none, so the
+        file is a pure function of ``ds``.
+    bench : Bench, optional
+        The bench the samples come from, described in ``/entry/instrument``;
+        default the packaged bench (``@assumed`` says so).
 
     Returns
     -------
     Path
         The destination.
+
+    Raises
+    ------
+    ValueError
+        ``start_time`` or ``end_time`` not ISO 8601 with a UTC offset.
     """
-    from fsmbench import __version__
+    from fsmbench.bench.params import default_bench  # the bench layer is above io
 
     dest = Path(path)
     _validate(ds, origin=os.fspath(dest), require=(), adc_range_v=20.0, adc_bits=16,
               saturation=False, stacklevel=3)
     names = [str(n) for n in ds.data_vars]
-    opts: dict[str, Any] = (
-        {"compression": "gzip", "compression_opts": 1, "shuffle": True} if compress else {}
-    )
+    opts = compression_options(ds.sizes[TIME], chunk_samples=_CHUNK_SAMPLES, compress=compress)
+    times = {START_TIME: ds.attrs.get(START_TIME), END_TIME: ds.attrs.get(END_TIME)}
     with atomic_path(dest) as tmp, h5py.File(tmp, "w") as f:
-        f.attrs["default"] = _ENTRY
-        f.attrs["creator"] = f"fsmbench {__version__}"
-        f.attrs["file_time"] = (
-            datetime.datetime.now().astimezone() if created is None
-            else datetime.datetime.fromtimestamp(created, tz=datetime.UTC)).isoformat()
-        f.attrs["HDF5_Version"] = h5py.version.hdf5_version
+        write_root(f, created=created)
         entry = f.create_group(_ENTRY)
         entry.attrs["NX_class"] = "NXentry"
         entry.attrs["default"] = _DATA
         for key, value in ds.attrs.items():
-            if key not in READ_NOTES:  # they describe the file read, not this one
+            # READ_NOTES describe the file read, not this one; the times are fields.
+            if key not in READ_NOTES and key not in times:
                 entry.attrs[key] = value
+        write_times(entry, start=times[START_TIME], end=times[END_TIME],
+                    unknown="not known: the recording does not say when it was taken")
+        write_instrument(entry, default_bench() if bench is None else bench)
+        if bench is None:
+            entry["instrument"].attrs["assumed"] = ("the packaged bench: the writer was not "
+                                                    "told which bench took the samples")
         data = entry.create_group(_DATA)
         data.attrs["NX_class"] = "NXdata"
         data.attrs["axes"] = TIME
@@ -194,6 +226,7 @@ def read_nexus(path: str | os.PathLike[str]) -> xr.Dataset:
             vectors[name] = _as_vector(name, dset[()], origin)
             var_attrs[name] = {k: _plain(v) for k, v in dset.attrs.items()}
         attrs = {k: _plain(v) for k, v in entry.attrs.items() if k not in _LAYOUT_ATTRS}
+        attrs.update(read_times(entry))
     _check_lengths(vectors, origin)
     return xr.Dataset(
         {name: (TIME, vectors[name], var_attrs[name]) for name in order},

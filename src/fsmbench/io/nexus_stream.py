@@ -3,8 +3,9 @@
 :class:`NexusAppender` writes the layout of :func:`fsmbench.io.nexus.write_nexus`
 (so :func:`~fsmbench.io.nexus.read_nexus` and the lazy reader read it) block
 by block: every signal is an HDF5 dataset of unlimited length, chunked
-along time, extended at each :meth:`~NexusAppender.append`. Memory is one
-block, whatever the record's length. The file appears under its name only
+along time and gzip-compressed (:mod:`fsmbench.io.nexus_meta`), extended at
+each :meth:`~NexusAppender.append`. Memory is one block, whatever the record's
+length. The file appears under its name only
 when :meth:`~NexusAppender.close` completes (a temporary file is renamed),
 so a failed or interrupted run leaves no partial record.
 """
@@ -12,19 +13,30 @@ so a failed or interrupted run leaves no partial record.
 from __future__ import annotations
 
 import contextlib
-import datetime
 import os
 from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
 from types import TracebackType
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import h5py
 import numpy as np
 
 from fsmbench.io.atomic import atomic_path
+from fsmbench.io.nexus_meta import (
+    END_TIME,
+    START_TIME,
+    check_time,
+    compression_options,
+    write_instrument,
+    write_root,
+    write_times,
+)
 from fsmbench.io.recording import _signal_attrs
 from fsmbench.io.signals import TIME
+
+if TYPE_CHECKING:
+    from fsmbench.bench.params import Bench
 
 __all__ = ["DEFAULT_CHUNK_SAMPLES", "NexusAppender"]
 
@@ -47,22 +59,40 @@ class NexusAppender:
         Sampling rate [Hz]; the time axis is ``k / fs_hz`` [s] from ``t0_s``.
     attrs : mapping
         Recording attributes (``experiment``, ``source``, ...); ``fs_hz`` is added.
+        ``start_time`` and ``end_time`` (ISO 8601 with a UTC offset), when given,
+        are the NXentry's fields (a copied recording keeps them).
     t0_s : float
         Time of the first sample [s].
     chunk_samples : int
         HDF5 chunk length along time.
     created : float, optional
-        ``file_time`` [s since the epoch]; default now.
+        ``file_time`` [s since the epoch]; default now;
+        :data:`~fsmbench.io.nexus_meta.UNSTAMPED_S`: none (reproducible bytes).
     root_attrs : mapping, optional
         More attributes of the file's root (``/``), such as the provenance
         ``fsmbench convert`` records.
+    bench : Bench, optional
+        The bench the samples come from (``/entry/instrument``); default the
+        packaged bench, marked ``@assumed``.
+    times_unknown : str
+        Why the samples have no wall-clock time (``@start_time_note``), when
+        neither ``attrs`` nor :meth:`set_times` gives one.
+    compress : bool, default True
+        gzip level 1 with shuffling.
+
+    Notes
+    -----
+    The times are never taken from the clock here: a conversion or a simulation
+    runs at another time than its samples. A live recording says when its
+    samples were taken through :meth:`set_times`.
     """
 
     def __init__(self, path: str | os.PathLike[str], *, signals: Sequence[str], fs_hz: float,
                  attrs: Mapping[str, Any], t0_s: float = 0.0,
                  chunk_samples: int = DEFAULT_CHUNK_SAMPLES,
                  created: float | None = None,
-                 root_attrs: Mapping[str, Any] | None = None) -> None:
+                 root_attrs: Mapping[str, Any] | None = None, bench: Bench | None = None,
+                 times_unknown: str = "", compress: bool = True) -> None:
         if not signals:
             raise ValueError(f"{path}: a recording needs at least one signal")
         self.path = Path(path)
@@ -70,7 +100,13 @@ class NexusAppender:
         self.fs_hz = float(fs_hz)
         self.t0_s = float(t0_s)
         self.n_samples = 0
-        self._attrs = {**dict(attrs), "fs_hz": self.fs_hz}
+        attrs = dict(attrs)
+        self._times: dict[str, str | None] = {}
+        self.set_times(start=attrs.pop(START_TIME, None), end=attrs.pop(END_TIME, None))
+        self._attrs = {**attrs, "fs_hz": self.fs_hz}
+        self._bench = bench
+        self._times_unknown = times_unknown
+        self._compress = compress
         self._chunk = int(chunk_samples)
         self._created = created
         self._root_attrs = dict(root_attrs or {})
@@ -80,26 +116,21 @@ class NexusAppender:
         self._entry: h5py.Group | None = None
 
     def __enter__(self) -> NexusAppender:
-        from fsmbench import __version__
+        from fsmbench.bench.params import default_bench  # the bench layer is above io
 
         tmp = self._stack.enter_context(atomic_path(self.path))
         f = self._stack.enter_context(h5py.File(tmp, "w"))
         self._file = f
-        f.attrs["default"] = "entry"
-        f.attrs["creator"] = f"fsmbench {__version__}"
-        f.attrs["file_time"] = (
-            datetime.datetime.now().astimezone() if self._created is None
-            else datetime.datetime.fromtimestamp(self._created, tz=datetime.UTC)).isoformat()
-        f.attrs["HDF5_Version"] = h5py.version.hdf5_version
-        for key, value in self._root_attrs.items():
-            f.attrs[key] = value
+        write_root(f, created=self._created, extra=self._root_attrs)
         entry = f.create_group("entry")
         entry.attrs["NX_class"] = "NXentry"
         entry.attrs["default"] = "data"
         for key, value in self._attrs.items():
             entry.attrs[key] = value
-        # NXentry's own fields: the wall clock of the first and (at the end) the last sample.
-        entry.create_dataset("start_time", data=self._time_iso())
+        write_instrument(entry, default_bench() if self._bench is None else self._bench)
+        if self._bench is None:
+            entry["instrument"].attrs["assumed"] = ("the packaged bench: the writer was not "
+                                                    "told which bench took the samples")
         self._entry = entry
         data = entry.create_group("data")
         data.attrs["NX_class"] = "NXdata"
@@ -108,21 +139,28 @@ class NexusAppender:
         data.attrs["signal"] = self.signals[0]
         if len(self.signals) > 1:
             data.attrs["auxiliary_signals"] = list(self.signals[1:])
+        opts = compression_options(None, chunk_samples=self._chunk, compress=self._compress)
         for name in (TIME, *self.signals):
             dset = data.create_dataset(name, shape=(0,), maxshape=(None,), dtype=np.float64,
-                                       chunks=(self._chunk,), track_times=False)
+                                       track_times=False, **opts)
             attrs = {"units": "s", "long_name": "Time"} if name == TIME else _signal_attrs(name)
             for key, value in attrs.items():
                 dset.attrs[key] = value
         self._data = data
         return self
 
-    def _time_iso(self) -> str:
-        """The wall clock now, or ``created`` when the caller fixed the file's time (a
-        reproducible run's files are byte-identical: its start and end time are that one)."""
-        if self._created is not None:
-            return datetime.datetime.fromtimestamp(self._created, tz=datetime.UTC).isoformat()
-        return _now_iso()
+    def set_times(self, *, start: str | None, end: str | None) -> None:
+        """When the first and the last sample were taken (ISO 8601 with a UTC offset).
+
+        Written when the file is closed; replaces times given in ``attrs``.
+
+        Raises
+        ------
+        ValueError
+            Not ISO 8601 or without an offset.
+        """
+        self._times = {name: None if value is None else check_time(value, name)
+                       for name, value in ((START_TIME, start), (END_TIME, end))}
 
     def note(self, **attrs: Any) -> None:
         """More attributes of the entry, written now (e.g. how a record ended)."""
@@ -190,13 +228,10 @@ class NexusAppender:
                 self._stack.__exit__(type(err), err, err.__traceback__)
                 raise
         if exc is None and self._entry is not None:
-            self._entry.create_dataset("end_time", data=self._time_iso())
+            write_times(self._entry, start=self._times[START_TIME], end=self._times[END_TIME],
+                        unknown=self._times_unknown)
         self._data = None
         self._entry = None
         self._file = None
         self._stack.__exit__(exc_type, exc, tb)
 
-
-def _now_iso() -> str:
-    """The wall clock now, ISO 8601 with its UTC offset (NeXus ``NX_DATE_TIME``)."""
-    return datetime.datetime.now().astimezone().isoformat()

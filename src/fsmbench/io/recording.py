@@ -502,7 +502,7 @@ def write_recording(
         signal as an N×1 double column, which MATLAB's ``load`` reads as the
         seed does; units and attributes are kept by NeXus only.
     compress : bool, optional
-        Compress the samples; default: yes for mat5, no otherwise.
+        Compress the samples; default: yes for mat5 and nexus (gzip), no for mat73.
     created : float, optional
         Creation time stamped in the file [s since the epoch, UTC]; default
         now. A fixed value makes the file a pure function of ``ds``.
@@ -518,7 +518,7 @@ def write_recording(
     if format == "nexus":
         from fsmbench.io import nexus  # nexus builds on this module: imported here
 
-        return nexus.write_nexus(ds, dest, compress=bool(compress), created=created)
+        return nexus.write_nexus(ds, dest, compress=compress is not False, created=created)
     if format not in ("mat5", "mat73"):
         raise ValueError(f"{dest}: unknown recording format {format!r}; "
                          "use 'mat5', 'mat73' or 'nexus'")

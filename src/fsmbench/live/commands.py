@@ -499,8 +499,8 @@ class BenchCommands:
         return str(plan.path)
 
     def _start_job(self, plan: JobPlan, restore: Callable[[bool], None] | None) -> None:
-        self._job = Job(plan, restore=restore, on_done=self._job_written,
-                        thread_init=self.thread_init)
+        self._job = Job(replace(plan, bench=self.bench), restore=restore,
+                        on_done=self._job_written, thread_init=self.thread_init)
 
     def _collect(self, block: Any) -> None:
         job = self._job

@@ -20,16 +20,21 @@ import os
 import queue
 import shutil
 import threading
+import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from fsmbench.io.nexus_meta import iso_time
 from fsmbench.io.nexus_stream import NexusAppender
 from fsmbench.io.recording import read_recording, write_recording
 from fsmbench.live.states import Refused
+
+if TYPE_CHECKING:
+    from fsmbench.bench.params import Bench
 
 __all__ = ["BATCH_SAMPLES", "DISK_RESERVE_BYTES", "MAT_MAX_BYTES", "QUEUE_BLOCKS", "JobOutcome",
            "JobPlan", "JobWriter", "plan_job"]
@@ -66,6 +71,8 @@ class JobPlan:
     fs_hz : float
     source : str
         The file's ``source`` attribute.
+    bench : Bench or None
+        The bench served, described in the file's NXinstrument (None: the packaged one).
     """
 
     kind: str
@@ -78,6 +85,7 @@ class JobPlan:
     t0_s: float
     fs_hz: float
     source: str
+    bench: Bench | None = None
 
     @property
     def duration_s(self) -> float:
@@ -211,6 +219,10 @@ class JobWriter:
         self._queue: queue.Queue[dict[str, np.ndarray]] = queue.Queue(QUEUE_BLOCKS)
         self._finished = threading.Event()
         self.taken = 0  # samples handed over by the loop
+        # Wall clock [s since the epoch] of the first and the last hand-over: when the
+        # samples were taken, to one loop block.
+        self._first_put_s: float | None = None
+        self._last_put_s: float | None = None
         #: Why the writer stopped early ("" while it writes): the loop ends the job on it.
         self.failed = ""
         self._aborted = ""
@@ -226,6 +238,9 @@ class JobWriter:
         except queue.Full:
             return False
         self.taken += len(next(iter(samples.values())))
+        self._last_put_s = time.time()
+        if self._first_put_s is None:
+            self._first_put_s = self._last_put_s
         return True
 
     def finish(self, *, aborted: str = "", error: str = "") -> None:
@@ -279,7 +294,8 @@ class JobWriter:
         written = 0
         try:
             with NexusAppender(p.stream_path, signals=p.signals, fs_hz=p.fs_hz, t0_s=p.t0_s,
-                               attrs={"experiment": p.name, "source": p.source}) as app:
+                               attrs={"experiment": p.name, "source": p.source},
+                               bench=p.bench) as app:
                 while (block := self._next()) is not None:
                     app.append(self._batch(block))
                     written = app.n_samples
@@ -287,6 +303,9 @@ class JobWriter:
                     # NexusAppender refuses an empty file; leave none, say so below.
                     raise _NoSamplesError
                 # How it ended, in the file: a record cut short says so and by what.
+                if self._first_put_s is not None and self._last_put_s is not None:
+                    app.set_times(start=iso_time(self._first_put_s),
+                                  end=iso_time(self._last_put_s))
                 app.note(planned_duration_s=p.duration_s, recorded_duration_s=written / p.fs_hz,
                          ended=(f"stopped by {self._aborted}" if self._aborted else
                                 f"ended early: {self._error}" if self._error else "complete"))

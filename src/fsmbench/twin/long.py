@@ -131,7 +131,8 @@ def stream_experiment(bench: Bench, spec: ExperimentSpec, *, seed: int, path: st
     plant, controller : optional
         As :func:`fsmbench.twin.simulate.simulate_experiment`.
     created : float, optional
-        ``file_time`` of the archive [s since the epoch].
+        ``file_time`` of the archive [s since the epoch]; default now;
+        :data:`~fsmbench.io.nexus_meta.UNSTAMPED_S`: none (reproducible bytes).
     progress : callable, optional
         Called with a :class:`StreamProgress` at most every ``progress_every_s``
         wall-clock seconds, and at the end.
@@ -150,8 +151,10 @@ def stream_experiment(bench: Bench, spec: ExperimentSpec, *, seed: int, path: st
     block = max(1, round(block_s * fs))
     realized = _Realized()
     start = last = time.monotonic()
-    with NexusAppender(path, signals=signals, fs_hz=fs, created=created,
-                       attrs={"experiment": spec.name, "source": "fsmbench twin"}) as nx:
+    with NexusAppender(path, signals=signals, fs_hz=fs, created=created, bench=bench,
+                       attrs={"experiment": spec.name, "source": "fsmbench twin"},
+                       times_unknown="none: simulated by the twin, the samples have no "
+                                     "wall-clock time") as nx:
         done = 0
         while done < n_total:
             b = stream.step(min(block, n_total - done))
