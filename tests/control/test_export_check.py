@@ -85,14 +85,15 @@ def test_sos_document_carries_the_float32_check_antiwindup_and_note() -> None:
                        scaling=InputScaling(qd_gain_v_per_rad=(-31.0, 36.3),
                                             plant_source="physical (nominal)"), ts_s=TS)
     json.dumps(doc, allow_nan=False)  # the file's own rule: no NaN or inf
-    assert doc["dac_rails_v"] == list(DAC_RAILS_V)
+    assert doc["dac_rails_v"] == {"min": DAC_RAILS_V[0], "max": DAC_RAILS_V[1]}
     f = np.logspace(0, 3.6, 40)
     for axis in ("h", "v"):
         ch = doc["controllers"]["seed_controller"][axis]
         own = float32_sos_check(ch["sos"], ts_s=TS).to_json()
         assert ch["float32"]["max_relative_error"] == own["max_relative_error"]
         aw = ch["antiwindup"]
-        assert aw["scheme"] == "back-calculation" and len(aw["gain_on_registers"]) == 2
+        assert aw["scheme"] == "back-calculation" and len(aw["integrator_registers"]) == 2
+        assert {r["register"] for r in aw["integrator_registers"]} == {"s1", "s2"}
         # Reordering the sections leaves the filter as it was (sections commute).
         _, h0 = signal.sosfreqz(np.array(ch["sos"]), worN=f, fs=1 / TS)
         _, h1 = signal.sosfreqz(np.array(aw["sos_integrators_last"]), worN=f, fs=1 / TS)

@@ -126,14 +126,23 @@ class AntiWindupChannel:
         return len(self.integrator_states)
 
     def to_json(self) -> dict[str, Any]:
-        """The reordered sections, ``L`` on the integrator registers and the tracking time."""
-        first = self.sos.shape[0] - sum(1 for r in self.sos if is_integrator_section(r))
+        """The reordered sections, ``L`` per integrator register and the tracking time.
+
+        Registers are numbered as :func:`df2t_cascade` orders them; each names
+        its section (index in ``sos_integrators_last``) and ``s1`` or ``s2``.
+        """
+        owner: list[tuple[int, str]] = []
+        for i, row in enumerate(self.sos):
+            order = 2 if (row[5] != 0.0 or row[2] != 0.0) else (
+                1 if (row[4] != 0.0 or row[1] != 0.0) else 0)
+            owner.extend((i, f"s{j + 1}") for j in range(order))
+        regs = [{"state_index": int(k), "section": owner[k][0], "register": owner[k][1],
+                 "gain": float(self.gain[k])} for k in self.integrator_states]
+        poles = [{"z": float(abs(p)), "time_constant_s": float(-self.ts_s / np.log(abs(p)))}
+                 for p in self.saturated_poles]
         return {"scheme": "back-calculation", "tracking_time_s": self.tracking_time_s,
                 "sos_integrators_last": [[float(x) for x in r] for r in self.sos],
-                "integrator_sections": list(range(first, self.sos.shape[0])),
-                "integrator_registers": [int(i) for i in self.integrator_states],
-                "gain_on_registers": [float(self.gain[i]) for i in self.integrator_states],
-                "saturated_poles_z": [float(abs(p)) for p in self.saturated_poles]}
+                "integrator_registers": regs, "saturated_poles": poles}
 
 
 def antiwindup_channel(sos: np.ndarray, *, ts_s: float,

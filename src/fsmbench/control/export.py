@@ -440,7 +440,7 @@ def sos_document(controllers: Mapping[str, ct.StateSpace], *, scaling: InputScal
         "difference_equation": "a0 y[k] = b0 x[k] + b1 x[k-1] + b2 x[k-2] - a1 y[k-1] - a2 y[k-2]",
         "feedback": "u = -K y: apply the negative of the cascade's output to the command",
         "input_scaling": scaling.to_json(),
-        "dac_rails_v": [float(x) for x in dac_rails_v],
+        "dac_rails_v": {"min": float(dac_rails_v[0]), "max": float(dac_rails_v[1])},
         "controllers": {},
     }
     for name, k in controllers.items():
@@ -518,8 +518,8 @@ def implementation_note(doc: Mapping[str, Any], *, dac_rails_v: tuple[float, flo
         f"DAC limits: {dac_rails_v[0]:g} V .. {dac_rails_v[1]:g} V on every command.",
         f"Anti-windup (back-calculation): with the sections in 'sos_integrators_last' order, "
         f"compute v = the cascade's output and u_applied = -clip(v, rails) as the DAC "
-        f"applies it; after each section's usual update add gain_on_registers[i] * "
-        f"(clip(v) - v) to the integrator registers (zero while v is within the rails). "
+        f"applies it; after each section's usual update add each integrator_registers "
+        f"entry's gain * (clip(v) - v) to its register (zero while v is within the rails). "
         f"Tracking time {tracking_time_s:g} s: saturated, the integrators' poles sit at "
         f"exp(-i Ts / Tt), i = 1..n.",
     ]

@@ -174,6 +174,10 @@ class DesignResult:
         Closed-loop step and Newport-disturbance responses, time and frequency,
         of ``seed_controller`` and ``fsmbench_controller``
         (:func:`fsmbench.control.responses.closed_loop_responses`).
+    saturating_steps : dict "name/axis" -> SaturatingStep
+        The twin's reference step beyond the DAC's reach without and with
+        anti-windup (:func:`fsmbench.sim.antiwindup.saturating_step`), per
+        controller and axis, e.g. ``"fsmbench_controller/h"``.
     """
 
     plant_source: str
@@ -191,6 +195,7 @@ class DesignResult:
     options: StudyOptions
     qd_gain_v_per_rad: tuple[float, float]
     responses: dict[str, ClosedLoopResponses] = field(default_factory=dict)
+    saturating_steps: dict[str, Any] = field(default_factory=dict)
 
     @property
     def loops(self) -> dict[str, LoopAnalysis]:
@@ -206,7 +211,8 @@ class DesignResult:
         with ``{h,v}.{stable, gain_margin_db, phase_margin_deg, modulus_margin,
         crossover_hz, sensitivity_at_1hz}`` and ``meets_objective``; ``iff``;
         ``robustness`` (fsmbench's controller) and ``seed_robustness``;
-        ``newport_to_beam``; ``options``.
+        ``newport_to_beam``; ``options``; ``saturating_step`` (per controller and
+        axis, :meth:`fsmbench.sim.antiwindup.SaturatingStep.to_json`).
         """
         f0 = self.objective.frequency_hz
         fsm = {**self.fsmbench.to_json(), "design": self.design.to_json()}
@@ -227,6 +233,7 @@ class DesignResult:
             "newport_to_beam": {"attenuation_at_1hz": n2b},
             "options": self.options.to_json(),
             "checks": [c.to_json() for c in self.checks],
+            "saturating_step": _steps_json(self.saturating_steps),
         })
 
     @property
@@ -272,6 +279,15 @@ class DesignResult:
         loader = resources.files("fsmbench").joinpath("matlab", MATLAB_LOADER).read_text(
             encoding="utf-8")
         return [mat, sos, atomic_write_text(out / MATLAB_LOADER, loader)]
+
+
+def _steps_json(steps: dict[str, Any]) -> dict[str, dict[str, Any]]:
+    """``{"controller/axis": step}`` as ``{controller: {axis: step.to_json()}}``."""
+    out: dict[str, dict[str, Any]] = {}
+    for key, step in steps.items():
+        name, _, axis = key.partition("/")
+        out.setdefault(name, {})[axis] = step.to_json()
+    return out
 
 
 def _qd_gain(plant: PlantModel) -> tuple[float, float]:
@@ -346,8 +362,16 @@ def design_study(plant: PlantModel, *, bench: Bench,
                                     pade_order=opts.loop.pade_order)
         for name, words in (("seed_controller", "the ESRF study's controller"),
                             ("fsmbench_controller", "fsmbench's controller"))}
+    # The twin runs the controllers here (sim builds on control): imported when used.
+    from fsmbench.sim.antiwindup import saturating_step
+
+    steps = {f"{name}/{axis}": saturating_step(bench, controllers[name], name=words, axis=axis)
+             for name, words in (("seed_controller", "the ESRF study's controller"),
+                                 ("fsmbench_controller", "fsmbench's controller"))
+             for axis in ("h", "v")}
     return DesignResult(plant_source=plant.source, objective=objective, plant=plant_an,
                         seed=seed, fsmbench=fsm, design=design, newport=newport, iff=iff,
                         robustness=rob, seed_robustness=seed_rob, newport_to_beam=n2b,
                         controllers=controllers, options=opts,
-                        qd_gain_v_per_rad=_qd_gain(plant), responses=responses)
+                        qd_gain_v_per_rad=_qd_gain(plant), responses=responses,
+                        saturating_steps=steps)

@@ -34,6 +34,7 @@ from fsmbench.report.figures.control import (
     sensitivity_figure,
 )
 from fsmbench.report.html import Block, Note, Section, Table
+from fsmbench.report.sections.antiwindup import antiwindup_blocks
 from fsmbench.report.sections.responses import response_blocks
 
 if TYPE_CHECKING:
@@ -516,6 +517,7 @@ def _section9(res: DesignResult, check: Any, *, skipped: str = "") -> Section:
         "fsmbench exports (controllers.mat, controllers_sos.json) is instead Tustin prewarped "
         "at each notch, section by section.",
         _discrete_table(res),
+        *antiwindup_blocks(res),
     ]
     if shift:
         blocks.append(Note(f"Without prewarping Tustin moves the ESRF study's notches ({shift}); "

@@ -1,0 +1,66 @@
+"""Report: the twin's saturating step without and with anti-windup (chapter 9).
+
+Every number and curve comes from the design stage's
+:class:`~fsmbench.sim.antiwindup.SaturatingStep` results; nothing is computed here.
+"""
+
+from __future__ import annotations
+
+import math
+
+from fsmbench.control.study import DesignResult
+from fsmbench.report.figures.antiwindup import saturating_step_figure
+from fsmbench.report.html import Block
+
+__all__ = ["antiwindup_blocks"]
+
+_WHO = (("fsmbench_controller", "fsmbench's controller"),
+        ("seed_controller", "the ESRF study's controller"))
+
+
+def _ms(x: float) -> str:
+    return f"{1e3 * x:.0f} ms" if math.isfinite(x) else "not within the run"
+
+
+def antiwindup_blocks(res: DesignResult) -> list[Block]:
+    """Text and figure of the saturating step (empty when the design ran no step).
+
+    Parameters
+    ----------
+    res : DesignResult
+        Its ``saturating_steps``.
+    """
+    steps = res.saturating_steps
+    fsm = [steps[k] for k in ("fsmbench_controller/h", "fsmbench_controller/v") if k in steps]
+    if not fsm:
+        return []
+    first = fsm[0]
+    said = []
+    for name, words in _WHO:
+        parts = [f"{axis}: {_ms(s.recovery_s['with'])} with, {_ms(s.recovery_s['without'])} "
+                 f"without (ideal DAC {_ms(s.recovery_s['linear'])})"
+                 for axis in ("h", "v") if (s := steps.get(f"{name}/{axis}")) is not None]
+        if parts:
+            said.append(f"{words}: " + "; ".join(parts))
+    return [
+        "What happens when the DAC saturates? fsmbench's controller has four integrators per "
+        "axis and the ESRF study's two; while the command sits on the ±10 V rail they keep "
+        "integrating. The exported controllers carry a back-calculation anti-windup "
+        "(controllers_sos.json, implementation_note): the part of the command the rail clips "
+        "off is fed back into the integrator sections' registers with tracking time "
+        f"{1e3 * first.tracking_time_s:g} ms, and nothing changes while the command is inside "
+        "the rails. On the twin, the beam's reference steps by an angle whose steady command "
+        f"is 1.5 times the rail, is held {1e3 * first.hold_s:g} ms and steps back; the "
+        f"recovery is the time after the step back until the beam stays within "
+        f"{100 * first.band_rad / first.step_rad:g} % of the step. " + ". ".join(said) + ".",
+        saturating_step_figure(
+            fsm, key="saturating_step_antiwindup",
+            title="A step beyond the DAC's reach, without and with anti-windup",
+            caption=("fsmbench's controller on the twin (its true plant, 16-bit converters, no "
+                     "noise). Top: the beam angle over the step's height; bottom: the command "
+                     "the DAC applied, with its rails. Red: without anti-windup, the wound-up "
+                     "integrators keep the command on the rails after the step back; blue: "
+                     "with back-calculation; grey dotted: the same step with an ideal DAC "
+                     "(no rails), the linear loop's own settling. The dashed vertical line is "
+                     "the step back.")),
+    ]
