@@ -18,8 +18,8 @@ _WHO = (("fsmbench_controller", "fsmbench's controller"),
         ("seed_controller", "the ESRF study's controller"))
 
 
-def _ms(x: float) -> str:
-    return f"{1e3 * x:.0f} ms" if math.isfinite(x) else "not within the run"
+def _ms(x: float, *, after_s: float) -> str:
+    return f"{1e3 * x:.0f} ms" if math.isfinite(x) else f"not within {1e3 * after_s:.0f} ms"
 
 
 def antiwindup_blocks(res: DesignResult) -> list[Block]:
@@ -37,11 +37,16 @@ def antiwindup_blocks(res: DesignResult) -> list[Block]:
     first = fsm[0]
     said = []
     for name, words in _WHO:
-        parts = [f"{axis}: {_ms(s.recovery_s['with'])} with, {_ms(s.recovery_s['without'])} "
-                 f"without (ideal DAC {_ms(s.recovery_s['linear'])})"
-                 for axis in ("h", "v") if (s := steps.get(f"{name}/{axis}")) is not None]
+        parts = []
+        for axis in ("h", "v"):
+            if (s := steps.get(f"{name}/{axis}")) is None:
+                continue
+            after = float(s.t_s[-1]) - s.hold_s
+            parts.append(f"{axis}: {_ms(s.recovery_s['with'], after_s=after)} with, "
+                         f"{_ms(s.recovery_s['without'], after_s=after)} without (ideal DAC "
+                         f"{_ms(s.recovery_s['linear'], after_s=after)})")
         if parts:
-            said.append(f"{words}: " + "; ".join(parts))
+            said.append(f"{words[0].upper()}{words[1:]}: " + "; ".join(parts))
     return [
         "What happens when the DAC saturates? fsmbench's controller has four integrators per "
         "axis and the ESRF study's two; while the command sits on the ±10 V rail they keep "
@@ -52,7 +57,11 @@ def antiwindup_blocks(res: DesignResult) -> list[Block]:
         "the rails. On the twin, the beam's reference steps by an angle whose steady command "
         f"is 1.5 times the rail, is held {1e3 * first.hold_s:g} ms and steps back; the "
         f"recovery is the time after the step back until the beam stays within "
-        f"{100 * first.band_rad / first.step_rad:g} % of the step. " + ". ".join(said) + ".",
+        f"{100 * first.band_rad / first.step_rad:g} % of the step. " + ". ".join(said) + ". "
+        "Where the recovery with anti-windup stays well behind the ideal DAC's although the "
+        "command has left the rail, what is left is not windup: a Sercalo resonance rung while "
+        "the loop was open on the rail, which a notch that cancels it (the ESRF study's "
+        "controller) hides from the loop, so it decays only at its own mechanical damping.",
         saturating_step_figure(
             fsm, key="saturating_step_antiwindup",
             title="A step beyond the DAC's reach, without and with anti-windup",
@@ -62,5 +71,6 @@ def antiwindup_blocks(res: DesignResult) -> list[Block]:
                      "integrators keep the command on the rails after the step back; blue: "
                      "with back-calculation; grey dotted: the same step with an ideal DAC "
                      "(no rails), the linear loop's own settling. The dashed vertical line is "
-                     "the step back.")),
+                     "the step back; the ripple while the command sits on a rail is the "
+                     "Sercalo's resonance, rung by the loop opened by the rail.")),
     ]
