@@ -21,6 +21,7 @@ import xarray as xr
 
 from fsmbench.bench.axes import PerAxis
 from fsmbench.bench.params import Bench, default_bench, real_bench
+from fsmbench.io.matwrite import wall_clock_headers
 from fsmbench.io.nexus import read_nexus, write_nexus
 from fsmbench.io.nexus_meta import NEXUS_FORMAT, UNSTAMPED_S
 from fsmbench.io.nexus_stream import NexusAppender
@@ -144,6 +145,10 @@ def test_file_time_is_the_writing_time_or_absent(tmp_path: Path, recording: xr.D
         assert "file_time" not in c.attrs and "reproducible" in c.attrs["file_time_note"]
     again = write_nexus(recording, tmp_path / "again.h5", created=UNSTAMPED_S)
     assert again.read_bytes() == bare.read_bytes()
+    with wall_clock_headers():  # --timestamp: the reproducible writers stamp the clock too
+        asked = write_nexus(recording, tmp_path / "asked.h5", created=UNSTAMPED_S)
+    with h5py.File(asked, "r") as f:
+        assert before <= _time(f.attrs["file_time"]) and "file_time_note" not in f.attrs
 
 
 def test_a_recordings_times_are_fields_and_read_back(tmp_path: Path,

@@ -27,7 +27,7 @@ import scipy.sparse
 from fsmbench.io.atomic import atomic_path
 
 __all__ = ["FIXED_CREATED_S", "MatVersion", "mat5_header", "mat73_header", "save_mat",
-           "wall_clock_headers"]
+           "wall_clock_headers", "wall_clock_wanted"]
 
 #: Creation time headers carry unless asked otherwise [s since the epoch]: the
 #: epoch itself, so that the same variables give a byte-identical file.
@@ -53,6 +53,12 @@ def wall_clock_headers(enabled: bool = True) -> Iterator[None]:
         yield
     finally:
         _wall_clock[0] = saved
+
+
+def wall_clock_wanted() -> bool:
+    """True within :func:`wall_clock_headers` (``--timestamp``): files carry the wall clock."""
+    return _wall_clock[0]
+
 
 #: MAT-file versions :func:`save_mat` writes ("5" is MATLAB's ``-v7`` layout).
 MatVersion = Literal["5", "7.3"]

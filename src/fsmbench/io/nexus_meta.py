@@ -26,6 +26,8 @@ from typing import TYPE_CHECKING, Any, Final
 import h5py
 import numpy as np
 
+from fsmbench.io.matwrite import wall_clock_wanted
+
 if TYPE_CHECKING:
     from fsmbench.bench.params import Bench
 
@@ -110,7 +112,8 @@ def write_root(f: h5py.File, *, created: float | None,
         Open for writing.
     created : float or None
         ``file_time`` [s since the epoch]; None: now; :data:`UNSTAMPED_S`: none (the
-        attribute ``file_time_note`` says why).
+        attribute ``file_time_note`` says why), or now within
+        :func:`~fsmbench.io.matwrite.wall_clock_headers` (``--timestamp``).
     extra : mapping, optional
         More root attributes (``fsmbench convert``'s provenance).
     """
@@ -119,11 +122,12 @@ def write_root(f: h5py.File, *, created: float | None,
     f.attrs["default"] = "entry"
     f.attrs["creator"] = f"fsmbench {__version__}"
     f.attrs["format"], f.attrs["format_version"] = NEXUS_FORMAT[0], np.int32(NEXUS_FORMAT[1])
-    if created == UNSTAMPED_S:
+    if created == UNSTAMPED_S and not wall_clock_wanted():
         f.attrs["file_time_note"] = ("no file_time: a reproducible output (the same inputs "
-                                     "give the same bytes); fsmbench --timestamp records it")
+                                     "give the same bytes); the commands' --timestamp "
+                                     "records it")
     else:
-        f.attrs["file_time"] = iso_time(created)
+        f.attrs["file_time"] = iso_time(None if created == UNSTAMPED_S else created)
     f.attrs["HDF5_Version"] = h5py.version.hdf5_version
     for key, value in (extra or {}).items():
         f.attrs[key] = value
