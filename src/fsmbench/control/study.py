@@ -178,6 +178,9 @@ class DesignResult:
         The twin's reference step beyond the DAC's reach without and with
         anti-windup (:func:`fsmbench.sim.antiwindup.saturating_step`), per
         controller and axis, e.g. ``"fsmbench_controller/h"``.
+    float32_loops : dict name -> Float32Loop
+        The twin's closed-loop poles with each exported form rounded to
+        float32 (:func:`fsmbench.sim.float32_loop.float32_closed_loop`).
     """
 
     plant_source: str
@@ -196,6 +199,7 @@ class DesignResult:
     qd_gain_v_per_rad: tuple[float, float]
     responses: dict[str, ClosedLoopResponses] = field(default_factory=dict)
     saturating_steps: dict[str, Any] = field(default_factory=dict)
+    float32_loops: dict[str, Any] = field(default_factory=dict)
 
     @property
     def loops(self) -> dict[str, LoopAnalysis]:
@@ -212,7 +216,9 @@ class DesignResult:
         crossover_hz, sensitivity_at_1hz}`` and ``meets_objective``; ``iff``;
         ``robustness`` (fsmbench's controller) and ``seed_robustness``;
         ``newport_to_beam``; ``options``; ``saturating_step`` (per controller and
-        axis, :meth:`fsmbench.sim.antiwindup.SaturatingStep.to_json`).
+        axis, :meth:`fsmbench.sim.antiwindup.SaturatingStep.to_json`);
+        ``float32_closed_loop`` (per controller,
+        :meth:`fsmbench.sim.float32_loop.Float32Loop.to_json`).
         """
         f0 = self.objective.frequency_hz
         fsm = {**self.fsmbench.to_json(), "design": self.design.to_json()}
@@ -234,6 +240,7 @@ class DesignResult:
             "options": self.options.to_json(),
             "checks": [c.to_json() for c in self.checks],
             "saturating_step": _steps_json(self.saturating_steps),
+            "float32_closed_loop": {k: v.to_json() for k, v in self.float32_loops.items()},
         })
 
     @property
@@ -364,14 +371,16 @@ def design_study(plant: PlantModel, *, bench: Bench,
                             ("fsmbench_controller", "fsmbench's controller"))}
     # The twin runs the controllers here (sim builds on control): imported when used.
     from fsmbench.sim.antiwindup import saturating_step
+    from fsmbench.sim.float32_loop import float32_closed_loop
 
+    who = (("seed_controller", "the ESRF study's controller"),
+           ("fsmbench_controller", "fsmbench's controller"))
     steps = {f"{name}/{axis}": saturating_step(bench, controllers[name], name=words, axis=axis)
-             for name, words in (("seed_controller", "the ESRF study's controller"),
-                                 ("fsmbench_controller", "fsmbench's controller"))
-             for axis in ("h", "v")}
+             for name, words in who for axis in ("h", "v")}
+    f32 = {name: float32_closed_loop(bench, controllers[name], name=words) for name, words in who}
     return DesignResult(plant_source=plant.source, objective=objective, plant=plant_an,
                         seed=seed, fsmbench=fsm, design=design, newport=newport, iff=iff,
                         robustness=rob, seed_robustness=seed_rob, newport_to_beam=n2b,
                         controllers=controllers, options=opts,
                         qd_gain_v_per_rad=_qd_gain(plant), responses=responses,
-                        saturating_steps=steps)
+                        saturating_steps=steps, float32_loops=f32)

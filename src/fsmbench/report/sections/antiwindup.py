@@ -35,6 +35,27 @@ def antiwindup_blocks(res: DesignResult) -> list[Block]:
     if not fsm:
         return []
     first = fsm[0]
+    f32 = []
+    for name, words in _WHO:
+        if (loop := res.float32_loops.get(name)) is None:
+            continue
+        e_sos, e_ss = loop.response_error_sos, loop.response_error_state_space
+        f32.append(
+            f"{words}: the sections' response moves by at most {max(e_sos.values()):.2g} "
+            f"(relative, h and v), controllers.mat's Kd by {max(e_ss.values()):.2g}; on the "
+            f"twin the closed loop's poles move by at most {loop.pole_shift_sos:.2g} "
+            f"(sections) and {loop.pole_shift_state_space:.2g} (Kd) in the z-plane, its "
+            f"largest pole modulus goes from {loop.radius_float64:.6f} to "
+            f"{loop.radius_float32_sos:.6f} (sections) and {loop.radius_float32_state_space:.6f}"
+            f" (Kd): {'stable' if loop.sos_stable and loop.state_space_stable else 'UNSTABLE'}")
+    float32_text = (
+        ["Will the exported controllers run on a float32 target? fsmbench's sections' "
+         "coefficients span many decades (the overall gain sits in the first section, the "
+         "integrators' numerators are of order Ts²) and four poles per axis sit on z = 1. "
+         "Rounding every "
+         "coefficient to float32 (from 0.1 Hz to 0.9 of the Nyquist frequency): "
+         + "; ".join(f32) + ". The integrators' denominators are exact in float32, so they "
+         "stay integrators; the arithmetic's own roundoff was not simulated."] if f32 else [])
     said = []
     for name, words in _WHO:
         parts = []
@@ -48,6 +69,7 @@ def antiwindup_blocks(res: DesignResult) -> list[Block]:
         if parts:
             said.append(f"{words[0].upper()}{words[1:]}: " + "; ".join(parts))
     return [
+        *float32_text,
         "What happens when the DAC saturates? fsmbench's controller has four integrators per "
         "axis and the ESRF study's two; while the command sits on the ±10 V rail they keep "
         "integrating. The exported controllers carry a back-calculation anti-windup "
