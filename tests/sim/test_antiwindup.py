@@ -147,3 +147,41 @@ def test_saturating_step_recovers_with_antiwindup_and_not_without(
 def test_seed_controller_has_two_integrators_per_axis() -> None:
     k = seed_decentralised_controller()
     assert [antiwindup_channel(_sos(k, i), ts_s=TS).n_integrators for i in range(2)] == [2, 2]
+
+
+def test_the_exports_recipe_runs_like_the_twins_controller(fsm_controller: ct.StateSpace) -> None:
+    """A target written from controllers_sos.json's words alone gives the twin's commands."""
+    from fsmbench.control.export import InputScaling, sos_document
+
+    doc = sos_document({"k": fsm_controller}, ts_s=TS,
+                       scaling=InputScaling(qd_gain_v_per_rad=(-31.0, 36.3), plant_source="x"))
+    lo, hi = doc["dac_rails_v"]["min"], doc["dac_rails_v"]["max"]
+    aw = doc["controllers"]["k"]["h"]["antiwindup"]
+    rows = np.array(aw["sos_integrators_last"])
+    regs = np.zeros((len(rows), 2))  # (s1, s2) of each section
+    gains = {(r["section"], int(r["register"][1]) - 1): r["gain"]
+             for r in aw["integrator_registers"]}
+    ch = antiwindup_channel(_sos(fsm_controller, 0), ts_s=TS)
+    x = np.zeros(ch.a.shape[0])
+    e = np.r_[np.full(300, 0.4), np.zeros(300)]  # beam error [rad]: drives u past the rails
+    clipped = 0
+    for ek in e:
+        # The recipe: DF2T sections in order, u = -v, clip, feed u - u_applied back.
+        w = ek
+        for i, (b0, b1, b2, _a0, a1, a2) in enumerate(rows):
+            y = b0 * w + regs[i, 0]
+            regs[i, 0] = regs[i, 1] + b1 * w - a1 * y
+            regs[i, 1] = b2 * w - a2 * y
+            w = y
+        u = -w
+        u_applied = min(max(u, lo), hi)
+        clipped += u != u_applied
+        for (i, j), g in gains.items():
+            regs[i, j] += g * (u - u_applied)
+        # The twin's form: the same controller as one state space, L on its integrators.
+        v = (ch.c @ x)[0] + ch.d[0, 0] * ek
+        x = ch.a @ x + ch.b[:, 0] * ek
+        x = x + ch.gain * (-v - min(max(-v, lo), hi))
+        # Same products in another order; the registers are O(1e6) V-scaled sums near the rails.
+        assert u == pytest.approx(-v, rel=1e-9, abs=1e-6)
+    assert clipped > 100  # the run spent most of its first half on a rail

@@ -517,9 +517,10 @@ def implementation_note(doc: Mapping[str, Any], *, dac_rails_v: tuple[float, flo
         "(one for a first-order section).",
         f"DAC limits: {dac_rails_v[0]:g} V .. {dac_rails_v[1]:g} V on every command.",
         f"Anti-windup (back-calculation): with the sections in 'sos_integrators_last' order, "
-        f"compute v = the cascade's output and u_applied = -clip(v, rails) as the DAC "
-        f"applies it; after each section's usual update add each integrator_registers "
-        f"entry's gain * (clip(v) - v) to its register (zero while v is within the rails). "
+        f"compute v = the cascade's output, the command u = -v and u_applied = clip(u, "
+        f"rails), what the DAC applies; after every section's usual update add each "
+        f"integrator_registers entry's gain * (u - u_applied) to its register (zero while u "
+        f"is within the rails). "
         f"Tracking time {tracking_time_s:g} s: saturated, the integrators' poles sit at "
         f"exp(-i Ts / Tt), i = 1..n.",
     ]
