@@ -96,13 +96,15 @@ class Float32Check:
     def sentence(self) -> str:
         """One line for the export's note."""
         verdict = "passes" if self.passes else "does not pass"
+        bound = (f"|T| < {self.t_peak_bound:.3g}" if np.isfinite(self.t_peak_bound)
+                 else "any |T|")
         return (f"float32 {self.form.replace('_', '-')}: response within "
                 f"{self.max_relative_error:.2g} relative (worst at {self.worst_f_hz:.3g} Hz) and "
                 f"{self.max_phase_error_deg:.2g} deg of float64 from {self.f_hz[0]:g} Hz to "
                 f"{self.f_hz[-1]:.4g} Hz; poles inside the unit circle stay inside: "
                 f"{'yes' if self.stable_poles_kept else 'NO'}; integrators exactly on z = 1: "
-                f"{'yes' if self.integrators_exact else 'NO'}; a loop stays stable while "
-                f"|T| < {self.t_peak_bound:.3g}; {verdict} the {FLOAT32_REL_TOL:g} tolerance")
+                f"{'yes' if self.integrators_exact else 'NO'}; a loop stays stable with "
+                f"{bound}; {verdict} the {FLOAT32_REL_TOL:g} tolerance")
 
     def to_json(self) -> dict[str, Any]:
         """Plain numbers for the export's JSON."""
