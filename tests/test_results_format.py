@@ -121,7 +121,7 @@ def test_stamped_formats(out: Path) -> None:
     expected = {"identification.json": ("fsmbench.identification", 4),
                 "budget.json": ("fsmbench.budget", 4),
                 "design.json": ("fsmbench.design", 2),
-                "summary.json": ("fsmbench.summary", 2),
+                "summary.json": ("fsmbench.summary", 3),
                 "validation.json": ("fsmbench.validation", 1),
                 "twin-data/twin_truth.json": ("fsmbench.twin_truth", 3)}
     for name, stamp in expected.items():

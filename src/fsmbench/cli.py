@@ -441,8 +441,9 @@ def _stage_folder(args: argparse.Namespace, need_bytes: float) -> Any:
 
 def _cmd_identify(args: argparse.Namespace) -> int:
     from fsmbench.io.truth import read_twin_truth
+    from fsmbench.jsonutil import format_text
     from fsmbench.stages import identify_stage
-    from fsmbench.twin.compare import comparison_rows, readable_table
+    from fsmbench.twin.compare import comparison_json, readable_table
 
     asked = bool(getattr(args, "closed_loop", False))
     if asked:
@@ -471,12 +472,10 @@ def _cmd_identify(args: argparse.Namespace) -> int:
         print(f"wrote {run.final_path(path)}", file=sys.stderr)
     js = result.to_json()
     if args.json:
-        rows = comparison_rows(js, reference=reference, bench=inp.bench)
-        print(json.dumps({"files": [str(run.final_path(p)) for p in paths],
-                          "reference": "true" if reference is not None else "nominal",
-                          "rows": [r.to_json() for r in rows],
-                          "skipped": result.skipped, "warnings": list(result.warnings)},
-                         indent=2, allow_nan=False))
+        print(format_text(comparison_json(
+            js, reference=reference, bench=inp.bench,
+            files=[str(run.final_path(p)) for p in paths], skipped=result.skipped,
+            warnings=list(result.warnings))), end="")
     else:
         print("\n".join(readable_table(js, reference=reference, bench=inp.bench)))
         for finding in result.findings:
@@ -560,6 +559,10 @@ def _cmd_budget(args: argparse.Namespace) -> int:
     for path in paths:
         print(run.final_path(path))
     print(f"total {1e9 * result.total_rms_m:.3g} nm rms; limiting source: {result.limiting}",
+          file=sys.stderr)
+    # The study's verdict quotes another controller's budget: say so, or the two look unequal.
+    print("with the ESRF study's controller as recorded (the study's budget.json has the same "
+          "total; its verdict quotes fsmbench's controller, budget.json's recommended)",
           file=sys.stderr)
     for part, why in result.skipped.items():
         print(f"skipped {part}: {why}", file=sys.stderr)

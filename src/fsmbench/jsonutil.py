@@ -8,13 +8,14 @@ is always ``{"h": …, "v": …}`` (:func:`hv`), never a 2-element list.
 
 from __future__ import annotations
 
+import json
 import math
 from collections.abc import Mapping, Sequence
 from typing import Any
 
 import numpy as np
 
-__all__ = ["hv", "plain_json", "stamped"]
+__all__ = ["format_text", "hv", "plain_json", "stamped"]
 
 
 def plain_json(value: Any) -> Any:
@@ -72,3 +73,48 @@ def stamped(payload: Mapping[str, Any], *, format: str, version: int) -> dict[st
                          f"got {format!r} v{version}")
     rest = {k: v for k, v in payload.items() if k not in ("format", "format_version")}
     return {"format": format, "format_version": int(version), **rest}
+
+
+def _sorted(value: Any) -> Any:
+    """``value`` with every mapping's keys in sorted order, at every depth."""
+    if isinstance(value, Mapping):
+        return {k: _sorted(value[k]) for k in sorted(value)}
+    if isinstance(value, list):
+        return [_sorted(v) for v in value]
+    return value
+
+
+def format_text(payload: Mapping[str, Any], *, sort_keys: bool = False,
+                indent: int | None = 2) -> str:
+    """A format's file content: ``format`` and ``format_version`` its first two keys.
+
+    ``json.dumps(..., sort_keys=True)`` would file them among the other keys in
+    alphabetical order; here the rest is sorted (at every depth) behind them.
+
+    Parameters
+    ----------
+    payload : mapping
+        The file's content, holding ``format`` and ``format_version``
+        (:func:`stamped`); made plain with :func:`plain_json` (NaN to null).
+    sort_keys : bool
+        Sort every other key, at every depth (reproducible files).
+    indent : int or None
+        As :func:`json.dumps`.
+
+    Returns
+    -------
+    str
+        Strict JSON text, ending with a newline.
+
+    Raises
+    ------
+    ValueError
+        When ``payload`` has no ``format`` or ``format_version``.
+    """
+    if "format" not in payload or "format_version" not in payload:
+        raise ValueError(f"a result file needs 'format' and 'format_version', got keys "
+                         f"{sorted(payload)[:8]}")
+    plain = plain_json(payload)
+    body = _sorted(plain) if sort_keys else plain
+    ordered = stamped(body, format=str(plain["format"]), version=int(plain["format_version"]))
+    return json.dumps(ordered, indent=indent, allow_nan=False, ensure_ascii=True) + "\n"

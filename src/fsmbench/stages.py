@@ -24,9 +24,8 @@ its first keys (``docs/results.md``).
 
 from __future__ import annotations
 
-import json
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -41,16 +40,18 @@ from fsmbench.ident.pipeline import (
     write_identification,
 )
 from fsmbench.io.atomic import atomic_write_text
-from fsmbench.jsonutil import plain_json, stamped
+from fsmbench.jsonutil import format_text, stamped
 
 __all__ = [
     "BUDGET_FORMAT",
     "DESIGN_FORMAT",
     "IDENT_EXPERIMENTS",
+    "RECOMMENDED_SKIPPED",
     "VALIDATION_FORMAT",
     "DesignStage",
     "PlantChoice",
     "RecordedLoop",
+    "SavedIdentification",
     "SimulationBench",
     "ValidationStage",
     "budget_stage",
@@ -72,6 +73,13 @@ IDENT_EXPERIMENTS = ("data_cal_pd_h", "data_cal_pd_v", "data_uch", "data_ucv", "
 #: ids for keys, (h, v) pairs as ``{"h", "v"}``, huddle bands as a list; 4: each row's
 #: provenance, ``stationary_total_rms_m``, ``recommended``: fsmbench's controller's budget).
 BUDGET_FORMAT = ("fsmbench.budget", 4)
+#: ``budget.json``'s ``recommended_skipped`` when no controller was designed in the run.
+RECOMMENDED_SKIPPED = (
+    "no controller was designed in this run, so there is no budget with fsmbench's "
+    "controller: budget.total_rms_m is the recorded loop's (the ESRF study's controller as "
+    "the closed-loop records ran it), the same number the study's budget.json has on the "
+    "same recordings and identification; the study's verdict quotes recommended (fsmbench's "
+    "controller), which fsmbench study writes")
 #: ``design.json``'s format and version (2: ``closed_loop_twin`` names the bench it ran on,
 #: ``bench``/``bench_kind``, and is null with ``closed_loop_skipped`` when there was none).
 DESIGN_FORMAT = ("fsmbench.design", 2)
@@ -83,13 +91,43 @@ def _quiet(_msg: str) -> None:
     return None
 
 
+@dataclass(frozen=True)
+class SavedIdentification:
+    """What the budget reads of an identification besides its plant, read back from a
+    previous run's ``identification.json`` (``--bench DIR``).
+
+    Attributes
+    ----------
+    path : str
+        The ``identification.json`` read.
+    noise_model : NoiseModelFit or None
+        The noise its open-loop huddle tests fitted (None: none was fitted).
+    recorded_loops : mapping
+        ``diagnostics.recorded_loop``: per axis ``{"verdict", "gd_used_v_per_rad",
+        "gd_used_std_v_per_rad", …}``, the 4QD gains [V/rad] the closed-loop records ran.
+    checks : tuple of dict
+        Its plausibility checks, as written.
+    """
+
+    path: str
+    noise_model: Any = None
+    recorded_loops: Mapping[str, Mapping[str, Any]] = field(default_factory=dict)
+    checks: tuple[Mapping[str, Any], ...] = ()
+
+
 @dataclass(frozen=True, eq=False)
 class PlantChoice:
-    """The plant a stage works on and where it comes from."""
+    """The plant a stage works on and where it comes from.
+
+    ``saved``: with no ``identification`` in memory, what a previous run's
+    ``identification.json`` adds to its plant (the measured noise and the recorded loop's
+    gains), so that ``budget --bench DIR`` computes the budget the study computes.
+    """
 
     plant: PlantModel
     source: str
     identification: Identification | None
+    saved: SavedIdentification | None = None
 
 
 def identify_stage(recordings: Mapping[str, xr.Dataset], *, bench: Bench, out_dir: Path,
@@ -176,21 +214,26 @@ class RecordedLoop:
         return ", ".join(parts)
 
 
-def recorded_loop(ident: Identification | None, *, bench: Bench) -> RecordedLoop:
+def recorded_loop(ident: Identification | Mapping[str, Mapping[str, Any]] | None, *,
+                  bench: Bench) -> RecordedLoop:
     """The recorded loop's 4QD gains: measured where the records ran the ESRF study's
     controller, the bench file's otherwise. A measured gain within 3 of its standard
     deviations (or 0.1 %) of the bench file's is the bench file's: the records confirm it,
-    and a simulation of the loop does not change with the fit's last digits."""
+    and a simulation of the loop does not change with the fit's last digits.
+
+    ``ident``: the identification, or its ``diagnostics.recorded_loop`` as written (per
+    axis ``verdict``, ``gd_used_v_per_rad``, ``gd_used_std_v_per_rad``)."""
     gd = bench.nominal.quad_diode.gain_v_per_rad
-    found = {} if ident is None else ident.recorded_loop
+    found: Mapping[str, Any] = ({} if ident is None else ident if isinstance(ident, Mapping)
+                                else {a: r.to_json() for a, r in ident.recorded_loop.items()})
     values, measured = [], []
     for axis in "hv":
         loop = found.get(axis)
-        ok = loop is not None and loop.verdict == "seed"
+        ok = loop is not None and loop.get("verdict") == "seed"
         value = gd[axis]
         if ok and loop is not None:
-            value = float(loop.gd_used_v_per_rad)
-            close = max(3.0 * loop.gd_used_std_v_per_rad, 1e-3 * abs(gd[axis]))
+            value = float(loop["gd_used_v_per_rad"])
+            close = max(3.0 * float(loop["gd_used_std_v_per_rad"]), 1e-3 * abs(gd[axis]))
             if abs(value - gd[axis]) <= close:
                 value = gd[axis]
         values.append(value)
@@ -199,8 +242,7 @@ def recorded_loop(ident: Identification | None, *, bench: Bench) -> RecordedLoop
 
 
 def _write_json(path: Path, payload: Mapping[str, Any]) -> Path:
-    return atomic_write_text(path, json.dumps(plain_json(payload), indent=2, sort_keys=True,
-                                              allow_nan=False) + "\n")
+    return atomic_write_text(path, format_text(payload, sort_keys=True))
 
 
 def budget_stage(recordings: Mapping[str, xr.Dataset], *, bench: Bench, out_dir: Path,
@@ -214,10 +256,14 @@ def budget_stage(recordings: Mapping[str, xr.Dataset], *, bench: Bench, out_dir:
     """
     from fsmbench.budget.study import budget_study
 
-    ident = plant.identification
-    # The measured noise replaces the bench file's only from a trusted identification.
+    ident, saved = plant.identification, plant.saved
+    # The measured noise replaces the bench file's only from a trusted identification (a
+    # saved one with warnings is refused when it is read).
     trusted = ident is not None and not ident.warnings and plant.plant is ident.plant
-    loop = recorded_loop(ident, bench=bench)
+    noise_model = (ident.noise_model if trusted and ident is not None
+                   else saved.noise_model if ident is None and saved is not None else None)
+    loop = recorded_loop(ident if ident is not None or saved is None else saved.recorded_loops,
+                         bench=bench)
     result = budget_study(recordings, bench=bench, plant=plant.plant, progress=progress,
                           recommended=recommended,
                           controller=_recorded_seed_controller(plant.plant, bench=bench,
@@ -225,12 +271,17 @@ def budget_stage(recordings: Mapping[str, xr.Dataset], *, bench: Bench, out_dir:
                           controller_name=("ESRF study 9.2 K, Tustin at 1/fs (9.3), on the 4QD "
                                            f"gains the records ran ({loop.words()})"
                                            if any(loop.measured) else ""),
-                          noise_model=ident.noise_model if trusted and ident else None)
+                          noise_model=noise_model)
     # The stage's plant source (which blocks were identified, or why nominal) replaces the
     # plant model's own shorter one.
     payload = {**result.to_json(), "plant_source": plant.source}
+    if recommended is None:
+        # The study quotes the recommended budget in its verdict; say why this one has none.
+        payload["recommended_skipped"] = RECOMMENDED_SKIPPED
     if plant.identification is not None:  # the plant's own verdicts travel with it
         payload["plant_checks"] = [c.to_json() for c in plant.identification.checks]
+    elif saved is not None:
+        payload["plant_checks"] = [dict(c) for c in saved.checks]
     name, version = BUDGET_FORMAT
     return result, [_write_json(out_dir / "budget.json",
                                 stamped(payload, format=name, version=version))]

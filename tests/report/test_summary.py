@@ -252,7 +252,7 @@ def test_summary_json_has_numbers_units_provenance_and_the_display_beside() -> N
                       identification=None, plant_source="identified", plant_identified=True,
                       budget=_budget(1e-9), design=_design(1e-4), validation=_validation())
     js = json.loads(json.dumps(s.to_json(), allow_nan=False))
-    assert js["format"] == "fsmbench.summary" and js["format_version"] == 2
+    assert js["format"] == "fsmbench.summary" and js["format_version"] == 3
     assert js["verdict_status"] == "meets" and js["next_step"]
     assert js["notices"][0]["kind"] == "saturation"
     assert all(" " not in k and "-" not in k for k in js)
@@ -262,8 +262,20 @@ def test_summary_json_has_numbers_units_provenance_and_the_display_beside() -> N
         assert req["unit"] and req["limits"] and req["display"]["value"]
         assert all(isinstance(v, float) or v is None for v in req["values"].values())
     by = {r["name"]: r for r in js["requirements"]}
-    assert by["closed_loop_simulation"]["values"] == {"h": 3.0e-5, "v": 3.1e-5}
-    assert by["closed_loop_simulation"]["unit"] == "rad"
+    # Version 3: values are what the limits bound, in one unit; the rms in other_values.
+    row = by["closed_loop_simulation"]
+    assert row["values"] == {"h": 0.99, "v": 1.01} and row["unit"] == "1"
+    assert row["quantity"] == "simulated_over_predicted"
+    assert row["other_values"]["simulated_rms_rad"] == {"h": 3.0e-5, "v": 3.1e-5}
+    row = by["model_validation"]
+    assert row["values"] == {"h": 1.02, "v": 1.02} and row["unit"] == "1"
+    assert row["other_values"]["recorded_rms_rad"] == {"h": 4.0e-5 * 1.02, "v": 4.1e-5 * 1.02}
+    for req in js["requirements"]:
+        # Each status follows from its values and limits alone (all judged rows here).
+        inside = all(v is None or (req["limits"].get("min", -math.inf) <= v
+                                   <= req["limits"].get("max", math.inf))
+                     for v in req["values"].values())
+        assert req["passed"] is None or req["passed"] == inside, req["name"]
 
 
 def test_the_study_writes_the_summary_and_keeps_timings_apart(twin_study: StudyResult) -> None:

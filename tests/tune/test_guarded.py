@@ -74,6 +74,16 @@ def test_tune_json(drift_tune: TuneResult) -> None:
             assert set(js[key][field]) == {"h", "v"}, (key, field)
 
 
+def test_tune_json_file_starts_with_its_format(drift_tune: TuneResult, tmp_path) -> None:
+    from fsmbench.tune.cli import write_tune_json
+
+    path = write_tune_json(tmp_path / "tune.json", drift_tune.to_json())
+    js = json.loads(path.read_text())
+    assert list(js)[:2] == ["format", "format_version"]
+    assert (js["format"], js["format_version"]) == ("fsmbench.tune", 1)
+    assert js == json.loads(json.dumps(drift_tune.to_json(), allow_nan=False))  # all kept
+
+
 def test_a_worse_candidate_is_refused(bench: Bench) -> None:
     running = _seed_loop(bench)
     worse = _seed_loop(bench, gain=0.3)  # less loop gain: a larger error at 1 Hz

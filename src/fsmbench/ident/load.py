@@ -190,7 +190,30 @@ def load_identified_plant(folder: str | Path, *, option: str = "--bench") -> Pla
         raise RecordingError(ident_path, f"the identification raised warnings ({warnings[0]}); "
                                          f"its plant is not trusted, run without {option}")
     plant = read_plant_mat(d / "plant.mat")
-    return PlantChoice(plant, source=f"identified (from {ident_path})", identification=None)
+    return PlantChoice(plant, source=f"identified (from {ident_path})", identification=None,
+                       saved=_saved(ident_path, ident))
+
+
+def _saved(path: Path, ident: Mapping[str, Any]) -> Any:
+    """What the budget reads of ``identification.json`` besides the plant: the fitted noise
+    model, the recorded loop's 4QD gains and the checks (as the study has them in memory)."""
+    from fsmbench.ident.noise_model import NoiseModelFit
+    from fsmbench.stages import SavedIdentification
+
+    raw = ident.get("noise_model")
+    noise = None
+    if isinstance(raw, dict) and raw:
+        try:
+            noise = NoiseModelFit.from_json(raw)
+        except (KeyError, TypeError, ValueError) as exc:
+            raise RecordingError(path, f"has a malformed noise_model ({exc})") from exc
+    diagnostics = ident.get("diagnostics")
+    loops = diagnostics.get("recorded_loop") if isinstance(diagnostics, dict) else None
+    checks = ident.get("checks")
+    return SavedIdentification(
+        path=str(path), noise_model=noise,
+        recorded_loops={str(a): v for a, v in (loops or {}).items() if isinstance(v, dict)},
+        checks=tuple(c for c in (checks or ()) if isinstance(c, dict)))
 
 
 #: The experiment each excitation input is recorded in.

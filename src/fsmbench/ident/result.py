@@ -8,7 +8,6 @@ version first) with ``plant.mat``, ``frf.mat`` and ``bench_identified.toml``.
 
 from __future__ import annotations
 
-import json
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -35,7 +34,7 @@ from fsmbench.ident.sercalo import SercaloFitOptions, SercaloIdentification
 from fsmbench.ident.uncertainty import Uncertain
 from fsmbench.ident.validate import PathValidation
 from fsmbench.io.atomic import atomic_write_text
-from fsmbench.jsonutil import plain_json, stamped
+from fsmbench.jsonutil import format_text, stamped
 
 __all__ = ["IDENTIFICATION_FORMAT", "SEED_TRIMS_S", "Identification", "IdentifyOptions",
            "path_keyed_summary", "write_identification"]
@@ -333,7 +332,7 @@ def write_identification(result: Identification, out_dir: str | Path) -> list[Pa
     name, version = IDENTIFICATION_FORMAT
     payload = stamped(result.to_json(), format=name, version=version)
     paths = [atomic_write_text(out / "identification.json",
-                               json.dumps(plain_json(payload), indent=2, sort_keys=True) + "\n")]
+                               format_text(payload, sort_keys=True))]
     if result.plant is not None:
         paths.append(write_plant_mat(out / "plant.mat", result.plant))
     frfs = {name: part.frf for name, part in (("sercalo", result.sercalo),

@@ -40,6 +40,8 @@ from pathlib import Path
 from types import FrameType
 from typing import Any, Final
 
+from fsmbench.jsonutil import format_text
+
 __all__ = [
     "MANIFEST",
     "InputPaths",
@@ -366,7 +368,7 @@ def _write_manifest(staging: Path, *, command: str, arguments: Sequence[str],
     }
     if timestamp:
         payload["created_utc"] = time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())
-    atomic_write_text(staging / MANIFEST, json.dumps(payload, indent=2, sort_keys=True) + "\n")
+    atomic_write_text(staging / MANIFEST, format_text(payload, sort_keys=True))
 
 
 @contextlib.contextmanager

@@ -44,8 +44,10 @@ FINDINGS = frozenset({"newport_amplitude_bandwidth", "newport_phase_bandwidth",
 
 #: 2: requirements carry numbers (``values`` per axis in SI, ``unit``, ``limits``), a
 #: ``status`` (pass / fail / not verified) and a ``provenance``; the verdict is three-valued
-#: (``verdict_status``) and ends with ``next_step``.
-SUMMARY_FORMAT = ("fsmbench.summary", 2)
+#: (``verdict_status``) and ends with ``next_step``. 3: ``values`` are what ``limits`` bound,
+#: in one ``unit`` (the two prediction checks give their ratios, no longer rad), named by
+#: ``quantity``; the other numbers are in ``other_values``, units in their keys.
+SUMMARY_FORMAT = ("fsmbench.summary", 3)
 
 Provenance = Literal["measured", "derived", "predicted", "assumed", ""]
 Status = Literal["pass", "fail", "not verified"]
@@ -95,13 +97,18 @@ class Requirement:
     link : str
         Anchor of the report chapter.
     values : mapping
-        The numbers behind ``value``, SI: ``{"h": x, "v": y}`` per axis, or
+        The numbers ``limits`` bound, SI: ``{"h": x, "v": y}`` per axis, or
         ``{"total": x}``.
     unit : str
-        Unit of ``values`` (``"1"`` for dimensionless).
+        Unit of ``values`` and ``limits`` (``"1"`` for dimensionless).
     limits : mapping
-        ``{"min": a}``, ``{"max": b}`` or both, in ``unit`` (a ratio's band for
-        the checks of a prediction).
+        ``{"min": a}``, ``{"max": b}`` or both, in ``unit``.
+    quantity : str
+        What ``values`` are, an id with the unit in it (``phase_margin_deg``,
+        ``simulated_over_predicted``).
+    other_values : mapping
+        The other numbers behind ``value``, each under an id with its unit
+        (``simulated_rms_rad``: ``{"h", "v"}`` [rad]).
     provenance : {"measured", "derived", "predicted", "assumed"}
     provenance_detail : str
         Where the number comes from, in words (which bench it ran on).
@@ -129,6 +136,8 @@ class Requirement:
     missing: str = ""
     reason: int = 0
     action: str = ""
+    quantity: str = ""
+    other_values: Mapping[str, Any] = field(default_factory=dict)
 
     @property
     def status(self) -> Status:
@@ -140,8 +149,9 @@ class Requirement:
     def to_json(self) -> dict[str, Any]:
         """Numbers first, then the words (``display`` holds what a reader sees)."""
         return {"name": self.name, "description": self.description, "status": self.status,
-                "passed": self.passed, "values": dict(self.values), "unit": self.unit,
-                "limits": dict(self.limits), "provenance": self.provenance,
+                "passed": self.passed, "quantity": self.quantity, "values": dict(self.values),
+                "unit": self.unit, "limits": dict(self.limits),
+                "other_values": dict(self.other_values), "provenance": self.provenance,
                 "provenance_detail": self.provenance_detail, "missing": self.missing,
                 "reason": self.reason, "action": self.action,
                 "display": {"value": self.value, "limit": self.limit},
@@ -270,7 +280,7 @@ def _loop_requirements(design: Mapping[str, Any], spec: Specification, *,
                      "beam-angle error (the ESRF study's maximum wanted error is 10 µrad)."),
         link="#decentralised-control", values=_hv(s1), unit="1",
         limits={"max": spec.sensitivity_bound}, provenance=prov, provenance_detail=detail,
-        missing=missing))
+        missing=missing, quantity="sensitivity_at_1hz"))
     stable = {a: bool(fsm[a]["stable"]) for a in ("h", "v")}
     gm = {a: float(fsm[a]["gain_margin_db"] if fsm[a]["gain_margin_db"] is not None
                    else math.inf) for a in ("h", "v")}
@@ -287,7 +297,7 @@ def _loop_requirements(design: Mapping[str, Any], spec: Specification, *,
         explanation=unstable, link="#decentralised-control",
         values={a: (gm[a] if math.isfinite(gm[a]) else None) for a in "hv"}, unit="dB",
         limits={"min": spec.gain_margin_min_db}, provenance=prov, provenance_detail=detail,
-        missing=missing))
+        missing=missing, quantity="gain_margin_db"))
     out.append(Requirement(
         name="phase_margin",
         description="fsmbench's controller: closed loop stable, phase margin, h / v",
@@ -296,7 +306,7 @@ def _loop_requirements(design: Mapping[str, Any], spec: Specification, *,
         explanation=unstable, link="#decentralised-control",
         values={a: (pm[a] if math.isfinite(pm[a]) else None) for a in "hv"}, unit="deg",
         limits={"min": spec.phase_margin_min_deg}, provenance=prov, provenance_detail=detail,
-        missing=missing))
+        missing=missing, quantity="phase_margin_deg"))
     rob = design.get("robustness") or {}
     if rob:
         n = len(rob.get("cases", []))
@@ -309,10 +319,12 @@ def _loop_requirements(design: Mapping[str, Any], spec: Specification, *,
                    f"{rob['worst_gain_margin_db']:.1f} dB"),
             limit="all stable", passed=judged(bool(rob["all_stable"])),
             link="#decentralised-control",
-            values={"unstable_plants": float(n_unstable),
-                    "worst_gain_margin_db": float(rob["worst_gain_margin_db"])},
-            unit="count, dB", limits={"max": 0.0}, provenance=prov,
-            provenance_detail=detail + " over the perturbed plants", missing=missing))
+            values={"unstable_plants": float(n_unstable)}, unit="1", limits={"max": 0.0},
+            quantity="unstable_plants",
+            other_values={"perturbed_plants": float(n),
+                          "worst_gain_margin_db": float(rob["worst_gain_margin_db"])},
+            provenance=prov, provenance_detail=detail + " over the perturbed plants",
+            missing=missing))
     return out
 
 
@@ -325,8 +337,9 @@ def _closed_loop_requirement(design: Mapping[str, Any], *, is_twin: bool) -> Req
         return Requirement(
             name="closed_loop_simulation", description=description, value="not simulated",
             limit="simulated / predicted within 0.9–1.1", passed=None,
-            link="#decentralised-control", unit="rad", limits={"min": 0.9, "max": 1.1},
-            provenance="predicted", missing=f"a bench identified from the recordings ({why})")
+            link="#decentralised-control", unit="1", limits={"min": 0.9, "max": 1.1},
+            quantity="simulated_over_predicted", provenance="predicted",
+            missing=f"a bench identified from the recordings ({why})")
     ratio = twin["measured_over_predicted"]
     ok = all(0.9 <= float(r) <= 1.1 for r in ratio.values())
     qd = twin["predicted_parts_rad"]
@@ -346,8 +359,11 @@ def _closed_loop_requirement(design: Mapping[str, Any], *, is_twin: bool) -> Req
         limit="simulated / predicted within 0.9–1.1", passed=ok,
         explanation=(f"Predicted: {where}. The 4QD's own noise makes {_pair(share, '.0%')} of "
                      "the variance: the loop cannot reject what its sensor adds."),
-        link="#decentralised-control", values=_hv(twin["tracking_error_rms_rad"]), unit="rad",
-        limits={"min": 0.9, "max": 1.1}, provenance="predicted", provenance_detail=where)
+        link="#decentralised-control", values=_hv(ratio), unit="1",
+        limits={"min": 0.9, "max": 1.1}, quantity="simulated_over_predicted",
+        other_values={"simulated_rms_rad": _hv(twin["tracking_error_rms_rad"]),
+                      "predicted_rms_rad": _hv(twin["predicted_rms_rad"])},
+        provenance="predicted", provenance_detail=where)
 
 
 def _validation_requirement(validation: Any, skipped: str) -> Requirement:
@@ -359,7 +375,8 @@ def _validation_requirement(validation: Any, skipped: str) -> Requirement:
         return Requirement(
             name="model_validation", description=description, value="not compared",
             limit="recorded / predicted within 0.8–1.25", passed=None, link="#validation",
-            unit="rad", limits={"min": 0.8, "max": 1.25}, provenance="measured",
+            unit="1", limits={"min": 0.8, "max": 1.25}, quantity="recorded_over_predicted",
+            provenance="measured",
             missing=skipped or "data_rep_h, data_rep_v and an identified bench")
     v = validation
     lo, hi = v.band_hz
@@ -380,8 +397,14 @@ def _validation_requirement(validation: Any, skipped: str) -> Requirement:
         explanation=(f"{lo:g} Hz to {hi:g} Hz, {v.n_periods} periods; predicted by simulating "
                      f"{', '.join(v.experiments)} on {v.bench} with {v.controller}."
                      + (f" {v.reason}." if v.reason else "")),
-        link="#validation", values=_hv(v.measured_rms_rad), unit="rad",
-        limits={"min": v.limits[0], "max": v.limits[1]}, provenance="measured",
+        link="#validation", values=_hv(v.ratio), unit="1",
+        limits={"min": v.limits[0], "max": v.limits[1]}, quantity="recorded_over_predicted",
+        other_values={"recorded_rms_rad": _hv(v.measured_rms_rad),
+                      "predicted_rms_rad": _hv(v.predicted_rms_rad),
+                      **({"accepted": {a: {"min": float(lo_hi[0]), "max": float(lo_hi[1])}
+                                       for a, lo_hi in accepted.items()}}
+                         if (accepted := getattr(v, "accepted", None)) else {})},
+        provenance="measured",
         provenance_detail=f"recorded in {', '.join(v.experiments)}; compared with {v.bench}",
         action=v.action)
 
@@ -419,7 +442,7 @@ def _distance_requirement(budget: Any, spec: Specification) -> tuple[Requirement
         value=f"{total * 1e9:.3g} nm", limit=f"≤ {limit * 1e9:g} nm",
         passed=(total <= limit) if verified else None, explanation=explanation,
         link="#error-budget", values={"total": total}, unit="m", limits={"max": limit},
-        provenance="predicted",
+        quantity="distance_error_rms_m", provenance="predicted",
         provenance_detail=("budget of measured inputs (" + ", ".join(measured_inputs)
                            + ") and assumed ones (" + ", ".join(r.name for r in assumed) + ")"
                            if measured_inputs else

@@ -35,7 +35,6 @@ from __future__ import annotations
 
 import argparse
 import functools
-import json
 import math
 import sys
 from pathlib import Path
@@ -43,7 +42,8 @@ from typing import Any
 
 from fsmbench.cli_args import positive, seconds, seed
 
-__all__ = ["add_closed_loop_options", "add_tune_command", "closed_loop_simulation"]
+__all__ = ["add_closed_loop_options", "add_tune_command", "closed_loop_simulation",
+           "write_tune_json"]
 
 #: A controller pole closer than this to z = -1 counts as on it [1]: its Tustin pre-image
 #: would lie beyond 4 / (T 1e-6) rad/s (6e5 times the sample rate), no roll-off of a
@@ -265,7 +265,6 @@ def _tune(args: argparse.Namespace, proxy: Any) -> int:
     """One tune on the twin (``proxy`` None) or on the device ``proxy`` reaches."""
     from fsmbench.bench.params import load_bench
     from fsmbench.ident.closed_loop import write_closed_loop_identification
-    from fsmbench.io.atomic import atomic_write_text
     from fsmbench.io.outdir import check_inputs, output_transaction
     from fsmbench.progress import Reporter
     from fsmbench.report.html import write_report
@@ -315,9 +314,7 @@ def _tune(args: argparse.Namespace, proxy: Any) -> int:
         payload["watch"] = _watch(args, bench, result, running, say)
     with output_transaction(out, command="tune", arguments=argv, need_bytes=2**23,
                             inputs=inputs) as run:
-        paths = [atomic_write_text(run.staging / "tune.json",
-                                   json.dumps(payload, indent=2, sort_keys=True,
-                                              allow_nan=False) + "\n")]
+        paths = [write_tune_json(run.staging / "tune.json", payload)]
         paths += write_closed_loop_identification(result.measurement.identification,
                                                   run.staging / "identification")
         paths.append(write_report(run.staging / "report.html",
@@ -338,6 +335,30 @@ def _tune(args: argparse.Namespace, proxy: Any) -> int:
     for path in paths:
         print(f"wrote {run.final_path(Path(path))}", file=sys.stderr)
     return 0
+
+
+def write_tune_json(path: Path, payload: dict[str, Any]) -> Path:
+    """Write ``tune.json`` (``TuneResult.to_json()``, ``watch`` added) atomically.
+
+    ``format`` and ``format_version`` come first, every other key sorted at every depth
+    (reproducible files).
+
+    Parameters
+    ----------
+    path : Path
+        The file to write.
+    payload : dict
+        Its content, stamped ``fsmbench.tune``.
+
+    Returns
+    -------
+    Path
+        ``path``.
+    """
+    from fsmbench.io.atomic import atomic_write_text
+    from fsmbench.jsonutil import format_text
+
+    return atomic_write_text(path, format_text(payload, sort_keys=True))
 
 
 class _Journal:
@@ -363,13 +384,12 @@ class _Journal:
         self.last: Any = None
 
     def __call__(self, result: Any) -> None:
-        from fsmbench.io.atomic import atomic_write_text
         from fsmbench.io.outdir import output_transaction
 
-        text = json.dumps(result.to_json(), indent=2, sort_keys=True, allow_nan=False) + "\n"
+        payload = result.to_json()
         with output_transaction(self.out, command="tune", arguments=self.arguments,
                                 need_bytes=2**20, inputs=self.inputs) as run:
-            atomic_write_text(run.staging / "tune.json", text)
+            write_tune_json(run.staging / "tune.json", payload)
         self.last = result
 
 

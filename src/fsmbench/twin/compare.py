@@ -18,8 +18,18 @@ from typing import Any
 from fsmbench.bench.params import Bench
 from fsmbench.twin.truth import model_values
 
-__all__ = ["TARGETS", "ComparisonRow", "compare_with_truth", "comparison_rows", "quantity",
-           "readable_table"]
+__all__ = ["COMPARISON_FORMAT", "TARGETS", "ComparisonRow", "compare_with_truth",
+           "comparison_json", "comparison_rows", "quantity", "readable_table"]
+
+#: ``fsmbench identify --json``'s format (2: stamped; each target as numbers,
+#: ``target_relative`` / ``target_abs`` / ``target_samples``, and ``within_target_reason``
+#: when ``within_target`` is null; version 1, unstamped, had the target as text).
+COMPARISON_FORMAT = ("fsmbench.identify_comparison", 2)
+
+#: Why a row against the bench file is not judged.
+NOT_JUDGED_NOMINAL = ("no true value: the reference is the bench file's nominal value, and "
+                      "the difference is how far this bench is from it, not an error of the "
+                      "identification (the accuracy targets hold against the twin's truth)")
 
 # key -> (kind, tolerance): "rel" relative, "abs" absolute in the key's unit, "samples"
 # absolute in sampling periods of the reference's (or the identification's) fs_hz.
@@ -46,9 +56,12 @@ class ComparisonRow:
     """One key: identified, reference, difference and whether the target holds.
 
     ``reference_kind`` is ``"true"`` (twin) or ``"nominal"``; ``within_target``
-    is None against nominal values (the targets are for the twin);
-    ``tolerance_abs`` is the target in the key's unit for absolute targets
-    (sample targets converted at the rate), None for relative ones.
+    is None when it cannot be judged, ``not_judged`` saying why (against nominal
+    values: the targets are for the twin); ``tolerance_abs`` is the target in the
+    key's unit for absolute targets (sample targets converted at the rate), None for
+    relative ones; ``target_relative`` the relative target [1] (None for absolute
+    ones); ``target_samples`` a sample target in sampling periods. ``target`` is the
+    target as text, for display.
     """
 
     key: str
@@ -59,10 +72,17 @@ class ComparisonRow:
     target: str
     within_target: bool | None
     tolerance_abs: float | None = None
+    target_relative: float | None = None
+    target_samples: float | None = None
+    not_judged: str = ""
 
     def to_json(self) -> dict[str, Any]:
-        """Plain values."""
-        return asdict(self)
+        """Numbers: each target as a number in its unit, the text under ``display``."""
+        out = asdict(self)
+        del out["target"], out["tolerance_abs"], out["not_judged"]
+        out |= {"target_abs": self.tolerance_abs, "within_target_reason": self.not_judged,
+                "display": {"target": self.target}}
+        return out
 
     def __str__(self) -> str:
         mark = {True: "ok", False: "MISSED", None: ""}[self.within_target]
@@ -134,15 +154,44 @@ def comparison_rows(identified: Mapping[str, Any], *, reference: Mapping[str, An
         rel = ours / theirs - 1 if theirs != 0 else float("nan")
         err = abs(rel) if tol_kind == "rel" else abs(ours - theirs)
         target = f"±{tol:.3g}" if tol_kind == "abs" else f"±{tol:.1%}"
+        samples = tol if tol_kind == "samples" else None
         if tol_kind == "samples":
             fs = _get(ref, "fs_hz") or _get(identified, "fs_hz") or 1e4
             target = f"±{tol:g} sample ({tol / fs:.3g} s)"
             tol = tol / fs
+        why = (NOT_JUDGED_NOMINAL if reference is None else
+               "the true value is 0: no relative difference" if err != err else "")
         rows.append(ComparisonRow(key=key, identified=ours, reference=theirs,
                                   reference_kind=kind, relative_difference=rel, target=target,
-                                  within_target=(err <= tol) if reference is not None else None,
-                                  tolerance_abs=None if tol_kind == "rel" else tol))
+                                  within_target=None if why else bool(err <= tol),
+                                  tolerance_abs=None if tol_kind == "rel" else tol,
+                                  target_relative=tol if tol_kind == "rel" else None,
+                                  target_samples=samples, not_judged=why))
     return rows
+
+
+def comparison_json(identified: Mapping[str, Any], *, reference: Mapping[str, Any] | None,
+                    bench: Bench, **extra: Any) -> dict[str, Any]:
+    """``fsmbench identify --json``'s document: :data:`COMPARISON_FORMAT` first, the rows.
+
+    Parameters
+    ----------
+    identified, reference, bench
+        As :func:`comparison_rows`.
+    **extra
+        More top-level keys (``files``, ``skipped``, ``warnings``).
+
+    Returns
+    -------
+    dict
+        ``format``, ``format_version``, ``reference`` (``"true"`` or ``"nominal"``),
+        ``rows`` (:meth:`ComparisonRow.to_json`) and ``extra``.
+    """
+    rows = comparison_rows(identified, reference=reference, bench=bench)
+    name, version = COMPARISON_FORMAT
+    return {"format": name, "format_version": version,
+            "reference": "true" if reference is not None else "nominal",
+            "rows": [r.to_json() for r in rows], **extra}
 
 
 def readable_table(identified: Mapping[str, Any], *, reference: Mapping[str, Any] | None,

@@ -32,7 +32,7 @@ from fsmbench.bench.params import Bench, default_bench
 from fsmbench.io.atomic import atomic_write_text
 from fsmbench.io.recording import RecordingFormat, make_recording, write_recording
 from fsmbench.io.signals import EXPERIMENTS
-from fsmbench.jsonutil import stamped
+from fsmbench.jsonutil import format_text, stamped
 from fsmbench.progress import advance
 from fsmbench.sim.controller import closed_loop_spectral_radius
 from fsmbench.sim.discretize import DiscretePlant
@@ -188,8 +188,8 @@ def stream_bench(bench: Bench | None = None, *, out_dir: str | Path, seed: int =
                        controller_name=None if controller is None else controller.name)
     truth_path = out / "twin_truth.json"
     name, version = TRUTH_FORMAT
-    atomic_write_text(truth_path, json.dumps(stamped(truth, format=name, version=version),
-                                             indent=2, sort_keys=True) + "\n")
+    atomic_write_text(truth_path, format_text(stamped(truth, format=name, version=version),
+                                              sort_keys=True))
     return [*(out / f"{s.name}.h5" for s in specs), truth_path]
 
 
@@ -324,8 +324,8 @@ def write_twin(run: TwinRun, out_dir: str | Path, *,
         paths.append(path)
     truth_path = out / "twin_truth.json"
     name, version = TRUTH_FORMAT
-    atomic_write_text(truth_path, json.dumps(stamped(run.truth, format=name, version=version),
-                                             indent=2, sort_keys=True) + "\n")
+    atomic_write_text(truth_path, format_text(stamped(run.truth, format=name, version=version),
+                                              sort_keys=True))
     paths.append(truth_path)
     return paths
 
