@@ -163,3 +163,17 @@ def test_the_docs_python_examples_run_on_the_files(runs: dict[str, Path], tmp_pa
     with contextlib.redirect_stdout(io.StringIO()):
         for block in blocks:  # in order: a later block uses an earlier one's names
             exec(compile(block, str(DOC), "exec"), namespace)
+
+
+def test_format_text_puts_the_stamp_first_and_sorts_the_rest() -> None:
+    from fsmbench.jsonutil import format_text, stamped
+
+    payload = stamped({"b": {"z": 1, "a": [{"y": 2, "x": float("nan")}]}, "a": 0},
+                      format="fsmbench.x", version=2)
+    text = format_text(payload, sort_keys=True)
+    assert list(json.loads(text)) == ["format", "format_version", "a", "b"]
+    # Sorted at every depth (lists of objects too), NaN as null, one line feed at the end.
+    assert json.dumps(json.loads(text)["b"]) == '{"a": [{"x": null, "y": 2}], "z": 1}'
+    assert text.endswith("}\n")
+    with pytest.raises(ValueError, match="format"):
+        format_text({"a": 1})
