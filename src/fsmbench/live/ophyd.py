@@ -74,6 +74,10 @@ _OTHER: dict[str, tuple[str, type]] = {"status": ("Status", str),
                                        "heartbeat": ("Heartbeat", int)}
 _SPECTRA = {"asd_frequency": "AsdFrequency", "asd_vph": "AsdVph", "asd_vpv": "AsdVpv",
             "asd_va": "AsdVa"}
+#: How long a read waits for an INVALID Tango attribute to have a value [s] (the signals'
+#: timeout is longer).
+INVALID_WAIT_S = 5.0
+_INVALID_POLL_S = 0.05
 #: How long a command may take to answer [s] (the device answers within Tango's 3 s
 #: client timeout; a busy machine is given more).
 COMMAND_TIMEOUT_S = 30.0
@@ -283,6 +287,49 @@ class FsmBenchDevice(StandardReadable):
     record: BenchCommand
 
 
+def _valid_tango_backend(datatype: Any, trl: str) -> Any:
+    """ophyd-async's Tango backend that reads an INVALID attribute again.
+
+    The device gives an attribute INVALID quality, with no value, when it has none to give
+    (a spectrum before its first second of data, the bench's lock taken for longer than a
+    read may wait on a busy machine). ophyd-async then fails to describe or read it; a
+    plan should wait for the value as ``tune --device`` does
+    (:func:`fsmbench.tune.reads.read_valid`): read again for up to
+    :data:`INVALID_WAIT_S`, then fail naming the attribute.
+    """
+    from ophyd_async.core import make_datakey
+    from ophyd_async.tango.core import TangoSignalBackend, get_source_metadata
+
+    class ValidTangoSignalBackend(TangoSignalBackend[Any]):
+        async def _valid(self, read: Callable[[], Any], value_of: Callable[[Any], Any]) -> Any:
+            loop = asyncio.get_running_loop()
+            deadline = loop.time() + INVALID_WAIT_S
+            while True:
+                got = await read()
+                if value_of(got) is not None:
+                    return got
+                if loop.time() > deadline:
+                    raise TimeoutError(f"{trl} stayed INVALID (no value) for "
+                                       f"{INVALID_WAIT_S:g} s")
+                await asyncio.sleep(_INVALID_POLL_S)
+
+        async def get_reading(self) -> Any:
+            return await self._valid(super().get_reading, lambda r: r["value"])
+
+        async def get_value(self) -> Any:
+            return await self._valid(super().get_value, lambda v: v)
+
+        async def get_datakey(self, source: str) -> Any:
+            proxy = self.proxies[source]
+            if proxy is None:
+                return await super().get_datakey(source)  # says it is not connected
+            value = await self._valid(proxy.get, lambda v: v)
+            return make_datakey(self.datatype, value, source,  # type: ignore[arg-type]
+                                metadata=get_source_metadata(source, self.trl_configs))
+
+    return ValidTangoSignalBackend(datatype, trl, trl)
+
+
 def _tango_trl(address: str, attribute: str) -> str:
     """``tango://host:port/d/f/m/Attr#dbase=no`` (the suffix after the attribute)."""
     base, sep, suffix = address.partition("#")
@@ -335,13 +382,13 @@ def bench_device(address: str, *, name: str = "fsm_bench",
 
         return FsmBenchDevice(signal_r=ca_r, signal_rw=ca_rw, command=ca_command,
                               address=address, name=name)
-    from ophyd_async.tango.core import tango_signal_r, tango_signal_rw
-
     def tango_r(datatype: Any, attr: str) -> SignalR[Any]:
-        return tango_signal_r(datatype, _tango_trl(address, attr), timeout=timeout)
+        return SignalR(_valid_tango_backend(datatype, _tango_trl(address, attr)),
+                       timeout=timeout)
 
     def tango_rw(datatype: Any, attr: str) -> SignalRW[Any]:
-        return tango_signal_rw(datatype, _tango_trl(address, attr), timeout=timeout)
+        return SignalRW(_valid_tango_backend(datatype, _tango_trl(address, attr)),
+                        timeout=timeout)
 
     def tango_command(command: str, with_argument: bool) -> CommandBackend[..., str]:
         return _TangoCommand(address, command, with_argument=with_argument)

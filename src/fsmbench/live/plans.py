@@ -27,6 +27,7 @@ writes in ``folder`` must be readable by the device.
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import functools
 import json
 import shutil
@@ -37,12 +38,14 @@ from pathlib import Path
 from typing import Any
 
 import bluesky.plan_stubs as bps
+import bluesky.preprocessors as bpp
 import numpy as np
 
 from fsmbench.live.ophyd import BenchCommand, BenchState, FsmBenchDevice
 
 __all__ = ["IDENTIFICATION_EXPERIMENTS", "BenchRecords", "closed_loop_experiments",
-           "identification_experiments", "identify_records"]
+           "design_excitations", "execute", "identification_experiments", "identify_records",
+           "wait_until_done"]
 
 #: The ESRF study's identification experiments (section 2), as the twin plays them.
 IDENTIFICATION_EXPERIMENTS = ("data_cal_pd_h", "data_cal_pd_v", "data_uch", "data_ucv",
@@ -51,7 +54,7 @@ IDENTIFICATION_EXPERIMENTS = ("data_cal_pd_h", "data_cal_pd_v", "data_uch", "dat
 #: stalled bench fails the plan, a slow one does not.
 STALL_S = 60.0
 _POLL_S = 0.05
-_SETTLE_S = 1.0  # bench time between the excitation's start and its record [s]
+_SETTLE_S = 4.0  # least bench time between the excitation's start and its record [s]
 
 Plan = Generator[Any, Any, Any]
 
@@ -73,6 +76,8 @@ class BenchRecords:
         The device's controller during the records (closed loop) or as found.
     bench_s : float
         Bench time the plan took [s].
+    excitations : dict of str to Path
+        The closed-loop excitations played (``excitation_Uch.npy`` …; open loop: none).
     """
 
     folder: Path
@@ -180,32 +185,83 @@ def identification_experiments(bench: FsmBenchDevice, folder: str | Path, *,
     out.mkdir(parents=True, exist_ok=True)
     controller = yield from bps.rd(bench.controller)
     t0 = yield from bps.rd(bench.bench_time)
-    yield from bps.open_run({"plan_name": "fsmbench_identification_experiments",
-                             "experiments": list(experiments), "folder": str(out),
-                             "device": bench.address, **(md or {})})
     files: dict[str, Path] = {}
-    for name in experiments:
-        path = yield from execute(bench.run_experiment,
-                                  json.dumps({"name": name, "overwrite": True}))
-        yield from wait_until_done(bench, f"RunExperiment {name}")
-        files[name] = _gather(Path(path), out, name)
-        yield from bps.trigger_and_read([bench], name="experiments")
-    yield from bps.close_run()
+
+    def body() -> Plan:
+        for name in experiments:
+            path = yield from execute(bench.run_experiment,
+                                      json.dumps({"name": name, "overwrite": True}))
+            yield from wait_until_done(bench, f"RunExperiment {name}")
+            files[name] = _gather(Path(path), out, name)
+            yield from bps.trigger_and_read([bench], name="experiments")
+
+    yield from bpp.finalize_wrapper(
+        bpp.run_wrapper(body(), md={"plan_name": "fsmbench_identification_experiments",
+                                    "experiments": list(experiments), "folder": str(out),
+                                    "device": bench.address, **(md or {})}),
+        functools.partial(_stand_down, bench, open_loop=False))
     t1 = yield from bps.rd(bench.bench_time)
     return BenchRecords(folder=out, files=files, kind="open loop", address=bench.address,
                         controller=str(controller), bench_s=float(t1 - t0))
 
 
-def _design(model: Any, controller: Any, channel: str, *, max_error_rad: float,
-            resolution_hz: float, periods: int) -> np.ndarray:
-    from fsmbench.excite.shaped import beam_bounded_measurement
+def _stand_down(bench: FsmBenchDevice, *, open_loop: bool) -> Plan:
+    """After a plan, whether it ended or failed: its experiment or record aborted, its
+    excitation stopped and (``open_loop``) the loop it closed opened; a refusal (nothing to
+    stop, a FAULT) is no error here."""
+    from fsmbench.live.ophyd import CommandRefusedError
 
-    m = beam_bounded_measurement(
-        bench=model, params=model.nominal if model.model is None else model.true,
-        controller=controller.feedback, channel=channel, max_error_rad=max_error_rad,
-        resolution_hz=resolution_hz, periods=periods, transient_periods=0,
-        controller_name=controller.name)
-    return np.asarray(m.design.samples_v, dtype=float)
+    if (yield from bps.rd(bench.state)) == BenchState.MOVING:
+        with contextlib.suppress(CommandRefusedError):
+            yield from execute(bench.abort)
+    with contextlib.suppress(CommandRefusedError):
+        yield from execute(bench.stop_excitation)
+    if open_loop:
+        with contextlib.suppress(CommandRefusedError):
+            yield from execute(bench.open_loop)
+
+
+def design_excitations(*, model: Any = None, controller: str | Path | None = None,
+                       max_error_rad: float = 30e-6,
+                       resolution_hz: float = 0.25) -> dict[str, np.ndarray]:
+    """One period of the beam-bounded multisine on each Sercalo command, for
+    :func:`closed_loop_experiments` (a computation of seconds: design once, play often).
+
+    Parameters
+    ----------
+    model : Bench, optional
+        The bench model the excitation is designed on (default: the packaged bench).
+    controller : str or Path, optional
+        The loop's controller, as ``fsmbench simulate --closed-loop`` takes it (default:
+        the ESRF study's, which the device closes with when it has none loaded).
+    max_error_rad : float
+        The bound on the rms beam error the excitation adds, on the model [rad].
+    resolution_hz : float
+        The line spacing [Hz]: the period is ``1 / resolution_hz``.
+
+    Returns
+    -------
+    dict of str to ndarray
+        ``Uch`` and ``Ucv``: one period of commands [V] at the bench's rate
+        (:func:`fsmbench.excite.shaped.beam_bounded_measurement`).
+    """
+    from fsmbench.bench.params import default_bench
+    from fsmbench.excite.shaped import beam_bounded_measurement
+    from fsmbench.sim.loaded import running_controller
+    from fsmbench.twin.closed_loop import CLOSED_LOOP_EXPERIMENTS
+
+    bench_model = model if model is not None else default_bench()
+    k = running_controller(None if controller is None else str(controller), bench=bench_model)
+    out = {}
+    for ch in CLOSED_LOOP_EXPERIMENTS:
+        m = beam_bounded_measurement(
+            bench=bench_model,
+            params=bench_model.nominal if bench_model.model is None else bench_model.true,
+            controller=k.feedback, channel=ch, max_error_rad=max_error_rad,
+            resolution_hz=resolution_hz, periods=1, transient_periods=0,
+            controller_name=k.name)
+        out[ch] = np.asarray(m.design.samples_v, dtype=float)
+    return out
 
 
 def _excitation_start(bench: FsmBenchDevice, sha: str) -> Plan:
@@ -227,41 +283,37 @@ def _excitation_start(bench: FsmBenchDevice, sha: str) -> Plan:
 
 
 def closed_loop_experiments(bench: FsmBenchDevice, folder: str | Path, *,
-                            model: Any = None, controller: str | Path | None = None,
-                            max_error_rad: float = 30e-6, resolution_hz: float = 0.25,
-                            periods: int = 6,
-                            md: Mapping[str, Any] | None = None) -> Plan:
+                            excitations: Mapping[str, np.ndarray] | None = None,
+                            periods: int = 6, md: Mapping[str, Any] | None = None,
+                            **design: Any) -> Plan:
     """A closed-loop identification's records on the live bench (a plan).
 
-    With the loop closed (``CloseLoop`` when it is open), for each command ``Uch`` and
-    ``Ucv``: a beam-bounded multisine designed for ``model`` and ``controller`` (its
-    added rms beam error within ``max_error_rad`` on the model) is written to
-    ``folder/excitation_<ch>.npy`` and played by ``StartExcitation`` as a ``samples``
-    excitation repeated from its first sample; after :data:`_SETTLE_S` of bench time
-    ``Record`` takes ``periods`` whole periods of the loop's signals; ``StopExcitation``.
-    The record and the excitation as it was played during it (from the device's
-    ``Excitation``: the bench time it started) are written as ``data_cl_uch.mat`` /
+    With the loop closed (``CloseLoop`` when it is open, ``OpenLoop`` at the end), for each
+    command ``Uch`` and
+    ``Ucv``: one period of excitation (``excitations``, or the beam-bounded multisine of
+    :func:`design_excitations`) is written to ``folder/excitation_<ch>.npy`` and played by
+    ``StartExcitation`` as a ``samples`` excitation repeated from its first sample; after
+    a period of bench time (at least :data:`_SETTLE_S`: the loop's transient) ``Record``
+    takes ``periods`` whole periods of the loop's signals; ``StopExcitation``. The record
+    and the excitation as it was played during it (placed by the bench time the device's
+    ``Excitation`` says it started) are written as ``data_cl_uch.mat`` /
     ``data_cl_ucv.mat`` (``t``, ``Xch``/``Xcv``, ``Uch``, ``Ucv``, ``Vph``, ``Vpv``,
-    ``Vch``, ``Vcv``). The excitation is in steady state from the record's first sample,
-    so the record holds no loop before it.
+    ``Vch``, ``Vcv``: the layout of ``fsmbench simulate --closed-loop``). The excitation
+    is in steady state from the record's first sample (the record holds no loop before
+    it), so the latency between the plan and the device never shifts it.
 
     Parameters
     ----------
     bench : FsmBenchDevice
     folder : str or Path
-    model : Bench, optional
-        The bench model the excitation is designed on (default: the packaged bench).
-    controller : str or Path, optional
-        The loop's controller for the design, as ``fsmbench simulate --closed-loop``
-        takes it (default: the ESRF study's, which the device closes with when it has
-        none loaded).
-    max_error_rad : float
-        The bound on the rms beam error the excitation adds, on the model [rad].
-    resolution_hz : float
-        The multisine's line spacing [Hz]: its period is ``1 / resolution_hz``.
+    excitations : mapping of str to ndarray, optional
+        ``Uch`` and ``Ucv``: one period of commands each [V] at the bench's rate.
     periods : int
         Whole periods recorded per command.
     md : mapping, optional
+        Added to the run's start document.
+    **design
+        :func:`design_excitations`'s options when ``excitations`` is not given.
 
     Returns
     -------
@@ -270,7 +322,6 @@ def closed_loop_experiments(bench: FsmBenchDevice, folder: str | Path, *,
     from fsmbench.bench.params import default_bench
     from fsmbench.io.recording import make_recording, read_recording, write_recording
     from fsmbench.sim.excitation import samples_sha256
-    from fsmbench.sim.loaded import running_controller
     from fsmbench.twin.closed_loop import (
         CLOSED_LOOP_EXPERIMENTS,
         CLOSED_LOOP_SIGNALS,
@@ -279,54 +330,66 @@ def closed_loop_experiments(bench: FsmBenchDevice, folder: str | Path, *,
 
     out = Path(folder)
     out.mkdir(parents=True, exist_ok=True)
-    bench_model = model if model is not None else default_bench()
-    k = running_controller(None if controller is None else str(controller), bench=bench_model)
-    fs = float(bench_model.true.converter.fs_hz)
-    designs: dict[str, np.ndarray] = {}
-    for ch in CLOSED_LOOP_EXPERIMENTS:
-        design = functools.partial(_design, bench_model, k, ch, max_error_rad=max_error_rad,
-                                   resolution_hz=resolution_hz, periods=periods)
-        designs[ch] = yield from _in_thread(design)
+    fs = float((design.get("model") or default_bench()).true.converter.fs_hz)
+    if excitations is None:
+        excitations = yield from _in_thread(functools.partial(design_excitations, **design))
+    missing = [ch for ch in CLOSED_LOOP_EXPERIMENTS if ch not in excitations]
+    if missing:
+        raise ValueError(f"closed_loop_experiments needs an excitation for {', '.join(missing)}")
     t0 = yield from bps.rd(bench.bench_time)
-    yield from bps.open_run({"plan_name": "fsmbench_closed_loop_experiments",
-                             "folder": str(out), "device": bench.address,
-                             "max_error_rad": max_error_rad, "resolution_hz": resolution_hz,
-                             "periods": periods, **(md or {})})
-    if not (yield from bps.rd(bench.loop_closed)):
-        yield from execute(bench.close_loop)
-    running = str((yield from bps.rd(bench.controller)))
+    closes = not (yield from bps.rd(bench.loop_closed))
     files: dict[str, Path] = {}
     npys: dict[str, Path] = {}
-    for ch, name in CLOSED_LOOP_EXPERIMENTS.items():
-        x = designs[ch]
-        npys[ch] = out / f"excitation_{ch}.npy"
-        np.save(npys[ch], x)
-        yield from execute(bench.start_excitation, json.dumps(
-            {"input": ch, "kind": "samples", "path": str(npys[ch].resolve()), "loop_from": 0}))
-        e0 = yield from _excitation_start(bench, samples_sha256(x))
-        while (yield from bps.rd(bench.bench_time)) < e0 + _SETTLE_S:
-            yield from bps.sleep(_POLL_S)
-        path = yield from execute(bench.record, json.dumps(
-            {"signals": list(CLOSED_LOOP_SIGNALS), "name": f"bluesky_{name}",
-             "duration_s": periods / resolution_hz, "overwrite": True}))
-        yield from wait_until_done(bench, f"the record of {name}")
-        yield from execute(bench.stop_excitation)
-        rec = read_recording(path, require=())
-        n = rec.sizes["t"]
-        r0 = round(float(rec["t"].values[0]) * fs)
-        # The sample of the (repeated) excitation each recorded sample was played with.
-        played = x[(r0 - round(e0 * fs) + np.arange(n)) % x.size]
-        signals = {s: np.asarray(rec[s].values, dtype=float) for s in CLOSED_LOOP_SIGNALS}
-        signals[excitation_variable(ch, "output")] = played
-        ds = make_recording(signals, fs_hz=fs, experiment=name,
-                            source=f"fsmbench Bluesky plan through {bench.address} (loop "
-                                   f"closed by {running})")
-        files[name] = write_recording(ds, out / f"{name}.mat")
-        yield from bps.trigger_and_read([bench], name="experiments")
-    yield from bps.close_run()
+    running: list[str] = []
+
+    def body() -> Plan:
+        if closes:
+            yield from execute(bench.close_loop)
+        running.append(str((yield from bps.rd(bench.controller))))
+        for ch, name in CLOSED_LOOP_EXPERIMENTS.items():
+            x = np.asarray(excitations[ch], dtype=float)
+            npys[ch] = out / f"excitation_{ch}.npy"
+            np.save(npys[ch], x)
+            yield from execute(bench.start_excitation, json.dumps(
+                {"input": ch, "kind": "samples", "path": str(npys[ch].resolve()),
+                 "loop_from": 0}))
+            e0 = yield from _excitation_start(bench, samples_sha256(x))
+            # The loop's transient decays before the record: the Sercalo's modes (time
+            # constant 1 / (zeta w) ~0.6 s at 251 Hz, 0.1 %) ring for seconds; a whole
+            # period (4 s at the default 0.25 Hz) and at least _SETTLE_S.
+            settle_s = max(_SETTLE_S, x.size / fs)
+            while (yield from bps.rd(bench.bench_time)) < e0 + settle_s:
+                yield from bps.sleep(_POLL_S)
+            n = periods * x.size
+            path = yield from execute(bench.record, json.dumps(
+                {"signals": list(CLOSED_LOOP_SIGNALS), "name": f"bluesky_{name}",
+                 "duration_s": n / fs, "overwrite": True}))
+            yield from wait_until_done(bench, f"the record of {name}")
+            yield from execute(bench.stop_excitation)
+            rec = read_recording(path, require=())
+            if rec.sizes["t"] != n:
+                status = yield from bps.rd(bench.status)
+                raise RuntimeError(f"{bench.address}: the record of {name} holds "
+                                   f"{rec.sizes['t']} samples of {n} (cut short): {status}")
+            r0 = round(float(rec["t"].values[0]) * fs)
+            # The sample of the (repeated) excitation each recorded sample was played with.
+            played = x[(r0 - round(e0 * fs) + np.arange(n)) % x.size]
+            signals = {s: np.asarray(rec[s].values, dtype=float) for s in CLOSED_LOOP_SIGNALS}
+            signals[excitation_variable(ch, "output")] = played
+            ds = make_recording(signals, fs_hz=fs, experiment=name,
+                                source=f"fsmbench Bluesky plan through {bench.address} "
+                                       f"(loop closed by {running[0]})")
+            files[name] = write_recording(ds, out / f"{name}.mat")
+            yield from bps.trigger_and_read([bench], name="experiments")
+
+    yield from bpp.finalize_wrapper(
+        bpp.run_wrapper(body(), md={"plan_name": "fsmbench_closed_loop_experiments",
+                                    "folder": str(out), "device": bench.address,
+                                    "periods": periods, **(md or {})}),
+        functools.partial(_stand_down, bench, open_loop=closes))
     t1 = yield from bps.rd(bench.bench_time)
     return BenchRecords(folder=out, files=files, kind="closed loop", address=bench.address,
-                        controller=running, bench_s=float(t1 - t0), excitations=npys)
+                        controller=running[0], bench_s=float(t1 - t0), excitations=npys)
 
 
 def identify_records(records: BenchRecords, *, model: Any = None,
