@@ -257,13 +257,16 @@ def budget_stage(recordings: Mapping[str, xr.Dataset], *, bench: Bench, out_dir:
     from fsmbench.budget.study import budget_study
 
     ident, saved = plant.identification, plant.saved
-    # The measured noise replaces the bench file's only from a trusted identification (a
-    # saved one with warnings is refused when it is read).
-    trusted = ident is not None and not ident.warnings and plant.plant is ident.plant
-    noise_model = (ident.noise_model if trusted and ident is not None
-                   else saved.noise_model if ident is None and saved is not None else None)
-    loop = recorded_loop(ident if ident is not None or saved is None else saved.recorded_loops,
-                         bench=bench)
+    if ident is not None:
+        # The measured noise replaces the bench file's only from a trusted identification.
+        trusted = not ident.warnings and plant.plant is ident.plant
+        noise_model = ident.noise_model if trusted else None
+        loop = recorded_loop(ident, bench=bench)
+    else:
+        # A saved identification (--bench DIR) with warnings was refused when it was read:
+        # what it measured is used as the study uses it in memory.
+        noise_model = None if saved is None else saved.noise_model
+        loop = recorded_loop(None if saved is None else saved.recorded_loops, bench=bench)
     result = budget_study(recordings, bench=bench, plant=plant.plant, progress=progress,
                           recommended=recommended,
                           controller=_recorded_seed_controller(plant.plant, bench=bench,
