@@ -170,6 +170,25 @@ def test_devices_read_units_and_commands_answer(live: Any, run_engine: Any) -> N
     assert after == BenchState.RUNNING
     assert reply == "loop opened, holding the last command"
 
+    # A plan the device refuses mid-way fails with the refusal and leaves the bench as it
+    # found it: 20 V commands are beyond the DAC's +/-10 V, refused once the plan has
+    # closed the loop; the plan opens it again.
+    from fsmbench.live.plans import closed_loop_experiments
+
+    too_large = {ch: np.full(400, 20.0) for ch in ("Uch", "Ucv")}
+    stops: list[dict[str, Any]] = []
+    token = run_engine.subscribe(lambda name, doc: stops.append(doc) if name == "stop" else None)
+    try:
+        with pytest.raises(CommandRefusedError) as refused:
+            run_engine(closed_loop_experiments(bench, live.folder / "refused",
+                                               excitations=too_large))
+    finally:
+        run_engine.unsubscribe(token)
+    assert refused.value.reason == "FSM_BadArgument" and "DAC" in refused.value.sentence
+    assert [d["exit_status"] for d in stops] == ["fail"]
+    assert not live.device_loop_closed()
+    assert not list((live.folder / "refused").glob("data_cl_*"))
+
 
 def _judged(result: Any) -> dict[str, Any]:
     """Each identified value against the twin's truth, with the open-loop targets."""
