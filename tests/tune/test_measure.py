@@ -69,3 +69,47 @@ def test_model_excess_is_the_largest_measured_over_predicted_ratio() -> None:
     assert model_excess(ident, designs) == pytest.approx(30.36 / 27)  # type: ignore[arg-type]
     within = SimpleNamespace(tracking=(tracking("data_cl_uch", 20e-6, float("nan")),))
     assert model_excess(within, designs) == 1.0  # type: ignore[arg-type]
+
+
+def test_a_stage_1_that_locates_nothing_is_measured_once_again() -> None:
+    """The first records' outputs shuffled in time (no longer the excitation's response):
+    stage 1 locates nothing from them, is measured again, and locates both modes within
+    the open-loop resonance tolerance; the repeat is said and its records counted."""
+    import dataclasses
+
+    import numpy as np
+
+    from fsmbench.twin.closed_loop import play_closed_loop
+
+    b = default_bench()
+    calls: list[int] = []
+
+    def play(plays, *, controller, settle_s, seed, progress):  # type: ignore[no-untyped-def]
+        run = play_closed_loop(plays, bench=b, controller=controller, seed=seed,
+                               settle_s=settle_s, progress=progress)
+        calls.append(seed)
+        if len(calls) > 1:
+            return run
+        rng = np.random.default_rng(0)
+        spoiled = {}
+        for name, ds in run.recordings.items():
+            ds = ds.copy(deep=True)
+            for sig in ("Vph", "Vpv"):
+                ds[sig].values[:] = rng.permutation(ds[sig].values)
+            spoiled[name] = ds
+        return dataclasses.replace(run, recordings=spoiled)
+
+    said: list[str] = []
+    m = measure_closed_loop(model=b, controller=running_controller(None, bench=b), play=play,
+                            options=MeasurementOptions(refine=False), seed=4,
+                            progress=said.append)
+    assert calls == [4, 6]  # the repeat draws new noise
+    assert m.note.startswith("stage 1 was measured again") and any(
+        s.startswith("stage 1 was measured again") for s in said)
+    one = sum(e.duration_s for e in m.stages[-1][1].experiments)
+    assert m.duration_s == pytest.approx(len(m.stages) * one)  # the spoiled records count
+    truth = m.stages[-1][1].truth
+    found = m.identification.to_json()["sercalo"]
+    for axis in ("h", "v"):
+        rel = found[axis]["resonance_hz"] / truth["sercalo"][axis]["resonance_hz"] - 1.0
+        assert abs(rel) <= _TOLERANCE["resonance_hz"], (axis, rel)

@@ -31,6 +31,7 @@ class Scripted:
         self.on_load, self.fail_back, self.journal = on_load, roll_back, journal
         self.now = "before"
         self.seen_at_load: list[str] = []
+        self.forced: list[bool] = []
 
     def load(self, loop: Any) -> dict[str, Any]:
         self.seen_at_load.append(self.journal[-1].decision)
@@ -39,7 +40,8 @@ class Scripted:
             raise self.on_load
         return {"from": "before", "to": loop.name}
 
-    def roll_back(self, loop: Any) -> dict[str, Any]:
+    def roll_back(self, loop: Any, *, force: bool = False) -> dict[str, Any]:
+        self.forced.append(force)
         if self.fail_back is not None:
             raise self.fail_back
         self.now = loop.name
@@ -98,3 +100,31 @@ def test_an_error_after_the_load_rolls_back_and_says_where_the_device_is() -> No
                                   "device).")
     assert "RuntimeError: connection lost" in str(err.value)
     assert [r.decision for r in journal] == ["loading", "interrupted"]
+
+
+class Lagging(Scripted):
+    """A device that loads the candidate but whose Controller still reads the old name (an
+    IOC whose updates had stopped: a soak's run)."""
+
+    def load(self, loop: Any) -> dict[str, Any]:
+        self.seen_at_load.append(self.journal[-1].decision)
+        self.loaded = loop.name  # in the loop; the reading below lags
+        raise ValueError("LoadController of candidate is not confirmed")
+
+    def running_controller(self) -> str:
+        return "before"
+
+    def roll_back(self, loop: Any, *, force: bool = False) -> dict[str, Any]:
+        self.forced.append(force)
+        self.loaded = loop.name
+        return {"from": "candidate", "to": loop.name, "request": "seed"}
+
+
+def test_once_a_load_started_the_roll_back_is_made_whatever_the_device_reads() -> None:
+    journal: list[Any] = []
+    target = Lagging(on_load=None, roll_back=None, journal=journal)
+    with pytest.raises(LoopChangeError) as err:
+        _change(target, journal)
+    assert target.forced == [True] and target.loaded == "before"
+    assert journal[-1].transaction["rollback"]["done"] is True
+    assert "loaded back by LoadController 'seed'" in err.value.sentence

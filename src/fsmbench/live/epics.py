@@ -33,6 +33,7 @@ from __future__ import annotations
 
 import contextlib
 import faulthandler
+import functools
 import importlib.util
 import logging
 import math
@@ -207,6 +208,7 @@ class BenchIoc:
         self._records: dict[str, Any] = {}
         self._last_arrays: dict[str, Any] = {}
         self._posted: dict[str, tuple[Any, ...]] = {}
+        self._refused: set[str] = set()  # records whose last update failed (logged once)
         self._lengths: dict[str, int] = {}
         self._stop = threading.Event()
         self._wake = threading.Event()
@@ -379,44 +381,67 @@ class BenchIoc:
                 self.bench.log("WARNING", f"IOC update failed: {type(exc).__name__}: {exc}")
 
     def update(self) -> None:
-        """Put the bench's views into the records (their severity with them)."""
-        from softioc import alarm
+        """Put the bench's views into the records (their severity with them).
 
-        rec = self._records
+        Record by record: one record refusing its value must not hold the others (a
+        stall's INVALID count once stopped every later record, Controller and State
+        among them, and a client then read the controller of before a load).
+        """
         for spec in ATTRIBUTES:
             if spec in _WITH_STATE:
                 continue  # with State, below
-            value, quality = evaluate(spec, self.bench, self._latch)
-            if spec.kind in ("spectrum", "image"):
-                if quality == "INVALID" or value is None:
-                    continue
-                rows = [value] if spec.kind == "spectrum" else list(value)
-                for i, row in enumerate(spec.rows or ("",)):
-                    data = np.asarray(rows[i] if i < len(rows) else [], dtype=float)
-                    key = spec.name + row
-                    last, when = self._last_arrays.get(key, (None, -np.inf))
-                    # At most once a wall-clock second: at 50x the estimators renew 50 times
-                    # a second, and 64 KiB monitors that fast stall a client's event queue.
-                    if (last is None or last.shape != data.shape or
-                            not np.array_equal(last, data)) and \
-                            time.monotonic() - when >= _SPECTRUM_S:
-                        self._last_arrays[key] = (data, time.monotonic())
-                        rec[key].set(data[:self._lengths[key]])
-                continue
-            if spec.writable:
-                continue  # SpeedFactor: its own record
-            if spec.kind == "str":
-                self._post(spec.name, plain(str(value))[:_STRING - 1])
-            elif spec.kind == "bool":
-                self._post(spec.name, bool(value))
-            elif quality == "INVALID":
-                stale = value is not None and math.isfinite(float(value))
-                self._post(spec.name, float(value) if stale else 0.0,
-                           severity=alarm.INVALID_ALARM,
-                           alarm=alarm.TIMEOUT_ALARM if stale else alarm.UDF_ALARM)
-            else:
-                self._post(spec.name, value)
-        self._update_state()
+            self._guarded(spec.name, functools.partial(self._update_one, spec))
+        self._guarded("State", self._update_state)
+
+    def _guarded(self, name: str, update: Callable[[], None]) -> None:
+        """``update()``, a failure logged once per record until it updates again."""
+        try:
+            update()
+        except Exception as exc:
+            if name not in self._refused:
+                self._refused.add(name)
+                self.bench.log("WARNING", f"IOC update of {self.prefix}:{name} failed: "
+                                          f"{type(exc).__name__}: {exc}")
+        else:
+            self._refused.discard(name)
+
+    def _update_one(self, spec: Any) -> None:
+        """One attribute's record (its rows for a spectrum or an image)."""
+        from softioc import alarm
+
+        rec = self._records
+        value, quality = evaluate(spec, self.bench, self._latch)
+        if spec.kind in ("spectrum", "image"):
+            if quality == "INVALID" or value is None:
+                return
+            rows = [value] if spec.kind == "spectrum" else list(value)
+            for i, row in enumerate(spec.rows or ("",)):
+                data = np.asarray(rows[i] if i < len(rows) else [], dtype=float)
+                key = spec.name + row
+                last, when = self._last_arrays.get(key, (None, -np.inf))
+                # At most once a wall-clock second: at 50x the estimators renew 50 times
+                # a second, and 64 KiB monitors that fast stall a client's event queue.
+                if (last is None or last.shape != data.shape or
+                        not np.array_equal(last, data)) and \
+                        time.monotonic() - when >= _SPECTRUM_S:
+                    self._last_arrays[key] = (data, time.monotonic())
+                    rec[key].set(data[:self._lengths[key]])
+            return
+        if spec.writable:
+            return  # SpeedFactor: its own record
+        if spec.kind == "str":
+            self._post(spec.name, plain(str(value))[:_STRING - 1])
+        elif spec.kind == "bool":
+            self._post(spec.name, bool(value))
+        elif quality == "INVALID":
+            stale = value is not None and math.isfinite(float(value))
+            shown = float(value) if stale else 0.0
+            # A longIn takes only an int: a float there raised and, before, cut the update
+            self._post(spec.name, round(shown) if spec.kind == "int" else shown,
+                       severity=alarm.INVALID_ALARM,
+                       alarm=alarm.TIMEOUT_ALARM if stale else alarm.UDF_ALARM)
+        else:
+            self._post(spec.name, value)
 
     def _update_state(self) -> None:
         from softioc import alarm

@@ -295,10 +295,20 @@ class DeviceTarget:
         before = self._attr("Controller")
         reply = self.proxy.LoadController(json.dumps({"path": str(where), "controller": key}))
         self._wait(lambda: self._attr("Task") == "", "the controller's load", 0.0)
+
+        def confirmed() -> bool:
+            # The same name twice (a retune over a tuned controller) is told apart by the
+            # file the device says it loaded; a read may lag the reply by an update.
+            now = str(self._attr("Controller"))
+            return now.startswith(key) and (now != before or str(where) in self.proxy.status())
+
+        try:
+            self._wait(confirmed, "the device's Controller naming what it loaded", 0.0)
+        except ValueError:
+            raise ValueError(f"{self.label}: LoadController of {loop.name} is not confirmed: "
+                             f"the device replied {reply!r} but its Controller reads "
+                             f"{self._attr('Controller')!r} ({self.proxy.status()})") from None
         now = self._attr("Controller")
-        if now == before or not now.startswith(key):
-            raise ValueError(f"{self.label}: LoadController did not load {loop.name} (the "
-                             f"device runs {now!r}): {self.proxy.status()}")
         self.gd = loop.gd_v_per_rad
         return {"bench_time_s": float(self._attr("BenchTime")), "from": before, "to": now,
                 "file": str(where), "reply": reply}
@@ -352,7 +362,7 @@ class DeviceTarget:
                            "bench when it was loaded (or it is the ESRF study's seed)",
                 "restore_with": list(self.restore_requests)}
 
-    def roll_back(self, loop: Loop) -> dict[str, Any]:
+    def roll_back(self, loop: Loop, *, force: bool = False) -> dict[str, Any]:
         """Return the device to ``loop``, the controller it ran when tune started (module notes).
 
         Returns
@@ -367,7 +377,7 @@ class DeviceTarget:
             No argument brought ``loop`` back (each refusal named).
         """
         before = self.running_controller()
-        if before == loop.name:
+        if before == loop.name and not force:
             return {"from": before, "to": before, "reply": "already running"}
         self.proxy.StopExcitation()
         if str(self.proxy.state()) == "MOVING":

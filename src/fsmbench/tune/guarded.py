@@ -315,9 +315,10 @@ class TuneTarget(Protocol):
     def load(self, loop: Loop) -> dict[str, Any]:
         """Load ``loop`` bumplessly in the running loop; the switch, JSON-ready."""
 
-    def roll_back(self, loop: Loop) -> dict[str, Any]:
+    def roll_back(self, loop: Loop, *, force: bool = False) -> dict[str, Any]:
         """Return to ``loop``, the controller that ran when tune started, by the means that
-        put it there (the device: its own ``LoadController``); the switch, JSON-ready."""
+        put it there (the device: its own ``LoadController``); the switch, JSON-ready.
+        ``force``: load it even when the target reads it as running already."""
 
     def running_controller(self) -> str:
         """The name of the controller the bench runs now."""

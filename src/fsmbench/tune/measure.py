@@ -59,10 +59,12 @@ __all__ = [
     "ClosedLoopMeasurement",
     "MeasurementOptions",
     "Player",
+    "RecordsRejectedError",
     "identified_model",
     "located_bench",
     "measure_closed_loop",
     "model_excess",
+    "not_located",
 ]
 
 
@@ -134,12 +136,14 @@ class ClosedLoopMeasurement:
     identification : ClosedLoopIdentification
         From the last stage's records (stage 1's when stage 2's could not be fitted).
     stages : tuple of (ClosedLoopIdentification, TwinRun, tuple of BoundedMeasurement)
-        Each stage's identification, records and designs.
+        Each stage's identification, records and designs (a stage 1 that located no
+        resonance and was measured again first, its records counted in the duration).
     duration_s : float
         Measurement time, both stages and both commands [s].
     options : MeasurementOptions
     note : str
-        Why the identification is not the last stage's ('' when it is).
+        Why stage 1 was measured again, and why the identification is not the last
+        stage's ('' when neither).
     model_excess : float
         Stage 1's measured over predicted beam error (≥ 1; stage 2's fill was
         divided by it).
@@ -215,11 +219,9 @@ def located_bench(model: Bench, ident: ClosedLoopIdentification) -> Bench:
     from fsmbench.bench.axes import PerAxis
     from fsmbench.scale.draws import PARAMETERS, perturbed_bench
 
-    found = (ident.to_json().get("sercalo") or {})
-    missing = [a for a in ("h", "v") if a not in found]
-    if missing:
-        raise ValueError(f"stage 1 found no Sercalo resonance on axis {', '.join(missing)}: "
-                         f"{ident.skipped.get('sercalo', 'the fit kept no mode there')}")
+    if (why := not_located(ident)):
+        raise ValueError(f"stage 1 found {why}")
+    found = ident.to_json()["sercalo"]
     f_hz = {a: float(found[a]["resonance_hz"]) for a in ("h", "v")}
     if model.model is not None:
         values = model.model.values.get("sercalo") or {}
@@ -280,12 +282,19 @@ def _stage(*, play: Player, model: Bench, controller: RunningController,
              for d in designs]
     run = play(plays, controller=controller, settle_s=options.settle_s, seed=seed,
                progress=progress)
-    ident = identify_closed_loop(
-        run.recordings, bench=ident_bench,
-        options=ClosedLoopIdentifyOptions(transient_periods=options.transient_periods,
-                                          max_error_rad=options.max_error_rad),
-        source=f"closed-loop measurement ({prior_label})", merge_with=merge_with)
+    try:
+        ident = identify_closed_loop(
+            run.recordings, bench=ident_bench,
+            options=ClosedLoopIdentifyOptions(transient_periods=options.transient_periods,
+                                              max_error_rad=options.max_error_rad),
+            source=f"closed-loop measurement ({prior_label})", merge_with=merge_with)
+    except ValueError as exc:
+        raise RecordsRejectedError(str(exc)) from exc
     return ident, run, designs
+
+
+class RecordsRejectedError(ValueError):
+    """A stage's records failed their checks: the identification could not start."""
 
 
 def measure_closed_loop(*, model: Bench, controller: RunningController,
@@ -328,11 +337,36 @@ def measure_closed_loop(*, model: Bench, controller: RunningController,
                                     settle_s=settle_s, progress=progress)
 
     say("closed-loop measurement, stage 1: locating the resonances (±5 % bands)")
-    first = _stage(play=play, model=model, controller=controller,
-                   options=dataclasses.replace(opts, fill=opts.first_fill),
-                   dense_width=0.05, seed=seed, prior_label="the bench model", ident_bench=model,
-                   progress=progress)
-    stages = [first]
+
+    def locate(stage_seed: int) -> tuple[ClosedLoopIdentification, TwinRun,
+                                         tuple[BoundedMeasurement, ...]]:
+        return _stage(play=play, model=model, controller=controller,
+                      options=dataclasses.replace(opts, fill=opts.first_fill),
+                      dense_width=0.05, seed=stage_seed, prior_label="the bench model",
+                      ident_bench=model, progress=progress)
+
+    stages = []
+    repeated = ""
+    attempt: tuple[ClosedLoopIdentification, TwinRun, tuple[BoundedMeasurement, ...]] | None
+    try:
+        attempt = locate(seed)
+        why = not_located(attempt[0])
+    except RecordsRejectedError as exc:  # not the device's errors: those stop tune
+        attempt, why = None, str(exc)
+    if not why and attempt is not None:
+        first = attempt
+    else:
+        # Once, a live stage 1 under load kept one mode for two axes where every other run
+        # of the soak located both: a measurement is repeated before tune gives up.
+        repeated = f"stage 1 was measured again: its first records located nothing ({why})"
+        say(repeated)
+        if attempt is not None:
+            stages.append(attempt)
+        first = locate(seed + 2)
+        if (again := not_located(first[0])):
+            raise ValueError(f"stage 1 found no Sercalo resonance in two measurements: {why}; "
+                             f"then {again}")
+    stages.append(first)
     excess = model_excess(first[0], first[2])
     if opts.refine:
         located = located_bench(model, first[0])
@@ -349,13 +383,24 @@ def measure_closed_loop(*, model: Bench, controller: RunningController,
                              merge_with=(first[0].frf,)))
     duration = float(sum(s.duration_s for _i, run, _d in stages for s in run.experiments))
     final, note = stages[-1][0], ""
-    if final.plant is None and stages[0][0].plant is not None:
+    if final.plant is None and first[0].plant is not None:
         # The refined records starve the lines far from the modes; when they do not carry
         # the whole band (the fit names why), stage 1's identification stands.
         note = (f"stage 2 did not identify the Sercalo "
                 f"({final.skipped.get('sercalo', 'no plant')}); stage 1's identification is kept")
         say(note)
-        final = stages[0][0]
+        final = first[0]
     return ClosedLoopMeasurement(identification=final, stages=tuple(stages),
-                                 duration_s=duration, options=opts, note=note,
+                                 duration_s=duration, options=opts,
+                                 note="; ".join(n for n in (repeated, note) if n),
                                  model_excess=excess)
+
+
+def not_located(ident: ClosedLoopIdentification) -> str:
+    """Why ``ident`` gives no resonance on an axis, in words ('' when it gives both)."""
+    found = (ident.to_json().get("sercalo") or {})
+    missing = [a for a in ("h", "v") if a not in found]
+    if not missing:
+        return ""
+    return (f"no Sercalo resonance on axis {', '.join(missing)}: "
+            f"{ident.skipped.get('sercalo', 'the fit kept no mode there')}")

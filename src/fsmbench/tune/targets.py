@@ -79,8 +79,9 @@ class TwinTarget:
                 "command_before_v": [float(x) for x in sw.command_before_v],
                 "command_after_v": [float(x) for x in sw.command_after_v]}
 
-    def roll_back(self, loop: Loop) -> dict[str, Any]:
-        """Swap ``loop`` (the controller that ran before) back in bumplessly: :meth:`load`."""
+    def roll_back(self, loop: Loop, *, force: bool = False) -> dict[str, Any]:
+        """Swap ``loop`` (the controller that ran before) back in bumplessly: :meth:`load`
+        (always: the twin's reading is exact, ``force`` changes nothing)."""
         return self.load(loop)
 
     def running_controller(self) -> str:

@@ -123,8 +123,15 @@ def _by_hand(point: Mapping[str, Any]) -> str:
 
 
 def _recover(target: TuneTarget, running: Loop, point: Mapping[str, Any],
-             say: Callable[[str], None]) -> tuple[str | None, dict[str, Any], str]:
-    """Roll back to ``running`` unless the target runs it: (left on, roll-back, sentence)."""
+             say: Callable[[str], None], *, load_started: bool
+             ) -> tuple[str | None, dict[str, Any], str]:
+    """Roll back to ``running`` unless the target runs it: (left on, roll-back, sentence).
+
+    Once a load has started, the roll-back is made whatever the target reads: a device
+    whose Controller had not caught up with a load it made read the old name, and tune
+    once said "left on" a controller the device no longer ran. Loading the controller
+    that runs is harmless (bumpless, checked again).
+    """
     noun = str(point.get("noun", "The bench"))
     with ctrl_c_held(say, f"the roll-back to {running.name}"):
         try:
@@ -133,12 +140,12 @@ def _recover(target: TuneTarget, running: Loop, point: Mapping[str, Any],
             now, seen = None, _cause(exc)
         else:
             seen = ""
-        if now == running.name:
+        if now == running.name and not load_started:
             return now, {"needed": False}, (
                 f"{noun} is left on {running.name}, the controller it ran before tune "
                 "(the candidate is not in the loop).")
         try:
-            switch = target.roll_back(running)
+            switch = target.roll_back(running, force=load_started)
         except Exception as exc:
             why = _cause(exc)
             try:
@@ -278,7 +285,8 @@ def load_and_watch(*, target: TuneTarget, running: Loop, candidate: Loop,
                 exc.sentence
         else:
             say(f"{cause} {when}: returning to {running.name}")
-            left, rollback, sentence = _recover(target, running, point, say)
+            left, rollback, sentence = _recover(target, running, point, say,
+                                                   load_started=bool(tx["load_started"]))
         if rollback.get("done"):
             switches.append(rollback["switch"])
         tx.update(state="done", cause=cause, left_on=left, rollback=rollback,
