@@ -286,3 +286,21 @@ def test_refusals_and_loads_through_tango_on_the_call(folder: Path, tmp_path: Pa
             assert str(proxy.state()) == "RUNNING", proxy.status()
         print(f"LoadController through Tango ({kind}), wall clock [ms]: "
               + ", ".join(f"{a!r} {1e3 * t:.0f}" for a, t in times.items()))
+
+
+def test_the_ioc_memory_file_names_its_format_and_reads_the_older_one(tmp_path: Path) -> None:
+    import json
+
+    from fsmbench.live.loading import MEMORY_FORMAT
+
+    memory = FileMemory(tmp_path / "memory.json")
+    request = {"path": "/x/controllers_sos.json", "controller": "tuned"}
+    memory.save(request)
+    doc = json.loads((tmp_path / "memory.json").read_text())
+    assert list(doc)[:2] == ["format", "format_version"]
+    assert (doc["format"], doc["format_version"]) == MEMORY_FORMAT
+    assert memory.load() == request
+    (tmp_path / "memory.json").write_text(json.dumps(request))  # as written before the format
+    assert memory.load() == request
+    memory.save(None)
+    assert memory.load() is None

@@ -38,7 +38,6 @@ closed-loop part under ``diagnostics.closed_loop``), ``plant.mat`` and
 from __future__ import annotations
 
 import dataclasses
-import json
 import math
 import warnings as pywarnings
 from collections.abc import Mapping, Sequence
@@ -69,7 +68,7 @@ from fsmbench.ident.frf.estimate import FrfEstimate
 from fsmbench.ident.pipeline import path_keyed_summary
 from fsmbench.ident.sercalo import SercaloFitOptions, SercaloIdentification, fit_sercalo
 from fsmbench.io.atomic import atomic_write_text
-from fsmbench.jsonutil import plain_json, stamped
+from fsmbench.jsonutil import format_text, plain_json, stamped
 
 __all__ = ["CLOSED_LOOP_RECORDS", "EXCITATION_VARIABLES", "MODE_ASSIGNMENT_TOLERANCE",
            "ClosedLoopIdentification", "ClosedLoopIdentifyOptions", "TrackingDuringMeasurement",
@@ -605,7 +604,7 @@ def write_closed_loop_identification(result: ClosedLoopIdentification,
     name, version = _IDENTIFICATION_FORMAT
     payload = stamped(result.to_json(), format=name, version=version)
     paths = [atomic_write_text(out / "identification.json",
-                               json.dumps(plain_json(payload), indent=2, sort_keys=True) + "\n")]
+                               format_text(payload, sort_keys=True))]
     if result.plant is not None:
         paths.append(write_plant_mat(out / "plant.mat", result.plant))
     paths.append(write_frf_mat(out / "frf.mat",

@@ -34,7 +34,7 @@ if TYPE_CHECKING:
     from fsmbench.live.backend import PlaybackBackend, TwinBackend
     from fsmbench.sim.engine import DiscreteController
 
-__all__ = ["ControllerCommands", "ControllerMemory", "FileMemory"]
+__all__ = ["MEMORY_FORMAT", "ControllerCommands", "ControllerMemory", "FileMemory"]
 
 
 class ControllerMemory(Protocol):
@@ -67,14 +67,23 @@ class FileMemory:
             doc = json.loads(self.path.read_text())
         except (OSError, ValueError):
             return None
+        if isinstance(doc, dict) and doc.get("format") == MEMORY_FORMAT[0]:
+            doc = doc.get("controller")
+        # else a file of before the format: the request itself
         return {str(k): str(v) for k, v in doc.items()} if isinstance(doc, dict) and doc \
             else None
 
     def save(self, doc: dict[str, str] | None) -> None:
         self.path.parent.mkdir(parents=True, exist_ok=True)
         tmp = self.path.with_suffix(".tmp")
-        tmp.write_text(json.dumps(doc or {}))
+        name, version = MEMORY_FORMAT
+        tmp.write_text(json.dumps({"format": name, "format_version": version,
+                                   "controller": doc or {}}) + "\n")
         tmp.replace(self.path)
+
+
+#: The IOC's remembered controller: ``{"format", "format_version", "controller": request}``.
+MEMORY_FORMAT = ("fsmbench.ioc_memory", 1)
 
 
 class ControllerCommands:
