@@ -133,17 +133,17 @@ def test_devices_read_units_and_commands_answer(live: Any, run_engine: Any) -> N
     # The same signal names on both protocols, the units and precisions of the attribute
     # table as each control system carries them (Tango's unit; EPICS' 7-character EGU).
     specs = {spec.name: spec for spec in ATTRIBUTES}
-    from fsmbench.live.ophyd import _READ
+    from fsmbench.live.ophyd import READ_SIGNALS
 
-    assert set(descriptor["data_keys"]) == {f"fsm_bench-{k}" for k in _READ}
-    for key, attr in _READ.items():
+    assert set(descriptor["data_keys"]) == {f"fsm_bench-{k}" for k in READ_SIGNALS}
+    for key, attr in READ_SIGNALS.items():
         spec, data_key = specs[attr], descriptor["data_keys"][f"fsm_bench-{key}"]
         unit = spec.unit if live.protocol == "tango" else ca_units(spec.egu)
         assert (data_key["units"], data_key["precision"]) == (unit, precision(spec.fmt)), key
     config = descriptor["configuration"]["fsm_bench"]["data"]
     assert config["fsm_bench-speed_factor"] == float(SPEED)
     assert config["fsm_bench-loop_closed"] is False
-    assert np.all(np.isfinite([events[-1]["data"][f"fsm_bench-{k}"] for k in _READ]))
+    assert np.all(np.isfinite([events[-1]["data"][f"fsm_bench-{k}"] for k in READ_SIGNALS]))
 
     def commands() -> Any:
         yield from bps.trigger(bench.close_loop, wait=True)

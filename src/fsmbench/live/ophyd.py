@@ -16,10 +16,11 @@ both:
 - commands (:class:`BenchCommand`): ``close_loop``, ``open_loop``, ``stop_excitation``,
   ``abort``, ``reset`` (no argument: ``trigger()`` runs them, so ``bps.trigger(bench.reset,
   wait=True)`` works), ``load_controller``, ``start_excitation``, ``run_experiment``,
-  ``record`` (one string argument, JSON as the device takes it: ``execute(argument)``).
-  Each returns the device's reply (a sentence; ``run_experiment`` and ``record`` the
-  file's path) and raises :class:`CommandRefusedError` with the reason code and the
-  device's sentence when the device refuses it.
+  ``record`` (one string argument, JSON as the device takes it). ``await
+  bench.record.execute(argument)`` gives the device's reply (a sentence; ``run_experiment``
+  and ``record`` the file's path), in a plan :func:`fsmbench.live.plans.execute`; a
+  refusal raises :class:`CommandRefusedError` with the reason code and the device's
+  sentence.
 
 Why a command backend of our own: the device's commands answer in a ``DevString``
 (Tango) or in ``Reply``/``ReplyCode`` after the put (EPICS), and a refusal is a
@@ -51,8 +52,8 @@ from ophyd_async.core import (
     StrictEnum,
 )
 
-__all__ = ["ACTION_COMMANDS", "ARGUMENT_COMMANDS", "BenchCommand", "BenchState",
-           "CommandRefusedError", "FsmBenchDevice", "bench_device"]
+__all__ = ["ACTION_COMMANDS", "ARGUMENT_COMMANDS", "READ_SIGNALS", "BenchCommand",
+           "BenchState", "CommandRefusedError", "FsmBenchDevice", "bench_device"]
 
 #: Commands without argument and with one (the device's names), and their signal names.
 ACTION_COMMANDS = {"close_loop": "CloseLoop", "open_loop": "OpenLoop",
@@ -60,8 +61,8 @@ ACTION_COMMANDS = {"close_loop": "CloseLoop", "open_loop": "OpenLoop",
 ARGUMENT_COMMANDS = {"load_controller": "LoadController",
                      "start_excitation": "StartExcitation",
                      "run_experiment": "RunExperiment", "record": "Record"}
-#: Readables: signal name → (attribute or record, type).
-_READ = {"beam_angle_h": "BeamAngleH", "beam_angle_v": "BeamAngleV", "distance": "Distance",
+#: Readables (``read()``): signal name → attribute (Tango) or record (EPICS), all float.
+READ_SIGNALS = {"beam_angle_h": "BeamAngleH", "beam_angle_v": "BeamAngleV", "distance": "Distance",
          "tracking_error_rms_h": "TrackingErrorRmsH",
          "tracking_error_rms_v": "TrackingErrorRmsV", "dac_saturation": "DacSaturation",
          "bench_time": "BenchTime"}
@@ -235,7 +236,7 @@ class FsmBenchDevice(StandardReadable):
 
         self.address = address
         with self.add_children_as_readables():
-            for attr, device_name in _READ.items():
+            for attr, device_name in READ_SIGNALS.items():
                 setattr(self, attr, signal_r(float, device_name))
         with self.add_children_as_readables(StandardReadableFormat.CONFIG_SIGNAL):
             for attr, (device_name, datatype) in _CONFIG.items():
