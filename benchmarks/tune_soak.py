@@ -201,13 +201,22 @@ def _busy(n: int) -> list[subprocess.Popen[bytes]]:
     return [subprocess.Popen([sys.executable, "-c", code]) for _ in range(n)]
 
 
+def _sigint_default() -> None:
+    """In the child before exec: SIGINT back to its default action."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
 def _tune(device: Device, *, out: Path, running: str, seed: int, env: dict[str, str],
           interrupt_at_s: float | None) -> tuple[int, str, float]:
     """One ``tune --device`` run; its exit status, stdout and stderr, and wall time."""
     cmd = [*PYTHON, "tune", "--device", device.address, "--out", str(out), "--running",
            running, "--watch-s", "6", "--periods", "4", "--seed", str(seed)]
     t0 = time.monotonic()
-    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=env)
+    # SIGINT as a terminal sends it: a soak started in the background (nohup, cmd &) runs
+    # with SIGINT ignored, and its children inherit that; Python then keeps it ignored
+    # and no run was ever interrupted (ten runs in a row exited 0 after their SIGINT).
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=env,
+                            preexec_fn=_sigint_default)
     if interrupt_at_s is not None:
         try:
             proc.wait(timeout=interrupt_at_s)
