@@ -88,6 +88,12 @@ def live(request: pytest.FixtureRequest, parts: SimpleNamespace,
                 str(out)]
         address = f"ca://{prefix}"
         ready = "fsmbench serve: IOC"
+        pyepics_ca = sys.modules.get("epics.ca")
+        if pyepics_ca is not None:
+            # ophyd-async attaches to pyepics' context when pyepics is imported (test_epics
+            # imports it): made here, on the main thread with these ports, as test_epics
+            # makes its own (made on the RunEngine's thread, pyepics could not attach it).
+            pyepics_ca.initialize_libca()
     server = parts.start(args, env=dict(os.environ), folder=folder, name=protocol,
                          ready=ready)
     try:
@@ -104,9 +110,28 @@ def live(request: pytest.FixtureRequest, parts: SimpleNamespace,
         yield SimpleNamespace(protocol=protocol, device=device, folder=folder, out=out,
                               device_loop_closed=loop_closed)
     finally:
+        if protocol == "epics":
+            _clear_channels()
         server.stop()
         os.environ.clear()
         os.environ.update(saved)
+
+
+def _clear_channels() -> None:
+    """Clear the channels on the RunEngine's thread (their context's), while the IOC is up,
+    then finish pyepics' context when there is one (test_epics then makes its own, with
+    its ports). Left to aioca's exit handler, the channels were cleared from the main
+    thread after test_epics had finished its context, and the process hung at exit."""
+    from aioca import purge_channel_caches
+    from bluesky.run_engine import call_in_bluesky_event_loop
+
+    async def purge() -> None:
+        purge_channel_caches()
+
+    call_in_bluesky_event_loop(purge())
+    pyepics_ca = sys.modules.get("epics.ca")
+    if pyepics_ca is not None:
+        pyepics_ca.finalize_libca()
 
 
 def _call(run_engine: Any, plan: Any) -> Any:

@@ -37,6 +37,7 @@ from __future__ import annotations
 
 import asyncio
 import inspect
+import sys
 from collections.abc import Callable
 from typing import Any
 
@@ -177,6 +178,12 @@ class _CaCommand(CommandBackend[..., str]):
     async def connect(self, timeout: float) -> None:
         from aioca import connect
 
+        # The Channel Access context ophyd-async's CA signals use: pyepics' when pyepics is
+        # imported. Connected first, aioca would make a context of its own on this thread,
+        # and the signals could then not attach to pyepics' ('already attached').
+        pyepics_ca = sys.modules.get("epics.ca")
+        if pyepics_ca is not None:
+            pyepics_ca.use_initial_context()
         await connect([f"{self.prefix}:{n}" for n in (self.command, "Reply", "ReplyCode",
                                                         "ReplyCount")], timeout=timeout)
 
