@@ -156,7 +156,8 @@ def antiwindup_channel(sos: np.ndarray, *, ts_s: float,
     ts_s : float
         Sample time [s].
     tracking_time_s : float
-        ``Tt`` [s], the slowest saturated pole's time constant.
+        ``Tt`` [s], the slowest saturated pole's time constant; at least the integrators'
+        count of samples (``n * ts_s``), which the result then records.
 
     Raises
     ------
@@ -180,6 +181,9 @@ def antiwindup_channel(sos: np.ndarray, *, ts_s: float,
     if n_int:
         a_i = a[nk - n_int:, nk - n_int:]
         c_i = c[:, nk - n_int:]
+        # A tracking time of a few samples at least: at a slow rate (a bench file at 10 Hz)
+        # 20 ms put the poles at 1e-9 and no placement reached them; the fastest stays e^-1.
+        tracking_time_s = max(float(tracking_time_s), n_int * ts_s)
         want = np.exp(-ts_s * np.arange(1, n_int + 1) / tracking_time_s)
         # Observer-style placement on the dual pair (A_I^T, C_I^T); its conditioning is poor
         # (states scaled 1 : 1e-9 by the cascade's gain), so the result is checked below.
