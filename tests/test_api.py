@@ -189,11 +189,18 @@ def test_to_control_is_minimal_and_exact(true_plant: PlantModel, delays: Any,
     full = plant_model(sub, true_plant.input_delay_s, delays=delays, dt=dt, minimal=False)
     x = 2j * np.pi * F_HZ if dt is None else np.exp(2j * np.pi * F_HZ * dt)  # F_HZ < Nyquist
     h, ref = ss_response(g, x), ss_response(full, x)
-    assert _hinf_relative(h, ref) < 1e-9
-    assert _pointwise_relative(h, ref) < 1e-9
+    hinf_floor = pointwise_floor = 0.0
     if delays == "pade":  # the full model the issue's notebook built (companion-form Padé)
         issue = select(true_plant.with_pade(order=6), outputs=outputs, inputs=inputs)
-        assert _hinf_relative(h, ss_response(issue, x)) < 1e-9
+        h_issue = ss_response(issue, x)
+        assert _hinf_relative(h, h_issue) < 1e-9
+        # The two full realisations differ by their own rounding (the Newport paths' Padé:
+        # 4.3e-9 on a fresh CI install, under 1e-9 on another); the minimal one need only
+        # be as close to the block-wise one as the notebook's is.
+        hinf_floor = _hinf_relative(h_issue, ref)
+        pointwise_floor = _pointwise_relative(h_issue, ref)
+    assert _hinf_relative(h, ref) < 1e-9 + hinf_floor
+    assert _pointwise_relative(h, ref) < 1e-9 + pointwise_floor
 
 
 def test_exact_delays_sample_the_exact_response(true_plant: PlantModel) -> None:

@@ -40,8 +40,11 @@ SAMPLED_FIGURES = ("fig41_seed_loop_gain", "fsmbench_controller_loop_gain",
                    "seed_controller_robustness", "fsmbench_controller_robustness",
                    "fig42_newport_to_beam", "iff_uc_to_vp")
 # The report's whole page (plotly.js's 4.6 MB included): 11.1 MB before long records
-# carried their zoom pyramid, at most 21 bins of 4 bytes per pixel column of each.
-PAGE_BUDGET_BYTES = 16_000_000
+# carried their zoom pyramid, at most 21 bins of 4 bytes per pixel column of each; 16.13 MB
+# with the figures a control engineer asked for (closed-loop step and disturbance
+# responses, model against each record, model bands, the saturating step drawn as plain
+# lines at 5 kHz): the budget keeps 2 % above that, so a figure that doubles is caught.
+PAGE_BUDGET_BYTES = 16_500_000
 
 
 
