@@ -128,3 +128,30 @@ def test_once_a_load_started_the_roll_back_is_made_whatever_the_device_reads() -
     assert target.forced == [True] and target.loaded == "before"
     assert journal[-1].transaction["rollback"]["done"] is True
     assert "loaded back by LoadController 'seed'" in err.value.sentence
+
+
+def test_a_measurement_that_identifies_nothing_is_made_once_again(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """Twice nothing: tune stops before any design or load, having measured twice (new
+    noise the second time) and said so."""
+    import fsmbench.tune.guarded as guarded
+    from fsmbench.bench.params import default_bench
+
+    seeds: list[int] = []
+
+    def measure(**kw: Any) -> Any:
+        seeds.append(kw["seed"])
+        ident = SimpleNamespace(plant=None, skipped={"sercalo": "no mode near the peaks"})
+        return SimpleNamespace(identification=ident)
+
+    monkeypatch.setattr(guarded, "measure_closed_loop", measure)
+    target: Any = SimpleNamespace(label="a scripted bench", fs_hz=1000.0, drift_pct=0.0,
+                                  play=None, run=lambda *_a, **_k: np.zeros((100, 2)))
+    running: Any = SimpleNamespace(name="before", feedback=None, gd_v_per_rad=(1.0, 1.0))
+    said: list[str] = []
+    with pytest.raises(ValueError, match="could not be identified in closed loop"):
+        guarded.tune_guarded(target=target, bench=default_bench(), running=running,
+                             options=TuneOptions(watch_s=2.0, settle_s=1.0), seed=5,
+                             progress=said.append)
+    assert seeds == [105, 305]
+    assert any(s.endswith("measured once again") for s in said)

@@ -57,8 +57,8 @@ from fsmbench.twin.experiments import REP_AMPLITUDE_V
 from fsmbench.twin.simulate import TwinRun
 
 __all__ = ["MAX_MODE_MOVE", "TUNE_FORMAT", "ControllerFigures", "Loop", "TuneOptions",
-           "TuneResult", "TuneTarget", "implausible_modes", "loop_of", "tune_guarded",
-           "tune_twin"]
+           "TuneResult", "TuneTarget", "implausible_modes", "loop_of", "not_plausible",
+           "tune_guarded", "tune_twin"]
 
 #: A resonance further than this from the model's is not a drift a tune follows (the drift
 #: scenarios move it by a few %): a mode assigned to the wrong axis, or another bench.
@@ -416,6 +416,16 @@ def implausible_modes(sercalo: Mapping[str, Mapping[str, Any]], *, bench: Bench)
     return "; ".join(words)
 
 
+def not_plausible(measurement: ClosedLoopMeasurement, *, bench: Bench) -> str:
+    """Why a closed-loop measurement cannot be designed on, in words ('' when it can)."""
+    ident = measurement.identification
+    if ident.plant is None:
+        return (f"the Sercalo could not be identified in closed loop: "
+                f"{ident.skipped.get('sercalo', 'no plant')}")
+    why = implausible_modes(ident.to_json().get("sercalo", {}), bench=bench)
+    return f"the Sercalo's closed-loop identification is not plausible: {why}" if why else ""
+
+
 def tune_guarded(*, target: TuneTarget, bench: Bench, running: Loop,
                  options: TuneOptions | None = None, seed: int = 0,
                  candidate: Loop | None = None,
@@ -485,6 +495,14 @@ def tune_guarded(*, target: TuneTarget, bench: Bench, running: Loop,
     measurement = measure_closed_loop(play=target.play, model=bench, controller=rc,
                                       options=opts.measurement, seed=seed + 100,
                                       progress=say)
+    if (first_why := not_plausible(measurement, bench=bench)):
+        # The closed-loop fit sometimes puts the notched h mode on the v mode's frequency
+        # (on the live device, by when the commands reach it): measured once again before
+        # tune gives up, as a user would.
+        say(f"{first_why}: measured once again")
+        measurement = measure_closed_loop(play=target.play, model=bench, controller=rc,
+                                          options=opts.measurement, seed=seed + 300,
+                                          progress=say)
     ident = measurement.identification
     if ident.plant is None:
         raise ValueError(f"the Sercalo could not be identified in closed loop: "
