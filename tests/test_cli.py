@@ -20,10 +20,31 @@ def test_params_table_has_units_and_sources(capsys: pytest.CaptureFixture[str]) 
 
 def test_params_json_and_roundtrip(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     assert main(["params", "--json", "--out", str(tmp_path)]) == 0
-    rows = json.loads(capsys.readouterr().out)
+    doc = json.loads(capsys.readouterr().out)
+    assert list(doc)[:2] == ["format", "format_version"]
+    assert (doc["format"], doc["format_version"]) == ("fsmbench.params", 1)
+    rows = doc["parameters"]
     assert {"key", "nominal", "true", "unit", "source"} <= set(rows[0])
     assert main(["params", "--json", "--params", str(tmp_path / "bench.toml")]) == 0
-    assert json.loads(capsys.readouterr().out) == rows  # saved TOML reloads to the same
+    again = json.loads(capsys.readouterr().out)
+    assert again["parameters"] == rows  # saved TOML reloads to the same
+    assert again["bench"].endswith("bench.toml")
+
+
+def test_a_reader_that_closes_the_pipe_ends_the_command_quietly(
+        monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]) -> None:
+    """``fsmbench params --json | head -1``: the shell's SIGPIPE status, no error line."""
+    import io
+
+    from fsmbench.cli import EXIT_BROKEN_PIPE
+
+    class ClosedPipe(io.StringIO):
+        def write(self, text: str) -> int:
+            raise BrokenPipeError(32, "Broken pipe")
+
+    monkeypatch.setattr("sys.stdout", ClosedPipe())
+    assert main(["params", "--json"]) == EXIT_BROKEN_PIPE == 128 + 13
+    assert capsys.readouterr().err == ""
 
 
 def test_simulate_writes_the_requested_records(tmp_path: Path,

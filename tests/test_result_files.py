@@ -2,7 +2,7 @@
 
 On the twin study's folder (``twin_study``) and the stage commands run on its recordings
 (``identify``, ``budget --bench``, ``excite``, ``simulate --excitation``, ``montecarlo``,
-``params``): every JSON file starts with ``format`` then ``format_version``;
+``params``, ``params --json``): every JSON file starts with ``format`` then ``format_version``;
 ``identify --json`` gives its targets as numbers; the study and ``identify`` + ``budget
 --bench`` give the same budget on the same recordings; the doc's Python examples run on
 the study's files.
@@ -42,6 +42,10 @@ def runs(twin_study: StudyResult, tmp_path_factory: pytest.TempPathFactory) -> d
         assert main(["identify", data, "--out", out["identify"], "--json"]) == 0
     # What identify --json prints is a document too: kept as a file to be walked.
     (root / "identify_stdout.json").write_text(stdout.getvalue())
+    stdout = io.StringIO()
+    with contextlib.redirect_stdout(stdout):
+        assert main(["params", "--json"]) == 0
+    (root / "params_stdout.json").write_text(stdout.getvalue())
     commands = [
         ["budget", data, "--bench", out["identify"], "--out", out["budget"]],
         ["excite", out["excite"], "--input", "Uch", "--amplitude-rms", "0.015", "--band", "1",
@@ -67,7 +71,8 @@ def test_every_json_written_starts_with_format_then_version(runs: dict[str, Path
     # The commands' own files are among those walked (the walk found the folders).
     assert {"identification.json", "budget.json", "design.json", "controllers_sos.json",
             "summary.json", "study.json", "timings.json", "run.json", "twin_truth.json",
-            "excitation.json", "montecarlo.json", "identify_stdout.json"} <= names, names
+            "excitation.json", "montecarlo.json", "identify_stdout.json",
+            "params_stdout.json"} <= names, names
     bad = []
     for path in files:
         doc = json.loads(path.read_text(encoding="utf-8"))

@@ -44,6 +44,7 @@ import argparse
 import contextlib
 import json
 import math
+import os
 import signal
 import sys
 import threading
@@ -74,6 +75,7 @@ try:
     )
     from fsmbench.excite.cli import add_excite_command
     from fsmbench.io.convert_cli import add_convert_command
+    from fsmbench.jsonutil import format_text, stamped
     from fsmbench.live.serve import add_serve_command
     from fsmbench.scale.mc_cli import add_montecarlo_command
     from fsmbench.tune.cli import add_closed_loop_options, add_tune_command, closed_loop_simulation
@@ -251,7 +253,9 @@ def _cmd_params(args: argparse.Namespace) -> int:
         with _run_folder(args, args.out, data=None, need_bytes=_SMALL_BYTES) as run:
             written = run.final_path(save_bench(bench, run.staging / "bench.toml"))
     if args.json:
-        print(json.dumps([r.__dict__ for r in rows], indent=2))
+        print(format_text(stamped({"bench": bench.origin,
+                                   "parameters": [dict(r.__dict__) for r in rows]},
+                                  format="fsmbench.params", version=1)))
     else:
         width = max(len(r.key) for r in rows)
         print(f"{'parameter':<{width}}  {'nominal':<26} {'true (twin)':<26} {'unit':<9} source")
@@ -441,7 +445,6 @@ def _stage_folder(args: argparse.Namespace, need_bytes: float) -> Any:
 
 def _cmd_identify(args: argparse.Namespace) -> int:
     from fsmbench.io.truth import read_twin_truth
-    from fsmbench.jsonutil import format_text
     from fsmbench.stages import identify_stage
     from fsmbench.twin.compare import comparison_json, readable_table
 
@@ -863,6 +866,10 @@ def _mapped(text: str) -> str:
     return text if run is None else run.final_text(text)
 
 
+#: A shell's status for a command killed by SIGPIPE (128 + 13): its reader closed the pipe.
+EXIT_BROKEN_PIPE = 141
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``fsmbench`` console script; returns the exit status."""
     argv = list(sys.argv[1:] if argv is None else argv)
@@ -884,6 +891,13 @@ def main(argv: Sequence[str] | None = None) -> int:
     except Terminated:
         print(f"{prefix} {out}: terminated (SIGTERM); {untouched}", file=sys.stderr)
         return EXIT_SIGTERM
+    except BrokenPipeError:
+        # The reader went away (``fsmbench params --json | head``): no error to tell it.
+        # Later writes to stdout (the interpreter's flush at exit) go nowhere.
+        with contextlib.suppress(OSError, ValueError):
+            devnull = os.open(os.devnull, os.O_WRONLY)
+            os.dup2(devnull, sys.stdout.fileno())
+        return EXIT_BROKEN_PIPE
     except Exception as exc:
         if not _user_error(exc):
             traceback.print_exc()

@@ -48,6 +48,25 @@ def test_resonances_are_found(sercalo_frf) -> None:
     assert res["Ucv"] == pytest.approx(251.2, abs=1.0)
 
 
+@pytest.mark.parametrize(("lines", "expected_hz"), [
+    (1, 411.5),     # one line alone is noise: the h peak stands
+    (3, 251.2),     # three lines, as wide as a resonance: the largest peak
+])
+def test_a_peak_one_line_wide_is_not_a_resonance(sercalo_frf, lines: int,
+                                                  expected_hz: float) -> None:
+    # The closed-loop case (a live record on the twin): the h column's line at the v
+    # resonance estimated at 1.3 times the h peak, its neighbours near their true ~2.
+    f = sercalo_frf.frequency_hz
+    line = int(np.argmin(np.abs(f - 251.2)))
+    h = sercalo_frf.frf.values.copy()
+    peak = np.max(np.abs(h[(f > 400) & (f < 420), 0, 0]))
+    half = lines // 2
+    h[line - half: line + half + 1, 0, 0] = 1.3 * peak
+    frf = dataclasses.replace(sercalo_frf, frf=sercalo_frf.frf.copy(data=h))
+    # One Welch line (0.61 Hz) either way.
+    assert detect_resonances(frf)["Uch"] == pytest.approx(expected_hz, abs=1.0)
+
+
 def test_combined_delay_is_the_inverse_variance_mean() -> None:
     def est(d: float, s: float) -> DelayEstimate:
         return DelayEstimate(delay_s=d, std_s=s, band_hz=(10.0, 100.0), method="x",

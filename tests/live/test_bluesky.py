@@ -255,15 +255,53 @@ def test_plans_record_what_identifies_the_bench(live: Any, run_engine: Any,
     missed = [str(r) for r in rows.values() if not r.within_target]
     assert not missed, "\n".join(missed)
     # The closed-loop identification gives the Sercalo, its current amplifiers and delay:
-    # each within the same targets, but the v damping. One stage at the default bound
-    # leaves the v resonance band too little excitation: 3 of 17 runs on the twin gave 2.8
-    # to 10 times the true damping (closed_loop_experiments' notes); it is checked to be
-    # a damping (positive, below 1), the rest to hold.
+    # each within the same targets, but the dampings. One stage at the default bound leaves
+    # the resonance bands too little excitation: the v damping came out 2.8 to 10 times the
+    # true one in 3 of 17 runs on the twin, the h damping +63 % in 1 of 9 runs of this test
+    # (closed_loop_identification's two stages bring them within: the test below); each is
+    # checked to be a damping (positive, below 1), the rest to hold.
     result = identify_records(closed, model=BENCH)
     assert not live.device_loop_closed(), "the plan opens the loop it closed"
     rows = _judged(result)
     assert {f"sercalo.{a}.{q}" for a in "hv" for q in ("resonance_hz", "damping_ratio",
                                                           "dc_gain_v_per_a")} <= set(rows)
-    assert 0.0 < rows.pop("sercalo.v.damping_ratio").identified < 1.0
+    for axis in "hv":
+        assert 0.0 < rows.pop(f"sercalo.{axis}.damping_ratio").identified < 1.0
     missed = [str(r) for r in rows.values() if not r.within_target]
     assert not missed, "\n".join(missed)
+
+
+@pytest.mark.slow  # two stages of two records and three identifications: ~1 min each
+def test_the_two_stage_plan_identifies_every_target_in_closed_loop(live: Any,
+                                                                   run_engine: Any) -> None:
+    from fsmbench.live.plans import closed_loop_identification
+
+    bound = 30e-6
+    docs: list[str] = []
+    token = run_engine.subscribe(lambda name, doc: docs.append(name))
+    try:
+        run = _call(run_engine, closed_loop_identification(live.device,
+                                                           live.folder / "two_stage"))
+    finally:
+        run_engine.unsubscribe(token)
+    assert not live.device_loop_closed(), "the plan opens the loop it closed"
+    # One run, an event after each stage; each stage's two records kept in its folder.
+    assert docs.count("start") == docs.count("stop") == 1
+    assert docs.count("event") == len(run.stage_folders) >= 2
+    for folder in run.stage_folders:
+        assert sorted(p.name for p in folder.glob("data_cl_*.mat")) == ["data_cl_uch.mat",
+                                                                         "data_cl_ucv.mat"]
+    assert "ESRF study" in run.controller
+    names = sorted(p.name for p in run.files)
+    assert names == ["frf.mat", "identification.json", "measurement.json", "plant.mat"]
+    for name in ("identification.json", "measurement.json"):
+        assert list(json.loads((run.folder / name).read_text()))[:2] == ["format",
+                                                                        "format_version"]
+    # Every target of the open-loop identification, the dampings included, against the
+    # twin's truth; the beam error the measurement added under the bound on both axes.
+    rows = _judged(run.measurement.identification)
+    assert {f"sercalo.{a}.{q}" for a in "hv" for q in ("resonance_hz", "damping_ratio",
+                                                          "dc_gain_v_per_a")} <= set(rows)
+    missed = [str(r) for r in rows.values() if not r.within_target]
+    assert not missed, "\n".join(missed)
+    assert max(run.measurement.tracking_added_rad().values()) <= bound

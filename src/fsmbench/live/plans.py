@@ -10,6 +10,10 @@ closed loop, through a RunEngine, and the identification of their files.
   simulate --closed-loop``) played by ``StartExcitation`` and recorded by ``Record``;
   written as ``data_cl_uch.mat`` and ``data_cl_ucv.mat``, the layout
   :func:`fsmbench.ident.closed_loop.identify_closed_loop` reads;
+- :func:`closed_loop_identification`: ``fsmbench tune``'s two-stage closed-loop
+  measurement (locate the resonances, then refine around them) played the same way, each
+  stage identified between the records off the RunEngine's loop; the identification's
+  files written (a folder ``--bench`` takes);
 - :func:`identify_records`: the follow-up call, the folder's records to
   :func:`fsmbench.api.identify` (open loop) or to the closed-loop identification.
 
@@ -26,13 +30,10 @@ writes in ``folder`` must be readable by the device.
 
 from __future__ import annotations
 
-import asyncio
-import contextlib
 import functools
 import json
 import shutil
-import time
-from collections.abc import Callable, Generator, Mapping, Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -41,22 +42,25 @@ import bluesky.plan_stubs as bps
 import bluesky.preprocessors as bpp
 import numpy as np
 
-from fsmbench.live.ophyd import BenchCommand, BenchState, FsmBenchDevice
+from fsmbench.live.ophyd import FsmBenchDevice
+from fsmbench.live.plan_stubs import (
+    Plan,
+    excitation_start,
+    execute,
+    in_thread,
+    stand_down,
+    wait_bench_time,
+    wait_until_done,
+)
 
-__all__ = ["IDENTIFICATION_EXPERIMENTS", "BenchRecords", "closed_loop_experiments",
-           "design_excitations", "execute", "identification_experiments", "identify_records",
-           "wait_until_done"]
+__all__ = ["IDENTIFICATION_EXPERIMENTS", "BenchRecords", "ClosedLoopIdentificationRun",
+           "closed_loop_experiments", "closed_loop_identification", "design_excitations",
+           "execute", "identification_experiments", "identify_records", "wait_until_done"]
 
 #: The ESRF study's identification experiments (section 2), as the twin plays them.
 IDENTIFICATION_EXPERIMENTS = ("data_cal_pd_h", "data_cal_pd_v", "data_uch", "data_ucv",
                               "data_unh", "data_unv")
-#: Longest wall-clock time the bench may stand still while a plan waits on it [s]: a
-#: stalled bench fails the plan, a slow one does not.
-STALL_S = 60.0
-_POLL_S = 0.05
 _SETTLE_S = 4.0  # least bench time between the excitation's start and its record [s]
-
-Plan = Generator[Any, Any, Any]
 
 
 @dataclass(frozen=True)
@@ -87,55 +91,6 @@ class BenchRecords:
     controller: str
     bench_s: float
     excitations: dict[str, Path] = field(default_factory=dict)
-
-
-def execute(command: BenchCommand, *args: str) -> Plan:
-    """Run ``command`` on the device; the device's reply (a plan stub).
-
-    Raises
-    ------
-    fsmbench.live.ophyd.CommandRefusedError
-        The device refused it (its reason code and sentence).
-    """
-
-    async def run() -> str:
-        return str(await command.execute(*args))
-
-    (task,) = yield from bps.wait_for([run])
-    return task.result()
-
-
-def _in_thread(fn: Callable[[], Any]) -> Plan:
-    """``fn()`` off the RunEngine's loop (a computation of seconds), its result."""
-
-    async def run() -> Any:
-        return await asyncio.to_thread(fn)
-
-    (task,) = yield from bps.wait_for([run])
-    return task.result()
-
-
-def wait_until_done(bench: FsmBenchDevice, what: str) -> Plan:
-    """Wait while the device is MOVING (its experiment or record runs); its state after.
-
-    Fails when the bench time stands still for :data:`STALL_S` of wall clock, or the
-    device ends in FAULT (its status named).
-    """
-    last = yield from bps.rd(bench.bench_time)
-    moved = time.monotonic()
-    while (state := (yield from bps.rd(bench.state))) == BenchState.MOVING:
-        yield from bps.sleep(_POLL_S)
-        now = yield from bps.rd(bench.bench_time)
-        if now != last:
-            last, moved = now, time.monotonic()
-        elif time.monotonic() - moved > STALL_S:
-            status = yield from bps.rd(bench.status)
-            raise TimeoutError(f"{bench.address}: the bench time stood still for {STALL_S:g} s "
-                               f"(wall clock) during {what}: {status}")
-    if state == BenchState.FAULT:
-        status = yield from bps.rd(bench.status)
-        raise RuntimeError(f"{bench.address}: FAULT during {what}: {status}")
-    return state
 
 
 def _gather(path: Path, folder: Path, name: str) -> Path:
@@ -199,26 +154,10 @@ def identification_experiments(bench: FsmBenchDevice, folder: str | Path, *,
         bpp.run_wrapper(body(), md={"plan_name": "fsmbench_identification_experiments",
                                     "experiments": list(experiments), "folder": str(out),
                                     "device": bench.address, **(md or {})}),
-        functools.partial(_stand_down, bench, open_loop=False))
+        functools.partial(stand_down, bench, open_loop=False))
     t1 = yield from bps.rd(bench.bench_time)
     return BenchRecords(folder=out, files=files, kind="open loop", address=bench.address,
                         controller=str(controller), bench_s=float(t1 - t0))
-
-
-def _stand_down(bench: FsmBenchDevice, *, open_loop: bool) -> Plan:
-    """After a plan, whether it ended or failed: its experiment or record aborted, its
-    excitation stopped and (``open_loop``) the loop it closed opened; a refusal (nothing to
-    stop, a FAULT) is no error here."""
-    from fsmbench.live.ophyd import CommandRefusedError
-
-    if (yield from bps.rd(bench.state)) == BenchState.MOVING:
-        with contextlib.suppress(CommandRefusedError):
-            yield from execute(bench.abort)
-    with contextlib.suppress(CommandRefusedError):
-        yield from execute(bench.stop_excitation)
-    if open_loop:
-        with contextlib.suppress(CommandRefusedError):
-            yield from execute(bench.open_loop)
 
 
 def design_excitations(*, model: Any = None, controller: str | Path | None = None,
@@ -264,28 +203,47 @@ def design_excitations(*, model: Any = None, controller: str | Path | None = Non
     return out
 
 
-def _wait_bench_time(bench: FsmBenchDevice, until_s: float) -> Plan:
-    """Wait until the device's bench time reaches ``until_s`` [s]."""
-    while (yield from bps.rd(bench.bench_time)) < until_s:
-        yield from bps.sleep(_POLL_S)
+def _record_closed_loop(bench: FsmBenchDevice, npy: Path, x: np.ndarray, *, periods: int,
+                        fs_hz: float, channel: str, source: str) -> Plan:
+    """One period ``x`` [V] played on ``channel``, repeated, with the loop closed; after a
+    period of bench time (at least :data:`_SETTLE_S`) ``periods`` whole periods recorded and
+    written next to ``npy`` as ``data_cl_<ch>.mat`` with the excitation as it was played
+    (placed by the bench time the device's ``Excitation`` says it started); its path."""
+    from fsmbench.io.recording import make_recording, read_recording, write_recording
+    from fsmbench.sim.excitation import samples_sha256
+    from fsmbench.twin.closed_loop import (
+        CLOSED_LOOP_EXPERIMENTS,
+        CLOSED_LOOP_SIGNALS,
+        excitation_variable,
+    )
 
-
-def _excitation_start(bench: FsmBenchDevice, sha: str) -> Plan:
-    """The bench time the excitation of samples ``sha`` started [s] (the device's
-    ``Excitation``, once it names them: the IOC refreshes it 10 times a second)."""
-    moved = time.monotonic()
-    while True:
-        text = yield from bps.rd(bench.excitation)
-        try:
-            doc = json.loads(str(text) or "{}")
-        except ValueError:
-            doc = {}
-        if isinstance(doc, dict) and doc.get("samples_sha256") == sha:
-            return float(doc["start_time_s"])
-        if time.monotonic() - moved > STALL_S:
-            raise TimeoutError(f"{bench.address}: Excitation never named the samples played: "
-                               f"{text}")
-        yield from bps.sleep(_POLL_S)
+    name = CLOSED_LOOP_EXPERIMENTS[channel]
+    np.save(npy, x)
+    yield from execute(bench.start_excitation, json.dumps(
+        {"input": channel, "kind": "samples", "path": str(npy.resolve()), "loop_from": 0}))
+    e0 = yield from excitation_start(bench, samples_sha256(x))
+    # The loop's transient decays before the record: the Sercalo's modes (time constant
+    # 1 / (zeta w) ~0.6 s at 251 Hz, 0.1 %) ring for seconds; a whole period (4 s at the
+    # default 0.25 Hz) and at least _SETTLE_S.
+    yield from wait_bench_time(bench, e0 + max(_SETTLE_S, x.size / fs_hz))
+    n = periods * x.size
+    path = yield from execute(bench.record, json.dumps(
+        {"signals": list(CLOSED_LOOP_SIGNALS), "name": f"bluesky_{name}",
+         "duration_s": n / fs_hz, "overwrite": True}))
+    yield from wait_until_done(bench, f"the record of {name}")
+    yield from execute(bench.stop_excitation)
+    rec = read_recording(path, require=())
+    if rec.sizes["t"] != n:
+        status = yield from bps.rd(bench.status)
+        raise RuntimeError(f"{bench.address}: the record of {name} holds {rec.sizes['t']} "
+                           f"samples of {n} (cut short): {status}")
+    r0 = round(float(rec["t"].values[0]) * fs_hz)
+    # The sample of the (repeated) excitation each recorded sample was played with.
+    played = x[(r0 - round(e0 * fs_hz) + np.arange(n)) % x.size]
+    signals = {s: np.asarray(rec[s].values, dtype=float) for s in CLOSED_LOOP_SIGNALS}
+    signals[excitation_variable(channel, "output")] = played
+    ds = make_recording(signals, fs_hz=fs_hz, experiment=name, source=source)
+    return write_recording(ds, npy.parent / f"{name}.mat")
 
 
 def closed_loop_experiments(bench: FsmBenchDevice, folder: str | Path, *,
@@ -336,19 +294,13 @@ def closed_loop_experiments(bench: FsmBenchDevice, folder: str | Path, *,
     damping within its target.
     """
     from fsmbench.bench.params import default_bench
-    from fsmbench.io.recording import make_recording, read_recording, write_recording
-    from fsmbench.sim.excitation import samples_sha256
-    from fsmbench.twin.closed_loop import (
-        CLOSED_LOOP_EXPERIMENTS,
-        CLOSED_LOOP_SIGNALS,
-        excitation_variable,
-    )
+    from fsmbench.twin.closed_loop import CLOSED_LOOP_EXPERIMENTS
 
     out = Path(folder)
     out.mkdir(parents=True, exist_ok=True)
     fs = float((design.get("model") or default_bench()).true.converter.fs_hz)
     if excitations is None:
-        excitations = yield from _in_thread(functools.partial(design_excitations, **design))
+        excitations = yield from in_thread(functools.partial(design_excitations, **design))
     missing = [ch for ch in CLOSED_LOOP_EXPERIMENTS if ch not in excitations]
     if missing:
         raise ValueError(f"closed_loop_experiments needs an excitation for {', '.join(missing)}")
@@ -365,46 +317,187 @@ def closed_loop_experiments(bench: FsmBenchDevice, folder: str | Path, *,
         for ch, name in CLOSED_LOOP_EXPERIMENTS.items():
             x = np.asarray(excitations[ch], dtype=float)
             npys[ch] = out / f"excitation_{ch}.npy"
-            np.save(npys[ch], x)
-            yield from execute(bench.start_excitation, json.dumps(
-                {"input": ch, "kind": "samples", "path": str(npys[ch].resolve()),
-                 "loop_from": 0}))
-            e0 = yield from _excitation_start(bench, samples_sha256(x))
-            # The loop's transient decays before the record: the Sercalo's modes (time
-            # constant 1 / (zeta w) ~0.6 s at 251 Hz, 0.1 %) ring for seconds; a whole
-            # period (4 s at the default 0.25 Hz) and at least _SETTLE_S.
-            settle_s = max(_SETTLE_S, x.size / fs)
-            yield from _wait_bench_time(bench, e0 + settle_s)
-            n = periods * x.size
-            path = yield from execute(bench.record, json.dumps(
-                {"signals": list(CLOSED_LOOP_SIGNALS), "name": f"bluesky_{name}",
-                 "duration_s": n / fs, "overwrite": True}))
-            yield from wait_until_done(bench, f"the record of {name}")
-            yield from execute(bench.stop_excitation)
-            rec = read_recording(path, require=())
-            if rec.sizes["t"] != n:
-                status = yield from bps.rd(bench.status)
-                raise RuntimeError(f"{bench.address}: the record of {name} holds "
-                                   f"{rec.sizes['t']} samples of {n} (cut short): {status}")
-            r0 = round(float(rec["t"].values[0]) * fs)
-            # The sample of the (repeated) excitation each recorded sample was played with.
-            played = x[(r0 - round(e0 * fs) + np.arange(n)) % x.size]
-            signals = {s: np.asarray(rec[s].values, dtype=float) for s in CLOSED_LOOP_SIGNALS}
-            signals[excitation_variable(ch, "output")] = played
-            ds = make_recording(signals, fs_hz=fs, experiment=name,
-                                source=f"fsmbench Bluesky plan through {bench.address} "
-                                       f"(loop closed by {running[0]})")
-            files[name] = write_recording(ds, out / f"{name}.mat")
+            files[name] = yield from _record_closed_loop(
+                bench, npys[ch], x, periods=periods, fs_hz=fs, channel=ch,
+                source=f"fsmbench Bluesky plan through {bench.address} (loop closed by "
+                       f"{running[0]})")
             yield from bps.trigger_and_read([bench], name="experiments")
 
     yield from bpp.finalize_wrapper(
         bpp.run_wrapper(body(), md={"plan_name": "fsmbench_closed_loop_experiments",
                                     "folder": str(out), "device": bench.address,
                                     "periods": periods, **(md or {})}),
-        functools.partial(_stand_down, bench, open_loop=closes))
+        functools.partial(stand_down, bench, open_loop=closes))
     t1 = yield from bps.rd(bench.bench_time)
     return BenchRecords(folder=out, files=files, kind="closed loop", address=bench.address,
                         controller=running[0], bench_s=float(t1 - t0), excitations=npys)
+
+
+@dataclass(frozen=True, eq=False)
+class ClosedLoopIdentificationRun:
+    """What :func:`closed_loop_identification` measured and identified.
+
+    Attributes
+    ----------
+    folder : Path
+        ``identification.json``, ``plant.mat``, ``frf.mat`` (the identification, a folder
+        ``--bench`` takes) and ``measurement.json`` (each stage's designs and tracking).
+    stage_folders : tuple of Path
+        Each stage's records (``data_cl_uch.mat``, ``data_cl_ucv.mat``) and excitations.
+    measurement : fsmbench.tune.measure.ClosedLoopMeasurement
+        Both stages and the identification from them (``.identification``).
+    files : tuple of Path
+        The files written in ``folder``.
+    address, controller : str
+        The device, and its controller during the records.
+    bench_s : float
+        Bench time the plan took [s].
+    """
+
+    folder: Path
+    stage_folders: tuple[Path, ...]
+    measurement: Any
+    files: tuple[Path, ...]
+    address: str
+    controller: str
+    bench_s: float
+
+
+def _advance(steps: Any, records: Any) -> Any:
+    """The protocol's next stage request, or its result once it returns."""
+    try:
+        return next(steps) if records is None else steps.send(records)
+    except StopIteration as done:
+        return done.value
+
+
+def _play_stage(bench: FsmBenchDevice, folder: Path, request: Any, *, fs_hz: float,
+                controller: str) -> Plan:
+    """One stage's designs played through the device (:func:`_record_closed_loop`: the
+    steady-state period repeated, ``transient + steady`` periods recorded); its records as
+    :func:`fsmbench.tune.measure.measurement_steps` takes them."""
+    from fsmbench.ident.closed_loop import read_closed_loop_records
+    from fsmbench.sim.excitation import SampledExcitation
+    from fsmbench.twin.experiments import ExperimentSpec
+    from fsmbench.twin.simulate import TwinRun
+
+    folder.mkdir(parents=True, exist_ok=True)
+    specs = []
+    for play, measured in zip(request.plays, request.designs, strict=True):
+        d = measured.design
+        x = np.asarray(d.samples_v[-d.period_samples:], dtype=float)
+        periods = d.periods + d.transient_periods
+        yield from _record_closed_loop(
+            bench, folder / f"excitation_{play.channel}.npy", x, periods=periods, fs_hz=fs_hz,
+            channel=play.channel, source=f"fsmbench Bluesky plan through {bench.address}, "
+            f"{request.label} (loop closed by {controller})")
+        specs.append(ExperimentSpec(
+            name=play.name, description=f"{play.description} on {play.channel} (controller "
+            f"output, in steady state), loop closed by {controller}, through {bench.address}",
+            seed_section="closed loop", duration_s=periods * x.size / fs_hz,
+            excitations=(SampledExcitation(play.channel, "samples",
+                                           float(np.sqrt(np.mean(x**2))), 0.0, samples_v=x,
+                                           loop_from=0),),
+            closed_loop=True, compensation_unit=True, shielding=True))
+    yield from bps.trigger_and_read([bench], name="experiments")
+    recordings = yield from in_thread(functools.partial(read_closed_loop_records, folder))
+    return TwinRun(recordings=recordings, truth={"source": bench.address}, seed=request.seed,
+                   experiments=tuple(specs))
+
+
+def closed_loop_identification(bench: FsmBenchDevice, folder: str | Path, *,
+                               model: Any = None, controller: str | Path | None = None,
+                               options: Any = None, seed: int = 0,
+                               md: Mapping[str, Any] | None = None) -> Plan:
+    """The Sercalo measured and identified with the loop closed, in two stages (a plan).
+
+    ``fsmbench tune``'s measurement (:func:`fsmbench.tune.measure.measurement_steps`, one
+    protocol for the twin, the device and this plan): stage 1 locates the resonances with
+    a beam-bounded multisine on each command (±5 % bands, 0.85 of the bound, designed on
+    ``model``); stage 2 refines around the located ones (±0.2 %), the plant fitted on both
+    stages' lines. Each stage is played as :func:`closed_loop_experiments` plays its
+    excitations (its steady-state period repeated, recorded whole periods after a period
+    of settling) and identified between the stages off the RunEngine's loop. One stage
+    leaves the dampings short of their targets (the v damping 2.8 to 10 times, the h one
+    +63 % once in 9 runs on the twin); the two stages bring them within.
+
+    Parameters
+    ----------
+    bench : FsmBenchDevice
+    folder : str or Path
+        Where the stages' records and the identification go (made if missing).
+    model : Bench, optional
+        The bench file the excitations are designed on and the 4QD gains and Newport come
+        from (default: the packaged bench).
+    controller : str or Path, optional
+        The controller the device runs, as ``fsmbench simulate --closed-loop`` takes it
+        (default: the ESRF study's, which the device closes with when it has none
+        loaded); the plan fails when the device's ``Controller`` names another.
+    options : fsmbench.tune.measure.MeasurementOptions, optional
+        The bound (``max_error_rad``, 30 µrad), resolution, periods, stages.
+    seed : int
+        The stages' seeds, as ``tune`` numbers them (the device ignores them).
+    md : mapping, optional
+        Added to the run's start document.
+
+    Returns
+    -------
+    ClosedLoopIdentificationRun
+    """
+    from fsmbench.bench.params import default_bench
+    from fsmbench.ident.closed_loop import write_closed_loop_identification
+    from fsmbench.io.atomic import atomic_write_text
+    from fsmbench.jsonutil import format_text, stamped
+    from fsmbench.sim.loaded import running_controller
+    from fsmbench.tune.measure import MeasurementOptions, StageRequest, measurement_steps
+
+    out = Path(folder)
+    out.mkdir(parents=True, exist_ok=True)
+    bench_model = model if model is not None else default_bench()
+    opts = options or MeasurementOptions()
+    if opts.at != "output":
+        raise ValueError("the device adds an excitation at the controller's output, not at "
+                         "the reference: MeasurementOptions(at='output')")
+    fs = float(bench_model.true.converter.fs_hz)
+    k = yield from in_thread(functools.partial(
+        running_controller, None if controller is None else str(controller), bench=bench_model))
+    t0 = yield from bps.rd(bench.bench_time)
+    closes = not (yield from bps.rd(bench.loop_closed))
+    stages: list[Path] = []
+    running: list[str] = []
+    done: list[Any] = []
+
+    def body() -> Plan:
+        if closes:
+            yield from execute(bench.close_loop)
+        running.append(str((yield from bps.rd(bench.controller))))
+        if running[0] != k.name:
+            raise ValueError(f"{bench.address} runs {running[0]}; the excitations would be "
+                             f"designed on {k.name} and their beam bound would not hold: "
+                             "give controller= the file of the device's controller")
+        steps = measurement_steps(model=bench_model, controller=k, options=opts, seed=seed)
+        step = yield from in_thread(functools.partial(_advance, steps, None))
+        while isinstance(step, StageRequest):
+            stages.append(out / f"stage_{len(stages) + 1}")
+            run = yield from _play_stage(bench, stages[-1], step, fs_hz=fs,
+                                         controller=running[0])
+            step = yield from in_thread(functools.partial(_advance, steps, run))
+        done.append(step)
+
+    yield from bpp.finalize_wrapper(
+        bpp.run_wrapper(body(), md={"plan_name": "fsmbench_closed_loop_identification",
+                                    "folder": str(out), "device": bench.address,
+                                    "max_error_rad": opts.max_error_rad, **(md or {})}),
+        functools.partial(stand_down, bench, open_loop=closes))
+    t1 = yield from bps.rd(bench.bench_time)
+    measurement = done[0]
+    files = write_closed_loop_identification(measurement.identification, out)
+    files.append(atomic_write_text(out / "measurement.json", format_text(stamped(
+        {"device": bench.address, "controller": running[0], **measurement.to_json()},
+        format="fsmbench.closed_loop_measurement", version=1))))
+    return ClosedLoopIdentificationRun(
+        folder=out, stage_folders=tuple(stages), measurement=measurement, files=tuple(files),
+        address=bench.address, controller=running[0], bench_s=float(t1 - t0))
 
 
 def identify_records(records: BenchRecords, *, model: Any = None,

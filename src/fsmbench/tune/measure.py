@@ -36,7 +36,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import tempfile
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Generator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -58,11 +58,14 @@ from fsmbench.twin.simulate import TwinRun
 __all__ = [
     "ClosedLoopMeasurement",
     "MeasurementOptions",
+    "MeasurementSteps",
     "Player",
     "RecordsRejectedError",
+    "StageRequest",
     "identified_model",
     "located_bench",
     "measure_closed_loop",
+    "measurement_steps",
     "model_excess",
     "not_located",
 ]
@@ -262,11 +265,39 @@ def model_excess(ident: ClosedLoopIdentification,
     return ratio
 
 
-def _stage(*, play: Player, model: Bench, controller: RunningController,
-           options: MeasurementOptions, dense_width: float, seed: int, prior_label: str,
-           ident_bench: Bench, progress: Callable[[str], None] | None,
-           merge_with: Sequence[ClosedLoopFrf] = ()
-           ) -> tuple[ClosedLoopIdentification, TwinRun, tuple[BoundedMeasurement, ...]]:
+@dataclass(frozen=True, eq=False)
+class StageRequest:
+    """One stage's excitations, for whatever plays them (the twin, the device, a plan).
+
+    Attributes
+    ----------
+    plays : tuple of ClosedLoopPlay
+        One per command, each its whole design (transient periods first).
+    designs : tuple of BoundedMeasurement
+        The designs the plays come from (period, periods, predicted beam error).
+    settle_s : float
+        Loop closed, nothing played, before each excitation [s].
+    seed : int
+        The stage's noise seed (the twin's; a device ignores it).
+    label : str
+        The stage, in words (``stage 1``, ``stage 1 again``, ``stage 2``).
+    """
+
+    plays: tuple[ClosedLoopPlay, ...]
+    designs: tuple[BoundedMeasurement, ...]
+    settle_s: float
+    seed: int
+    label: str
+
+
+#: The two-stage protocol (:func:`measurement_steps`): yields each stage's request,
+#: is sent its records, returns the measurement.
+MeasurementSteps = Generator[StageRequest, TwinRun, ClosedLoopMeasurement]
+_Stage = tuple[ClosedLoopIdentification, TwinRun, tuple[BoundedMeasurement, ...]]
+
+
+def _stage_request(*, model: Bench, controller: RunningController, options: MeasurementOptions,
+                   dense_width: float, seed: int, prior_label: str, label: str) -> StageRequest:
     scales = (1.0 - dense_width, 1.0, 1.0 + dense_width)
     loops = robust_loops(model, controller.feedback, frequency_scales=scales)
     designs = tuple(beam_bounded_measurement(
@@ -277,11 +308,21 @@ def _stage(*, play: Player, model: Bench, controller: RunningController,
         transient_periods=options.transient_periods, dense_width=dense_width,
         fill=options.fill, loops=loops, controller_name=controller.name, model=prior_label)
         for ch in ("Uch", "Ucv"))
-    plays = [ClosedLoopPlay(channel=d.design.input, samples_v=d.design.samples_v, at=options.at,
-                            description=f"beam-bounded multisine ({prior_label})")
-             for d in designs]
-    run = play(plays, controller=controller, settle_s=options.settle_s, seed=seed,
-               progress=progress)
+    plays = tuple(ClosedLoopPlay(channel=d.design.input, samples_v=d.design.samples_v,
+                                 at=options.at,
+                                 description=f"beam-bounded multisine ({prior_label})")
+                  for d in designs)
+    return StageRequest(plays=plays, designs=designs, settle_s=options.settle_s, seed=seed,
+                        label=label)
+
+
+def _stage(*, model: Bench, controller: RunningController, options: MeasurementOptions,
+           dense_width: float, seed: int, prior_label: str, ident_bench: Bench, label: str,
+           merge_with: Sequence[ClosedLoopFrf] = ()) -> Generator[StageRequest, TwinRun, _Stage]:
+    request = _stage_request(model=model, controller=controller, options=options,
+                             dense_width=dense_width, seed=seed, prior_label=prior_label,
+                             label=label)
+    run = yield request
     try:
         ident = identify_closed_loop(
             run.recordings, bench=ident_bench,
@@ -290,11 +331,95 @@ def _stage(*, play: Player, model: Bench, controller: RunningController,
             source=f"closed-loop measurement ({prior_label})", merge_with=merge_with)
     except ValueError as exc:
         raise RecordsRejectedError(str(exc)) from exc
-    return ident, run, designs
+    return ident, run, request.designs
 
 
 class RecordsRejectedError(ValueError):
     """A stage's records failed their checks: the identification could not start."""
+
+
+def measurement_steps(*, model: Bench, controller: RunningController,
+                      options: MeasurementOptions | None = None, seed: int = 0,
+                      progress: Callable[[str], None] | None = None) -> MeasurementSteps:
+    """The two-stage measurement as a protocol: what to play, then what was recorded.
+
+    A generator: each ``next``/``send`` designs a stage and yields its
+    :class:`StageRequest`; the caller plays it and sends the records back (a
+    :class:`fsmbench.twin.simulate.TwinRun`: ``recordings`` ``data_cl_uch`` and
+    ``data_cl_ucv``, and ``experiments`` for their durations). The generator's return
+    value (``StopIteration.value``) is the :class:`ClosedLoopMeasurement`.
+    :func:`measure_closed_loop` drives it with a blocking player;
+    :func:`fsmbench.live.plans.closed_loop_identification` from a Bluesky plan.
+
+    Parameters
+    ----------
+    model, controller, options, seed, progress
+        As :func:`measure_closed_loop`.
+
+    Raises
+    ------
+    ValueError
+        (From a ``send``) stage 1 located no resonance in two measurements (named).
+    """
+    opts = options or MeasurementOptions()
+    say = progress or (lambda _m: None)
+    say("closed-loop measurement, stage 1: locating the resonances (±5 % bands)")
+
+    def locate(stage_seed: int, label: str) -> Generator[StageRequest, TwinRun, _Stage]:
+        return _stage(model=model, controller=controller,
+                      options=dataclasses.replace(opts, fill=opts.first_fill),
+                      dense_width=0.05, seed=stage_seed, prior_label="the bench model",
+                      ident_bench=model, label=label)
+
+    stages = []
+    repeated = ""
+    attempt: _Stage | None
+    try:
+        attempt = yield from locate(seed, "stage 1")
+        why = not_located(attempt[0])
+    except RecordsRejectedError as exc:  # not the device's errors: those stop tune
+        attempt, why = None, str(exc)
+    if not why and attempt is not None:
+        first = attempt
+    else:
+        # Once, a live stage 1 under load kept one mode for two axes where every other run
+        # of the soak located both: a measurement is repeated before tune gives up.
+        repeated = f"stage 1 was measured again: its first records located nothing ({why})"
+        say(repeated)
+        if attempt is not None:
+            stages.append(attempt)
+        first = yield from locate(seed + 2, "stage 1 again")
+        if (again := not_located(first[0])):
+            raise ValueError(f"stage 1 found no Sercalo resonance in two measurements: {why}; "
+                             f"then {again}")
+    stages.append(first)
+    excess = model_excess(first[0], first[2])
+    if opts.refine:
+        located = located_bench(model, first[0])
+        say("closed-loop measurement, stage 2: the located resonances "
+            f"(±{100 * opts.refine_width:g} % bands)")
+        if excess > 1.0:
+            say(f"stage 1 added {excess:.3g}x the beam error its model predicted: stage 2 "
+                f"uses {opts.fill / excess:.2g} of the bound")
+        stages.append((yield from _stage(
+            model=located, controller=controller,
+            options=dataclasses.replace(opts, fill=opts.fill / excess),
+            dense_width=opts.refine_width, seed=seed + 1,
+            prior_label="the resonances located in stage 1", ident_bench=model,
+            label="stage 2", merge_with=(first[0].frf,))))
+    duration = float(sum(s.duration_s for _i, run, _d in stages for s in run.experiments))
+    final, note = stages[-1][0], ""
+    if final.plant is None and first[0].plant is not None:
+        # The refined records starve the lines far from the modes; when they do not carry
+        # the whole band (the fit names why), stage 1's identification stands.
+        note = (f"stage 2 did not identify the Sercalo "
+                f"({final.skipped.get('sercalo', 'no plant')}); stage 1's identification is kept")
+        say(note)
+        final = first[0]
+    return ClosedLoopMeasurement(identification=final, stages=tuple(stages),
+                                 duration_s=duration, options=opts,
+                                 note="; ".join(n for n in (repeated, note) if n),
+                                 model_excess=excess)
 
 
 def measure_closed_loop(*, model: Bench, controller: RunningController,
@@ -323,8 +448,6 @@ def measure_closed_loop(*, model: Bench, controller: RunningController,
     ValueError
         The Sercalo could not be identified in the first stage (named).
     """
-    opts = options or MeasurementOptions()
-    say = progress or (lambda _m: None)
     if play is None:
         if true_bench is None:
             raise ValueError("measure_closed_loop needs the twin (true_bench) or a player")
@@ -336,64 +459,17 @@ def measure_closed_loop(*, model: Bench, controller: RunningController,
             return play_closed_loop(plays, bench=twin, controller=controller, seed=seed,
                                     settle_s=settle_s, progress=progress)
 
-    say("closed-loop measurement, stage 1: locating the resonances (±5 % bands)")
-
-    def locate(stage_seed: int) -> tuple[ClosedLoopIdentification, TwinRun,
-                                         tuple[BoundedMeasurement, ...]]:
-        return _stage(play=play, model=model, controller=controller,
-                      options=dataclasses.replace(opts, fill=opts.first_fill),
-                      dense_width=0.05, seed=stage_seed, prior_label="the bench model",
-                      ident_bench=model, progress=progress)
-
-    stages = []
-    repeated = ""
-    attempt: tuple[ClosedLoopIdentification, TwinRun, tuple[BoundedMeasurement, ...]] | None
-    try:
-        attempt = locate(seed)
-        why = not_located(attempt[0])
-    except RecordsRejectedError as exc:  # not the device's errors: those stop tune
-        attempt, why = None, str(exc)
-    if not why and attempt is not None:
-        first = attempt
-    else:
-        # Once, a live stage 1 under load kept one mode for two axes where every other run
-        # of the soak located both: a measurement is repeated before tune gives up.
-        repeated = f"stage 1 was measured again: its first records located nothing ({why})"
-        say(repeated)
-        if attempt is not None:
-            stages.append(attempt)
-        first = locate(seed + 2)
-        if (again := not_located(first[0])):
-            raise ValueError(f"stage 1 found no Sercalo resonance in two measurements: {why}; "
-                             f"then {again}")
-    stages.append(first)
-    excess = model_excess(first[0], first[2])
-    if opts.refine:
-        located = located_bench(model, first[0])
-        say("closed-loop measurement, stage 2: the located resonances "
-            f"(±{100 * opts.refine_width:g} % bands)")
-        if excess > 1.0:
-            say(f"stage 1 added {excess:.3g}x the beam error its model predicted: stage 2 "
-                f"uses {opts.fill / excess:.2g} of the bound")
-        stages.append(_stage(play=play, model=located, controller=controller,
-                             options=dataclasses.replace(opts, fill=opts.fill / excess),
-                             dense_width=opts.refine_width, seed=seed + 1,
-                             prior_label="the resonances located in stage 1",
-                             ident_bench=model, progress=progress,
-                             merge_with=(first[0].frf,)))
-    duration = float(sum(s.duration_s for _i, run, _d in stages for s in run.experiments))
-    final, note = stages[-1][0], ""
-    if final.plant is None and first[0].plant is not None:
-        # The refined records starve the lines far from the modes; when they do not carry
-        # the whole band (the fit names why), stage 1's identification stands.
-        note = (f"stage 2 did not identify the Sercalo "
-                f"({final.skipped.get('sercalo', 'no plant')}); stage 1's identification is kept")
-        say(note)
-        final = first[0]
-    return ClosedLoopMeasurement(identification=final, stages=tuple(stages),
-                                 duration_s=duration, options=opts,
-                                 note="; ".join(n for n in (repeated, note) if n),
-                                 model_excess=excess)
+    steps = measurement_steps(model=model, controller=controller, options=options, seed=seed,
+                              progress=progress)
+    request = next(steps)
+    while True:
+        run = play(list(request.plays), controller=controller, settle_s=request.settle_s,
+                   seed=request.seed, progress=progress)
+        try:
+            request = steps.send(run)
+        except StopIteration as done:
+            measurement: ClosedLoopMeasurement = done.value
+            return measurement
 
 
 def not_located(ident: ClosedLoopIdentification) -> str:
