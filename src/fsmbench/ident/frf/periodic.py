@@ -172,10 +172,10 @@ def detect_period(signal: ArrayLike, *, min_period: int = 16,
     inner = rho[1:-1]
     peaks = np.flatnonzero((inner >= threshold) & (inner >= rho[:-2]) & (inner >= rho[2:])) + 1
     width = 2 * max(int(below[0]), 1)
-    for k in peaks:
-        if float(np.min(rho[k::k])) < threshold:
+    for peak in peaks:
+        if float(np.min(rho[peak::peak])) < threshold:
             continue
-        k = int(k) + int(np.argmax(rho[k:min(k + width + 1, rho.size)]))
+        k = int(peak) + int(np.argmax(rho[peak:min(peak + width + 1, rho.size)]))
         while k + 1 < rho.size and rho[k + 1] > rho[k]:  # climb to the local maximum
             k += 1
         return k
