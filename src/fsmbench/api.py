@@ -12,8 +12,6 @@ objects keep rad/s as python-control does. The loop is closed as ``u = -K y``.
 from __future__ import annotations
 
 import os
-import sys
-import types
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Literal
@@ -53,25 +51,6 @@ Delays = Literal["pade", "exact", "none"]
 #: The six identification experiments (ESRF study section 2).
 IDENT_EXPERIMENTS = ("data_cal_pd_h", "data_cal_pd_v", "data_uch", "data_ucv", "data_unh",
                      "data_unv")
-
-
-class _EntryModule(types.ModuleType):
-    """A sub-module that is also the entry point of its name (see :func:`callable_module`)."""
-
-    def __call__(self, *args: Any, **kwargs: Any) -> Any:
-        return globals()[self.__name__.rsplit(".", 1)[-1]](*args, **kwargs)
-
-
-def callable_module(name: str) -> None:
-    """Make the module ``name`` (``fsmbench.budget``, ``fsmbench.study``) call the entry
-    point of the same name.
-
-    Importing a sub-module binds it as its parent's attribute: once anything imported
-    ``fsmbench.budget.study``, ``fsmbench.budget`` is the package, not :func:`budget`.
-    The package then answers the call itself, so ``fsmbench.budget(...)`` is the API
-    whichever was bound last, and ``fsmbench.budget.study`` stays importable.
-    """
-    sys.modules[name].__class__ = _EntryModule
 
 
 def load_bench(path: PathLike | None = None) -> Bench:

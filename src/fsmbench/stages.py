@@ -25,7 +25,7 @@ its first keys (``docs/results.md``).
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -39,6 +39,7 @@ from fsmbench.ident.pipeline import (
     identify,
     write_identification,
 )
+from fsmbench.ident.result import PlantChoice, SavedIdentification
 from fsmbench.io.atomic import atomic_write_text
 from fsmbench.jsonutil import format_text, stamped
 
@@ -89,45 +90,6 @@ VALIDATION_FORMAT = ("fsmbench.validation", 1)
 
 def _quiet(_msg: str) -> None:
     return None
-
-
-@dataclass(frozen=True)
-class SavedIdentification:
-    """What the budget reads of an identification besides its plant, read back from a
-    previous run's ``identification.json`` (``--bench DIR``).
-
-    Attributes
-    ----------
-    path : str
-        The ``identification.json`` read.
-    noise_model : NoiseModelFit or None
-        The noise its open-loop huddle tests fitted (None: none was fitted).
-    recorded_loops : mapping
-        ``diagnostics.recorded_loop``: per axis ``{"verdict", "gd_used_v_per_rad",
-        "gd_used_std_v_per_rad", …}``, the 4QD gains [V/rad] the closed-loop records ran.
-    checks : tuple of dict
-        Its plausibility checks, as written.
-    """
-
-    path: str
-    noise_model: Any = None
-    recorded_loops: Mapping[str, Mapping[str, Any]] = field(default_factory=dict)
-    checks: tuple[Mapping[str, Any], ...] = ()
-
-
-@dataclass(frozen=True, eq=False)
-class PlantChoice:
-    """The plant a stage works on and where it comes from.
-
-    ``saved``: with no ``identification`` in memory, what a previous run's
-    ``identification.json`` adds to its plant (the measured noise and the recorded loop's
-    gains), so that ``budget --bench DIR`` computes the budget the study computes.
-    """
-
-    plant: PlantModel
-    source: str
-    identification: Identification | None
-    saved: SavedIdentification | None = None
 
 
 def identify_stage(recordings: Mapping[str, xr.Dataset], *, bench: Bench, out_dir: Path,

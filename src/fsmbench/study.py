@@ -25,8 +25,8 @@ from pathlib import Path
 from typing import Any
 
 from fsmbench import __version__
-from fsmbench.api import callable_module
 from fsmbench.bench.params import Bench, default_bench
+from fsmbench.entry import callable_module
 from fsmbench.ident.pipeline import Identification, IdentifyOptions
 from fsmbench.io.atomic import atomic_write_text
 from fsmbench.io.folder import RecordingSet, load_recordings

@@ -94,6 +94,6 @@ __all__ = [
 ]
 
 # fsmbench.budget is also the API's budget(): importing this package rebinds the name.
-from fsmbench.api import callable_module as _callable
+from fsmbench.entry import callable_module as _callable
 
 _callable(__name__)

@@ -11,7 +11,7 @@ from __future__ import annotations
 import json
 from collections.abc import Mapping
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import control as ct
 import numpy as np
@@ -19,10 +19,8 @@ import scipy.io
 from scipy.io.matlab import MatReadError
 
 from fsmbench.bench.blocks import PLANT_INPUTS, PLANT_OUTPUTS, PlantModel
+from fsmbench.ident.result import PlantChoice, SavedIdentification
 from fsmbench.io.errors import RecordingError
-
-if TYPE_CHECKING:
-    from fsmbench.stages import PlantChoice
 
 __all__ = ["BLOCK_NAMES", "excitation_transients", "load_identified_plant",
            "read_identification_json", "read_plant_mat"]
@@ -164,7 +162,7 @@ def load_identified_plant(folder: str | Path, *, option: str = "--bench") -> Pla
 
     Returns
     -------
-    fsmbench.stages.PlantChoice
+    fsmbench.ident.result.PlantChoice
         The plant, its source ``"identified (from FOLDER/identification.json)"``
         and no in-memory identification.
 
@@ -176,7 +174,6 @@ def load_identified_plant(folder: str | Path, *, option: str = "--bench") -> Pla
         identified, or the identification raised warnings): then the reason
         is named and the command should run without ``option``.
     """
-    from fsmbench.stages import PlantChoice
 
     ident_path, ident = read_identification_json(folder, option=option)
     d = ident_path.parent
@@ -198,7 +195,6 @@ def _saved(path: Path, ident: Mapping[str, Any]) -> Any:
     """What the budget reads of ``identification.json`` besides the plant: the fitted noise
     model, the recorded loop's 4QD gains and the checks (as the study has them in memory)."""
     from fsmbench.ident.noise_model import NoiseModelFit
-    from fsmbench.stages import SavedIdentification
 
     raw = ident.get("noise_model")
     noise = None

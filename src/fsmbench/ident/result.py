@@ -37,7 +37,7 @@ from fsmbench.io.atomic import atomic_write_text
 from fsmbench.jsonutil import format_text, stamped
 
 __all__ = ["IDENTIFICATION_FORMAT", "SEED_TRIMS_S", "Identification", "IdentifyOptions",
-           "path_keyed_summary", "write_identification"]
+           "PlantChoice", "SavedIdentification", "path_keyed_summary", "write_identification"]
 
 # The seed's t0 for each experiment (2.1: 1 s, 2.3: 1 s, 2.4: 3 s and 1.5 s).
 SEED_TRIMS_S = {"data_cal_pd_h": 1.0, "data_cal_pd_v": 1.0, "data_uch": 1.0, "data_ucv": 1.0,
@@ -343,3 +343,42 @@ def write_identification(result: Identification, out_dir: str | Path) -> list[Pa
         paths.append(write_matching_bench(out / MATCHING_BENCH, result.matching,
                                           findings=result.findings))
     return paths
+
+
+@dataclass(frozen=True)
+class SavedIdentification:
+    """What the budget reads of an identification besides its plant, read back from a
+    previous run's ``identification.json`` (``--bench DIR``).
+
+    Attributes
+    ----------
+    path : str
+        The ``identification.json`` read.
+    noise_model : NoiseModelFit or None
+        The noise its open-loop huddle tests fitted (None: none was fitted).
+    recorded_loops : mapping
+        ``diagnostics.recorded_loop``: per axis ``{"verdict", "gd_used_v_per_rad",
+        "gd_used_std_v_per_rad", …}``, the 4QD gains [V/rad] the closed-loop records ran.
+    checks : tuple of dict
+        Its plausibility checks, as written.
+    """
+
+    path: str
+    noise_model: Any = None
+    recorded_loops: Mapping[str, Mapping[str, Any]] = field(default_factory=dict)
+    checks: tuple[Mapping[str, Any], ...] = ()
+
+
+@dataclass(frozen=True, eq=False)
+class PlantChoice:
+    """The plant a stage works on and where it comes from.
+
+    ``saved``: with no ``identification`` in memory, what a previous run's
+    ``identification.json`` adds to its plant (the measured noise and the recorded loop's
+    gains), so that ``budget --bench DIR`` computes the budget the study computes.
+    """
+
+    plant: PlantModel
+    source: str
+    identification: Identification | None
+    saved: SavedIdentification | None = None
