@@ -450,7 +450,7 @@ def _cmd_identify(args: argparse.Namespace) -> int:
 
     asked = bool(getattr(args, "closed_loop", False))
     if asked:
-        check_closed_loop_folder(args.data)  # one line when DATA has no data_cl_* (issue 24)
+        check_closed_loop_folder(args.data)  # one line when DATA has no data_cl_*
     if asked or is_closed_loop_folder(args.data):  # or data_cl_* and no data_uch/ucv
         with _stage_folder(args, _IDENT_BYTES) as run:
             cl, paths = identify_closed_loop_folder(args.data, bench=_bench(args),

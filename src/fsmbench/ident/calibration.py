@@ -184,8 +184,8 @@ def calibrate_qd(ds: xr.Dataset, *, axis: str, metrology_gain_rad_per_v: float,
     # A drifting offset (the 4QD's, thermal) is a ramp over a few seconds, and a ramp is
     # not orthogonal to a sweep that starts at zero phase: it would enter the slope, and
     # coherently — a trend's lines all sit in one quadrature, so a spectral std that
-    # splits each line's power evenly under-states it (1.3x on the real-bench twin,
-    # issue 20). The trend is fitted with the line and left out of the slope.
+    # splits each line's power evenly under-states it (1.3x on the real-bench twin).
+    # The trend is fitted with the line and left out of the slope.
     t_s = np.asarray(rec["t"].values, dtype=float)
     trend = (t_s - t_s.mean()) / max(float(np.ptp(t_s)), 1e-12)
     design = np.column_stack([np.ones_like(x), x, trend])

@@ -8,7 +8,7 @@ of samples plus a latency), and the ADC samples what comes out. The sampled
 response's magnitude differs from the continuous one by the hold's droop and
 by aliasing, which depends on the delay: +4.2e-4 and −2.5e-4 of bias on an
 exact, noise-free FRF of the default and real-bench twins, twenty times the
-estimate's noise (issue 20).
+estimate's noise.
 
 Here the measured FRF (the identification's estimator: Welch, LPM or the
 periodic average, each with its per-line variance) is fitted, in the band, by

@@ -300,9 +300,10 @@ def _identify(recordings: Mapping[str, xr.Dataset], *, bench: Bench, opts: Ident
                 notices.extend(notes)
         return first_failure(c for n in names for c in seen[n])
 
-    # ---- issue 21 (ident.consistency): signs, swapped cables and 4QD offsets across the
-    # records. A failed check joins its records' own: each step using them falls back
-    # naming it. Huddle tests failing their checks (a jump in Va …) leave the noise model.
+    # The records checked against each other (ident.consistency): signs, swapped cables
+    # and 4QD offsets across the records. A failed check joins its records' own: each
+    # step using them falls back naming it. Huddle tests failing their checks (a jump in
+    # Va …) leave the noise model.
     for name, extra in rate.by_experiment.items():
         if name in recordings:
             data_failure(name)
@@ -324,7 +325,6 @@ def _identify(recordings: Mapping[str, xr.Dataset], *, bench: Bench, opts: Ident
     # with: the bench file is a prior (ident.evidence).
     if screen.params is not None:
         nom = screen.params
-    # ---- end of issue 21
 
     qd: dict[str, QdCalibration] = {}
     compression: dict[str, CompressionFactors] = {}

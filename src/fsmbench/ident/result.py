@@ -46,7 +46,7 @@ SEED_TRIMS_S = {"data_cal_pd_h": 1.0, "data_cal_pd_v": 1.0, "data_uch": 1.0, "da
 #: ``identification.json``'s format and version (docs/results.md); 2: the keys of
 #: ``diagnostics.sercalo.fit_error_rms_relative`` are ``Uch_to_Vph``, not ``Vph/Uch``;
 #: 3: ``noise_model``, the noise fitted to the open-loop huddle tests; 4: ``uncertainty``,
-#: every value with its total std and parts (issue 20), ``effective_delay_s`` and
+#: every value with its total std and parts, ``effective_delay_s`` and
 #: ``qd_diode_gain_v_per_rad``; ``delay_s.sercalo`` measured on ``Uc → Vc``.
 IDENTIFICATION_FORMAT = ("fsmbench.identification", 4)
 

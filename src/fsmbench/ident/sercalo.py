@@ -62,7 +62,7 @@ MIRROR_HIGH_FREQUENCY_SLOPE = -2.0
 # Below their modes both are flat (a spring's static deflection; the Newport's position
 # loop): given, the low-frequency continuation no longer rounds a closed-loop estimate's
 # noisy lowest lines to +1 or +2, which put the Bode delay 0.6 ms off and the fit's start
-# with it (issue 24: a stage-2 closed-loop fit lost a mode, another came out 1.35 samples
+# with it (a stage-2 closed-loop fit lost a mode, another came out 1.35 samples
 # off, when its excitation changed by 4 %).
 MIRROR_LOW_FREQUENCY_SLOPE = 0.0
 

@@ -1,4 +1,4 @@
-"""Every identified value with its total uncertainty (issue 20): what ``identification.json``'s
+"""Every identified value with its total uncertainty: what ``identification.json``'s
 ``uncertainty`` holds.
 
 Keys are those of ``twin_truth.json`` (dotted), so a value and its truth

@@ -1,4 +1,4 @@
-"""A value with its total uncertainty and the parts it is made of (issue 20).
+"""A value with its total uncertainty and the parts it is made of.
 
 Every identified value is reported as an :class:`Uncertain`: the value, its
 unit, what quantity it is, and one standard deviation per *part* — measurement

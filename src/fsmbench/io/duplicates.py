@@ -1,4 +1,4 @@
-"""One experiment in two files of a folder: ``data_uch.mat`` beside ``data_uch.h5`` (issue 30).
+"""One experiment in two files of a folder: ``data_uch.mat`` beside ``data_uch.h5``.
 
 The loader reads one of them (``.mat`` before ``.h5`` before ``.nxs``, as
 :func:`~fsmbench.io.recording.find_experiments`); the other may be its faithful

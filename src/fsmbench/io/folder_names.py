@@ -3,7 +3,7 @@ are there but are not files to read.
 
 :func:`folder_hints` says, for each experiment the folder lacks, which file nearly
 matches and how to rename it; :func:`not_a_file` names an entry that has the right
-name but is a directory, a dangling or looping link, a pipe … (issue 21). Both are
+name but is a directory, a dangling or looping link, a pipe …; both are
 used by :func:`fsmbench.io.folder.load_recordings`, which re-exports them.
 """
 

@@ -1,4 +1,4 @@
-"""Where a MAT-file's data end, and the bytes after them (issue 30, item 7).
+"""Where a MAT-file's data end, and the bytes after them.
 
 A file of valid variables can be followed by bytes that belong to no variable:
 zeros from a copy that preallocated its destination, a disk image's slack, a

@@ -1,6 +1,6 @@
 """Controllers the live bench loads: which, from where, what they are, and whether they are safe.
 
-``LoadController`` decides all of it on the client's call (issue 31), so that a refusal is
+``LoadController`` decides all of it on the client's call, so that a refusal is
 its reply and the loop never meets a controller that was not checked:
 
 1. **which** (:func:`parse_request`): a file (its path, or ``{"path": ..., "controller":

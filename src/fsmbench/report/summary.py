@@ -37,7 +37,7 @@ __all__ = ["FINDINGS", "SUMMARY_FORMAT", "PartSkipped", "Requirement", "Specific
 
 #: Failed checks that are findings about a device or an analysis, not data contradicting
 #: itself: the Newport found off its datasheet, a margin the numerics could not compute.
-#: Every other failed check leaves the verdict not verified (issue 21: never a pass on data
+#: Every other failed check leaves the verdict not verified (never a pass on data
 #: that contradicts itself or the bench file).
 FINDINGS = frozenset({"newport_amplitude_bandwidth", "newport_phase_bandwidth",
                       "newport_peaking", "coprime_factor_margin"})
@@ -424,7 +424,7 @@ def _distance_requirement(budget: Any, spec: Specification) -> tuple[Requirement
         f" With {budget.controller}: {budget.budget.total_rms_m * 1e9:.3g} nm.")
     huddle = getattr(budget, "huddle", None)
     measured = huddle is not None and getattr(huddle, "qd_noise", None) is not None
-    # A budget whose own huddle tests contradict it is not a verdict (issue 21).
+    # A budget whose own huddle tests contradict it is not a verdict.
     contradicted = [c for c in getattr(budget, "checks", ())
                     if not c.passed and c.name in ("huddle_va_vs_prediction", "huddle_qd_vs_model")]
     verified = measured and not contradicted
@@ -649,7 +649,7 @@ def _assumed(r: Requirement, missing: str) -> Requirement:
                    missing=f"the identified {missing.split(':')[0]}")
 
 
-#: Longest headline a reader takes in at once [words] (issue 30); the reasons follow it.
+#: Longest headline a reader takes in at once [words]; the reasons follow it.
 HEADLINE_WORDS = 30
 
 

@@ -64,7 +64,7 @@ FloatArray = NDArray[np.float64]
 SENSOR_FALSE_ALARM = 1e-3
 #: Tests one identification makes: the Newport's two axes, each taking the largest
 #: likelihood ratio over two orders and the 13 bandwidths scanned. A single test at 99.9 %
-#: (10.83) passed on 1 in 50 axes of a sensor-free twin with the LPM (issue 20): the maximum
+#: (10.83) passed on 1 in 50 axes of a sensor-free twin with the LPM: the maximum
 #: over 26 candidate models is not chi-square(1).
 SENSOR_TESTS = 2 * 2 * 13
 #: Likelihood-ratio threshold: chi-square (1 dof) at ``1 - SENSOR_FALSE_ALARM / SENSOR_TESTS``

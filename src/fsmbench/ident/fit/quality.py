@@ -56,7 +56,7 @@ def leakage_corrected(sid: SercaloIdentification, window_s: float, *,
 
     The bias is the fitted model's (its modes refined on the time records) with its delay.
     Removed, because a bias only widened still pulls the fit: the lines a few Hz from the
-    vertical mode moved its static gain by +0.7 of its std on every seed (issue 20, 100
+    vertical mode moved its static gain by +0.7 of its std on every seed (100
     twin seeds); subtracted, +0.04. The correction's own error is that of the model's
     modes: bounded by how much the bias changes from the fit's modes before the refinement
     (the FRF's, leakage-biased: 5-10 % in damping) to the refined ones; without a

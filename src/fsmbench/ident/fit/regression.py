@@ -3,7 +3,7 @@
 The ordinary least-squares covariance ``s² (XᵀX)⁻¹`` assumes white residuals.
 A 4QD calibration's residual holds 1/f noise, drift and mains: its power
 near the sweep's 0.2 Hz, where the regressor lives, is many times its
-average, and the ordinary standard error is 5× optimistic (issue 20). The
+average, and the ordinary standard error is 5× optimistic. The
 estimate's error is ``(XᵀX)⁻¹ Xᵀ e``; for a stationary ``e`` whose DFT lines
 are uncorrelated with variances ``n σ²_k`` (``σ²_k`` the two-sided spectral
 density in variance per sample),

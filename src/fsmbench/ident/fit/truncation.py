@@ -6,8 +6,8 @@ real-bench twin's second modes at 1420 and 1850 Hz, 1 % of the gain) is not a
 constant over the band: its response rises as ``1/(1 − (f/f₂)²)``, which
 ``D`` cannot follow, and the fit bends its in-band residues to follow it. On
 the exact, noise-free FRF of the real-bench twin the static gain came out
-+1.0e-3 (h) and +2.3e-3 (v) high with the 1 kHz band, 2 to 8 of its stds
-(issue 20); over half the band, +1e-4 and +3e-4.
++1.0e-3 (h) and +2.3e-3 (v) high with the 1 kHz band, 2 to 8 of its stds;
+over half the band, +1e-4 and +3e-4.
 
 The bias grows with the band, as ``f_max²`` or faster (the out-of-band
 mode's curvature over the band). The fit over half the band is consistent

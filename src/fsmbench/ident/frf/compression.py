@@ -9,7 +9,7 @@ FRF is ``1 + 3 (c/a) σx² = 1 + 3 κ σ_V²`` times the small-signal one
 (``κ = c / a³`` [1/V²], ``σ_V²`` the output's variance in that experiment;
 the 4QD's own noise, added after the compression, is < 1 % of it). On the
 real-bench twin's noise records that is −1.2 % on the Sercalo's static gain
-(−15 to −41 of its noise std, issue 20).
+(−15 to −41 of its noise std).
 
 :func:`compression_factors` gives the factor of each element (output, input)
 from its output's variance in the column's experiment, and its standard

@@ -11,7 +11,7 @@ of an averaged spectrum). Where ``H`` varies within the kernel's width (±2
 bins for Hann) the bias is large: a 1 s window on the twin's modes, whose
 half-power bandwidths are 1 and 0.5 Hz, smears the peak to a fraction of its
 height. Bendat & Piersol's variance does not see it: near the modes 57–69 %
-of the lines fell inside the "95 %" circle (issue 20).
+of the lines fell inside the "95 %" circle.
 
 :func:`welch_leakage_bias` computes ``E[H_hat] − H`` for a model ``H`` (the
 fitted Sercalo, its modes from the leakage-free time-domain refinement) on a
@@ -21,7 +21,7 @@ the measured FRF and adds ``|bias|²`` to each line's variance as its
 ``leakage`` part (the correction's own error, bounded by its size): the
 variance weights of the fit give the smeared lines next to no weight, and the
 lines a few Hz out, where the bias is small against the peak but not against
-their noise, no longer pull the static gain (issue 20: +0.7 std on the
+their noise, no longer pull the static gain (+0.7 std on the
 twin's vertical axis before).
 """
 

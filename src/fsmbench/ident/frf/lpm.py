@@ -96,7 +96,7 @@ class LpmOptions:
         variance ``s2_V`` (0: none). One line's ``s2_V`` has ``q`` (7) complex
         degrees of freedom: as a weight it makes a fit's lines heavy-tailed
         (a line whose noise came out low counts too much) and a likelihood
-        ratio test falsely sure (issue 20). The noise spectrum is smooth;
+        ratio test falsely sure. The noise spectrum is smooth;
         the median over ``2 w + 1`` lines (scaled to a mean, 2/π of their
         dof) replaces it, except where one line is 5× its neighbours (a mains
         line), which keeps its own.
@@ -258,7 +258,7 @@ def local_polynomial_frf(
 
 
 #: The identification's half width of the noise variance's running median (7 estimated
-#: lines, ~31 dof instead of 7: the weighted fits' stds were optimistic, issue 20).
+#: lines, ~31 dof instead of 7: the weighted fits' stds were optimistic).
 LPM_NOISE_SMOOTHING = 3
 #: A line whose noise variance is this many times its neighbours' median keeps its own
 #: (a mains line, a spur): the median would hide it.

@@ -1,4 +1,4 @@
-"""The closed-loop step and disturbance responses as a figure (issue 33).
+"""The closed-loop step and disturbance responses as a figure.
 
 Draws :class:`fsmbench.control.responses.ClosedLoopResponses`; nothing here
 computes a response. One column per axis; rows: the reference step in time,

@@ -1,4 +1,4 @@
-"""The identification's values with their total uncertainty and its largest part (issue 20).
+"""The identification's values with their total uncertainty and its largest part.
 
 Every value of ``identification.json``'s ``uncertainty`` becomes a row: the
 quantity in words, the value, its total standard deviation, the largest of

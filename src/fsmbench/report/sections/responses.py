@@ -1,4 +1,4 @@
-"""Report: closed-loop step and sample-motion responses (chapter 9, issue 33).
+"""Report: closed-loop step and sample-motion responses (chapter 9).
 
 Every number and curve comes from the design stage's
 :class:`~fsmbench.control.responses.ClosedLoopResponses`; nothing is computed here.
