@@ -135,3 +135,15 @@ def test_the_distance_target_is_read_in_nanometres_and_checked() -> None:
     for bad in ("-1", "0", "inf", "nan", "five"):
         with pytest.raises(SystemExit):
             _parser().parse_args(["study", "--out", "x", "--distance-target", bad])
+
+
+@pytest.mark.parametrize("rate", ["2e4", "nan", "fast"])
+def test_serve_and_tune_read_a_drift_rate_alike(rate: str,
+                                                capsys: pytest.CaptureFixture[str]) -> None:
+    """One parser for ``--drift-rate``: the same limit and the same words on both commands."""
+    errors = []
+    for argv in (["serve", "--drift-rate", rate], ["tune", "--twin", "--drift-rate", rate,
+                                                   "--out", "unused"]):
+        assert main(argv) == 2
+        errors.append(capsys.readouterr().err.split("--drift-rate", 1)[1].split(" (see ")[0])
+    assert errors[0] == errors[1] and "drift rate" in errors[0]

@@ -13,6 +13,7 @@ from pathlib import Path
 from typing import Any, NoReturn
 
 __all__ = ["EXIT_USER_ERROR", "SEED_MAX", "Parser", "add_identify_options", "default_noted",
+           "drift_rate",
            "factor", "figure_formats", "identify_options", "nanometres", "port", "positive",
            "seconds", "seed", "typed_option"]
 
@@ -111,6 +112,22 @@ def positive(text: str, unit: str) -> float:
         raise argparse.ArgumentTypeError(f"{text!r} is not a number of {unit}") from None
     if not math.isfinite(value) or value <= 0:
         raise argparse.ArgumentTypeError(f"{text!r} is not a finite positive number of {unit}")
+    return value
+
+
+def drift_rate(text: str) -> float:
+    """A resonance drift rate [%/h], within what the twin's drift allows
+    (:data:`fsmbench.live.states.MAX_DRIFT_PCT_PER_H`): ``serve --drift-rate`` and
+    ``tune --drift-rate`` take the same."""
+    from fsmbench.live.states import MAX_DRIFT_PCT_PER_H
+
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a drift rate in %/h") from None
+    if not (math.isfinite(value) and abs(value) <= MAX_DRIFT_PCT_PER_H):
+        raise argparse.ArgumentTypeError(f"{text!r}: give a drift rate within "
+                                         f"±{MAX_DRIFT_PCT_PER_H:g} %/h")
     return value
 
 

@@ -23,7 +23,6 @@ bench as a Channel Access (and PV Access) IOC (:mod:`fsmbench.live.epics`).
 from __future__ import annotations
 
 import argparse
-import math
 import os
 import socket
 import sys
@@ -333,19 +332,6 @@ def starter_main(argv: Sequence[str] | None = None) -> int:
 # ------------------------------------------------------------------ the command line
 
 
-def _drift_rate(text: str) -> float:
-    from fsmbench.live.states import MAX_DRIFT_PCT_PER_H
-
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not a drift rate in %/h") from None
-    if not (math.isfinite(value) and abs(value) <= MAX_DRIFT_PCT_PER_H):
-        raise argparse.ArgumentTypeError(f"{text!r}: give a drift rate within "
-                                         f"+/-{MAX_DRIFT_PCT_PER_H:g} %/h")
-    return value
-
-
 def add_serve_command(sub: Any, *, factor: Callable[[str], float]) -> None:
     """Add ``serve`` to the CLI's sub-commands (``factor`` parses ``--speed``)."""
     p = sub.add_parser("serve", help="the bench live as a Tango device or an EPICS IOC "
@@ -376,7 +362,7 @@ def add_serve_command(sub: Any, *, factor: Callable[[str], float]) -> None:
     p.add_argument("--watchdog", metavar="S", type=factor, default=None,
                    help="wall-clock seconds without a bench block that make the device FAULT "
                         "(default 5)")
-    p.add_argument("--drift-rate", metavar="PCT_PER_H", dest="drift_rate", type=_drift_rate,
+    p.add_argument("--drift-rate", metavar="PCT_PER_H", dest="drift_rate", type=cli_args.drift_rate,
                    default=None, help="twin: the Sercalo resonance (both axes) drifts this fast "
                                       "[%%/h] (default 0), what the loop's watch (WatchVerdict, "
                                       "WatchCause) is for")
