@@ -147,3 +147,27 @@ def test_serve_and_tune_read_a_drift_rate_alike(rate: str,
         assert main(argv) == 2
         errors.append(capsys.readouterr().err.split("--drift-rate", 1)[1].split(" (see ")[0])
     assert errors[0] == errors[1] and "drift rate" in errors[0]
+
+
+@pytest.mark.parametrize("command", [
+    ["excite", "{out}", "--input", "Uch", "--amplitude-rms", "0.01", "--band", "1", "100"],
+    ["tune", "--twin", "--out", "{out}"],
+    ["params"],
+])
+@pytest.mark.parametrize(("kind", "words"), [("folder", "is a folder"),
+                                             ("binary", "is not UTF-8 text")])
+def test_every_command_names_a_bench_file_that_is_not_one(
+        command: list[str], kind: str, words: str, tmp_path: Path,
+        capsys: pytest.CaptureFixture[str]) -> None:
+    """A folder or a binary file given as ``--params``: one line naming it, status 2, on
+    the commands that load the bench themselves as on the others."""
+    bad = tmp_path / "bench"
+    if kind == "folder":
+        bad.mkdir()
+    else:
+        bad.write_bytes(b"\xff\xfe\x00 not text")
+    argv = [a.format(out=tmp_path / "out") for a in command] + ["--params", str(bad)]
+    assert main(argv) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and str(bad) in err and words in err
+    assert not (tmp_path / "out").exists()

@@ -555,17 +555,24 @@ def load_bench(path: str | Path | None = None) -> Bench:
     Raises
     ------
     ParamsError
-        The file is not TOML, or a key is missing, unknown, or of the wrong type.
+        The path is a folder, the file is not UTF-8 text or not TOML, or a key is
+        missing, unknown, or of the wrong type.
     """
     if path is None:
         return default_bench()
     p = Path(path)
     if not p.exists() and str(path) in PACKAGED_BENCHES:
         return _bench_from_mapping(packaged_mapping(str(path)), str(path))
+    if p.is_dir():
+        raise ParamsError(f"{p}: is a folder; a bench file is a TOML file (e.g. one written "
+                          "by fsmbench params --out DIR)")
     try:
         data = tomllib.loads(p.read_text("utf-8"))
     except FileNotFoundError:
         raise ParamsError(f"{p}: no such parameter file") from None
+    except UnicodeDecodeError as exc:
+        raise ParamsError(f"{p}: is not UTF-8 text ({exc.reason} at byte {exc.start}); a "
+                          "bench file is a TOML file") from None
     except tomllib.TOMLDecodeError as exc:
         raise ParamsError(f"{p}: not valid TOML ({exc})") from None
     return _bench_from_mapping(data, str(p))
