@@ -561,12 +561,11 @@ def _cmd_budget(args: argparse.Namespace) -> int:
                                      plant=plant, progress=inp.say)
     for path in paths:
         print(run.final_path(path))
-    print(f"total {1e9 * result.total_rms_m:.3g} nm rms; limiting source: {result.limiting}",
-          file=sys.stderr)
+    # The result on stdout (the files above it), what was skipped on stderr.
+    print(f"total {1e9 * result.total_rms_m:.3g} nm rms; limiting source: {result.limiting}")
     # The study's verdict quotes another controller's budget: say so, or the two look unequal.
     print("with the ESRF study's controller as recorded (the study's budget.json has the same "
-          "total; its verdict quotes fsmbench's controller, budget.json's recommended)",
-          file=sys.stderr)
+          "total; its verdict quotes fsmbench's controller, budget.json's recommended)")
     for part, why in result.skipped.items():
         print(f"skipped {part}: {why}", file=sys.stderr)
     return 0
@@ -685,7 +684,8 @@ def _cmd_study(args: argparse.Namespace) -> int:
             print(f"check failed: {check.sentence()}", file=sys.stderr)
         for notice in result.summary.notices:
             print(f"note: {notice.sentence()}", file=sys.stderr)
-        print(f"verdict: {result.summary.verdict}", file=sys.stderr)
+        # The verdict is the study's result: on stdout, after the report's path.
+        print(f"verdict: {result.summary.verdict}")
     return 0
 
 

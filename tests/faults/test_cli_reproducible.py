@@ -79,7 +79,8 @@ def test_budget(kit: SimpleNamespace, run_cli: Callable[..., Any], tmp_path: Pat
     files, r = _twice(kit, run_cli, tmp_path, lambda out: ("budget", huddle_data,
                                                             "--out", out))
     assert sorted(files) == ["budget.json", "run.json"]
-    assert "limiting source" in r.err and "nominal physical model" in r.err
+    # The result on stdout, what the stage could not use on stderr.
+    assert "limiting source" in r.out and "nominal physical model" in r.err
     assert json.loads((tmp_path / "a" / "run" / "budget.json").read_text()
                       )["budget"]["total_rms_m"] > 0
 
@@ -113,7 +114,10 @@ def test_study_cli_equals_the_library_run(kit: SimpleNamespace, run_cli: Callabl
     assert {k: v for k, v in files.items() if k != "run.json"} == {
         k: v for k, v in library.items() if k != "timings.json"}
     assert any(k.startswith("twin-data/") for k in files)
-    assert str(out / "report.html") in r.out.splitlines()
+    # The report's path, then the verdict: the result on stdout; progress on stderr.
+    lines = r.out.splitlines()
+    assert lines[0] == str(out / "report.html") and lines[1].startswith("verdict: ")
+    assert "verdict" not in r.err
 
 
 def test_timestamp_puts_the_wall_clock_in_headers(run_cli: Callable[..., Any],
