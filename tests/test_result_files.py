@@ -46,8 +46,13 @@ def runs(twin_study: StudyResult, tmp_path_factory: pytest.TempPathFactory) -> d
     with contextlib.redirect_stdout(stdout):
         assert main(["params", "--json"]) == 0
     (root / "params_stdout.json").write_text(stdout.getvalue())
+    stdout = io.StringIO()
+    with contextlib.redirect_stdout(stdout):
+        assert main(["budget", data, "--bench", out["identify"], "--out", out["budget"],
+                     "--json"]) == 0
+    # budget --json prints budget.json as written.
+    assert stdout.getvalue() == (folders["budget"] / "budget.json").read_text(encoding="utf-8")
     commands = [
-        ["budget", data, "--bench", out["identify"], "--out", out["budget"]],
         ["excite", out["excite"], "--input", "Uch", "--amplitude-rms", "0.015", "--band", "1",
          "200"],
         ["simulate", out["simulate"], "--excitation", out["excite"], "--duration", "5"],

@@ -42,7 +42,6 @@ from __future__ import annotations
 
 import argparse
 import contextlib
-import json
 import math
 import os
 import signal
@@ -559,13 +558,19 @@ def _cmd_budget(args: argparse.Namespace) -> int:
                 "11)")
         result, paths = budget_stage(inp.recordings, bench=inp.bench, out_dir=run.staging,
                                      plant=plant, progress=inp.say)
+    # The result on stdout, the files and what was skipped on stderr.
     for path in paths:
-        print(run.final_path(path))
-    # The result on stdout (the files above it), what was skipped on stderr.
-    print(f"total {1e9 * result.total_rms_m:.3g} nm rms; limiting source: {result.limiting}")
-    # The study's verdict quotes another controller's budget: say so, or the two look unequal.
-    print("with the ESRF study's controller as recorded (the study's budget.json has the same "
-          "total; its verdict quotes fsmbench's controller, budget.json's recommended)")
+        print(f"wrote {run.final_path(path)}", file=sys.stderr)
+    if args.json:
+        _print_document(run, paths, "budget.json")
+    else:
+        print(f"total {1e9 * result.total_rms_m:.3g} nm rms; limiting source: "
+              f"{result.limiting}")
+        # The study's verdict quotes another controller's budget: say so, or the two look
+        # unequal.
+        print("with the ESRF study's controller as recorded (the study's budget.json has the "
+              "same total; its verdict quotes fsmbench's controller, budget.json's "
+              "recommended)")
     for part, why in result.skipped.items():
         print(f"skipped {part}: {why}", file=sys.stderr)
     return 0
@@ -641,11 +646,16 @@ def _cmd_design(args: argparse.Namespace) -> int:
     for path in paths:
         print(f"wrote {run.final_path(path)}", file=sys.stderr)
     if args.json:
-        print(json.dumps({"files": [str(run.final_path(p)) for p in paths],
-                          "design": stage.payload}, indent=2, allow_nan=False))
+        _print_document(run, paths, "design.json")
     else:
         print("\n".join(design_table(stage.payload)))
     return 0
+
+
+def _print_document(run: Any, paths: Sequence[Path], name: str) -> None:
+    """A written result file's content on stdout, as written (``--json``)."""
+    path = next(Path(run.final_path(p)) for p in paths if Path(p).name == name)
+    print(path.read_text(encoding="utf-8"), end="")
 
 
 def _cmd_study(args: argparse.Namespace) -> int:
@@ -675,7 +685,10 @@ def _cmd_study(args: argparse.Namespace) -> int:
                            spec=Specification(distance_error_max_m=args.distance_target_m),
                            identify_options=identify_options(args, data=data),
                            montecarlo=montecarlo)
-    print(run.final_path(result.report))
+    if args.json:
+        print(f"wrote {run.final_path(result.report)}", file=sys.stderr)
+    else:
+        print(run.final_path(result.report))
     # Once each, one line each: what was not used, what failed a check, what to know.
     for name, why in result.skipped_experiments.items():
         print(f"skipped {name}: {why}", file=sys.stderr)
@@ -685,7 +698,11 @@ def _cmd_study(args: argparse.Namespace) -> int:
         for notice in result.summary.notices:
             print(f"note: {notice.sentence()}", file=sys.stderr)
         # The verdict is the study's result: on stdout, after the report's path.
-        print(f"verdict: {result.summary.verdict}")
+        if args.json:
+            summary = Path(run.final_path(result.report)).parent / "summary.json"
+            print(summary.read_text(encoding="utf-8"), end="")
+        else:
+            print(f"verdict: {result.summary.verdict}")
     return 0
 
 
@@ -752,10 +769,11 @@ def _parser() -> argparse.ArgumentParser:
                                 "only is detected")
             p.add_argument("--json", action="store_true",
                            help="print the comparison as JSON on stdout instead of the table")
-        if name == "design":
+        if name in ("budget", "design"):
             p.add_argument("--json", action="store_true",
-                           help="print the design (design.json's content) as JSON on stdout "
-                                "instead of the table")
+                           help=f"print {name}.json's content on stdout instead of the "
+                                + ("table" if name == "design" else "total"))
+        if name == "design":
             p.add_argument("--seed", metavar="N", type=seed, default=0,
                            help="random seed of the closed-loop verification's twin (default 0)")
         if name in ("budget", "design"):
@@ -788,6 +806,9 @@ def _parser() -> argparse.ArgumentParser:
                    help="a fsmbench montecarlo output (or its montecarlo.json): the report lists "
                         "the draws that break each requirement, the robustness row names one "
                         "broken by 5 %% of the draws or more")
+    p.add_argument("--json", action="store_true",
+                   help="print the verdict (summary.json's content) on stdout instead of the "
+                        "report's path and the verdict's line")
     add_identify_options(p)
     p.set_defaults(func=_cmd_study)
 

@@ -100,13 +100,19 @@ def test_design(kit: SimpleNamespace, run_cli: Callable[..., Any], tmp_path: Pat
                                    simplify_cells=True)
     k = controllers["fsmbench_controller"]
     assert list(k["K"]["InputName"]) == ["Rh", "Rv"] and k["Kd"]["Ts"] == pytest.approx(1e-4)
+    # --json: design.json as written on stdout, the files on stderr.
+    out = tmp_path / "json"
+    r = run_cli("design", huddle_data, "--out", out, "--seed", "3", "--json")
+    assert r.status == 0, r.err
+    assert r.out == (out / "design.json").read_text(encoding="utf-8")
+    assert f"wrote {out / 'design.json'}" in r.err.splitlines()
 
 
 def test_study_cli_equals_the_library_run(kit: SimpleNamespace, run_cli: Callable[..., Any],
                                           tmp_path: Path, twin_study: Any) -> None:
     """``study --duration 5`` (random seed 0) writes the same bytes as ``run_study`` did."""
     out = tmp_path / "study"
-    r = run_cli("study", "--out", out, "--duration", "5")
+    r = run_cli("study", "--out", out, "--duration", "5", "--json")
     assert r.status == 0, r.err
     files = _reproducible(kit, out)
     library = kit.hashes(Path(twin_study.out_dir))
@@ -114,10 +120,11 @@ def test_study_cli_equals_the_library_run(kit: SimpleNamespace, run_cli: Callabl
     assert {k: v for k, v in files.items() if k != "run.json"} == {
         k: v for k, v in library.items() if k != "timings.json"}
     assert any(k.startswith("twin-data/") for k in files)
-    # The report's path, then the verdict: the result on stdout; progress on stderr.
-    lines = r.out.splitlines()
-    assert lines[0] == str(out / "report.html") and lines[1].startswith("verdict: ")
-    assert "verdict" not in r.err
+    # --json: the verdict's document (summary.json, as written) on stdout, the report's
+    # path with the progress on stderr.
+    assert r.out == (out / "summary.json").read_text(encoding="utf-8")
+    assert json.loads(r.out)["format"] == "fsmbench.summary"
+    assert f"wrote {out / 'report.html'}" in r.err.splitlines()
 
 
 def test_timestamp_puts_the_wall_clock_in_headers(run_cli: Callable[..., Any],
