@@ -17,7 +17,7 @@ import argparse
 import numpy as np
 
 from fsmbench.ident.frf.leakage import welch_leakage_bias
-from fsmbench.ident.frf.welch import hanning
+from fsmbench.signal.welch import hanning
 from timing import timed_runs
 
 FS_HZ = 10_000.0

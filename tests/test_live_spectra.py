@@ -10,8 +10,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy import signal
 
-from fsmbench.ident.frf.welch import effective_averages, hanning, mscohere, pwelch, tfestimate
 from fsmbench.live.spectra import AccumulatingFrf, RollingAsd
+from fsmbench.signal.welch import effective_averages, hanning, mscohere, pwelch, tfestimate
 
 FS = 100.0  # small records keep the property tests fast; the code has no rate of its own
 

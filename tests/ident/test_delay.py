@@ -20,7 +20,7 @@ from fsmbench.ident.delay.bode import (
     remove_delay,
 )
 from fsmbench.ident.frf.response import FrequencyResponse, spectral_matrix
-from fsmbench.ident.frf.welch import hanning
+from fsmbench.signal.welch import hanning
 from fsmbench.twin import TwinRun
 
 FS_HZ = 1e4

@@ -11,7 +11,7 @@ import scipy.io
 from fsmbench.bench.blocks import PlantModel
 from fsmbench.ident.export import frf_variables, ss_struct, write_frf_mat, write_plant_mat
 from fsmbench.ident.frf.response import spectral_matrix
-from fsmbench.ident.frf.welch import hanning
+from fsmbench.signal.welch import hanning
 
 
 def test_plant_mat_rebuilds_the_same_systems(nominal_plant: PlantModel, tmp_path: Path) -> None:

@@ -6,8 +6,8 @@ import numpy as np
 import scipy.signal
 
 from fsmbench.ident.frf.response import spectral_matrix
-from fsmbench.ident.frf.welch import hanning
 from fsmbench.ident.sercalo import relative_fit_error
+from fsmbench.signal.welch import hanning
 
 FS = 10_000.0
 

@@ -11,7 +11,7 @@ import scipy.signal as ss
 import scipy.stats as st
 
 from fsmbench.ident.frf.response import FrequencyResponse, combine_columns, spectral_matrix
-from fsmbench.ident.frf.welch import cpsd, hanning, mscohere, pwelch, tfestimate
+from fsmbench.signal.welch import cpsd, hanning, mscohere, pwelch, tfestimate
 
 FS_HZ = 1e4
 WIN = hanning(512)

@@ -8,8 +8,8 @@ import scipy.stats as st
 
 from fsmbench.ident.frf.estimate import FrfEstimate, circular_bound_factor
 from fsmbench.ident.frf.response import spectral_matrix
-from fsmbench.ident.frf.welch import hanning
 from fsmbench.report.figures.ident import estimator_description, frf_matrix_figure
+from fsmbench.signal.welch import hanning
 
 F_HZ = np.arange(1, 101) * 2.0
 

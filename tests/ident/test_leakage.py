@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from fsmbench.ident.frf.leakage import welch_leakage_bias
-from fsmbench.ident.frf.welch import hanning
+from fsmbench.signal.welch import hanning
 
 FS_HZ = 10_000.0
 WINDOW = hanning(10_000)  # 1 s: 1 Hz bins, the ESRF study's

@@ -15,7 +15,7 @@ import scipy.stats as st
 
 from fsmbench.ident.frf.lpm import LpmOptions, default_half_width, local_polynomial_frf
 from fsmbench.ident.frf.response import spectral_matrix
-from fsmbench.ident.frf.welch import hanning
+from fsmbench.signal.welch import hanning
 
 FS = 1000.0
 L = 4000  # 4 s: line spacing 0.25 Hz, the window (13 lines) 3.25 Hz << the mode's 16 Hz

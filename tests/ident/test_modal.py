@@ -28,7 +28,7 @@ import scipy.signal as ss
 
 from fsmbench.ident.fit.modal import ModalEstimate, estimate_modes, fit_frf_modes
 from fsmbench.ident.frf.response import spectral_matrix
-from fsmbench.ident.frf.welch import hanning
+from fsmbench.signal.welch import hanning
 from fsmbench.twin import TwinRun
 
 FS_HZ = 1e4

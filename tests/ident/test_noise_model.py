@@ -25,9 +25,9 @@ from scipy.stats import chi2
 from fsmbench.bench.axes import PerAxis
 from fsmbench.bench.blocks import newport_beam_matrix
 from fsmbench.bench.params import Bench, BenchParams, default_bench, load_bench, real_bench
-from fsmbench.ident.frf.welch import effective_averages, hanning
 from fsmbench.ident.noise_model import NoiseModelFit, fit_noise_model
 from fsmbench.io.recording import make_recording
+from fsmbench.signal.welch import effective_averages, hanning
 from fsmbench.sim.noise import FlickerStream
 from fsmbench.sim.stream import BenchStream
 from fsmbench.twin import TwinRun, simulate_bench

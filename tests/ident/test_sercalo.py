@@ -11,7 +11,6 @@ from fsmbench.ident.delay.bode import DelayEstimate
 from fsmbench.ident.fit.weights import detect_resonances, seed_weights
 from fsmbench.ident.frf.experiment import experiment_frf
 from fsmbench.ident.frf.response import spectral_matrix
-from fsmbench.ident.frf.welch import hanning
 from fsmbench.ident.newport import identify_newport
 from fsmbench.ident.sercalo import (
     combined_delay,
@@ -19,6 +18,7 @@ from fsmbench.ident.sercalo import (
     refit_with_poles,
     relative_fit_error,
 )
+from fsmbench.signal.welch import hanning
 from fsmbench.twin import TwinRun
 
 TRIMS = {"data_uch": 1.0, "data_ucv": 1.0, "data_unh": 3.0, "data_unv": 1.5}

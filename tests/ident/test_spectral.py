@@ -17,7 +17,6 @@ import scipy.stats as st
 import fsmbench.ident as ident_pkg
 from fsmbench.ident.frf import response as frf_mod
 from fsmbench.ident.frf import spectral
-from fsmbench.ident.frf import welch as welch_mod
 from fsmbench.ident.frf.spectral import (
     combine_columns,
     cpsd,
@@ -27,6 +26,7 @@ from fsmbench.ident.frf.spectral import (
     spectral_matrix,
     tfestimate,
 )
+from fsmbench.signal import welch as welch_mod
 
 FS_HZ = 1e4
 

@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 import scipy.signal as ss
 
-from fsmbench.ident.frf import welch
-from fsmbench.ident.frf.welch import (
+from fsmbench.signal import welch_core as welch
+from fsmbench.signal.welch import (
     WelchOptions,
     cpsd,
     cross_spectral_density,

@@ -30,11 +30,11 @@ tango = pytest.importorskip("tango")
 from tango.test_context import DeviceTestContext  # noqa: E402
 
 from fsmbench.bench.params import Bench  # noqa: E402
-from fsmbench.ident.frf.welch import default_nfft, hanning, mscohere, tfestimate  # noqa: E402
 from fsmbench.io.recording import read_recording  # noqa: E402
 from fsmbench.live.attributes import ATTRIBUTES  # noqa: E402
 from fsmbench.live.device import FsmBench  # noqa: E402
 from fsmbench.live.states import REASONS  # noqa: E402
+from fsmbench.signal.welch import default_nfft, hanning, mscohere, tfestimate  # noqa: E402
 from fsmbench.twin import simulate_bench, write_twin  # noqa: E402
 
 DEVICE = "fsmbench/bench/1"

@@ -12,7 +12,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from fsmbench.ident.frf.welch import (
+from fsmbench.signal.welch import (
     WelchOptions,
     cpsd,
     cross_spectral_density,
@@ -20,12 +20,8 @@ from fsmbench.ident.frf.welch import (
     pwelch,
     tfestimate,
 )
-from fsmbench.scale.welch import (
-    cpsd_dask,
+from fsmbench.signal.welch_dask import (
     cross_spectral_density_dask,
-    mscohere_dask,
-    pwelch_dask,
-    tfestimate_dask,
 )
 
 # Same segments and FFTs, only the order of summing the segment products differs:
@@ -92,10 +88,10 @@ def test_siso_functions_equal_in_memory() -> None:
     xd, yd = _chunked(x, [13, 500, 501, 2999]), _chunked(y, [1, 2, 1800])
     kw = {"window": np.hanning(300), "noverlap": 120, "nfft": 512, "fs_hz": 1000.0}
     pairs = [
-        (pwelch(x, **kw), pwelch_dask(xd, segments_per_task=4, **kw)),
-        (cpsd(x, y, **kw), cpsd_dask(xd, yd, segments_per_task=3, **kw)),
-        (tfestimate(x, y, **kw), tfestimate_dask(xd, yd, **kw)),
-        (mscohere(x, y, **kw), mscohere_dask(x, y, **kw)),  # NumPy inputs are accepted too
+        (pwelch(x, **kw), pwelch(xd, segments_per_task=4, **kw)),
+        (cpsd(x, y, **kw), cpsd(xd, yd, segments_per_task=3, **kw)),
+        (tfestimate(x, y, **kw), tfestimate(xd, yd, **kw)),
+        (mscohere(x, y, **kw), mscohere(xd, y, **kw)),  # one Dask array is enough
     ]
     for ref, got in pairs:
         assert got.quantity == ref.quantity and got.n_segments == ref.n_segments
@@ -116,24 +112,23 @@ def test_too_short_record_gives_the_in_memory_error() -> None:
     with pytest.raises(ValueError) as ref:
         pwelch(x[0], window=64, fs_hz=100.0, x_name="Va")
     with pytest.raises(ValueError) as got:
-        pwelch_dask(x[0], window=64, fs_hz=100.0, x_name="Va")
+        pwelch(da.from_array(x[0], chunks=10), window=64, fs_hz=100.0, x_name="Va")
     assert str(got.value) == str(ref.value)
 
 
 def test_bad_samples_and_constant_input_give_the_in_memory_errors() -> None:
     x = np.random.default_rng(1).standard_normal(1000)
     x[[400, 700]] = np.nan
-    for fn, dfn in ((pwelch, pwelch_dask),):
-        with pytest.raises(ValueError) as ref:
-            fn(x, window=100, fs_hz=10.0, x_name="Uch")
-        with pytest.raises(ValueError) as got:
-            dfn(_chunked(x, [333]), window=100, fs_hz=10.0, x_name="Uch")
-        assert str(got.value) == str(ref.value)
+    with pytest.raises(ValueError) as ref:
+        pwelch(x, window=100, fs_hz=10.0, x_name="Uch")
+    with pytest.raises(ValueError) as got:
+        pwelch(_chunked(x, [333]), window=100, fs_hz=10.0, x_name="Uch")
+    assert str(got.value) == str(ref.value)
     const, y = np.full(1000, 2.5), np.arange(1000.0)
     with pytest.raises(ValueError) as ref:
         tfestimate(const, y, window=100, fs_hz=10.0, x_name="Uch")
     with pytest.raises(ValueError) as got:
-        tfestimate_dask(_chunked(const, [5]), y, window=100, fs_hz=10.0, x_name="Uch")
+        tfestimate(_chunked(const, [5]), y, window=100, fs_hz=10.0, x_name="Uch")
     assert str(got.value) == str(ref.value)
 
 
@@ -166,8 +161,8 @@ def test_same_result_on_sync_scheduler_and_local_cluster() -> None:
     ):
         on_cluster = client.compute(s).result()
         with dask.config.set(scheduler=client.get):
-            via_wrapper = pwelch_dask(x[0], window=500, noverlap=300, nfft=256, fs_hz=1000.0)
+            via_wrapper = pwelch(x[0], window=500, noverlap=300, nfft=256, fs_hz=1000.0)
     # Same graph, same tasks, same tree order: the same floating-point operations.
     np.testing.assert_array_equal(on_cluster, sync)
-    np.testing.assert_array_equal(via_wrapper.values, pwelch_dask(
+    np.testing.assert_array_equal(via_wrapper.values, pwelch(
         x[0], window=500, noverlap=300, nfft=256, fs_hz=1000.0).values)

@@ -9,7 +9,6 @@ from hypothesis import strategies as st
 
 from fsmbench.budget.signals import block_means
 from fsmbench.filters import first_order_lowpass
-from fsmbench.ident.frf.welch import WelchOptions, hanning, pwelch
 from fsmbench.scale.envelope import minmax_envelope
 from fsmbench.scale.streaming import (
     BlockMeanStream,
@@ -19,6 +18,7 @@ from fsmbench.scale.streaming import (
     WelchStream,
     read_blocks,
 )
+from fsmbench.signal.welch import WelchOptions, hanning, pwelch
 
 FS = 1000.0
 # Same samples and arithmetic, sums grouped differently: rounding only (1e-12 relative).

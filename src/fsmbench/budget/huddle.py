@@ -44,8 +44,8 @@ from fsmbench.budget.long_record import LongRecordSummary, summarise_long_record
 from fsmbench.budget.signals import block_means, is_lazy, lowpass, trim_record
 from fsmbench.budget.spectra import cumulative_power, seed_welch
 from fsmbench.control.seed import tustin
-from fsmbench.ident import hanning
 from fsmbench.jsonutil import hv
+from fsmbench.signal.welch import hanning
 
 __all__ = [
     "HUDDLE_CONFIGS",

@@ -31,7 +31,6 @@ import xarray as xr
 from numpy.typing import NDArray
 
 from fsmbench.budget.signals import LazyTrim, trim_record
-from fsmbench.ident.frf.welch import SpectrumResult, WelchOptions, hanning
 from fsmbench.progress import advance
 from fsmbench.scale.allan import AllanResult
 from fsmbench.scale.envelope import Envelope
@@ -45,6 +44,7 @@ from fsmbench.scale.streaming import (
     WelchStream,
     read_blocks,
 )
+from fsmbench.signal.welch import SpectrumResult, WelchOptions, hanning
 
 __all__ = ["LongRecordSummary", "allan_factors", "summarise_long_record"]
 

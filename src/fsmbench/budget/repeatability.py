@@ -53,7 +53,6 @@ from fsmbench.bench.blocks import rotation
 from fsmbench.bench.params import BenchParams
 from fsmbench.budget.propagation import distance_coefficients
 from fsmbench.budget.signals import trim_record
-from fsmbench.ident.frf.welch import WelchOptions, hanning
 from fsmbench.jsonutil import hv
 from fsmbench.progress import advance
 from fsmbench.scale.envelope import Envelope
@@ -65,6 +64,7 @@ from fsmbench.scale.streaming import (
     WelchStream,
     read_blocks,
 )
+from fsmbench.signal.welch import WelchOptions, hanning
 
 __all__ = [
     "ENVELOPE_BINS",

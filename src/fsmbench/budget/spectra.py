@@ -22,7 +22,7 @@ from numpy.typing import ArrayLike, NDArray
 from scipy.integrate import cumulative_trapezoid, trapezoid
 
 from fsmbench.filters import first_order_lowpass
-from fsmbench.ident import SpectrumResult, hanning, pwelch
+from fsmbench.signal.welch import SpectrumResult, hanning, is_dask_array, pwelch
 
 __all__ = [
     "cumulative_power",
@@ -54,12 +54,9 @@ def seed_welch(x: ArrayLike, *, fs_hz: float, name: str = "x") -> SpectrumResult
         One-sided PSD [U²/Hz] on ``(0:nfft/2)·fs/nfft`` (nfft = 16384 at 10 kHz).
     """
     n_win = math.ceil(1.0 * fs_hz)
-    if type(x).__module__.startswith("dask"):
-        # A record out of core: the same estimate over Dask chunks (equal to 1e-12).
-        from fsmbench.scale.welch import pwelch_dask
-
-        return pwelch_dask(x, window=hanning(n_win), fs_hz=fs_hz, x_name=name)
-    return pwelch(np.asarray(x, dtype=float), window=hanning(n_win), fs_hz=fs_hz, x_name=name)
+    # A Dask array (a record out of core) is estimated over its chunks, equal to 1e-12.
+    record = x if is_dask_array(x) else np.asarray(x, dtype=float)
+    return pwelch(record, window=hanning(n_win), fs_hz=fs_hz, x_name=name)
 
 
 

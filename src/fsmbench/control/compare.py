@@ -48,8 +48,8 @@ from numpy.typing import NDArray
 
 from fsmbench.bench.blocks import PlantModel
 from fsmbench.checks import Check
-from fsmbench.ident.frf.welch import hanning, pwelch
 from fsmbench.jsonutil import plain_json
+from fsmbench.signal.welch import hanning, pwelch
 
 __all__ = ["BANDS_HZ", "MAX_EXCESS", "OutputErrorCheck", "output_error_check",
            "without_mean_period"]

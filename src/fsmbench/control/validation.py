@@ -54,8 +54,8 @@ from fsmbench.bench.params import BenchParams
 from fsmbench.budget.propagation import loop_response
 from fsmbench.checks import Check
 from fsmbench.control.compare import OutputErrorCheck, output_error_check, without_mean_period
-from fsmbench.ident.frf.welch import hanning, pwelch
 from fsmbench.jsonutil import plain_json
+from fsmbench.signal.welch import hanning, pwelch
 from fsmbench.sim.spectra import qd_noise_spectrum
 
 __all__ = [

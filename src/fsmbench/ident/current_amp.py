@@ -51,7 +51,7 @@ from fsmbench.ident.frf.estimate import FrfEstimate
 from fsmbench.ident.frf.lpm import LPM_NOISE_SMOOTHING, LpmOptions, local_polynomial_frf
 from fsmbench.ident.frf.periodic import PeriodicOptions, periodic_frf
 from fsmbench.ident.frf.response import spectral_matrix
-from fsmbench.ident.frf.welch import hanning
+from fsmbench.signal.welch import hanning
 
 __all__ = ["AmplifierFit", "amplifier_path", "fit_amplifier", "identify_current_amplifier",
            "kink_interval_variance"]

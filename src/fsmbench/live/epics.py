@@ -237,7 +237,7 @@ class BenchIoc:
                 on_update=self._action(name), DESC=f"put the argument to run {name}")
 
     def _spectrum_points(self) -> int:
-        from fsmbench.ident.frf.welch import default_nfft
+        from fsmbench.signal.welch import default_nfft
 
         return default_nfft(math.ceil(self.bench.fs_hz)) // 2 + 1  # 1 s Hann window
 

@@ -1,7 +1,7 @@
 """Streaming Welch estimates for the live bench: a rolling ASD and an accumulating H1 FRF.
 
 Both estimators are fed block by block (any block length, down to one sample)
-and give the numbers fsmbench's batch functions (:mod:`fsmbench.ident.frf.welch`,
+and give the numbers fsmbench's batch functions (:mod:`fsmbench.signal.welch`,
 MATLAB semantics) give on the same samples:
 
 * :class:`RollingAsd`: ``sqrt(pwelch(x, hanning(ceil(window_s*fs)), [], [], fs))``
@@ -30,7 +30,7 @@ import numpy as np
 import scipy.fft
 from numpy.typing import ArrayLike, NDArray
 
-from fsmbench.ident.frf.welch import WelchOptions, hanning, pwelch
+from fsmbench.signal.welch import WelchOptions, hanning, pwelch
 
 __all__ = ["AccumulatingFrf", "AsdSnapshot", "FrfSnapshot", "RollingAsd"]
 
@@ -120,7 +120,7 @@ class RollingAsd:
     """ASD of the last ``span_s`` seconds of several channels, fed block by block.
 
     :meth:`spectrum` equals ``sqrt(pwelch(x_last, window=hanning(L), fs_hz=fs))``
-    of :func:`fsmbench.ident.frf.welch.pwelch` (MATLAB's ``[]`` overlap, i.e. 50 %,
+    of :func:`fsmbench.signal.welch.pwelch` (MATLAB's ``[]`` overlap, i.e. 50 %,
     and ``[]`` nfft), with ``x_last`` the last ``round(span_s * fs)`` samples of
     each channel, or all of them while fewer have been pushed. The
     configuration is fixed at construction (read-only properties).
@@ -329,8 +329,8 @@ class AccumulatingFrf:
 
     Every complete Welch segment of the samples pushed since construction (or
     :meth:`reset`) is averaged, including segments that straddle two blocks:
-    :meth:`result` equals :func:`fsmbench.ident.frf.welch.tfestimate` and
-    :func:`fsmbench.ident.frf.welch.mscohere` (window ``hanning(L)``, overlap
+    :meth:`result` equals :func:`fsmbench.signal.welch.tfestimate` and
+    :func:`fsmbench.signal.welch.mscohere` (window ``hanning(L)``, overlap
     ``floor(overlap * L)``, default nfft) of the first ``n_samples`` pushed
     samples, to rounding. Only the spectral sums and a tail shorter than one
     segment are kept.

@@ -4,8 +4,8 @@ The modules of this package import :mod:`dask` (the ``fsmbench[dask]`` extra);
 this ``__init__`` imports nothing, so ``import fsmbench`` works without Dask.
 Import the functions from their modules:
 
-- :mod:`fsmbench.scale.welch`: Welch PSD/CPSD/H1/coherence on Dask arrays,
-  MATLAB semantics, equal to :mod:`fsmbench.ident.frf.welch`;
+- :mod:`fsmbench.signal.welch_dask`: Welch PSD/CPSD/H1/coherence on Dask arrays,
+  MATLAB semantics, equal to :mod:`fsmbench.signal.welch`;
 - :mod:`fsmbench.scale.allan`: overlapping Allan deviation of long records and
   its noise-type slope regions;
 - :mod:`fsmbench.scale.envelope`: min/max/mean envelope of long records for plots.

@@ -168,7 +168,7 @@ def _si(value: float, unit: str) -> str:
 # --------------------------------------------------------------------------- tasks
 def _read(pieces: Sequence[NDArray[np.float64]], offset: int,
           length: int) -> NDArray[np.float64]:
-    from fsmbench.scale.segments import read_span as read  # the Dask graph's reader
+    from fsmbench.signal.segments import read_span as read  # the Dask graph's reader
 
     return read(pieces, offset, length)
 
@@ -291,7 +291,7 @@ def allan_deviation(
     import dask
     from dask.base import tokenize
 
-    from fsmbench.scale.welch import _MIN_TASK_SAMPLES, _TimeChunks, as_time_chunked
+    from fsmbench.signal.welch_dask import _MIN_TASK_SAMPLES, _TimeChunks, as_time_chunked
 
     arr = as_time_chunked(x, what=name)
     if arr.ndim != 1:

@@ -53,7 +53,7 @@ def _bins(
     pieces: list[NDArray[np.float64]], offset: int, length: int, local_edges: NDArray[np.int64]
 ) -> NDArray[np.float64]:
     """``(3, bins)``: min, max, mean of ``data[local_edges[i]:local_edges[i+1]]``."""
-    from fsmbench.scale.segments import read_span  # the Dask graph's reader
+    from fsmbench.signal.segments import read_span  # the Dask graph's reader
 
     return _reduce(read_span(pieces, offset, length), local_edges)
 
@@ -124,7 +124,7 @@ def minmax_envelope(
     import dask
     from dask.base import tokenize
 
-    from fsmbench.scale.welch import _MIN_TASK_SAMPLES, _TimeChunks, as_time_chunked
+    from fsmbench.signal.welch_dask import _MIN_TASK_SAMPLES, _TimeChunks, as_time_chunked
 
     arr = as_time_chunked(x, what=name)
     longest = max(arr.chunks[0])

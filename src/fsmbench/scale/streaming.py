@@ -1,6 +1,6 @@
 """Estimators fed block after block: many analyses in one sequential read of a record.
 
-The Dask graphs of :mod:`fsmbench.scale.welch`, :mod:`~fsmbench.scale.allan`
+The Dask graphs of :mod:`fsmbench.signal.welch_dask`, :mod:`~fsmbench.scale.allan`
 and :mod:`~fsmbench.scale.envelope` spread one estimate over workers. On one
 machine a day-long record is limited by the disk, not the processor (a day of
 huddle test 5 is 41 GB; reading it once takes 6–10 min here), and every
@@ -25,10 +25,10 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.signal import lfilter
 
-from fsmbench.ident.frf.welch import SpectrumResult, WelchOptions, _result
 from fsmbench.scale.allan import AllanResult
 from fsmbench.scale.envelope import Envelope, _envelope
-from fsmbench.scale.segments import segment_sums
+from fsmbench.signal.segments import segment_sums
+from fsmbench.signal.welch import SpectrumResult, WelchOptions, _result
 
 __all__ = [
     "AllanStream",

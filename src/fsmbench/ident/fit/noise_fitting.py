@@ -16,13 +16,13 @@ from numpy.typing import NDArray
 from scipy.linalg import block_diag, cho_factor, cho_solve, toeplitz
 from scipy.optimize import least_squares, minimize_scalar, nnls
 
-from fsmbench.ident.frf.welch import (
+from fsmbench.jsonutil import plain_json
+from fsmbench.signal.welch import (
     WelchOptions,
     cross_spectral_density,
     effective_averages,
     hanning,
 )
-from fsmbench.jsonutil import plain_json
 from fsmbench.sim.spectra import flicker_corners, flicker_psd, walk_psd
 
 __all__ = [

@@ -18,10 +18,10 @@ from fsmbench.checks import Notice
 from fsmbench.ident.fit.modes import ModeRefinement
 from fsmbench.ident.frf.leakage import welch_leakage_bias
 from fsmbench.ident.frf.response import FrequencyResponse, with_variance_part
-from fsmbench.ident.frf.welch import hanning
 from fsmbench.ident.newport import SensorShift
 from fsmbench.ident.sercalo import SercaloIdentification
 from fsmbench.ident.validate import PathValidation
+from fsmbench.signal.welch import hanning
 
 __all__ = ["MAX_DIRECT_FIT_ERROR", "MIN_DIRECT_VAF", "leakage_bias", "leakage_corrected",
            "quality_warnings", "sensor_shift_notices"]

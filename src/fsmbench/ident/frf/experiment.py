@@ -22,7 +22,7 @@ from fsmbench.ident.frf.estimate import FrfEstimate, combine_estimates
 from fsmbench.ident.frf.lpm import LPM_NOISE_SMOOTHING, LpmOptions, local_polynomial_frf
 from fsmbench.ident.frf.periodic import PeriodicOptions, detect_period, periodic_frf
 from fsmbench.ident.frf.response import FrequencyResponse, combine_columns, spectral_matrix
-from fsmbench.ident.frf.welch import hanning
+from fsmbench.signal.welch import hanning
 
 __all__ = ["OUTPUTS", "FrfEstimator", "choose_estimator", "experiment_frf"]
 

@@ -25,7 +25,7 @@ from numpy.typing import ArrayLike, NDArray
 from scipy.stats import f as f_dist
 from scipy.stats import t as t_dist
 
-from fsmbench.ident.frf.welch import (
+from fsmbench.signal.welch import (
     WelchOptions,
     _as_signal,
     _check_has_power,

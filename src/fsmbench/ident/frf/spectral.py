@@ -4,7 +4,7 @@ The seed study (sections 2.2-2.4, 3.5) calls ``tfestimate``, ``mscohere`` and
 ``pwelch`` with ``win = hanning(ceil(1*fs))``, ``[]`` overlap and nfft, and
 ``fs = 1e4``. This module gives a MATLAB user the same numbers for the same
 arguments, and computes a whole experiment (all inputs and outputs) in one
-pass. Implementation: :mod:`fsmbench.ident.frf.welch` (windows, options, engine,
+pass. Implementation: :mod:`fsmbench.signal.welch` (windows, options, engine,
 SISO functions) and :mod:`fsmbench.ident.frf.response` (FRF matrix, bounds).
 
 Conventions (each checked against the source named; URLs as retrieved)
@@ -95,7 +95,7 @@ Confidence bounds
 from __future__ import annotations
 
 from fsmbench.ident.frf.response import FrequencyResponse, combine_columns, spectral_matrix
-from fsmbench.ident.frf.welch import (
+from fsmbench.signal.welch import (
     SpectrumResult,
     WelchOptions,
     cpsd,

@@ -1,6 +1,6 @@
 """Welch's segment sums on chunks of a record, without Dask.
 
-Shared by the Dask graphs of :mod:`fsmbench.scale.welch` (each task sums the
+Shared by the Dask graphs of :mod:`fsmbench.signal.welch_dask` (each task sums the
 segments it owns) and the block-fed estimators of :mod:`fsmbench.scale.streaming`
 (which records in memory use too, so this module must import without the
 ``dask`` extra).
@@ -13,7 +13,7 @@ from collections.abc import Sequence
 import numpy as np
 from numpy.typing import NDArray
 
-from fsmbench.ident.frf.welch import segment_sums as welch_segment_sums
+from fsmbench.signal.welch import segment_sums as welch_segment_sums
 
 __all__ = ["read_span", "segment_sums"]
 
@@ -35,7 +35,7 @@ def segment_sums(
 ) -> NDArray[np.complex128]:
     """Unscaled ``sum_k X_a conj(X_b)`` over ``n_seg`` segments, shape (c, c, nfft//2 + 1).
 
-    The accumulation of :func:`fsmbench.ident.frf.welch.segment_sums` on the samples
+    The accumulation of :func:`fsmbench.signal.welch.segment_sums` on the samples
     ``offset .. offset+length-1`` of the concatenated chunks.
     """
     data = read_span(pieces, offset, length)

@@ -1,6 +1,6 @@
 """Welch estimates on Dask arrays with MATLAB's semantics, equal to the in-memory engine.
 
-:func:`cross_spectral_density_dask` is :func:`fsmbench.ident.frf.welch.cross_spectral_density`
+:func:`cross_spectral_density_dask` is :func:`fsmbench.signal.welch.cross_spectral_density`
 for a record chunked along time: the same MATLAB segments (segment ``k`` is samples
 ``k*hop .. k*hop + L - 1``, ``K = floor((N - noverlap)/hop)`` of them), the same
 window, datawrap (``nfft < L``), density scaling and one-sided doubling. Only the
@@ -16,11 +16,10 @@ sums are added in a tree and scaled once. Every segment belongs to exactly one
 task, whatever the chunk boundaries; a task holds O(its samples) in memory, never
 the whole record.
 
-The SISO functions :func:`pwelch_dask`, :func:`cpsd_dask`, :func:`tfestimate_dask`
-and :func:`mscohere_dask` take the arguments of their in-memory namesakes and return
-the same :class:`~fsmbench.ident.frf.welch.SpectrumResult` (computed). They accept
-Dask arrays or NumPy arrays (wrapped in chunks of :data:`DEFAULT_CHUNK_SAMPLES`).
-They run on Dask's current scheduler (a ``dask.distributed`` client if one is active).
+MATLAB's four functions (:mod:`fsmbench.signal.welch`) come here when given a Dask
+array: :func:`pairwise_dask` checks the records as the in-memory path does (in the
+same pass over the data as the spectra) and returns the same spectral matrix. They run
+on Dask's current scheduler (a ``dask.distributed`` client if one is active).
 """
 
 from __future__ import annotations
@@ -36,23 +35,14 @@ from dask.core import flatten
 from dask.highlevelgraph import HighLevelGraph
 from numpy.typing import ArrayLike, NDArray
 
-from fsmbench.ident.frf.welch import (
-    SpectrumResult,
-    WelchOptions,
-    _check_record,
-    _label,
-    _result,
-)
-from fsmbench.scale.segments import segment_sums
+from fsmbench.signal.segments import segment_sums
+from fsmbench.signal.welch_core import WelchOptions, _check_record, _label
 
 __all__ = [
     "DEFAULT_CHUNK_SAMPLES",
     "as_time_chunked",
-    "cpsd_dask",
     "cross_spectral_density_dask",
-    "mscohere_dask",
-    "pwelch_dask",
-    "tfestimate_dask",
+    "pairwise_dask",
 ]
 
 #: Chunk length (samples) given to NumPy inputs: 1 Mi samples = 8 MiB per channel.
@@ -174,7 +164,7 @@ def cross_spectral_density_dask(
     Returns
     -------
     S : dask.array.Array, complex128, shape (nfft//2 + 1, c, c)
-        Lazy; ``S.compute()`` equals :func:`fsmbench.ident.frf.welch.cross_spectral_density`
+        Lazy; ``S.compute()`` equals :func:`fsmbench.signal.welch.cross_spectral_density`
         on the same samples (U_a U_b / Hz) to floating-point reordering.
     n_segments : int
         Number of segments ``K`` averaged (known without reading the data).
@@ -228,7 +218,7 @@ def _checks(x: da.Array) -> tuple[da.Array, da.Array, da.Array, da.Array]:
     return bad.sum(), da.argmax(bad), da.nanmin(x), da.nanmax(x)
 
 
-def _pairwise_dask(
+def pairwise_dask(
     arrays: Sequence[tuple[Any, str | None, str]],
     *,
     window: int | ArrayLike,
@@ -239,6 +229,35 @@ def _pairwise_dask(
     need_power: Sequence[bool] = (),
     segments_per_task: int | None = None,
 ) -> tuple[WelchOptions, NDArray[np.complex128], int]:
+    """The spectral matrix of 1-D records, any of them a Dask array (computed).
+
+    Parameters
+    ----------
+    arrays : sequence of (array, name, role)
+        Each record (Dask or NumPy, shape (N,)), its signal name (or None) and its role in
+        messages (``"x"``, ``"input x"`` …).
+    window, noverlap, nfft, fs_hz
+        MATLAB's arguments (:meth:`fsmbench.signal.welch_core.WelchOptions.from_matlab`).
+    min_segments : int
+        Fewest segments the estimate needs (2 for a coherence).
+    need_power : sequence of bool
+        Per record: refused when constant (an input of a ratio).
+    segments_per_task : int, optional
+        See :func:`cross_spectral_density_dask`.
+
+    Returns
+    -------
+    options : WelchOptions
+    s : ndarray, complex, shape (nfft//2 + 1, c, c)
+        ``S[f, a, b]``, U_a U_b / Hz.
+    n_segments : int
+
+    Raises
+    ------
+    ValueError
+        A record too short, not 1-D, with NaN or infinite samples, or constant where
+        ``need_power``: the in-memory path's messages.
+    """
     options = WelchOptions.from_matlab(window=window, noverlap=noverlap, nfft=nfft, fs_hz=fs_hz)
     checked: list[tuple[str, da.Array]] = []
     for x, name, role in arrays:
@@ -267,154 +286,3 @@ def _pairwise_dask(
                 "undefined"
             )
     return options, np.asarray(s), k
-
-
-def pwelch_dask(
-    x: Any,
-    *,
-    window: int | ArrayLike,
-    noverlap: int | None = None,
-    nfft: int | None = None,
-    fs_hz: float,
-    x_name: str | None = None,
-    segments_per_task: int | None = None,
-) -> SpectrumResult:
-    """MATLAB ``pwelch`` of a record chunked along time; as :func:`fsmbench.ident.frf.welch.pwelch`.
-
-    Parameters
-    ----------
-    x : dask.array.Array or array_like, shape (N,)
-        Real record, unit U_x, chunked along time in any way.
-    window : int or array_like, shape (L,)
-        Integer ``L`` means ``hamming(L)``; an array is used as is.
-    noverlap : int, optional
-        Overlap, samples; ``None`` is MATLAB's ``[]`` (``floor(L/2)``).
-    nfft : int, optional
-        FFT length, samples; ``None`` is ``max(256, 2^nextpow2(L))``.
-    fs_hz : float
-        Sampling frequency, Hz.
-    x_name : str, optional
-        Signal name used in error messages.
-    segments_per_task : int, optional
-        Segments per Dask task, see :func:`cross_spectral_density_dask`.
-
-    Returns
-    -------
-    SpectrumResult
-        ``values``: one-sided PSD, U_x^2/Hz, shape (nfft//2 + 1,) (computed).
-    """
-    options, s, k = _pairwise_dask(
-        [(x, x_name, "x")], window=window, noverlap=noverlap, nfft=nfft, fs_hz=fs_hz,
-        segments_per_task=segments_per_task,
-    )
-    return _result(options, np.ascontiguousarray(s[:, 0, 0].real), "psd", k)
-
-
-def cpsd_dask(
-    x: Any,
-    y: Any,
-    *,
-    window: int | ArrayLike,
-    noverlap: int | None = None,
-    nfft: int | None = None,
-    fs_hz: float,
-    x_name: str | None = None,
-    y_name: str | None = None,
-    segments_per_task: int | None = None,
-) -> SpectrumResult:
-    """MATLAB ``cpsd(x, y)`` (average of ``X conj(Y)``) of records chunked along time.
-
-    Parameters
-    ----------
-    x, y : dask.array.Array or array_like, shape (N,)
-        Real records of equal length, units U_x and U_y.
-    window, noverlap, nfft, fs_hz, segments_per_task
-        As in :func:`pwelch_dask`.
-    x_name, y_name : str, optional
-        Signal names used in error messages.
-
-    Returns
-    -------
-    SpectrumResult
-        ``values``: complex one-sided CPSD, U_x U_y/Hz, shape (nfft//2 + 1,).
-    """
-    options, s, k = _pairwise_dask(
-        [(x, x_name, "x"), (y, y_name, "y")], window=window, noverlap=noverlap, nfft=nfft,
-        fs_hz=fs_hz, segments_per_task=segments_per_task,
-    )
-    return _result(options, np.ascontiguousarray(s[:, 0, 1]), "cpsd", k)
-
-
-def tfestimate_dask(
-    x: Any,
-    y: Any,
-    *,
-    window: int | ArrayLike,
-    noverlap: int | None = None,
-    nfft: int | None = None,
-    fs_hz: float,
-    x_name: str | None = None,
-    y_name: str | None = None,
-    segments_per_task: int | None = None,
-) -> SpectrumResult:
-    """MATLAB ``tfestimate(x, y)`` (H1 = ``Pyx/Pxx``) of records chunked along time.
-
-    Parameters
-    ----------
-    x : dask.array.Array or array_like, shape (N,)
-        Real input (excitation) record, unit U_x; must not be constant.
-    y : dask.array.Array or array_like, shape (N,)
-        Real output record, unit U_y.
-    window, noverlap, nfft, fs_hz, segments_per_task
-        As in :func:`pwelch_dask`.
-    x_name, y_name : str, optional
-        Signal names used in error messages.
-
-    Returns
-    -------
-    SpectrumResult
-        ``values``: complex frequency response, U_y/U_x, shape (nfft//2 + 1,).
-    """
-    options, s, k = _pairwise_dask(
-        [(x, x_name, "input x"), (y, y_name, "output y")], window=window, noverlap=noverlap,
-        nfft=nfft, fs_hz=fs_hz, need_power=(True, False), segments_per_task=segments_per_task,
-    )
-    return _result(options, s[:, 1, 0] / s[:, 0, 0].real, "tf", k)
-
-
-def mscohere_dask(
-    x: Any,
-    y: Any,
-    *,
-    window: int | ArrayLike,
-    noverlap: int | None = None,
-    nfft: int | None = None,
-    fs_hz: float,
-    x_name: str | None = None,
-    y_name: str | None = None,
-    segments_per_task: int | None = None,
-) -> SpectrumResult:
-    """MATLAB ``mscohere(x, y)`` = ``|Pxy|^2/(Pxx Pyy)`` of records chunked along time.
-
-    Needs at least two segments, as the in-memory :func:`fsmbench.ident.frf.welch.mscohere`.
-
-    Parameters
-    ----------
-    x, y : dask.array.Array or array_like, shape (N,)
-        Real records of equal length; neither may be constant.
-    window, noverlap, nfft, fs_hz, segments_per_task
-        As in :func:`pwelch_dask`.
-    x_name, y_name : str, optional
-        Signal names used in error messages.
-
-    Returns
-    -------
-    SpectrumResult
-        ``values``: magnitude-squared coherence in [0, 1], shape (nfft//2 + 1,).
-    """
-    options, s, k = _pairwise_dask(
-        [(x, x_name, "x"), (y, y_name, "y")], window=window, noverlap=noverlap, nfft=nfft,
-        fs_hz=fs_hz, min_segments=2, need_power=(True, True), segments_per_task=segments_per_task,
-    )
-    coh = np.abs(s[:, 0, 1]) ** 2 / (s[:, 0, 0].real * s[:, 1, 1].real)
-    return _result(options, coh, "coherence", k)

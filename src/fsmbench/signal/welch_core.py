@@ -1,15 +1,12 @@
-"""Welch estimates with MATLAB's semantics: windows, options, engine, SISO functions.
-
-``pwelch``, ``cpsd``, ``tfestimate`` and ``mscohere`` return the numbers
-MATLAB's functions of the same name return for the same arguments (real
-input, one-sided spectra, ``[]`` meaning "MATLAB default"). Every convention
-used here, with its source, is listed in the docstring of
-:mod:`fsmbench.ident.frf.spectral`.
+"""Welch's estimate with MATLAB's semantics: windows, options, the engine, the result type.
 
 The engine :func:`cross_spectral_density` computes every segment's FFT of every
-channel once and accumulates the full cross-spectral matrix; the SISO
-functions and :func:`fsmbench.ident.frf.response.spectral_matrix` are thin views on it,
-so all of them agree to floating-point reordering.
+channel once and accumulates the full cross-spectral matrix; MATLAB's four
+functions (:mod:`fsmbench.signal.welch`), its Dask twin
+(:mod:`fsmbench.signal.welch_dask`) and
+:func:`fsmbench.ident.frf.response.spectral_matrix` are thin views on it, so all
+of them agree to floating-point reordering. Every convention used here, with its
+source, is listed in the docstring of :mod:`fsmbench.ident.frf.spectral`.
 """
 
 from __future__ import annotations
@@ -27,7 +24,6 @@ from numpy.typing import ArrayLike, NDArray
 __all__ = [
     "SpectrumResult",
     "WelchOptions",
-    "cpsd",
     "cross_spectral_density",
     "default_nfft",
     "default_noverlap",
@@ -35,10 +31,7 @@ __all__ = [
     "hamming",
     "hann",
     "hanning",
-    "mscohere",
-    "pwelch",
     "segment_sums",
-    "tfestimate",
 ]
 
 # Memory cap for one block of segment FFTs (complex128). A 31 s, 10 kHz,
@@ -454,26 +447,6 @@ class SpectrumResult:
     effective_averages: float
 
 
-def _pairwise(
-    arrays: Sequence[tuple[ArrayLike, str | None, str]],
-    *,
-    window: int | ArrayLike,
-    noverlap: int | None,
-    nfft: int | None,
-    fs_hz: float,
-    min_segments: int = 1,
-    need_power: Sequence[bool] = (),
-) -> tuple[WelchOptions, NDArray[np.complex128], int]:
-    options = WelchOptions.from_matlab(window=window, noverlap=noverlap, nfft=nfft, fs_hz=fs_hz)
-    checked = [(_label(nm, role), _as_signal(x, name=nm, role=role)) for x, nm, role in arrays]
-    _check_record(checked, options, min_segments=min_segments)
-    for (who, arr), need in zip(checked, need_power, strict=False):
-        if need:
-            _check_has_power(arr, who)
-    s, k = cross_spectral_density(np.stack([arr for _, arr in checked]), options)
-    return options, s, k
-
-
 def _result(
     options: WelchOptions,
     values: NDArray[np.float64] | NDArray[np.complex128],
@@ -488,154 +461,3 @@ def _result(
         noverlap=options.noverlap, nfft=options.nfft, fs_hz=options.fs_hz, n_segments=k,
         effective_averages=effective_averages(options.window, options.noverlap, k),
     )
-
-
-def pwelch(
-    x: ArrayLike,
-    *,
-    window: int | ArrayLike,
-    noverlap: int | None = None,
-    nfft: int | None = None,
-    fs_hz: float,
-    x_name: str | None = None,
-) -> SpectrumResult:
-    """MATLAB ``[pxx, f] = pwelch(x, window, noverlap, nfft, fs)`` for real ``x``.
-
-    Parameters
-    ----------
-    x : array_like, shape (N,)
-        Real record, unit U_x. Not detrended (MATLAB does not remove the mean).
-    window : int or array_like, shape (L,)
-        Integer ``L`` means ``hamming(L)``; an array is used as is.
-    noverlap : int, optional
-        Overlap, samples; ``None`` is MATLAB's ``[]`` (``floor(L/2)``).
-    nfft : int, optional
-        FFT length, samples; ``None`` is ``max(256, 2^nextpow2(L))``.
-    fs_hz : float
-        Sampling frequency, Hz.
-    x_name : str, optional
-        Signal name used in error messages.
-
-    Returns
-    -------
-    SpectrumResult
-        ``values``: one-sided PSD, U_x^2/Hz, shape (nfft//2 + 1,).
-    """
-    options, s, k = _pairwise(
-        [(x, x_name, "x")], window=window, noverlap=noverlap, nfft=nfft, fs_hz=fs_hz
-    )
-    return _result(options, np.ascontiguousarray(s[:, 0, 0].real), "psd", k)
-
-
-def cpsd(
-    x: ArrayLike,
-    y: ArrayLike,
-    *,
-    window: int | ArrayLike,
-    noverlap: int | None = None,
-    nfft: int | None = None,
-    fs_hz: float,
-    x_name: str | None = None,
-    y_name: str | None = None,
-) -> SpectrumResult:
-    """MATLAB ``[pxy, f] = cpsd(x, y, window, noverlap, nfft, fs)`` for real signals.
-
-    MATLAB's convention: ``pxy`` averages ``X conj(Y)``, the complex conjugate
-    of ``scipy.signal.csd(x, y)`` (which averages ``conj(X) Y``).
-
-    Parameters
-    ----------
-    x, y : array_like, shape (N,)
-        Real records of equal length, units U_x and U_y.
-    window, noverlap, nfft, fs_hz
-        As in :func:`pwelch`.
-    x_name, y_name : str, optional
-        Signal names used in error messages.
-
-    Returns
-    -------
-    SpectrumResult
-        ``values``: complex one-sided CPSD, U_x U_y/Hz, shape (nfft//2 + 1,).
-    """
-    options, s, k = _pairwise(
-        [(x, x_name, "x"), (y, y_name, "y")],
-        window=window, noverlap=noverlap, nfft=nfft, fs_hz=fs_hz,
-    )
-    return _result(options, np.ascontiguousarray(s[:, 0, 1]), "cpsd", k)
-
-
-def tfestimate(
-    x: ArrayLike,
-    y: ArrayLike,
-    *,
-    window: int | ArrayLike,
-    noverlap: int | None = None,
-    nfft: int | None = None,
-    fs_hz: float,
-    x_name: str | None = None,
-    y_name: str | None = None,
-) -> SpectrumResult:
-    """MATLAB ``[txy, f] = tfestimate(x, y, window, noverlap, nfft, fs)`` (H1 estimator).
-
-    ``txy = Pyx / Pxx`` with ``Pyx = cpsd(y, x)`` (average of ``Y conj(X)``), so a
-    pure delay of ``d`` samples gives the phase ``-2 pi f d / fs``.
-
-    Parameters
-    ----------
-    x : array_like, shape (N,)
-        Real input (excitation) record, unit U_x; must not be constant.
-    y : array_like, shape (N,)
-        Real output record, unit U_y.
-    window, noverlap, nfft, fs_hz
-        As in :func:`pwelch`.
-    x_name, y_name : str, optional
-        Signal names used in error messages.
-
-    Returns
-    -------
-    SpectrumResult
-        ``values``: complex frequency response, U_y/U_x, shape (nfft//2 + 1,).
-    """
-    options, s, k = _pairwise(
-        [(x, x_name, "input x"), (y, y_name, "output y")], window=window, noverlap=noverlap,
-        nfft=nfft, fs_hz=fs_hz, need_power=(True, False),
-    )
-    return _result(options, s[:, 1, 0] / s[:, 0, 0].real, "tf", k)
-
-
-def mscohere(
-    x: ArrayLike,
-    y: ArrayLike,
-    *,
-    window: int | ArrayLike,
-    noverlap: int | None = None,
-    nfft: int | None = None,
-    fs_hz: float,
-    x_name: str | None = None,
-    y_name: str | None = None,
-) -> SpectrumResult:
-    """MATLAB ``[cxy, f] = mscohere(x, y, window, noverlap, nfft, fs)``.
-
-    ``cxy = |Pxy|^2 / (Pxx Pyy)``. MATLAB's documentation requires at least two
-    segments (with one the estimate is identically 1); fewer raise here.
-
-    Parameters
-    ----------
-    x, y : array_like, shape (N,)
-        Real records of equal length; neither may be constant.
-    window, noverlap, nfft, fs_hz
-        As in :func:`pwelch`.
-    x_name, y_name : str, optional
-        Signal names used in error messages.
-
-    Returns
-    -------
-    SpectrumResult
-        ``values``: magnitude-squared coherence in [0, 1], shape (nfft//2 + 1,).
-    """
-    options, s, k = _pairwise(
-        [(x, x_name, "x"), (y, y_name, "y")], window=window, noverlap=noverlap, nfft=nfft,
-        fs_hz=fs_hz, min_segments=2, need_power=(True, True),
-    )
-    coh = np.abs(s[:, 0, 1]) ** 2 / (s[:, 0, 0].real * s[:, 1, 1].real)
-    return _result(options, coh, "coherence", k)
