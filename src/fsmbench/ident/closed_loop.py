@@ -67,8 +67,7 @@ from fsmbench.ident.frf.closed_loop_merge import merge_closed_loop_frf
 from fsmbench.ident.frf.estimate import FrfEstimate
 from fsmbench.ident.pipeline import path_keyed_summary
 from fsmbench.ident.sercalo import SercaloFitOptions, SercaloIdentification, fit_sercalo
-from fsmbench.io.atomic import atomic_write_text
-from fsmbench.jsonutil import format_text, plain_json, stamped
+from fsmbench.jsonutil import plain_json
 
 __all__ = ["CLOSED_LOOP_RECORDS", "EXCITATION_VARIABLES", "MODE_ASSIGNMENT_TOLERANCE",
            "ClosedLoopIdentification", "ClosedLoopIdentifyOptions", "TrackingDuringMeasurement",
@@ -83,7 +82,6 @@ _REQUIRED = ("t", "Uch", "Ucv", "Vph", "Vpv")
 _SUFFIXES = (".mat", ".h5", ".nxs")
 # The coil-voltage channels: a failure there only leaves the current amplifiers unmeasured.
 _COIL = (": Vch", ": Vcv")
-_IDENTIFICATION_FORMAT = ("fsmbench.identification", 4)
 # The loop's own error is read on the record before the excitation starts, after the
 # closing transient; shorter than this it is not measured.
 _MIN_BEFORE_S = 0.5
@@ -596,17 +594,10 @@ def _assemble(sid: SercaloIdentification | None, *, bench: Bench, prior: PlantMo
 
 def write_closed_loop_identification(result: ClosedLoopIdentification,
                                      out_dir: str | Path) -> list[Path]:
-    """Write ``identification.json``, ``plant.mat`` (when a plant was found) and ``frf.mat``."""
-    from fsmbench.ident.export import write_frf_mat, write_plant_mat
+    """Write ``identification.json``, ``plant.mat`` (when a plant was found) and ``frf.mat``
+    (:func:`fsmbench.ident.export.write_identification_folder`)."""
+    from fsmbench.ident.export import write_identification_folder
 
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
-    name, version = _IDENTIFICATION_FORMAT
-    payload = stamped(result.to_json(), format=name, version=version)
-    paths = [atomic_write_text(out / "identification.json",
-                               format_text(payload, sort_keys=True))]
-    if result.plant is not None:
-        paths.append(write_plant_mat(out / "plant.mat", result.plant))
-    paths.append(write_frf_mat(out / "frf.mat",
-                               {"sercalo": result.frf.plant.to_frequency_response()}))
-    return paths
+    return write_identification_folder(
+        out_dir, document=result.to_json(), plant=result.plant,
+        frfs={"sercalo": result.frf.plant.to_frequency_response()})

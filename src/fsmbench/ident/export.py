@@ -26,7 +26,11 @@ from fsmbench.bench.blocks import PlantModel
 from fsmbench.ident.frf.response import FrequencyResponse
 from fsmbench.io.matwrite import save_mat
 
-__all__ = ["frf_variables", "plant_variables", "ss_struct", "write_frf_mat", "write_plant_mat"]
+__all__ = ["IDENTIFICATION_FORMAT", "frf_variables", "plant_variables", "ss_struct",
+           "write_frf_mat", "write_identification_folder", "write_plant_mat"]
+
+#: ``identification.json``'s format and version (open-loop and closed-loop identifications).
+IDENTIFICATION_FORMAT = ("fsmbench.identification", 4)
 
 
 def frf_variables(responses: Mapping[str, FrequencyResponse]) -> dict[str, Any]:
@@ -101,3 +105,44 @@ def write_frf_mat(path: str | Path, responses: Mapping[str, FrequencyResponse]) 
 def write_plant_mat(path: str | Path, plant: PlantModel) -> Path:
     """Write ``plant.mat`` (MATLAB v5) atomically."""
     return save_mat(path, plant_variables(plant))
+
+
+def write_identification_folder(out_dir: str | Path, *, document: Mapping[str, Any],
+                                plant: PlantModel | None,
+                                frfs: Mapping[str, FrequencyResponse]) -> list[Path]:
+    """An identification's folder: ``identification.json``, ``plant.mat``, ``frf.mat``.
+
+    The one writer of the layout ``--bench DIR`` reads (:mod:`fsmbench.ident.load`), for
+    the open-loop and the closed-loop identifications. Every file is written atomically.
+
+    Parameters
+    ----------
+    out_dir : str or Path
+        Made if missing.
+    document : mapping
+        ``identification.json``'s content, stamped here with :data:`IDENTIFICATION_FORMAT`
+        (keys sorted, ``format`` and ``format_version`` first).
+    plant : PlantModel or None
+        ``plant.mat`` (not written when None: nothing was identified).
+    frfs : mapping of str to FrequencyResponse
+        ``frf.mat``'s measured FRF matrices by name (not written when empty).
+
+    Returns
+    -------
+    list of Path
+        The files written, in that order.
+    """
+    from fsmbench.io.atomic import atomic_write_text
+    from fsmbench.jsonutil import format_text, stamped
+
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    name, version = IDENTIFICATION_FORMAT
+    paths = [atomic_write_text(out / "identification.json",
+                               format_text(stamped(document, format=name, version=version),
+                                           sort_keys=True))]
+    if plant is not None:
+        paths.append(write_plant_mat(out / "plant.mat", plant))
+    if frfs:
+        paths.append(write_frf_mat(out / "frf.mat", frfs))
+    return paths

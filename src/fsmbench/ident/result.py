@@ -23,7 +23,7 @@ from fsmbench.ident.calibration import CurrentAmplifierGain, QdCalibration
 from fsmbench.ident.compare import ModelComparison
 from fsmbench.ident.evidence.matching import MATCHING_BENCH, write_matching_bench
 from fsmbench.ident.evidence.recorded_loop import RecordedController
-from fsmbench.ident.export import write_frf_mat, write_plant_mat
+from fsmbench.ident.export import IDENTIFICATION_FORMAT, write_identification_folder
 from fsmbench.ident.fit.modes import ModeRefinement
 from fsmbench.ident.fit.truncation import TruncationCheck
 from fsmbench.ident.frf.compression import CompressionFactors
@@ -33,8 +33,6 @@ from fsmbench.ident.noise_model import NoiseModelFit
 from fsmbench.ident.sercalo import SercaloFitOptions, SercaloIdentification
 from fsmbench.ident.uncertainty import Uncertain
 from fsmbench.ident.validate import PathValidation
-from fsmbench.io.atomic import atomic_write_text
-from fsmbench.jsonutil import format_text, stamped
 
 __all__ = ["IDENTIFICATION_FORMAT", "SEED_TRIMS_S", "Identification", "IdentifyOptions",
            "PlantChoice", "SavedIdentification", "path_keyed_summary", "write_identification"]
@@ -48,7 +46,6 @@ SEED_TRIMS_S = {"data_cal_pd_h": 1.0, "data_cal_pd_v": 1.0, "data_uch": 1.0, "da
 #: 3: ``noise_model``, the noise fitted to the open-loop huddle tests; 4: ``uncertainty``,
 #: every value with its total std and parts, ``effective_delay_s`` and
 #: ``qd_diode_gain_v_per_rad``; ``delay_s.sercalo`` measured on ``Uc → Vc``.
-IDENTIFICATION_FORMAT = ("fsmbench.identification", 4)
 
 
 @dataclass(frozen=True)
@@ -327,18 +324,11 @@ def write_identification(result: Identification, out_dir: str | Path) -> list[Pa
     Every file is written atomically. ``frf.mat`` holds the measured FRF
     matrices present (Sercalo and/or Newport); it is not written when none is.
     """
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
-    name, version = IDENTIFICATION_FORMAT
-    payload = stamped(result.to_json(), format=name, version=version)
-    paths = [atomic_write_text(out / "identification.json",
-                               format_text(payload, sort_keys=True))]
-    if result.plant is not None:
-        paths.append(write_plant_mat(out / "plant.mat", result.plant))
     frfs = {name: part.frf for name, part in (("sercalo", result.sercalo),
                                                 ("newport", result.newport)) if part is not None}
-    if frfs:
-        paths.append(write_frf_mat(out / "frf.mat", frfs))
+    paths = write_identification_folder(out_dir, document=result.to_json(), plant=result.plant,
+                                        frfs=frfs)
+    out = Path(out_dir)
     if result.matching is not None:
         paths.append(write_matching_bench(out / MATCHING_BENCH, result.matching,
                                           findings=result.findings))
