@@ -339,8 +339,12 @@ def first_tune(ioc: SimpleNamespace, tmp_path_factory: pytest.TempPathFactory
     """``tune --device ca://PREFIX`` from the ESRF study's controller, run once."""
     _on_seed(ioc)
     out = tmp_path_factory.mktemp("first") / "first"
+    # Any gain loads the candidate (--better-by-pct 0): a 4.5 s watch of the running loop
+    # reads 37-47 µrad on the twin (12 seeds) against the candidate's predicted 33, so the
+    # default 10 % (tested in test_guarded) can refuse, and these tests need the load.
     done = subprocess.run([*CLI, "tune", "--device", ioc.address, "--out", str(out),
-                           "--watch-s", "6", "--periods", "4", "--seed", "1"],
+                           "--watch-s", "6", "--periods", "4", "--seed", "1",
+                           "--better-by-pct", "0"],
                           capture_output=True, text=True, env=ioc.env, timeout=RUN_S,
                           check=False)
     return SimpleNamespace(status=done.returncode, stdout=done.stdout, stderr=done.stderr,

@@ -31,8 +31,11 @@ from fsmbench.tune.transaction import LoopChangeError
 
 SEED_NAME = "the ESRF study's controller (9.2)"  # what the device calls it
 # Two measured stages of 4 periods (the CLI test's, which locates both modes within 0.5 %);
-# no Newport sine is played on the device.
-OPTIONS = TuneOptions(watch_s=6.0, settle_s=1.5, disturbance_v=0.0,
+# no Newport sine is played on the device. These tests need the candidate loaded to test
+# the transaction around the load, so any gain loads it (better_by 0): a 4.5 s watch reads
+# the running loop's error anywhere in 37-47 µrad on the twin (12 seeds), and the candidate
+# predicts 33, so the rule's 10 % (tested in test_guarded) refused it in one CI run.
+OPTIONS = TuneOptions(watch_s=6.0, settle_s=1.5, disturbance_v=0.0, better_by=0.0,
                       measurement=MeasurementOptions(periods=4))
 
 
@@ -66,10 +69,10 @@ def test_invalid_readings_are_read_again_and_tune_goes_on(
     r = tune_guarded(target=target, bench=bench, running=_seed(bench), options=OPTIONS, seed=1,
                      candidate=fsmbench_loop, journal=records.append)
     # Every INVALID answer reached tune and was read again; tune went on to the end.
+    assert r.decision in ("loaded", "rolled_back"), r.reason
     assert invalid_reads.served == {"LoopClosed": 3, "Controller": 3, "SpeedFactor": 6,
                                     "Task": 3}
     assert all(left == 0 for left in invalid_reads.left.values())
-    assert r.decision in ("loaded", "rolled_back"), r.reason
     assert r.transaction is not None and r.transaction["outcome"] == r.decision
     assert [rec.decision for rec in records] == ["loading", r.decision]
     assert proxy.Controller == r.transaction["left_on"] and proxy.LoopClosed
