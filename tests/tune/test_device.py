@@ -51,9 +51,9 @@ def test_a_worse_candidate_is_refused_through_the_device(device: tuple[Any, str]
         r = tune_guarded(target=target, bench=bench, running=running, options=opts, seed=2,
                          candidate=worse)
     except ValueError as exc:
-        # The device's records depend on when the commands reach it; on some of them the
-        # one-stage fit puts the notched h mode on the v mode's frequency (244 Hz: a known
-        # defect of the closed-loop fit). The guard must then stop before any design or load.
+        # A one-stage fit that keeps a mode on the wrong axis (once 244 Hz for h, before the
+        # resonance search ignored isolated noisy lines) must stop the guard before any
+        # design or load.
         assert "not plausible" in str(exc) and "wrong axis" in str(exc), exc
         assert proxy.Controller == SEED_NAME and proxy.LoopClosed
         return
