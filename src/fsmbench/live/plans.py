@@ -36,7 +36,7 @@ import shutil
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import bluesky.plan_stubs as bps
 import bluesky.preprocessors as bpp
@@ -52,6 +52,16 @@ from fsmbench.live.plan_stubs import (
     wait_bench_time,
     wait_until_done,
 )
+
+if TYPE_CHECKING:
+    from fsmbench.bench.params import Bench
+    from fsmbench.tune.measure import (
+        ClosedLoopMeasurement,
+        MeasurementOptions,
+        MeasurementSteps,
+        StageRequest,
+    )
+    from fsmbench.twin.simulate import TwinRun
 
 __all__ = ["IDENTIFICATION_EXPERIMENTS", "BenchRecords", "ClosedLoopIdentificationRun",
            "closed_loop_experiments", "closed_loop_identification", "design_excitations",
@@ -356,14 +366,15 @@ class ClosedLoopIdentificationRun:
 
     folder: Path
     stage_folders: tuple[Path, ...]
-    measurement: Any
+    measurement: ClosedLoopMeasurement
     files: tuple[Path, ...]
     address: str
     controller: str
     bench_s: float
 
 
-def _advance(steps: Any, records: Any) -> Any:
+def _advance(steps: MeasurementSteps, records: TwinRun | None
+             ) -> StageRequest | ClosedLoopMeasurement:
     """The protocol's next stage request, or its result once it returns."""
     try:
         return next(steps) if records is None else steps.send(records)
@@ -371,7 +382,7 @@ def _advance(steps: Any, records: Any) -> Any:
         return done.value
 
 
-def _play_stage(bench: FsmBenchDevice, folder: Path, request: Any, *, fs_hz: float,
+def _play_stage(bench: FsmBenchDevice, folder: Path, request: StageRequest, *, fs_hz: float,
                 controller: str) -> Plan:
     """One stage's designs played through the device (:func:`_record_closed_loop`: the
     steady-state period repeated, ``transient + steady`` periods recorded); its records as
@@ -406,8 +417,9 @@ def _play_stage(bench: FsmBenchDevice, folder: Path, request: Any, *, fs_hz: flo
 
 
 def closed_loop_identification(bench: FsmBenchDevice, folder: str | Path, *,
-                               model: Any = None, controller: str | Path | None = None,
-                               options: Any = None, seed: int = 0,
+                               model: Bench | None = None,
+                               controller: str | Path | None = None,
+                               options: MeasurementOptions | None = None, seed: int = 0,
                                md: Mapping[str, Any] | None = None) -> Plan:
     """The Sercalo measured and identified with the loop closed, in two stages (a plan).
 
@@ -465,7 +477,7 @@ def closed_loop_identification(bench: FsmBenchDevice, folder: str | Path, *,
     closes = not (yield from bps.rd(bench.loop_closed))
     stages: list[Path] = []
     running: list[str] = []
-    done: list[Any] = []
+    done: list[ClosedLoopMeasurement] = []
 
     def body() -> Plan:
         if closes:

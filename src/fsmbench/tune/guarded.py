@@ -496,9 +496,10 @@ def tune_guarded(*, target: TuneTarget, bench: Bench, running: Loop,
                                       options=opts.measurement, seed=seed + 100,
                                       progress=say)
     if (first_why := not_plausible(measurement, bench=bench)):
-        # The closed-loop fit sometimes puts the notched h mode on the v mode's frequency
-        # (on the live device, by when the commands reach it): measured once again before
-        # tune gives up, as a user would.
+        # A measurement the records do not carry (too little excitation at a resonance on
+        # one run: its fit keeps a mode on the wrong axis) is made once again with new noise
+        # before tune gives up, as a user would. Its usual cause, an isolated noisy line
+        # taken for the h peak, is gone from the resonance search (detect_resonances).
         say(f"{first_why}: measured once again")
         measurement = measure_closed_loop(play=target.play, model=bench, controller=rc,
                                           options=opts.measurement, seed=seed + 300,

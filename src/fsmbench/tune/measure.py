@@ -382,8 +382,9 @@ def measurement_steps(*, model: Bench, controller: RunningController,
     if not why and attempt is not None:
         first = attempt
     else:
-        # Once, a live stage 1 under load kept one mode for two axes where every other run
-        # of the soak located both: a measurement is repeated before tune gives up.
+        # A stage 1 whose records locate no resonance on an axis (before the resonance
+        # search ignored isolated noisy lines, a live stage 1 kept one mode for both axes)
+        # is measured again before tune gives up.
         repeated = f"stage 1 was measured again: its first records located nothing ({why})"
         say(repeated)
         if attempt is not None:

@@ -13,6 +13,7 @@ from collections.abc import Mapping
 
 import numpy as np
 import xarray as xr
+from scipy.ndimage import median_filter
 
 from fsmbench.ident.frf.response import FrequencyResponse
 
@@ -52,15 +53,9 @@ def detect_resonances(frf: FrequencyResponse, *, f_min_hz: float = 20.0,
     for j, inp in enumerate(frf.input_names):
         diag = frf.output_names[min(j, len(frf.output_names) - 1)]
         mag = np.abs(frf.frf.sel(output=diag, input=inp).values)[band]
-        if mag.size >= 3:
-            padded = np.concatenate([mag[:1], mag, mag[-1:]])
-            median = np.median(np.stack([padded[:-2], padded[1:-1], padded[2:]]), axis=0)
-            k = int(np.argmax(median))
-            lo, hi = max(0, k - 1), min(mag.size, k + 2)
-            pick = lo + int(np.argmax(mag[lo:hi]))
-        else:
-            pick = int(np.argmax(mag))
-        out[inp] = float(f[band][pick])
+        k = int(np.argmax(median_filter(mag, size=3, mode="nearest")))
+        lo = max(0, k - 1)
+        out[inp] = float(f[band][lo + int(np.argmax(mag[lo:k + 2]))])
     return out
 
 
