@@ -31,8 +31,8 @@ import time
 import numpy as np
 
 from fsmbench.bench.params import default_bench
-from fsmbench.scale.mc_cli import dask_client, designed_controller
 from fsmbench.scale.montecarlo import METRICS, MonteCarloSetup, run_montecarlo
+from fsmbench.scale.montecarlo_run import dask_client, designed_controller
 from timing import timed_runs
 
 

@@ -245,7 +245,7 @@ def run_study(*, out_dir: str | Path, data_dir: str | Path | None = None,
     identify_options : IdentifyOptions, optional
         FRF estimator and fit weights of the identification (default: ``auto``, the ESRF study's).
     montecarlo : mapping, optional
-        A ``montecarlo.json``'s content (:func:`fsmbench.scale.mc_cli.read_montecarlo`):
+        A ``montecarlo.json``'s content (:func:`fsmbench.scale.montecarlo_run.read_montecarlo`):
         chapter 11 lists its draws that break a requirement, and the robustness row names
         a requirement ≥ 5 % of them break.
     """

@@ -42,7 +42,7 @@ def no_computation(monkeypatch: pytest.MonkeyPatch) -> None:
         raise AssertionError("the computation started before the arguments were checked")
 
     for target in ("fsmbench.twin.simulate.simulate_bench", "fsmbench.twin.simulate.stream_bench",
-                   "fsmbench.excite.cli._design"):
+                   "fsmbench.cli.commands.excite._design"):
         monkeypatch.setattr(target, never)
 
 

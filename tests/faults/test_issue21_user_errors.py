@@ -39,7 +39,7 @@ def no_computation(monkeypatch: pytest.MonkeyPatch) -> None:
         raise AssertionError("the computation started before the arguments were checked")
 
     for target in ("fsmbench.twin.simulate.simulate_bench", "fsmbench.twin.simulate.stream_bench",
-                   "fsmbench.excite.cli._design"):
+                   "fsmbench.cli.commands.excite._design"):
         monkeypatch.setattr(target, never)
 
 
@@ -106,7 +106,7 @@ def test_simulate_size_estimate_fits_a_short_run(monkeypatch: pytest.MonkeyPatch
     of the measured peak (1.52 GB), and 5 s records need well under 1 GB."""
     import argparse
 
-    from fsmbench.cli import _simulation_memory_bytes
+    from fsmbench.cli.commands.simulate import simulation_memory_bytes as _simulation_memory_bytes
 
     def need(**kw: Any) -> float:
         args = argparse.Namespace(experiments=None, excitation=None, duration=None, **kw)

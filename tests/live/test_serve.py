@@ -180,7 +180,7 @@ def test_an_unreachable_database_is_one_line(capsys: pytest.CaptureFixture[str],
     monkeypatch.setenv("TANGO_HOST", f"127.0.0.1:{_free_port()}")  # nothing listens there
     line = _serve_error(capsys, "bench1", "--device", "test/fsm/1")
     assert "the Tango database at TANGO_HOST=127.0.0.1:" in line and "does not answer" in line
-    from fsmbench.live.serve import starter_main
+    from fsmbench.cli.starter import main as starter_main
 
     assert starter_main(["bench1"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
@@ -189,7 +189,7 @@ def test_an_unreachable_database_is_one_line(capsys: pytest.CaptureFixture[str],
 
 
 def test_starter_entry_point_needs_an_instance(capsys: pytest.CaptureFixture[str]) -> None:
-    from fsmbench.live.serve import starter_main
+    from fsmbench.cli.starter import main as starter_main
 
     assert starter_main([]) == 2
     assert "usage: FsmBench INSTANCE" in capsys.readouterr().err

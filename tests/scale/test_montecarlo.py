@@ -16,16 +16,10 @@ pytest.importorskip("distributed")
 
 from fsmbench.bench.blocks import physical_plant
 from fsmbench.bench.params import Bench, default_bench
+from fsmbench.cli import build_parser
 from fsmbench.control.analysis import control_objective
 from fsmbench.control.export import InputScaling, write_controllers_mat
 from fsmbench.control.loops import LoopOptions, analyse_loop
-from fsmbench.scale.mc_cli import (
-    add_montecarlo_command,
-    dask_client,
-    designed_controller,
-    loaded_controller,
-    read_ranges,
-)
 from fsmbench.scale.montecarlo import (
     METRICS,
     PARAMETERS,
@@ -38,6 +32,12 @@ from fsmbench.scale.montecarlo import (
     draw_parameters,
     run_draw,
     run_montecarlo,
+)
+from fsmbench.scale.montecarlo_run import (
+    dask_client,
+    designed_controller,
+    loaded_controller,
+    read_ranges,
 )
 from fsmbench.sim.controller import feedback_controller
 from fsmbench.twin.verify import verify_on_twin
@@ -243,9 +243,7 @@ def _at(tree: dict[str, Any], dotted: str) -> Any:
 
 
 def _parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="fsmbench")
-    add_montecarlo_command(parser.add_subparsers(dest="command", required=True))
-    return parser
+    return build_parser()
 
 
 def test_cli_writes_json_and_prints_table(tmp_path: Path, client: Any,

@@ -21,7 +21,6 @@ from fsmbench.scale.breaches import (
     breach_sentence,
     requirement_outcomes,
 )
-from fsmbench.scale.mc_cli import designed_controller, format_table
 from fsmbench.scale.montecarlo import (
     PARAMETERS,
     DrawResult,
@@ -30,6 +29,7 @@ from fsmbench.scale.montecarlo import (
     Ranges,
     run_montecarlo,
 )
+from fsmbench.scale.montecarlo_run import designed_controller, format_table
 
 N = 6  # draws simulated: enough for a limit between the smallest and largest margins
 DURATION_S = 5.0  # the shortest record the repeatability experiments accept is 4.5 s
@@ -237,7 +237,7 @@ def test_the_verdict_robustness_row_names_a_requirement_five_percent_break(
 
 
 def test_the_study_reads_version_3_only(tmp_path: Any) -> None:
-    from fsmbench.scale.mc_cli import read_montecarlo
+    from fsmbench.scale.montecarlo_run import read_montecarlo
 
     doc = {"format": "fsmbench.montecarlo", "format_version": 3, **_payload(20, 1)}
     (tmp_path / "montecarlo.json").write_text(json.dumps(doc))

@@ -83,6 +83,6 @@ def invalid_reads(monkeypatch: pytest.MonkeyPatch) -> InvalidReads:
 @pytest.fixture(scope="session")
 def fsmbench_loop(bench: Bench) -> Any:
     """fsmbench's controller designed on the bench file, as ``tune --running fsmbench``."""
-    from fsmbench.tune.cli import _running
+    from fsmbench.tune.running import running_loop
 
-    return _running("fsmbench", bench)
+    return running_loop("fsmbench", bench)

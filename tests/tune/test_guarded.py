@@ -75,7 +75,7 @@ def test_tune_json(drift_tune: TuneResult) -> None:
 
 
 def test_tune_json_file_starts_with_its_format(drift_tune: TuneResult, tmp_path) -> None:
-    from fsmbench.tune.cli import write_tune_json
+    from fsmbench.tune.running import write_tune_json
 
     path = write_tune_json(tmp_path / "tune.json", drift_tune.to_json())
     js = json.loads(path.read_text())

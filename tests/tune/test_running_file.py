@@ -20,7 +20,7 @@ from fsmbench.control.export import InputScaling, write_sos_json
 from fsmbench.control.load import load_controllers, select_controller
 from fsmbench.control.seed import seed_decentralised_controller
 from fsmbench.sim.controller import sercalo_feedback
-from fsmbench.tune.cli import _running_file
+from fsmbench.tune.running import loop_from_file as _running_file
 
 
 def _response(ctrl: object, f_hz: np.ndarray, ts_s: float) -> np.ndarray:

@@ -91,7 +91,7 @@ def test_drift_on_the_twin_is_detected(bench) -> None:
     (three windows beyond 5 sigma: the first at +0.3 %). Under fsmbench's controller (a
     broader peak, ~1 Hz of jitter) at +2.3 % and +3.0 %.
     """
-    from fsmbench.tune.cli import _running
+    from fsmbench.tune.running import running_loop as _running
     from fsmbench.tune.watch_twin import watch_twin
 
     run = watch_twin(bench=bench, loop=_running("seed", bench), drift_pct_per_h=120.0,
@@ -106,7 +106,7 @@ def test_drift_on_the_twin_is_detected(bench) -> None:
 
 
 def test_no_warning_on_the_twin_without_drift(bench) -> None:
-    from fsmbench.tune.cli import _running
+    from fsmbench.tune.running import running_loop as _running
     from fsmbench.tune.watch_twin import watch_twin
 
     run = watch_twin(bench=bench, loop=_running("seed", bench), drift_pct_per_h=0.0,

@@ -13,7 +13,7 @@ without loading numpy's and scipy's heavier parts); import from the modules:
   that avoid them, the warning;
 - :mod:`fsmbench.excite.files`: the MAT-file a real-time target plays and its
   JSON description (``fsmbench.excitation`` version 1), written and read back;
-- :mod:`fsmbench.excite.cli`: ``fsmbench excite``.
+- :mod:`fsmbench.cli.commands.excite`: ``fsmbench excite``.
 
 ``fsmbench simulate --excitation FILE`` plays a file on the twin
 (:func:`fsmbench.twin.simulate.simulate_excitation`).

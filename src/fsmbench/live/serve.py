@@ -11,7 +11,7 @@ Tango (the default protocol):
   instance (or of a device another instance serves) is refused before the
   database is touched. An unreachable database is one line and status 2.
   Starter (Astor) launches the same server as ``FsmBench INSTANCE``
-  (:func:`starter_main`), reading everything from the database;
+  (:func:`fsmbench.cli.starter.main`), reading everything from the database;
 - without one (``--nodb``): a Tango *file database* in a temporary folder holds
   the one device and its properties; clients use
   ``tango://<host>:<port>/<device>#dbase=no``.
@@ -22,20 +22,15 @@ bench as a Channel Access (and PV Access) IOC (:mod:`fsmbench.live.epics`).
 
 from __future__ import annotations
 
-import argparse
 import os
 import socket
-import sys
 import tempfile
-from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from fsmbench import cli_args
-
-__all__ = ["SERVER", "ServeOptions", "add_serve_command", "file_database", "serve",
-           "starter_main"]
+__all__ = ["SERVER", "ServeOptions", "file_database", "refuse_second_start", "serve",
+           "tango_database"]
 
 SERVER = "FsmBench"
 _CONTACT_MS = 2000  # timeout of the database and ping calls before the server starts
@@ -170,7 +165,7 @@ def _check_inputs(options: ServeOptions) -> None:
 # ------------------------------------------------------------------ the Tango database
 
 
-def _database() -> Any:
+def tango_database() -> Any:
     """The Tango database of ``TANGO_HOST``, or one line saying why not."""
     import tango
 
@@ -201,7 +196,7 @@ def _alive(name: str) -> bool:
     return True
 
 
-def _refuse_second_start(db: Any, instance: str, device: str | None) -> None:
+def refuse_second_start(db: Any, instance: str, device: str | None) -> None:
     """Refuse, before writing anything, a server instance (or a device) already served."""
     import tango
 
@@ -264,8 +259,8 @@ def _serve_tango(options: ServeOptions, ready: str) -> int:
             FsmBench.run_server(args=[options.instance, f"-file={db_file}",
                                       "-ORBendPoint", f"giop:tcp::{options.port}"])
         return 0
-    db = _database()
-    _refuse_second_start(db, options.instance, options.device_name)
+    db = tango_database()
+    refuse_second_start(db, options.instance, options.device_name)
     try:
         registered = db.get_device_info(options.device_name) is not None
     except tango.DevFailed:
@@ -294,139 +289,3 @@ def serve(options: ServeOptions, *, ready: str = "") -> int:
 
         return serve_epics(options, ready=ready)
     return _serve_tango(options, ready)
-
-
-def starter_main(argv: Sequence[str] | None = None) -> int:
-    """``FsmBench INSTANCE [Tango options]``: the server as Starter (Astor) launches it.
-
-    Everything comes from the database; an instance with no device, a second
-    start or an unreachable database is one line on stderr and status 2.
-    """
-    args = list(sys.argv[1:] if argv is None else argv)
-    if not args or args[0].startswith("-"):
-        print(f"usage: {SERVER} INSTANCE [Tango server options]  (register the device with "
-              "`fsmbench serve INSTANCE --device NAME` or Jive)", file=sys.stderr)
-        return 2
-    instance = args[0]
-    try:
-        try:
-            import tango  # noqa: F401  (a missing extra is one line)
-        except ImportError:
-            raise ValueError("needs PyTango: pip install 'fsmbench[tango]'") from None
-        db = _database()
-        devices = list(db.get_device_class_list(f"{SERVER}/{instance}"))
-        if SERVER not in devices[1::2]:
-            raise ValueError(f"{SERVER}/{instance} has no {SERVER} device in the database at "
-                             f"{os.environ.get('TANGO_HOST')}: register one with `fsmbench "
-                             f"serve {instance} --device NAME` (or Jive)")
-        _refuse_second_start(db, instance, None)
-    except ValueError as exc:
-        print(f"{SERVER} {instance}: error: {' '.join(str(exc).split())}", file=sys.stderr)
-        return 2
-    from fsmbench.live.device import FsmBench
-
-    FsmBench.run_server(args=args)
-    return 0
-
-
-# ------------------------------------------------------------------ the command line
-
-
-def add_serve_command(sub: Any, *, factor: Callable[[str], float]) -> None:
-    """Add ``serve`` to the CLI's sub-commands (``factor`` parses ``--speed``)."""
-    p = sub.add_parser("serve", help="the bench live as a Tango device or an EPICS IOC "
-                                     "(the twin by default)",
-                       description="Serve the live bench (the twin by default) as the Tango "
-                                   "device FsmBench, or as an EPICS IOC.")
-    p.add_argument("instance", nargs="?", default="fsmbench", metavar="INSTANCE",
-                   help="Tango server instance: the server is FsmBench/INSTANCE (default "
-                        "fsmbench)")
-    p.add_argument("--device", metavar="NAME", default="fsmbench/bench/1",
-                   help="Tango device name (default fsmbench/bench/1)")
-    p.add_argument("--protocol", choices=("tango", "epics"), default="tango",
-                   help="tango (default) or epics (a Channel Access IOC; the epics extra)")
-    p.add_argument("--prefix", metavar="PREFIX", default="",
-                   help="PV prefix with --protocol epics: PREFIX:BeamAngleH, ...")
-    p.add_argument("--backend", nargs="+", metavar=("twin|playback", "DIR"), default=None,
-                   help="twin (default), or playback DIR: replay a folder of recordings")
-    p.add_argument("--params", metavar="FILE", default=None,
-                   help="bench parameters (TOML); default: the packaged Sercalo bench")
-    p.add_argument("--bench", metavar="DIR", default=None, dest="bench_dir",
-                   help="the twin simulates the bench identified in DIR (the output of "
-                        "fsmbench identify or study) instead of the packaged one")
-    p.add_argument("--seed", metavar="N", type=cli_args.seed, default=None,
-                   help="twin seed (default 0)")
-    p.add_argument("--speed", metavar="X", type=factor, default=None,
-                   help="bench seconds per wall-clock second, 0.01 to 100 (default 1: real "
-                        "time)")
-    p.add_argument("--watchdog", metavar="S", type=factor, default=None,
-                   help="wall-clock seconds without a bench block that make the device FAULT "
-                        "(default 5)")
-    p.add_argument("--drift-rate", metavar="PCT_PER_H", dest="drift_rate", type=cli_args.drift_rate,
-                   default=None, help="twin: the Sercalo resonance (both axes) drifts this fast "
-                                      "[%%/h] (default 0), what the loop's watch (WatchVerdict, "
-                                      "WatchCause) is for")
-    p.add_argument("--drift-start", metavar="S", dest="drift_start", type=cli_args.seconds,
-                   default=None, help="with --drift-rate: the bench time the drift starts [s] "
-                                      "(default 0)")
-    p.add_argument("--nodb", action="store_true", help="Tango without a database")
-    p.add_argument("--port", metavar="N", type=cli_args.port, default=10000,
-                   help="TCP port with --nodb (default 10000)")
-    p.add_argument("--out", metavar="DIR", default=None,
-                   help="where RunExperiment and Record write (default fsmbench-live)")
-    p.add_argument("--controllers", metavar="DIR", default=None,
-                   help="the only folder LoadController reads controller files from (a "
-                        "relative path is taken inside it; default: the --out folder)")
-    p.add_argument("--access-security", metavar="FILE.acf", default=None,
-                   dest="access_security",
-                   help="EPICS: an access-security file for the IOC's records (ASG DEFAULT: "
-                        "the users and hosts that may put; everyone else reads)")
-    p.set_defaults(func=_command)
-
-
-_OPTION_PROPERTY = {"backend": "Backend", "params": "ParamsFile", "bench_dir": "BenchFolder",
-                    "seed": "Seed", "speed": "Speed", "out": "OutputFolder",
-                    "watchdog": "WatchdogSeconds", "drift_rate": "DriftRate",
-                    "drift_start": "DriftStart", "controllers": "ControllersFolder"}
-
-
-def _command(args: argparse.Namespace) -> int:
-    from fsmbench.live.states import MAX_SPEED, MIN_SPEED
-
-    kind, *rest = args.backend or ["twin"]
-    if kind not in ("twin", "playback") or (kind == "twin" and rest) or len(rest) > 1:
-        raise ValueError("--backend must be 'twin' or 'playback DIR'")
-    given = {prop for opt, prop in _OPTION_PROPERTY.items() if getattr(args, opt) is not None}
-    if kind == "playback":
-        given.add("PlaybackFolder")
-    speed = 1.0 if args.speed is None else args.speed
-    if not MIN_SPEED <= speed <= MAX_SPEED:
-        raise ValueError(f"--speed {speed:g} is outside [{MIN_SPEED:g}, {MAX_SPEED:g}]")
-    if args.protocol == "epics":
-        if not args.prefix:
-            raise ValueError("--protocol epics needs --prefix PREFIX (the PVs are "
-                             "PREFIX:BeamAngleH, ...)")
-        if args.nodb or args.device != "fsmbench/bench/1" or args.instance != "fsmbench":
-            raise ValueError("INSTANCE, --device and --nodb are Tango's; an IOC is named by "
-                             "--prefix")
-    elif args.prefix:
-        raise ValueError("--prefix is for --protocol epics")
-    elif args.access_security:
-        raise ValueError("--access-security is for --protocol epics (Tango's own access "
-                         "control is the TangoAccessControl device: README)")
-    if args.device.count("/") != 2 or not all(args.device.split("/")):
-        raise ValueError(f"--device {args.device!r} is not a Tango device name "
-                         "(domain/family/member)")
-    return serve(ServeOptions(
-        backend=kind, playback_folder=Path(rest[0]) if rest else None,
-        params_file=Path(args.params) if args.params else None,
-        seed=0 if args.seed is None else args.seed, speed=speed, nodb=args.nodb,
-        port=args.port, output_folder=Path(args.out or "fsmbench-live"),
-        bench_folder=Path(args.bench_dir) if args.bench_dir else None,
-        device_name=args.device.lower(), instance=args.instance, protocol=args.protocol,
-        prefix=args.prefix, watchdog_s=5.0 if args.watchdog is None else args.watchdog,
-        drift_pct_per_h=0.0 if args.drift_rate is None else args.drift_rate,
-        drift_start_s=0.0 if args.drift_start is None else args.drift_start,
-        controllers_folder=Path(args.controllers) if args.controllers else None,
-        access_security=Path(args.access_security) if args.access_security else None,
-        given=frozenset(given)))

@@ -1,24 +1,21 @@
 """Argument types and the parser class of the ``fsmbench`` command line.
 
-Shared by :mod:`fsmbench.cli` and the commands other packages register
-(``serve``, ``montecarlo``): every number a user types is checked here, and
-a bad one gives one line, status 2.
+Every number a user types is checked here, and a bad one gives one line,
+status 2.
 """
 
 from __future__ import annotations
 
 import argparse
 import math
-from pathlib import Path
 from typing import Any, NoReturn
 
-__all__ = ["EXIT_USER_ERROR", "SEED_MAX", "Parser", "add_identify_options", "default_noted",
-           "drift_rate",
-           "factor", "figure_formats", "identify_options", "nanometres", "port", "positive",
-           "seconds", "seed", "typed_option"]
+from fsmbench.cli.status import EXIT_USER_ERROR
 
-#: Exit status of an error the user can fix (bad argument, bad data, unwritable folder).
-EXIT_USER_ERROR = 2
+__all__ = ["EXIT_USER_ERROR", "SEED_MAX", "Parser", "default_noted", "drift_rate", "factor",
+           "figure_formats", "nanometres", "port", "positive", "seconds", "seed",
+           "typed_option"]
+
 
 #: Largest ``--seed``: numpy's SeedSequence takes non-negative integers only, and the live
 #: device keeps the seed in a Tango 64-bit signed integer property.
@@ -180,29 +177,3 @@ def figure_formats(text: str) -> tuple[str, ...]:
         raise argparse.ArgumentTypeError(f"unknown figure format(s) {', '.join(bad)}; "
                                          "use png, pdf or png,pdf")
     return tuple(dict.fromkeys(items))
-
-
-def add_identify_options(p: argparse.ArgumentParser) -> None:
-    """``--frf`` and ``--weights`` of the identification (``identify`` and ``study``)."""
-    p.add_argument("--frf", choices=("auto", "welch", "lpm", "periodic"), default="auto",
-                   help="frequency-response estimator: auto (averaging over periods when every "
-                        "excitation repeats, else Welch as the ESRF study), welch, lpm (local "
-                        "polynomial method), periodic (default auto)")
-    p.add_argument("--weights", choices=("seed", "variance"), default="seed",
-                   help="vector-fit weights: the ESRF study's coherence recipe, or the inverse "
-                        "standard deviation of each line, which also gives the Sercalo's "
-                        "parameters standard deviations (default seed)")
-
-
-def identify_options(args: argparse.Namespace, *, data: str | Path | None = None) -> Any:
-    """The :class:`~fsmbench.ident.pipeline.IdentifyOptions` of ``--frf`` and ``--weights``.
-
-    ``data``: the recording folder; the transient periods of every excitation
-    described there (``fsmbench excite``'s JSON beside the records) are dropped by
-    the periodic averaging, at least (more when the records show a transient).
-    """
-    from fsmbench.ident.load import excitation_transients
-    from fsmbench.ident.pipeline import IdentifyOptions
-
-    return IdentifyOptions(frf=args.frf, weights=args.weights,
-                           transient_periods={} if data is None else excitation_transients(data))

@@ -37,9 +37,20 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from fsmbench.cli_args import default_noted, positive, seconds, seed, typed_option
+from fsmbench.cli.args import default_noted, positive, seconds, typed_option
+from fsmbench.cli.inputs import bench_of, print_document
+from fsmbench.cli.options import (
+    add_bench,
+    add_json,
+    add_out,
+    add_params,
+    add_seed,
+    add_timestamp,
+    out_folder,
+)
+from fsmbench.cli.runfolder import check_inputs_first, run_folder
 
-__all__ = ["add_excite_command", "summary"]
+__all__ = ["register", "run", "summary"]
 
 _CHANNELS = ("Uch", "Ucv", "Unh", "Unv")
 
@@ -75,13 +86,13 @@ def _mains_hz(text: str) -> float:
     return value
 
 
-def add_excite_command(sub: Any) -> None:
-    """Add ``excite`` to the CLI's sub-commands (``sub`` from ``add_subparsers``)."""
+def register(sub: Any) -> None:
+    """Add ``excite`` to the sub-commands ``sub``."""
     hz = functools.partial(positive, unit="Hz")
     volts = functools.partial(positive, unit="volts")
     p = sub.add_parser("excite", help="design an excitation (multisine, noise, chirp) a "
                                       "real-time target or the twin can play")
-    p.add_argument("out", metavar="OUT", help="output folder")
+    add_out(p, positional=True)
     p.add_argument("--input", required=True, choices=_CHANNELS,
                    help="DAC channel to excite (the ESRF study's signal name)")
     p.add_argument("--kind", choices=("multisine", "noise", "chirp"), default="multisine",
@@ -117,19 +128,15 @@ def add_excite_command(sub: Any) -> None:
                    help="noise or chirp period [s] (default 30, the ESRF study's noise records)")
     p.add_argument("--sweep", choices=("linear", "log"), default="linear",
                    help="chirp sweep (default linear)")
-    p.add_argument("--seed", metavar="N", type=seed, default=0,
-                   help="seed of random phases and noise (default 0)")
-    p.add_argument("--params", metavar="TOML", default=None, dest="params",
-                   help="bench parameters (TOML); default: the packaged Sercalo bench")
+    add_seed(p, help="seed of random phases and noise (default 0)")
+    add_params(p)
     p.add_argument("--model", choices=("nominal", "true"), default="nominal",
                    help="parameters the limits are checked with: nominal (a real bench; the "
                         "larger gains) or true (the twin) (default nominal)")
-    p.add_argument("--bench", "--identification", metavar="DIR", default=None,
-                   dest="bench_dir",
-                   help="check the limits on the bench identified in DIR (a previous identify "
-                        "or study run: its plant, delays, 4QD gains and compression, where the "
-                        "packaged model's 4QD is linear) instead of the bench file's model "
-                        "(--identification: the same, older name)")
+    add_bench(p, alias=True, help="check the limits on the bench identified in DIR (a previous "
+                                  "identify or study run: its plant, delays, 4QD gains and "
+                                  "compression, where the packaged model's 4QD is linear) "
+                                  "instead of the bench file's model")
     p.add_argument("--max-4qd-compression", metavar="PCT", dest="max_qd_compression",
                    type=functools.partial(positive, unit="percent"), default=1.0,
                    help="largest compression of the 4QD at the beam's peak [%%] (default 1: "
@@ -140,9 +147,7 @@ def add_excite_command(sub: Any) -> None:
                         "(default 50; 60 for US grids; 0: no check)")
     p.add_argument("--skip-mains", action="store_true",
                    help="leave the multisine lines on mains harmonics out of the excited grid")
-    p.add_argument("--timestamp", action="store_true",
-                   help="write the wall-clock time into the MAT-file header and run.json "
-                        "(default: none, so that outputs are byte-identical)")
+    add_timestamp(p)
     p.add_argument("--closed-loop", metavar="CONTROLLER", dest="closed_loop", default=None,
                    help="the excitation is played with the loop closed by CONTROLLER (seed: "
                         "the ESRF study's; or a controllers file or fsmbench design folder, "
@@ -158,7 +163,8 @@ def add_excite_command(sub: Any) -> None:
                         "measurement [µrad]; without --amplitude-rms, a multisine shaped to "
                         "move the beam equally on every line within it (odd lines, log grid, "
                         "dense around the resonances)")
-    p.set_defaults(func=_command)
+    add_json(p, help="print excitation.json's content on stdout instead of the summary")
+    p.set_defaults(func=run)
 
 
 def _closed_loop(args: argparse.Namespace, *, bench: Any, params: Any, plant: Any,
@@ -296,18 +302,18 @@ def summary(design: Any, report: Any) -> list[str]:
     return lines
 
 
-def _command(args: argparse.Namespace) -> int:
-    from fsmbench.bench.params import load_bench
+def run(args: argparse.Namespace) -> int:
+    """Design, check and write the excitation; its summary (or excitation.json) is the
+    result."""
     from fsmbench.excite.files import write_excitation
     from fsmbench.excite.limits import check_limits
     from fsmbench.excite.mains import mains_warning
-    from fsmbench.io.matwrite import wall_clock_headers
-    from fsmbench.io.outdir import check_inputs, output_transaction
 
+    out = out_folder(args)
+    assert out is not None  # out_folder raises for a command that needs one
     option = typed_option(args, "bench_dir", "--bench")  # or its alias --identification
-    inputs = [("--params", args.params), (option, args.bench_dir)]
-    check_inputs(args.out, inputs, out_option="OUT")  # before anything is read or computed
-    bench = load_bench(args.params)
+    check_inputs_first(args, out, None)  # before anything is read or computed
+    bench = bench_of(args)
     params = bench.nominal if args.model == "nominal" else bench.true
     model = args.model
     plant = None
@@ -349,14 +355,10 @@ def _command(args: argparse.Namespace) -> int:
     warning = mains_warning(design)
     if warning:
         print(f"fsmbench excite: warning: {warning}", file=sys.stderr)
-    out = str(args.out)
-    argv = [("." if a == out else a) for a in getattr(args, "argv", [])]
     # Two float64 columns, compressed or not, plus a JSON of the lines and phases.
     need = 16 * design.samples_v.size + 64 * design.lines_hz.size + 65536
-    with output_transaction(out, command="excite", arguments=argv, need_bytes=need,
-                            timestamp=args.timestamp, inputs=inputs, out_option="OUT") as run, \
-            wall_clock_headers(args.timestamp):
-        paths = write_excitation(design, run.staging, limits=report)
+    with run_folder(args, out, data=None, need_bytes=need) as folder:
+        paths = write_excitation(design, folder.staging, limits=report)
         if closed is not None:
             # The closed loop's peaks and beam error beside the converter limits.
             import json
@@ -366,9 +368,12 @@ def _command(args: argparse.Namespace) -> int:
             js = json.loads(paths[1].read_text())
             js["closed_loop"] = closed.to_json()
             atomic_write_text(paths[1], json.dumps(js, indent=2, allow_nan=False) + "\n")
+    for path in paths:
+        print(f"wrote {folder.final_path(path)}", file=sys.stderr)
+    if args.json:
+        print_document(folder, paths, "excitation.json")
+        return 0
     print("\n".join(summary(design, report)))
     if closed is not None:
         print("\n".join(closed.lines()[-2:]))
-    for path in paths:
-        print(f"wrote {run.final_path(path)}", file=sys.stderr)
     return 0

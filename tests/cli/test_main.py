@@ -127,7 +127,7 @@ def test_stage_commands_refuse_a_missing_folder(command: str, tmp_path: Path,
 
 
 def test_the_distance_target_is_read_in_nanometres_and_checked() -> None:
-    from fsmbench.cli import _parser
+    from fsmbench.cli import build_parser as _parser
 
     args = _parser().parse_args(["study", "--out", "x", "--distance-target", "2.5"])
     assert args.distance_target_m == pytest.approx(2.5e-9)

@@ -1,7 +1,7 @@
 """``fsmbench convert IN OUT``: a recording copied into a chunked NeXus archive.
 
 A MATLAB v5 file cannot be read in parts; converted, it is read lazily with
-bounded memory (:mod:`fsmbench.io.lazy`). Registered by :mod:`fsmbench.cli`.
+bounded memory (:mod:`fsmbench.io.lazy`).
 
 OUT is one file, written atomically. It never replaces a file fsmbench did not
 write: an existing OUT is replaced only when it is an archive ``convert`` made
@@ -19,13 +19,14 @@ from __future__ import annotations
 import argparse
 import functools
 import os
-from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-from fsmbench.cli_args import positive
+from fsmbench.cli.args import positive
+from fsmbench.cli.options import add_json, add_timestamp
+from fsmbench.cli.runfolder import print_files, progress
 
-__all__ = ["NEXUS_SUFFIXES", "add_convert_command"]
+__all__ = ["NEXUS_SUFFIXES", "register", "run"]
 
 #: Names an archive written by ``convert`` may have: those a data folder is read by
 #: (:data:`fsmbench.io.folder._SUFFIXES` less ``.mat``).
@@ -62,21 +63,8 @@ def _check_paths(src: Path, dest: Path) -> None:
         raise FileNotFoundError(2, "output folder does not exist", str(dest.parent))
 
 
-def add_convert_command(sub: Any, *, progress: Callable[[], Callable[[str], None]]) -> None:
-    """Register ``convert`` on the ``fsmbench`` subparsers ``sub``.
-
-    ``progress`` makes the progress printer of the command line.
-    """
-
-    def run(args: argparse.Namespace) -> int:
-        from fsmbench.io.lazy import convert_recording
-
-        src, dest = Path(args.source), Path(args.dest)
-        _check_paths(src, dest)
-        print(convert_recording(src, dest, fs_hz=args.fs_hz, progress=progress(),
-                                created=None if args.timestamp else _FIXED_CREATED_S))
-        return 0
-
+def register(sub: Any) -> None:
+    """Add ``convert`` to the sub-commands ``sub``."""
     p = sub.add_parser("convert", help="copy a recording into a chunked NeXus archive (long "
                                        "records: lazy reading, bounded memory)")
     p.add_argument("source", metavar="IN", help="MATLAB v5/v7.3 or NeXus recording")
@@ -89,7 +77,19 @@ def add_convert_command(sub: Any, *, progress: Callable[[], Callable[[str], None
                    default=None, dest="fs_hz",
                    help="sampling rate [Hz] (default: from t; when given, it must agree with "
                         "t within 0.1 %%)")
-    p.add_argument("--timestamp", action="store_true",
-                   help="write the wall-clock time into the archive's file_time (default: "
-                        "none, so that the same IN gives the same bytes)")
+    add_timestamp(p, where="the archive's file_time")
+    add_json(p, help="print the archive written as JSON (format fsmbench.files) instead of "
+                     "its path")
     p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    """Convert; the archive's path is the result."""
+    from fsmbench.io.lazy import convert_recording
+
+    src, dest = Path(args.source), Path(args.dest)
+    _check_paths(src, dest)
+    written = convert_recording(src, dest, fs_hz=args.fs_hz, progress=progress(),
+                                created=None if args.timestamp else _FIXED_CREATED_S)
+    print_files([written], as_json=args.json, command="convert")
+    return 0

@@ -13,7 +13,7 @@ _SCRIPT = """
 import builtins, runpy, sys
 real = builtins.__import__
 def interrupted(name, *args, **kwargs):
-    if name == "fsmbench.tune.cli":
+    if name == "fsmbench.cli.commands":
         raise KeyboardInterrupt
     return real(name, *args, **kwargs)
 builtins.__import__ = interrupted

@@ -1,0 +1,7 @@
+"""``python -m fsmbench.cli``: the ``fsmbench`` command."""
+
+import sys
+
+from fsmbench.cli.main import main
+
+sys.exit(main())

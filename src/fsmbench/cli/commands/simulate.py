@@ -1,0 +1,206 @@
+"""``fsmbench simulate OUT``: the ESRF study's 13 experiments on the digital twin.
+
+    fsmbench simulate OUT [--duration S] [--seed N] [--params FILE] [--format F]
+                      [--experiments NAME…] [--excitation FILE…] [--bench DIR]
+                      [--closed-loop CONTROLLER [--at output|reference] [--max-error-urad U]]
+"""
+
+from __future__ import annotations
+
+import argparse
+import functools
+import os
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+from fsmbench.bench.params import Bench
+from fsmbench.cli.args import default_noted, positive, seconds
+from fsmbench.cli.inputs import sim_bench
+from fsmbench.cli.options import (
+    add_bench,
+    add_json,
+    add_out,
+    add_params,
+    add_seed,
+    add_timestamp,
+    out_folder,
+)
+from fsmbench.cli.runfolder import check_inputs_first, print_files, progress, run_folder
+
+__all__ = ["SMALL_BYTES", "register", "run", "simulation_memory_bytes", "twin_bytes"]
+
+# Bytes a record-second of twin data takes on disk, measured on `fsmbench simulate`
+# (seed 0, the seed's lengths, 737.5 s of records in all): 76.65 MB as compressed
+# MATLAB v5, 313.6 MB of raw float64 (what v7.3 and NeXus store uncompressed).
+_TWIN_BYTES_PER_S = {"mat5": 76.65e6 / 737.5, "mat73": 313.6e6 / 737.5,
+                     "nexus": 313.6e6 / 737.5}
+# Peak memory of `fsmbench simulate` in the mat5/mat73 formats, which simulate every record
+# in memory before writing (measured peak RSS, /usr/bin/time, 10 kHz): 0.33 GB of interpreter,
+# numba and plant; one experiment of d seconds peaks at 0.33 GB + 4.85 MB per record-second
+# (data_uch, data_cal_pd_h, data_huddle_test_1/3, data_rep_h at 200 s: 1.23-1.30 GB; data_rep_h
+# at 400 s: 2.27 GB), i.e. ~61 float64 per sample in flight; the records finished before the
+# others are held at <= 11 float64 per sample (t + the 10 signals of data_rep_*). The model
+# over-estimates the default run (1.78 GB against 1.52 GB measured) and 13 x 60 s (1.49 GB
+# against 1.20 GB).
+_SIM_BASE_BYTES = 0.33e9
+_SIM_WORKING_BYTES_PER_SAMPLE = 4.85e6 / 1e4
+_SIM_HELD_BYTES_PER_SAMPLE = 11 * 8
+#: run.json and the small files beside the records.
+SMALL_BYTES = 1e6
+
+
+def register(sub: Any) -> None:
+    """Add ``simulate`` to the sub-commands ``sub``."""
+    p = sub.add_parser("simulate", help="run the ESRF study's 13 experiments on the digital twin")
+    add_params(p)
+    add_timestamp(p)
+    add_out(p, positional=True)
+    p.add_argument("--duration", metavar="S", type=seconds, default=None,
+                   help="length of every record [s] (default: the ESRF study's, 100 s huddle "
+                        "tests)")
+    add_seed(p, help="random seed (default 0)")
+    p.add_argument("--format", choices=("mat5", "mat73", "nexus"), default="mat5",
+                   help="file format (default: MATLAB v5)")
+    p.add_argument("--experiments", metavar="NAME", nargs="+", default=None,
+                   help="only these experiments (e.g. data_uch data_ucv)")
+    p.add_argument("--excitation", metavar="FILE", default=None, nargs="+",
+                   help="play these designed excitations (fsmbench excite: folder, .json or "
+                        ".mat) each in its input's experiment instead of the ESRF study's noise; "
+                        "--experiments adds the ESRF study's own")
+    _add_closed_loop_options(p)
+    add_bench(p)
+    add_json(p, help="print the files written as JSON (format fsmbench.files) instead of one "
+                     "path a line")
+    p.set_defaults(func=run)
+
+
+def _add_closed_loop_options(p: argparse.ArgumentParser) -> None:
+    """``--closed-loop CONTROLLER [--at output|reference] [--max-error-urad U]``."""
+    p.add_argument("--closed-loop", metavar="CONTROLLER", dest="closed_loop", default=None,
+                   help="play the excitations with the loop closed by CONTROLLER (seed: the "
+                        "ESRF study's; or a controllers file or fsmbench design folder, "
+                        "PATH[::NAME]) and write data_cl_uch, data_cl_ucv; without "
+                        "--excitation, beam-bounded multisines designed on the bench")
+    p.add_argument("--at", choices=("output", "reference"), default="output",
+                   help="with --closed-loop: add the excitation to the controller's output "
+                        "(default) or to the loop's reference"
+                        + "; at the reference the controller's notch removes it at the "
+                          "Sercalo's resonances, which then come out poorly")
+    p.add_argument("--max-error-urad", metavar="U", dest="max_error_urad",
+                   type=functools.partial(positive, unit="µrad"), default=30.0,
+                   help="with --closed-loop and no --excitation: the rms beam error the "
+                        "designed multisines may add [µrad] (default 30)")
+
+
+def twin_bytes(args: argparse.Namespace, fmt: str) -> float:
+    """Bytes the twin's records of ``args`` (``experiments``, ``duration``) take as ``fmt``."""
+    from fsmbench.twin.experiments import seed_experiments
+
+    specs = seed_experiments()
+    if getattr(args, "experiments", None):
+        specs = tuple(s for s in specs if s.name in set(args.experiments))
+    total_s = sum(args.duration if args.duration is not None else s.duration_s for s in specs)
+    return total_s * _TWIN_BYTES_PER_S[fmt]
+
+
+def simulation_memory_bytes(args: argparse.Namespace, bench: Bench) -> float:
+    """Peak memory of simulating the records in memory (see ``_SIM_BASE_BYTES``)."""
+    from fsmbench.twin.experiments import seed_experiments
+
+    specs = seed_experiments()
+    if args.experiments:
+        specs = tuple(s for s in specs if s.name in set(args.experiments))
+    durations = [args.duration if args.duration is not None else s.duration_s for s in specs]
+    if args.duration is not None:  # one record per excitation file
+        durations += [args.duration] * len(args.excitation or ())
+    durations.sort(reverse=True)
+    in_flight = max(1, min(len(durations), os.cpu_count() or 1))  # simulate_bench's threads
+    fs = bench.true.converter.fs_hz
+    return (_SIM_BASE_BYTES + _SIM_WORKING_BYTES_PER_SAMPLE * fs * sum(durations[:in_flight])
+            + _SIM_HELD_BYTES_PER_SAMPLE * fs * sum(durations[in_flight:]))
+
+
+def _check_simulation_memory(args: argparse.Namespace, bench: Bench) -> None:
+    """Refuse an in-memory simulation larger than the memory available, with the way out."""
+    from fsmbench.io.matfile import available_memory_bytes
+
+    if args.excitation is None and args.format == "nexus":
+        return  # streamed block by block
+    if args.excitation is not None and args.duration is None:
+        return  # the files' own lengths, which excite bounds
+    need = simulation_memory_bytes(args, bench)
+    have = available_memory_bytes()
+    if need <= have:
+        return
+    length = (f"--duration {args.duration:g} s" if args.duration is not None
+              else "the ESRF study's record lengths")
+    if args.excitation is not None:
+        what, fix = ("--excitation", "an excitation is played in memory whatever the format: "
+                                     "shorten --duration")
+    else:
+        what, fix = (default_noted(args, "format", f"--format {args.format}"),
+                     "--format nexus streams the records to disk "
+                     "block by block in bounded memory (0.39 GB measured for a day), or "
+                     "shorten --duration")
+    raise ValueError(f"{what}: {length} needs about {need / 1e9:.1f} GB of memory (every "
+                     f"record is simulated whole before it is written) and this machine has "
+                     f"{have / 1e9:.1f} GB available; {fix}")
+
+
+def run(args: argparse.Namespace) -> int:
+    """Simulate and write the records; their paths are the result."""
+    from fsmbench.twin.simulate import play_excitation, stream_bench
+
+    out = out_folder(args)
+    assert out is not None  # out_folder raises for a command that needs one
+    check_inputs_first(args, out, None)
+    bench = sim_bench(args)
+    _check_simulation_memory(args, bench)  # before anything is simulated or written
+    with run_folder(args, out, data=None,
+                    need_bytes=twin_bytes(args, args.format) + SMALL_BYTES) as folder:
+        say = progress()
+        if args.closed_loop is not None:
+            paths = _closed_loop_simulation(args, bench, folder.staging, say)
+        elif args.excitation is not None:
+            paths = play_excitation(args.excitation, bench, out_dir=folder.staging,
+                                    seed=args.seed, duration_s=args.duration,
+                                    experiments=args.experiments, format=args.format,
+                                    progress=say)
+        elif args.format == "nexus":
+            # Streamed block by block: any --duration in bounded memory.
+            paths = stream_bench(bench, out_dir=folder.staging, seed=args.seed,
+                                 duration_s=args.duration, experiments=args.experiments,
+                                 progress=say)
+        else:
+            paths = _simulate_in_memory(args, bench, folder.staging, say)
+    print_files([folder.final_path(p) for p in paths], as_json=args.json, command="simulate")
+    say("done")
+    return 0
+
+
+def _simulate_in_memory(args: argparse.Namespace, bench: Bench, staging: Path,
+                        say: Callable[[str], None]) -> list[Path]:
+    from fsmbench.twin.simulate import simulate_bench, write_twin
+
+    sim = simulate_bench(bench, seed=args.seed, duration_s=args.duration,
+                         experiments=args.experiments, progress=say)
+    say(f"writing {len(sim.recordings)} records")
+    return write_twin(sim, staging, format=args.format)
+
+
+def _closed_loop_simulation(args: argparse.Namespace, bench: Bench, out_dir: Path,
+                            say: Callable[[str], None]) -> list[Path]:
+    """``--closed-loop``: the records data_cl_uch, data_cl_ucv, written to ``out_dir``."""
+    from fsmbench.sim.loaded import running_controller
+    from fsmbench.twin.closed_loop import simulate_closed_loop
+    from fsmbench.twin.simulate import write_twin
+
+    if args.experiments:
+        raise ValueError("--closed-loop writes data_cl_uch and data_cl_ucv only; run the "
+                         "ESRF study's experiments (--experiments) in another simulate")
+    controller = running_controller(args.closed_loop, bench=bench)
+    result = simulate_closed_loop(bench=bench, controller=controller, sources=args.excitation,
+                                  at=args.at, max_error_rad=args.max_error_urad * 1e-6,
+                                  seed=args.seed, duration_s=args.duration, progress=say)
+    return write_twin(result, out_dir, format=args.format)
