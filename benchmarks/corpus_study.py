@@ -90,8 +90,8 @@ def study_one(data: Path, out: Path, *, identify_only: bool, params: Path | None
         conv = bench.nominal.converter
         loaded = load_recordings(data, fs_hz=None, adc_range_v=conv.range_v,
                                  adc_bits=conv.bits)
-        ident, _ = identify_stage(loaded.recordings, bench=bench, out_dir=out,
-                                  source=str(data), unusable=loaded.unusable())
+        ident = identify_stage(loaded.recordings, bench=bench, out_dir=out,
+                               source=str(data), unusable=loaded.unusable()).result
         failed = [c.sentence() for c in (*loaded.checks, *ident.checks) if not c.passed]
         return {"seconds": time.perf_counter() - t0, "verdict": "", "status": "",
                 "failed": failed, "warnings": list(ident.warnings),

@@ -44,7 +44,7 @@ def test_plant_choice(ident_twin: TwinRun, bench: Bench) -> None:
 def test_design_stage_writes_the_contracted_keys(ident_twin: TwinRun, bench: Bench,
                                                  tmp_path: Path) -> None:
     plant = choose_plant(ident_twin.recordings, bench=bench)
-    _stage, paths = design_stage(bench=bench, out_dir=tmp_path, plant=plant)
+    paths = design_stage(bench=bench, out_dir=tmp_path, plant=plant).files
     assert sorted(p.name for p in paths) == ["controllers.mat", "controllers_sos.json",
                                              "design.json", "fsmbench_load.m"]
     data = json.loads((tmp_path / "design.json").read_text())
@@ -76,8 +76,8 @@ def test_design_stage_writes_the_contracted_keys(ident_twin: TwinRun, bench: Ben
 def test_budget_stage_writes_the_contracted_keys(short_twin: TwinRun, bench: Bench,
                                                  tmp_path: Path) -> None:
     plant = choose_plant({}, bench=bench)
-    result, paths = budget_stage(short_twin.recordings, bench=bench, out_dir=tmp_path,
-                                 plant=plant)
+    stage = budget_stage(short_twin.recordings, bench=bench, out_dir=tmp_path, plant=plant)
+    result, paths = stage.result, stage.files
     assert [p.name for p in paths] == ["budget.json"]
     data = json.loads(paths[0].read_text())
     for key in BUDGET_KEYS:

@@ -295,9 +295,8 @@ def identify(recordings: RecordingSet | TwinRun | Mapping[str, xr.Dataset], *,
                          unusable=unusable)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    result, _ = identify_stage(recs, bench=b, out_dir=out, source=source, progress=progress,
-                               options=options, unusable=unusable)
-    return result
+    return identify_stage(recs, bench=b, out_dir=out, source=source, progress=progress,
+                          options=options, unusable=unusable).result
 
 
 def _plant_choice(plant: Any, recordings: Mapping[str, xr.Dataset] | None, bench: Bench,
@@ -380,10 +379,10 @@ def budget(recordings: RecordingSet | TwinRun | Mapping[str, xr.Dataset], *,
         out = Path(out_dir)
         out.mkdir(parents=True, exist_ok=True)
         return budget_stage(recs, bench=b, out_dir=out, plant=choice, progress=progress,
-                            recommended=recommended)[0]
+                            recommended=recommended).result
     with tempfile.TemporaryDirectory(prefix="fsmbench-budget-") as tmp:
         return budget_stage(recs, bench=b, out_dir=Path(tmp), plant=choice, progress=progress,
-                            recommended=recommended)[0]
+                            recommended=recommended).result
 
 
 def design(plant: PlantModel | Identification | None = None, *, bench: Bench | None = None,
@@ -440,7 +439,7 @@ def design(plant: PlantModel | Identification | None = None, *, bench: Bench | N
 
     def run(folder: Path) -> DesignStage:
         return design_stage(bench=b, out_dir=folder, plant=choice, seed=seed,
-                            progress=progress, simulated=sim)[0]
+                            progress=progress, simulated=sim)
 
     if out_dir is not None:
         out = Path(out_dir)

@@ -29,10 +29,18 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+import control as ct
+import numpy as np
 import xarray as xr
 
+from fsmbench.bench.axes import PerAxis
 from fsmbench.bench.blocks import PlantModel, physical_plant
 from fsmbench.bench.params import Bench
+from fsmbench.budget.result import BudgetResult
+from fsmbench.budget.study import budget_study
+from fsmbench.control.seed import seed_decentralised_controller, tustin
+from fsmbench.control.study import DesignResult, design_study
+from fsmbench.control.validation import ClosedLoopValidation, validate_closed_loop
 from fsmbench.ident.pipeline import (
     Identification,
     IdentifyOptions,
@@ -41,7 +49,13 @@ from fsmbench.ident.pipeline import (
 )
 from fsmbench.ident.result import PlantChoice, SavedIdentification
 from fsmbench.io.atomic import atomic_write_text
+from fsmbench.io.errors import RecordingError
+from fsmbench.io.signals import MIN_DURATION_S
 from fsmbench.jsonutil import format_text, stamped
+from fsmbench.sim.controller import feedback_controller
+from fsmbench.sim.identified import bench_from_identification
+from fsmbench.twin.simulate import simulate_bench
+from fsmbench.twin.verify import TrackingCheck, verify_on_twin
 
 __all__ = [
     "BUDGET_FORMAT",
@@ -49,7 +63,9 @@ __all__ = [
     "IDENT_EXPERIMENTS",
     "RECOMMENDED_SKIPPED",
     "VALIDATION_FORMAT",
+    "BudgetStage",
     "DesignStage",
+    "IdentifyStage",
     "PlantChoice",
     "RecordedLoop",
     "SavedIdentification",
@@ -92,16 +108,23 @@ def _quiet(_msg: str) -> None:
     return None
 
 
+@dataclass(frozen=True, eq=False)
+class IdentifyStage:
+    """ESRF study section 2's result and the files written of it."""
+
+    result: Identification
+    files: tuple[Path, ...]
+
+
 def identify_stage(recordings: Mapping[str, xr.Dataset], *, bench: Bench, out_dir: Path,
                    source: str, progress: Progress | None = None,
                    options: IdentifyOptions | None = None,
-                   unusable: Mapping[str, str] | None = None
-                   ) -> tuple[Identification, list[Path]]:
+                   unusable: Mapping[str, str] | None = None) -> IdentifyStage:
     """Run ESRF study section 2 and write its files (``options``: the estimator and weights;
     ``unusable``: files present but unreadable, by experiment, with the loader's reason)."""
     result = identify(recordings, bench=bench, options=options, source=source,
                       progress=progress, unusable=unusable)
-    return result, write_identification(result, out_dir)
+    return IdentifyStage(result, tuple(write_identification(result, out_dir)))
 
 
 def choose_plant(recordings: Mapping[str, xr.Dataset], *, bench: Bench,
@@ -207,17 +230,23 @@ def _write_json(path: Path, payload: Mapping[str, Any]) -> Path:
     return atomic_write_text(path, format_text(payload, sort_keys=True))
 
 
+@dataclass(frozen=True, eq=False)
+class BudgetStage:
+    """ESRF study sections 3, 4 and 11's result and the file written of it."""
+
+    result: BudgetResult
+    files: tuple[Path, ...]
+
+
 def budget_stage(recordings: Mapping[str, xr.Dataset], *, bench: Bench, out_dir: Path,
                  plant: PlantChoice, progress: Callable[[str], None] | None = None,
-                 recommended: Any = None) -> tuple[Any, list[Path]]:
+                 recommended: ct.StateSpace | None = None) -> BudgetStage:
     """ESRF study sections 3, 4, 11: ``budget.json`` (``progress`` hears of long records' reads).
 
     ``recommended``: fsmbench's controller (continuous), whose budget is computed
     beside the recorded loop's (the ESRF study's controller of 9.2, on the 4QD gains
     the closed-loop records show it divided by: :func:`recorded_loop`).
     """
-    from fsmbench.budget.study import budget_study
-
     ident, saved = plant.identification, plant.saved
     if ident is not None:
         # The measured noise replaces the bench file's only from a trusted identification.
@@ -248,19 +277,15 @@ def budget_stage(recordings: Mapping[str, xr.Dataset], *, bench: Bench, out_dir:
     elif saved is not None:
         payload["plant_checks"] = [dict(c) for c in saved.checks]
     name, version = BUDGET_FORMAT
-    return result, [_write_json(out_dir / "budget.json",
-                                stamped(payload, format=name, version=version))]
+    return BudgetStage(result, (_write_json(out_dir / "budget.json",
+                                            stamped(payload, format=name, version=version)),))
 
 
-def _recorded_seed_controller(plant: PlantModel, *, bench: Bench, loop: RecordedLoop) -> Any:
+def _recorded_seed_controller(plant: PlantModel, *, bench: Bench,
+                              loop: RecordedLoop) -> ct.StateSpace | None:
     """The ESRF study's controller as the records ran it on this plant's beam angles:
     ``K diag(Gd / g_used)`` (Tustin at 1/fs, ESRF study 9.3), or None (the budget's
     default, K on the beam angle) when the records measured no loop."""
-    import control as ct
-    import numpy as np
-
-    from fsmbench.control.seed import seed_decentralised_controller, tustin
-
     if not any(loop.measured) or "Gd" not in plant.blocks:
         return None
     scale = (np.diag(np.asarray(plant.blocks["Gd"].D, dtype=float))
@@ -294,9 +319,6 @@ def simulation_bench(*, bench: Bench, is_twin: bool, identification: Identificat
     """
     if is_twin:
         return SimulationBench(bench)
-    from fsmbench.io.errors import RecordingError
-    from fsmbench.sim.identified import bench_from_identification
-
     if identification is None:
         return SimulationBench(None, "no identification ran: none of its experiments is "
                                      "usable")
@@ -320,26 +342,25 @@ def simulation_bench(*, bench: Bench, is_twin: bool, identification: Identificat
 class DesignStage:
     """The design study and the simulated bench's verdict on fsmbench's controller.
 
-    ``twin_check`` is None when there was no bench to simulate (``skipped`` says why).
+    ``twin_check`` is None when there was no bench to simulate (``skipped`` says why);
+    ``payload`` is ``design.json``'s content; ``files`` the files written.
     """
 
-    result: Any
-    twin_check: Any
+    result: DesignResult
+    twin_check: TrackingCheck | None
     payload: dict[str, Any]
     skipped: str = ""
+    files: tuple[Path, ...] = ()
 
 
 def design_stage(*, bench: Bench, out_dir: Path, plant: PlantChoice, seed: int = 0,
                  progress: Progress | None = None,
-                 simulated: SimulationBench | None = None) -> tuple[DesignStage, list[Path]]:
+                 simulated: SimulationBench | None = None) -> DesignStage:
     """ESRF study sections 5–10 and the closed-loop proof on the simulated bench.
 
     ``simulated``: the bench fsmbench's controller is run on (default: ``bench``
     itself, the packaged twin).
     """
-    from fsmbench.control.study import design_study
-    from fsmbench.twin.verify import verify_on_twin
-
     say = progress or _quiet
     sim = SimulationBench(bench) if simulated is None else simulated
     say("designing and verifying the controllers (ESRF study sections 5–10)")
@@ -363,22 +384,23 @@ def design_stage(*, bench: Bench, out_dir: Path, plant: PlantChoice, seed: int =
     paths.insert(0, _write_json(out_dir / "design.json",
                                 stamped(payload, format=name, version=version)))
     return DesignStage(result=result, twin_check=check, payload=payload,
-                       skipped=sim.reason), paths
+                       skipped=sim.reason, files=tuple(paths))
 
 
 @dataclass(frozen=True, eq=False)
 class ValidationStage:
-    """The model's check on the recorded closed loop, or why it did not run."""
+    """The model's check on the recorded closed loop, or why it did not run; the file
+    written of it."""
 
-    result: Any
+    result: ClosedLoopValidation | None
     skipped: str = ""
+    files: tuple[Path, ...] = ()
 
 
 def validation_stage(recordings: Mapping[str, xr.Dataset], *, bench: Bench,
                      simulated: Bench | None, plant: PlantModel | None, out_dir: Path,
                      seed: int = 0, progress: Progress | None = None,
-                     loop: RecordedLoop | None = None
-                     ) -> tuple[ValidationStage, list[Path]]:
+                     loop: RecordedLoop | None = None) -> ValidationStage:
     """``data_rep_h/v`` as recorded against the same experiments simulated on ``simulated``.
 
     Parameters
@@ -396,13 +418,6 @@ def validation_stage(recordings: Mapping[str, xr.Dataset], *, bench: Bench,
         The 4QD gains the recorded loop divided by (default: the bench file's,
         assumed).
     """
-    from fsmbench.bench.axes import PerAxis
-    from fsmbench.control.seed import seed_decentralised_controller, tustin
-    from fsmbench.control.validation import validate_closed_loop
-    from fsmbench.io.signals import MIN_DURATION_S
-    from fsmbench.sim.controller import feedback_controller
-    from fsmbench.twin.simulate import simulate_bench
-
     say = progress or _quiet
     present = [n for n in ("data_rep_h", "data_rep_v") if n in recordings]
     # A record shorter than its analysis reads is named by its record_length check: it
@@ -413,9 +428,9 @@ def validation_stage(recordings: Mapping[str, xr.Dataset], *, bench: Bench,
     if not names:
         return ValidationStage(None, "neither data_rep_h nor data_rep_v was recorded" if not
                                present else f"{' and '.join(present)} too short to compare "
-                               f"(at least {MIN_DURATION_S[present[0]]:g} s)"), []
+                               f"(at least {MIN_DURATION_S[present[0]]:g} s)")
     if simulated is None or plant is None:
-        return ValidationStage(None, "no identified bench to predict the recorded loop on"), []
+        return ValidationStage(None, "no identified bench to predict the recorded loop on")
     say(f"predicting the recorded closed loop ({', '.join(names)}) on {simulated.label}")
     used = (loop or recorded_loop(None, bench=bench)).gd_used_v_per_rad
     runs: dict[str, xr.Dataset] = {}
@@ -437,7 +452,7 @@ def validation_stage(recordings: Mapping[str, xr.Dataset], *, bench: Bench,
                 "model (a signal of it recorded with its sign flipped or its gain changed, "
                 "or a loop that divided by other 4QD gains than the other closed-loop "
                 "records show); the records cannot tell which, and the model's check on "
-                "the closed loop is not made")), []
+                "the closed loop is not made"))
         runs[name] = run.recordings[name]
     k = tustin(seed_decentralised_controller(), ts_s=bench.nominal.converter.ts_s)
     try:
@@ -447,8 +462,8 @@ def validation_stage(recordings: Mapping[str, xr.Dataset], *, bench: Bench,
                                       gd_used_v_per_rad=used,
                                       bench_label=simulated.label)
     except ValueError as exc:
-        return ValidationStage(None, str(exc)), []
+        return ValidationStage(None, str(exc))
     name, version = VALIDATION_FORMAT
     path = _write_json(out_dir / "validation.json",
                        stamped(result.to_json(), format=name, version=version))
-    return ValidationStage(result), [path]
+    return ValidationStage(result, files=(path,))

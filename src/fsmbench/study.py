@@ -299,11 +299,12 @@ def run_study(*, out_dir: str | Path, data_dir: str | Path | None = None,
     ident = None
     if any(n in recordings for n in IDENT_EXPERIMENTS):
         say("identification (ESRF study section 2)")
-        ident, written = identify_stage(recordings, bench=bench, out_dir=out, source=source,
-                                        progress=say, options=identify_options,
-                                        unusable=loaded.unusable())
+        identified_stage = identify_stage(recordings, bench=bench, out_dir=out, source=source,
+                                          progress=say, options=identify_options,
+                                          unusable=loaded.unusable())
+        ident = identified_stage.result
         stages.append(StageStatus(
-            "identify", True, outputs=tuple(str(p) for p in written),
+            "identify", True, outputs=tuple(str(p) for p in identified_stage.files),
             reason="; ".join(f"{k}: {v}" for k, v in ident.skipped.items())))
     else:
         stages.append(StageStatus("identify", False,
@@ -325,28 +326,28 @@ def run_study(*, out_dir: str | Path, data_dir: str | Path | None = None,
                                          if is_twin else
                                          f"the bench identified from the recordings in {data}"))
     simulated = SimulationBench(bench) if is_twin else identified
-    design, written = design_stage(bench=bench, out_dir=out, plant=plant, seed=seed,
-                                   progress=say, simulated=simulated)
-    stages.append(StageStatus("design", True, outputs=tuple(str(p) for p in written),
+    design = design_stage(bench=bench, out_dir=out, plant=plant, seed=seed, progress=say,
+                          simulated=simulated)
+    stages.append(StageStatus("design", True, outputs=tuple(str(p) for p in design.files),
                               reason=design.skipped))
     lap("design")
 
     say("noise and error budget, huddle tests, repeatability (ESRF study sections 3, 4, 11)")
     # The recorded loop's budget (the seed's controller ran in the huddle tests) and the
     # one the verdict recommends (fsmbench's), side by side.
-    budget, written = budget_stage(recordings, bench=bench, out_dir=out, plant=plant,
-                                   progress=say,
-                                   recommended=design.result.controllers["fsmbench_controller"])
-    stages.append(StageStatus("budget", True, outputs=tuple(str(p) for p in written),
+    budgeted = budget_stage(recordings, bench=bench, out_dir=out, plant=plant, progress=say,
+                            recommended=design.result.controllers["fsmbench_controller"])
+    budget = budgeted.result
+    stages.append(StageStatus("budget", True, outputs=tuple(str(p) for p in budgeted.files),
                               reason="; ".join(f"{k}: {v}" for k, v in budget.skipped.items())))
     lap("budget")
 
-    validation, written = validation_stage(
+    validation = validation_stage(
         recordings, bench=bench, simulated=identified.bench,
         plant=None if identified.bench is None else plant.plant, out_dir=out, seed=seed,
         progress=say, loop=recorded_loop(ident, bench=bench))
     stages.append(StageStatus("validation", validation.result is not None,
-                              outputs=tuple(str(p) for p in written),
+                              outputs=tuple(str(p) for p in validation.files),
                               reason=validation.skipped or identified.reason))
     lap("validation")
 

@@ -103,8 +103,9 @@ def test_dead_4qd_channel_falls_back_to_the_nominal_gain(twin: TwinRun, bench: B
     dead = _edit(Vph=lambda v: np.round(1e-3 * rng.standard_normal(v.size) / LSB_V) * LSB_V)
     data = write_folder(tmp_path / "data", twin, CAL, {"data_cal_pd_h": dead})
     loaded = load_quietly(data, fs_hz=FS_HZ)
-    ident, paths = identify_stage(loaded.recordings, bench=bench, out_dir=tmp_path / "out",
-                                  source="test")
+    stage = identify_stage(loaded.recordings, bench=bench, out_dir=tmp_path / "out",
+                           source="test")
+    ident, paths = stage.result, stage.files
     r2 = failed_named(ident.checks, "calibration_r2")
     assert [c.subject for c in r2] == ["data_cal_pd_h: Vph"]
     assert r2[0].value is not None and float(r2[0].value) < 1e-2  # noise explains nothing

@@ -84,8 +84,9 @@ def run(args: argparse.Namespace) -> int:
         plant = plant_of(args, inp)
         inp.say("noise and error budget, huddle tests, repeatability (ESRF study sections 3, 4, "
                 "11)")
-        result, paths = budget_stage(inp.recordings, bench=inp.bench, out_dir=folder.staging,
-                                     plant=plant, progress=inp.say)
+        stage = budget_stage(inp.recordings, bench=inp.bench, out_dir=folder.staging,
+                             plant=plant, progress=inp.say)
+    result, paths = stage.result, stage.files
     # The result on stdout, the files and what was skipped on stderr.
     for path in paths:
         print(f"wrote {folder.final_path(path)}", file=sys.stderr)

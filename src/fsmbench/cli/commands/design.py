@@ -106,9 +106,10 @@ def run(args: argparse.Namespace) -> int:
     with stage_folder(args, _SMALL_BYTES) as folder:
         inp = stage_input(args, uses=IDENT_EXPERIMENTS if args.bench_dir is None else ())
         plant = plant_of(args, inp)
-        stage, paths = design_stage(bench=inp.bench, out_dir=folder.staging, plant=plant,
-                                    seed=args.seed, progress=inp.say,
-                                    simulated=_simulated(args, inp, plant))
+        stage = design_stage(bench=inp.bench, out_dir=folder.staging, plant=plant,
+                             seed=args.seed, progress=inp.say,
+                             simulated=_simulated(args, inp, plant))
+    paths = stage.files
     for path in paths:
         print(f"wrote {folder.final_path(path)}", file=sys.stderr)
     if args.json:

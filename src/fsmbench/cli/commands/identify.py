@@ -93,10 +93,10 @@ def _open_loop(args: argparse.Namespace) -> int:
     with stage_folder(args, _IDENT_BYTES) as folder:
         reference = read_twin_truth(Path(args.data))
         inp = stage_input(args)
-        result, paths = identify_stage(inp.recordings, bench=inp.bench, out_dir=folder.staging,
-                                       source=str(inp.data), progress=inp.say,
-                                       unusable=inp.unusable,
-                                       options=identify_options(args, data=inp.data))
+        stage = identify_stage(inp.recordings, bench=inp.bench, out_dir=folder.staging,
+                               source=str(inp.data), progress=inp.say, unusable=inp.unusable,
+                               options=identify_options(args, data=inp.data))
+    result, paths = stage.result, stage.files
     for step, why in result.skipped.items():
         inp.say(f"step {step} skipped: {why}")
     for warning in result.warnings:
