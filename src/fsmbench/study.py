@@ -38,6 +38,7 @@ from fsmbench.report.html import Section, iter_figures, write_report
 from fsmbench.report.summary import (
     PartSkipped,
     Specification,
+    StudyEvidence,
     Summary,
     build_summary,
 )
@@ -370,20 +371,31 @@ def run_study(*, out_dir: str | Path, data_dir: str | Path | None = None,
              if part not in loaded.skipped
              and not why.startswith(("not in the recordings", "missing", "check "))]
     summary = build_summary(
-        source=source, is_twin=is_twin, spec=spec, skipped=loaded.skipped, parts_skipped=parts,
-        n_experiments=len(EXPERIMENTS), n_read=len(recordings), checks=checks, notices=notices,
-        identification=None if ident is None else {
-            "ran": True, "warnings": list(ident.warnings), "skipped": dict(ident.skipped)},
-        identification_headline="" if ident is None else _identification_headline(
-            ident, truth, bench),
-        plant_source=plant.source, plant_identified=plant.identification is not None
-        and plant.source.startswith("identified"),
-        plant_missing=_loop_blocks_missing(plant.identification),
-        disturbance_missing=_disturbance_blocks_missing(plant.identification),
-        budget=budget, design=design.payload, validation=validation.result,
-        validation_skipped=validation.skipped or identified.reason,
-        simulated_bench="" if simulated.bench is None else simulated.bench.label,
-        montecarlo=montecarlo)
+        StudyEvidence(
+            source=source,
+            is_twin=is_twin,
+            skipped=loaded.skipped,
+            parts_skipped=parts,
+            n_experiments=len(EXPERIMENTS),
+            n_read=len(recordings),
+            checks=checks,
+            notices=notices,
+            identification=None if ident is None else {
+                "ran": True, "warnings": list(ident.warnings), "skipped": dict(ident.skipped)},
+            identification_headline=("" if ident is None
+                                     else _identification_headline(ident, truth, bench)),
+            plant_source=plant.source,
+            plant_identified=(plant.identification is not None
+                              and plant.source.startswith("identified")),
+            plant_missing=_loop_blocks_missing(plant.identification),
+            disturbance_missing=_disturbance_blocks_missing(plant.identification),
+            budget=budget,
+            design=design.payload,
+            validation=validation.result,
+            validation_skipped=validation.skipped or identified.reason,
+            simulated_bench="" if simulated.bench is None else simulated.bench.label,
+            montecarlo=montecarlo),
+        spec=spec)
     sections = _sections(bench=bench, loaded=loaded, source=source, is_twin=is_twin,
                          ident=ident, truth=truth, budget=budget, design=design,
                          plant_source=plant.source, validation=validation.result,

@@ -12,7 +12,7 @@ import pytest
 
 from fsmbench.budget.table import BudgetRow
 from fsmbench.checks import Check, Notice
-from fsmbench.report.summary import Specification, build_summary
+from fsmbench.report.summary import Specification, StudyEvidence, build_summary
 from fsmbench.report.verdict import verdict_html
 from fsmbench.study import StudyResult
 
@@ -71,13 +71,20 @@ def _summary(*, total_m: float = 2.25e-9, s1: float = 1.2e-4, skipped: dict[str,
              checks: tuple[Check, ...] = (), identified: bool = True, huddle: bool = True,
              validation: Any = "default", simulated: bool = True, **kw: Any) -> Any:
     return build_summary(
-        source="test", is_twin=False, spec=Specification(), skipped=skipped or {},
-        n_experiments=13, n_read=13 - len(skipped or {}), checks=checks,
-        identification={"ran": True, "warnings": [], "skipped": {}},
-        plant_source="identified" if identified else "nominal physical model (test)",
-        plant_identified=identified, budget=_budget(total_m, huddle=huddle),
-        design=_design(s1, simulated=simulated, **kw),
-        validation=_validation() if validation == "default" else validation)
+        StudyEvidence(
+            source="test",
+            is_twin=False,
+            skipped=skipped or {},
+            n_experiments=13,
+            n_read=13 - len(skipped or {}),
+            checks=checks,
+            identification={"ran": True, "warnings": [], "skipped": {}},
+            plant_source="identified" if identified else "nominal physical model (test)",
+            plant_identified=identified,
+            budget=_budget(total_m, huddle=huddle),
+            design=_design(s1, simulated=simulated, **kw),
+            validation=_validation() if validation == "default" else validation),
+        spec=Specification())
 
 
 def test_a_bench_within_every_limit_passes_with_numbers_and_provenance() -> None:
@@ -183,10 +190,20 @@ def test_a_dead_band_the_plant_explains_gives_a_verdict_from_the_other_rows() ->
     design = _design(1.2e-4)
     design["closed_loop_twin"]["measured_over_predicted"] = {"h": 2.65, "v": 2.01}
     s = build_summary(
-        source="test", is_twin=False, spec=Specification(), skipped={}, n_experiments=13,
-        n_read=13, checks=(), identification={"ran": True, "warnings": [], "skipped": {}},
-        plant_source="identified", plant_identified=True, budget=_budget(2.25e-9),
-        design=design, validation=validation)
+        StudyEvidence(
+            source="test",
+            is_twin=False,
+            skipped={},
+            n_experiments=13,
+            n_read=13,
+            checks=(),
+            identification={"ran": True, "warnings": [], "skipped": {}},
+            plant_source="identified",
+            plant_identified=True,
+            budget=_budget(2.25e-9),
+            design=design,
+            validation=validation),
+        spec=Specification())
     assert s.verdict_status == "does_not_meet", s.verdict
     assert "closed loop" in s.verdict and "2.65" in s.verdict
     assert s.next_step.startswith("Next: make the Sercalo DAC's step finer")
@@ -196,10 +213,19 @@ def test_a_dead_band_the_plant_explains_gives_a_verdict_from_the_other_rows() ->
 
 
 def test_the_distance_limit_is_configurable() -> None:
-    s = build_summary(source="t", is_twin=True, spec=Specification(distance_error_max_m=2e-9),
-                      skipped={}, n_experiments=13, n_read=13, identification=None,
-                      plant_source="identified", plant_identified=True,
-                      budget=_budget(2.25e-9), design=None)
+    s = build_summary(
+        StudyEvidence(
+            source="t",
+            is_twin=True,
+            skipped={},
+            n_experiments=13,
+            n_read=13,
+            identification=None,
+            plant_source="identified",
+            plant_identified=True,
+            budget=_budget(2.25e-9),
+            design=None),
+        spec=Specification(distance_error_max_m=2e-9))
     req = next(r for r in s.requirements if r.name == "distance_error_budget")
     assert req.passed is False and req.limit == "≤ 2 nm" and req.limits == {"max": 2e-9}
 
@@ -230,27 +256,57 @@ def test_skips_failed_checks_and_fallbacks_are_listed_first() -> None:
 ])
 def test_a_fallback_says_what_to_do(skipped: dict[str, str], plant_source: str,
                                     advice: str) -> None:
-    s = build_summary(source="t", is_twin=False, spec=Specification(), skipped=skipped,
-                      n_experiments=13, n_read=13 - len(skipped), identification=None,
-                      plant_source=plant_source, plant_identified=False, budget=None,
-                      design=None)
+    s = build_summary(
+        StudyEvidence(
+            source="t",
+            is_twin=False,
+            skipped=skipped,
+            n_experiments=13,
+            n_read=13 - len(skipped),
+            identification=None,
+            plant_source=plant_source,
+            plant_identified=False,
+            budget=None,
+            design=None),
+        spec=Specification())
     assert f"What to do: {advice}" in s.fallbacks[0]
 
 
 def test_no_stage_no_verdict() -> None:
-    s = build_summary(source="t", is_twin=False, spec=Specification(), skipped={},
-                      n_experiments=13, n_read=0, identification=None, plant_source="nominal",
-                      plant_identified=False, budget=None, design=None)
+    s = build_summary(
+        StudyEvidence(
+            source="t",
+            is_twin=False,
+            skipped={},
+            n_experiments=13,
+            n_read=0,
+            identification=None,
+            plant_source="nominal",
+            plant_identified=False,
+            budget=None,
+            design=None),
+        spec=Specification())
     assert s.meets_specifications is None and s.verdict.startswith("No verdict")
 
 
 def test_summary_json_has_numbers_units_provenance_and_the_display_beside() -> None:
     notice = Notice("saturation", "data_rep_h", "Vph: 5 % of samples at the ADC rails")
     s = _summary(checks=(), skipped=None)
-    s = build_summary(source="t", is_twin=False, spec=Specification(), skipped={},
-                      n_experiments=13, n_read=13, notices=(notice,),
-                      identification=None, plant_source="identified", plant_identified=True,
-                      budget=_budget(1e-9), design=_design(1e-4), validation=_validation())
+    s = build_summary(
+        StudyEvidence(
+            source="t",
+            is_twin=False,
+            skipped={},
+            n_experiments=13,
+            n_read=13,
+            notices=(notice,),
+            identification=None,
+            plant_source="identified",
+            plant_identified=True,
+            budget=_budget(1e-9),
+            design=_design(1e-4),
+            validation=_validation()),
+        spec=Specification())
     js = json.loads(json.dumps(s.to_json(), allow_nan=False))
     assert js["format"] == "fsmbench.summary" and js["format_version"] == 3
     assert js["verdict_status"] == "meets" and js["next_step"]

@@ -210,14 +210,24 @@ def _design() -> dict[str, Any]:
 def test_the_verdict_robustness_row_names_a_requirement_five_percent_break(
         n: int, broken: int) -> None:
     from fsmbench.report.html import visible_text
-    from fsmbench.report.summary import Specification, build_summary
+    from fsmbench.report.summary import Specification, StudyEvidence, build_summary
     from fsmbench.report.verdict import verdict_html
 
     def summary(montecarlo: dict[str, Any] | None) -> Any:
         return build_summary(
-            source="test", is_twin=True, spec=Specification(), skipped={}, n_experiments=13,
-            n_read=13, identification=None, plant_source="identified",
-            plant_identified=True, budget=None, design=_design(), montecarlo=montecarlo)
+            StudyEvidence(
+                source="test",
+                is_twin=True,
+                skipped={},
+                n_experiments=13,
+                n_read=13,
+                identification=None,
+                plant_source="identified",
+                plant_identified=True,
+                budget=None,
+                design=_design(),
+                montecarlo=montecarlo),
+            spec=Specification())
 
     payload = _payload(n, broken)
     without, with_mc = summary(None), summary(payload)

@@ -32,8 +32,18 @@ from fsmbench.checks import Check, Notice
 from fsmbench.jsonutil import plain_json
 from fsmbench.report.verdict import next_step, verdict_html
 
-__all__ = ["FINDINGS", "SUMMARY_FORMAT", "PartSkipped", "Requirement", "Specification",
-           "StageLine", "Summary", "build_summary", "verdict_html"]
+__all__ = [
+    "FINDINGS",
+    "SUMMARY_FORMAT",
+    "PartSkipped",
+    "Requirement",
+    "Specification",
+    "StageLine",
+    "StudyEvidence",
+    "Summary",
+    "build_summary",
+    "verdict_html",
+]
 
 #: Failed checks that are findings about a device or an analysis, not data contradicting
 #: itself: the Newport found off its datasheet, a margin the numerics could not compute.
@@ -474,26 +484,15 @@ def _plant_advice(plant_source: str, skipped: Mapping[str, str]) -> str:
     return "chapter 2 (identification) names the step that failed and why."
 
 
-def build_summary(*, source: str, is_twin: bool, spec: Specification,
-                  skipped: Mapping[str, str], n_experiments: int, n_read: int,
-                  parts_skipped: Sequence[PartSkipped] = (),
-                  checks: Sequence[Check] = (), notices: Sequence[Notice] = (),
-                  identification: Mapping[str, Any] | None,
-                  identification_headline: str = "",
-                  plant_source: str, plant_identified: bool,
-                  budget: Any | None, design: Mapping[str, Any] | None,
-                  plant_missing: str = "", disturbance_missing: str = "",
-                  validation: Any | None = None, validation_skipped: str = "",
-                  simulated_bench: str = "",
-                  montecarlo: Mapping[str, Any] | None = None) -> Summary:
-    """The verdict of a study.
+@dataclass(frozen=True, eq=False)
+class StudyEvidence:
+    """What the study's stages found: the verdict's one input beside the requirements.
 
-    Parameters
+    Attributes
     ----------
     source : str
         Where the data came from, in words.
     is_twin : bool
-    spec : Specification
     skipped : mapping
         Experiment → why it was not used.
     parts_skipped : sequence of PartSkipped
@@ -528,6 +527,48 @@ def build_summary(*, source: str, is_twin: bool, spec: Specification,
         ``montecarlo.json``'s content: a requirement broken by ≥ 5 % of its draws is
         named in the robustness row (or in the findings without one).
     """
+
+    source: str
+    is_twin: bool
+    skipped: Mapping[str, str]
+    n_experiments: int
+    n_read: int
+    identification: Mapping[str, Any] | None
+    plant_source: str
+    plant_identified: bool
+    budget: Any | None
+    design: Mapping[str, Any] | None
+    parts_skipped: Sequence[PartSkipped] = ()
+    checks: Sequence[Check] = ()
+    notices: Sequence[Notice] = ()
+    identification_headline: str = ""
+    plant_missing: str = ""
+    disturbance_missing: str = ""
+    validation: Any | None = None
+    validation_skipped: str = ""
+    simulated_bench: str = ""
+    montecarlo: Mapping[str, Any] | None = None
+
+
+def build_summary(evidence: StudyEvidence, *, spec: Specification) -> Summary:
+    """The verdict of a study on its evidence, against ``spec``'s requirements.
+
+    Parameters
+    ----------
+    evidence : StudyEvidence
+        What the stages found.
+    spec : Specification
+        The requirements.
+    """
+    e = evidence
+    source, is_twin, skipped, parts_skipped = e.source, e.is_twin, e.skipped, e.parts_skipped
+    n_experiments, n_read, checks, notices = e.n_experiments, e.n_read, e.checks, e.notices
+    identification, identification_headline = e.identification, e.identification_headline
+    plant_source, plant_identified = e.plant_source, e.plant_identified
+    budget, design, plant_missing = e.budget, e.design, e.plant_missing
+    disturbance_missing, validation = e.disturbance_missing, e.validation
+    validation_skipped, simulated_bench, montecarlo = (e.validation_skipped,
+                                                       e.simulated_bench, e.montecarlo)
     reqs: list[Requirement] = []
     stages: list[StageLine] = []
     findings: list[str] = []
