@@ -25,6 +25,7 @@ from pathlib import Path
 from typing import Any
 
 from fsmbench import __version__
+from fsmbench.bench.blocks import PlantModel
 from fsmbench.bench.params import Bench, default_bench
 from fsmbench.entry import callable_module
 from fsmbench.ident.pipeline import Identification, IdentifyOptions
@@ -45,7 +46,11 @@ from fsmbench.report.summary import (
 from fsmbench.report.verdict import verdict_html
 from fsmbench.stages import (
     IDENT_EXPERIMENTS,
+    BudgetStage,
+    DesignStage,
+    PlantChoice,
     SimulationBench,
+    ValidationStage,
     budget_stage,
     choose_plant,
     design_stage,
@@ -93,8 +98,8 @@ class StudyResult:
     timings_s: dict[str, float] = field(default_factory=dict)
     figures: tuple[str, ...] = ()
     sections: tuple[Section, ...] = field(default=(), repr=False, compare=False)
-    design: Any = field(default=None, repr=False, compare=False)
-    plant: Any = field(default=None, repr=False, compare=False)
+    design: DesignStage | None = field(default=None, repr=False, compare=False)
+    plant: PlantModel | None = field(default=None, repr=False, compare=False)
 
     def to_json(self) -> dict[str, Any]:
         """``study.json``: what ran, relative paths, no timings (they are in timings.json)."""
@@ -216,6 +221,189 @@ def _sections(*, bench: Bench, loaded: RecordingSet, source: str, is_twin: bool,
     return [replace(s, anchor=a) for s, a in zip(sections, _ANCHORS, strict=True)]
 
 
+@dataclass(eq=False)
+class _StudyRun:
+    """One study as its stages run: where it writes, what each stage did, their times.
+
+    Mutable on purpose: the stages' accumulator, private to one :func:`run_study`.
+    """
+
+    out: Path
+    say: Progress
+    stages: list[StageStatus] = field(default_factory=list)
+    timings: dict[str, float] = field(default_factory=dict)
+    clock: float = field(default_factory=time.perf_counter)
+
+    def lap(self, name: str) -> None:
+        """The wall time since the last lap, as stage ``name``'s [s]."""
+        now = time.perf_counter()
+        self.timings[name] = round(now - self.clock, 3)
+        self.clock = now
+
+
+@dataclass(frozen=True, eq=False)
+class _Recorded:
+    """The recordings the study analyses and where they came from."""
+
+    data: Path
+    source: str
+    is_twin: bool
+    loaded: RecordingSet
+    truth: Mapping[str, Any] | None
+
+
+@dataclass(frozen=True, eq=False)
+class _Identified:
+    """Section 2's outcome: the identification (None: not run), the bench as the records
+    describe it, the plant the later stages use, the bench the predictions simulate."""
+
+    ident: Identification | None
+    bench: Bench
+    plant: PlantChoice
+    identified: SimulationBench
+    simulated: SimulationBench
+
+
+def _recordings_step(run: _StudyRun, *, data: Path | None, bench: Bench, seed: int,
+                     duration_s: float | None) -> _Recorded:
+    """The twin's records simulated and written (no ``data``), then every record read."""
+    is_twin = data is None
+    if data is None:
+        from fsmbench.twin.simulate import simulate_bench, write_twin
+
+        run.say("simulating the bench with the digital twin")
+        simulated = simulate_bench(bench, seed=seed, duration_s=duration_s, progress=run.say)
+        data = run.out / "twin-data"
+        run.say(f"writing the twin's records to {data}")
+        written = write_twin(simulated, data)
+        run.stages.append(StageStatus("simulate", True, outputs=tuple(str(p) for p in written)))
+        source = f"digital twin, random seed {seed}"
+        run.lap("simulate")
+    else:
+        source = f"recorded data in {data}"
+    conv = bench.nominal.converter
+    # The records' rate is judged against each other and then the bench file, by the
+    # identification (ident.evidence.rate): the loader does not hold t to the bench file.
+    loaded = load_recordings(data, progress=run.say, fs_hz=None, adc_range_v=conv.range_v,
+                             adc_bits=conv.bits)
+    run.stages.append(StageStatus("recordings", True, outputs=tuple(loaded.recordings)))
+    truth = read_twin_truth(data / "twin_truth.json")
+    run.lap("recordings")
+    return _Recorded(data, source, is_twin, loaded, truth)
+
+
+def _identification_step(run: _StudyRun, rec: _Recorded, *, bench: Bench,
+                         options: IdentifyOptions | None) -> _Identified:
+    """Section 2 when its experiments are there; the plant and the benches that follow."""
+    recordings = rec.loaded.recordings
+    ident = None
+    if any(n in recordings for n in IDENT_EXPERIMENTS):
+        run.say("identification (ESRF study section 2)")
+        stage = identify_stage(recordings, bench=bench, out_dir=run.out, source=rec.source,
+                               progress=run.say, options=options,
+                               unusable=rec.loaded.unusable())
+        ident = stage.result
+        run.stages.append(StageStatus(
+            "identify", True, outputs=tuple(str(p) for p in stage.files),
+            reason="; ".join(f"{k}: {v}" for k, v in ident.skipped.items())))
+    else:
+        run.stages.append(StageStatus("identify", False, reason="none of " + ", ".join(
+            IDENT_EXPERIMENTS) + " present"))
+    if ident is not None and ident.params is not None and ident.params != bench.nominal:
+        # The bench as the records describe its structure (their rate, its signs): every
+        # later stage models and simulates it so (ident.evidence).
+        bench = replace(bench, nominal=ident.params)
+    plant = choose_plant(recordings, bench=bench, identification=ident, progress=run.say)
+    run.say(f"plant for the budget and the design: {plant.source}")
+    run.lap("identify")
+    # Every prediction runs on the bench the recordings came from: the packaged twin for
+    # twin data, the bench identified from them otherwise (never the packaged one).
+    identified = simulation_bench(bench=bench, is_twin=False,
+                                  identification_dir=run.out if ident is not None else None,
+                                  identification=ident,
+                                  label=("the bench identified from the twin's records"
+                                         if rec.is_twin else
+                                         f"the bench identified from the recordings in "
+                                         f"{rec.data}"))
+    simulated = SimulationBench(bench) if rec.is_twin else identified
+    return _Identified(ident, bench, plant, identified, simulated)
+
+
+def _later_stages(run: _StudyRun, rec: _Recorded, found: _Identified, *,
+                  seed: int) -> tuple[DesignStage, BudgetStage, ValidationStage]:
+    """Sections 5-10 (design), 3, 4, 11 (budget, with fsmbench's controller the design
+    recommends) and the model's check on the recorded loop."""
+    recordings, bench, plant = rec.loaded.recordings, found.bench, found.plant
+    design = design_stage(bench=bench, out_dir=run.out, plant=plant, seed=seed,
+                          progress=run.say, simulated=found.simulated)
+    run.stages.append(StageStatus("design", True, outputs=tuple(str(p) for p in design.files),
+                                  reason=design.skipped))
+    run.lap("design")
+    run.say("noise and error budget, huddle tests, repeatability (ESRF study sections 3, 4, "
+            "11)")
+    # The recorded loop's budget (the seed's controller ran in the huddle tests) and the
+    # one the verdict recommends (fsmbench's), side by side.
+    budgeted = budget_stage(recordings, bench=bench, out_dir=run.out, plant=plant,
+                            progress=run.say,
+                            recommended=design.result.controllers["fsmbench_controller"])
+    run.stages.append(StageStatus(
+        "budget", True, outputs=tuple(str(p) for p in budgeted.files),
+        reason="; ".join(f"{k}: {v}" for k, v in budgeted.result.skipped.items())))
+    run.lap("budget")
+    identified = found.identified
+    validation = validation_stage(
+        recordings, bench=bench, simulated=identified.bench,
+        plant=None if identified.bench is None else plant.plant, out_dir=run.out, seed=seed,
+        progress=run.say, loop=recorded_loop(found.ident, bench=bench))
+    run.stages.append(StageStatus("validation", validation.result is not None,
+                                  outputs=tuple(str(p) for p in validation.files),
+                                  reason=validation.skipped or identified.reason))
+    run.lap("validation")
+    return design, budgeted, validation
+
+
+def _evidence(rec: _Recorded, found: _Identified, *, design: DesignStage,
+              budget: BudgetStage, validation: ValidationStage,
+              montecarlo: Mapping[str, Any] | None) -> StudyEvidence:
+    """What the stages found, for the verdict."""
+    loaded, ident, plant, bench = rec.loaded, found.ident, found.plant, found.bench
+    # A check can be run by several stages on the same record: list each verdict once.
+    checks = list(dict.fromkeys([*loaded.checks, *(ident.checks if ident is not None else ()),
+                                 *budget.result.checks, *design.result.checks,
+                                 *(() if validation.result is None
+                                   else (validation.result.check,))]))
+    notices = list(dict.fromkeys([*loaded.notices,
+                                  *(ident.notices if ident is not None else ()),
+                                  *budget.result.notices]))
+    # What a stage left out of a record it had (a record the loader skipped, or one that
+    # is simply absent, is already in loaded.skipped; a part refused by a check is in the
+    # failed checks).
+    parts = [PartSkipped(stage, part, why)
+             for stage, skips in (("identification", ident.skipped if ident else {}),
+                                  ("budget", budget.result.skipped))
+             for part, why in skips.items()
+             if part not in loaded.skipped
+             and not why.startswith(("not in the recordings", "missing", "check "))]
+    simulated = found.simulated
+    return StudyEvidence(
+        source=rec.source, is_twin=rec.is_twin, skipped=loaded.skipped, parts_skipped=parts,
+        n_experiments=len(EXPERIMENTS), n_read=len(loaded.recordings), checks=checks,
+        notices=notices,
+        identification=None if ident is None else {
+            "ran": True, "warnings": list(ident.warnings), "skipped": dict(ident.skipped)},
+        identification_headline=("" if ident is None
+                                 else _identification_headline(ident, rec.truth, bench)),
+        plant_source=plant.source,
+        plant_identified=(plant.identification is not None
+                          and plant.source.startswith("identified")),
+        plant_missing=_loop_blocks_missing(plant.identification),
+        disturbance_missing=_disturbance_blocks_missing(plant.identification),
+        budget=budget.result, design=design.payload, validation=validation.result,
+        validation_skipped=validation.skipped or found.identified.reason,
+        simulated_bench="" if simulated.bench is None else simulated.bench.label,
+        montecarlo=montecarlo)
+
+
 def run_study(*, out_dir: str | Path, data_dir: str | Path | None = None,
               bench: Bench | None = None, seed: int = 0, duration_s: float | None = None,
               progress: Progress | None = None, figures: Sequence[str] = (),
@@ -250,7 +438,6 @@ def run_study(*, out_dir: str | Path, data_dir: str | Path | None = None,
         chapter 11 lists its draws that break a requirement, and the robustness row names
         a requirement ≥ 5 % of them break.
     """
-    say = progress or (lambda _msg: None)
     bench = default_bench() if bench is None else bench
     spec = Specification() if spec is None else spec
     bad = [f for f in figures if f not in FIGURE_FORMATS]
@@ -262,144 +449,29 @@ def run_study(*, out_dir: str | Path, data_dir: str | Path | None = None,
     if data is not None and not data.is_dir():
         raise FileNotFoundError(f"data folder {data} does not exist")
     out.mkdir(parents=True, exist_ok=True)
-    stages: list[StageStatus] = []
-    timings: dict[str, float] = {}
-    clock = time.perf_counter()
+    run = _StudyRun(out, progress or (lambda _msg: None))
+    rec = _recordings_step(run, data=data, bench=bench, seed=seed, duration_s=duration_s)
+    found = _identification_step(run, rec, bench=bench, options=identify_options)
+    design, budget, validation = _later_stages(run, rec, found, seed=seed)
+    summary = build_summary(_evidence(rec, found, design=design, budget=budget,
+                                      validation=validation, montecarlo=montecarlo), spec=spec)
+    return _write_outputs(run, rec, found, summary=summary, design=design,
+                          budget=budget, validation=validation, figures=figures,
+                          montecarlo=montecarlo)
 
-    def lap(name: str) -> None:
-        nonlocal clock
-        now = time.perf_counter()
-        timings[name] = round(now - clock, 3)
-        clock = now
 
-    is_twin = data is None
-    if data is None:
-        from fsmbench.twin.simulate import simulate_bench, write_twin
-
-        say("simulating the bench with the digital twin")
-        run = simulate_bench(bench, seed=seed, duration_s=duration_s, progress=say)
-        data = out / "twin-data"
-        say(f"writing the twin's records to {data}")
-        written = write_twin(run, data)
-        stages.append(StageStatus("simulate", True, outputs=tuple(str(p) for p in written)))
-        source = f"digital twin, random seed {seed}"
-        lap("simulate")
-    else:
-        source = f"recorded data in {data}"
-
-    conv = bench.nominal.converter
-    # The records' rate is judged against each other and then the bench file, by the
-    # identification (ident.evidence.rate): the loader does not hold t to the bench file.
-    loaded = load_recordings(data, progress=say, fs_hz=None, adc_range_v=conv.range_v,
-                             adc_bits=conv.bits)
-    recordings = loaded.recordings
-    stages.append(StageStatus("recordings", True, outputs=tuple(recordings)))
-    truth = read_twin_truth(data / "twin_truth.json")
-    lap("recordings")
-
-    ident = None
-    if any(n in recordings for n in IDENT_EXPERIMENTS):
-        say("identification (ESRF study section 2)")
-        identified_stage = identify_stage(recordings, bench=bench, out_dir=out, source=source,
-                                          progress=say, options=identify_options,
-                                          unusable=loaded.unusable())
-        ident = identified_stage.result
-        stages.append(StageStatus(
-            "identify", True, outputs=tuple(str(p) for p in identified_stage.files),
-            reason="; ".join(f"{k}: {v}" for k, v in ident.skipped.items())))
-    else:
-        stages.append(StageStatus("identify", False,
-                                  reason="none of " + ", ".join(IDENT_EXPERIMENTS) + " present"))
-    if ident is not None and ident.params is not None and ident.params != bench.nominal:
-        # The bench as the records describe its structure (their rate, its signs): every
-        # later stage models and simulates it so (ident.evidence).
-        bench = replace(bench, nominal=ident.params)
-    plant = choose_plant(recordings, bench=bench, identification=ident, progress=say)
-    say(f"plant for the budget and the design: {plant.source}")
-    lap("identify")
-
-    # Every prediction runs on the bench the recordings came from: the packaged twin for
-    # twin data, the bench identified from them otherwise (never the packaged one).
-    identified = simulation_bench(bench=bench, is_twin=False,
-                                  identification_dir=out if ident is not None else None,
-                                  identification=ident,
-                                  label=("the bench identified from the twin's records"
-                                         if is_twin else
-                                         f"the bench identified from the recordings in {data}"))
-    simulated = SimulationBench(bench) if is_twin else identified
-    design = design_stage(bench=bench, out_dir=out, plant=plant, seed=seed, progress=say,
-                          simulated=simulated)
-    stages.append(StageStatus("design", True, outputs=tuple(str(p) for p in design.files),
-                              reason=design.skipped))
-    lap("design")
-
-    say("noise and error budget, huddle tests, repeatability (ESRF study sections 3, 4, 11)")
-    # The recorded loop's budget (the seed's controller ran in the huddle tests) and the
-    # one the verdict recommends (fsmbench's), side by side.
-    budgeted = budget_stage(recordings, bench=bench, out_dir=out, plant=plant, progress=say,
-                            recommended=design.result.controllers["fsmbench_controller"])
-    budget = budgeted.result
-    stages.append(StageStatus("budget", True, outputs=tuple(str(p) for p in budgeted.files),
-                              reason="; ".join(f"{k}: {v}" for k, v in budget.skipped.items())))
-    lap("budget")
-
-    validation = validation_stage(
-        recordings, bench=bench, simulated=identified.bench,
-        plant=None if identified.bench is None else plant.plant, out_dir=out, seed=seed,
-        progress=say, loop=recorded_loop(ident, bench=bench))
-    stages.append(StageStatus("validation", validation.result is not None,
-                              outputs=tuple(str(p) for p in validation.files),
-                              reason=validation.skipped or identified.reason))
-    lap("validation")
-
+def _write_outputs(run: _StudyRun, rec: _Recorded, found: _Identified, *, summary: Summary,
+                   design: DesignStage, budget: BudgetStage, validation: ValidationStage,
+                   figures: Sequence[str],
+                   montecarlo: Mapping[str, Any] | None) -> StudyResult:
+    """The report, summary.json, the figures asked for, study.json and timings.json."""
+    out, say, source = run.out, run.say, rec.source
     say("writing the report")
-    # A check can be run by several stages on the same record: list each verdict once.
-    checks = list(dict.fromkeys([*loaded.checks, *(ident.checks if ident is not None else ()),
-                                 *budget.checks, *design.result.checks,
-                                 *(() if validation.result is None
-                                   else (validation.result.check,))]))
-    notices = list(dict.fromkeys([*loaded.notices,
-                                  *(ident.notices if ident is not None else ()),
-                                  *budget.notices]))
-    # What a stage left out of a record it had (a record the loader skipped, or one that
-    # is simply absent, is already in loaded.skipped; a part refused by a check is in the
-    # failed checks).
-    parts = [PartSkipped(stage, part, why)
-             for stage, skips in (("identification", ident.skipped if ident else {}),
-                                  ("budget", budget.skipped))
-             for part, why in skips.items()
-             if part not in loaded.skipped
-             and not why.startswith(("not in the recordings", "missing", "check "))]
-    summary = build_summary(
-        StudyEvidence(
-            source=source,
-            is_twin=is_twin,
-            skipped=loaded.skipped,
-            parts_skipped=parts,
-            n_experiments=len(EXPERIMENTS),
-            n_read=len(recordings),
-            checks=checks,
-            notices=notices,
-            identification=None if ident is None else {
-                "ran": True, "warnings": list(ident.warnings), "skipped": dict(ident.skipped)},
-            identification_headline=("" if ident is None
-                                     else _identification_headline(ident, truth, bench)),
-            plant_source=plant.source,
-            plant_identified=(plant.identification is not None
-                              and plant.source.startswith("identified")),
-            plant_missing=_loop_blocks_missing(plant.identification),
-            disturbance_missing=_disturbance_blocks_missing(plant.identification),
-            budget=budget,
-            design=design.payload,
-            validation=validation.result,
-            validation_skipped=validation.skipped or identified.reason,
-            simulated_bench="" if simulated.bench is None else simulated.bench.label,
-            montecarlo=montecarlo),
-        spec=spec)
-    sections = _sections(bench=bench, loaded=loaded, source=source, is_twin=is_twin,
-                         ident=ident, truth=truth, budget=budget, design=design,
-                         plant_source=plant.source, validation=validation.result,
-                         validation_skipped=validation.skipped or identified.reason,
+    sections = _sections(bench=found.bench, loaded=rec.loaded, source=source,
+                         is_twin=rec.is_twin, ident=found.ident, truth=rec.truth,
+                         budget=budget.result, design=design, plant_source=found.plant.source,
+                         validation=validation.result,
+                         validation_skipped=validation.skipped or found.identified.reason,
                          montecarlo=montecarlo)
     summary_json = summary.to_json()
     report_path = write_report(
@@ -410,25 +482,25 @@ def run_study(*, out_dir: str | Path, data_dir: str | Path | None = None,
               "figures and tables are cited as (ESRF study 2.1), (ESRF study Fig. 8).",))
     atomic_write_text(out / "summary.json",
                       json.dumps(summary_json, indent=2, allow_nan=False) + "\n")
-    lap("report")
+    run.lap("report")
     exported: list[Path] = []
     if figures:
         from fsmbench.report.figures.static import export_figures
 
         say(f"writing every figure as {', '.join(figures)} to {out / 'figures'}")
         exported = export_figures(iter_figures(sections), out / "figures", formats=figures)
-        lap("figures")
+        run.lap("figures")
     say("report written")
-    result = StudyResult(out_dir=str(out), data_dir=str(data), source=source,
-                         report=str(report_path), stages=tuple(stages),
-                         experiments=tuple(recordings),
-                         skipped_experiments=dict(loaded.skipped), summary=summary,
-                         timings_s=timings, figures=tuple(str(p) for p in exported),
-                         sections=tuple(sections), design=design, plant=plant.plant)
+    result = StudyResult(out_dir=str(out), data_dir=str(rec.data), source=source,
+                         report=str(report_path), stages=tuple(run.stages),
+                         experiments=tuple(rec.loaded.recordings),
+                         skipped_experiments=dict(rec.loaded.skipped), summary=summary,
+                         timings_s=run.timings, figures=tuple(str(p) for p in exported),
+                         sections=tuple(sections), design=design, plant=found.plant.plant)
     atomic_write_text(out / "study.json", json.dumps(plain_json(result.to_json()), indent=2)
                       + "\n")
     atomic_write_text(out / "timings.json", json.dumps(
-        {"format": "fsmbench.timings", "format_version": 1, "seconds": timings}, indent=2)
+        {"format": "fsmbench.timings", "format_version": 1, "seconds": run.timings}, indent=2)
         + "\n")
     return result
 
