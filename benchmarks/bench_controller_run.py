@@ -17,7 +17,7 @@ import numpy as np
 from scipy import signal
 
 from fsmbench.budget.huddle import _run_controller
-from fsmbench.control.seed import seed_decentralised_controller, tustin
+from fsmbench.control.esrf import esrf_decentralised_controller, tustin
 from timing import timed_runs
 
 
@@ -27,7 +27,7 @@ def main() -> None:
     parser.add_argument("--samples", type=int, default=1_000_000)
     parser.add_argument("--repeats", type=int, default=5)
     args = parser.parse_args()
-    k = tustin(seed_decentralised_controller())
+    k = tustin(esrf_decentralised_controller())
     r = 1e-6 * np.random.default_rng(0).standard_normal((2, args.samples))
     ours_s, _ = timed_runs(lambda: _run_controller(k, r), args.repeats)
     system = (np.asarray(k.A), np.asarray(k.B), np.asarray(k.C), np.asarray(k.D), float(k.dt))

@@ -39,7 +39,7 @@ from fsmbench.bench.blocks import replace_params
 from fsmbench.bench.params import Bench, default_bench, real_bench
 from fsmbench.ident.delay.sampled import SensorLowpass, mode_sum, sampled_response, series
 from fsmbench.ident.frf.experiment import experiment_frf
-from fsmbench.ident.pipeline import SEED_TRIMS_S
+from fsmbench.ident.pipeline import ESRF_TRIMS_S
 from fsmbench.ident.sercalo import fit_sercalo
 from fsmbench.twin import simulate_bench
 from timing import timed_runs
@@ -103,7 +103,7 @@ def accuracy(seeds: int) -> None:
             run = simulate_bench(bench, seed=seed, duration_s=10.0,
                                  experiments=["data_uch", "data_ucv"])
             frf = experiment_frf(run.recordings, columns=[("data_uch", "Uch"), ("data_ucv", "Ucv")],
-                                 trims_s=SEED_TRIMS_S)
+                                 trims_s=ESRF_TRIMS_S)
             target = run.truth["delay_s"]["sercalo"] + lag
             sid = fit_sercalo(frf, gi_a_per_v={"h": 0.01, "v": 0.01},
                               sensor=SensorLowpass.from_params(bench.nominal))

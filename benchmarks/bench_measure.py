@@ -93,7 +93,7 @@ from fsmbench.ident.pipeline import IdentifyOptions, identify
 from fsmbench.sim.discretize import DiscretePlant
 from fsmbench.sim.plant import twin_discrete
 from fsmbench.twin.compare import comparison_rows
-from fsmbench.twin.experiments import UC_NOISE_RMS_V, played_experiment, seed_experiments
+from fsmbench.twin.experiments import UC_NOISE_RMS_V, esrf_experiments, played_experiment
 from fsmbench.twin.simulate import simulate_bench, simulate_experiment
 
 CAL = ["data_cal_pd_h", "data_cal_pd_v"]
@@ -247,8 +247,8 @@ def main(argv: Sequence[str] | None = None) -> None:
     plant = twin_discrete(bench.true)
     cache: Cache = {}
     lengths = sorted(args.lengths)
-    min_record = next(s for s in seed_experiments() if s.name == "data_uch").min_duration_s()
-    start_s = next(s for s in seed_experiments()
+    min_record = next(s for s in esrf_experiments() if s.name == "data_uch").min_duration_s()
+    start_s = next(s for s in esrf_experiments()
                    if s.name == "data_uch").excitations[0].start_s
     if lengths[0] + start_s < min_record:
         parser.error(f"--lengths: {lengths[0]:g} s is shorter than data_uch's minimum of "

@@ -30,7 +30,7 @@ import numpy as np
 import scipy.signal as sig
 
 from fsmbench.bench.params import default_bench
-from fsmbench.control.seed import seed_decentralised_controller
+from fsmbench.control.esrf import esrf_decentralised_controller
 from fsmbench.sim.controller import feedback_controller
 from fsmbench.sim.engine import Quantiser, run_loop, run_loop_python
 from fsmbench.sim.plant import ADC_CHANNELS, twin_discrete
@@ -90,7 +90,7 @@ def main() -> None:
     print(f"   max relative difference vs forced_response: {err:.1e}")
 
     # 2. closed loop with quantisation
-    ctrl = feedback_controller(seed_decentralised_controller(),
+    ctrl = feedback_controller(esrf_decentralised_controller(),
                                gd_v_per_rad=bench.nominal.quad_diode.gain_v_per_rad,
                                ts_s=plant.ts_s)
     noise = 1e-3 * rng.standard_normal((n, n_adc))
@@ -110,10 +110,10 @@ def main() -> None:
 
     # 3. the full experiment set
     if not args.skip_full:
-        from fsmbench.twin.experiments import seed_experiments
+        from fsmbench.twin.experiments import esrf_experiments
         from fsmbench.twin.simulate import simulate_bench
 
-        total_s = sum(s.duration_s for s in seed_experiments())
+        total_s = sum(s.duration_s for s in esrf_experiments())
         t_full = median_time(lambda: simulate_bench(bench, seed=0), max(1, args.repeats // 2))
         print(f"3. all 13 experiments, {total_s:g} s of records "
               f"({total_s * bench.true.converter.fs_hz / 1e6:.1f} M samples)")

@@ -72,7 +72,7 @@ from fsmbench.bench.params import Bench, default_bench, real_bench
 from fsmbench.excite.design import design_multisine
 from fsmbench.ident.pipeline import Identification, IdentifyOptions, identify
 from fsmbench.sim.plant import twin_discrete
-from fsmbench.twin.experiments import played_experiment, seed_experiments
+from fsmbench.twin.experiments import esrf_experiments, played_experiment
 from fsmbench.twin.simulate import simulate_experiment
 from fsmbench.twin.truth import twin_truth
 
@@ -125,7 +125,7 @@ def _truth(bench: Bench, seed: int, specs: Sequence[Any],
 def noise_records(bench: Bench, seed: int) -> tuple[dict[str, xr.Dataset], dict[str, Any]]:
     """The twin's calibration and noise records of one seed (one core), and its truth."""
     plant = twin_discrete(bench.true)
-    specs = [s for s in seed_experiments() if s.name in (*CAL, *NOISE)]
+    specs = [s for s in esrf_experiments() if s.name in (*CAL, *NOISE)]
     results = {s.name: simulate_experiment(bench, s, seed=seed, plant=plant) for s in specs}
     truth = _truth(bench, seed, specs, {k: r.realized for k, r in results.items()})
     return {k: r.recording for k, r in results.items()}, truth

@@ -21,7 +21,7 @@ import matplotlib
 import numpy as np
 
 import fsmbench
-from fsmbench.control import seed_decentralised_controller
+from fsmbench.control import esrf_decentralised_controller
 
 matplotlib.use("Agg")  # files only, no display
 import matplotlib.pyplot as plt
@@ -31,7 +31,7 @@ TS_S = 1e-4  # the bench's sample time [s]
 
 def main(out: Path) -> None:
     plant = fsmbench.physical_plant(parameters="true")    # the twin's truth
-    k = seed_decentralised_controller()                   # ESRF study 9.2: Rh, Rv -> Uch, Ucv
+    k = esrf_decentralised_controller()                   # ESRF study 9.2: Rh, Rv -> Uch, Ucv
 
     print("Uch -> Rh: states of the minimal model")
     for order in (2, 6):

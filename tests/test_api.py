@@ -17,8 +17,8 @@ import fsmbench
 import fsmbench.api
 from fsmbench.bench.blocks import PlantModel, ss_response
 from fsmbench.bench.realization import minimal_realization, plant_model, select
+from fsmbench.control.esrf import esrf_decentralised_controller, tustin
 from fsmbench.control.feedback import LoopMargins
-from fsmbench.control.seed import seed_decentralised_controller, tustin
 
 API = ("load_bench", "physical_plant", "simulate", "load_recordings", "identify", "budget",
        "design", "study", "loop_gain", "sensitivity", "complementary", "margins")
@@ -245,7 +245,7 @@ def controllers(true_plant: PlantModel) -> dict[str, ct.StateSpace]:
     """The ESRF study's controller (9.2) and fsmbench's, designed through the API on the
     twin's plant; continuous and as the report discretises them (Tustin at 1e-4 s)."""
     fsm = fsmbench.design(true_plant).result.controllers["fsmbench_controller"]
-    seed = seed_decentralised_controller()
+    seed = esrf_decentralised_controller()
     return {"seed": seed, "fsmbench": fsm, "seed_d": tustin(seed, ts_s=TS_S),
             "fsmbench_d": tustin(fsm, ts_s=TS_S)}
 
@@ -371,7 +371,7 @@ def test_sensitivity_plus_complementary_on_the_twin(true_plant: PlantModel,
 
 
 def test_a_loop_needs_matching_kinds(true_plant: PlantModel) -> None:
-    k = seed_decentralised_controller()
+    k = esrf_decentralised_controller()
     g = true_plant.to_control(outputs=["Rh", "Rv"], inputs=["Uch", "Ucv"])
     with pytest.raises(ValueError, match="both be continuous or both"):
         fsmbench.loop_gain(g, tustin(k, ts_s=TS_S))

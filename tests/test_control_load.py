@@ -12,6 +12,7 @@ import pytest
 from fsmbench.bench.blocks import PlantModel, ss_response
 from fsmbench.bench.params import Bench
 from fsmbench.control.design import AxisShape, DesignOptions
+from fsmbench.control.esrf import esrf_decentralised_controller, newport_controller
 from fsmbench.control.export import (
     DEFAULT_DISCRETISATION,
     InputScaling,
@@ -25,7 +26,6 @@ from fsmbench.control.load import (
     load_controllers,
     select_controller,
 )
-from fsmbench.control.seed import newport_controller, seed_decentralised_controller
 from fsmbench.control.study import (
     CONTROLLERS_MAT,
     CONTROLLERS_SOS_JSON,
@@ -53,7 +53,7 @@ def _fsm_like() -> ct.StateSpace:
 
 
 CONTROLLERS = {
-    "seed_controller": seed_decentralised_controller(),
+    "seed_controller": esrf_decentralised_controller(),
     "newport_controller": newport_controller(gn0_rad_per_v=(5.3e-3, 5.2e-3)),
     "fsmbench_controller": _fsm_like(),
     "static_gain": ct.ss([], [], [], [[-2.0, 0.0], [0.0, 3.0]], inputs=["Rh", "Rv"],

@@ -521,9 +521,9 @@ def loop_gain(plant: PlantModel | ct.StateSpace | ct.TransferFunction,
     Examples
     --------
     >>> import control as ct, fsmbench
-    >>> from fsmbench.control import seed_decentralised_controller
+    >>> from fsmbench.control import esrf_decentralised_controller
     >>> plant = fsmbench.physical_plant(parameters="true")
-    >>> k = seed_decentralised_controller()                 # ESRF study 9.2
+    >>> k = esrf_decentralised_controller()                 # ESRF study 9.2
     >>> L = fsmbench.loop_gain(plant, k)
     >>> L.input_labels, L.nstates                         # 18 plant + 8 controller
     (['Rh', 'Rv'], 26)
@@ -547,9 +547,9 @@ def sensitivity(plant: PlantModel | ct.StateSpace | ct.TransferFunction,
     Examples
     --------
     >>> import numpy as np, fsmbench
-    >>> from fsmbench.control import seed_decentralised_controller
+    >>> from fsmbench.control import esrf_decentralised_controller
     >>> plant = fsmbench.physical_plant(parameters="true")
-    >>> k = seed_decentralised_controller()
+    >>> k = esrf_decentralised_controller()
     >>> S = fsmbench.sensitivity(plant, k)
     >>> bool(abs(S(2j * np.pi * 1.0)[0, 0]) < 3e-3)      # 1 Hz rejected 300-fold
     True
@@ -568,9 +568,9 @@ def complementary(plant: PlantModel | ct.StateSpace | ct.TransferFunction,
     Examples
     --------
     >>> import numpy as np, fsmbench
-    >>> from fsmbench.control import seed_decentralised_controller
+    >>> from fsmbench.control import esrf_decentralised_controller
     >>> plant = fsmbench.physical_plant(parameters="true")
-    >>> k = seed_decentralised_controller()
+    >>> k = esrf_decentralised_controller()
     >>> S, T = fsmbench.sensitivity(plant, k), fsmbench.complementary(plant, k)
     >>> s = 2j * np.pi * np.array([1.0, 30.0, 300.0])
     >>> bool(np.allclose(S(s) + T(s), np.eye(2)[:, :, None]))
@@ -612,9 +612,9 @@ def margins(plant: PlantModel | ct.StateSpace | ct.TransferFunction,
     Examples
     --------
     >>> import control as ct, fsmbench
-    >>> from fsmbench.control import seed_decentralised_controller
+    >>> from fsmbench.control import esrf_decentralised_controller
     >>> plant = fsmbench.physical_plant(parameters="true")
-    >>> k = seed_decentralised_controller()
+    >>> k = esrf_decentralised_controller()
     >>> m = fsmbench.margins(plant, k, channel="Rh")
     >>> round(m.gain_margin_db, 1), round(m.phase_margin_deg, 1), round(m.crossover_hz, 1)
     (25.5, 28.6, 27.1)

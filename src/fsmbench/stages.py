@@ -38,7 +38,7 @@ from fsmbench.bench.blocks import PlantModel, physical_plant
 from fsmbench.bench.params import Bench
 from fsmbench.budget.result import BudgetResult
 from fsmbench.budget.study import budget_study
-from fsmbench.control.seed import seed_decentralised_controller, tustin
+from fsmbench.control.esrf import esrf_decentralised_controller, tustin
 from fsmbench.control.study import DesignResult, design_study
 from fsmbench.control.validation import ClosedLoopValidation, validate_closed_loop
 from fsmbench.ident.pipeline import (
@@ -290,7 +290,7 @@ def _recorded_seed_controller(plant: PlantModel, *, bench: Bench,
         return None
     scale = (np.diag(np.asarray(plant.blocks["Gd"].D, dtype=float))
              / np.asarray(loop.gd_used_v_per_rad, dtype=float))
-    k = tustin(seed_decentralised_controller(), ts_s=bench.nominal.converter.ts_s)
+    k = tustin(esrf_decentralised_controller(), ts_s=bench.nominal.converter.ts_s)
     return ct.ss(k.A, k.B @ np.diag(scale), k.C, np.asarray(k.D) @ np.diag(scale), k.dt,
                  inputs=["Rh", "Rv"], outputs=["Uch", "Ucv"], name="Krecorded")
 
@@ -438,7 +438,7 @@ def validation_stage(recordings: Mapping[str, xr.Dataset], *, bench: Bench,
         t = recordings[name]["t"].values
         duration = float(t[-1] - t[0]) + 1.0 / bench.nominal.converter.fs_hz
         # The recorded loop ran the seed's controller on the 4QD gains it divided by.
-        controller = feedback_controller(seed_decentralised_controller(),
+        controller = feedback_controller(esrf_decentralised_controller(),
                                          gd_v_per_rad=PerAxis(h=used[0], v=used[1]),
                                          ts_s=simulated.true.converter.ts_s, name="seed K (9.2)")
         try:
@@ -454,7 +454,7 @@ def validation_stage(recordings: Mapping[str, xr.Dataset], *, bench: Bench,
                 "records show); the records cannot tell which, and the model's check on "
                 "the closed loop is not made"))
         runs[name] = run.recordings[name]
-    k = tustin(seed_decentralised_controller(), ts_s=bench.nominal.converter.ts_s)
+    k = tustin(esrf_decentralised_controller(), ts_s=bench.nominal.converter.ts_s)
     try:
         result = validate_closed_loop(recordings, simulated=runs, plant=plant,
                                       params=simulated.true, controller=k,

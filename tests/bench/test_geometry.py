@@ -14,10 +14,10 @@ from fsmbench.bench.geometry import (
     angle_error_table,
     beam_path_figure_data,
     closed_form_path_error,
+    esrf_beam_path,
+    esrf_theta_range,
     fit_quadratic_law,
     perpendicular_motion,
-    seed_beam_path,
-    seed_theta_range,
     small_angle_law,
     tilted_leg_excess,
     trace_bench,
@@ -76,9 +76,9 @@ def test_trace_matches_an_independent_naive_tracer(theta, alpha, dc, dn) -> None
 @pytest.mark.parametrize(("h", "length"), GEOMETRIES)
 def test_trace_reproduces_seed_closed_form_points(h, length) -> None:
     """ESRF study 4.1 formulas for Y, M, T agree with the trace (relative to each point's size)."""
-    theta = np.concatenate([seed_theta_range(), [1e-3, 1e-2, math.radians(2.0)]])
+    theta = np.concatenate([esrf_theta_range(), [1e-3, 1e-2, math.radians(2.0)]])
     bp = trace_bench(theta, h_m=h, l_m=length)
-    seed = seed_beam_path(theta, h_m=h, l_m=length)
+    seed = esrf_beam_path(theta, h_m=h, l_m=length)
     for name in ("Y", "M", "T"):
         got, want = getattr(bp, name), getattr(seed, name)
         scale = np.linalg.norm(want, axis=-1)
@@ -91,9 +91,9 @@ def test_trace_reproduces_seed_closed_form_points(h, length) -> None:
 @pytest.mark.parametrize(("h", "length"), GEOMETRIES)
 def test_seed_path_error_only_differs_by_its_float_floor(h, length) -> None:
     """The study's norm-sum path error equals the trace up to float64 rounding of a 0.4 m sum."""
-    theta = seed_theta_range()
+    theta = esrf_theta_range()
     bp = trace_bench(theta, h_m=h, l_m=length)
-    seed = seed_beam_path(theta, h_m=h, l_m=length)
+    seed = esrf_beam_path(theta, h_m=h, l_m=length)
     # Four norms of ≤0.1 m plus the subtraction: ≤ 8 ulp(0.4 m) ≈ 4e-16 m.
     np.testing.assert_allclose(seed.path_error_m, bp.path_error_m, rtol=0, atol=4e-16)
 
@@ -101,7 +101,7 @@ def test_seed_path_error_only_differs_by_its_float_floor(h, length) -> None:
 # ---------------------------------------------------------------- exactness and the law
 @pytest.mark.parametrize(("h", "length"), GEOMETRIES)
 def test_trace_path_error_equals_derived_closed_form(h, length) -> None:
-    theta = np.concatenate([seed_theta_range(), [1e-3, 0.01, 0.1, 0.3]])
+    theta = np.concatenate([esrf_theta_range(), [1e-3, 0.01, 0.1, 0.3]])
     bp = trace_bench(theta, h_m=h, l_m=length)
     exact = closed_form_path_error(theta, h_m=h, l_m=length)
     # Rounding left in the trace: ~1e-23 m on ±4Hθ terms → < 1e-9 relative at 1e-7 rad.
@@ -188,7 +188,7 @@ def test_fit_over_the_seed_range() -> None:
     assert fit.k_derived_m_per_rad2 == pytest.approx(1.0, rel=1e-15)
     # The fit can only sit above k by the mean quartic term, (k4/k)·mean(θ²) ≈ 5e-9.
     mean_quartic = float(np.mean(small_angle_law(h_m=SEED_H, l_m=SEED_L)
-                                 .relative_truncation(seed_theta_range())))
+                                 .relative_truncation(esrf_theta_range())))
     assert 0 <= fit.relative_difference <= 1.01 * mean_quartic + 1e-10  # + trace rounding
     assert fit.max_relative_residual < 1e-7  # largest quartic term, 6.5e-8 at 1e-4 rad
     assert fit.loglog_slope == pytest.approx(2.0, abs=1e-7)  # quartic bends the slope by ~4e-9
@@ -312,7 +312,7 @@ def test_results_are_frozen_and_json_plain() -> None:
 def test_figure_data_at_two_degrees() -> None:
     """ESRF study Fig. 35: θ = 2°; the polyline is the ESRF study's O, S, Y, M, T."""
     fig = beam_path_figure_data(math.radians(2.0), h_m=0.05, l_m=0.05)
-    seed = seed_beam_path(math.radians(2.0), h_m=0.05, l_m=0.05)
+    seed = esrf_beam_path(math.radians(2.0), h_m=0.05, l_m=0.05)
     want = np.stack([seed.O, seed.S, seed.Y, seed.M, seed.T])
     np.testing.assert_allclose(fig.beam, want, rtol=0, atol=1e-15)  # a few ulp of 0.05 m
     assert fig.beam.shape == (5, 2) and fig.labels == ("O", "S", "Y", "M", "T")
@@ -330,6 +330,6 @@ def test_bad_lengths_are_rejected(bad) -> None:
 
 def test_seed_formula_needs_nonzero_angle_and_mirror_name_is_checked() -> None:
     with pytest.raises(ValueError, match="non-zero"):
-        seed_beam_path([0.0, 1e-6], h_m=0.05, l_m=0.05)
+        esrf_beam_path([0.0, 1e-6], h_m=0.05, l_m=0.05)
     with pytest.raises(ValueError, match="mirror"):
         perpendicular_motion(1e-9, mirror="attocube", h_m=0.05, l_m=0.05)  # type: ignore[arg-type]

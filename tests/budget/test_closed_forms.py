@@ -13,12 +13,12 @@ from fsmbench.bench.params import default_bench
 from fsmbench.budget import (
     air_budget,
     cumulative_power,
+    esrf_welch,
     first_order_lowpass,
     frame_budget,
     geometry_budget,
     noise_sources,
     ou_window_factor,
-    seed_welch,
 )
 from fsmbench.budget.optics import law_checks
 from fsmbench.budget.quantisation import SEED_4_5
@@ -55,7 +55,7 @@ def test_quantisation_noise_of_a_busy_signal_is_white_at_gamma():
     rng = np.random.default_rng(0)
     x = 0.3 * rng.standard_normal(200_000)  # ~1000 LSB rms
     e = np.round(x / q) * q - x
-    s = seed_welch(e, fs_hz=fs)
+    s = esrf_welch(e, fs_hz=fs)
     band = (s.f_hz > 10) & (s.f_hz < 4900)
     # 39 Welch averages × ~3000 bins: the band mean is known to < 1 %; allow 3 %.
     assert np.mean(s.values[band]) == pytest.approx(q**2 / (6 * fs), rel=0.03)

@@ -9,7 +9,7 @@ import pytest
 
 from fsmbench.bench.params import default_bench
 from fsmbench.budget.huddle import analyse_huddle_record, estimate_dac_noise
-from fsmbench.control.seed import seed_decentralised_controller
+from fsmbench.control.esrf import esrf_decentralised_controller
 from fsmbench.io.lazy import open_recording
 from fsmbench.io.recording import read_recording
 from fsmbench.twin.simulate import stream_bench
@@ -46,7 +46,7 @@ def test_lazy_huddle_record_equals_in_memory(archive: Path, chunk: int, block: i
 
 
 def test_lazy_dac_noise_equals_in_memory(archive: Path) -> None:
-    k = seed_decentralised_controller()
+    k = esrf_decentralised_controller()
     mem, _ = estimate_dac_noise({"data_huddle_test_5": read_recording(archive)}, controller=k,
                                 params=BENCH.nominal, duration_s=5.0)
     lazy, _ = estimate_dac_noise({"data_huddle_test_5": open_recording(archive)}, controller=k,

@@ -15,13 +15,13 @@ from fsmbench.budget import (
     NoiseInput,
     budget_grid,
     error_budget,
+    esrf_welch,
     loop_response,
     propagate,
     quadratic_distance,
-    seed_welch,
 )
 from fsmbench.budget.propagation import controller_response
-from fsmbench.control.seed import seed_decentralised_controller, tustin
+from fsmbench.control.esrf import esrf_decentralised_controller, tustin
 
 
 @pytest.fixture(scope="module")
@@ -76,7 +76,7 @@ def test_quadratic_propagation_against_monte_carlo(monte_carlo):
     # 10⁶ samples, correlation time ~30 samples: mean and std known to ~0.5 %; allow 2 %.
     assert np.mean(y) == pytest.approx(q.mean_m, rel=0.02)
     assert np.std(y) == pytest.approx(q.std_m, rel=0.02)
-    s = seed_welch(y - y.mean(), fs_hz=fs)
+    s = esrf_welch(y - y.mean(), fs_hz=fs)
     for lo, hi in ((2, 40), (40, 120), (150, 250), (300, 500)):
         sel_mc = (s.f_hz >= lo) & (s.f_hz < hi)
         sel = (f >= lo) & (f < hi)
@@ -102,7 +102,7 @@ def test_loop_matches_python_control_responses(nominal, plant):
     A matrix has a condition number ~1e44 — the 125 kHz coil pole next to K's
     double integrator — and its frequency response is off by O(1).)
     """
-    k = seed_decentralised_controller()
+    k = esrf_decentralised_controller()
     f = np.array([1.0, 10.0, 30.0, 100.0])
     loop = loop_response(plant, params=nominal, f_hz=f, controller=k)
     to_r = loop.transfers("sercalo_dac")[0]
@@ -137,7 +137,7 @@ def test_open_loop_transfers(nominal, plant):
 
 def test_propagation_scales_linearly_and_quadratically(nominal, plant):
     f = budget_grid(fs_hz=1e4, df_hz=1.0)
-    loop = loop_response(plant, params=nominal, f_hz=f, controller=seed_decentralised_controller())
+    loop = loop_response(plant, params=nominal, f_hz=f, controller=esrf_decentralised_controller())
     base = np.full((f.size, 2), 1e-12)
     a = propagate(NoiseInput("a", "sercalo_dac", base, "", ""), loop, params=nominal)
     b = propagate(NoiseInput("b", "sercalo_dac", 4 * base, "", ""), loop, params=nominal)
@@ -148,7 +148,7 @@ def test_propagation_scales_linearly_and_quadratically(nominal, plant):
 
 
 def test_discrete_controller_response():
-    k = seed_decentralised_controller()
+    k = esrf_decentralised_controller()
     kd = tustin(k, ts_s=1e-4)
     f = np.array([10.0, 100.0])
     # Tustin warps frequency by tan(ωT/2)/(ωT/2): < 1e-3 below 100 Hz.
@@ -156,7 +156,7 @@ def test_discrete_controller_response():
 
 
 def test_budget_rows_add_up(nominal, plant):
-    b = error_budget(nominal, plant=plant, controller=seed_decentralised_controller(),
+    b = error_budget(nominal, plant=plant, controller=esrf_decentralised_controller(),
                      df_hz=1.0)
     # RSS by construction (the cross-term row closes it): rounding only.
     assert b.total_rms_m == pytest.approx(math.sqrt(sum(r.rms_m**2 for r in b.rows)), rel=1e-12)

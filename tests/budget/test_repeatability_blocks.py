@@ -25,8 +25,8 @@ from fsmbench.budget.repeatability import (
     analyse_repeatability,
     find_alignment,
 )
-from fsmbench.budget.spectra import first_order_lowpass, seed_welch
-from fsmbench.twin import seed_experiments, simulate_experiment
+from fsmbench.budget.spectra import esrf_welch, first_order_lowpass
+from fsmbench.twin import esrf_experiments, simulate_experiment
 from fsmbench.twin.experiments import with_duration
 
 FS = 500.0  # a low rate keeps the records small; the code takes fs from the attrs
@@ -105,7 +105,7 @@ def _reference(ds: xr.Dataset, params) -> dict[str, object]:
     seed_dist = 0.5 * SEED_11["law_length_m"] * r**2
     dist_p = dist.reshape(n, per)
     nonrep = float(np.sqrt(np.mean((va_p - rep) ** 2)))
-    psd = [np.asarray(seed_welch(x, fs_hz=fs).values, dtype=float)
+    psd = [np.asarray(esrf_welch(x, fs_hz=fs).values, dtype=float)
            for x in (r[0], r[1], dist, seed_dist[0], seed_dist[1], va - va.mean())]
     return {
         "n_periods": n, "start_s": start / fs,
@@ -163,7 +163,7 @@ def params():
 
 @pytest.fixture(scope="module")
 def twin_rep():
-    spec = {s.name: s for s in with_duration(seed_experiments(), duration_s=6.0)}["data_rep_h"]
+    spec = {s.name: s for s in with_duration(esrf_experiments(), duration_s=6.0)}["data_rep_h"]
     return simulate_experiment(default_bench(), spec, seed=3).recording
 
 

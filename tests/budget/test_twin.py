@@ -17,8 +17,8 @@ from fsmbench.budget import (
     first_order_lowpass,
 )
 from fsmbench.budget.table import angle_sources
-from fsmbench.control.seed import seed_decentralised_controller, tustin
-from fsmbench.twin import seed_experiments, simulate_bench, simulate_experiment
+from fsmbench.control.esrf import esrf_decentralised_controller, tustin
+from fsmbench.twin import esrf_experiments, simulate_bench, simulate_experiment
 from fsmbench.twin.experiments import with_duration
 
 HUDDLES = [f"data_huddle_test_{i}" for i in range(1, 6)]
@@ -85,7 +85,7 @@ def test_closed_loop_propagation_predicts_the_twin(run, bench, result):
     """Budget with the twin's parameters and the measured noises against the realized Va parts."""
     p = bench.true
     angles = angle_sources(p, plant=physical_plant(p),
-                           controller=tustin(seed_decentralised_controller(), ts_s=1e-4),
+                           controller=tustin(esrf_decentralised_controller(), ts_s=1e-4),
                            qd_noise=result.huddle.qd_noise, dac_noise=result.dac_noise)
     perp = math.sqrt(sum(s.perpendicular_rms_m**2 for s in angles.sources.values()))
     geo = angles.geometric_all.std_m
@@ -108,7 +108,7 @@ def clean_rep(bench):
     """
     true = replace_params(bench.true, geometry={"sercalo_spot_offset_m": 0.0})
     b = dataclasses.replace(bench, true=true)
-    specs = {s.name: s for s in with_duration(seed_experiments(), duration_s=22.0)}
+    specs = {s.name: s for s in with_duration(esrf_experiments(), duration_s=22.0)}
     out = {}
     for name in ("data_rep_h", "data_rep_v"):
         sine = simulate_experiment(b, specs[name], seed=4)

@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 from scipy import signal
 
+from fsmbench.control.esrf import iff_controller, tustin
 from fsmbench.control.export import discretise
 from fsmbench.control.freq import evaluate_ss
 from fsmbench.control.realize import (
@@ -16,7 +17,6 @@ from fsmbench.control.realize import (
     tustin_section,
     warped_frequency_rad_s,
 )
-from fsmbench.control.seed import iff_controller, tustin
 
 TS = 1e-4  # [s]
 

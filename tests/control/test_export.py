@@ -13,6 +13,7 @@ import pytest
 from scipy import optimize, signal
 
 from fsmbench.control.design import AxisShape
+from fsmbench.control.esrf import esrf_decentralised_controller, newport_controller, tustin
 from fsmbench.control.export import (
     SOS_FORMAT,
     SOS_FORMAT_VERSION,
@@ -29,7 +30,6 @@ from fsmbench.control.export import (
     write_sos_json,
 )
 from fsmbench.control.freq import evaluate_ss
-from fsmbench.control.seed import newport_controller, seed_decentralised_controller, tustin
 from fsmbench.io.matfile import load_mat
 
 TS = 1e-4  # seed 9.3's sample time [s]
@@ -47,7 +47,7 @@ def _fsm_like() -> ct.StateSpace:
 
 
 CONTROLLERS = {
-    "seed_controller": seed_decentralised_controller(),
+    "seed_controller": esrf_decentralised_controller(),
     "newport_controller": newport_controller(gn0_rad_per_v=(5.3e-3, 5.2e-3)),
     "fsmbench_controller": _fsm_like(),
 }

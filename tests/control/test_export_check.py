@@ -4,13 +4,13 @@ from __future__ import annotations
 
 import numpy as np
 
+from fsmbench.control.esrf import esrf_decentralised_controller
 from fsmbench.control.export import discretise_channel
 from fsmbench.control.export_check import (
     FLOAT32_REL_TOL,
     float32_sos_check,
     float32_state_space_check,
 )
-from fsmbench.control.seed import seed_decentralised_controller
 
 TS = 1e-4
 
@@ -48,7 +48,7 @@ def test_a_pole_rounded_onto_the_unit_circle_is_reported() -> None:
 
 
 def test_seed_controller_sections_pass_and_the_sentence_says_so() -> None:
-    k = seed_decentralised_controller()
+    k = esrf_decentralised_controller()
     for i in range(2):
         sos = np.array([s.sos for s in discretise_channel(k, ts_s=TS, output=i, input=i)])
         chk = float32_sos_check(sos, ts_s=TS)
@@ -81,7 +81,7 @@ def test_sos_document_carries_the_float32_check_antiwindup_and_note() -> None:
 
     from fsmbench.control.export import DAC_RAILS_V, InputScaling, sos_document
 
-    doc = sos_document({"seed_controller": seed_decentralised_controller()},
+    doc = sos_document({"seed_controller": esrf_decentralised_controller()},
                        scaling=InputScaling(qd_gain_v_per_rad=(-31.0, 36.3),
                                             plant_source="physical (nominal)"), ts_s=TS)
     json.dumps(doc, allow_nan=False)  # the file's own rule: no NaN or inf

@@ -10,6 +10,7 @@ from fsmbench.bench.blocks import PlantModel
 from fsmbench.bench.params import Bench
 from fsmbench.control.analysis import ControlObjective, control_objective
 from fsmbench.control.design import perturbed_plants
+from fsmbench.control.esrf import esrf_decentralised_controller, newport_controller, tustin
 from fsmbench.control.freq import evaluate_ss
 from fsmbench.control.loops import (
     LoopAnalysis,
@@ -19,7 +20,6 @@ from fsmbench.control.loops import (
     discrete_axis_margins,
     newport_to_beam,
 )
-from fsmbench.control.seed import newport_controller, seed_decentralised_controller, tustin
 
 
 @pytest.fixture(scope="module")
@@ -29,7 +29,7 @@ def objective(bench: Bench) -> ControlObjective:
 
 @pytest.fixture(scope="module")
 def seed_on_true(true_plant: PlantModel, objective: ControlObjective) -> LoopAnalysis:
-    return analyse_loop(true_plant, seed_decentralised_controller(), objective=objective,
+    return analyse_loop(true_plant, esrf_decentralised_controller(), objective=objective,
                         name="seed")
 
 
@@ -70,7 +70,7 @@ def test_seed_loops_on_the_true_plant(seed_on_true: LoopAnalysis) -> None:
 
 
 def test_closed_loop_poles_match_python_control(true_plant: PlantModel) -> None:
-    k = seed_decentralised_controller()
+    k = esrf_decentralised_controller()
     g = delayed_subsystem(true_plant, outputs=["Rh", "Rv"], inputs=["Uch", "Ucv"])
     ref = ct.feedback(g, k, sign=-1).poles()
     ours = closed_loop_poles(true_plant, k)
@@ -95,7 +95,7 @@ def test_closed_loop_poles_with_feedthrough_on_both_sides(true_plant: PlantModel
     g0 = delayed_subsystem(true_plant, outputs=["Rh", "Rv"], inputs=["Uch", "Ucv"])
     d_g = np.array([[2e-3, 1e-4], [-1e-4, 3e-3]])
     g = ct.ss(g0.A, g0.B, g0.C, d_g, inputs=["Uch", "Ucv"], outputs=["Rh", "Rv"])
-    k0 = seed_decentralised_controller()
+    k0 = esrf_decentralised_controller()
     k = ct.ss(k0.A, k0.B, k0.C, np.asarray(k0.D) + 50.0 * np.eye(2),
               inputs=list(k0.input_labels), outputs=list(k0.output_labels))
     ours = closed_loop_poles(_PadePlant(g), k)  # type: ignore[arg-type]
@@ -116,13 +116,13 @@ def test_nyquist_count_agrees_with_closed_loop_poles(nominal_plant: PlantModel,
                                                      label: str, unstable: int) -> None:
     """The study's notch leaves the nominal plant's mode 5 % up unstable; both methods agree."""
     plant = dict(perturbed_plants(nominal_plant))[label]
-    la = analyse_loop(plant, seed_decentralised_controller(), objective=objective)
+    la = analyse_loop(plant, esrf_decentralised_controller(), objective=objective)
     assert int(np.sum(la.poles.real > 0)) == la.nyquist.closed_loop_unstable == unstable
 
 
 def test_tustin_is_the_warped_continuous_controller() -> None:
     """Kd(e^{jwT}) = K(j (2/T) tan(wT/2)) exactly; the notch moves down accordingly."""
-    k = seed_decentralised_controller()
+    k = esrf_decentralised_controller()
     ts = 1e-4
     kd = tustin(k, ts_s=ts)
     f = np.logspace(-1, 3, 200)
@@ -164,7 +164,7 @@ def test_newport_loop_of_10_2(true_plant: PlantModel, objective: ControlObjectiv
 
 def test_newport_to_beam(true_plant: PlantModel) -> None:
     f = np.array([0.5, 1.0, 50.0])
-    k = seed_decentralised_controller()
+    k = esrf_decentralised_controller()
     open_ = newport_to_beam(true_plant, None, f)
     ref = true_plant.frequency_response(f, outputs=["Rh", "Rv"], inputs=["Unh", "Unv"]).values
     np.testing.assert_allclose(open_, ref, rtol=1e-12)  # same evaluation

@@ -28,7 +28,7 @@ from fsmbench.budget.study import budget_study
 from fsmbench.checks import Check, failed, first_failure
 from fsmbench.cli import main
 from fsmbench.ident.consistency import screen_recordings
-from fsmbench.ident.pipeline import SEED_TRIMS_S, identify
+from fsmbench.ident.pipeline import ESRF_TRIMS_S, identify
 from fsmbench.io.errors import RecordingError
 from fsmbench.io.folder import check_recording, load_recordings
 from fsmbench.io.matwrite import save_mat
@@ -80,7 +80,7 @@ def screen(recordings: Mapping[str, xr.Dataset], bench: Bench) -> Any:
                                              adc_range_v=conv.range_v,
                                              adc_bits=conv.bits)[0])
 
-    return screen_recordings(recordings, params=bench.nominal, trims_s=SEED_TRIMS_S,
+    return screen_recordings(recordings, params=bench.nominal, trims_s=ESRF_TRIMS_S,
                              failure=failure)
 
 

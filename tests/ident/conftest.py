@@ -58,7 +58,7 @@ class Experiment:
 
 
 @pytest.fixture
-def seed_experiments(
+def esrf_experiments(
     rng: np.random.Generator, resonance_ba: tuple[np.ndarray, np.ndarray]
 ) -> dict[str, Experiment]:
     """data_uch / data_ucv look-alikes: 6 s at 10 kHz, white excitation, coupled outputs."""

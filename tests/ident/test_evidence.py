@@ -127,7 +127,7 @@ def loop_run() -> TwinRun:
 
 
 def test_the_recorded_controller_is_the_twin_s(loop_run: TwinRun) -> None:
-    # The twin divides by the bench file's 4QD gains (its seed_feedback): the fit must
+    # The twin divides by the bench file's 4QD gains (its esrf_feedback): the fit must
     # find them. 1e-3 relative: the command's rounding to the DAC's step is the residual.
     found = recorded_controllers(loop_run.recordings, fs_hz=1e4, step_v=STEP_V)
     gd = default_bench().nominal.quad_diode.gain_v_per_rad
@@ -221,3 +221,37 @@ def test_the_coil_path_s_corners_witness_the_rate(factor: float) -> None:
     assert check is not None and check.passed == (factor == 1.0)
     if factor != 1.0:
         assert check.value == pytest.approx(1e4) and "sampled at 10000 Hz" in check.advice
+
+
+@settings(max_examples=20, deadline=None, derandomize=True)
+@given(gain=st.floats(min_value=-2.0, max_value=2.0).filter(lambda g: abs(g) > 0.1),
+       offset=st.floats(min_value=-1.0, max_value=1.0), seed=st.integers(0, 2**31))
+def test_the_recorded_loop_fit_is_the_full_least_squares(gain: float, offset: float,
+                                                         seed: int) -> None:
+    """The controller's coefficient with the polynomial projected out once equals the
+    coefficient of numpy's least squares on the whole design [K y, 1, t, t^2]
+    (Frisch-Waugh-Lovell); 1e-9 relative: two well-conditioned 4-column solves of the same
+    problem, far above their rounding (~1e-15) and far below any effect on a verdict."""
+    import scipy.signal
+
+    from fsmbench.ident.evidence.recorded_loop import SETTLE_S, _esrf_sos, _fit_record
+
+    rng = np.random.default_rng(seed)
+    fs = 10_000.0
+    n = 20_000
+    y = rng.standard_normal(n)
+    k0 = round(SETTLE_S * fs)
+    sos = _esrf_sos("h", fs)
+    w = scipy.signal.sosfilt(sos, y - y.mean())
+    t = np.arange(n - k0) / fs
+    t = t / t[-1]
+    u = np.zeros(n)
+    u[k0:] = gain * w[k0:] + offset * (1.0 + t - t * t) + 0.01 * rng.standard_normal(n - k0)
+    fit = _fit_record("r", u, y, axis="h", fs_hz=fs, step_v=1e-3)
+    lag = fit.lag_samples  # the lag the fit kept, 0 here unless noise decides otherwise
+    yl = np.concatenate([np.zeros(lag), y[:n - lag]]) - y.mean()
+    x = np.column_stack([scipy.signal.sosfilt(sos, yl)[k0:], np.ones_like(t), t, t * t])
+    coef, *_ = np.linalg.lstsq(x, u[k0:], rcond=None)
+    assert -1.0 / fit.gd_used_v_per_rad == pytest.approx(coef[0], rel=1e-9)
+    resid = u[k0:] - x @ coef
+    assert fit.explained == pytest.approx(1.0 - np.var(resid) / np.var(u[k0:]), rel=1e-9)

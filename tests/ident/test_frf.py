@@ -23,8 +23,8 @@ def _sm(inputs: np.ndarray, outputs: np.ndarray, ins: list[str], outs: list[str]
                            window=kw.pop("window", WIN), fs_hz=FS_HZ, **kw)  # type: ignore[arg-type]
 
 
-def test_one_pass_equals_pairwise_functions(seed_experiments: dict) -> None:
-    e = seed_experiments["Uch"]
+def test_one_pass_equals_pairwise_functions(esrf_experiments: dict) -> None:
+    e = esrf_experiments["Uch"]
     r = _sm(e.inputs, e.outputs, ["Uch"], ["Vph", "Vpv"])
     x = e.inputs[:, 0]
     kw = {"window": WIN, "fs_hz": FS_HZ}
@@ -44,8 +44,8 @@ def test_one_pass_equals_pairwise_functions(seed_experiments: dict) -> None:
     assert r.n_segments == (pwelch(x, **kw).n_segments,)
 
 
-def test_layout_units_and_options(seed_experiments: dict) -> None:
-    e = seed_experiments["Ucv"]
+def test_layout_units_and_options(esrf_experiments: dict) -> None:
+    e = esrf_experiments["Ucv"]
     r = _sm(e.inputs, e.outputs, ["Ucv"], ["Vph", "Vpv"], noverlap=128, nfft=1024)
     for name in FrequencyResponse._ARRAYS:
         arr = getattr(r, name)
@@ -59,8 +59,8 @@ def test_layout_units_and_options(seed_experiments: dict) -> None:
         r.nfft = 2048  # type: ignore[misc]
 
 
-def test_random_error_is_bendat_piersol_and_bounds_scale_with_z(seed_experiments: dict) -> None:
-    e = seed_experiments["Uch"]
+def test_random_error_is_bendat_piersol_and_bounds_scale_with_z(esrf_experiments: dict) -> None:
+    e = esrf_experiments["Uch"]
     r95 = _sm(e.inputs, e.outputs, ["Uch"], ["Vph", "Vpv"])
     r99 = _sm(e.inputs, e.outputs, ["Uch"], ["Vph", "Vpv"], confidence=0.99)
     g2 = r95.coherence.values
@@ -112,13 +112,13 @@ def test_two_input_h1_matches_independent_solve_and_its_bounds_cover(
 
 
 # ------------------------------------------------------------------ combine_columns
-def _seed_columns(seed_experiments: dict, **kw: object) -> list[FrequencyResponse]:
+def _seed_columns(esrf_experiments: dict, **kw: object) -> list[FrequencyResponse]:
     return [_sm(e.inputs, e.outputs, [name], ["Vph", "Vpv"], **kw)
-            for name, e in seed_experiments.items()]
+            for name, e in esrf_experiments.items()]
 
 
-def test_combine_columns_builds_named_matrix(seed_experiments: dict) -> None:
-    uch, ucv = _seed_columns(seed_experiments)
+def test_combine_columns_builds_named_matrix(esrf_experiments: dict) -> None:
+    uch, ucv = _seed_columns(esrf_experiments)
     g = combine_columns([uch, ucv])
     assert g.input_names == ("Uch", "Ucv") and g.output_names == ("Vph", "Vpv")
     assert g.frf.shape == (257, 2, 2)
@@ -130,19 +130,19 @@ def test_combine_columns_builds_named_matrix(seed_experiments: dict) -> None:
     assert g.n_segments == uch.n_segments + ucv.n_segments
 
 
-def test_combine_columns_aligns_outputs_by_name(seed_experiments: dict) -> None:
-    e = seed_experiments["Ucv"]
+def test_combine_columns_aligns_outputs_by_name(esrf_experiments: dict) -> None:
+    e = esrf_experiments["Ucv"]
     swapped = _sm(e.inputs, e.outputs[:, ::-1], ["Ucv"], ["Vpv", "Vph"])
-    uch = _seed_columns(seed_experiments)[0]
+    uch = _seed_columns(esrf_experiments)[0]
     g = combine_columns([uch, swapped])
     assert g.output_names == ("Vph", "Vpv")
     np.testing.assert_array_equal(g.frf.sel(output="Vph", input="Ucv").values,
                                   swapped.frf.sel(output="Vph", input="Ucv").values)
 
 
-def test_combine_columns_rejects_inconsistent_responses(seed_experiments: dict) -> None:
-    uch = _seed_columns(seed_experiments)[0]
-    e = seed_experiments["Ucv"]
+def test_combine_columns_rejects_inconsistent_responses(esrf_experiments: dict) -> None:
+    uch = _seed_columns(esrf_experiments)[0]
+    e = esrf_experiments["Ucv"]
     with pytest.raises(ValueError, match=r"response 1 has nfft=1024 but response 0 has 512"):
         combine_columns([uch, _sm(e.inputs, e.outputs, ["Ucv"], ["Vph", "Vpv"], nfft=1024)])
     with pytest.raises(ValueError, match=r"outputs \['Vph', 'Vx'\]"):
@@ -153,8 +153,8 @@ def test_combine_columns_rejects_inconsistent_responses(seed_experiments: dict) 
         combine_columns([])
 
 
-def test_summary_is_json(seed_experiments: dict) -> None:
-    g = combine_columns(_seed_columns(seed_experiments))
+def test_summary_is_json(esrf_experiments: dict) -> None:
+    g = combine_columns(_seed_columns(esrf_experiments))
     s = json.loads(g.to_json())
     assert s["inputs"] == ["Uch", "Ucv"] and s["outputs"] == ["Vph", "Vpv"]
     assert s["nfft"] == 512 and s["fs_hz"] == FS_HZ and s["confidence"] == 0.95

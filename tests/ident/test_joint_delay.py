@@ -26,7 +26,7 @@ from fsmbench.ident.delay.sampled import (
     series,
 )
 from fsmbench.ident.frf.experiment import experiment_frf
-from fsmbench.ident.pipeline import SEED_TRIMS_S
+from fsmbench.ident.pipeline import ESRF_TRIMS_S
 from fsmbench.ident.sercalo import fit_sercalo
 from fsmbench.sim.discretize import zoh_with_delays
 from fsmbench.twin import simulate_bench
@@ -181,7 +181,7 @@ def test_the_bound_is_where_the_profile_rises_by_its_threshold() -> None:
 def _sercalo_frf(bench: Bench, seed: int = 0):
     run = simulate_bench(bench, seed=seed, duration_s=10.0, experiments=["data_uch", "data_ucv"])
     frf = experiment_frf(run.recordings, columns=[("data_uch", "Uch"), ("data_ucv", "Ucv")],
-                         trims_s=SEED_TRIMS_S)
+                         trims_s=ESRF_TRIMS_S)
     return frf, run.truth
 
 

@@ -23,7 +23,7 @@ from fsmbench.ident.newport import (
     identify_newport,
     newport_checks,
 )
-from fsmbench.ident.pipeline import SEED_TRIMS_S
+from fsmbench.ident.pipeline import ESRF_TRIMS_S
 from fsmbench.ident.totals import uncertainty_tree
 from fsmbench.ident.uncertainty import bounded
 from fsmbench.sim.plant import twin_discrete
@@ -66,7 +66,7 @@ def test_phase_bandwidth_is_where_the_lag_reaches_60_degrees() -> None:
 def twin_fit():  # type: ignore[no-untyped-def]
     run = simulate_bench(BENCH, seed=1, experiments=["data_unh", "data_unv"])
     frf = experiment_frf(run.recordings, columns=[("data_unh", "Unh"), ("data_unv", "Unv")],
-                         trims_s=SEED_TRIMS_S)
+                         trims_s=ESRF_TRIMS_S)
     return fit_newport_dynamics(frf)
 
 
@@ -117,7 +117,7 @@ def test_predicted_std_matches_the_spread_over_realisations() -> None:
     for seed in range(6):
         run = simulate_bench(BENCH, seed=10 + seed, experiments=["data_unh", "data_unv"])
         frf = experiment_frf(run.recordings, columns=[("data_unh", "Unh"), ("data_unv", "Unv")],
-                             trims_s=SEED_TRIMS_S)
+                             trims_s=ESRF_TRIMS_S)
         fits.append(fit_newport_dynamics(frf).axes["h"])
     for value, std in (("natural_freq_hz", "natural_freq_std_hz"), ("damping_ratio", "damping_std"),
                        ("delay_s", "delay_std_s")):
@@ -164,7 +164,7 @@ def real_frf() -> FrequencyResponse:
     """The real-bench twin's Newport matrix (its 10 kHz Butterworth 4QD amplifier), seed 3."""
     run = simulate_bench(REAL, seed=3, experiments=["data_unh", "data_unv"])
     return experiment_frf(run.recordings, columns=[("data_unh", "Unh"), ("data_unv", "Unv")],
-                          trims_s=SEED_TRIMS_S)
+                          trims_s=ESRF_TRIMS_S)
 
 
 def test_an_unresolved_amplifier_bounds_the_newports_parameters(

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from fsmbench.ident.delay.bode import DelayEstimate
-from fsmbench.ident.fit.weights import detect_resonances, seed_weights
+from fsmbench.ident.fit.weights import detect_resonances, esrf_weights
 from fsmbench.ident.frf.experiment import experiment_frf
 from fsmbench.ident.frf.response import spectral_matrix
 from fsmbench.ident.newport import identify_newport
@@ -31,7 +31,7 @@ def sercalo_frf(ident_twin: TwinRun):
 
 
 def test_seed_weights_follow_the_seed(sercalo_frf) -> None:
-    w = seed_weights(sercalo_frf, resonances_hz={"Uch": 410.0, "Ucv": 250.0})
+    w = esrf_weights(sercalo_frf, resonances_hz={"Uch": 410.0, "Ucv": 250.0})
     f = sercalo_frf.frequency_hz
     coh = sercalo_frf.coherence
     near_h = (f > 369.0) & (f < 451.0)

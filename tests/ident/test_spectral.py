@@ -222,20 +222,20 @@ def test_coherence_of_noiseless_lti_output(rng: np.random.Generator) -> None:
 
 # ------------------------------------------------------------------ the seed's workflow
 def test_seed_workflow_builds_the_named_2x2_matrix(
-    seed_experiments: dict, resonance_ba: tuple[np.ndarray, np.ndarray]
+    esrf_experiments: dict, resonance_ba: tuple[np.ndarray, np.ndarray]
 ) -> None:
     win = hanning(int(np.ceil(1 * FS_HZ)))  # win = hanning(ceil(1*fs))
     responses = [
         spectral_matrix(e.inputs, e.outputs, input_names=[e.input_name],
                         output_names=["Vph", "Vpv"], window=win, fs_hz=FS_HZ)
-        for e in seed_experiments.values()
+        for e in esrf_experiments.values()
     ]
     g = combine_columns(responses)
     assert g.frf.dims == ("frequency", "output", "input")
     assert g.output_names == ("Vph", "Vpv") and g.input_names == ("Uch", "Ucv")
     assert (g.nfft, g.noverlap, g.window_length) == (16384, 5000, 10000)
     assert g.frequency_hz[1] == pytest.approx(FS_HZ / 16384, rel=1e-15)  # exact grid
-    e = seed_experiments["Ucv"]
+    e = esrf_experiments["Ucv"]
     np.testing.assert_allclose(  # column Ucv, row Vpv is MATLAB's tfestimate(uv.Ucv, uv.Vpv)
         g.frf.sel(output="Vpv", input="Ucv").values,
         tfestimate(e.inputs[:, 0], e.outputs[:, 1], window=win, fs_hz=FS_HZ).values,

@@ -276,7 +276,7 @@ def test_the_report_calls_no_estimator() -> None:
     import fsmbench.report
 
     estimators = {"spectral_matrix", "tfestimate", "pwelch", "cpsd", "mscohere",
-                  "local_polynomial_frf", "periodic_frf", "seed_welch", "first_order_lowpass"}
+                  "local_polynomial_frf", "periodic_frf", "esrf_welch", "first_order_lowpass"}
     for path in Path(fsmbench.report.__file__).parent.rglob("*.py"):
         for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
             if isinstance(node, ast.ImportFrom):

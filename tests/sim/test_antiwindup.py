@@ -17,8 +17,8 @@ from fsmbench.control.antiwindup import (
     is_integrator_section,
 )
 from fsmbench.control.design import design_controller
+from fsmbench.control.esrf import esrf_decentralised_controller
 from fsmbench.control.export import discretise_channel
-from fsmbench.control.seed import seed_decentralised_controller
 from fsmbench.sim.antiwindup import (
     antiwindup_feedback,
     recovery_time_s,
@@ -145,7 +145,7 @@ def test_saturating_step_recovers_with_antiwindup_and_not_without(
 
 
 def test_seed_controller_has_two_integrators_per_axis() -> None:
-    k = seed_decentralised_controller()
+    k = esrf_decentralised_controller()
     assert [antiwindup_channel(_sos(k, i), ts_s=TS).n_integrators for i in range(2)] == [2, 2]
 
 

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from fsmbench.bench.params import Bench
-from fsmbench.control.seed import seed_decentralised_controller
+from fsmbench.control.esrf import esrf_decentralised_controller
 from fsmbench.sim import codegen
 from fsmbench.sim.controller import feedback_controller
 from fsmbench.sim.engine import Quantiser, run_loop
@@ -24,7 +24,7 @@ def test_unrolled_loop_is_bit_identical_to_the_generic_one(bench: Bench) -> None
     u[:, 3] = 0.1 * rng.standard_normal(n)
     noise = 1e-3 * rng.standard_normal((n, len(ADC_CHANNELS)))
     conv = Quantiser(range_v=20.0, bits=16)
-    k = feedback_controller(seed_decentralised_controller(),
+    k = feedback_controller(esrf_decentralised_controller(),
                             gd_v_per_rad=bench.nominal.quad_diode.gain_v_per_rad, ts_s=1e-4)
     runs = [run_loop(plant, u_ext=u, adc_noise=noise, adc=conv, dac=conv, controller=k,
                      n_adc=len(ADC_CHANNELS), specialise=spec) for spec in (False, True)]

@@ -8,7 +8,7 @@ import pytest
 import scipy.signal as sig
 
 from fsmbench.bench.params import Bench
-from fsmbench.control.seed import seed_decentralised_controller
+from fsmbench.control.esrf import esrf_decentralised_controller
 from fsmbench.sim.engine import Quantiser, run_loop, run_loop_python
 from fsmbench.sim.plant import ADC_CHANNELS, DAC_CHANNELS, twin_discrete
 
@@ -48,7 +48,7 @@ def test_closed_loop_matches_python_control(bench: Bench, plant) -> None:
     from fsmbench.sim.controller import feedback_controller
 
     ts = plant.ts_s
-    ctrl = feedback_controller(seed_decentralised_controller(),
+    ctrl = feedback_controller(esrf_decentralised_controller(),
                                gd_v_per_rad=bench.nominal.quad_diode.gain_v_per_rad, ts_s=ts)
     n = 4000
     u = _excitation(n)
@@ -74,7 +74,7 @@ def test_closed_loop_matches_python_control(bench: Bench, plant) -> None:
 def test_compiled_and_interpreted_loops_agree(bench: Bench, plant) -> None:
     from fsmbench.sim.controller import feedback_controller
 
-    ctrl = feedback_controller(seed_decentralised_controller(),
+    ctrl = feedback_controller(esrf_decentralised_controller(),
                                gd_v_per_rad=bench.nominal.quad_diode.gain_v_per_rad,
                                ts_s=plant.ts_s)
     n = 300

@@ -5,15 +5,15 @@ from __future__ import annotations
 import numpy as np
 
 from fsmbench.bench.params import Bench
+from fsmbench.control.esrf import esrf_decentralised_controller
 from fsmbench.control.export import discretise
-from fsmbench.control.seed import seed_decentralised_controller
 from fsmbench.sim.controller import closed_loop_spectral_radius, sercalo_feedback
 from fsmbench.sim.float32_loop import float32_closed_loop
 from fsmbench.sim.plant import ADC_CHANNELS, bench_discrete
 
 
 def test_float64_radius_is_the_engines_loop_with_the_mat_realisation(bench: Bench) -> None:
-    k = seed_decentralised_controller()
+    k = esrf_decentralised_controller()
     loop = float32_closed_loop(bench, k, name="seed")
     ts = bench.true.converter.ts_s
     kd = discretise(k, ts_s=ts)
@@ -27,7 +27,7 @@ def test_float64_radius_is_the_engines_loop_with_the_mat_realisation(bench: Benc
 
 
 def test_float32_keeps_the_seed_loop_stable_and_its_poles_close(bench: Bench) -> None:
-    loop = float32_closed_loop(bench, seed_decentralised_controller(), name="seed")
+    loop = float32_closed_loop(bench, esrf_decentralised_controller(), name="seed")
     assert loop.sos_stable and loop.state_space_stable
     # float32 rounds each coefficient by <= 6e-8 relative; a pole moves by that times its
     # sensitivity, far below the 1e-4 that would change a mode's frequency by 0.2 Hz.

@@ -34,7 +34,7 @@ from fsmbench.sim.plant import (
     twin_discrete,
 )
 from fsmbench.sim.stream import BenchBlock, BenchStream, concatenate_blocks
-from fsmbench.twin.experiments import experiment_stream, seed_experiments, seed_feedback
+from fsmbench.twin.experiments import esrf_experiments, esrf_feedback, experiment_stream
 
 DEFAULT = default_bench()
 REAL = real_bench()
@@ -341,7 +341,7 @@ def _every_feature_switched_off(p: BenchParams) -> BenchParams:
 def _records(bench: Bench) -> dict[str, BenchBlock]:
     """The thirteen experiments of ``bench``'s twin, 5 s each, random seed 1."""
     out = {}
-    for spec in seed_experiments(duration_s=_SECONDS):
+    for spec in esrf_experiments(duration_s=_SECONDS):
         s = experiment_stream(bench, spec, seed=_SEED)
         out[spec.name] = s.run(round(spec.duration_s * s.fs_hz))
     return out
@@ -449,8 +449,8 @@ def test_default_twin_records_are_the_bench_model_plus_its_noise(
     # The ADC adds white noise and rounds to its step: variance sigma**2 + lsb**2 / 12
     # (Sheppard; exact to exp(-2 pi**2 (sigma/lsb)**2) < 1e-70 for sigma ~ 3 lsb).
     sigma = np.sqrt(_adc_noise_rms(p) ** 2 + lsb**2 / 12)
-    specs = {s.name: s for s in seed_experiments(duration_s=_SECONDS)}
-    feedback = seed_feedback(DEFAULT)
+    specs = {s.name: s for s in esrf_experiments(duration_s=_SECONDS)}
+    feedback = esrf_feedback(DEFAULT)
     for name, out in default_records.items():
         spec = specs[name]
         _, y, _ = dlsim((plant.a, plant.b, plant.c, np.zeros((plant.c.shape[0], 4)),
@@ -592,7 +592,7 @@ def test_twin_with_every_feature_runs_at_5_10_and_20_khz(fs_hz: float) -> None:
     # bench: the linear closed loop's eigenvalues lie inside the unit circle.
     bench = dataclasses.replace(REAL, true=p,
                                 nominal=_with(REAL.nominal, converter={"fs_hz": fs_hz}))
-    k = seed_feedback(bench)
+    k = esrf_feedback(bench)
     c_in = plant.c[list(k.adc_inputs)]
     b_out = plant.b[:, list(k.dac_outputs)]
     loop = np.block([[plant.a + b_out @ k.d @ c_in, b_out @ k.c], [k.b @ c_in, k.a]])

@@ -11,7 +11,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from fsmbench.bench.params import default_bench
-from fsmbench.control.seed import seed_decentralised_controller
+from fsmbench.control.esrf import esrf_decentralised_controller
 from fsmbench.sim.controller import feedback_controller
 from fsmbench.sim.excitation import Excitation
 from fsmbench.sim.plant import DAC_CHANNELS, twin_discrete
@@ -24,7 +24,7 @@ N = 3000
 
 
 def _controller(gain: float = 1.0, name: str = "seed K (9.2)"):
-    k = seed_decentralised_controller() * gain
+    k = esrf_decentralised_controller() * gain
     k = type(k)(k.A, k.B, k.C, k.D, inputs=["Rh", "Rv"], outputs=["Uch", "Ucv"])
     return feedback_controller(k, gd_v_per_rad=BENCH.nominal.quad_diode.gain_v_per_rad,
                                ts_s=P.converter.ts_s, name=name)

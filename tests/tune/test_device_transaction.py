@@ -22,7 +22,7 @@ pytest.importorskip("tango")
 
 from fsmbench.bench.params import Bench
 from fsmbench.cli import EXIT_SIGINT, EXIT_SIGTERM, Terminated, main
-from fsmbench.control.seed import seed_decentralised_controller
+from fsmbench.control.esrf import esrf_decentralised_controller
 from fsmbench.tune.device import DeviceTarget
 from fsmbench.tune.guarded import Loop, TuneOptions, TuneResult, loop_of, tune_guarded
 from fsmbench.tune.measure import MeasurementOptions
@@ -45,7 +45,7 @@ OPTIONS = TuneOptions(watch_s=6.0, settle_s=1.5, disturbance_v=0.0, better_by=0.
 
 def _seed(bench: Bench) -> Loop:
     gd = bench.nominal.quad_diode.gain_v_per_rad
-    k = seed_decentralised_controller()
+    k = esrf_decentralised_controller()
     k = ct.ss(k.A, k.B, k.C, k.D, inputs=["Rh", "Rv"], outputs=["Uch", "Ucv"])
     return loop_of(k, name=SEED_NAME, ts_s=bench.true.converter.ts_s,
                    gd_v_per_rad=(float(gd.h), float(gd.v)))

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from fsmbench.bench.params import Bench
-from fsmbench.control.seed import seed_decentralised_controller
+from fsmbench.control.esrf import esrf_decentralised_controller
 from fsmbench.sim.excitation import Excitation
 from fsmbench.sim.stream import BenchStream
 from fsmbench.tune.guarded import TuneOptions, TuneResult, loop_of, tune_twin
@@ -22,7 +22,7 @@ _OPTS = TuneOptions(watch_s=6.0, settle_s=1.5,
 
 def _seed_loop(bench: Bench, gain: float = 1.0):
     gd = bench.nominal.quad_diode.gain_v_per_rad
-    k = seed_decentralised_controller()
+    k = esrf_decentralised_controller()
     k = ct.ss(k.A, k.B, gain * k.C, gain * k.D, inputs=["Rh", "Rv"], outputs=["Uch", "Ucv"])
     return loop_of(k,
                    name=f"the ESRF study's controller x{gain:g}", ts_s=bench.true.converter.ts_s,

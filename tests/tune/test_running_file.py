@@ -16,9 +16,9 @@ import pytest
 
 from fsmbench.bench.params import Bench
 from fsmbench.cli import main
+from fsmbench.control.esrf import esrf_decentralised_controller
 from fsmbench.control.export import InputScaling, write_sos_json
 from fsmbench.control.load import load_controllers, select_controller
-from fsmbench.control.seed import seed_decentralised_controller
 from fsmbench.sim.controller import sercalo_feedback
 from fsmbench.tune.running import loop_from_file as _running_file
 
@@ -35,7 +35,7 @@ def tuned_file(bench: Bench, tmp_path: Path) -> Path:
     ``tuned`` (prewarped Tustin per section)."""
     gd = bench.nominal.quad_diode.gain_v_per_rad
     path = tmp_path / "controllers_sos.json"
-    write_sos_json(path, {"tuned": seed_decentralised_controller()},
+    write_sos_json(path, {"tuned": esrf_decentralised_controller()},
                    scaling=InputScaling(qd_gain_v_per_rad=(float(gd.h), float(gd.v)),
                                         plant_source="identified (test)"),
                    ts_s=bench.true.converter.ts_s)

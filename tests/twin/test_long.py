@@ -9,7 +9,7 @@ import pytest
 
 from fsmbench.bench.params import default_bench
 from fsmbench.io.nexus import read_nexus
-from fsmbench.twin.experiments import seed_experiments
+from fsmbench.twin.experiments import esrf_experiments
 from fsmbench.twin.long import RunningMoments, StreamProgress, stream_experiment
 from fsmbench.twin.simulate import simulate_bench, stream_bench
 
@@ -34,7 +34,7 @@ def test_stream_bench_equals_simulate_bench(tmp_path: Path) -> None:
 
 
 def test_blocks_and_realized_noise(tmp_path: Path) -> None:
-    spec = next(s for s in seed_experiments(duration_s=5.0) if s.name == "data_huddle_test_1")
+    spec = next(s for s in esrf_experiments(duration_s=5.0) if s.name == "data_huddle_test_1")
     seen: list[StreamProgress] = []
     realized = stream_experiment(BENCH, spec, seed=2, path=tmp_path / "a.h5", block_s=0.37,
                                  progress=seen.append, progress_every_s=0.0)

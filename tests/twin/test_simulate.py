@@ -10,13 +10,13 @@ import pytest
 import scipy.io
 
 from fsmbench.bench.params import Bench
-from fsmbench.control.seed import seed_decentralised_controller
+from fsmbench.control.esrf import esrf_decentralised_controller
 from fsmbench.ident import hanning, spectral_matrix
 from fsmbench.io.signals import EXPERIMENTS
 from fsmbench.sim.controller import closed_loop_spectral_radius
 from fsmbench.sim.plant import ADC_CHANNELS, twin_discrete
 from fsmbench.twin import TwinRun, feedback_controller, simulate_bench, write_twin
-from fsmbench.twin.experiments import seed_experiments, with_duration
+from fsmbench.twin.experiments import esrf_experiments, with_duration
 from fsmbench.twin.simulate import simulate_experiment
 
 REQUIRED_TRUTH_KEYS = [
@@ -113,7 +113,7 @@ def test_unknown_experiment_is_refused() -> None:
 def test_seed_controller_stabilises_the_twin_and_a_bad_one_is_refused(bench: Bench) -> None:
     p = bench.true
     plant = twin_discrete(p)
-    k = seed_decentralised_controller()
+    k = esrf_decentralised_controller()
     good = feedback_controller(k, gd_v_per_rad=bench.nominal.quad_diode.gain_v_per_rad,
                                ts_s=p.converter.ts_s)
     assert closed_loop_spectral_radius(plant, good, n_adc=len(ADC_CHANNELS)) < 1.0
@@ -209,7 +209,7 @@ def test_experiments_run_in_threads_give_the_serial_records(bench: Bench) -> Non
     # and source, so each record must equal its serial run bit for bit.
     names = ["data_uch", "data_huddle_test_3", "data_rep_h"]
     run = simulate_bench(bench, seed=3, duration_s=5.0, experiments=names)
-    for spec in with_duration(tuple(s for s in seed_experiments() if s.name in names),
+    for spec in with_duration(tuple(s for s in esrf_experiments() if s.name in names),
                               duration_s=5.0):
         serial = simulate_experiment(bench, spec, seed=3).recording
         for var in serial.data_vars:

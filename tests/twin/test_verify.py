@@ -9,13 +9,13 @@ import pytest
 
 from fsmbench.bench.blocks import PlantModel, replace_params
 from fsmbench.bench.params import Bench, PerAxis
-from fsmbench.control.seed import seed_decentralised_controller
+from fsmbench.control.esrf import esrf_decentralised_controller
 from fsmbench.twin.verify import predict_tracking, verify_on_twin
 
 
 def test_seed_controller_on_the_twin_matches_the_prediction(bench: Bench,
                                                             true_plant: PlantModel) -> None:
-    check = verify_on_twin(seed_decentralised_controller(), bench=bench, plant=true_plant,
+    check = verify_on_twin(esrf_decentralised_controller(), bench=bench, plant=true_plant,
                            name="seed", duration_s=8.0)
     for axis in "hv":
         # Issue target: the twin agrees with the linear prediction within 20 %.
@@ -23,7 +23,7 @@ def test_seed_controller_on_the_twin_matches_the_prediction(bench: Bench,
 
 
 def test_prediction_terms_scale_as_their_sources(bench: Bench, true_plant: PlantModel) -> None:
-    k = seed_decentralised_controller()
+    k = esrf_decentralised_controller()
     _, parts = predict_tracking(true_plant, k, bench=bench, n_freq=4000)
     q = bench.true.quad_diode.noise_rms_v
     louder = dataclasses.replace(bench, true=replace_params(
@@ -36,7 +36,7 @@ def test_prediction_terms_scale_as_their_sources(bench: Bench, true_plant: Plant
 
 
 def test_a_destabilising_controller_is_refused(bench: Bench, true_plant: PlantModel) -> None:
-    k = seed_decentralised_controller()
+    k = esrf_decentralised_controller()
     bad = ct.ss(k.A, k.B, -k.C, -k.D, inputs=k.input_labels, outputs=k.output_labels)
     with pytest.raises(ValueError, match="does not stabilise"):
         verify_on_twin(bad, bench=bench, plant=true_plant, name="bad", duration_s=5.0)

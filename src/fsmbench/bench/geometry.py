@@ -94,10 +94,10 @@ __all__ = [
     "angle_error_table",
     "beam_path_figure_data",
     "closed_form_path_error",
+    "esrf_beam_path",
+    "esrf_theta_range",
     "fit_quadratic_law",
     "perpendicular_motion",
-    "seed_beam_path",
-    "seed_theta_range",
     "small_angle_law",
     "tilted_leg_excess",
     "trace_bench",
@@ -110,7 +110,7 @@ ComplexArray = NDArray[np.complex128]
 _QUARTER_TURNS = (1.0 + 0.0j, 1.0j, -1.0 + 0.0j, -1.0j)
 
 
-def seed_theta_range() -> FloatArray:
+def esrf_theta_range() -> FloatArray:
     """The ESRF study's Sercalo angle-error range ``logspace(-7, -4, 100)`` [rad], shape (100,)."""
     return np.logspace(-7.0, -4.0, 100)
 
@@ -331,7 +331,7 @@ def trace_bench(
     )
 
 
-def seed_beam_path(theta_rad: ArrayLike, *, h_m: float, l_m: float) -> BeamPath:
+def esrf_beam_path(theta_rad: ArrayLike, *, h_m: float, l_m: float) -> BeamPath:
     """The ESRF study's closed-form points Y, M, T (4.1 MATLAB code), for comparison.
 
     Same formulas and the same ``norm`` sum as the ESRF study; ``theta_rad`` must be
@@ -342,7 +342,7 @@ def seed_beam_path(theta_rad: ArrayLike, *, h_m: float, l_m: float) -> BeamPath:
     length = _check_length("l_m", l_m)
     th = np.array(theta_rad, dtype=float)
     if np.any(th == 0.0):
-        raise ValueError("seed_beam_path: theta_rad must be non-zero (the ESRF study divides by "
+        raise ValueError("esrf_beam_path: theta_rad must be non-zero (the ESRF study divides by "
                          "tan 2θ)")
     one = np.ones_like(th)
     o = np.stack([-length * one, 0.0 * one], axis=-1)
@@ -460,7 +460,7 @@ def fit_quadratic_law(
     relative weight across the four decades; the trace is exact enough for it.
     ``theta_rad`` : array_like, shape (n,), non-zero Sercalo angle errors [rad].
     """
-    th = seed_theta_range() if theta_rad is None else np.asarray(theta_rad, dtype=float).ravel()
+    th = esrf_theta_range() if theta_rad is None else np.asarray(theta_rad, dtype=float).ravel()
     if th.size < 2 or np.any(th == 0.0):
         raise ValueError("fit_quadratic_law needs at least two non-zero angles")
     path = trace_bench(th, h_m=h_m, l_m=l_m)

@@ -45,7 +45,7 @@ from fsmbench.budget.repeatability import (
     analyse_repeatability,
 )
 from fsmbench.budget.result import BudgetResult, NonRepeatability
-from fsmbench.budget.spectra import cumulative_power, first_order_lowpass, seed_welch
+from fsmbench.budget.spectra import cumulative_power, esrf_welch, first_order_lowpass
 from fsmbench.budget.study import budget_study
 from fsmbench.budget.table import BudgetRow, ErrorBudget, error_budget
 
@@ -79,6 +79,7 @@ __all__ = [
     "cumulative_power",
     "distance_coefficients",
     "error_budget",
+    "esrf_welch",
     "estimate_dac_noise",
     "estimate_qd_noise",
     "first_order_lowpass",
@@ -89,7 +90,6 @@ __all__ = [
     "ou_window_factor",
     "propagate",
     "quadratic_distance",
-    "seed_welch",
     "trim_huddle",
 ]
 

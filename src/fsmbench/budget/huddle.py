@@ -42,8 +42,8 @@ from fsmbench.bench.blocks import newport_beam_matrix
 from fsmbench.bench.params import BenchParams
 from fsmbench.budget.long_record import LongRecordSummary, summarise_long_record
 from fsmbench.budget.signals import block_means, is_lazy, lowpass, trim_record
-from fsmbench.budget.spectra import cumulative_power, seed_welch
-from fsmbench.control.seed import tustin
+from fsmbench.budget.spectra import cumulative_power, esrf_welch
+from fsmbench.control.esrf import tustin
 from fsmbench.jsonutil import hv
 from fsmbench.signal.welch import hanning
 
@@ -287,9 +287,9 @@ def analyse_huddle_record(ds: xr.Dataset, *, name: str | None = None, t0_s: floa
         va, vph, vpv = sig["Va"], sig["Vph"], sig["Vpv"]
         va_lowpass = lowpass(va, cutoff_hz=lpf_hz, fs_hz=fs)
         va_lpf_rms = float(np.sqrt(np.mean((va_lowpass - va_lowpass.mean()) ** 2)))
-        s_va = seed_welch(va, fs_hz=fs, name=f"{name}.Va")
-        s_ph = seed_welch(vph, fs_hz=fs, name=f"{name}.Vph")
-        s_pv = seed_welch(vpv, fs_hz=fs, name=f"{name}.Vpv")
+        s_va = esrf_welch(va, fs_hz=fs, name=f"{name}.Va")
+        s_ph = esrf_welch(vph, fs_hz=fs, name=f"{name}.Vph")
+        s_pv = esrf_welch(vpv, fs_hz=fs, name=f"{name}.Vpv")
         va_rms, vph_rms, vpv_rms = (float(np.sqrt(np.mean(x**2))) for x in (va, vph, vpv))
         drift = _drift(va, fs)
         n_samples = int(va.shape[0])
@@ -499,7 +499,7 @@ def estimate_dac_noise(recordings: Mapping[str, xr.Dataset], *, controller: ct.S
             continue
         worst = max(worst, worst_here)
         used.append(name)
-        spectra = [seed_welch(e[i], fs_hz=fs, name=f"{name}.Uc error") for i in (0, 1)]
+        spectra = [esrf_welch(e[i], fs_hz=fs, name=f"{name}.Uc error") for i in (0, 1)]
         f = np.asarray(spectra[0].f_hz)
         psds.append([np.asarray(sp.values, dtype=float) for sp in spectra])
         cmd.append(np.sqrt(np.mean((u[:, keep] - u[:, keep].mean(axis=1, keepdims=True)) ** 2,

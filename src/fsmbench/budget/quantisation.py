@@ -103,7 +103,7 @@ class NoiseSources:
         return out
 
 
-def _seed_dac_procedure(plant: PlantModel, *, lsb_v: float, fs_hz: float) -> float:
+def _esrf_dac_procedure(plant: PlantModel, *, lsb_v: float, fs_hz: float) -> float:
     """ESRF study 4.5c on ``plant``: white DAC ASD × |Rh/Uch|, 10 Hz–1 kHz, × 1e-6 m/rad."""
     freqs = np.logspace(1.0, 3.0, 1000)
     g11 = plant.frequency_response(freqs, outputs=["Rh"], inputs=["Uch"], with_delay=False)
@@ -172,6 +172,6 @@ def noise_sources(params: BenchParams, *, plant: PlantModel | None = None,
         sercalo_dc_gain_rad_per_v=pair(g_dc),
         sercalo_dac_lsb_beam_angle_rad=float(q * np.max(g_dc)),
         seed_sercalo_dac_lsb_beam_angle_rad=seed_lsb_beam,
-        seed_method_sercalo_dac_distance_rms_m=_seed_dac_procedure(plant, lsb_v=q,
+        seed_method_sercalo_dac_distance_rms_m=_esrf_dac_procedure(plant, lsb_v=q,
                                                                    fs_hz=conv.fs_hz),
     )

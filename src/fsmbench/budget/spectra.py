@@ -26,9 +26,9 @@ from fsmbench.signal.welch import SpectrumResult, hanning, is_dask_array, pwelch
 
 __all__ = [
     "cumulative_power",
+    "esrf_welch",
     "first_order_lowpass",
     "gauss_markov_psd",
-    "seed_welch",
     "window_variance",
     "window_weight",
 ]
@@ -36,7 +36,7 @@ __all__ = [
 FloatArray = NDArray[np.float64]
 
 
-def seed_welch(x: ArrayLike, *, fs_hz: float, name: str = "x") -> SpectrumResult:
+def esrf_welch(x: ArrayLike, *, fs_hz: float, name: str = "x") -> SpectrumResult:
     """The ESRF study's ``pwelch(x, hanning(ceil(1*fs)), [], [], fs)`` (3.5, 11.3).
 
     Parameters

@@ -49,7 +49,7 @@ from fsmbench.budget.signals import is_lazy
 from fsmbench.budget.stability import DRIFT_BINS, StabilityRecord, analyse_stability
 from fsmbench.budget.table import AngleSources, angle_sources, budget_table
 from fsmbench.checks import Check, Notice, first_failure
-from fsmbench.control.seed import seed_decentralised_controller, tustin
+from fsmbench.control.esrf import esrf_decentralised_controller, tustin
 from fsmbench.io.folder import check_recording
 
 # The result types live in fsmbench.budget.result; named here too, where they were first.
@@ -165,7 +165,7 @@ def _budget_study(recordings: Mapping[str, xr.Dataset], *, bench: Bench,
     plant = physical_plant(params, source="physical (nominal)") if plant is None else plant
     params = _with_plant_qd_gain(params, plant)
     if controller is None:
-        controller = tustin(seed_decentralised_controller(), ts_s=params.converter.ts_s)
+        controller = tustin(esrf_decentralised_controller(), ts_s=params.converter.ts_s)
         controller_name = "ESRF study 9.2 K, Tustin at 1/fs (9.3)"
     else:
         controller_name = controller_name or str(controller.name or "given controller")

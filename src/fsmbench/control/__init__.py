@@ -1,26 +1,26 @@
 """Plant analysis, controllers (the ESRF study's and fsmbench's), discretisation and export.
 
 Entry point: :func:`design_study` (ESRF study sections 5–10 on a plant model); the
-ESRF study's controllers are in :mod:`fsmbench.control.seed`. The report's figures
+ESRF study's controllers are in :mod:`fsmbench.control.esrf`. The report's figures
 of these results are built in :mod:`fsmbench.report.figures.control`.
 """
 
-from fsmbench.control.realize import zpk_cascade
-from fsmbench.control.seed import (
+from fsmbench.control.esrf import (
+    esrf_decentralised_controller,
     iff_controller,
     newport_controller,
-    seed_decentralised_controller,
     tustin,
 )
+from fsmbench.control.realize import zpk_cascade
 from fsmbench.control.study import DesignResult, StudyOptions, design_study
 
 __all__ = [
     "DesignResult",
     "StudyOptions",
     "design_study",
+    "esrf_decentralised_controller",
     "iff_controller",
     "newport_controller",
-    "seed_decentralised_controller",
     "tustin",
     "zpk_cascade",
 ]

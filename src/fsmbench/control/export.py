@@ -39,6 +39,7 @@ from scipy.linalg import eigvals
 
 from fsmbench import __version__
 from fsmbench.control.antiwindup import DEFAULT_TRACKING_TIME_S, antiwindup_channel
+from fsmbench.control.esrf import ESRF_TS_S, tustin
 from fsmbench.control.export_check import float32_sos_check, float32_state_space_check
 from fsmbench.control.realize import (
     DiscreteSection,
@@ -49,7 +50,6 @@ from fsmbench.control.realize import (
     tustin_section,
     warped_frequency_rad_s,
 )
-from fsmbench.control.seed import SEED_TS_S, tustin
 from fsmbench.io.atomic import atomic_write_text
 from fsmbench.io.matwrite import save_mat
 
@@ -237,7 +237,7 @@ def channel_sections(sys: ct.StateSpace, *, output: int = 0, input: int = 0) -> 
     return sections or [Section(zeros=(), poles=(), gain=k)]
 
 
-def discretise_channel(sys: ct.StateSpace, *, ts_s: float = SEED_TS_S, output: int = 0,
+def discretise_channel(sys: ct.StateSpace, *, ts_s: float = ESRF_TS_S, output: int = 0,
                        input: int = 0,
                        method: str = DEFAULT_DISCRETISATION) -> list[DiscreteSection]:
     """Discrete sections of one channel of a continuous model.
@@ -258,7 +258,7 @@ def discretise_channel(sys: ct.StateSpace, *, ts_s: float = SEED_TS_S, output: i
             for sec in channel_sections(sys, output=output, input=input)]
 
 
-def tustin_sos(sys: ct.StateSpace, *, ts_s: float = SEED_TS_S, output: int = 0,
+def tustin_sos(sys: ct.StateSpace, *, ts_s: float = ESRF_TS_S, output: int = 0,
                input: int = 0, method: str = DEFAULT_DISCRETISATION) -> np.ndarray:
     """Second-order sections ``[b0, b1, b2, 1, a1, a2]`` of one discretised channel.
 
@@ -271,11 +271,11 @@ def tustin_sos(sys: ct.StateSpace, *, ts_s: float = SEED_TS_S, output: int = 0,
     return np.array([s.sos for s in secs], dtype=float)
 
 
-def discretise(k: ct.StateSpace, *, ts_s: float = SEED_TS_S,
+def discretise(k: ct.StateSpace, *, ts_s: float = ESRF_TS_S,
                method: str = DEFAULT_DISCRETISATION) -> ct.StateSpace:
     """Discrete controller with ``k``'s signal names (``dt = ts_s``).
 
-    ``"tustin"`` discretises the whole model (:func:`fsmbench.control.seed.tustin`);
+    ``"tustin"`` discretises the whole model (:func:`fsmbench.control.esrf.tustin`);
     ``"tustin_prewarp"`` cascades each diagonal channel's prewarped sections
     (off-diagonal channels must be zero).
     """
@@ -291,7 +291,7 @@ def discretise(k: ct.StateSpace, *, ts_s: float = SEED_TS_S,
 
 
 def write_controllers_mat(path: str | Path, controllers: Mapping[str, ct.StateSpace], *,
-                          ts_s: float = SEED_TS_S, method: str = DEFAULT_DISCRETISATION,
+                          ts_s: float = ESRF_TS_S, method: str = DEFAULT_DISCRETISATION,
                           descriptions: Mapping[str, str] | None = None,
                           scaling: InputScaling | None = None) -> Path:
     """Write ``controllers.mat``: per controller a struct ``{K, Kd}``, plus ``fsmbench`` meta.
@@ -396,7 +396,7 @@ def _channel_entry(k: ct.StateSpace, i: int, *, ts_s: float, method: str,
 
 
 def sos_document(controllers: Mapping[str, ct.StateSpace], *, scaling: InputScaling,
-                 ts_s: float = SEED_TS_S, method: str = DEFAULT_DISCRETISATION,
+                 ts_s: float = ESRF_TS_S, method: str = DEFAULT_DISCRETISATION,
                  descriptions: Mapping[str, str] | None = None,
                  dac_rails_v: tuple[float, float] = DAC_RAILS_V,
                  tracking_time_s: float = DEFAULT_TRACKING_TIME_S) -> dict[str, Any]:
@@ -458,7 +458,7 @@ def sos_document(controllers: Mapping[str, ct.StateSpace], *, scaling: InputScal
 
 
 def write_sos_json(path: str | Path, controllers: Mapping[str, ct.StateSpace], *,
-                   scaling: InputScaling, ts_s: float = SEED_TS_S,
+                   scaling: InputScaling, ts_s: float = ESRF_TS_S,
                    method: str = DEFAULT_DISCRETISATION,
                    descriptions: Mapping[str, str] | None = None,
                    dac_rails_v: tuple[float, float] = DAC_RAILS_V,
@@ -486,7 +486,7 @@ def _check_diagonal(k: ct.StateSpace, name: str) -> None:
 
 
 def sos_response(sos: Sequence[Sequence[float]], f_hz: np.ndarray, *,
-                 ts_s: float = SEED_TS_S) -> np.ndarray:
+                 ts_s: float = ESRF_TS_S) -> np.ndarray:
     """Frequency response of a cascade of sections at ``f_hz`` (for checks), shape (n,)."""
     _, h = signal.sosfreqz(np.asarray(sos, dtype=float), worN=np.asarray(f_hz, dtype=float),
                            fs=1.0 / ts_s)

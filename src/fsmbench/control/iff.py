@@ -26,6 +26,7 @@ import control as ct
 import numpy as np
 
 from fsmbench.bench.blocks import PlantModel
+from fsmbench.control.esrf import iff_controller
 from fsmbench.control.freq import (
     NyquistCount,
     evaluate_ss,
@@ -35,7 +36,6 @@ from fsmbench.control.freq import (
     plant_response,
 )
 from fsmbench.control.loops import AXES, closed_loop_poles
-from fsmbench.control.seed import iff_controller
 
 __all__ = ["IffAnalysis", "ModeDamping", "iff_analysis", "lightly_damped_modes"]
 

@@ -29,6 +29,7 @@ from scipy.linalg import eigvals
 
 from fsmbench.bench.blocks import PlantModel, ResponseEvaluator
 from fsmbench.control.analysis import ControlObjective
+from fsmbench.control.esrf import ESRF_TS_S, tustin
 from fsmbench.control.freq import (
     Margins,
     NyquistCount,
@@ -40,7 +41,6 @@ from fsmbench.control.freq import (
     plant_response,
     siso_margins,
 )
-from fsmbench.control.seed import SEED_TS_S, tustin
 
 __all__ = [
     "AXES",
@@ -82,7 +82,7 @@ class LoopOptions:
     """
 
     pade_order: int = 6
-    ts_s: float = SEED_TS_S
+    ts_s: float = ESRF_TS_S
     discrete_f_max_hz: float = 1e3
     f_min_hz: float = 1e-2
     f_max_hz: float = 1e4
@@ -239,7 +239,7 @@ class LoopAnalysis:
     complementary: np.ndarray = field(repr=False)
     discrete: DiscreteComparison | None = None
     pade_order: int = 6
-    nyquist_hz: float = 0.5 / SEED_TS_S
+    nyquist_hz: float = 0.5 / ESRF_TS_S
 
     def to_json(self) -> dict[str, Any]:
         """``{h,v}.{stable, gain_margin_db, ...}``, ``stable``, ``meets_objective`` and more."""

@@ -44,6 +44,7 @@ from fsmbench.control.design import (
     design_controller,
     robustness,
 )
+from fsmbench.control.esrf import esrf_decentralised_controller, iff_controller, newport_controller
 from fsmbench.control.export import (
     DEFAULT_DISCRETISATION,
     InputScaling,
@@ -54,7 +55,6 @@ from fsmbench.control.freq import evaluate_ss, plain_json
 from fsmbench.control.iff import IffAnalysis, iff_analysis
 from fsmbench.control.loops import LoopAnalysis, LoopOptions, analyse_loop, newport_to_beam
 from fsmbench.control.responses import ClosedLoopResponses, closed_loop_responses
-from fsmbench.control.seed import iff_controller, newport_controller, seed_decentralised_controller
 from fsmbench.io.atomic import atomic_write_text
 
 __all__ = [
@@ -331,7 +331,7 @@ def design_study(plant: PlantModel, *, bench: Bench,
     plant_an = analyse_plant(plant, params=bench.nominal)
     scaling = _gd_scaling(plant)
 
-    k_seed = seed_decentralised_controller()
+    k_seed = esrf_decentralised_controller()
     seed = analyse_loop(plant, k_seed, objective=objective, name="seed_controller",
                         scaling=scaling, options=opts.loop)
     design = design_controller(plant, objective=objective, options=opts.design)

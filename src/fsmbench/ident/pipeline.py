@@ -58,8 +58,8 @@ from fsmbench.ident.fit.quality import (
 )
 from fsmbench.ident.model_band import model_band
 from fsmbench.ident.result import (
+    ESRF_TRIMS_S,
     IDENTIFICATION_FORMAT,
-    SEED_TRIMS_S,
     Identification,
     IdentifyOptions,
     path_keyed_summary,
@@ -76,9 +76,9 @@ from fsmbench.ident.steps import (
 )
 
 __all__ = [
+    "ESRF_TRIMS_S",
     "IDENTIFICATION_FORMAT",
     "NOISE_EXPERIMENTS",
-    "SEED_TRIMS_S",
     "Identification",
     "IdentifyOptions",
     "identify",

@@ -34,11 +34,19 @@ from fsmbench.ident.sercalo import SercaloFitOptions, SercaloIdentification
 from fsmbench.ident.uncertainty import Uncertain
 from fsmbench.ident.validate import PathValidation
 
-__all__ = ["IDENTIFICATION_FORMAT", "SEED_TRIMS_S", "Identification", "IdentifyOptions",
-           "PlantChoice", "SavedIdentification", "path_keyed_summary", "write_identification"]
+__all__ = [
+    "ESRF_TRIMS_S",
+    "IDENTIFICATION_FORMAT",
+    "Identification",
+    "IdentifyOptions",
+    "PlantChoice",
+    "SavedIdentification",
+    "path_keyed_summary",
+    "write_identification",
+]
 
 # The seed's t0 for each experiment (2.1: 1 s, 2.3: 1 s, 2.4: 3 s and 1.5 s).
-SEED_TRIMS_S = {"data_cal_pd_h": 1.0, "data_cal_pd_v": 1.0, "data_uch": 1.0, "data_ucv": 1.0,
+ESRF_TRIMS_S = {"data_cal_pd_h": 1.0, "data_cal_pd_v": 1.0, "data_uch": 1.0, "data_ucv": 1.0,
                 "data_unh": 3.0, "data_unv": 1.5}
 
 #: ``identification.json``'s format and version (docs/results.md); 2: the keys of
@@ -84,7 +92,7 @@ class IdentifyOptions:
     """
 
     window_s: float = 1.0
-    trims_s: Mapping[str, float] = field(default_factory=lambda: dict(SEED_TRIMS_S))
+    trims_s: Mapping[str, float] = field(default_factory=lambda: dict(ESRF_TRIMS_S))
     sercalo: SercaloFitOptions = field(default_factory=SercaloFitOptions)
     newport_band_hz: tuple[float, float] = (10.0, 100.0)
     current_amp_band_hz: tuple[float, float] = (20.0, 200.0)

@@ -8,7 +8,7 @@ Sercalo (2.3)
     (:mod:`fsmbench.ident.delay.bode`) instead of the seed's hard-coded ``Ts``;
     their weighted mean is removed from both columns. The weights are the
     seed's (coherence, 10 within ±10 % of each column's resonance, 0 above
-    1 kHz; :func:`seed_weights`), divided by ``|H|`` so that the fit
+    1 kHz; :func:`esrf_weights`), divided by ``|H|`` so that the fit
     minimises *relative* error whatever the element's scale (the cross terms
     are 30× below the diagonal). Vector fitting uses common poles for the
     whole matrix, one pair per resonance (the seed's 410 Hz and 250 Hz
@@ -37,8 +37,8 @@ from fsmbench.ident.fit.parameter_std import ParameterStd, sercalo_parameter_std
 from fsmbench.ident.fit.vectfit import VectorFit, VectorFitOptions, vector_fit
 from fsmbench.ident.fit.weights import (
     detect_resonances,
+    esrf_weights,
     fit_weights,
-    seed_weights,
     variance_weights,
 )
 from fsmbench.ident.frf.experiment import OUTPUTS
@@ -105,7 +105,7 @@ class SercaloFitOptions:
     Attributes
     ----------
     alpha, boost, f_max_hz : float
-        The seed's weights (:func:`fsmbench.ident.fit.weights.seed_weights`).
+        The seed's weights (:func:`fsmbench.ident.fit.weights.esrf_weights`).
     min_coherence : float
         Coherence threshold of the delay band.
     delay_s : float, optional
@@ -384,7 +384,7 @@ def _weights(clean: FrequencyResponse, resonances: Mapping[str, float],
              opts: SercaloFitOptions) -> xr.DataArray:
     if opts.weights == "variance":
         return variance_weights(clean, f_max_hz=opts.f_max_hz)
-    return seed_weights(clean, resonances_hz=resonances, alpha=opts.alpha, boost=opts.boost,
+    return esrf_weights(clean, resonances_hz=resonances, alpha=opts.alpha, boost=opts.boost,
                         f_max_hz=opts.f_max_hz)
 
 

@@ -33,7 +33,7 @@ from fsmbench.live.spectra import AccumulatingFrf
 from fsmbench.live.states import ALLOWED, Refused
 from fsmbench.live.tasks import Task, TaskControl, design_multisine
 from fsmbench.sim.excitation import Excitation, SampledExcitation
-from fsmbench.twin.experiments import seed_experiments, seed_feedback
+from fsmbench.twin.experiments import esrf_experiments, esrf_feedback
 
 if TYPE_CHECKING:
     from fsmbench.bench.params import Bench
@@ -203,7 +203,7 @@ class BenchCommands:
     # -- the loop ------------------------------------------------------------------
 
     def _seed_controller(self) -> DiscreteController:
-        return replace(seed_feedback(self.bench), name="the ESRF study's controller (9.2)")
+        return replace(esrf_feedback(self.bench), name="the ESRF study's controller (9.2)")
 
     @_command("CloseLoop")
     def close_loop(self) -> str:
@@ -442,7 +442,7 @@ class BenchCommands:
         loaded controller (the seed's if none); when it ends (or is aborted) the
         loop and the environment are put back as they were.
         """
-        specs = {s.name: s for s in seed_experiments()}
+        specs = {s.name: s for s in esrf_experiments()}
         request = parse_experiment(argument, tuple(specs))
         spec = specs[request.name]
         with self._locked("RunExperiment"):

@@ -6,7 +6,7 @@ MATLAB semantics) give on the same samples:
 
 * :class:`RollingAsd`: ``sqrt(pwelch(x, hanning(ceil(window_s*fs)), [], [], fs))``
   of the last ``span_s`` seconds of each channel, the seed's 1 s Welch
-  (:func:`fsmbench.budget.spectra.seed_welch`) over a sliding span.
+  (:func:`fsmbench.budget.spectra.esrf_welch`) over a sliding span.
 * :class:`AccumulatingFrf`: ``tfestimate`` (H1) and ``mscohere`` of one input and
   several outputs over every complete Welch segment pushed since the start (or
   the last :meth:`AccumulatingFrf.reset`); segments that straddle two blocks are

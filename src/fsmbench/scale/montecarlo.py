@@ -295,7 +295,7 @@ def run_draw(draw: Draw, setup: MonteCarloSetup) -> DrawResult:
     from fsmbench.sim.controller import closed_loop_spectral_radius
     from fsmbench.sim.plant import ADC_CHANNELS, bench_discrete
     from fsmbench.sim.stream import BenchStream
-    from fsmbench.twin.experiments import seed_experiments, with_duration
+    from fsmbench.twin.experiments import esrf_experiments, with_duration
 
     bench = perturbed_bench(setup.bench, draw.factors)
     p = bench.true
@@ -309,7 +309,7 @@ def run_draw(draw: Draw, setup: MonteCarloSetup) -> DrawResult:
         tau = -p.converter.ts_s / math.log(rho)
         metrics["slowest_time_constant_s"] = tau
         specs = {s.name: s for s in with_duration(
-            [s for s in seed_experiments() if s.name in {e for _a, e, _v in _EXPERIMENTS}],
+            [s for s in esrf_experiments() if s.name in {e for _a, e, _v in _EXPERIMENTS}],
             duration_s=setup.duration_s)}
         fs = p.converter.fs_hz
         gd = bench.nominal.quad_diode.gain_v_per_rad

@@ -106,7 +106,7 @@ def designed_controller(bench: Bench, *, plant: Any = None,
     from fsmbench.bench.blocks import physical_plant
     from fsmbench.control.analysis import control_objective
     from fsmbench.control.design import design_controller
-    from fsmbench.control.seed import tustin
+    from fsmbench.control.esrf import tustin
     from fsmbench.scale.montecarlo import ControllerChoice
 
     model = physical_plant(bench.nominal, source=plant_source) if plant is None else plant

@@ -93,7 +93,7 @@ def running_controller(spec: str | Path | None, *, bench: Bench,
         file is missing or not a controllers file, has no such controller, its
         sample time is not the bench's.
     """
-    from fsmbench.control.seed import seed_decentralised_controller, tustin
+    from fsmbench.control.esrf import esrf_decentralised_controller, tustin
 
     ts = bench.true.converter.ts_s
     nominal = bench.nominal.quad_diode.gain_v_per_rad
@@ -101,7 +101,7 @@ def running_controller(spec: str | Path | None, *, bench: Bench,
         gd = gd_v_per_rad or (float(nominal.h), float(nominal.v))
         from fsmbench.bench.axes import PerAxis
 
-        kd = tustin(seed_decentralised_controller(), ts_s=ts)
+        kd = tustin(esrf_decentralised_controller(), ts_s=ts)
         fb = feedback_controller(kd, gd_v_per_rad=PerAxis(h=gd[0], v=gd[1]), ts_s=ts,
                                  name="seed K (9.2)")
         return RunningController(feedback=fb, a=np.asarray(kd.A, dtype=float),

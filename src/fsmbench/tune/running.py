@@ -11,8 +11,8 @@ import numpy as np
 
 from fsmbench.bench.blocks import physical_plant
 from fsmbench.bench.params import Bench
+from fsmbench.control.esrf import esrf_decentralised_controller
 from fsmbench.control.load import load_controllers, select_controller
-from fsmbench.control.seed import seed_decentralised_controller
 from fsmbench.control.study import design_study
 from fsmbench.io.atomic import atomic_write_text
 from fsmbench.jsonutil import format_text
@@ -43,7 +43,7 @@ def running_loop(kind: str, bench: Bench) -> Loop:
     if kind not in ("seed", "fsmbench"):
         return loop_from_file(kind, bench)
     if kind == "seed":
-        return loop_of(seed_decentralised_controller(), name="the ESRF study's controller (9.2)",
+        return loop_of(esrf_decentralised_controller(), name="the ESRF study's controller (9.2)",
                        ts_s=ts, gd_v_per_rad=(float(gd.h), float(gd.v)))
     study = design_study(physical_plant(bench.nominal, source="the bench file"), bench=bench)
     return loop_of(study.controllers["fsmbench_controller"],

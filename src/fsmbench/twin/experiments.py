@@ -29,7 +29,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from fsmbench.bench.params import Bench
-from fsmbench.control.seed import seed_decentralised_controller
+from fsmbench.control.esrf import esrf_decentralised_controller
 from fsmbench.io.signals import MIN_DURATION_S as SIGNAL_MIN_DURATION_S
 from fsmbench.sim.controller import feedback_controller
 from fsmbench.sim.discretize import DiscretePlant
@@ -45,10 +45,10 @@ __all__ = [
     "REALIZED_NOISE",
     "Excitation",
     "ExperimentSpec",
+    "esrf_experiments",
+    "esrf_feedback",
     "experiment_stream",
     "played_experiment",
-    "seed_experiments",
-    "seed_feedback",
     "with_duration",
 ]
 
@@ -116,7 +116,7 @@ def _huddle(i: int, closed: bool, comp: bool, alu: bool) -> ExperimentSpec:
         compensation_unit=comp, shielding=alu)
 
 
-def seed_experiments(*, duration_s: float | None = None) -> tuple[ExperimentSpec, ...]:
+def esrf_experiments(*, duration_s: float | None = None) -> tuple[ExperimentSpec, ...]:
     """The thirteen experiments, at the seed's lengths or all at ``duration_s``.
 
     Raises
@@ -213,7 +213,7 @@ def played_experiment(*, channel: str, samples_v: np.ndarray, fs_hz: float,
         raise ValueError(f"unknown input {channel!r}; an excitation file can drive "
                          f"{', '.join(INPUT_EXPERIMENTS)}")
     name = INPUT_EXPERIMENTS[channel]
-    spec = next(s for s in seed_experiments() if s.name == name)
+    spec = next(s for s in esrf_experiments() if s.name == name)
     start = spec.excitations[0].start_s
     x = np.asarray(samples_v, dtype=float)
     ex = SampledExcitation(channel, "samples", float(np.sqrt(np.mean(x * x))), start,
@@ -233,9 +233,9 @@ REALIZED_NOISE = (("qd_noise_v", "qd"), ("newport_angle_noise_rad", "newport_ang
                   ("qd_slow_disturbance_v", "qd_slow"))
 
 
-def seed_feedback(bench: Bench) -> DiscreteController:
+def esrf_feedback(bench: Bench) -> DiscreteController:
     """The seed's decentralised controller of 9.2, Tustin at the converter rate, in the loop."""
-    return feedback_controller(seed_decentralised_controller(),
+    return feedback_controller(esrf_decentralised_controller(),
                                gd_v_per_rad=bench.nominal.quad_diode.gain_v_per_rad,
                                ts_s=bench.true.converter.ts_s, name="seed K (9.2)")
 
@@ -245,10 +245,10 @@ def experiment_stream(bench: Bench, spec: ExperimentSpec, *, seed: int,
                       controller: DiscreteController | None = None) -> BenchStream:
     """The twin's bench set up for one experiment (loop, environment, excitations).
 
-    ``controller`` closes the loop when ``spec.closed_loop`` (default: :func:`seed_feedback`).
+    ``controller`` closes the loop when ``spec.closed_loop`` (default: :func:`esrf_feedback`).
     """
     if spec.closed_loop and controller is None:
-        controller = seed_feedback(bench)
+        controller = esrf_feedback(bench)
     return BenchStream(bench.true, seed=seed, name=spec.name,
                        compensation_unit=spec.compensation_unit, shielding=spec.shielding,
                        controller=controller if spec.closed_loop else None,

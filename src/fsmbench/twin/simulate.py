@@ -42,10 +42,10 @@ from fsmbench.sim.plant import ADC_CHANNELS, bench_discrete
 from fsmbench.twin.experiments import (
     REALIZED_NOISE,
     ExperimentSpec,
+    esrf_experiments,
+    esrf_feedback,
     experiment_stream,
     played_experiment,
-    seed_experiments,
-    seed_feedback,
     with_duration,
 )
 from fsmbench.twin.truth import TRUTH_FORMAT, twin_truth
@@ -134,7 +134,7 @@ def _prepare_run(bench: Bench, *, duration_s: float | None, experiments: Sequenc
                  controller: DiscreteController | None
                  ) -> tuple[tuple[ExperimentSpec, ...], DiscretePlant, DiscreteController | None]:
     """The experiments asked for, the twin's plant and a controller checked stable."""
-    specs = seed_experiments()
+    specs = esrf_experiments()
     if experiments is not None:
         unknown = sorted(set(experiments) - {s.name for s in specs})
         if unknown:
@@ -144,7 +144,7 @@ def _prepare_run(bench: Bench, *, duration_s: float | None, experiments: Sequenc
         specs = with_duration(specs, duration_s=duration_s)
     plant = bench_discrete(bench)
     if controller is None and any(s.closed_loop for s in specs):
-        controller = seed_feedback(bench)
+        controller = esrf_feedback(bench)
     if controller is not None:
         rho = closed_loop_spectral_radius(plant, controller, n_adc=len(ADC_CHANNELS))
         if rho >= 1.0:

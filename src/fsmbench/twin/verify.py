@@ -35,7 +35,7 @@ import numpy as np
 from fsmbench.bench.blocks import PlantModel
 from fsmbench.bench.params import Bench, PerAxis
 from fsmbench.budget.propagation import loop_response
-from fsmbench.control.seed import tustin
+from fsmbench.control.esrf import tustin
 from fsmbench.control.validation import tracking_error_spectra
 from fsmbench.sim.controller import feedback_controller
 from fsmbench.twin.experiments import REP_AMPLITUDE_V, REP_FREQ_HZ

@@ -186,10 +186,10 @@ def run(args: argparse.Namespace) -> int:
                   else str(args.controller).partition("::")[0])
     args.more_inputs = [("--controller", controller), ("--ranges", args.ranges)]
     check_inputs_first(args, args.out, args.data)  # before anything is read or computed
-    from fsmbench.twin.experiments import seed_experiments, with_duration
+    from fsmbench.twin.experiments import esrf_experiments, with_duration
 
     # A record too short for the repeatability experiments: one line, before any work.
-    with_duration([e for e in seed_experiments() if e.name in ("data_rep_h", "data_rep_v")],
+    with_duration([e for e in esrf_experiments() if e.name in ("data_rep_h", "data_rep_v")],
                   duration_s=args.duration)
     if args.settle >= args.duration:
         settle = default_noted(args, "settle", f"--settle {args.settle:g} s")

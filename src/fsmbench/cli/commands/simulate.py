@@ -95,9 +95,9 @@ def _add_closed_loop_options(p: argparse.ArgumentParser) -> None:
 
 def twin_bytes(args: argparse.Namespace, fmt: str) -> float:
     """Bytes the twin's records of ``args`` (``experiments``, ``duration``) take as ``fmt``."""
-    from fsmbench.twin.experiments import seed_experiments
+    from fsmbench.twin.experiments import esrf_experiments
 
-    specs = seed_experiments()
+    specs = esrf_experiments()
     if getattr(args, "experiments", None):
         specs = tuple(s for s in specs if s.name in set(args.experiments))
     total_s = sum(args.duration if args.duration is not None else s.duration_s for s in specs)
@@ -106,9 +106,9 @@ def twin_bytes(args: argparse.Namespace, fmt: str) -> float:
 
 def simulation_memory_bytes(args: argparse.Namespace, bench: Bench) -> float:
     """Peak memory of simulating the records in memory (see ``_SIM_BASE_BYTES``)."""
-    from fsmbench.twin.experiments import seed_experiments
+    from fsmbench.twin.experiments import esrf_experiments
 
-    specs = seed_experiments()
+    specs = esrf_experiments()
     if args.experiments:
         specs = tuple(s for s in specs if s.name in set(args.experiments))
     durations = [args.duration if args.duration is not None else s.duration_s for s in specs]

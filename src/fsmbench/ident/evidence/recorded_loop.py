@@ -36,7 +36,7 @@ import numpy as np
 import scipy.signal
 import xarray as xr
 
-from fsmbench.control.seed import seed_decentralised_zpk
+from fsmbench.control.esrf import esrf_decentralised_zpk
 
 __all__ = [
     "CLOSED_LOOP_EXPLAINED",
@@ -198,10 +198,10 @@ class RecordedController:
                 "fits": [f.to_json() for f in self.fits], "words": self.words()}
 
 
-def _seed_sos(axis: str, fs_hz: float) -> np.ndarray:
+def _esrf_sos(axis: str, fs_hz: float) -> np.ndarray:
     """``K_axis`` by Tustin at ``fs_hz`` as second-order sections (per axis from its zpk: a
     state-space column of the 2×2 block would carry the other axis's poles as round-off)."""
-    k = seed_decentralised_zpk()[axis]
+    k = esrf_decentralised_zpk()[axis]
     z, p, g = scipy.signal.bilinear_zpk(np.asarray(k.zeros_rad_s), np.asarray(k.poles_rad_s),
                                         k.gain, fs_hz)
     sos: np.ndarray = scipy.signal.zpk2sos(z, p, g)
@@ -215,25 +215,30 @@ def _fit_record(record: str, u: np.ndarray, y: np.ndarray, *, axis: str, fs_hz: 
     rms = float(np.std(uc)) if uc.size else 0.0
     if uc.size < 3 or not rms > 0:
         return ControllerFit(record, 0.0, 0.0, float("nan"), float("nan"), 0.0, 0)
-    sos = _seed_sos(axis, fs_hz)
+    sos = _esrf_sos(axis, fs_hz)
     t = np.arange(uc.size) / fs_hz
     t = t / max(float(t[-1]), 1.0 / fs_hz)  # scaled to [0, 1]: a well-conditioned polynomial
+    # The polynomial is the same for every lag: projected out once (Frisch-Waugh-Lovell),
+    # the controller's coefficient and the residual are those of the full least squares
+    # on [K y, 1, t, t^2], at a third of its cost (a 1e6 x 4 lstsq per lag).
+    poly = np.column_stack([np.ones_like(t), t, t * t])
+    q, _ = np.linalg.qr(poly / np.linalg.norm(poly, axis=0))
+    u_perp = uc - q @ (q.T @ uc)
+    var_u = float(np.var(uc))
+    mean_y = float(np.mean(y))
     best: tuple[float, int, float, float] | None = None
     for lag in _LAGS:
-        yl = np.concatenate([np.zeros(lag), y[:y.size - lag]]) - float(np.mean(y))
+        yl = np.concatenate([np.zeros(lag), y[:y.size - lag]]) - mean_y
         w = scipy.signal.sosfilt(sos, yl)[k0:]
-        x = np.column_stack([w, np.ones_like(t), t, t * t])
-        scale = np.linalg.norm(x, axis=0)
-        scale[scale == 0] = 1.0
-        coef, *_ = np.linalg.lstsq(x / scale, uc, rcond=None)
-        resid = uc - (x / scale) @ coef
-        explained = 1.0 - float(np.var(resid)) / float(np.var(uc))
+        w_perp = w - q @ (q.T @ w)  # K y after the polynomial
+        ww = float(w_perp @ w_perp)
+        c = float(w_perp @ u_perp) / ww if ww > 0 else 0.0
+        resid = u_perp - c * w_perp
+        explained = 1.0 - float(np.var(resid)) / var_u
         if best is None or explained > best[0]:
             # The coefficient's std under a white residual: σ_r / |w| after the polynomial.
-            q, _ = np.linalg.qr(x[:, 1:] / scale[1:])
-            w_alone = x[:, 0] - q @ (q.T @ x[:, 0])
-            c_std = float(np.std(resid)) / max(float(np.linalg.norm(w_alone)), 1e-300)
-            best = (explained, lag, float(coef[0] / scale[0]), c_std)
+            c_std = float(np.std(resid)) / max(float(np.sqrt(ww)), 1e-300)
+            best = (explained, lag, c, c_std)
     assert best is not None
     explained, lag, c, c_std = best
     # u = −(1/g_used) K y  →  the fitted coefficient c = −1/g_used, dg = dc / c².

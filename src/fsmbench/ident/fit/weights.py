@@ -1,7 +1,7 @@
 """Weights of the Sercalo's rational fit: the seed's recipe or each line's inverse std.
 
 The seed's (2.3e, Fig. 20): the coherence, 10 within ±10 % of each column's
-resonance (:func:`detect_resonances`), 0 above 1 kHz (:func:`seed_weights`),
+resonance (:func:`detect_resonances`), 0 above 1 kHz (:func:`esrf_weights`),
 divided by ``|H|`` so the fit minimises relative error; or ``1 / std(H)`` of
 each line (:func:`variance_weights`), under which the fit's residuals have
 unit variance.
@@ -17,7 +17,7 @@ from scipy.ndimage import median_filter
 
 from fsmbench.ident.frf.response import FrequencyResponse
 
-__all__ = ["detect_resonances", "fit_weights", "seed_weights", "variance_weights"]
+__all__ = ["detect_resonances", "esrf_weights", "fit_weights", "variance_weights"]
 
 
 def detect_resonances(frf: FrequencyResponse, *, f_min_hz: float = 20.0,
@@ -59,7 +59,7 @@ def detect_resonances(frf: FrequencyResponse, *, f_min_hz: float = 20.0,
     return out
 
 
-def seed_weights(frf: FrequencyResponse, *, resonances_hz: Mapping[str, float],
+def esrf_weights(frf: FrequencyResponse, *, resonances_hz: Mapping[str, float],
                  alpha: float = 0.1, boost: float = 10.0,
                  f_max_hz: float = 1000.0) -> xr.DataArray:
     """The seed's fit weights (2.3e, Fig. 20), dims ``(frequency, output, input)``.
@@ -83,7 +83,7 @@ def variance_weights(frf: FrequencyResponse, *, f_max_hz: float = 1000.0) -> xr.
 
     ``frf.frf_variance`` when the estimator gives it (periodic, LPM), else
     Bendat & Piersol's ``var(H) = 2 (random_error |H|)^2`` of a Welch
-    estimate. As :func:`seed_weights`: 0 at DC and above ``f_max_hz`` (the
+    estimate. As :func:`esrf_weights`: 0 at DC and above ``f_max_hz`` (the
     two-pole model is not meant for what lies above), and 0 where the
     variance is not finite and positive. Weighted so, the fit's residuals have
     unit variance (:mod:`fsmbench.ident.fit.parameter_std`).

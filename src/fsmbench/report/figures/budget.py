@@ -16,7 +16,7 @@ import numpy as np
 import xarray as xr
 from numpy.typing import NDArray
 
-from fsmbench.bench.geometry import seed_theta_range, small_angle_law, trace_bench
+from fsmbench.bench.geometry import esrf_theta_range, small_angle_law, trace_bench
 from fsmbench.budget.huddle import HuddleAnalysis, HuddleRecord, trim_huddle
 from fsmbench.budget.optics import SEED_4_1, GeometryBudget
 from fsmbench.budget.spectra import cumulative_power, window_weight
@@ -282,7 +282,7 @@ def huddle_qd_asd_figure(h: HuddleAnalysis) -> Figure:
 
 def path_error_figure(g: GeometryBudget) -> Figure:
     """ESRF study Fig. 34: distance error against the Sercalo angle error, trace and law."""
-    th = seed_theta_range()
+    th = esrf_theta_range()
     trace = trace_bench(th, h_m=g.h_m, l_m=g.l_m).path_error_m
     law = small_angle_law(h_m=g.h_m, l_m=g.l_m)
     seed_th = np.asarray(SEED_4_1["table4_theta_rad"], dtype=float)

@@ -32,8 +32,8 @@ from fsmbench.report.figures.spec import H_COLOR, PALETTE, V_COLOR, Figure, Line
 
 __all__ = [
     "AXIS_WORDS",
+    "ESRF_COLOR",
     "FSM_COLOR",
-    "SEED_COLOR",
     "band_words",
     "bode_phase_deg",
     "controllers_figure",
@@ -53,7 +53,7 @@ __all__ = [
 AXIS_WORDS = {"h": "horizontal (h)", "v": "vertical (v)"}
 _AXIS_COLOR = {"h": H_COLOR, "v": V_COLOR}
 # Colours of the controllers where h and v sit in separate panels.
-SEED_COLOR = PALETTE[2]
+ESRF_COLOR = PALETTE[2]
 FSM_COLOR = PALETTE[4]
 _UNSTABLE_COLOR = PALETTE[3]
 # Nyquist window: ±1.5 around −1 shows the unit circle's left half, the
@@ -361,7 +361,7 @@ def robustness_figure(rob: Robustness, *, factors: Sequence[tuple[float, float]]
 def newport_to_beam_figure(n2b: NewportToBeam, *, key: str, title: str, caption: str,
                            seed_ref: str = "") -> Figure:
     """``|Un_i → R_i|`` open loop and with each Sercalo controller closed (ESRF study Fig. 42)."""
-    words = {"seed_controller": ("with the ESRF study's controller", SEED_COLOR),
+    words = {"seed_controller": ("with the ESRF study's controller", ESRF_COLOR),
              "fsmbench_controller": ("with fsmbench's controller", FSM_COLOR)}
     panels = []
     for i, axis in enumerate(AXES):

@@ -20,8 +20,8 @@ from fsmbench.control.loops import AXES, LoopAnalysis
 from fsmbench.control.study import DesignResult
 from fsmbench.report.figures.control import (
     AXIS_WORDS,
+    ESRF_COLOR,
     FSM_COLOR,
-    SEED_COLOR,
     controllers_figure,
     iff_figure,
     loop_gain_figure,
@@ -498,7 +498,7 @@ def _section9(res: DesignResult, check: Any, *, skipped: str = "") -> Section:
         Table(caption="fsmbench's controller: the loop shape of each axis",
               header=("quantity", "h", "v"), rows=shape_rows),
         controllers_figure(
-            (("the ESRF study's controller", res.controllers["seed_controller"], SEED_COLOR),
+            (("the ESRF study's controller", res.controllers["seed_controller"], ESRF_COLOR),
              ("fsmbench's controller", res.controllers["fsmbench_controller"], FSM_COLOR)),
             f_hz=np.union1d(seed.f_hz, fsm.f_hz), key="controllers_compared",
             title="The two controllers",
@@ -508,7 +508,7 @@ def _section9(res: DesignResult, check: Any, *, skipped: str = "") -> Section:
                      "instead, leaving the resonance in the loop.")),
         *_controller_blocks(fsm, who="fsmbench's controller", prefix="fsmbench_controller",
                             seed_ref="", bode_key="fsmbench_controller_loop_gain"),
-        *response_blocks(res, colors=(SEED_COLOR, FSM_COLOR)),
+        *response_blocks(res, colors=(ESRF_COLOR, FSM_COLOR)),
         *_robustness_blocks(res.robustness, res, who="fsmbench's controller",
                             key="fsmbench_controller_robustness",
                             title="fsmbench's controller over the perturbed plants"),

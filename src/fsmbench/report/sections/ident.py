@@ -18,7 +18,7 @@ import xarray as xr
 from fsmbench.bench.params import Bench
 from fsmbench.ident.fit.quality import MAX_DIRECT_FIT_ERROR, MIN_DIRECT_VAF
 from fsmbench.ident.newport import NewportIdentification
-from fsmbench.ident.result import SEED_TRIMS_S, Identification
+from fsmbench.ident.result import ESRF_TRIMS_S, Identification
 from fsmbench.ident.sercalo import SercaloIdentification
 from fsmbench.io.signals import EXPERIMENTS
 from fsmbench.report.figures.ident import (
@@ -113,7 +113,7 @@ def comparison_table(result: Identification, *, bench: Bench,
 
 
 def _trims(result: Identification | None) -> Mapping[str, float]:
-    return result.options.trims_s if result is not None else SEED_TRIMS_S
+    return result.options.trims_s if result is not None else ESRF_TRIMS_S
 
 
 def _time_figure(name: str, recordings: Mapping[str, xr.Dataset], *, bench: Bench,
@@ -518,7 +518,7 @@ def _status(result: Identification | None, *, recordings: Mapping[str, xr.Datase
             skipped: Mapping[str, str]) -> list[Block]:
     """What ran, what was skipped and whether the Sercalo model can be trusted."""
     if result is None:
-        gone = [f"{e} ({skipped.get(e, 'not in the data')})" for e in SEED_TRIMS_S
+        gone = [f"{e} ({skipped.get(e, 'not in the data')})" for e in ESRF_TRIMS_S
                 if e not in recordings]
         text = "The identification did not run"
         text += (": missing " + "; ".join(gone) + "." if gone else ".")

@@ -8,7 +8,7 @@ the only one that parses with the same factors, is
     Kv = 10207 (s + 55.15)(s^2 + 17.45 s + 2.491e6) / (s^2 (s + 491.2)(s + 7695))
 
 (errata E-K1). Both loops then cross over near 27 Hz on the bench's plant,
-which supports the restoration (see tests/control/test_seed.py).
+which supports the restoration (see tests/control/test_esrf.py).
 The ESRF study closes the loop with ``-K``: ``[Uch, Ucv] = -K [Rh, Rv]``.
 """
 
@@ -22,16 +22,16 @@ import numpy as np
 from fsmbench.control.realize import zpk_cascade
 
 __all__ = [
-    "SEED_TS_S",
-    "SeedZpk",
+    "ESRF_TS_S",
+    "EsrfZpk",
+    "esrf_decentralised_controller",
+    "esrf_decentralised_zpk",
     "iff_controller",
     "newport_controller",
-    "seed_decentralised_controller",
-    "seed_decentralised_zpk",
     "tustin",
 ]
 
-SEED_TS_S = 1e-4  # seed 9.3: Kd = c2d(K, 1e-4, 'tustin')
+ESRF_TS_S = 1e-4  # seed 9.3: Kd = c2d(K, 1e-4, 'tustin')
 
 
 def _quadratic_roots(b1: float, b0: float) -> list[complex]:
@@ -39,7 +39,7 @@ def _quadratic_roots(b1: float, b0: float) -> list[complex]:
 
 
 @dataclass(frozen=True)
-class SeedZpk:
+class EsrfZpk:
     """One axis of the ESRF study's controller of 9.2 as continuous zeros, poles and gain.
 
     Attributes
@@ -55,18 +55,18 @@ class SeedZpk:
     gain: float
 
 
-def seed_decentralised_zpk() -> dict[str, SeedZpk]:
+def esrf_decentralised_zpk() -> dict[str, EsrfZpk]:
     """``Kh`` and ``Kv`` of ESRF study 9.2 by axis (``"h"``, ``"v"``), input R [rad], output V."""
     w_lp = 2.0 * np.pi * 2000.0
-    return {"h": SeedZpk((-112.0, *_quadratic_roots(15.93, 6.686e6)),
+    return {"h": EsrfZpk((-112.0, *_quadratic_roots(15.93, 6.686e6)),
                          (0.0, 0.0, -352.5, -w_lp), -0.25598 * w_lp),
-            "v": SeedZpk((-55.15, *_quadratic_roots(17.45, 2.491e6)),
+            "v": EsrfZpk((-55.15, *_quadratic_roots(17.45, 2.491e6)),
                          (0.0, 0.0, -491.2, -7695.0), 10207.0)}
 
 
-def seed_decentralised_controller() -> ct.StateSpace:
+def esrf_decentralised_controller() -> ct.StateSpace:
     """``K = blkdiag(Kh, Kv)`` (ESRF study 9.2), inputs ``Rh, Rv`` [rad], outputs ``Uch, Ucv``."""
-    axes = seed_decentralised_zpk()
+    axes = esrf_decentralised_zpk()
     kh, kv = (zpk_cascade(list(axes[a].zeros_rad_s), list(axes[a].poles_rad_s), axes[a].gain,
                           input_name=f"R{a}", output_name=f"Uc{a}") for a in "hv")
     k = ct.append(kh, kv)
@@ -101,7 +101,7 @@ def iff_controller() -> ct.StateSpace:
                  name="Kppf")
 
 
-def tustin(k: ct.StateSpace, *, ts_s: float = SEED_TS_S) -> ct.StateSpace:
+def tustin(k: ct.StateSpace, *, ts_s: float = ESRF_TS_S) -> ct.StateSpace:
     """Bilinear (Tustin) discretisation keeping the signal names (ESRF study 9.3)."""
     kd = ct.sample_system(k, ts_s, method="tustin")
     return ct.ss(kd.A, kd.B, kd.C, kd.D, ts_s, inputs=list(k.input_labels),

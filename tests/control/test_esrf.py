@@ -7,10 +7,10 @@ import numpy as np
 import pytest
 
 from fsmbench.bench.blocks import PlantModel, ss_frequency_response
-from fsmbench.control.seed import (
+from fsmbench.control.esrf import (
+    esrf_decentralised_controller,
     iff_controller,
     newport_controller,
-    seed_decentralised_controller,
     tustin,
 )
 
@@ -21,7 +21,7 @@ KV = 10207 * (S + 55.15) * (S**2 + 17.45 * S + 2.491e06) / (S**2 * (S + 491.2) *
 
 
 def test_controller_is_the_seeds_expression() -> None:
-    k = seed_decentralised_controller()
+    k = esrf_decentralised_controller()
     assert list(k.input_labels) == ["Rh", "Rv"] and list(k.output_labels) == ["Uch", "Ucv"]
     f = np.logspace(-1, 3.6, 50)
     resp = ss_frequency_response(k, f)
@@ -34,7 +34,7 @@ def test_controller_is_the_seeds_expression() -> None:
 
 def _loop_gain(plant: PlantModel, f: np.ndarray) -> np.ndarray:
     g = plant.frequency_response(f, outputs=["Rh", "Rv"], inputs=["Uch", "Ucv"]).values
-    k = ss_frequency_response(seed_decentralised_controller(), f)
+    k = ss_frequency_response(esrf_decentralised_controller(), f)
     return np.stack([k[:, 0, 0] * g[:, 0, 0], k[:, 1, 1] * g[:, 1, 1]], axis=1)
 
 
@@ -61,14 +61,14 @@ def test_seed_loops_are_stable_on_the_plant(which: str, request) -> None:
     g = plant.with_pade(order=6)
     g_sub = g[[list(g.output_labels).index("Rh"), list(g.output_labels).index("Rv")],
               [list(g.input_labels).index("Uch"), list(g.input_labels).index("Ucv")]]
-    k = seed_decentralised_controller()
+    k = esrf_decentralised_controller()
     cl = ct.feedback(ct.ss(g_sub.A, g_sub.B, g_sub.C, g_sub.D), ct.ss(k.A, k.B, k.C, k.D),
                      sign=-1)
     assert np.max(np.real(cl.poles())) < 0
 
 
 def test_tustin_matches_continuous_below_1khz() -> None:
-    k = seed_decentralised_controller()
+    k = esrf_decentralised_controller()
     kd = tustin(k)
     assert kd.dt == pytest.approx(1e-4)
     assert list(kd.input_labels) == ["Rh", "Rv"]
