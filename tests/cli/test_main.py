@@ -127,14 +127,14 @@ def test_stage_commands_refuse_a_missing_folder(command: str, tmp_path: Path,
 
 
 def test_the_distance_target_is_read_in_nanometres_and_checked() -> None:
-    from fsmbench.cli import build_parser as _parser
+    from fsmbench.cli import build_parser
 
-    args = _parser().parse_args(["study", "--out", "x", "--distance-target", "2.5"])
+    args = build_parser().parse_args(["study", "--out", "x", "--distance-target", "2.5"])
     assert args.distance_target_m == pytest.approx(2.5e-9)
-    assert _parser().parse_args(["study", "--out", "x"]).distance_target_m == 5e-9
+    assert build_parser().parse_args(["study", "--out", "x"]).distance_target_m == 5e-9
     for bad in ("-1", "0", "inf", "nan", "five"):
         with pytest.raises(SystemExit):
-            _parser().parse_args(["study", "--out", "x", "--distance-target", bad])
+            build_parser().parse_args(["study", "--out", "x", "--distance-target", bad])
 
 
 @pytest.mark.parametrize("rate", ["2e4", "nan", "fast"])

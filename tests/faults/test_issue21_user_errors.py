@@ -106,16 +106,16 @@ def test_simulate_size_estimate_fits_a_short_run(monkeypatch: pytest.MonkeyPatch
     of the measured peak (1.52 GB), and 5 s records need well under 1 GB."""
     import argparse
 
-    from fsmbench.cli.commands.simulate import simulation_memory_bytes as _simulation_memory_bytes
+    from fsmbench.cli.commands.simulate import simulation_memory_bytes
 
     def need(**kw: Any) -> float:
         args = argparse.Namespace(experiments=None, excitation=None, duration=None, **kw)
-        return _simulation_memory_bytes(args, default_bench())
+        return simulation_memory_bytes(args, default_bench())
 
     monkeypatch.setattr("os.cpu_count", lambda: 2)
     assert 1.52e9 < need() < 1.2 * 1.52e9 + 0.1e9
     args = argparse.Namespace(experiments=None, excitation=None, duration=5.0)
-    assert _simulation_memory_bytes(args, default_bench()) < 0.5e9
+    assert simulation_memory_bytes(args, default_bench()) < 0.5e9
 
 
 def _fake_huge_mat73(path: Path, samples: int) -> None:

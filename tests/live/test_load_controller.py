@@ -215,7 +215,7 @@ def test_fsmbench_s_own_tuned_files_load_and_run_a_new_tune(
     """A previous tune's controllers_sos.json (and design's controllers.mat) can be the running
     controller of a new tune: loaded by the device, then named by ``--running FILE::tuned``
     (its prewarped integrator sections were refused as a pole at z = -1)."""
-    from fsmbench.tune.running import loop_from_file as _running_file
+    from fsmbench.tune.running import loop_from_file
 
     bench, _ = live
     sos = bench.controllers_folder / "tune-device" / "tune_controller_1" / "controllers_sos.json"
@@ -225,7 +225,7 @@ def test_fsmbench_s_own_tuned_files_load_and_run_a_new_tune(
         rel = str(path.relative_to(bench.controllers_folder))
         reply = bench.load_controller(json.dumps({"path": rel, "controller": "tuned"}))
         assert reply.startswith(f"tuned ({path.name}) in the loop"), reply
-        loop = _running_file(f"{path}::tuned", BENCH)
+        loop = loop_from_file(f"{path}::tuned", BENCH)
         assert loop.name == bench.controller_name  # what tune --device compares
         bench.advance(round(0.5 * FS))
         assert bench.state == "RUNNING", bench.status

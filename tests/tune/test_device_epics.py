@@ -384,7 +384,7 @@ _PREVIOUS = r"""
 import json, sys
 import control as ct
 from fsmbench.bench.params import default_bench
-from fsmbench.tune.running import running_loop as _running
+from fsmbench.tune.running import running_loop
 from fsmbench.tune.device import DeviceTarget, device_proxy, release_proxy
 from fsmbench.tune.device_errors import DeviceRefused
 from fsmbench.tune.guarded import loop_of
@@ -392,7 +392,7 @@ from fsmbench.tune.transaction import _cause
 
 address, running, folder = sys.argv[1:4]
 bench = default_bench()
-loop = _running(running, bench)
+loop = running_loop(running, bench)
 proxy = device_proxy(address)
 out = {}
 try:

@@ -20,7 +20,7 @@ from fsmbench.control.esrf import esrf_decentralised_controller
 from fsmbench.control.export import InputScaling, write_sos_json
 from fsmbench.control.load import load_controllers, select_controller
 from fsmbench.sim.controller import sercalo_feedback
-from fsmbench.tune.running import loop_from_file as _running_file
+from fsmbench.tune.running import loop_from_file
 
 
 def _response(ctrl: object, f_hz: np.ndarray, ts_s: float) -> np.ndarray:
@@ -44,7 +44,7 @@ def tuned_file(bench: Bench, tmp_path: Path) -> Path:
 
 def test_running_controller_from_a_file_is_the_device_s(bench: Bench, tuned_file: Path) -> None:
     path = tuned_file
-    loop = _running_file(str(path), bench)
+    loop = loop_from_file(str(path), bench)
     assert loop.name == "tuned (controllers_sos.json)"  # as LoadController names it
     ts = bench.true.converter.ts_s
     chosen = select_controller(load_controllers(path, ts_s=ts), None)
@@ -88,7 +88,7 @@ def test_fsmbench_s_own_files_can_be_the_running_controller(bench: Bench, design
     Its integrator sections' delta realisation puts entries of ~1e12 in A, which the old
     det(I + A) < 1e-12 |I + A|^n test read as singular; no pole is near -1."""
     path = designed / name
-    loop = _running_file(f"{path}::fsmbench_controller", bench)
+    loop = loop_from_file(f"{path}::fsmbench_controller", bench)
     assert loop.name == f"fsmbench_controller ({name})"
     ts = bench.true.converter.ts_s
     chosen = select_controller(load_controllers(path, ts_s=ts), "fsmbench_controller")
@@ -113,9 +113,9 @@ def test_a_pole_on_nyquist_is_refused_and_one_just_inside_is_not(
     path.write_text(json.dumps(doc))
     if refused:
         with pytest.raises(ValueError, match=r"has a pole at z = -1 \(Nyquist\)"):
-            _running_file(f"{path}::tuned", bench)
+            loop_from_file(f"{path}::tuned", bench)
         return
-    loop = _running_file(f"{path}::tuned", bench)
+    loop = loop_from_file(f"{path}::tuned", bench)
     ts = bench.true.converter.ts_s
     chosen = select_controller(load_controllers(path, ts_s=ts), "tuned")
     device = sercalo_feedback(a=chosen.a, b=chosen.b, c=chosen.c, d=chosen.d,
@@ -147,7 +147,7 @@ def test_a_device_running_a_file_s_controller_is_accepted(bench: Bench, tmp_path
         # Checked on the device's bench and swapped in on the call.
         reply = proxy.LoadController(f'{{"path": "{path}", "controller": "tuned"}}')
         assert reply.startswith("tuned (controllers_sos.json) in the loop"), reply
-        loop = _running_file(str(path), bench)
+        loop = loop_from_file(str(path), bench)
         assert proxy.Controller == loop.name
         target = DeviceTarget(proxy, bench=bench, running=loop, folder=tmp_path / "files",
                               address=ctx.get_device_access())

@@ -91,10 +91,10 @@ def test_drift_on_the_twin_is_detected(bench) -> None:
     (three windows beyond 5 sigma: the first at +0.3 %). Under fsmbench's controller (a
     broader peak, ~1 Hz of jitter) at +2.3 % and +3.0 %.
     """
-    from fsmbench.tune.running import running_loop as _running
+    from fsmbench.tune.running import running_loop
     from fsmbench.tune.watch_twin import watch_twin
 
-    run = watch_twin(bench=bench, loop=_running("seed", bench), drift_pct_per_h=120.0,
+    run = watch_twin(bench=bench, loop=running_loop("seed", bench), drift_pct_per_h=120.0,
                      duration_s=150.0, seed=3)
     assert run.first_warning_s is not None, [c for _t, c in run.watch.history[-1:]]
     first = next(e for e in run.events if e.level == "WARNING")
@@ -106,10 +106,10 @@ def test_drift_on_the_twin_is_detected(bench) -> None:
 
 
 def test_no_warning_on_the_twin_without_drift(bench) -> None:
-    from fsmbench.tune.running import running_loop as _running
+    from fsmbench.tune.running import running_loop
     from fsmbench.tune.watch_twin import watch_twin
 
-    run = watch_twin(bench=bench, loop=_running("seed", bench), drift_pct_per_h=0.0,
+    run = watch_twin(bench=bench, loop=running_loop("seed", bench), drift_pct_per_h=0.0,
                      duration_s=180.0, seed=3)
     assert run.events == ()
     # After the baseline, the bands' z are centred: the calibration holds.
