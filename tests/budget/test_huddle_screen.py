@@ -2,7 +2,7 @@
 
 Synthetic records of known band power (white noise: the 1–10 Hz PSD is 2σ²/fs), so the
 expected ratios are closed forms. The closed-loop tests' controller fits are given (they
-are tested on recorded loops in ``tests/ident/test_evidence.py``); what is tested here is
+are tested on recorded loops in ``tests/ident/evidence/test_evidence.py``); what is tested here is
 the decision taken from them.
 """
 

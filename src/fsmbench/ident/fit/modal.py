@@ -9,7 +9,7 @@ The seed's Welch estimate uses a 1 s Hann window: its spectral window has a
 autocorrelation, which is gone after 1 s), so the H1 estimate shows a mode
 wider and lower than it is. Fitting a second-order model to it
 (:func:`fit_frf_modes`, "the plain approach") finds the frequency to 0.02 % but
-the damping 95 % (h) and 234 % (v) too high on the twin (``tests/ident/test_modal.py``);
+the damping 95 % (h) and 234 % (v) too high on the twin (``tests/ident/fit/test_modal.py``);
 the estimator below is within 0.002 % of the twin's damping, and its standard
 errors (~3e-5 relative) describe its actual errors.
 

@@ -13,7 +13,7 @@ both measured, the inverse-variance mean per element (its variance
 independent unbiased estimates. The variances are estimated, so the weights
 scatter and the merged variance is understated a little: on simulated records
 mean ``|z|^2`` 1.09 with the periodic estimator's 42 degrees of freedom per
-line, 1.38 with 6 (``tests/ident/test_closed_loop_stages.py``).
+line, 1.38 with 6 (``tests/ident/frf/test_closed_loop_stages.py``).
 """
 
 from __future__ import annotations
