@@ -250,14 +250,20 @@ def test_tune_device_stopped_while_it_loads_says_what_the_device_runs(
     # Ctrl-C after tune reached the device but before it sent a command (its models still
     # loading: the soak's SIGINT 4 s in over Channel Access): the device's controller,
     # read then, is said; the generic "left as it was" said nothing about the device.
-    import fsmbench.bench.params as params
+    import fsmbench.cli.inputs as inputs
+
+    called: list[bool] = []
 
     def interrupted(*_: Any, **__: Any) -> Any:
+        called.append(True)
         raise KeyboardInterrupt
 
-    monkeypatch.setattr(params, "load_bench", interrupted)
+    # The bench file as the command line reads it (cli.inputs.bench_of), after the device
+    # answered and before any command.
+    monkeypatch.setattr(inputs, "load_bench", interrupted)
     proxy, address = device
     assert main(["tune", "--device", address, "--out", str(tmp_path / "tune")]) == EXIT_SIGINT
+    assert called, "the interruption was not where the bench file is read"
     captured = capsys.readouterr()
     said = f"Nothing was loaded: the device still runs {SEED_NAME}, as before tune."
     assert said in captured.out and "interrupted (Ctrl-C) before a decision" in captured.err
