@@ -16,10 +16,13 @@ from typing import Any
 
 from fsmbench.cli.args import typed_option
 
-__all__ = ["Current", "check_inputs_first", "command_inputs", "mapped", "out_option",
-           "print_files", "progress", "run_folder"]
+__all__ = ["FILES_FORMAT", "Current", "check_inputs_first", "command_inputs", "mapped",
+           "out_option", "print_files", "progress", "run_folder"]
 
 InputPaths = list[tuple[str, Any]]
+
+#: The ``--json`` of a command whose result is the files it wrote (``simulate``, ``convert``).
+FILES_FORMAT = ("fsmbench.files", 1)
 
 
 class Current:
@@ -116,8 +119,9 @@ def print_files(paths: Sequence[Path | str], *, as_json: bool, command: str) -> 
     if as_json:
         from fsmbench.jsonutil import format_text, stamped
 
+        name, version = FILES_FORMAT
         print(format_text(stamped({"command": command, "files": [str(p) for p in paths]},
-                                  format="fsmbench.files", version=1)), end="")
+                                  format=name, version=version)), end="")
     else:
         for path in paths:
             print(path)
