@@ -16,7 +16,8 @@ from fsmbench.cli import build_parser, main
 from fsmbench.cli.commands import COMMANDS
 
 SRC = Path(fsmbench.__file__).parent
-SHARED = ("--params", "--bench", "--seed", "--timestamp", "--out", "--json")
+SHARED = ("--params", "--bench", "--seed", "--timestamp", "--out", "--json", "--max-error-urad",
+          "--at")
 
 
 def _subparsers() -> dict[str, argparse.ArgumentParser]:

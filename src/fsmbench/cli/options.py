@@ -9,13 +9,15 @@ message, ``run.json`` and the live device's properties name them one way.
 from __future__ import annotations
 
 import argparse
+import functools
 from pathlib import Path
 from typing import Any
 
-from fsmbench.cli.args import seed
+from fsmbench.cli.args import positive, seed
 
-__all__ = ["BENCH_HELP", "add_bench", "add_identify_options", "add_json", "add_out",
-           "add_params", "add_seed", "add_timestamp", "identify_options", "out_folder"]
+__all__ = ["BENCH_HELP", "add_bench", "add_closed_loop", "add_identify_options", "add_json",
+           "add_max_error", "add_out", "add_params", "add_seed", "add_timestamp",
+           "identify_options", "out_folder"]
 
 BENCH_HELP = ("simulate the bench identified in DIR (the output of fsmbench identify or "
               "study: identification.json, plant.mat) instead of the packaged twin; converters "
@@ -71,6 +73,26 @@ def add_bench(p: argparse.ArgumentParser, *, help: str = BENCH_HELP,
     names = ["--bench", *(["--identification"] if alias else [])]
     p.add_argument(*names, metavar="DIR", default=None, dest="bench_dir",
                    help=help + (" (--identification: the same, older name)" if alias else ""))
+
+
+def add_max_error(p: argparse.ArgumentParser, *, default: float | None, help: str) -> None:
+    """``--max-error-urad U``: the rms beam error a closed-loop measurement may add [µrad]."""
+    p.add_argument("--max-error-urad", metavar="U", dest="max_error_urad",
+                   type=functools.partial(positive, unit="µrad"), default=default, help=help)
+
+
+def add_closed_loop(p: argparse.ArgumentParser, *, help: str, max_error_default: float | None,
+                    max_error_help: str) -> None:
+    """``--closed-loop CONTROLLER [--at output|reference] [--max-error-urad U]``: an
+    excitation played with the loop closed (``simulate``, ``excite``)."""
+    p.add_argument("--closed-loop", metavar="CONTROLLER", dest="closed_loop", default=None,
+                   help=help)
+    p.add_argument("--at", choices=("output", "reference"), default="output",
+                   help="with --closed-loop: the excitation is added to the controller's "
+                        "output (default) or to the loop's reference (4QD volts); at the "
+                        "reference the controller's notch removes it at the Sercalo's "
+                        "resonances, which then come out poorly")
+    add_max_error(p, default=max_error_default, help=max_error_help)
 
 
 def add_json(p: argparse.ArgumentParser, *, help: str) -> None:

@@ -41,6 +41,7 @@ from fsmbench.cli.args import default_noted, positive, seconds, typed_option
 from fsmbench.cli.inputs import bench_of, print_document
 from fsmbench.cli.options import (
     add_bench,
+    add_closed_loop,
     add_json,
     add_out,
     add_params,
@@ -148,21 +149,15 @@ def register(sub: Any) -> None:
     p.add_argument("--skip-mains", action="store_true",
                    help="leave the multisine lines on mains harmonics out of the excited grid")
     add_timestamp(p)
-    p.add_argument("--closed-loop", metavar="CONTROLLER", dest="closed_loop", default=None,
-                   help="the excitation is played with the loop closed by CONTROLLER (seed: "
-                        "the ESRF study's; or a controllers file or fsmbench design folder, "
-                        "PATH[::NAME]): its limits are checked through the closed loop")
-    p.add_argument("--at", choices=("output", "reference"), default="output",
-                   help="with --closed-loop: added to the controller's output (default) or to "
-                        "the loop's reference (4QD volts)"
-                        + "; at the reference the controller's notch removes it at the "
-                          "Sercalo's resonances, which then come out poorly")
-    p.add_argument("--max-error-urad", metavar="U", dest="max_error_urad",
-                   type=functools.partial(positive, unit="µrad"), default=None,
-                   help="with --closed-loop: the rms beam error a user tolerates during the "
-                        "measurement [µrad]; without --amplitude-rms, a multisine shaped to "
-                        "move the beam equally on every line within it (odd lines, log grid, "
-                        "dense around the resonances)")
+    add_closed_loop(p, help="the excitation is played with the loop closed by CONTROLLER (seed: "
+                            "the ESRF study's; or a controllers file or fsmbench design folder, "
+                            "PATH[::NAME]): its limits are checked through the closed loop",
+                    max_error_default=None,
+                    max_error_help="with --closed-loop: the rms beam error a user tolerates "
+                                   "during the measurement [µrad]; without --amplitude-rms, a "
+                                   "multisine shaped to move the beam equally on every line "
+                                   "within it (odd lines, log grid, dense around the "
+                                   "resonances)")
     add_json(p, help="print excitation.json's content on stdout instead of the summary")
     p.set_defaults(func=run)
 

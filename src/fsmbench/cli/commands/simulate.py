@@ -8,17 +8,17 @@
 from __future__ import annotations
 
 import argparse
-import functools
 import os
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
 from fsmbench.bench.params import Bench
-from fsmbench.cli.args import default_noted, positive, seconds
+from fsmbench.cli.args import default_noted, seconds
 from fsmbench.cli.inputs import sim_bench
 from fsmbench.cli.options import (
     add_bench,
+    add_closed_loop,
     add_json,
     add_out,
     add_params,
@@ -68,29 +68,17 @@ def register(sub: Any) -> None:
                    help="play these designed excitations (fsmbench excite: folder, .json or "
                         ".mat) each in its input's experiment instead of the ESRF study's noise; "
                         "--experiments adds the ESRF study's own")
-    _add_closed_loop_options(p)
+    add_closed_loop(p, help="play the excitations with the loop closed by CONTROLLER (seed: the "
+                            "ESRF study's; or a controllers file or fsmbench design folder, "
+                            "PATH[::NAME]) and write data_cl_uch, data_cl_ucv; without "
+                            "--excitation, beam-bounded multisines designed on the bench",
+                    max_error_default=30.0,
+                    max_error_help="with --closed-loop and no --excitation: the rms beam error "
+                                   "the designed multisines may add [µrad] (default 30)")
     add_bench(p)
     add_json(p, help="print the files written as JSON (format fsmbench.files) instead of one "
                      "path a line")
     p.set_defaults(func=run)
-
-
-def _add_closed_loop_options(p: argparse.ArgumentParser) -> None:
-    """``--closed-loop CONTROLLER [--at output|reference] [--max-error-urad U]``."""
-    p.add_argument("--closed-loop", metavar="CONTROLLER", dest="closed_loop", default=None,
-                   help="play the excitations with the loop closed by CONTROLLER (seed: the "
-                        "ESRF study's; or a controllers file or fsmbench design folder, "
-                        "PATH[::NAME]) and write data_cl_uch, data_cl_ucv; without "
-                        "--excitation, beam-bounded multisines designed on the bench")
-    p.add_argument("--at", choices=("output", "reference"), default="output",
-                   help="with --closed-loop: add the excitation to the controller's output "
-                        "(default) or to the loop's reference"
-                        + "; at the reference the controller's notch removes it at the "
-                          "Sercalo's resonances, which then come out poorly")
-    p.add_argument("--max-error-urad", metavar="U", dest="max_error_urad",
-                   type=functools.partial(positive, unit="µrad"), default=30.0,
-                   help="with --closed-loop and no --excitation: the rms beam error the "
-                        "designed multisines may add [µrad] (default 30)")
 
 
 def twin_bytes(args: argparse.Namespace, fmt: str) -> float:

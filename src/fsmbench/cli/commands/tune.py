@@ -42,7 +42,15 @@ from typing import Any
 
 from fsmbench.cli.args import drift_rate, positive, seconds
 from fsmbench.cli.inputs import print_document, sim_bench
-from fsmbench.cli.options import add_bench, add_json, add_out, add_params, add_seed, add_timestamp
+from fsmbench.cli.options import (
+    add_bench,
+    add_json,
+    add_max_error,
+    add_out,
+    add_params,
+    add_seed,
+    add_timestamp,
+)
 from fsmbench.cli.runfolder import check_inputs_first, run_folder
 from fsmbench.cli.status import EXIT_SIGINT, EXIT_SIGTERM, Terminated
 
@@ -103,9 +111,8 @@ def register(sub: Any) -> None:
                         "one from a controllers file (controllers_sos.json or "
                         "controllers.mat, e.g. the one a previous tune loaded; ::NAME picks "
                         "one of several): the device names it 'NAME (FILE)'")
-    p.add_argument("--max-error-urad", metavar="U", dest="max_error_urad",
-                   type=functools.partial(positive, unit="µrad"), default=30.0,
-                   help="rms beam error the measurement may add [µrad] (default 30)")
+    add_max_error(p, default=30.0, help="rms beam error the measurement may add [µrad] "
+                                        "(default 30)")
     p.add_argument("--better-by-pct", metavar="P", dest="better_by_pct", type=_fraction_pct,
                    default=10.0, help="a candidate is loaded only if its predicted tracking "
                                       "error is this much below the running one's measured "
