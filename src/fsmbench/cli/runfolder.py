@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import sys
 from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
 from typing import Any
@@ -94,8 +95,6 @@ def run_folder(args: argparse.Namespace, out: str, *, data: str | Path | None,
                need_bytes: float) -> Iterator[Any]:
     """The output folder ``out`` as one transaction (its staging folder is ``run.staging``)
     with the wall-clock headers of ``--timestamp``."""
-    import sys
-
     from fsmbench.io.matwrite import wall_clock_headers
     from fsmbench.io.outdir import output_transaction
 
