@@ -20,6 +20,7 @@ from fsmbench.control.esrf import esrf_decentralised_controller
 from fsmbench.control.export import InputScaling, write_sos_json
 from fsmbench.control.load import load_controllers, select_controller
 from fsmbench.sim.controller import sercalo_feedback
+from fsmbench.tune.guarded import loop_of
 from fsmbench.tune.running import loop_from_file
 
 
@@ -175,3 +176,72 @@ def test_a_controller_tune_loaded_is_retuned_from(bench: Bench, fsmbench_loop: A
     js = json.loads((out / "tune.json").read_text())
     assert js["decision"] in ("loaded", "refused", "rolled_back")
     assert js["before"]["name"] == "tuned (controllers_sos.json)"
+
+
+#: fsmbench's controller as ``tune --twin --seed 2 --periods 4`` designed it and
+#: DeviceTarget.load wrote it (sections only). Its v axis's double zeros on z = -1 made the
+#: pre-image by substitution carry zeros at 1e12 rad/s: 20 times it could not be written
+#: again ("channel gain is not real"), and a retune over CA failed on it.
+RETUNED = Path(__file__).parent / "data" / "retuned_controllers_sos.json"
+
+
+def test_a_controller_read_from_a_file_can_be_scaled_and_written_again(
+        bench: Bench, tmp_path: Path) -> None:
+    import control as ct
+
+    loop = loop_from_file(f"{RETUNED}::tuned", bench)
+    ts = bench.true.converter.ts_s
+    k = loop.k
+    x20 = ct.ss(k.A, k.B, 20.0 * k.C, 20.0 * k.D, inputs=["Rh", "Rv"], outputs=["Uch", "Ucv"])
+    scaling = InputScaling(qd_gain_v_per_rad=loop.gd_v_per_rad, plant_source="a test")
+    write_sos_json(tmp_path / "prewarped.json", {"x20": x20}, scaling=scaling, ts_s=ts)
+    plain = write_sos_json(tmp_path / "plain.json", {"x20": x20}, scaling=scaling, ts_s=ts,
+                           method="tustin")
+    f = np.array([0.1, 1.0, 10.0, 100.0, 251.2, 411.5, 1000.0, 4000.0])
+    again = select_controller(load_controllers(plain, ts_s=ts), "x20").frequency_response(f)
+    file = select_controller(load_controllers(RETUNED, ts_s=ts), "tuned").frequency_response(f)
+    # Plain Tustin of the pre-image is the file, so 20 times it is 20 times the file:
+    # round-off (measured 9e-13), with room.
+    scale = np.max(np.abs(file), axis=(1, 2))[:, None, None]
+    assert np.max(np.abs(again - 20.0 * file) / (20.0 * scale)) < 1e-9
+
+
+def test_a_retune_s_scaled_controller_is_refused_by_the_device_not_by_tune(
+        bench: Bench, tmp_path: Path) -> None:
+    """What the CA test does, on Tango's DeviceTestContext: the device runs the file's
+    controller, tune asks it to load 20 times that one, and the device's check refuses it
+    (PyTango's DevFailed, which tune's transaction reads). Tune's own export of it failed
+    first when the pre-image carried zeros at 1e12 rad/s."""
+    import shutil
+
+    import control as ct
+
+    tango = pytest.importorskip("tango")
+    from tango.test_context import DeviceTestContext
+
+    from fsmbench.live.device import FsmBench
+    from fsmbench.tune.device import DeviceTarget
+
+    folder = tmp_path / "controllers"
+    folder.mkdir()
+    path = Path(shutil.copy(RETUNED, folder / "controllers_sos.json"))
+    ctx = DeviceTestContext(FsmBench, device_name="fsmbench/bench/1", process=False,
+                            properties={"Speed": 50.0, "OutputFolder": str(tmp_path / "live"),
+                                        "ControllersFolder": str(folder)})
+    with ctx as proxy:
+        proxy.set_source(tango.DevSource.DEV)
+        proxy.CloseLoop()
+        proxy.LoadController(f'{{"path": "{path}", "controller": "tuned"}}')
+        loop = loop_from_file(f"{path}::tuned", bench)
+        target = DeviceTarget(proxy, bench=bench, running=loop, folder=folder / "tune",
+                              address=ctx.get_device_access())
+        k = loop.k
+        x20 = loop_of(ct.ss(k.A, k.B, 20.0 * k.C, 20.0 * k.D, inputs=["Rh", "Rv"],
+                            outputs=["Uch", "Ucv"]), name="20 times the previous run's",
+                      ts_s=bench.true.converter.ts_s, gd_v_per_rad=loop.gd_v_per_rad)
+        with pytest.raises(tango.DevFailed) as refused:
+            target.load(x20)
+        error = refused.value.args[0]
+        assert error.reason == "FSM_BadArgument", error
+        assert "fails the check on the device's bench" in error.desc
+        assert target.running_controller() == "tuned (controllers_sos.json)"

@@ -46,6 +46,7 @@ from fsmbench.control.realize import (
     Section,
     section_response,
     sections_from_zpk,
+    structural_states,
     tustin_cascade,
     tustin_section,
     warped_frequency_rad_s,
@@ -183,7 +184,7 @@ def siso_zpk(sys: ct.StateSpace, *, output: int = 0,
     (integrators); the gain is matched at one point away from every root.
     """
     a_full = np.asarray(sys.A, dtype=float)
-    keep = _structural_states(a_full, np.asarray(sys.B, dtype=float)[:, input],
+    keep = structural_states(a_full, np.asarray(sys.B, dtype=float)[:, input],
                               np.asarray(sys.C, dtype=float)[output, :])
     a = a_full[np.ix_(keep, keep)]
     b = np.asarray(sys.B, dtype=float)[keep][:, [input]]
@@ -207,24 +208,6 @@ def siso_zpk(sys: ct.StateSpace, *, output: int = 0,
     if abs(k.imag) > 1e-6 * abs(k):
         raise ValueError(f"channel gain is not real: {k}")
     return zeros, poles, float(k.real)
-
-
-def _structural_states(a: np.ndarray, b: np.ndarray, c: np.ndarray) -> list[int]:
-    """States reachable from ``b`` and observable from ``c`` on the sparsity graph of ``a``."""
-    nz = a != 0
-
-    def closure(start: np.ndarray, adj: np.ndarray) -> np.ndarray:
-        seen = start.copy()
-        frontier = start.copy()
-        while frontier.any():
-            new = adj[:, frontier].any(axis=1) & ~seen
-            seen |= new
-            frontier = new
-        return seen
-
-    reach = closure(b != 0, nz)        # x_i driven by x_j when a[i, j] != 0
-    observe = closure(c != 0, nz.T)    # x_j seen through x_i when a[i, j] != 0
-    return [int(i) for i in np.nonzero(reach & observe)[0]]
 
 
 def channel_sections(sys: ct.StateSpace, *, output: int = 0, input: int = 0) -> list[Section]:

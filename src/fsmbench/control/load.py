@@ -102,6 +102,9 @@ class LoadedController:
         controller was designed on, if the file records it: ``r = Vp / Gd``.
     discretisation : str
         How the file says it was discretised, e.g. ``"tustin_prewarp"`` ("" if not said).
+    sections : tuple of ndarray, shape (n_sections, 6), or None
+        A ``controllers_sos.json``'s own cascades, one per axis (input ``i`` to output
+        ``i``), ``[b0, b1, b2, a0, a1, a2]``; None for a MAT-file.
     """
 
     name: str
@@ -116,6 +119,7 @@ class LoadedController:
     source_path: Path
     qd_gain_v_per_rad: tuple[float, float] | None
     discretisation: str
+    sections: tuple[FloatArray, ...] | None = None
 
     @property
     def n_states(self) -> int:
@@ -411,12 +415,14 @@ def _from_sos_json(p: Path, max_states: int | None) -> dict[str, LoadedControlle
             n = sum(2 * len(chan["sos"]) for chan in (entry.get(a) for a in _AXES)
                     if isinstance(chan, dict) and isinstance(chan.get("sos"), list))
             _check_states(p, n, name, max_states)
-        parts, ins, outs = [], [], []
+        parts, ins, outs, rows = [], [], [], []
         for axis in _AXES:
             chan = entry.get(axis) if isinstance(entry, dict) else None
             if not isinstance(chan, dict) or "sos" not in chan:
                 raise RecordingError(p, f"controller {name!r} has no sections for axis {axis}")
             parts.append(_cascade(p, chan["sos"], f"controller {name!r}, axis {axis}", ts_s=ts))
+            rows.append(np.array(chan["sos"], dtype=float))  # checked by _cascade
+            rows[-1].setflags(write=False)
             ins.append(_signal_name(chan.get("input_signal")))
             outs.append(_signal_name(chan.get("output_signal")))
         a, b, c, d = (_block_diag([x[i] for x in parts]) for i in range(4))
@@ -424,7 +430,7 @@ def _from_sos_json(p: Path, max_states: int | None) -> dict[str, LoadedControlle
         out[str(name)] = LoadedController(
             name=str(name), description=str(entry.get("description", "")), ts_s=ts, a=a, b=b,
             c=c, d=d, input_names=tuple(ins), output_names=tuple(outs), source_path=p,
-            qd_gain_v_per_rad=gain, discretisation=str(method))
+            qd_gain_v_per_rad=gain, discretisation=str(method), sections=tuple(rows))
     return out
 
 

@@ -6,25 +6,22 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
-import control as ct
-import numpy as np
-
 from fsmbench.bench.blocks import physical_plant
 from fsmbench.bench.params import Bench
 from fsmbench.control.esrf import esrf_decentralised_controller
 from fsmbench.control.load import load_controllers, select_controller
+from fsmbench.control.preimage import (
+    AT_NYQUIST,
+    nyquist_pole_distance,
+    sections_preimage,
+    tustin_preimage,
+)
 from fsmbench.control.study import design_study
 from fsmbench.io.atomic import atomic_write_text
 from fsmbench.jsonutil import format_text
 from fsmbench.tune.guarded import Loop, loop_of
 
 __all__ = ["loop_from_file", "running_loop", "write_tune_json"]
-
-#: A controller pole closer than this to z = -1 counts as on it [1]: its Tustin pre-image
-#: would lie beyond 4 / (T 1e-6) rad/s (6e5 times the sample rate), no roll-off of a
-#: physical loop, and a double pole on -1 is located only to ~sqrt(eps) = 1.5e-8.
-_AT_NYQUIST = 1e-6
-
 
 def running_loop(kind: str, bench: Bench) -> Loop:
     """The controller running when ``tune`` starts, as ``--running`` names it.
@@ -55,9 +52,10 @@ def loop_from_file(spec: str, bench: Bench) -> Loop:
     """The controller ``PATH[::NAME]`` of a controllers file, as the device runs it.
 
     The file holds it discrete at the converter rate (Tustin per section, prewarped);
-    ``Loop.k`` is its exact continuous pre-image under plain Tustin (``z = -1`` is no
-    pole of it), so that the loop the twin and the predictions run is the file's, line
-    for line. Named ``'NAME (FILE)'``, as ``LoadController`` names it on the device.
+    ``Loop.k`` is its continuous pre-image under plain Tustin
+    (:func:`fsmbench.control.preimage.tustin_preimage`; ``z = -1`` is no pole of it), so
+    that the loop the twin and the predictions run is the file's, line for line. Named
+    ``'NAME (FILE)'``, as ``LoadController`` names it on the device.
     """
     ts = bench.true.converter.ts_s
     path, sep, name = spec.partition("::")
@@ -65,24 +63,22 @@ def loop_from_file(spec: str, bench: Bench) -> Loop:
     if not chosen.maps(("Rh", "Rv"), ("Uch", "Ucv")):
         raise ValueError(f"{path}: controller {chosen.name!r} maps {list(chosen.input_names)} "
                          f"to {list(chosen.output_names)}, not Rh, Rv to Uch, Ucv")
-    n = chosen.a.shape[0]
-    m = np.eye(n) + chosen.a
     # Tustin maps s = infinity, and only it, to z = -1: a pole there has no pre-image. Decided
-    # on the poles themselves. det(I + A) against |I + A|^n refused fsmbench's own files: the
-    # delta realisation of their integrator sections puts entries of ~1e12 in A beside exact
-    # poles at z = 1 (|I + A|^14 ~ 1e120), with no pole near -1 (|1 + z| >= 1.9). A pole just
-    # inside -1 is legitimate: Tustin's image of a real lowpass far above Nyquist, at
-    # s = -(2/T)(1 - z)/(1 + z) (1e-3 from -1 is a roll-off at 640 times the sample rate).
-    poles = np.linalg.eigvals(chosen.a) if n else np.zeros(0)
-    if n and float(np.min(np.abs(1.0 + poles))) < _AT_NYQUIST:
+    # on the poles themselves, not det(I + A): fsmbench's integrator sections put entries of
+    # ~1e12 in A beside exact poles at z = 1. A pole just inside -1 is legitimate (a lowpass
+    # far above Nyquist: 1e-3 from -1 is a roll-off at 640 times the sample rate).
+    if nyquist_pole_distance(chosen.a) < AT_NYQUIST:
         raise ValueError(f"{path}: controller {chosen.name!r} has a pole at z = -1 (Nyquist): "
                          "it has no continuous-time equivalent")
-    # z = (1 + s T/2) / (1 - s T/2) substituted in C (zI - A)^-1 B + D, with M = I + A:
-    # Ac = (2/T) M^-1 (A - I), Bc = M^-1 B, Cc = (4/T) C M^-1, Dc = D - C M^-1 B.
-    minv = np.linalg.inv(m) if n else np.zeros((0, 0))
-    k = ct.ss((2.0 / ts) * minv @ (chosen.a - np.eye(n)), minv @ chosen.b,
-              (4.0 / ts) * chosen.c @ minv, chosen.d - chosen.c @ minv @ chosen.b,
-              inputs=["Rh", "Rv"], outputs=["Uch", "Ucv"], name=chosen.name)
+    # From the file's sections, root by root, where it has them: a substitution in the
+    # realisation puts its zeros at infinity at 1e11 to 1e13 rad/s, and a later zero-pole
+    # split (a re-export of it) is then ill-posed (control.preimage).
+    if chosen.sections is not None:
+        k = sections_preimage(chosen.sections, ts_s=ts, inputs=["Rh", "Rv"],
+                              outputs=["Uch", "Ucv"], name=chosen.name)
+    else:
+        k = tustin_preimage(chosen.a, chosen.b, chosen.c, chosen.d, ts_s=ts,
+                            inputs=["Rh", "Rv"], outputs=["Uch", "Ucv"], name=chosen.name)
     nominal = bench.nominal.quad_diode.gain_v_per_rad
     gd = chosen.qd_gain_v_per_rad or (float(nominal.h), float(nominal.v))
     return loop_of(k, name=f"{chosen.name} ({Path(chosen.source_path).name})", ts_s=ts,
