@@ -35,8 +35,7 @@ from fsmbench.api import (
     simulate,
     study,
 )
-
-__version__ = "0.1.0"
+from fsmbench.version import __version__
 
 __all__ = [
     "__version__",

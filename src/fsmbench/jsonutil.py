@@ -15,7 +15,7 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["format_text", "hv", "plain_json", "stamped"]
+__all__ = ["format_text", "hv", "nested", "plain_json", "stamped"]
 
 
 def plain_json(value: Any) -> Any:
@@ -118,3 +118,15 @@ def format_text(payload: Mapping[str, Any], *, sort_keys: bool = False,
     body = _sorted(plain) if sort_keys else plain
     ordered = stamped(body, format=str(plain["format"]), version=int(plain["format_version"]))
     return json.dumps(ordered, indent=indent, allow_nan=False, ensure_ascii=True) + "\n"
+
+
+def nested(flat: Mapping[str, Any]) -> dict[str, Any]:
+    """``{"a.h": 1, "a.v": 2, "b": 3}`` → ``{"a": {"h": 1, "v": 2}, "b": 3}`` (keys are ids)."""
+    out: dict[str, Any] = {}
+    for key, value in flat.items():
+        *parents, last = key.split(".")
+        node = out
+        for part in parents:
+            node = node.setdefault(part, {})
+        node[last] = value
+    return out

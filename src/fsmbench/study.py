@@ -24,7 +24,6 @@ from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
-from fsmbench import __version__
 from fsmbench.bench.blocks import PlantModel
 from fsmbench.bench.params import Bench, default_bench
 from fsmbench.entry import callable_module
@@ -60,6 +59,7 @@ from fsmbench.stages import (
     validation_stage,
 )
 from fsmbench.twin.compare import comparison_rows
+from fsmbench.version import __version__
 
 __all__ = ["FIGURE_FORMATS", "StageStatus", "StudyResult", "run_study"]
 

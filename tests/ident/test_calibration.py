@@ -10,11 +10,11 @@ import xarray as xr
 
 from fsmbench.bench.params import Bench
 from fsmbench.ident.calibration import (
-    calibrate_current_amplifier,
     calibrate_qd,
     known_ga_zc,
     trim_recording,
 )
+from fsmbench.ident.current_amp import calibrate_current_amplifier
 from fsmbench.ident.fit.regression import spectral_sandwich, t_scaled_std
 from fsmbench.io.recording import make_recording
 from fsmbench.twin import TwinRun

@@ -21,7 +21,6 @@ from types import FrameType
 # Ctrl-C while the command line loads (its imports take about a second): one line, the
 # shell's 130, not a traceback; nothing has run, so no device, file or folder was touched.
 try:
-    from fsmbench import __version__
     from fsmbench.bench.params import ParamsError
     from fsmbench.cli.args import Parser
     from fsmbench.cli.commands import COMMANDS
@@ -34,6 +33,7 @@ try:
         EXIT_USER_ERROR,
         Terminated,
     )
+    from fsmbench.version import __version__
 except KeyboardInterrupt:
     print("fsmbench: interrupted (Ctrl-C) while starting, before it contacted any device or "
           "wrote any file: nothing was changed", file=sys.stderr)

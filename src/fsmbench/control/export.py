@@ -37,7 +37,6 @@ import numpy as np
 from scipy import signal
 from scipy.linalg import eigvals
 
-from fsmbench import __version__
 from fsmbench.control.antiwindup import DEFAULT_TRACKING_TIME_S, antiwindup_channel
 from fsmbench.control.esrf import ESRF_TS_S, tustin
 from fsmbench.control.export_check import float32_sos_check, float32_state_space_check
@@ -53,6 +52,7 @@ from fsmbench.control.realize import (
 )
 from fsmbench.io.atomic import atomic_write_text
 from fsmbench.io.matwrite import save_mat
+from fsmbench.version import __version__
 
 __all__ = [
     "DAC_RAILS_V",

@@ -24,7 +24,6 @@ from typing import Any
 
 import numpy as np
 
-from fsmbench import __version__
 from fsmbench.excite.design import CHANNELS, ExcitationDesign
 from fsmbench.excite.limits import LimitReport
 from fsmbench.excite.mains import mains_hits, mains_warning
@@ -34,6 +33,7 @@ from fsmbench.io.matfile import load_mat
 from fsmbench.io.matwrite import save_mat
 from fsmbench.jsonutil import plain_json, stamped
 from fsmbench.sim.excitation import samples_sha256
+from fsmbench.version import __version__
 
 __all__ = ["EXCITATION_FORMAT", "ExcitationFileError", "description", "find_description",
            "read_excitation", "write_excitation"]

@@ -6,9 +6,9 @@ pipeline that turns recordings into an identified plant."""
 from fsmbench.ident.calibration import (
     CurrentAmplifierGain,
     QdCalibration,
-    calibrate_current_amplifier,
     calibrate_qd,
 )
+from fsmbench.ident.current_amp import calibrate_current_amplifier
 from fsmbench.ident.delay.bode import DelayEstimate, estimate_delay, remove_delay
 from fsmbench.ident.fit.modal import ModalEstimate, ModeEstimate, estimate_modes
 from fsmbench.ident.fit.vectfit import Mode, VectorFit, VectorFitOptions, vector_fit

@@ -43,7 +43,6 @@ __all__ = [
     "MIN_CALIBRATION_R2",
     "CurrentAmplifierGain",
     "QdCalibration",
-    "calibrate_current_amplifier",
     "calibrate_qd",
     "current_amp_checks",
     "known_ga_zc",
@@ -314,41 +313,6 @@ def known_ga_zc(p: BenchParams, *, axis: str, f_hz: np.ndarray) -> np.ndarray:
     ga = p.voltage_amplifier.gain / (1 + 1j * w / (2 * np.pi * p.voltage_amplifier.cutoff_hz))
     zc = p.sercalo.r_coil_ohm[axis] + 1j * w * p.sercalo.l_coil_h[axis]
     return np.abs(ga * zc)
-
-
-def calibrate_current_amplifier(ds: xr.Dataset, *, axis: str, nominal: BenchParams,
-                                trim_s: float = 1.0,
-                                band_hz: tuple[float, float] = (20.0, 200.0),
-                                window_s: float = 1.0,
-                                estimator: str = "welch") -> CurrentAmplifierGain:
-    """Identify ``Gi`` of ``axis`` from ``data_uch``/``data_ucv`` (``Uc → Vc``).
-
-    The sampled path fitted to the estimator's lines
-    (:func:`fsmbench.ident.current_amp.identify_current_amplifier`): the
-    seed's ratio to the continuous ``|Ga Zc|`` is biased by the hold and the
-    delay by twenty times its noise.
-
-    Parameters
-    ----------
-    ds : xarray.Dataset
-        Recording with ``Uch, Vch`` (h) or ``Ucv, Vcv`` (v) [V].
-    axis : {"h", "v"}
-    nominal : BenchParams
-        Known ``Ga`` (gain, cut-off) and ``Zc`` (``Rc``, ``Lc``), and the
-        resistor ``R`` for the theoretical gain.
-    trim_s : float
-        Seconds removed at the start (the Sercalo is off during the first one).
-    band_hz : (float, float)
-        Band of the lines [Hz], open interval as the seed's ``f>20 & f<200``.
-    window_s : float
-        Hann window length [s] (seed: ``hanning(ceil(1*fs))``), Welch only.
-    estimator : {"welch", "lpm", "periodic"}
-        FRF estimator of the lines.
-    """
-    from fsmbench.ident.current_amp import identify_current_amplifier
-
-    return identify_current_amplifier(ds, axis=axis, nominal=nominal, trim_s=trim_s,
-                                      band_hz=band_hz, window_s=window_s, estimator=estimator)
 
 
 # A working 4QD channel swept over the Newport's ±10 mrad is linear to well under

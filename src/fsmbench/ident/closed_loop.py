@@ -48,7 +48,6 @@ from typing import Any, Literal
 import numpy as np
 import xarray as xr
 
-from fsmbench import __version__
 from fsmbench.bench.blocks import (
     PlantModel,
     assemble_plant,
@@ -68,6 +67,7 @@ from fsmbench.ident.frf.estimate import FrfEstimate
 from fsmbench.ident.pipeline import path_keyed_summary
 from fsmbench.ident.sercalo import SercaloFitOptions, SercaloIdentification, fit_sercalo
 from fsmbench.jsonutil import plain_json
+from fsmbench.version import __version__
 
 __all__ = ["CLOSED_LOOP_RECORDS", "EXCITATION_VARIABLES", "MODE_ASSIGNMENT_TOLERANCE",
            "ClosedLoopIdentification", "ClosedLoopIdentifyOptions", "TrackingDuringMeasurement",
@@ -400,7 +400,7 @@ def identify_closed_loop(recordings: Mapping[str, xr.Dataset], *, bench: Bench,
         A record missing, failing its checks, without its excitation, or an FRF that
         cannot be estimated (named).
     """
-    from fsmbench.ident.calibration import calibrate_current_amplifier
+    from fsmbench.ident.current_amp import calibrate_current_amplifier
     from fsmbench.ident.pipeline import quality_warnings
     from fsmbench.io.folder import check_recording
 

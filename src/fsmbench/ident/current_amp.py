@@ -53,8 +53,8 @@ from fsmbench.ident.frf.periodic import PeriodicOptions, periodic_frf
 from fsmbench.ident.frf.response import spectral_matrix
 from fsmbench.signal.welch import hanning
 
-__all__ = ["AmplifierFit", "amplifier_path", "fit_amplifier", "identify_current_amplifier",
-           "kink_interval_variance"]
+__all__ = ["AmplifierFit", "amplifier_path", "calibrate_current_amplifier", "fit_amplifier",
+           "identify_current_amplifier", "kink_interval_variance"]
 
 FloatArray = NDArray[np.float64]
 _CURRENT = {"h": ("Uch", "Vch"), "v": ("Ucv", "Vcv")}
@@ -335,3 +335,36 @@ def identify_current_amplifier(ds: xr.Dataset, *, axis: str, nominal: BenchParam
         misfit_std_a_per_v=fit.misfit_std_a_per_v, delay_s=fit.delay_s,
         delay_std_s=fit.delay_std_s, reduced_chi2=fit.reduced_chi2, estimator=est.estimator,
         frf=est.to_frequency_response())
+
+
+def calibrate_current_amplifier(ds: xr.Dataset, *, axis: str, nominal: BenchParams,
+                                trim_s: float = 1.0,
+                                band_hz: tuple[float, float] = (20.0, 200.0),
+                                window_s: float = 1.0,
+                                estimator: str = "welch") -> CurrentAmplifierGain:
+    """Identify ``Gi`` of ``axis`` from ``data_uch``/``data_ucv`` (``Uc → Vc``).
+
+    The sampled path fitted to the estimator's lines (:func:`identify_current_amplifier`):
+    the
+    seed's ratio to the continuous ``|Ga Zc|`` is biased by the hold and the
+    delay by twenty times its noise.
+
+    Parameters
+    ----------
+    ds : xarray.Dataset
+        Recording with ``Uch, Vch`` (h) or ``Ucv, Vcv`` (v) [V].
+    axis : {"h", "v"}
+    nominal : BenchParams
+        Known ``Ga`` (gain, cut-off) and ``Zc`` (``Rc``, ``Lc``), and the
+        resistor ``R`` for the theoretical gain.
+    trim_s : float
+        Seconds removed at the start (the Sercalo is off during the first one).
+    band_hz : (float, float)
+        Band of the lines [Hz], open interval as the seed's ``f>20 & f<200``.
+    window_s : float
+        Hann window length [s] (seed: ``hanning(ceil(1*fs))``), Welch only.
+    estimator : {"welch", "lpm", "periodic"}
+        FRF estimator of the lines.
+    """
+    return identify_current_amplifier(ds, axis=axis, nominal=nominal, trim_s=trim_s,
+                                      band_hz=band_hz, window_s=window_s, estimator=estimator)

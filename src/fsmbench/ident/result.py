@@ -15,7 +15,6 @@ from typing import Any, Literal
 
 import numpy as np
 
-from fsmbench import __version__
 from fsmbench.bench.blocks import PlantModel
 from fsmbench.bench.params import Bench, BenchParams
 from fsmbench.checks import Check, Finding, Notice
@@ -33,6 +32,7 @@ from fsmbench.ident.noise_model import NoiseModelFit
 from fsmbench.ident.sercalo import SercaloFitOptions, SercaloIdentification
 from fsmbench.ident.uncertainty import Uncertain
 from fsmbench.ident.validate import PathValidation
+from fsmbench.version import __version__
 
 __all__ = [
     "ESRF_TRIMS_S",

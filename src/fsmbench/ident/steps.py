@@ -34,12 +34,12 @@ from fsmbench.checks import Check, Finding, Notice, first_failure
 from fsmbench.ident.calibration import (
     CurrentAmplifierGain,
     QdCalibration,
-    calibrate_current_amplifier,
     calibrate_qd,
     current_amp_checks,
     qd_checks,
 )
 from fsmbench.ident.consistency import screen_recordings
+from fsmbench.ident.current_amp import calibrate_current_amplifier
 from fsmbench.ident.delay.sampled import SensorLowpass
 from fsmbench.ident.delay.sercalo import with_sensor
 from fsmbench.ident.evidence.amplifier import (

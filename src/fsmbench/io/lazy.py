@@ -134,10 +134,10 @@ def _open_mat73(path: Path, chunk_samples: int, fs_hz: float | None) -> xr.Datas
             raise RecordingError(path, "has no time vector", variable=TIME)
         lengths = {k: _vector_length(path, f[k], k, True) for k in names}
     signals = [k for k in names if k != TIME]
-    from fsmbench.io.recording import _ordered, _signal_attrs
+    from fsmbench.io.dataset import ordered_signals, signal_attrs
 
-    ds = _lazy_dataset(path, _ordered(signals), lengths,
-                       {k: _signal_attrs(k) for k in signals}, {}, matlab=True,
+    ds = _lazy_dataset(path, ordered_signals(signals), lengths,
+                       {k: signal_attrs(k) for k in signals}, {}, matlab=True,
                        chunk_samples=chunk_samples)
     t = ds[TIME].data
     if fs_hz is None:
@@ -376,7 +376,7 @@ def _v5_stream_variable(path: Path, wanted: str,
 #: Root attribute of an archive ``fsmbench convert`` wrote: the absolute path of its input.
 CONVERTED_FROM = "converted_from"
 #: How far ``--fs`` may be from the rate of ``t``: the readers' tolerance on the time step
-#: (:data:`fsmbench.io.recording._STEP_TOLERANCE`, 0.1 %), so what is written reads back.
+#: (:data:`fsmbench.io.dataset._STEP_TOLERANCE`, 0.1 %), so what is written reads back.
 _FS_TOLERANCE = 1e-3
 
 
@@ -454,7 +454,7 @@ def convert_recording(source: str | os.PathLike[str], dest: str | os.PathLike[st
     RecordingError
         Unreadable input, no usable time base, or ``fs_hz`` contradicting ``t``.
     """
-    from fsmbench.io.recording import _ordered
+    from fsmbench.io.recording import ordered_signals
 
     src, out = Path(source), Path(dest)
     fmt = detect_format(src)
@@ -467,7 +467,7 @@ def convert_recording(source: str | os.PathLike[str], dest: str | os.PathLike[st
         def pieces(name: str) -> Iterator[np.ndarray]:
             return _v5_stream_variable(src, name)
         n = vectors[TIME]
-        signals = _ordered([k for k in vectors if k != TIME])
+        signals = ordered_signals([k for k in vectors if k != TIME])
         uneven = [k for k in signals if vectors[k] != n]
         if uneven:
             raise RecordingError(src, f"signals of unequal lengths ({', '.join(uneven)} vs "

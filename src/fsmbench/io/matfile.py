@@ -47,7 +47,7 @@ import scipy.sparse
 from scipy.io import matlab as _matlab
 
 from fsmbench.io.errors import RecordingError
-from fsmbench.io.trailing import PrefixReader, data_end, warn_trailing
+from fsmbench.io.trailing import HDF5_SIGNATURE, PrefixReader, data_end, warn_trailing
 
 __all__ = [
     "HDF5_SIGNATURE",
@@ -61,8 +61,6 @@ __all__ = [
 #: What :func:`detect_format` can report.
 FileFormat = Literal["mat4", "mat5", "mat73", "hdf5"]
 
-#: The 8 bytes that open an HDF5 superblock (HDF5 File Format Specification).
-HDF5_SIGNATURE: Final = b"\x89HDF\r\n\x1a\n"
 _MAT73_TEXT: Final = b"MATLAB 7.3 MAT-file"
 
 #: Fraction of the available memory an HDF5 file's datasets may claim before they are read

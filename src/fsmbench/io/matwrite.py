@@ -130,7 +130,7 @@ def mat5_header(*, platform: str | None = None, created: float | None = None) ->
 
 
 def _platform(platform: str | None) -> str:
-    from fsmbench import __version__
+    from fsmbench.version import __version__
 
     return platform if platform is not None else f"fsmbench {__version__}"
 

@@ -33,6 +33,7 @@ import numpy as np
 import xarray as xr
 
 from fsmbench.io.atomic import atomic_path
+from fsmbench.io.dataset import as_vector, check_lengths, validate_dataset
 from fsmbench.io.errors import RecordingError
 from fsmbench.io.nexus_meta import (
     END_TIME,
@@ -45,7 +46,6 @@ from fsmbench.io.nexus_meta import (
     write_times,
 )
 from fsmbench.io.notes import READ_NOTES
-from fsmbench.io.recording import _as_vector, _check_lengths, _validate
 from fsmbench.io.signals import TIME
 
 if TYPE_CHECKING:
@@ -132,7 +132,7 @@ def write_nexus(ds: xr.Dataset, path: str | os.PathLike[str], *, compress: bool 
     from fsmbench.bench.params import default_bench  # the bench layer is above io
 
     dest = Path(path)
-    _validate(ds, origin=os.fspath(dest), require=(), adc_range_v=20.0, adc_bits=16,
+    validate_dataset(ds, origin=os.fspath(dest), require=(), adc_range_v=20.0, adc_bits=16,
               saturation=False, stacklevel=3)
     names = [str(n) for n in ds.data_vars]
     opts = compression_options(ds.sizes[TIME], chunk_samples=_CHUNK_SAMPLES, compress=compress)
@@ -223,11 +223,11 @@ def read_nexus(path: str | os.PathLike[str]) -> xr.Dataset:
             dset = data[name]
             if not isinstance(dset, h5py.Dataset):
                 raise RecordingError(origin, "is a group, not samples", variable=name)
-            vectors[name] = _as_vector(name, dset[()], origin)
+            vectors[name] = as_vector(name, dset[()], origin)
             var_attrs[name] = {k: _plain(v) for k, v in dset.attrs.items()}
         attrs = {k: _plain(v) for k, v in entry.attrs.items() if k not in _LAYOUT_ATTRS}
         attrs.update(read_times(entry))
-    _check_lengths(vectors, origin)
+    check_lengths(vectors, origin)
     return xr.Dataset(
         {name: (TIME, vectors[name], var_attrs[name]) for name in order},
         coords={TIME: (TIME, vectors[TIME], var_attrs[TIME])},

@@ -117,7 +117,7 @@ def write_root(f: h5py.File, *, created: float | None,
     extra : mapping, optional
         More root attributes (``fsmbench convert``'s provenance).
     """
-    from fsmbench import __version__
+    from fsmbench.version import __version__
 
     f.attrs["default"] = "entry"
     f.attrs["creator"] = f"fsmbench {__version__}"

@@ -353,8 +353,8 @@ def _sha256(path: Path) -> str:
 
 def _write_manifest(staging: Path, *, command: str, arguments: Sequence[str],
                     not_reproducible: Sequence[str], timestamp: bool) -> None:
-    from fsmbench import __version__
     from fsmbench.io.atomic import atomic_write_text
+    from fsmbench.version import __version__
 
     files = [{"path": p.relative_to(staging).as_posix(), "sha256": _sha256(p),
               "size_bytes": p.stat().st_size}

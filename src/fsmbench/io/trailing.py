@@ -34,7 +34,11 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, BinaryIO, Final
 
-__all__ = ["DataEnd", "PrefixReader", "TrailingBytesWarning", "data_end", "warn_trailing"]
+__all__ = ["HDF5_SIGNATURE", "DataEnd", "PrefixReader", "TrailingBytesWarning", "data_end",
+           "warn_trailing"]
+
+#: The 8 bytes that open an HDF5 superblock (HDF5 File Format Specification).
+HDF5_SIGNATURE: Final = b"\x89HDF\r\n\x1a\n"
 
 _V5_HEADER: Final = 128
 _MI_COMPRESSED: Final = 15
@@ -249,8 +253,6 @@ def data_end(path: str | os.PathLike[str], fmt: str, *, fh: Any = None) -> DataE
 
 
 def _hdf5_signature_at(fh: BinaryIO, size: int) -> int:
-    from fsmbench.io.matfile import HDF5_SIGNATURE
-
     offset = 0
     while offset + 8 <= size:  # at 0, or after a userblock of 512 * 2**k bytes
         fh.seek(offset)

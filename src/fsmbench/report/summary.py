@@ -27,10 +27,10 @@ from collections.abc import Mapping, Sequence
 from dataclasses import asdict, dataclass, field, replace
 from typing import Any, Literal
 
-from fsmbench import __version__
 from fsmbench.checks import Check, Notice
 from fsmbench.jsonutil import plain_json
 from fsmbench.report.verdict import next_step, verdict_html
+from fsmbench.version import __version__
 
 __all__ = [
     "FINDINGS",

@@ -19,7 +19,7 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
 from fsmbench.control.design import DesignOptions
-from fsmbench.jsonutil import plain_json
+from fsmbench.jsonutil import nested, plain_json
 
 if TYPE_CHECKING:
     from fsmbench.scale.montecarlo import DrawResult
@@ -154,8 +154,6 @@ class Breach:
 
     def to_json(self) -> dict[str, Any]:
         """``index``, ``noise_seed``, ``reason``, ``axes``, ``values``, ``factors`` (nested)."""
-        from fsmbench.scale.montecarlo import nested
-
         return plain_json({"index": self.index, "noise_seed": self.noise_seed,
                            "reason": self.reason, "axes": list(self.axes),
                            "values": dict(self.values), "factors": nested(self.factors)})

@@ -67,7 +67,7 @@ import numpy as np
 
 from fsmbench.bench.blocks import physical_plant
 from fsmbench.bench.params import Bench, PerAxis
-from fsmbench.jsonutil import plain_json, stamped
+from fsmbench.jsonutil import nested, plain_json, stamped
 from fsmbench.scale.breaches import Limits, RequirementOutcome, requirement_outcomes
 from fsmbench.scale.draws import (
     PARAMETERS,
@@ -97,7 +97,6 @@ __all__ = [
     "RequirementOutcome",
     "discrete_feedback",
     "draw_parameters",
-    "nested",
     "perturbed_bench",
     "run_draw",
     "run_draws",
@@ -371,7 +370,7 @@ class MonteCarloResult:
 
     def to_json(self) -> dict[str, Any]:
         """``montecarlo.json``'s content: summary, setup and one row per draw."""
-        from fsmbench import __version__
+        from fsmbench.version import __version__
 
         name, version = MONTECARLO_FORMAT
         s = summarise(self)
@@ -386,18 +385,6 @@ class MonteCarloResult:
                                            in METRICS.items()}),
             "parameter_descriptions": nested(PARAMETERS),
             "draws": [d.to_json() for d in self.draws]}), format=name, version=version)
-
-
-def nested(flat: Mapping[str, Any]) -> dict[str, Any]:
-    """``{"a.h": 1, "a.v": 2, "b": 3}`` → ``{"a": {"h": 1, "v": 2}, "b": 3}`` (keys are ids)."""
-    out: dict[str, Any] = {}
-    for key, value in flat.items():
-        *parents, last = key.split(".")
-        node = out
-        for part in parents:
-            node = node.setdefault(part, {})
-        node[last] = value
-    return out
 
 
 def _severity(d: DrawResult) -> tuple[int, float]:

@@ -210,8 +210,9 @@ def _requirement_lines(result: Any) -> list[str]:
 def format_table(result: Any) -> str:
     """The short table: per requirement the draws that meet it and every draw that breaks
     it (with its factors), quantiles of each metric in display units, the worst draws."""
+    from fsmbench.jsonutil import nested
     from fsmbench.scale.breaches import factors_sentence
-    from fsmbench.scale.montecarlo import METRICS, nested, summarise
+    from fsmbench.scale.montecarlo import METRICS, summarise
 
     s = summarise(result)
     n = len(result.draws)

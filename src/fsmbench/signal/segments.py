@@ -13,7 +13,7 @@ from collections.abc import Sequence
 import numpy as np
 from numpy.typing import NDArray
 
-from fsmbench.signal.welch import segment_sums as welch_segment_sums
+from fsmbench.signal.welch_core import segment_sums as welch_segment_sums
 
 __all__ = ["read_span", "segment_sums"]
 
@@ -35,7 +35,7 @@ def segment_sums(
 ) -> NDArray[np.complex128]:
     """Unscaled ``sum_k X_a conj(X_b)`` over ``n_seg`` segments, shape (c, c, nfft//2 + 1).
 
-    The accumulation of :func:`fsmbench.signal.welch.segment_sums` on the samples
+    The accumulation of :func:`fsmbench.signal.welch_core.segment_sums` on the samples
     ``offset .. offset+length-1`` of the concatenated chunks.
     """
     data = read_span(pieces, offset, length)

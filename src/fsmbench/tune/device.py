@@ -63,10 +63,10 @@ from fsmbench.io.recording import make_recording, read_recording
 from fsmbench.sim.excitation import SampledExcitation, samples_sha256
 from fsmbench.sim.loaded import RunningController
 from fsmbench.tune.device_errors import device_failure
-from fsmbench.tune.guarded import Loop
 from fsmbench.tune.proxy import device_proxy, release_proxy
 from fsmbench.tune.reads import INVALID_WAIT_S, read_valid
 from fsmbench.tune.transaction import LoopOpenedError
+from fsmbench.tune.values import Loop
 from fsmbench.twin.closed_loop import CLOSED_LOOP_SIGNALS, ClosedLoopPlay, excitation_variable
 from fsmbench.twin.experiments import ExperimentSpec
 from fsmbench.twin.simulate import TwinRun

@@ -19,7 +19,7 @@ from fsmbench.control.preimage import (
 from fsmbench.control.study import design_study
 from fsmbench.io.atomic import atomic_write_text
 from fsmbench.jsonutil import format_text
-from fsmbench.tune.guarded import Loop, loop_of
+from fsmbench.tune.values import Loop, loop_of
 
 __all__ = ["loop_from_file", "running_loop", "write_tune_json"]
 

@@ -20,7 +20,7 @@ from fsmbench.sim.excitation import Excitation
 from fsmbench.sim.loaded import RunningController
 from fsmbench.sim.plant import ADC_CHANNELS, bench_discrete
 from fsmbench.sim.stream import BenchStream
-from fsmbench.tune.guarded import Loop
+from fsmbench.tune.values import Loop
 from fsmbench.twin.closed_loop import ClosedLoopPlay, play_closed_loop
 from fsmbench.twin.experiments import REP_FREQ_HZ
 from fsmbench.twin.simulate import TwinRun

@@ -33,13 +33,20 @@ import signal
 import threading
 from collections.abc import Callable, Iterator, Mapping
 from types import FrameType
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 from fsmbench.tune.device_errors import device_failure
-from fsmbench.tune.guarded import AXES, _replace, _rms, _urad
-
-if TYPE_CHECKING:
-    from fsmbench.tune.guarded import ControllerFigures, Loop, TuneOptions, TuneResult, TuneTarget
+from fsmbench.tune.values import (
+    AXES,
+    ControllerFigures,
+    Loop,
+    TuneOptions,
+    TuneResult,
+    TuneTarget,
+    rms_by_axis,
+    urad_text,
+    with_changes,
+)
 
 __all__ = ["OUTCOMES", "LoopChangeError", "LoopOpenedError", "ctrl_c_held", "load_and_watch"]
 
@@ -240,10 +247,10 @@ def load_and_watch(*, target: TuneTarget, running: Loop, candidate: Loop,
         if after_load is not None:
             say(f"the bench changed as the controller was loaded: {after_load(target)}")
         e_after = target.run(opts.watch_s, settle_s=opts.settle_s)
-        measured_after = _rms(e_after)
-        cand = _replace(cand, measured_rms_rad=measured_after)
-        say(f"watched {candidate.name} for {opts.watch_s:g} s: {_urad(measured_after)} rms "
-            f"(predicted {_urad(cand.predicted_rms_rad)})")
+        measured_after = rms_by_axis(e_after)
+        cand = with_changes(cand, measured_rms_rad=measured_after)
+        say(f"watched {candidate.name} for {opts.watch_s:g} s: {urad_text(measured_after)} rms "
+            f"(predicted {urad_text(cand.predicted_rms_rad)})")
         worse = [a for a in AXES if not measured_after[a]
                  <= (1.0 + opts.rollback_tolerance) * cand.predicted_rms_rad[a]]
         if worse:
@@ -254,15 +261,15 @@ def load_and_watch(*, target: TuneTarget, running: Loop, candidate: Loop,
                           for a in worse) + f": {running.name} loaded back")
             switches.append(target.roll_back(running))
             e_back = target.run(opts.watch_s, settle_s=opts.settle_s)
-            say(f"rolled back: {reason}; measured again {_urad(_rms(e_back))} rms")
+            say(f"rolled back: {reason}; measured again {urad_text(rms_by_axis(e_back))} rms")
             tx.update(state="done", outcome="rolled_back", left_on=running.name,
                       sentence=f"{noun} is left on {running.name}, the controller it ran "
                                "before tune (rolled back).")
             result = make("rolled_back", reason, candidate_figures=cand,
-                          after=_replace(before, measured_rms_rad=_rms(e_back)),
+                          after=with_changes(before, measured_rms_rad=rms_by_axis(e_back)),
                           switches=switches, transaction=tx, e_after=e_back)
         else:
-            reason = (f"{why}; measured {_urad(measured_after)} after loading, within "
+            reason = (f"{why}; measured {urad_text(measured_after)} after loading, within "
                       f"{100 * opts.rollback_tolerance:g} % of the prediction")
             say(f"kept: {reason}")
             named = str(switches[0].get("to") or candidate.name)  # the target's name for it

@@ -21,7 +21,7 @@ from fsmbench.bench.blocks import physical_plant
 from fsmbench.bench.params import Bench
 from fsmbench.sim.plant import ADC_CHANNELS, bench_discrete
 from fsmbench.sim.stream import BenchStream
-from fsmbench.tune.guarded import Loop
+from fsmbench.tune.values import Loop
 from fsmbench.tune.watch import LoopWatch, WatchEvent, WatchOptions
 from fsmbench.twin.closed_loop import drifted_bench
 

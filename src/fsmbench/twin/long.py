@@ -18,8 +18,8 @@ from pathlib import Path
 import numpy as np
 
 from fsmbench.bench.params import Bench
+from fsmbench.io.dataset import ordered_signals
 from fsmbench.io.nexus_stream import NexusAppender
-from fsmbench.io.recording import _ordered
 from fsmbench.io.signals import EXPERIMENTS
 from fsmbench.sim.discretize import DiscretePlant
 from fsmbench.sim.engine import DiscreteController
@@ -147,7 +147,7 @@ def stream_experiment(bench: Bench, spec: ExperimentSpec, *, seed: int, path: st
     n_total = round(spec.duration_s * fs)
     stream = experiment_stream(bench, spec, seed=seed, plant=plant, controller=controller)
     # The seed's table order, as make_recording stores in-memory records.
-    signals = _ordered(s for s in EXPERIMENTS[spec.name].required if s != "t")
+    signals = ordered_signals(s for s in EXPERIMENTS[spec.name].required if s != "t")
     block = max(1, round(block_s * fs))
     realized = _Realized()
     start = last = time.monotonic()

@@ -29,11 +29,11 @@ from typing import Any
 
 import numpy as np
 
-from fsmbench import __version__
 from fsmbench.bench.blocks import input_delays_s, physical_plant
 from fsmbench.bench.params import Bench, BenchParams
 from fsmbench.ident.delay.sampled import SensorLowpass
 from fsmbench.twin.experiments import ExperimentSpec
+from fsmbench.version import __version__
 
 __all__ = ["TRUTH_FORMAT", "model_values", "twin_truth"]
 
