@@ -2,7 +2,7 @@
 
     python benchmarks/bench_allan.py [--repeats 5] [--samples 1000000]
 
-Times :func:`fsmbench.scale.allan.allan_deviation` on one 100 s record at
+Times :func:`fsmbench.signal.allan.allan_deviation` on one 100 s record at
 10 kHz (a huddle test's ``Va``: nanometre noise on a 0.7 m distance, octave
 taus up to N/4) against ``allantools.oadev`` on the same record and taus,
 and against the NumPy slicing fsmbench used before (three temporaries of N
@@ -17,7 +17,7 @@ import argparse
 import allantools
 import numpy as np
 
-from fsmbench.scale.allan import allan_deviation
+from fsmbench.signal.allan import allan_deviation
 from timing import timed_runs
 
 

@@ -30,8 +30,8 @@ from typing import Any
 import numpy as np
 
 from fsmbench.bench.params import Bench, default_bench, real_bench
+from fsmbench.control.loaded import running_controller
 from fsmbench.ident.pipeline import identify
-from fsmbench.sim.loaded import running_controller
 from fsmbench.tune.measure import MeasurementOptions, measure_closed_loop
 from fsmbench.twin.simulate import simulate_bench
 

@@ -16,8 +16,8 @@ import argparse
 import numpy as np
 from scipy import signal
 
+from fsmbench.bench.esrf import esrf_decentralised_controller, tustin
 from fsmbench.budget.huddle import _run_controller
-from fsmbench.control.esrf import esrf_decentralised_controller, tustin
 from timing import timed_runs
 
 

@@ -29,8 +29,8 @@ import control as ct
 import numpy as np
 import scipy.signal as sig
 
+from fsmbench.bench.esrf import esrf_decentralised_controller
 from fsmbench.bench.params import default_bench
-from fsmbench.control.esrf import esrf_decentralised_controller
 from fsmbench.sim.controller import feedback_controller
 from fsmbench.sim.engine import Quantiser, run_loop, run_loop_python
 from fsmbench.sim.plant import ADC_CHANNELS, twin_discrete

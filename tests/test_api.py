@@ -16,8 +16,8 @@ import pytest
 import fsmbench
 import fsmbench.api
 from fsmbench.bench.blocks import PlantModel, ss_response
+from fsmbench.bench.esrf import esrf_decentralised_controller, tustin
 from fsmbench.bench.realization import minimal_realization, plant_model, select
-from fsmbench.control.esrf import esrf_decentralised_controller, tustin
 from fsmbench.control.feedback import LoopMargins
 
 API = ("load_bench", "physical_plant", "simulate", "load_recordings", "identify", "budget",

@@ -10,9 +10,9 @@ import numpy as np
 import pytest
 
 from fsmbench.bench.blocks import PlantModel, ss_response
+from fsmbench.bench.esrf import esrf_decentralised_controller, newport_controller
 from fsmbench.bench.params import Bench
 from fsmbench.control.design import AxisShape, DesignOptions
-from fsmbench.control.esrf import esrf_decentralised_controller, newport_controller
 from fsmbench.control.export import (
     DEFAULT_DISCRETISATION,
     InputScaling,

@@ -33,12 +33,13 @@ import control as ct
 import numpy as np
 import xarray as xr
 
+from fsmbench.atomic import atomic_write_text
 from fsmbench.bench.axes import PerAxis
 from fsmbench.bench.blocks import PlantModel, physical_plant
+from fsmbench.bench.esrf import esrf_decentralised_controller, tustin
 from fsmbench.bench.params import Bench
 from fsmbench.budget.result import BudgetResult
 from fsmbench.budget.study import budget_study
-from fsmbench.control.esrf import esrf_decentralised_controller, tustin
 from fsmbench.control.study import DesignResult, design_study
 from fsmbench.control.validation import ClosedLoopValidation, validate_closed_loop
 from fsmbench.ident.pipeline import (
@@ -48,12 +49,11 @@ from fsmbench.ident.pipeline import (
     write_identification,
 )
 from fsmbench.ident.result import PlantChoice, SavedIdentification
-from fsmbench.io.atomic import atomic_write_text
 from fsmbench.io.errors import RecordingError
 from fsmbench.io.signals import MIN_DURATION_S
 from fsmbench.jsonutil import format_text, stamped
 from fsmbench.sim.controller import feedback_controller
-from fsmbench.sim.identified import bench_from_identification
+from fsmbench.twin.identified import bench_from_identification
 from fsmbench.twin.simulate import simulate_bench
 from fsmbench.twin.verify import TrackingCheck, verify_on_twin
 

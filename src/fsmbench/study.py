@@ -24,11 +24,11 @@ from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
+from fsmbench.atomic import atomic_write_text
 from fsmbench.bench.blocks import PlantModel
 from fsmbench.bench.params import Bench, default_bench
 from fsmbench.entry import callable_module
 from fsmbench.ident.pipeline import Identification, IdentifyOptions
-from fsmbench.io.atomic import atomic_write_text
 from fsmbench.io.folder import RecordingSet, load_recordings
 from fsmbench.io.outdir import check_out_dir
 from fsmbench.io.signals import EXPERIMENTS
@@ -210,7 +210,8 @@ def _sections(*, bench: Bench, loaded: RecordingSet, source: str, is_twin: bool,
             None if ident is None else ident.noise_model))),
         huddle_section(budget, recordings=rec),
         budget_section(budget, plant_source=plant_source),
-        *control_sections(design, plant_source=plant_source),
+        *control_sections(design.result, twin_check=design.twin_check, skipped=design.skipped,
+                          plant_source=plant_source),
         replace(chapter11, subsections=(*chapter11.subsections, validation_subsection(
             validation, skipped=validation_skipped),
             *(() if montecarlo is None else (montecarlo_section(montecarlo),)))),

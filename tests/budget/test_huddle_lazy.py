@@ -7,9 +7,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from fsmbench.bench.esrf import esrf_decentralised_controller
 from fsmbench.bench.params import default_bench
 from fsmbench.budget.huddle import analyse_huddle_record, estimate_dac_noise
-from fsmbench.control.esrf import esrf_decentralised_controller
 from fsmbench.io.lazy import open_recording
 from fsmbench.io.recording import read_recording
 from fsmbench.twin.simulate import stream_bench

@@ -10,6 +10,7 @@ import pytest
 from scipy.signal import freqz, lfilter
 
 from fsmbench.bench.blocks import physical_plant
+from fsmbench.bench.esrf import esrf_decentralised_controller, tustin
 from fsmbench.bench.params import default_bench
 from fsmbench.budget import (
     NoiseInput,
@@ -21,7 +22,6 @@ from fsmbench.budget import (
     quadratic_distance,
 )
 from fsmbench.budget.propagation import controller_response
-from fsmbench.control.esrf import esrf_decentralised_controller, tustin
 
 
 @pytest.fixture(scope="module")

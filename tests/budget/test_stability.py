@@ -109,8 +109,8 @@ def test_records_in_memory_need_no_dask(record: xr.Dataset) -> None:
 
 @pytest.mark.parametrize("block", [1000, 4097, 1 << 20])
 def test_streamed_allan_equals_in_memory(block: int) -> None:
-    from fsmbench.scale.allan import allan_deviation
-    from fsmbench.scale.streaming import AllanStream, read_blocks
+    from fsmbench.signal.allan import allan_deviation
+    from fsmbench.signal.streaming import AllanStream, read_blocks
 
     rng = np.random.default_rng(5)
     x = 1.0 + 1e-9 * np.cumsum(rng.standard_normal(50_000)) + 1e-9 * rng.standard_normal(50_000)

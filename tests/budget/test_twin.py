@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 from fsmbench.bench.blocks import physical_plant, replace_params
+from fsmbench.bench.esrf import esrf_decentralised_controller, tustin
 from fsmbench.bench.params import default_bench
 from fsmbench.budget import (
     analyse_repeatability,
@@ -17,7 +18,6 @@ from fsmbench.budget import (
     first_order_lowpass,
 )
 from fsmbench.budget.table import angle_sources
-from fsmbench.control.esrf import esrf_decentralised_controller, tustin
 from fsmbench.twin import esrf_experiments, simulate_bench, simulate_experiment
 from fsmbench.twin.experiments import with_duration
 

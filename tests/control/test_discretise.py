@@ -6,10 +6,8 @@ import numpy as np
 import pytest
 from scipy import signal
 
-from fsmbench.control.esrf import iff_controller, tustin
-from fsmbench.control.export import discretise
-from fsmbench.control.freq import evaluate_ss
-from fsmbench.control.realize import (
+from fsmbench.bench.esrf import iff_controller, tustin
+from fsmbench.bench.sections import (
     Section,
     section_prewarp_rad_s,
     section_response,
@@ -17,6 +15,8 @@ from fsmbench.control.realize import (
     tustin_section,
     warped_frequency_rad_s,
 )
+from fsmbench.control.export import discretise
+from fsmbench.control.freq import evaluate_ss
 
 TS = 1e-4  # [s]
 

@@ -12,8 +12,8 @@ import numpy as np
 import pytest
 from scipy import optimize, signal
 
+from fsmbench.bench.esrf import esrf_decentralised_controller, newport_controller, tustin
 from fsmbench.control.design import AxisShape
-from fsmbench.control.esrf import esrf_decentralised_controller, newport_controller, tustin
 from fsmbench.control.export import (
     SOS_FORMAT,
     SOS_FORMAT_VERSION,

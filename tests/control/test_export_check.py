@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from fsmbench.control.esrf import esrf_decentralised_controller
+from fsmbench.bench.esrf import esrf_decentralised_controller
 from fsmbench.control.export import discretise_channel
 from fsmbench.control.export_check import (
     FLOAT32_REL_TOL,

@@ -7,10 +7,10 @@ import numpy as np
 import pytest
 
 from fsmbench.bench.blocks import PlantModel
+from fsmbench.bench.esrf import esrf_decentralised_controller, newport_controller, tustin
 from fsmbench.bench.params import Bench
 from fsmbench.control.analysis import ControlObjective, control_objective
 from fsmbench.control.design import perturbed_plants
-from fsmbench.control.esrf import esrf_decentralised_controller, newport_controller, tustin
 from fsmbench.control.freq import evaluate_ss
 from fsmbench.control.loops import (
     LoopAnalysis,

@@ -13,9 +13,9 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy import signal
 
+from fsmbench.bench.sections import Section, zpk_cascade
 from fsmbench.control.export import siso_zpk
 from fsmbench.control.preimage import sections_preimage, tustin_preimage
-from fsmbench.control.realize import Section, zpk_cascade
 
 TS_S = 1e-4
 F_HZ = np.array([0.05, 1.0, 10.0, 97.0, 251.2, 411.5, 1000.0, 3000.0, 4900.0])

@@ -8,11 +8,11 @@ import numpy as np
 import pytest
 
 from fsmbench.bench.params import Bench
+from fsmbench.control.loaded import running_controller
 from fsmbench.excite.closed_loop import check_closed_loop_limits, closed_loop_peaks
 from fsmbench.excite.design import design_multisine
 from fsmbench.excite.limits import ExcitationLimitError, converter_peaks
 from fsmbench.sim.engine import Quantiser, run_loop
-from fsmbench.sim.loaded import running_controller
 from fsmbench.sim.plant import ADC_CHANNELS, DAC_CHANNELS, bench_discrete
 
 

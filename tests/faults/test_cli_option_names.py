@@ -147,7 +147,7 @@ def test_the_device_names_its_property_not_an_option(no_identification: Path) ->
     # The Tango device reads the folder from its BenchFolder property: no option was typed.
     from fsmbench.bench.params import load_bench
     from fsmbench.io.errors import RecordingError
-    from fsmbench.sim.identified import identified_bench
+    from fsmbench.twin.identified import identified_bench
 
     with pytest.raises(RecordingError) as err:
         identified_bench(no_identification, bench=load_bench(None),

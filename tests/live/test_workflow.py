@@ -108,7 +108,7 @@ def test_controllers_are_checked_on_the_identified_bench(twin_study: Any, tmp_pa
 
     from fsmbench.live.core import LiveBench
     from fsmbench.live.states import Refused
-    from fsmbench.sim.identified import identified_bench
+    from fsmbench.twin.identified import identified_bench
 
     bench = identified_bench(twin_study.out_dir, bench=BENCH)
     folder = tmp_path / "controllers"

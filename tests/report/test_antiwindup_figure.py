@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import numpy as np
 
+from fsmbench.control.antiwindup_loop import SaturatingStep
 from fsmbench.report.figures.antiwindup import saturating_step_figure
 from fsmbench.report.figures.spec import Line
-from fsmbench.sim.antiwindup import SaturatingStep
 
 
 def _step(axis: str, recovered: float) -> SaturatingStep:

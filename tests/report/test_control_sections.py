@@ -48,7 +48,8 @@ def stage(nominal_plant: PlantModel, bench: Bench) -> DesignStage:
 
 @pytest.fixture(scope="session")
 def sections(stage: DesignStage) -> list[Section]:
-    return control_sections(stage, plant_source="physical model, nominal parameters")
+    return control_sections(stage.result, twin_check=stage.twin_check,
+                            plant_source="physical model, nominal parameters")
 
 
 def _digest(line: Line) -> str:

@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from fsmbench.bench.params import Bench
+from fsmbench.control.loaded import running_controller
 from fsmbench.sim.closed_loop import (
     closed_loop_plant,
     feedback_name,
@@ -14,7 +15,6 @@ from fsmbench.sim.closed_loop import (
 )
 from fsmbench.sim.controller import closed_loop_spectral_radius
 from fsmbench.sim.engine import Quantiser, run_loop
-from fsmbench.sim.loaded import running_controller
 from fsmbench.sim.plant import ADC_CHANNELS, DAC_CHANNELS, bench_discrete
 
 # Both sides are float64 state recursions of one linear system (ideal converters): they

@@ -7,8 +7,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from fsmbench.bench.esrf import esrf_decentralised_controller
 from fsmbench.bench.params import Bench
-from fsmbench.control.esrf import esrf_decentralised_controller
 from fsmbench.sim import codegen
 from fsmbench.sim.controller import feedback_controller
 from fsmbench.sim.engine import Quantiser, run_loop

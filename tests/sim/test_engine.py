@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 import scipy.signal as sig
 
+from fsmbench.bench.esrf import esrf_decentralised_controller
 from fsmbench.bench.params import Bench
-from fsmbench.control.esrf import esrf_decentralised_controller
 from fsmbench.sim.engine import Quantiser, run_loop, run_loop_python
 from fsmbench.sim.plant import ADC_CHANNELS, DAC_CHANNELS, twin_discrete
 

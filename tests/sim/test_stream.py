@@ -10,8 +10,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from fsmbench.bench.esrf import esrf_decentralised_controller
 from fsmbench.bench.params import default_bench
-from fsmbench.control.esrf import esrf_decentralised_controller
 from fsmbench.sim.controller import feedback_controller
 from fsmbench.sim.excitation import Excitation
 from fsmbench.sim.plant import DAC_CHANNELS, twin_discrete

@@ -19,9 +19,9 @@ import pytest
 
 tango = pytest.importorskip("tango")
 
+from fsmbench.bench.esrf import esrf_decentralised_controller  # noqa: E402
 from fsmbench.bench.params import Bench  # noqa: E402
 from fsmbench.cli import main  # noqa: E402
-from fsmbench.control.esrf import esrf_decentralised_controller  # noqa: E402
 from fsmbench.tune.device import DeviceTarget  # noqa: E402
 from fsmbench.tune.guarded import TuneOptions, loop_of, tune_guarded  # noqa: E402
 from fsmbench.tune.measure import MeasurementOptions  # noqa: E402

@@ -20,9 +20,9 @@ import pytest
 
 pytest.importorskip("tango")
 
+from fsmbench.bench.esrf import esrf_decentralised_controller
 from fsmbench.bench.params import Bench
 from fsmbench.cli import EXIT_SIGINT, EXIT_SIGTERM, Terminated, main
-from fsmbench.control.esrf import esrf_decentralised_controller
 from fsmbench.tune.device import DeviceTarget
 from fsmbench.tune.guarded import Loop, TuneOptions, TuneResult, loop_of, tune_guarded
 from fsmbench.tune.measure import MeasurementOptions

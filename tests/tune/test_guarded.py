@@ -8,8 +8,8 @@ import control as ct
 import numpy as np
 import pytest
 
+from fsmbench.bench.esrf import esrf_decentralised_controller
 from fsmbench.bench.params import Bench
-from fsmbench.control.esrf import esrf_decentralised_controller
 from fsmbench.sim.excitation import Excitation
 from fsmbench.sim.stream import BenchStream
 from fsmbench.tune.guarded import TuneOptions, TuneResult, loop_of, tune_twin

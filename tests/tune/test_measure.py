@@ -17,7 +17,7 @@ from __future__ import annotations
 import pytest
 
 from fsmbench.bench.params import Bench, default_bench, real_bench
-from fsmbench.sim.loaded import running_controller
+from fsmbench.control.loaded import running_controller
 from fsmbench.tune.measure import MeasurementOptions, measure_closed_loop, model_excess
 
 # The open-loop identification's tolerances (issue 24): resonance 0.5 %, damping 25 %,

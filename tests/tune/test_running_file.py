@@ -14,9 +14,9 @@ from typing import Any
 import numpy as np
 import pytest
 
+from fsmbench.bench.esrf import esrf_decentralised_controller
 from fsmbench.bench.params import Bench
 from fsmbench.cli import main
-from fsmbench.control.esrf import esrf_decentralised_controller
 from fsmbench.control.export import InputScaling, write_sos_json
 from fsmbench.control.load import load_controllers, select_controller
 from fsmbench.sim.controller import sercalo_feedback

@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 from fsmbench.bench.params import Bench
+from fsmbench.control.loaded import running_controller
 from fsmbench.ident.closed_loop import identify_closed_loop
-from fsmbench.sim.loaded import running_controller
 from fsmbench.twin.closed_loop import (
     CLOSED_LOOP_SIGNALS,
     ClosedLoopPlay,

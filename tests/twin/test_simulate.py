@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 import scipy.io
 
+from fsmbench.bench.esrf import esrf_decentralised_controller
 from fsmbench.bench.params import Bench
-from fsmbench.control.esrf import esrf_decentralised_controller
 from fsmbench.ident import hanning, spectral_matrix
 from fsmbench.io.signals import EXPERIMENTS
 from fsmbench.sim.controller import closed_loop_spectral_radius

@@ -8,8 +8,8 @@ import control as ct
 import pytest
 
 from fsmbench.bench.blocks import PlantModel, replace_params
+from fsmbench.bench.esrf import esrf_decentralised_controller
 from fsmbench.bench.params import Bench, PerAxis
-from fsmbench.control.esrf import esrf_decentralised_controller
 from fsmbench.twin.verify import predict_tracking, verify_on_twin
 
 

@@ -468,7 +468,7 @@ class Bench:
     true : BenchParams
         What the simulation engine reads: the packaged twin's ``[true]``, or for
         an identified bench the bench file's values with the identified 4QD and
-        the noise fitted to the recordings (:func:`fsmbench.sim.identified.identified_bench`).
+        the noise fitted to the recordings (:func:`fsmbench.twin.identified.identified_bench`).
     origin : str
         The bench file it was read from, or the identification folder.
     model : IdentifiedModel or None
@@ -580,7 +580,7 @@ def load_bench(path: str | Path | None = None) -> Bench:
 
 def save_bench(bench: Bench, path: str | Path) -> Path:
     """Write ``bench`` as TOML to ``path`` atomically; returns the path."""
-    from fsmbench.io.atomic import atomic_write_text
+    from fsmbench.atomic import atomic_write_text
 
     return atomic_write_text(Path(path), bench.to_toml())
 

@@ -39,11 +39,11 @@ from numba import njit
 from numpy.typing import NDArray
 
 from fsmbench.bench.blocks import newport_beam_matrix
+from fsmbench.bench.esrf import tustin
 from fsmbench.bench.params import BenchParams
 from fsmbench.budget.long_record import LongRecordSummary, summarise_long_record
 from fsmbench.budget.signals import block_means, is_lazy, lowpass, trim_record
 from fsmbench.budget.spectra import cumulative_power, esrf_welch
-from fsmbench.control.esrf import tustin
 from fsmbench.jsonutil import hv
 from fsmbench.signal.welch import hanning
 

@@ -6,7 +6,7 @@ signal) is analysed by the ESRF study's processing (section 3: mean removal, the
 (:mod:`fsmbench.budget.stability`: Allan deviations, drift, envelopes). Done
 estimate by estimate, that is some twenty reads of the record, and Dask
 graphs over its tens of thousands of chunks. Here the record is read twice,
-block after block (:mod:`fsmbench.scale.streaming`):
+block after block (:mod:`fsmbench.signal.streaming`):
 
 1. the raw ``Va``, ``Vph``, ``Vpv``: their means (needed by everything the ESRF study
    computes on mean-removed signals), Allan deviations up to 10 s, 0.1 s and
@@ -32,9 +32,9 @@ from numpy.typing import NDArray
 
 from fsmbench.budget.signals import LazyTrim, trim_record
 from fsmbench.progress import advance
-from fsmbench.scale.allan import AllanResult
-from fsmbench.scale.envelope import Envelope
-from fsmbench.scale.streaming import (
+from fsmbench.signal.allan import AllanResult
+from fsmbench.signal.envelope import Envelope
+from fsmbench.signal.streaming import (
     BLOCK_SAMPLES,
     AllanStream,
     BlockMeanStream,

@@ -28,7 +28,7 @@ with ``c = (6H + 4L)/16`` m/rad² (errata E15, E17). ``R`` includes the 4QD's
 own noise, so this equivalent is an upper bound of the true geometric term.
 
 Out of core: one code path for every record (NumPy or Dask), read twice
-block after block (:func:`fsmbench.scale.streaming.read_blocks`): read 1
+block after block (:func:`fsmbench.signal.streaming.read_blocks`): read 1
 folds ``Va``, its low pass and the distance equivalent period on period
 (sums, minimum, maximum at each position: arrays of shape (P,)) and takes the
 means, Welch PSDs and envelopes of the raw signals; read 2 needs the
@@ -55,8 +55,8 @@ from fsmbench.budget.propagation import distance_coefficients
 from fsmbench.budget.signals import trim_record
 from fsmbench.jsonutil import hv
 from fsmbench.progress import advance
-from fsmbench.scale.envelope import Envelope
-from fsmbench.scale.streaming import (
+from fsmbench.signal.envelope import Envelope
+from fsmbench.signal.streaming import (
     BLOCK_SAMPLES,
     EnvelopeStream,
     LowpassStream,

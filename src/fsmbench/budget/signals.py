@@ -82,7 +82,7 @@ def trim_record(ds: xr.Dataset, *, t0_s: float, duration_s: float | None,
 def lowpass(x: Any, *, cutoff_hz: float, fs_hz: float) -> FloatArray:
     """The ESRF study's first-order low pass (from rest) of a record in memory.
 
-    Records out of core go through :class:`fsmbench.scale.streaming.LowpassStream`
+    Records out of core go through :class:`fsmbench.signal.streaming.LowpassStream`
     (:mod:`fsmbench.budget.long_record`), the same recursion block by block.
     """
     return first_order_lowpass(np.asarray(x, dtype=float), cutoff_hz=cutoff_hz, fs_hz=fs_hz)

@@ -3,7 +3,7 @@
 For each huddle test, over the whole record after the ESRF study's trim (any
 length, out of core for records read lazily):
 
-- the **Allan deviation** (overlapping, :func:`fsmbench.scale.allan.allan_deviation`)
+- the **Allan deviation** (overlapping, :func:`fsmbench.signal.allan.allan_deviation`)
   of the Attocube distance ``Va`` [m] and of the beam angle the 4QD reads,
   ``Vph/Gd``, ``Vpv/Gd`` [rad], with its slope regions (white, flicker,
   random walk, drift) in words;
@@ -34,7 +34,7 @@ from fsmbench.budget.long_record import (
     summarise_long_record,
 )
 from fsmbench.budget.signals import block_means, is_lazy, lowpass, trim_record
-from fsmbench.scale.envelope import Envelope
+from fsmbench.signal.envelope import Envelope
 
 __all__ = ["FULL_OVERLAP_MAX_TAU_S", "SignalDrift", "StabilityRecord", "analyse_stability",
            "stability_from_summary"]
@@ -145,7 +145,7 @@ class StabilityRecord:
 
 
 def _binned(x: Any, *, signal: str, unit: str, n_bins: int, fs_hz: float) -> SignalDrift:
-    from fsmbench.scale.envelope import minmax_envelope
+    from fsmbench.signal.envelope import minmax_envelope
 
     return _drift_of(minmax_envelope(x, fs_hz=fs_hz, n_bins=n_bins), signal=signal, unit=unit,
                      fs_hz=fs_hz)
@@ -161,7 +161,7 @@ def _allan(x: Any, *, fs_hz: float, unit: str, name: str) -> Any:
     (``tests/budget/test_stability.py``). With hundreds of 0.1 s steps per
     averaging time, the loss of degrees of freedom is under a percent.
     """
-    from fsmbench.scale.allan import allan_deviation
+    from fsmbench.signal.allan import allan_deviation
 
     fine_m, stride = allan_factors(int(x.shape[0]), fs_hz)
     fine = allan_deviation(x, fs_hz=fs_hz, taus_s=fine_m / fs_hz, unit=unit, name=name)
@@ -170,7 +170,7 @@ def _allan(x: Any, *, fs_hz: float, unit: str, name: str) -> Any:
 
 def _with_coarse(fine: Any, means: FloatArray, *, stride: int, name: str) -> Any:
     """``fine`` extended with the averaging times of the ``stride``-sample ``means`` beyond it."""
-    from fsmbench.scale.allan import AllanResult, allan_deviation
+    from fsmbench.signal.allan import AllanResult, allan_deviation
 
     fs_hz, unit = fine.fs_hz, fine.unit
     coarse_m = 2 ** np.arange(1, 64)
@@ -190,7 +190,7 @@ def _with_coarse(fine: Any, means: FloatArray, *, stride: int, name: str) -> Any
 
 def _scaled_allan(a: Any, *, gain: float, unit: str) -> Any:
     """The Allan deviation of ``x / gain`` from that of ``x``."""
-    from fsmbench.scale.allan import AllanResult
+    from fsmbench.signal.allan import AllanResult
 
     return AllanResult(tau_s=a.tau_s, adev=a.adev / abs(gain), n_terms=a.n_terms, m=a.m,
                        fs_hz=a.fs_hz, n_samples=a.n_samples, unit=unit, kind=a.kind)

@@ -25,6 +25,7 @@ import numpy as np
 import xarray as xr
 
 from fsmbench.bench.blocks import PlantModel, newport_beam_matrix, physical_plant
+from fsmbench.bench.esrf import esrf_decentralised_controller, tustin
 from fsmbench.bench.params import Bench, BenchParams, PerAxis
 from fsmbench.budget.environment import air_budget, frame_budget
 from fsmbench.budget.huddle import (
@@ -49,7 +50,6 @@ from fsmbench.budget.signals import is_lazy
 from fsmbench.budget.stability import DRIFT_BINS, StabilityRecord, analyse_stability
 from fsmbench.budget.table import AngleSources, angle_sources, budget_table
 from fsmbench.checks import Check, Notice, first_failure
-from fsmbench.control.esrf import esrf_decentralised_controller, tustin
 from fsmbench.io.folder import check_recording
 
 # The result types live in fsmbench.budget.result; named here too, where they were first.

@@ -41,7 +41,7 @@ def sim_bench(args: argparse.Namespace) -> Bench:
     if Path(folder).is_file():
         raise ParamsError(f"{folder}: is a file; {option} needs a folder written by fsmbench "
                           "identify or study (a bench TOML goes to --params)")
-    from fsmbench.sim.identified import identified_bench
+    from fsmbench.twin.identified import identified_bench
 
     return identified_bench(folder, bench=bench, option=option)
 

@@ -47,7 +47,7 @@ __all__ = [
 
 #: Tracking time constant [s]: near fsmbench's integrator corner (7 Hz, 23 ms), so the
 #: saturated integrators unwind at the pace their own action has. Measured on the twin's
-#: saturating step (:func:`fsmbench.sim.antiwindup.saturating_step`): 2–5 ms made the
+#: saturating step (:func:`fsmbench.control.antiwindup_loop.saturating_step`): 2–5 ms made the
 #: four-integrator loop overshoot again after the rail, 20–40 ms recovered as fast as the
 #: unsaturated loop settles.
 DEFAULT_TRACKING_TIME_S = 20e-3

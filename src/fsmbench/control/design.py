@@ -38,10 +38,10 @@ import numpy as np
 from scipy import optimize
 
 from fsmbench.bench.blocks import PlantModel, assemble_plant
+from fsmbench.bench.sections import zpk_cascade
 from fsmbench.control.analysis import ControlObjective
 from fsmbench.control.freq import frequency_grid, plain_json, plant_response
 from fsmbench.control.loops import AXES, LoopAnalysis, LoopOptions, analyse_loop
-from fsmbench.control.realize import zpk_cascade
 
 __all__ = [
     "AxisShape",
@@ -175,7 +175,7 @@ class AxisShape:
                 * (1 + s * h / wz) / (1 + s / (wz * h)) * wl**2 / (s**2 + 2 * zl * wl * s + wl**2))
 
     def realise(self, *, input_name: str, output_name: str) -> ct.StateSpace:
-        """Cascade realisation (:func:`fsmbench.control.realize.zpk_cascade`)."""
+        """Cascade realisation (:func:`fsmbench.bench.sections.zpk_cascade`)."""
         z, p, k = self.zpk()
         return zpk_cascade(z, p, k, input_name=input_name, output_name=output_name)
 

@@ -13,7 +13,7 @@
   reproduce at a few frequencies.
 
 Discretisation (:data:`DISCRETISATIONS`): by default ``"tustin_prewarp"``:
-each continuous section (:func:`fsmbench.control.realize.sections_from_zpk`)
+each continuous section (:func:`fsmbench.bench.sections.sections_from_zpk`)
 is discretised by Tustin prewarped at its own notch (or resonance) frequency,
 so every notch stays exactly in place; plain Tustin (the ESRF study's
 ``c2d(K, 1e-4, 'tustin')``) moves the ESRF study's 411.5 Hz notch to 409.3 Hz
@@ -37,10 +37,9 @@ import numpy as np
 from scipy import signal
 from scipy.linalg import eigvals
 
-from fsmbench.control.antiwindup import DEFAULT_TRACKING_TIME_S, antiwindup_channel
-from fsmbench.control.esrf import ESRF_TS_S, tustin
-from fsmbench.control.export_check import float32_sos_check, float32_state_space_check
-from fsmbench.control.realize import (
+from fsmbench.atomic import atomic_write_text
+from fsmbench.bench.esrf import ESRF_TS_S, tustin
+from fsmbench.bench.sections import (
     DiscreteSection,
     Section,
     section_response,
@@ -50,7 +49,8 @@ from fsmbench.control.realize import (
     tustin_section,
     warped_frequency_rad_s,
 )
-from fsmbench.io.atomic import atomic_write_text
+from fsmbench.control.antiwindup import DEFAULT_TRACKING_TIME_S, antiwindup_channel
+from fsmbench.control.export_check import float32_sos_check, float32_state_space_check
 from fsmbench.io.matwrite import save_mat
 from fsmbench.version import __version__
 
@@ -258,7 +258,7 @@ def discretise(k: ct.StateSpace, *, ts_s: float = ESRF_TS_S,
                method: str = DEFAULT_DISCRETISATION) -> ct.StateSpace:
     """Discrete controller with ``k``'s signal names (``dt = ts_s``).
 
-    ``"tustin"`` discretises the whole model (:func:`fsmbench.control.esrf.tustin`);
+    ``"tustin"`` discretises the whole model (:func:`fsmbench.bench.esrf.tustin`);
     ``"tustin_prewarp"`` cascades each diagonal channel's prewarped sections
     (off-diagonal channels must be zero).
     """

@@ -26,7 +26,7 @@ import control as ct
 import numpy as np
 
 from fsmbench.bench.blocks import PlantModel
-from fsmbench.control.esrf import iff_controller
+from fsmbench.bench.esrf import iff_controller
 from fsmbench.control.freq import (
     NyquistCount,
     evaluate_ss,

@@ -462,7 +462,7 @@ def _section_ss(row: FloatArray, *,
     ``s = x2``, ``e = (x1 - x2) / eps`` instead gives
     ``A = [[1, eps], [-D(1)/eps, -(1 + a1)]]`` (``D(1) = 1 + a1 + a2 =
     (1 - p1)(1 - p2)``), coupling ``eps = sqrt|D(1)|`` ~ the poles' distance
-    from 1, as the design's own cascade (:func:`fsmbench.control.realize.tustin_cascade`)
+    from 1, as the design's own cascade (:func:`fsmbench.bench.sections.tustin_cascade`)
     whose states are scaled in the continuous domain. First order when
     ``b2 = a2 = 0``; static when also ``b1 = a1 = 0``.
     """

@@ -28,8 +28,8 @@ import numpy as np
 from scipy.linalg import eigvals
 
 from fsmbench.bench.blocks import PlantModel, ResponseEvaluator
+from fsmbench.bench.esrf import ESRF_TS_S, tustin
 from fsmbench.control.analysis import ControlObjective
-from fsmbench.control.esrf import ESRF_TS_S, tustin
 from fsmbench.control.freq import (
     Margins,
     NyquistCount,

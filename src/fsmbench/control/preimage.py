@@ -30,7 +30,7 @@ from collections.abc import Sequence
 import control as ct
 import numpy as np
 
-from fsmbench.control.realize import zpk_cascade
+from fsmbench.bench.sections import zpk_cascade
 
 __all__ = ["AT_NYQUIST", "nyquist_pole_distance", "sections_preimage", "tustin_preimage"]
 

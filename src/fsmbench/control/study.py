@@ -28,7 +28,9 @@ from typing import Any
 import control as ct
 import numpy as np
 
+from fsmbench.atomic import atomic_write_text
 from fsmbench.bench.blocks import PlantModel
+from fsmbench.bench.esrf import esrf_decentralised_controller, iff_controller, newport_controller
 from fsmbench.bench.params import Bench
 from fsmbench.checks import Check
 from fsmbench.control.analysis import (
@@ -44,7 +46,6 @@ from fsmbench.control.design import (
     design_controller,
     robustness,
 )
-from fsmbench.control.esrf import esrf_decentralised_controller, iff_controller, newport_controller
 from fsmbench.control.export import (
     DEFAULT_DISCRETISATION,
     InputScaling,
@@ -55,7 +56,6 @@ from fsmbench.control.freq import evaluate_ss, plain_json
 from fsmbench.control.iff import IffAnalysis, iff_analysis
 from fsmbench.control.loops import LoopAnalysis, LoopOptions, analyse_loop, newport_to_beam
 from fsmbench.control.responses import ClosedLoopResponses, closed_loop_responses
-from fsmbench.io.atomic import atomic_write_text
 
 __all__ = [
     "CONTROLLERS_MAT",
@@ -176,11 +176,11 @@ class DesignResult:
         (:func:`fsmbench.control.responses.closed_loop_responses`).
     saturating_steps : dict "name/axis" -> SaturatingStep
         The twin's reference step beyond the DAC's reach without and with
-        anti-windup (:func:`fsmbench.sim.antiwindup.saturating_step`), per
+        anti-windup (:func:`fsmbench.control.antiwindup_loop.saturating_step`), per
         controller and axis, e.g. ``"fsmbench_controller/h"``.
     float32_loops : dict name -> Float32Loop
         The twin's closed-loop poles with each exported form rounded to
-        float32 (:func:`fsmbench.sim.float32_loop.float32_closed_loop`).
+        float32 (:func:`fsmbench.control.float32_loop.float32_closed_loop`).
     """
 
     plant_source: str
@@ -216,9 +216,9 @@ class DesignResult:
         crossover_hz, sensitivity_at_1hz}`` and ``meets_objective``; ``iff``;
         ``robustness`` (fsmbench's controller) and ``seed_robustness``;
         ``newport_to_beam``; ``options``; ``saturating_step`` (per controller and
-        axis, :meth:`fsmbench.sim.antiwindup.SaturatingStep.to_json`);
+        axis, :meth:`fsmbench.control.antiwindup_loop.SaturatingStep.to_json`);
         ``float32_closed_loop`` (per controller,
-        :meth:`fsmbench.sim.float32_loop.Float32Loop.to_json`).
+        :meth:`fsmbench.control.float32_loop.Float32Loop.to_json`).
         """
         f0 = self.objective.frequency_hz
         fsm = {**self.fsmbench.to_json(), "design": self.design.to_json()}
@@ -370,8 +370,8 @@ def design_study(plant: PlantModel, *, bench: Bench,
         for name, words in (("seed_controller", "the ESRF study's controller"),
                             ("fsmbench_controller", "fsmbench's controller"))}
     # The twin runs the controllers here (sim builds on control): imported when used.
-    from fsmbench.sim.antiwindup import saturating_step
-    from fsmbench.sim.float32_loop import float32_closed_loop
+    from fsmbench.control.antiwindup_loop import saturating_step
+    from fsmbench.control.float32_loop import float32_closed_loop
 
     who = (("seed_controller", "the ESRF study's controller"),
            ("fsmbench_controller", "fsmbench's controller"))

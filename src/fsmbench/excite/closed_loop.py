@@ -333,9 +333,9 @@ def robust_loops(bench: Bench, controller: DiscreteController, *,
 
     The design's robust set by default (:class:`fsmbench.control.design.DesignOptions`);
     the unmoved bench first. Each is the engine's plant of the moved bench
-    (:func:`fsmbench.scale.draws.perturbed_bench`), closed as the engine closes it.
+    (:func:`fsmbench.twin.draws.perturbed_bench`), closed as the engine closes it.
     """
-    from fsmbench.scale.draws import PARAMETERS, perturbed_bench
+    from fsmbench.twin.draws import PARAMETERS, perturbed_bench
 
     loops = [closed_loop_plant(bench_discrete(bench), controller)]
     for fs in frequency_scales:

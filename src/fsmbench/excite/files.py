@@ -24,10 +24,10 @@ from typing import Any
 
 import numpy as np
 
+from fsmbench.atomic import atomic_write_text
 from fsmbench.excite.design import CHANNELS, ExcitationDesign
 from fsmbench.excite.limits import LimitReport
 from fsmbench.excite.mains import mains_hits, mains_warning
-from fsmbench.io.atomic import atomic_write_text
 from fsmbench.io.errors import RecordingError
 from fsmbench.io.matfile import load_mat
 from fsmbench.io.matwrite import save_mat

@@ -132,7 +132,7 @@ def write_identification_folder(out_dir: str | Path, *, document: Mapping[str, A
     list of Path
         The files written, in that order.
     """
-    from fsmbench.io.atomic import atomic_write_text
+    from fsmbench.atomic import atomic_write_text
     from fsmbench.jsonutil import format_text, stamped
 
     out = Path(out_dir)

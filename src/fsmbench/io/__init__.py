@@ -3,11 +3,11 @@
 A recording is an ``xarray.Dataset`` with one float64 variable per signal on
 the dimension ``"t"`` (see :mod:`fsmbench.io.recording`); the signals and the
 ESRF study's experiments are described in :mod:`fsmbench.io.signals`. Every write
-is atomic (:mod:`fsmbench.io.atomic`); every bad input raises a
+is atomic (:mod:`fsmbench.atomic`); every bad input raises a
 :class:`RecordingError` naming the file and the variable.
 """
 
-from fsmbench.io.atomic import atomic_path, atomic_write_bytes, atomic_write_text
+from fsmbench.atomic import atomic_path, atomic_write_bytes, atomic_write_text
 from fsmbench.io.errors import RecordingError, SaturationWarning
 from fsmbench.io.matfile import FileFormat, detect_format, load_mat
 from fsmbench.io.matwrite import MatVersion, mat5_header, mat73_header, save_mat

@@ -454,7 +454,7 @@ def convert_recording(source: str | os.PathLike[str], dest: str | os.PathLike[st
     RecordingError
         Unreadable input, no usable time base, or ``fs_hz`` contradicting ``t``.
     """
-    from fsmbench.io.recording import ordered_signals
+    from fsmbench.io.dataset import ordered_signals
 
     src, out = Path(source), Path(dest)
     fmt = detect_format(src)

@@ -3,7 +3,7 @@ default) and v7.3 (HDF5 with MATLAB's userblock and attributes).
 
 The reading side and the value conventions are in :mod:`fsmbench.io.matfile`;
 :func:`save_mat` accepts what :func:`~fsmbench.io.matfile.load_mat` returns.
-Every file is written atomically (:mod:`fsmbench.io.atomic`).
+Every file is written atomically (:mod:`fsmbench.atomic`).
 """
 
 from __future__ import annotations
@@ -24,7 +24,7 @@ import numpy as np
 import scipy.io
 import scipy.sparse
 
-from fsmbench.io.atomic import atomic_path
+from fsmbench.atomic import atomic_path
 
 __all__ = ["FIXED_CREATED_S", "MatVersion", "mat5_header", "mat73_header", "save_mat",
            "wall_clock_headers", "wall_clock_wanted"]

@@ -32,7 +32,7 @@ import h5py
 import numpy as np
 import xarray as xr
 
-from fsmbench.io.atomic import atomic_path
+from fsmbench.atomic import atomic_path
 from fsmbench.io.dataset import as_vector, check_lengths, validate_dataset
 from fsmbench.io.errors import RecordingError
 from fsmbench.io.nexus_meta import (

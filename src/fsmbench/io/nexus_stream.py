@@ -22,7 +22,8 @@ from typing import TYPE_CHECKING, Any
 import h5py
 import numpy as np
 
-from fsmbench.io.atomic import atomic_path
+from fsmbench.atomic import atomic_path
+from fsmbench.io.dataset import signal_attrs
 from fsmbench.io.nexus_meta import (
     END_TIME,
     START_TIME,
@@ -32,7 +33,6 @@ from fsmbench.io.nexus_meta import (
     write_root,
     write_times,
 )
-from fsmbench.io.recording import _signal_attrs
 from fsmbench.io.signals import TIME
 
 if TYPE_CHECKING:
@@ -143,7 +143,7 @@ class NexusAppender:
         for name in (TIME, *self.signals):
             dset = data.create_dataset(name, shape=(0,), maxshape=(None,), dtype=np.float64,
                                        track_times=False, **opts)
-            attrs = {"units": "s", "long_name": "Time"} if name == TIME else _signal_attrs(name)
+            attrs = {"units": "s", "long_name": "Time"} if name == TIME else signal_attrs(name)
             for key, value in attrs.items():
                 dset.attrs[key] = value
         self._data = data

@@ -353,7 +353,7 @@ def _sha256(path: Path) -> str:
 
 def _write_manifest(staging: Path, *, command: str, arguments: Sequence[str],
                     not_reproducible: Sequence[str], timestamp: bool) -> None:
-    from fsmbench.io.atomic import atomic_write_text
+    from fsmbench.atomic import atomic_write_text
     from fsmbench.version import __version__
 
     files = [{"path": p.relative_to(staging).as_posix(), "sha256": _sha256(p),

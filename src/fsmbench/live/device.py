@@ -196,7 +196,7 @@ class FsmBench(Device):
         try:
             bench = load_bench(self.ParamsFile) if self.ParamsFile else default_bench()
             if self.BenchFolder:
-                from fsmbench.sim.identified import identified_bench
+                from fsmbench.twin.identified import identified_bench
 
                 bench = identified_bench(self.BenchFolder, bench=bench,
                                          option="the BenchFolder property")

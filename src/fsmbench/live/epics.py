@@ -487,7 +487,7 @@ def serve_epics(options: ServeOptions, *, ready: str = "") -> int:
     from fsmbench.live.core import FileMemory, LiveBench
     bench = load_bench(options.params_file) if options.params_file else default_bench()
     if options.bench_folder is not None:
-        from fsmbench.sim.identified import identified_bench
+        from fsmbench.twin.identified import identified_bench
 
         bench = identified_bench(options.bench_folder, bench=bench)
     out = options.output_folder.resolve()

@@ -195,8 +195,8 @@ def design_excitations(*, model: Any = None, controller: str | Path | None = Non
         (:func:`fsmbench.excite.shaped.beam_bounded_measurement`).
     """
     from fsmbench.bench.params import default_bench
+    from fsmbench.control.loaded import running_controller
     from fsmbench.excite.shaped import beam_bounded_measurement
-    from fsmbench.sim.loaded import running_controller
     from fsmbench.twin.closed_loop import CLOSED_LOOP_EXPERIMENTS
 
     bench_model = model if model is not None else default_bench()
@@ -456,11 +456,11 @@ def closed_loop_identification(bench: FsmBenchDevice, folder: str | Path, *,
     -------
     ClosedLoopIdentificationRun
     """
+    from fsmbench.atomic import atomic_write_text
     from fsmbench.bench.params import default_bench
+    from fsmbench.control.loaded import running_controller
     from fsmbench.ident.closed_loop import write_closed_loop_identification
-    from fsmbench.io.atomic import atomic_write_text
     from fsmbench.jsonutil import format_text, stamped
-    from fsmbench.sim.loaded import running_controller
     from fsmbench.tune.measure import MeasurementOptions, StageRequest, measurement_steps
 
     out = Path(folder)

@@ -149,7 +149,7 @@ def _check_inputs(options: ServeOptions) -> None:
             raise ValueError("--bench DIR is the bench the twin simulates; it does not go with "
                              "--backend playback")
         from fsmbench.bench.params import load_bench
-        from fsmbench.sim.identified import identified_bench
+        from fsmbench.twin.identified import identified_bench
 
         # Bad folders are one line here, before the server starts.
         identified_bench(options.bench_folder, bench=load_bench(options.params_file))

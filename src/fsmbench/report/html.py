@@ -19,7 +19,7 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
-from fsmbench.io.atomic import atomic_write_text
+from fsmbench.atomic import atomic_write_text
 from fsmbench.report.errata import cited_errata, errata_appendix, link_citations
 from fsmbench.report.figures.interactive import ZOOM_JS, figure_json, plotly_js
 from fsmbench.report.figures.spec import Figure

@@ -6,9 +6,9 @@ Import the functions from their modules:
 
 - :mod:`fsmbench.signal.welch_dask`: Welch PSD/CPSD/H1/coherence on Dask arrays,
   MATLAB semantics, equal to :mod:`fsmbench.signal.welch`;
-- :mod:`fsmbench.scale.allan`: overlapping Allan deviation of long records and
+- :mod:`fsmbench.signal.allan`: overlapping Allan deviation of long records and
   its noise-type slope regions;
-- :mod:`fsmbench.scale.envelope`: min/max/mean envelope of long records for plots.
+- :mod:`fsmbench.signal.envelope`: min/max/mean envelope of long records for plots.
 """
 
 __all__ = ["allan", "envelope", "welch"]

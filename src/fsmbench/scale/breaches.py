@@ -3,7 +3,7 @@
 A quantile says how often a requirement holds, not on which plants it fails:
 this module lists, per requirement, every draw that breaks it, with its index,
 its noise seed and its drawn factors (so that the plant can be rebuilt,
-:func:`fsmbench.scale.draws.perturbed_bench`) and the value against the limit.
+:func:`fsmbench.twin.draws.perturbed_bench`) and the value against the limit.
 
 The requirements are the design's own (:class:`fsmbench.control.design.DesignOptions`):
 a stable closed loop, and on both axes a gain margin ≥ 6 dB, a phase margin ≥ 30°
@@ -134,7 +134,7 @@ class Breach:
     index, noise_seed : int
         The draw (its row in ``draws[]``) and the twin's noise seed it ran with.
     factors : mapping
-        The drawn factors and offsets (:data:`fsmbench.scale.draws.PARAMETERS` keys).
+        The drawn factors and offsets (:data:`fsmbench.twin.draws.PARAMETERS` keys).
     values : mapping
         The requirement's metric per axis (``h``, ``v``), or ``loop`` for a
         whole-loop one, in the requirement's unit (NaN: not computed or unstable).

@@ -69,7 +69,8 @@ from fsmbench.bench.blocks import physical_plant
 from fsmbench.bench.params import Bench, PerAxis
 from fsmbench.jsonutil import nested, plain_json, stamped
 from fsmbench.scale.breaches import Limits, RequirementOutcome, requirement_outcomes
-from fsmbench.scale.draws import (
+from fsmbench.sim.engine import DiscreteController
+from fsmbench.twin.draws import (
     PARAMETERS,
     RANGE_OF_PARAMETER,
     Draw,
@@ -78,7 +79,6 @@ from fsmbench.scale.draws import (
     parameter_values,
     perturbed_bench,
 )
-from fsmbench.sim.engine import DiscreteController
 from fsmbench.twin.experiments import REP_FREQ_HZ
 
 __all__ = [

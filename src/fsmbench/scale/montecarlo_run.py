@@ -104,9 +104,9 @@ def designed_controller(bench: Bench, *, plant: Any = None,
     import numpy as np
 
     from fsmbench.bench.blocks import physical_plant
+    from fsmbench.bench.esrf import tustin
     from fsmbench.control.analysis import control_objective
     from fsmbench.control.design import design_controller
-    from fsmbench.control.esrf import tustin
     from fsmbench.scale.montecarlo import ControllerChoice
 
     model = physical_plant(bench.nominal, source=plant_source) if plant is None else plant

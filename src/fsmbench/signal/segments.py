@@ -1,7 +1,7 @@
 """Welch's segment sums on chunks of a record, without Dask.
 
 Shared by the Dask graphs of :mod:`fsmbench.signal.welch_dask` (each task sums the
-segments it owns) and the block-fed estimators of :mod:`fsmbench.scale.streaming`
+segments it owns) and the block-fed estimators of :mod:`fsmbench.signal.streaming`
 (which records in memory use too, so this module must import without the
 ``dask`` extra).
 """

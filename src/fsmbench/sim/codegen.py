@@ -33,7 +33,7 @@ from typing import Any
 
 import numpy as np
 
-from fsmbench.io.atomic import atomic_write_text
+from fsmbench.atomic import atomic_write_text
 from fsmbench.sim import kernel
 from fsmbench.sim.discretize import DiscretePlant
 

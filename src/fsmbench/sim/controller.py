@@ -7,8 +7,8 @@ from collections.abc import Sequence
 import control as ct
 import numpy as np
 
+from fsmbench.bench.esrf import tustin
 from fsmbench.bench.params import PerAxis
-from fsmbench.control.esrf import tustin
 from fsmbench.sim.discretize import DiscretePlant
 from fsmbench.sim.engine import DiscreteController
 from fsmbench.sim.plant import ADC_CHANNELS, DAC_CHANNELS

@@ -97,7 +97,7 @@ def bench_discrete(bench: Bench) -> DiscretePlant:
     """The plant the engine steps for ``bench``: packaged (physics) or identified.
 
     A packaged bench is :func:`twin_discrete` of its ``true`` parameters; an
-    identified bench (:func:`fsmbench.sim.identified.identified_bench`) is its
+    identified bench (:func:`fsmbench.twin.identified.identified_bench`) is its
     identified plant, wired by :func:`fsmbench.bench.identified.engine_model`,
     with the same exact hold and fractional delays.
     """

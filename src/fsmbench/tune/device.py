@@ -59,9 +59,9 @@ from typing import Any
 import numpy as np
 
 from fsmbench.bench.params import Bench
+from fsmbench.control.loaded import RunningController
 from fsmbench.io.recording import make_recording, read_recording
 from fsmbench.sim.excitation import SampledExcitation, samples_sha256
-from fsmbench.sim.loaded import RunningController
 from fsmbench.tune.device_errors import device_failure
 from fsmbench.tune.proxy import device_proxy, release_proxy
 from fsmbench.tune.reads import INVALID_WAIT_S, read_valid

@@ -42,7 +42,7 @@ from scipy import signal
 
 from fsmbench.bench.blocks import PlantModel
 from fsmbench.bench.params import Bench
-from fsmbench.sim.loaded import RunningController
+from fsmbench.control.loaded import RunningController
 from fsmbench.sim.stream import BenchStream
 from fsmbench.tune.measure import ClosedLoopMeasurement, measure_closed_loop
 from fsmbench.tune.targets import TwinTarget

@@ -42,6 +42,7 @@ from pathlib import Path
 from typing import Any
 
 from fsmbench.bench.params import Bench
+from fsmbench.control.loaded import RunningController
 from fsmbench.excite.closed_loop import robust_loops
 from fsmbench.excite.shaped import BoundedMeasurement, beam_bounded_measurement
 from fsmbench.ident.closed_loop import (
@@ -51,7 +52,6 @@ from fsmbench.ident.closed_loop import (
     write_closed_loop_identification,
 )
 from fsmbench.ident.frf.closed_loop import ClosedLoopFrf
-from fsmbench.sim.loaded import RunningController
 from fsmbench.twin.closed_loop import ClosedLoopPlay, play_closed_loop
 from fsmbench.twin.simulate import TwinRun
 
@@ -195,7 +195,7 @@ def identified_model(ident: ClosedLoopIdentification, *, bench: Bench,
         The Sercalo was not identified (the reason named).
     """
     from fsmbench.ident.load import load_identified_plant, read_identification_json
-    from fsmbench.sim.identified import bench_from_identification
+    from fsmbench.twin.identified import bench_from_identification
 
     if ident.plant is None:
         raise ValueError(f"the Sercalo was not identified in closed loop: "
@@ -220,7 +220,7 @@ def located_bench(model: Bench, ident: ClosedLoopIdentification) -> Bench:
         ``ident`` found no resonance on an axis (named).
     """
     from fsmbench.bench.axes import PerAxis
-    from fsmbench.scale.draws import PARAMETERS, perturbed_bench
+    from fsmbench.twin.draws import PARAMETERS, perturbed_bench
 
     if (why := not_located(ident)):
         raise ValueError(f"stage 1 found {why}")

@@ -6,9 +6,10 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
+from fsmbench.atomic import atomic_write_text
 from fsmbench.bench.blocks import physical_plant
+from fsmbench.bench.esrf import esrf_decentralised_controller
 from fsmbench.bench.params import Bench
-from fsmbench.control.esrf import esrf_decentralised_controller
 from fsmbench.control.load import load_controllers, select_controller
 from fsmbench.control.preimage import (
     AT_NYQUIST,
@@ -17,7 +18,6 @@ from fsmbench.control.preimage import (
     tustin_preimage,
 )
 from fsmbench.control.study import design_study
-from fsmbench.io.atomic import atomic_write_text
 from fsmbench.jsonutil import format_text
 from fsmbench.tune.values import Loop, loop_of
 

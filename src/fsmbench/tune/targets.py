@@ -16,8 +16,8 @@ from typing import Any
 import numpy as np
 
 from fsmbench.bench.params import Bench
+from fsmbench.control.loaded import RunningController
 from fsmbench.sim.excitation import Excitation
-from fsmbench.sim.loaded import RunningController
 from fsmbench.sim.plant import ADC_CHANNELS, bench_discrete
 from fsmbench.sim.stream import BenchStream
 from fsmbench.tune.values import Loop

@@ -16,10 +16,10 @@ import control as ct
 import numpy as np
 
 from fsmbench.bench.axes import PerAxis
+from fsmbench.control.loaded import RunningController
 from fsmbench.jsonutil import plain_json
 from fsmbench.sim.controller import feedback_controller
 from fsmbench.sim.engine import DiscreteController
-from fsmbench.sim.loaded import RunningController
 from fsmbench.tune.measure import ClosedLoopMeasurement, MeasurementOptions
 from fsmbench.twin.closed_loop import ClosedLoopPlay
 from fsmbench.twin.experiments import REP_AMPLITUDE_V

@@ -38,9 +38,9 @@ import numpy as np
 import xarray as xr
 
 from fsmbench.bench.params import Bench
+from fsmbench.control.loaded import RunningController
 from fsmbench.io.recording import make_recording
 from fsmbench.sim.excitation import SampledExcitation, samples_sha256
-from fsmbench.sim.loaded import RunningController
 from fsmbench.sim.plant import bench_discrete
 from fsmbench.sim.stream import BenchStream
 from fsmbench.twin.experiments import ExperimentSpec
@@ -109,7 +109,7 @@ def drifted_bench(bench: Bench, *, resonance_pct: float) -> Bench:
 
     Its static gain is kept (a stiffness and mass change at constant ratio); an
     identified bench moves its identified modes
-    (:func:`fsmbench.scale.draws.perturbed_bench`).
+    (:func:`fsmbench.twin.draws.perturbed_bench`).
 
     Raises
     ------
@@ -120,7 +120,7 @@ def drifted_bench(bench: Bench, *, resonance_pct: float) -> Bench:
         raise ValueError(f"a resonance drift must be above -100 %, got {resonance_pct:g} %")
     if resonance_pct == 0.0:
         return bench
-    from fsmbench.scale.draws import PARAMETERS, perturbed_bench
+    from fsmbench.twin.draws import PARAMETERS, perturbed_bench
 
     factors = {k: (0.0 if k.endswith("_s") else 1.0) for k in PARAMETERS}
     factors.update({f"resonance_scale.{a}": 1.0 + resonance_pct / 100.0 for a in "hv"})
@@ -249,7 +249,7 @@ def simulate_closed_loop(*, bench: Bench, controller: RunningController,
     ----------
     bench : Bench
     controller : RunningController
-        Closes the loop (:func:`fsmbench.sim.loaded.running_controller`).
+        Closes the loop (:func:`fsmbench.control.loaded.running_controller`).
     sources : sequence of str, optional
         ``fsmbench excite`` outputs (folder, ``.json`` or ``.mat``), one per command
         (``Uch``, ``Ucv``); a repeated design repeats its steady-state periods to the

@@ -28,8 +28,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from fsmbench.bench.esrf import esrf_decentralised_controller
 from fsmbench.bench.params import Bench
-from fsmbench.control.esrf import esrf_decentralised_controller
 from fsmbench.io.signals import MIN_DURATION_S as SIGNAL_MIN_DURATION_S
 from fsmbench.sim.controller import feedback_controller
 from fsmbench.sim.discretize import DiscretePlant

@@ -28,8 +28,8 @@ from typing import Any
 import numpy as np
 import xarray as xr
 
+from fsmbench.atomic import atomic_write_text
 from fsmbench.bench.params import Bench, default_bench
-from fsmbench.io.atomic import atomic_write_text
 from fsmbench.io.recording import RecordingFormat, make_recording, write_recording
 from fsmbench.io.signals import EXPERIMENTS
 from fsmbench.jsonutil import format_text, stamped

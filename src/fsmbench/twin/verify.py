@@ -4,7 +4,7 @@ noise model.
 
 The bench simulated is the one :func:`verify_on_twin` is given: the packaged
 twin (the truth of twin data) or a bench identified from the user's recordings
-(:func:`fsmbench.sim.identified.identified_bench`); its label travels with the result.
+(:func:`fsmbench.twin.identified.identified_bench`); its label travels with the result.
 
 Simulated ("measured" on the simulated records)
     The bench runs ``data_rep_h`` and ``data_rep_v`` (1 V, 1 Hz Newport sine
@@ -33,9 +33,9 @@ import control as ct
 import numpy as np
 
 from fsmbench.bench.blocks import PlantModel
+from fsmbench.bench.esrf import tustin
 from fsmbench.bench.params import Bench, PerAxis
 from fsmbench.budget.propagation import loop_response
-from fsmbench.control.esrf import tustin
 from fsmbench.control.validation import tracking_error_spectra
 from fsmbench.sim.controller import feedback_controller
 from fsmbench.twin.experiments import REP_AMPLITUDE_V, REP_FREQ_HZ

@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 from fsmbench.bench.params import Bench
+from fsmbench.control.loaded import running_controller
 from fsmbench.excite.limits import input_response
 from fsmbench.ident.frf.closed_loop import (
     ClosedLoopRecord,
@@ -20,7 +21,6 @@ from fsmbench.ident.frf.closed_loop import (
 )
 from fsmbench.sim.closed_loop import closed_loop_plant
 from fsmbench.sim.engine import Quantiser, run_loop
-from fsmbench.sim.loaded import running_controller
 from fsmbench.sim.plant import ADC_CHANNELS, DAC_CHANNELS, bench_discrete
 
 _PERIOD = 1000  # samples: 10 Hz lines at 10 kHz

@@ -165,9 +165,9 @@ def register(sub: Any) -> None:
 def _closed_loop(args: argparse.Namespace, *, bench: Any, params: Any, plant: Any,
                  model: str) -> tuple[Any, Any]:
     """``--closed-loop``: the design (given or beam-bounded) and its closed-loop limits."""
+    from fsmbench.control.loaded import running_controller
     from fsmbench.excite.closed_loop import check_closed_loop_limits
     from fsmbench.excite.shaped import beam_bounded_measurement
-    from fsmbench.sim.loaded import running_controller
     from fsmbench.sim.plant import bench_discrete
 
     if args.input not in ("Uch", "Ucv"):
@@ -319,8 +319,8 @@ def run(args: argparse.Namespace) -> int:
                              "fsmbench identify or study (a bench TOML goes to --params)")
         from fsmbench.excite.identified import with_identified_quad_diode
         from fsmbench.ident.load import read_identification_json
-        from fsmbench.sim.identified import identified_bench
         from fsmbench.sim.plant import bench_discrete
+        from fsmbench.twin.identified import identified_bench
 
         _path, ident = read_identification_json(args.bench_dir, option=option)
         if "sercalo" in ident:
@@ -358,7 +358,7 @@ def run(args: argparse.Namespace) -> int:
             # The closed loop's peaks and beam error beside the converter limits.
             import json
 
-            from fsmbench.io.atomic import atomic_write_text
+            from fsmbench.atomic import atomic_write_text
 
             js = json.loads(paths[1].read_text())
             js["closed_loop"] = closed.to_json()

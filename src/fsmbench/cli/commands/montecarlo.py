@@ -139,7 +139,7 @@ def _drawn_bench(args: argparse.Namespace, bench: Any, say: Any) -> Any:
     if args.twin:
         return bench
     if args.bench_dir is not None:
-        from fsmbench.sim.identified import identified_bench
+        from fsmbench.twin.identified import identified_bench
 
         return identified_bench(args.bench_dir, bench=bench)
     from fsmbench.io.folder import load_recordings

@@ -180,7 +180,7 @@ def _simulate_in_memory(args: argparse.Namespace, bench: Bench, staging: Path,
 def _closed_loop_simulation(args: argparse.Namespace, bench: Bench, out_dir: Path,
                             say: Callable[[str], None]) -> list[Path]:
     """``--closed-loop``: the records data_cl_uch, data_cl_ucv, written to ``out_dir``."""
-    from fsmbench.sim.loaded import running_controller
+    from fsmbench.control.loaded import running_controller
     from fsmbench.twin.closed_loop import simulate_closed_loop
     from fsmbench.twin.simulate import write_twin
 

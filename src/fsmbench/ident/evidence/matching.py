@@ -13,9 +13,9 @@ from collections.abc import Iterable
 from pathlib import Path
 from typing import Final
 
+from fsmbench.atomic import atomic_write_text
 from fsmbench.bench.params import Bench
 from fsmbench.checks import Finding
-from fsmbench.io.atomic import atomic_write_text
 
 __all__ = ["MATCHING_BENCH", "matching_toml", "write_matching_bench"]
 

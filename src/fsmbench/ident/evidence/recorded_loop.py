@@ -36,7 +36,7 @@ import numpy as np
 import scipy.signal
 import xarray as xr
 
-from fsmbench.control.esrf import esrf_decentralised_zpk
+from fsmbench.bench.esrf import esrf_decentralised_zpk
 
 __all__ = [
     "CLOSED_LOOP_EXPLAINED",

@@ -1,6 +1,6 @@
 """The twin's saturating step without and with anti-windup, as a figure.
 
-Draws :class:`fsmbench.sim.antiwindup.SaturatingStep`; nothing here computes.
+Draws :class:`fsmbench.control.antiwindup_loop.SaturatingStep`; nothing here computes.
 One column per axis; top: the beam angle over the step's height, bottom: the
 command the DAC applied, with its rails.
 """
@@ -9,8 +9,8 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 
+from fsmbench.control.antiwindup_loop import SaturatingStep
 from fsmbench.report.figures.spec import Dash, Figure, Line, Panel, Rule
-from fsmbench.sim.antiwindup import SaturatingStep
 
 __all__ = ["saturating_step_figure"]
 

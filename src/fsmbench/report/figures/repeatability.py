@@ -33,7 +33,7 @@ from fsmbench.report.figures.spec import (
     Rule,
 )
 from fsmbench.report.figures.stability import time_axis
-from fsmbench.scale.envelope import Envelope
+from fsmbench.signal.envelope import Envelope
 
 __all__ = [
     "direction_words",

@@ -32,7 +32,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from fsmbench.io.atomic import atomic_path
+from fsmbench.atomic import atomic_path
 from fsmbench.report.figures.spec import (
     PALETTE,
     Bars,
@@ -574,7 +574,7 @@ def export_figures(figures: Iterable[Figure], out_dir: Path, *,
 
     Notes
     -----
-    Each file is written atomically (:func:`fsmbench.io.atomic.atomic_path`):
+    Each file is written atomically (:func:`fsmbench.atomic.atomic_path`):
     it is either complete or absent, never half-written. PDFs carry no
     creation date, so the same data give the same file. Worker processes
     receive the figures with long records already reduced to the envelope

@@ -1,7 +1,7 @@
 """Report: the twin's saturating step without and with anti-windup (chapter 9).
 
 Every number and curve comes from the design stage's
-:class:`~fsmbench.sim.antiwindup.SaturatingStep` results; nothing is computed here.
+:class:`~fsmbench.control.antiwindup_loop.SaturatingStep` results; nothing is computed here.
 """
 
 from __future__ import annotations

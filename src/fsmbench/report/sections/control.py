@@ -10,7 +10,7 @@ the run; where they differ from the ESRF study, a note names the errata entry
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 
@@ -36,9 +36,7 @@ from fsmbench.report.figures.control import (
 from fsmbench.report.html import Block, Note, Section, Table
 from fsmbench.report.sections.antiwindup import antiwindup_blocks
 from fsmbench.report.sections.responses import response_blocks
-
-if TYPE_CHECKING:
-    from fsmbench.stages import DesignStage
+from fsmbench.twin.verify import TrackingCheck
 
 __all__ = ["control_sections"]
 
@@ -450,7 +448,8 @@ def _discrete_table(res: DesignResult) -> Table:
         rows=tuple(rows))
 
 
-def _section9(res: DesignResult, check: Any, *, skipped: str = "") -> Section:
+def _section9(res: DesignResult, check: TrackingCheck | None, *,
+              skipped: str = "") -> Section:
     seed, fsm = res.seed, res.fsmbench
     seed_rob = res.seed_robustness
     shapes = res.design.shapes
@@ -630,14 +629,18 @@ def _section10(res: DesignResult) -> Section:
     ))
 
 
-def control_sections(stage: DesignStage, *, plant_source: str) -> list[Section]:
+def control_sections(res: DesignResult, *, twin_check: TrackingCheck | None,
+                     skipped: str = "", plant_source: str) -> list[Section]:
     """The six control chapters: "5. Plant uncertainty" … "10. Newport control".
 
     Parameters
     ----------
-    stage : DesignStage
-        ``stage.result`` is a :class:`~fsmbench.control.study.DesignResult`,
-        ``stage.twin_check`` a :class:`~fsmbench.twin.verify.TrackingCheck`.
+    res : DesignResult
+        The design study (``DesignStage.result``).
+    twin_check : TrackingCheck or None
+        fsmbench's controller run on the simulated bench; None when there was none
+        (``skipped`` says why).
+    skipped : str
     plant_source : str
         Where the plant comes from, in words (identified, nominal …).
 
@@ -646,11 +649,10 @@ def control_sections(stage: DesignStage, *, plant_source: str) -> list[Section]:
     list of Section
         In the ESRF study's order, each a sequence of text, tables and figures.
     """
-    res: DesignResult = stage.result
     sec5 = _section5(res)
     intro = (f"Plant of the control chapters: {plant_source}. Every loop below is closed "
              f"around it with its input delays exact.")
     sec5 = Section(title=sec5.title, anchor=sec5.anchor, blocks=(intro, *sec5.blocks))
     return [sec5, _section6(res), _section7(res), _section8(res),
-            _section9(res, stage.twin_check, skipped=getattr(stage, "skipped", "")),
+            _section9(res, twin_check, skipped=skipped),
             _section10(res)]

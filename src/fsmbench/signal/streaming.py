@@ -1,7 +1,7 @@
 """Estimators fed block after block: many analyses in one sequential read of a record.
 
-The Dask graphs of :mod:`fsmbench.signal.welch_dask`, :mod:`~fsmbench.scale.allan`
-and :mod:`~fsmbench.scale.envelope` spread one estimate over workers. On one
+The Dask graphs of :mod:`fsmbench.signal.welch_dask`, :mod:`~fsmbench.signal.allan`
+and :mod:`~fsmbench.signal.envelope` spread one estimate over workers. On one
 machine a day-long record is limited by the disk, not the processor (a day of
 huddle test 5 is 41 GB; reading it once takes 6–10 min here), and every
 estimate that reads the record again costs another full read, while a Dask
@@ -25,8 +25,8 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.signal import lfilter
 
-from fsmbench.scale.allan import AllanResult
-from fsmbench.scale.envelope import Envelope, _envelope
+from fsmbench.signal.allan import AllanResult
+from fsmbench.signal.envelope import Envelope, _envelope
 from fsmbench.signal.segments import segment_sums
 from fsmbench.signal.welch import SpectrumResult, WelchOptions, _result
 
@@ -266,7 +266,7 @@ class LowpassStream:
 
 
 class AllanStream:
-    """Overlapping Allan deviation (:mod:`fsmbench.scale.allan`'s formula) of a record read in
+    """Overlapping Allan deviation (:mod:`fsmbench.signal.allan`'s formula) of a record read in
     blocks, at the averaging factors ``factors``.
 
     Each block is appended to the samples still needed (about the last

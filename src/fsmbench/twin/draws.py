@@ -156,10 +156,10 @@ def perturbed_bench(bench: Bench, factors: Mapping[str, float]) -> Bench:
     ``R_buffer`` (the coil's resistance also sets the coil voltage); the DAC
     delay may become fractional (the twin's discretisation and the plant's
     delays take it as a float). An identified bench (``bench.model``) is moved
-    in its identified plant instead (:func:`fsmbench.sim.identified.perturbed_identified`).
+    in its identified plant instead (:func:`fsmbench.twin.identified.perturbed_identified`).
     """
     if bench.model is not None:
-        from fsmbench.sim.identified import perturbed_identified
+        from fsmbench.twin.identified import perturbed_identified
 
         return perturbed_identified(bench, factors)
     p = bench.true

@@ -8,6 +8,7 @@ import pytest
 from scipy import signal
 
 from fsmbench.bench.blocks import physical_plant
+from fsmbench.bench.esrf import esrf_decentralised_controller
 from fsmbench.bench.params import Bench
 from fsmbench.control.analysis import control_objective
 from fsmbench.control.antiwindup import (
@@ -16,15 +17,14 @@ from fsmbench.control.antiwindup import (
     df2t_cascade,
     is_integrator_section,
 )
-from fsmbench.control.design import design_controller
-from fsmbench.control.esrf import esrf_decentralised_controller
-from fsmbench.control.export import discretise_channel
-from fsmbench.sim.antiwindup import (
+from fsmbench.control.antiwindup_loop import (
     antiwindup_feedback,
     recovery_time_s,
     run_loop_antiwindup,
     saturating_step,
 )
+from fsmbench.control.design import design_controller
+from fsmbench.control.export import discretise_channel
 from fsmbench.sim.engine import Quantiser, run_loop
 from fsmbench.sim.plant import ADC_CHANNELS, DAC_CHANNELS, bench_discrete
 

@@ -12,7 +12,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy import stats
 
-from fsmbench.scale.allan import SLOPE_TOLERANCE, allan_deviation, allan_regions
+from fsmbench.signal.allan import SLOPE_TOLERANCE, allan_deviation, allan_regions
 
 # Sums of the same terms in another grouping: ~n*eps relative with n <= 1e4 terms.
 RTOL = 1e-12
@@ -158,7 +158,7 @@ def test_bad_input_verdicts() -> None:
 
 def test_a_held_quantity_has_slope_minus_one() -> None:
     """Differences of white noise (what a loop leaves of a held quantity): sqrt(3) sigma / m."""
-    from fsmbench.scale.allan import allan_regions
+    from fsmbench.signal.allan import allan_regions
 
     rng = np.random.default_rng(11)
     w = rng.standard_normal(400_001)

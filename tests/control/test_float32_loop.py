@@ -4,11 +4,11 @@ from __future__ import annotations
 
 import numpy as np
 
+from fsmbench.bench.esrf import esrf_decentralised_controller
 from fsmbench.bench.params import Bench
-from fsmbench.control.esrf import esrf_decentralised_controller
 from fsmbench.control.export import discretise
+from fsmbench.control.float32_loop import float32_closed_loop
 from fsmbench.sim.controller import closed_loop_spectral_radius, sercalo_feedback
-from fsmbench.sim.float32_loop import float32_closed_loop
 from fsmbench.sim.plant import ADC_CHANNELS, bench_discrete
 
 

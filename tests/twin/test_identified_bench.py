@@ -23,10 +23,10 @@ from fsmbench.cli import main
 from fsmbench.ident.pipeline import identify, write_identification
 from fsmbench.io.errors import RecordingError
 from fsmbench.sim.discretize import zoh_with_delays
-from fsmbench.sim.identified import identified_bench, perturbed_identified
 from fsmbench.sim.plant import ADC_CHANNELS, DAC_CHANNELS, bench_discrete
 from fsmbench.twin import simulate_bench
 from fsmbench.twin.compare import TARGETS
+from fsmbench.twin.identified import identified_bench, perturbed_identified
 
 STIFF = Path(__file__).resolve().parents[1] / "data" / "benches" / "stiff_bench.toml"
 IDENT = ("data_cal_pd_h", "data_cal_pd_v", "data_uch", "data_ucv", "data_unh", "data_unv")
@@ -140,7 +140,7 @@ def test_a_folder_without_a_sercalo_is_refused_in_one_line(tmp_path: Path) -> No
 
 def test_a_perturbation_moves_the_identified_modes_and_keeps_their_gain(
         identified: Bench) -> None:
-    from fsmbench.scale.draws import PARAMETERS
+    from fsmbench.twin.draws import PARAMETERS
 
     factors = dict.fromkeys(PARAMETERS, 1.0) | {"dac_delay_offset_s": 0.0,
                                                  "newport_delay_offset_s": 0.0,

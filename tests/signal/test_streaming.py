@@ -9,8 +9,8 @@ from hypothesis import strategies as st
 
 from fsmbench.budget.signals import block_means
 from fsmbench.filters import first_order_lowpass
-from fsmbench.scale.envelope import minmax_envelope
-from fsmbench.scale.streaming import (
+from fsmbench.signal.envelope import minmax_envelope
+from fsmbench.signal.streaming import (
     BlockMeanStream,
     EnvelopeStream,
     LowpassStream,

@@ -6,7 +6,7 @@ import control as ct
 import numpy as np
 import pytest
 
-from fsmbench.control.realize import pair_roots, sections_from_zpk, zpk_cascade
+from fsmbench.bench.sections import pair_roots, sections_from_zpk, zpk_cascade
 
 
 def _zpk_eval(zeros, poles, gain, s):

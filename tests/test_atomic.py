@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pytest
 
-from fsmbench.io.atomic import atomic_path, atomic_write_bytes, atomic_write_text
+from fsmbench.atomic import atomic_path, atomic_write_bytes, atomic_write_text
 
 
 def test_interrupted_write_leaves_the_old_file_and_no_temporary(tmp_path: Path) -> None:

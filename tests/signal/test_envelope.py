@@ -10,7 +10,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from fsmbench.scale.envelope import minmax_envelope
+from fsmbench.signal.envelope import minmax_envelope
 
 
 def _naive(x: np.ndarray, n_bins: int) -> tuple[np.ndarray, ...]:

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from fsmbench.bench.blocks import PlantModel, ss_frequency_response
-from fsmbench.control.esrf import (
+from fsmbench.bench.esrf import (
     esrf_decentralised_controller,
     iff_controller,
     newport_controller,

@@ -19,7 +19,7 @@ from dataclasses import dataclass
 import control as ct
 import numpy as np
 
-from fsmbench.control.realize import zpk_cascade
+from fsmbench.bench.sections import zpk_cascade
 
 __all__ = [
     "ESRF_TS_S",

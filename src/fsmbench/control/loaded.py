@@ -93,7 +93,7 @@ def running_controller(spec: str | Path | None, *, bench: Bench,
         file is missing or not a controllers file, has no such controller, its
         sample time is not the bench's.
     """
-    from fsmbench.control.esrf import esrf_decentralised_controller, tustin
+    from fsmbench.bench.esrf import esrf_decentralised_controller, tustin
 
     ts = bench.true.converter.ts_s
     nominal = bench.nominal.quad_diode.gain_v_per_rad
