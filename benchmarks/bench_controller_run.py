@@ -17,7 +17,7 @@ import numpy as np
 from scipy import signal
 
 from fsmbench.bench.esrf import esrf_decentralised_controller, tustin
-from fsmbench.budget.huddle import _run_controller
+from fsmbench.budget.huddle import run_controller
 from timing import timed_runs
 
 
@@ -29,13 +29,13 @@ def main() -> None:
     args = parser.parse_args()
     k = tustin(esrf_decentralised_controller())
     r = 1e-6 * np.random.default_rng(0).standard_normal((2, args.samples))
-    ours_s, _ = timed_runs(lambda: _run_controller(k, r), args.repeats)
+    ours_s, _ = timed_runs(lambda: run_controller(k, r), args.repeats)
     system = (np.asarray(k.A), np.asarray(k.B), np.asarray(k.C), np.asarray(k.D), float(k.dt))
     peer_s, _ = timed_runs(lambda: signal.dlsim(system, r.T), args.repeats)
-    ours = _run_controller(k, r)
+    ours = run_controller(k, r)
     ref = signal.dlsim(system, r.T)[1].T
     print(f"controller with {k.nstates} states, {args.samples} samples, 2 channels")
-    print(f"fsmbench _run_controller: {ours_s * 1e3:8.1f} ms (median of {args.repeats})")
+    print(f"fsmbench run_controller: {ours_s * 1e3:8.1f} ms (median of {args.repeats})")
     print(f"scipy.signal.dlsim:       {peer_s * 1e3:8.1f} ms")
     print(f"ratio scipy / fsmbench:   {peer_s / ours_s:8.2f}x")
     print(f"largest difference / peak: {np.abs(ours - ref).max() / np.abs(ref).max():.1e}")

@@ -21,7 +21,7 @@ import argparse
 import control as ct
 import numpy as np
 
-from fsmbench.bench.blocks import ResponseEvaluator, _solve_response, physical_plant, ss_response
+from fsmbench.bench.blocks import ResponseEvaluator, physical_plant, solve_response, ss_response
 from fsmbench.bench.params import default_bench
 from timing import timed_runs
 
@@ -35,12 +35,12 @@ def main() -> None:
     f = np.arange(1, 50_001) * 0.1
     s = 2j * np.pi * f
     modal = ss_response(sys, s)
-    exact = _solve_response(a, b, c, d, s)
+    exact = solve_response(a, b, c, d, s)
     peak = np.max(np.abs(exact), axis=0, keepdims=True)
     seen = np.abs(exact) > 1e-6 * peak
     rel = float(np.max(np.abs(modal - exact)[seen] / np.abs(exact)[seen]))
     t_modal, _ = timed_runs(lambda: ss_response(sys, s), args.repeats)
-    t_solve, _ = timed_runs(lambda: _solve_response(a, b, c, d, s), args.repeats)
+    t_solve, _ = timed_runs(lambda: solve_response(a, b, c, d, s), args.repeats)
     t_ct, _ = timed_runs(lambda: ct.frequency_response(sys, 2 * np.pi * f), args.repeats)
     print(f"{sys.nstates} states, {sys.ninputs} inputs, {sys.noutputs} outputs, "
           f"{f.size} frequencies; modal vs solve: max relative difference {rel:.1e}")

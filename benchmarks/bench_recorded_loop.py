@@ -17,7 +17,7 @@ import numpy as np
 import scipy.signal
 
 from fsmbench.bench.params import default_bench
-from fsmbench.ident.evidence.recorded_loop import _LAGS, SETTLE_S, _esrf_sos, _fit_record
+from fsmbench.ident.evidence.recorded_loop import _LAGS, SETTLE_S, esrf_sos, fit_record
 from fsmbench.twin.simulate import simulate_bench
 from timing import timed_runs
 
@@ -26,7 +26,7 @@ def _lstsq_coefficient(u: np.ndarray, y: np.ndarray, *, axis: str, fs_hz: float)
     """The peer: a full least squares per lag, the best lag's coefficient on ``K y``."""
     k0 = round(SETTLE_S * fs_hz)
     uc = u[k0:]
-    sos = _esrf_sos(axis, fs_hz)
+    sos = esrf_sos(axis, fs_hz)
     t = np.arange(uc.size) / fs_hz
     t = t / t[-1]
     best = (-np.inf, 0.0)
@@ -49,12 +49,12 @@ def main() -> None:
                                                      "data_huddle_test_5", "data_rep_h"])
     cases = [(name, np.asarray(ds[c].values, float), np.asarray(ds[r].values, float), c[-1])
              for name, ds in run.recordings.items() for c, r in (("Uch", "Vph"), ("Ucv", "Vpv"))]
-    ours = timed_runs(lambda: [_fit_record(n, u, y, axis=a, fs_hz=conv.fs_hz,
+    ours = timed_runs(lambda: [fit_record(n, u, y, axis=a, fs_hz=conv.fs_hz,
                                            step_v=conv.lsb_v) for n, u, y, a in cases],
                       args.repeats)[0]
     peer = timed_runs(lambda: [_lstsq_coefficient(u, y, axis=a, fs_hz=conv.fs_hz)
                                for _n, u, y, a in cases], args.repeats)[0]
-    diff = max(abs(-1.0 / _fit_record(n, u, y, axis=a, fs_hz=conv.fs_hz,
+    diff = max(abs(-1.0 / fit_record(n, u, y, axis=a, fs_hz=conv.fs_hz,
                                       step_v=conv.lsb_v).gd_used_v_per_rad
                    - _lstsq_coefficient(u, y, axis=a, fs_hz=conv.fs_hz))
                / abs(_lstsq_coefficient(u, y, axis=a, fs_hz=conv.fs_hz))

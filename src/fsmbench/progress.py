@@ -17,6 +17,8 @@ import time
 from collections.abc import Callable
 from typing import IO, Any
 
+from tqdm import tqdm
+
 __all__ = ["Progress", "Reporter", "advance"]
 
 Progress = Callable[[str], None]
@@ -50,8 +52,6 @@ class Reporter:
     def __call__(self, msg: str) -> None:
         line = f"[{time.perf_counter() - self._start:6.1f} s] {self._rewrite(msg)}"
         if self._tty and self._bars:
-            from tqdm import tqdm
-
             tqdm.write(line, file=self._stream)
         else:
             print(line, file=self._stream, flush=True)
@@ -74,7 +74,6 @@ class Reporter:
             else:
                 _tenth_line(self, self._tenths, task, done, total, unit)
             return
-        from tqdm import tqdm
 
         bar = self._bars.get(task)
         if bar is None:

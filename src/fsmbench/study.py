@@ -34,7 +34,17 @@ from fsmbench.io.outdir import check_out_dir
 from fsmbench.io.signals import EXPERIMENTS
 from fsmbench.io.truth import read_twin_truth
 from fsmbench.jsonutil import plain_json
+from fsmbench.report.figures.static import export_figures
 from fsmbench.report.html import Section, iter_figures, write_report
+from fsmbench.report.sections.bench import bench_section, parameters_appendix
+from fsmbench.report.sections.budget import budget_section
+from fsmbench.report.sections.control import control_sections
+from fsmbench.report.sections.huddle import huddle_section
+from fsmbench.report.sections.ident import identification_section
+from fsmbench.report.sections.montecarlo import montecarlo_section
+from fsmbench.report.sections.noise import noise_subsection
+from fsmbench.report.sections.repeatability import repeatability_section
+from fsmbench.report.sections.validation import validation_subsection
 from fsmbench.report.summary import (
     PartSkipped,
     Specification,
@@ -59,6 +69,7 @@ from fsmbench.stages import (
     validation_stage,
 )
 from fsmbench.twin.compare import comparison_rows
+from fsmbench.twin.simulate import simulate_bench, write_twin
 from fsmbench.version import __version__
 
 __all__ = ["FIGURE_FORMATS", "StageStatus", "StudyResult", "run_study"]
@@ -189,15 +200,6 @@ def _sections(*, bench: Bench, loaded: RecordingSet, source: str, is_twin: bool,
               validation_skipped: str = "",
               montecarlo: Mapping[str, Any] | None = None) -> list[Section]:
     """Every chapter in the ESRF study's order (1–11), then the parameters appendix."""
-    from fsmbench.report.sections.bench import bench_section, parameters_appendix
-    from fsmbench.report.sections.budget import budget_section
-    from fsmbench.report.sections.control import control_sections
-    from fsmbench.report.sections.huddle import huddle_section
-    from fsmbench.report.sections.ident import identification_section
-    from fsmbench.report.sections.montecarlo import montecarlo_section
-    from fsmbench.report.sections.noise import noise_subsection
-    from fsmbench.report.sections.repeatability import repeatability_section
-    from fsmbench.report.sections.validation import validation_subsection
 
     rec = loaded.recordings
     chapter2 = identification_section(ident, recordings=rec, bench=bench, truth=truth,
@@ -270,8 +272,6 @@ def _recordings_step(run: _StudyRun, *, data: Path | None, bench: Bench, seed: i
     """The twin's records simulated and written (no ``data``), then every record read."""
     is_twin = data is None
     if data is None:
-        from fsmbench.twin.simulate import simulate_bench, write_twin
-
         run.say("simulating the bench with the digital twin")
         simulated = simulate_bench(bench, seed=seed, duration_s=duration_s, progress=run.say)
         data = run.out / "twin-data"
@@ -486,8 +486,6 @@ def _write_outputs(run: _StudyRun, rec: _Recorded, found: _Identified, *, summar
     run.lap("report")
     exported: list[Path] = []
     if figures:
-        from fsmbench.report.figures.static import export_figures
-
         say(f"writing every figure as {', '.join(figures)} to {out / 'figures'}")
         exported = export_figures(iter_figures(sections), out / "figures", formats=figures)
         run.lap("figures")

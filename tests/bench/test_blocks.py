@@ -192,12 +192,12 @@ def _random_plant(seed: int, *, n_modes: int, n_real: int) -> ct.StateSpace:
 @given(seed=st.integers(0, 2**31), n_modes=st.integers(1, 8), n_real=st.integers(0, 4))
 def test_the_modal_sum_equals_the_direct_solve(seed: int, n_modes: int, n_real: int) -> None:
     """Every point of a long grid, not only the points the modal path checks itself on."""
-    from fsmbench.bench.blocks import _solve_response
+    from fsmbench.bench.blocks import solve_response
 
     sys = _random_plant(seed, n_modes=n_modes, n_real=n_real)
     s = 2j * np.pi * np.geomspace(1e-3, 5e3, 2000)
     a, b, c, d = (np.asarray(x, dtype=float) for x in (sys.A, sys.B, sys.C, sys.D))
-    exact = _solve_response(a, b, c, d, s)
+    exact = solve_response(a, b, c, d, s)
     h = ss_response(sys, s)
     # 1e-8: the modal path's own acceptance is 1e-10 at its probes; allow 100x between them,
     # relative to each element's value or 1e-6 of its peak (below that, nothing reads it).
@@ -219,7 +219,7 @@ def test_a_defective_system_falls_back_to_the_solve() -> None:
 def test_an_evaluator_equals_the_direct_solve_point_by_point(seed: int, n_modes: int,
                                                             n_real: int) -> None:
     """Checked on 24 points, used on others: one at a time, as a root finder asks."""
-    from fsmbench.bench.blocks import ResponseEvaluator, _solve_response
+    from fsmbench.bench.blocks import ResponseEvaluator, solve_response
 
     sys = _random_plant(seed, n_modes=n_modes, n_real=n_real)
     ev = ResponseEvaluator(sys, check_points=2j * np.pi * np.geomspace(1e-3, 1e4, 24))
@@ -227,7 +227,7 @@ def test_an_evaluator_equals_the_direct_solve_point_by_point(seed: int, n_modes:
     rng = np.random.default_rng(seed)
     for f in 10 ** rng.uniform(-3, 4, 20):
         s = np.array([2j * np.pi * f])
-        exact = _solve_response(a, b, c, d, s)
+        exact = solve_response(a, b, c, d, s)
         # As the modal path's acceptance, 100x: relative to each element or 1e-6 of the peak.
         scale = np.maximum(np.abs(exact), 1e-6 * np.max(np.abs(exact)))
         assert np.max(np.abs(ev(s) - exact) / scale) < 1e-8

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 from scipy import signal
 
-from fsmbench.budget.huddle import _run_controller
+from fsmbench.budget.huddle import run_controller
 
 
 @pytest.mark.parametrize("states", [1, 4, 9])
@@ -18,7 +18,7 @@ def test_run_controller_equals_dlsim(states: int) -> None:
     b, c, d = (rng.standard_normal(s) for s in ((states, 2), (2, states), (2, 2)))
     k = ct.ss(a, b, c, d, 1e-4)
     r = rng.standard_normal((2, 5000))
-    ours = _run_controller(k, r)
+    ours = run_controller(k, r)
     _, ref, _ = signal.dlsim((a, b, c, d, 1e-4), r.T)
     # The same recursion summed in another order: rounding, ~1e-15 of the output per step
     # over a few hundred steps of memory (spectral radius 0.95).

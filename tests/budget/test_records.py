@@ -157,7 +157,7 @@ def test_huddle_missing_signal():
 ])
 def test_a_huddle_comparison_says_significance_and_practice(
         ratio: float, rel_std: float, words: str, practical: bool) -> None:
-    from fsmbench.budget.huddle import BandRms, _compare
+    from fsmbench.budget.huddle import BandRms, compare_huddle_records
 
     def record(number: int, rms: float) -> Any:
         band = BandRms(band="50–5000 Hz", f_lo_hz=50.0, f_hi_hz=5000.0, rms=rms,
@@ -165,7 +165,7 @@ def test_a_huddle_comparison_says_significance_and_practice(
         return SimpleNamespace(number=number, name=f"data_huddle_test_{number}", bands=(band,),
                                band=lambda name, b=band: b)
 
-    c = _compare("closed loop", record(3, ratio * 1e-9), record(2, 1e-9))
+    c = compare_huddle_records("closed loop", record(3, ratio * 1e-9), record(2, 1e-9))
     assert words in c.sentence
     assert c.practical["50–5000 Hz"] is practical
     changed = c.significant["50–5000 Hz"] and practical

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 import xarray as xr
 
-from fsmbench.budget.stability import FULL_OVERLAP_MAX_TAU_S, _allan, analyse_stability
+from fsmbench.budget.stability import FULL_OVERLAP_MAX_TAU_S, allan_of, analyse_stability
 from fsmbench.io.recording import make_recording
 
 pytest.importorskip("dask")
@@ -20,7 +20,7 @@ def test_long_taus_on_a_drift_equal_the_closed_form() -> None:
     # averages are used: the strided part must give it as the full overlap does.
     a = 3e-9
     x = a * np.arange(round(400 * FS)) / FS
-    res = _allan(x, fs_hz=FS, unit="m", name="drift")
+    res = allan_of(x, fs_hz=FS, unit="m", name="drift")
     assert res.tau_s.max() > 4 * FULL_OVERLAP_MAX_TAU_S  # the strided part is exercised
     # Rounding of the block means and sums of 4e5 samples: 1e-7 relative.
     np.testing.assert_allclose(res.adev, a * res.tau_s / np.sqrt(2), rtol=1e-7)
@@ -29,7 +29,7 @@ def test_long_taus_on_a_drift_equal_the_closed_form() -> None:
 def test_long_taus_on_white_noise() -> None:
     s = 2e-9
     x = s * np.random.default_rng(3).standard_normal(round(800 * FS))
-    res = _allan(x, fs_hz=FS, unit="m", name="white")
+    res = allan_of(x, fs_hz=FS, unit="m", name="white")
     m = res.tau_s * FS
     ratio = res.adev / (s / np.sqrt(m))
     long = res.tau_s > FULL_OVERLAP_MAX_TAU_S

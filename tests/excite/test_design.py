@@ -7,12 +7,12 @@ import pytest
 from scipy.optimize import check_grad
 
 from fsmbench.excite.design import (
-    _lp_norm_and_gradient,
     crest_factor,
     design_chirp,
     design_multisine,
     design_noise,
     grid_lines,
+    lp_norm_and_gradient,
     multisine_period,
     schroeder_phases,
 )
@@ -82,8 +82,8 @@ def test_random_phases_are_the_seeds_and_plain() -> None:
 def test_lp_gradient_matches_finite_differences() -> None:
     k = np.arange(3, 60, 2)
     phases = np.random.default_rng(0).uniform(0, 2 * np.pi, k.size)
-    f = lambda ph: _lp_norm_and_gradient(ph, k, 1000, 8.0)[0]  # noqa: E731
-    g = lambda ph: _lp_norm_and_gradient(ph, k, 1000, 8.0)[1]  # noqa: E731
+    f = lambda ph: lp_norm_and_gradient(ph, k, 1000, 8.0)[0]  # noqa: E731
+    g = lambda ph: lp_norm_and_gradient(ph, k, 1000, 8.0)[1]  # noqa: E731
     # Central differences of step 1.5e-8 on a norm ~1.5: error ~1e-7 of the gradient's size.
     assert check_grad(f, g, phases) < 1e-5 * np.linalg.norm(g(phases))
 

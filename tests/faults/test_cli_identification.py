@@ -126,7 +126,7 @@ def test_budget_reuses_an_identification(kit: SimpleNamespace, stage_data: Path,
 
 
 def test_design_prints_rounded_values_with_units() -> None:
-    from fsmbench.cli.commands.design import design_table
+    from fsmbench.report.text import design_table
 
     axis = {"gain_margin_db": 14.467792213829014, "phase_margin_deg": 52.74239733270343,
             "crossover_hz": 36.90111458340814, "sensitivity_at_1hz": 0.00011787110436707398,

@@ -19,7 +19,7 @@ import h5py
 import numpy as np
 import pytest
 
-from fsmbench.bench.params import ParamsError, _walk, default_bench, load_bench
+from fsmbench.bench.params import ParamsError, default_bench, load_bench, walk_fields
 from fsmbench.io.matwrite import save_mat
 
 EXCITE = ("--input", "Uch", "--amplitude-rms", "0.015")
@@ -104,18 +104,14 @@ def test_study_longer_than_memory(kit: SimpleNamespace, run_cli: Callable[..., A
 def test_simulate_size_estimate_fits_a_short_run(monkeypatch: pytest.MonkeyPatch) -> None:
     """What fits is not refused: the estimate of the default run (1.78 GB) is within 20 %
     of the measured peak (1.52 GB), and 5 s records need well under 1 GB."""
-    import argparse
-
-    from fsmbench.cli.commands.simulate import simulation_memory_bytes
+    from fsmbench.twin.sizes import simulation_memory_bytes
 
     def need(**kw: Any) -> float:
-        args = argparse.Namespace(experiments=None, excitation=None, duration=None, **kw)
-        return simulation_memory_bytes(args, default_bench())
+        return simulation_memory_bytes(default_bench(), **kw)
 
     monkeypatch.setattr("os.cpu_count", lambda: 2)
     assert 1.52e9 < need() < 1.2 * 1.52e9 + 0.1e9
-    args = argparse.Namespace(experiments=None, excitation=None, duration=5.0)
-    assert simulation_memory_bytes(args, default_bench()) < 0.5e9
+    assert simulation_memory_bytes(default_bench(), duration_s=5.0) < 0.5e9
 
 
 def _fake_huge_mat73(path: Path, samples: int) -> None:
@@ -195,7 +191,7 @@ def test_every_bench_number_at_1e300_is_refused_on_load(tmp_path: Path) -> None:
     bench = default_bench()
     toml = tmp_path / "b.toml"
     for section in ("nominal", "true"):
-        for key, value, _field in _walk(getattr(bench, section), ""):
+        for key, value, _field in walk_fields(getattr(bench, section), ""):
             table, name = key.rsplit(".", 1)
             for big in ("1e300", "-1e300"):
                 text = (f"{{ h = {big}, v = {big} }}" if hasattr(value, "h")

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import pytest
 
-from fsmbench.ident.consistency import SWAP_GAIN_FACTOR, AxisRatio, _with_records_gains
+from fsmbench.ident.consistency import SWAP_GAIN_FACTOR, AxisRatio, with_records_gains
 
 
 def _run(exp: str, inp: str, direct: float, cross: float, model: float) -> AxisRatio:
@@ -20,7 +20,7 @@ def test_a_swapped_run_is_seen_whatever_the_bench_s_gains(scale: float) -> None:
     g = 0.02 * scale
     axes = {"data_uch": _run("data_uch", "Uch", 0.03 * g, g, model=0.02),
             "data_ucv": _run("data_ucv", "Ucv", g, 0.03 * g, model=0.02)}
-    judged = _with_records_gains(axes)
+    judged = with_records_gains(axes)
     assert not judged["data_uch"].passed  # the other axis moved
     assert judged["data_ucv"].passed
     # Without the records' gain, the bench far below the model hid the swap.
@@ -32,4 +32,4 @@ def test_a_dead_direct_channel_beside_a_coupling_is_not_a_swap() -> None:
     g = 0.02 / 80
     axes = {"data_uch": _run("data_uch", "Uch", 0.0, 0.03 * g, model=0.02),
             "data_ucv": _run("data_ucv", "Ucv", g, 0.0, model=0.02)}
-    assert _with_records_gains(axes)["data_uch"].passed
+    assert with_records_gains(axes)["data_uch"].passed

@@ -13,7 +13,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from fsmbench.io.errors import RecordingError
-from fsmbench.io.lazy import _v5_stream_variable, convert_recording, open_recording
+from fsmbench.io.lazy import convert_recording, open_recording, v5_stream_variable
 from fsmbench.io.nexus import read_nexus
 from fsmbench.io.nexus_stream import NexusAppender
 from fsmbench.io.recording import make_recording, read_recording, write_recording
@@ -120,7 +120,7 @@ def test_v5_converted_in_pieces(tmp_path: Path, compress: bool) -> None:
     src = write_recording(ds, tmp_path / "data_huddle_test_4.mat", format="mat5",
                           compress=compress)
     # Pieces of 4096 samples: the streamed inflate crosses many zlib buffer edges.
-    pieces = list(_v5_stream_variable(src, "Va", block=4096))
+    pieces = list(v5_stream_variable(src, "Va", block=4096))
     assert max(p.size for p in pieces) == 4096
     np.testing.assert_array_equal(np.concatenate(pieces), ds["Va"].values)
     out = convert_recording(src, tmp_path / "converted.h5")

@@ -15,7 +15,7 @@ import pytest
 import fsmbench.io.folder as folder
 import fsmbench.io.matfile as matfile
 from fsmbench.io.errors import RecordingError
-from fsmbench.io.folder import IN_MEMORY_FACTOR, _sample_bytes, load_recordings
+from fsmbench.io.folder import IN_MEMORY_FACTOR, load_recordings, sample_bytes
 from fsmbench.io.matfile import detect_format
 from fsmbench.io.recording import make_recording, write_recording
 
@@ -41,7 +41,7 @@ def huddle_file(request: pytest.FixtureRequest, tmp_path: Path) -> Path:
 
 def test_the_estimate_is_the_samples_the_file_holds(huddle_file: Path) -> None:
     # t and three signals of N float64 samples, read from the headers alone.
-    assert _sample_bytes(huddle_file, detect_format(huddle_file)) == 4 * N * 8
+    assert sample_bytes(huddle_file, detect_format(huddle_file)) == 4 * N * 8
 
 
 @pytest.mark.parametrize("dask_installed", [False, True])

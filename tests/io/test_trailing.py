@@ -24,7 +24,7 @@ import scipy.io
 
 from fsmbench.io.errors import RecordingError
 from fsmbench.io.folder import load_recordings
-from fsmbench.io.lazy import _v5_vectors, convert_recording
+from fsmbench.io.lazy import convert_recording, v5_vectors
 from fsmbench.io.matfile import load_mat
 from fsmbench.io.recording import read_recording
 from fsmbench.io.trailing import TrailingBytesWarning, data_end
@@ -174,7 +174,7 @@ def test_v5_headers_and_conversion_stop_at_the_zeros(tmp_path: Path,
                                                      write: Callable[[str, Path], Path]) -> None:
     path = write("mat5-compressed", tmp_path / "data_uch.mat")
     _pad(path, 20 * GIB)
-    assert dict(_v5_vectors(path)) == dict.fromkeys(_variables(), N)
+    assert dict(v5_vectors(path)) == dict.fromkeys(_variables(), N)
     out = convert_recording(path, tmp_path / "data_uch.h5", created=0.0)
     back = read_recording(out)
     assert np.array_equal(back["Vch"].values, _variables()["Vch"])

@@ -64,7 +64,7 @@ def invalid_reads(monkeypatch: pytest.MonkeyPatch) -> InvalidReads:
     pytest.importorskip("tango")
     from tango import AttrQuality
 
-    from fsmbench.live.device import _EMPTY, FsmBench
+    from fsmbench.live.device import EMPTY_TEXT, FsmBench
 
     reads = InvalidReads()
     original = FsmBench._read
@@ -73,7 +73,7 @@ def invalid_reads(monkeypatch: pytest.MonkeyPatch) -> InvalidReads:
         if reads.left.get(spec.name, 0) > 0:
             reads.left[spec.name] -= 1
             reads.served[spec.name] = reads.served.get(spec.name, 0) + 1
-            return _EMPTY[spec.kind], time.time(), AttrQuality.ATTR_INVALID
+            return EMPTY_TEXT[spec.kind], time.time(), AttrQuality.ATTR_INVALID
         return original(self, spec)
 
     monkeypatch.setattr(FsmBench, "_read", read)

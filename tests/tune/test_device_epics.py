@@ -29,10 +29,10 @@ import pytest
 
 from fsmbench.live.epics import MAX_ARRAY_BYTES
 from fsmbench.tune.ca_device import CaDevice, CaReading
-from fsmbench.tune.device import _words, device_proxy
+from fsmbench.tune.device import device_proxy, device_words
 from fsmbench.tune.device_errors import DeviceError, DeviceLost, DeviceRefused
 from fsmbench.tune.reads import DeviceReadError, read_valid
-from fsmbench.tune.transaction import _cause
+from fsmbench.tune.transaction import failure_cause
 
 SPEED = 50.0
 SEED_NAME = "the ESRF study's controller (9.2)"  # what the device calls it
@@ -141,10 +141,10 @@ def test_a_command_over_ca_replies_as_tango_and_a_refusal_is_the_device_s() -> N
     assert err.value.reason == "FSM_BadArgument" and err.value.words == sentence
     # Named as a refusal, with its reason, where tune names what cut a change short and
     # where the roll-back lists the ways back it tried.
-    assert _cause(err.value) == ("the device refused LoadController (FSM_BadArgument: x20 "
+    assert failure_cause(err.value) == ("the device refused LoadController (FSM_BadArgument: x20 "
                                  "fails the check on the device's bench (the bench file): "
                                  "the closed loop is unstable. The loop runs on.)")
-    assert _words(err.value) == f"{sentence} [FSM_BadArgument]"
+    assert device_words(err.value) == f"{sentence} [FSM_BadArgument]"
     # A reply still on its way is waited for: ReplyCount lags the put's completion, and the
     # reply of a command cut short (Ctrl-C) comes first.
     ioc.replies["Abort"] = ("OK", "nothing to abort")
@@ -163,7 +163,7 @@ def test_a_command_over_ca_replies_as_tango_and_a_refusal_is_the_device_s() -> N
     ioc.up = False
     with pytest.raises(DeviceLost, match="did not connect") as lost:
         device.StopExcitation()
-    assert _cause(lost.value).startswith("the device failed or the connection was lost")
+    assert failure_cause(lost.value).startswith("the device failed or the connection was lost")
     with pytest.raises(DeviceLost):
         device.read_attribute("Controller")
     device.close()
@@ -176,11 +176,11 @@ def test_tango_s_dev_failed_reads_the_same() -> None:
     refusal = DevFailed(SimpleNamespace(reason="FSM_Settling", origin="fsmbench/bench/1/"
                                         "LoadController", desc="LoadController refused: the "
                                         "mirror settles (0.4 s left)."))
-    assert _cause(refusal) == ("the device refused LoadController (FSM_Settling: the mirror "
+    assert failure_cause(refusal) == ("the device refused LoadController (FSM_Settling: the mirror "
                                "settles (0.4 s left).)")
     lost = DevFailed(SimpleNamespace(reason="API_CorbaException", origin="x",
                                      desc="TRANSIENT CORBA system exception"))
-    assert _cause(lost) == ("the device failed or the connection was lost (TRANSIENT CORBA "
+    assert failure_cause(lost) == ("the device failed or the connection was lost (TRANSIENT CORBA "
                             "system exception)")
 
 
@@ -388,7 +388,7 @@ from fsmbench.tune.running import running_loop
 from fsmbench.tune.device import DeviceTarget, device_proxy, release_proxy
 from fsmbench.tune.device_errors import DeviceRefused
 from fsmbench.tune.guarded import loop_of
-from fsmbench.tune.transaction import _cause
+from fsmbench.tune.transaction import failure_cause
 
 address, running, folder = sys.argv[1:4]
 bench = default_bench()
@@ -409,7 +409,7 @@ try:
         target.load(x20)
     except DeviceRefused as exc:
         out["refused"] = {"reason": exc.reason, "words": exc.words, "message": str(exc),
-                          "cause": _cause(exc)}
+                          "cause": failure_cause(exc)}
     out["after_refusal"] = target.running_controller()
     out["seed"] = proxy.LoadController("seed")
     out["moved_to"] = target.running_controller()

@@ -126,14 +126,14 @@ def _figures(predicted_urad: float, *, gm: float = 10.0, pm: float = 45.0, robus
 
 
 def test_refusal_rules() -> None:
-    from fsmbench.tune.guarded import _refusal
+    from fsmbench.tune.guarded import refusal_reason
 
     measured = {"h": 40e-6, "v": 40e-6}
     opts = TuneOptions(better_by=0.1)
-    assert _refusal(_figures(35.0), measured, opts) == ""  # 12.5 % better
-    assert "not better" in _refusal(_figures(37.0), measured, opts)  # 7.5 % better only
-    assert "margins" in _refusal(_figures(30.0, pm=25.0), measured, opts)
-    assert "perturbed set" in _refusal(_figures(30.0, robust=False), measured, opts)
+    assert refusal_reason(_figures(35.0), measured, opts) == ""  # 12.5 % better
+    assert "not better" in refusal_reason(_figures(37.0), measured, opts)  # 7.5 % better only
+    assert "margins" in refusal_reason(_figures(30.0, pm=25.0), measured, opts)
+    assert "perturbed set" in refusal_reason(_figures(30.0, robust=False), measured, opts)
 
 
 def test_report_section(drift_tune: TuneResult) -> None:

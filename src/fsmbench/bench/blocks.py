@@ -62,6 +62,7 @@ __all__ = [
     "sercalo",
     "sercalo_angles",
     "sercalo_beam_matrix",
+    "solve_response",
     "ss_frequency_response",
     "ss_response",
     "voltage_amplifier",
@@ -302,7 +303,7 @@ _MODAL_MIN_POINTS = 64
 _MODAL_RTOL = 1e-10
 
 
-def _solve_response(a: np.ndarray, b: np.ndarray, c: np.ndarray, d: np.ndarray,
+def solve_response(a: np.ndarray, b: np.ndarray, c: np.ndarray, d: np.ndarray,
                     s: np.ndarray) -> np.ndarray:
     n = a.shape[0]
     lhs = s[:, None, None] * np.eye(n)[None] - a[None]
@@ -330,7 +331,7 @@ def _modal_response(a: np.ndarray, b: np.ndarray, c: np.ndarray, d: np.ndarray,
     order = np.argsort(np.abs(s))
     probe = np.unique(np.concatenate([order[:2], order[-2:],
                                       order[np.linspace(0, s.size - 1, 8).astype(int)]]))
-    exact = _solve_response(a, b, c, d, s[probe])
+    exact = solve_response(a, b, c, d, s[probe])
     scale = np.maximum(np.abs(exact), np.max(np.abs(exact), axis=(1, 2), keepdims=True) * 1e-6)
     if not np.all(np.abs(h[probe] - exact) <= _MODAL_RTOL * scale):
         return None
@@ -368,7 +369,7 @@ class ResponseEvaluator:
             return
         x = np.asarray(check_points, dtype=complex).ravel()
         modal = (lam, c @ v, wb)
-        exact = _solve_response(a, b, c, d, x)
+        exact = solve_response(a, b, c, d, x)
         scale = np.maximum(np.abs(exact), np.max(np.abs(exact), axis=(1, 2), keepdims=True) * 1e-6)
         if np.all(np.isfinite(wb)) and np.all(
                 np.abs(self._sum(modal, x) - exact) <= _MODAL_RTOL * scale):
@@ -385,7 +386,7 @@ class ResponseEvaluator:
         if a.shape[0] == 0:
             return np.broadcast_to(d, (x.size, *d.shape)).astype(complex)
         if self._modal is None:
-            return _solve_response(a, b, c, d, x)
+            return solve_response(a, b, c, d, x)
         return self._sum(self._modal, x)
 
 
@@ -405,7 +406,7 @@ def ss_response(sys: ct.StateSpace, s: np.ndarray) -> np.ndarray:
         h = _modal_response(a, b, c, d, s)
         if h is not None:
             return h
-    return _solve_response(a, b, c, d, s)
+    return solve_response(a, b, c, d, s)
 
 
 def ss_frequency_response(sys: ct.StateSpace, f_hz: np.ndarray) -> np.ndarray:

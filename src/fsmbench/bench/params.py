@@ -30,6 +30,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from fsmbench.atomic import atomic_write_text
 from fsmbench.bench.axes import ParamsError, PerAxis
 from fsmbench.bench.paramfile import (
     build,
@@ -68,6 +69,7 @@ __all__ = [
     "param_rows",
     "real_bench",
     "save_bench",
+    "walk_fields",
 ]
 
 
@@ -580,7 +582,6 @@ def load_bench(path: str | Path | None = None) -> Bench:
 
 def save_bench(bench: Bench, path: str | Path) -> Path:
     """Write ``bench`` as TOML to ``path`` atomically; returns the path."""
-    from fsmbench.atomic import atomic_write_text
 
     return atomic_write_text(Path(path), bench.to_toml())
 
@@ -600,12 +601,12 @@ class ParamRow:
     doc: str
 
 
-def _walk(obj: Any, prefix: str) -> Iterator[tuple[str, Any, dataclasses.Field[Any]]]:
+def walk_fields(obj: Any, prefix: str) -> Iterator[tuple[str, Any, dataclasses.Field[Any]]]:
     for f in dataclasses.fields(obj):
         value = getattr(obj, f.name)
         key = f"{prefix}.{f.name}" if prefix else f.name
         if dataclasses.is_dataclass(value) and not isinstance(value, PerAxis):
-            yield from _walk(value, key)
+            yield from walk_fields(value, key)
         else:
             yield key, value, f
 
@@ -625,10 +626,10 @@ def param_rows(bench: Bench) -> list[ParamRow]:
     rows = [
         ParamRow(f"datasheet.{k}", _fmt(v), "", f.metadata["unit"], f.metadata["source"],
                  f.metadata["doc"])
-        for k, v, f in _walk(bench.datasheet, "")
+        for k, v, f in walk_fields(bench.datasheet, "")
     ]
-    true_values = {k: v for k, v, _ in _walk(bench.true, "")}
-    for k, v, f in _walk(bench.nominal, ""):
+    true_values = {k: v for k, v, _ in walk_fields(bench.true, "")}
+    for k, v, f in walk_fields(bench.nominal, ""):
         rows.append(ParamRow(k, _fmt(v), _fmt(true_values[k]), f.metadata["unit"],
                              f.metadata["source"], f.metadata["doc"]))
     return rows

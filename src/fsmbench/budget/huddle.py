@@ -60,9 +60,11 @@ __all__ = [
     "analyse_huddle_record",
     "band_id",
     "check_trim",
+    "compare_huddle_records",
     "estimate_dac_noise",
     "estimate_qd_noise",
     "huddle_number",
+    "run_controller",
     "trim_huddle",
 ]
 
@@ -432,7 +434,7 @@ def _state_space_run(a: FloatArray, b: FloatArray, c: FloatArray, d: FloatArray,
     return y
 
 
-def _run_controller(k: ct.StateSpace, r: FloatArray) -> FloatArray:
+def run_controller(k: ct.StateSpace, r: FloatArray) -> FloatArray:
     """``K`` (discrete) applied to ``r`` (2, N) from rest; returns (2, N).
 
     The recursion runs compiled (numba): K holds a double integrator, so its
@@ -487,7 +489,7 @@ def estimate_dac_noise(recordings: Mapping[str, xr.Dataset], *, controller: ct.S
             trim = trim_record(ds, t0_s=t0_s, duration_s=duration_s, fs_hz=fs)
             ds = ds.isel(t=slice(0, trim.start + trim.n)).compute()
         r = np.stack([np.asarray(ds["Vph"].values) / gd[0], np.asarray(ds["Vpv"].values) / gd[1]])
-        u = -_run_controller(kd, r)
+        u = -run_controller(kd, r)
         t = np.asarray(ds["t"].values)
         keep = np.flatnonzero(t >= t0_s)[: round(duration_s * fs)]
         e = np.stack([np.asarray(ds["Uch"].values), np.asarray(ds["Ucv"].values)])[:, keep]
@@ -566,7 +568,7 @@ def _ratio_words(band: str, r: float, *, significant: bool, practical: bool) -> 
     return f"no significant change in the {band} rms (×{r:.2f})"
 
 
-def _compare(effect: str, a: HuddleRecord, b: HuddleRecord) -> ConfigComparison:
+def compare_huddle_records(effect: str, a: HuddleRecord, b: HuddleRecord) -> ConfigComparison:
     ratios, sig, practical = {}, {}, {}
     parts = []
     for ba in a.bands:
@@ -636,8 +638,8 @@ def analyse_huddle(recordings: Mapping[str, xr.Dataset], *, params: BenchParams,
         recordings[n], name=n, t0_s=t0_s, duration_s=duration_s, lpf_hz=lpf_hz,
         summary=(summaries or {}).get(n))
                for n in names}
-    comps = tuple(_compare(effect, records[a], records[b]) for effect, a, b in _COMPARISONS
-                  if a in records and b in records)
+    comps = tuple(compare_huddle_records(effect, records[a], records[b])
+                  for effect, a, b in _COMPARISONS if a in records and b in records)
     if comps:
         conclusion = " ".join(c.sentence for c in comps)
         ecu = next((c for c in comps if c.effect == "compensation unit"), None)

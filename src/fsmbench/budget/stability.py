@@ -34,10 +34,17 @@ from fsmbench.budget.long_record import (
     summarise_long_record,
 )
 from fsmbench.budget.signals import block_means, is_lazy, lowpass, trim_record
-from fsmbench.signal.envelope import Envelope
+from fsmbench.signal.allan import AllanResult, allan_deviation
+from fsmbench.signal.envelope import Envelope, minmax_envelope
 
-__all__ = ["FULL_OVERLAP_MAX_TAU_S", "SignalDrift", "StabilityRecord", "analyse_stability",
-           "stability_from_summary"]
+__all__ = [
+    "FULL_OVERLAP_MAX_TAU_S",
+    "SignalDrift",
+    "StabilityRecord",
+    "allan_of",
+    "analyse_stability",
+    "stability_from_summary",
+]
 
 FloatArray = NDArray[np.float64]
 
@@ -145,13 +152,11 @@ class StabilityRecord:
 
 
 def _binned(x: Any, *, signal: str, unit: str, n_bins: int, fs_hz: float) -> SignalDrift:
-    from fsmbench.signal.envelope import minmax_envelope
-
     return _drift_of(minmax_envelope(x, fs_hz=fs_hz, n_bins=n_bins), signal=signal, unit=unit,
                      fs_hz=fs_hz)
 
 
-def _allan(x: Any, *, fs_hz: float, unit: str, name: str) -> Any:
+def allan_of(x: Any, *, fs_hz: float, unit: str, name: str) -> Any:
     """Overlapping Allan deviation of a record in memory; beyond 10 s from 0.1 s averages.
 
     Fully overlapping estimates at long averaging times read samples 2m
@@ -161,7 +166,6 @@ def _allan(x: Any, *, fs_hz: float, unit: str, name: str) -> Any:
     (``tests/budget/test_stability.py``). With hundreds of 0.1 s steps per
     averaging time, the loss of degrees of freedom is under a percent.
     """
-    from fsmbench.signal.allan import allan_deviation
 
     fine_m, stride = allan_factors(int(x.shape[0]), fs_hz)
     fine = allan_deviation(x, fs_hz=fs_hz, taus_s=fine_m / fs_hz, unit=unit, name=name)
@@ -170,7 +174,6 @@ def _allan(x: Any, *, fs_hz: float, unit: str, name: str) -> Any:
 
 def _with_coarse(fine: Any, means: FloatArray, *, stride: int, name: str) -> Any:
     """``fine`` extended with the averaging times of the ``stride``-sample ``means`` beyond it."""
-    from fsmbench.signal.allan import AllanResult, allan_deviation
 
     fs_hz, unit = fine.fs_hz, fine.unit
     coarse_m = 2 ** np.arange(1, 64)
@@ -190,7 +193,6 @@ def _with_coarse(fine: Any, means: FloatArray, *, stride: int, name: str) -> Any
 
 def _scaled_allan(a: Any, *, gain: float, unit: str) -> Any:
     """The Allan deviation of ``x / gain`` from that of ``x``."""
-    from fsmbench.signal.allan import AllanResult
 
     return AllanResult(tau_s=a.tau_s, adev=a.adev / abs(gain), n_terms=a.n_terms, m=a.m,
                        fs_hz=a.fs_hz, n_samples=a.n_samples, unit=unit, kind=a.kind)
@@ -279,7 +281,7 @@ def analyse_stability(ds: xr.Dataset, *, name: str, qd_gain_v_per_rad: tuple[flo
     bins = min(n_bins, trim.n)
     drift = {key: _binned(x, signal=key, unit=unit, n_bins=bins, fs_hz=fs)
              for key, (x, unit) in signals.items()}
-    allan = {key: _allan(x, fs_hz=fs, unit=unit, name=f"{name}.{key}")
+    allan = {key: allan_of(x, fs_hz=fs, unit=unit, name=f"{name}.{key}")
              for key, (x, unit) in signals.items() if key != "Va_lowpass"}
     return StabilityRecord(name=name, duration_s=trim.n / fs, fs_hz=fs, allan=allan,
                            drift=drift, qd_gain_v_per_rad=qd_gain_v_per_rad, out_of_core=False)

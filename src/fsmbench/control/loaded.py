@@ -21,7 +21,10 @@ from pathlib import Path
 
 import numpy as np
 
+from fsmbench.bench.axes import PerAxis
+from fsmbench.bench.esrf import esrf_decentralised_controller, tustin
 from fsmbench.bench.params import Bench
+from fsmbench.control.load import load_controllers, select_controller
 from fsmbench.sim.controller import feedback_controller, sercalo_feedback
 from fsmbench.sim.engine import DiscreteController
 
@@ -93,13 +96,11 @@ def running_controller(spec: str | Path | None, *, bench: Bench,
         file is missing or not a controllers file, has no such controller, its
         sample time is not the bench's.
     """
-    from fsmbench.bench.esrf import esrf_decentralised_controller, tustin
 
     ts = bench.true.converter.ts_s
     nominal = bench.nominal.quad_diode.gain_v_per_rad
     if spec is None or str(spec) == SEED_SPEC:
         gd = gd_v_per_rad or (float(nominal.h), float(nominal.v))
-        from fsmbench.bench.axes import PerAxis
 
         kd = tustin(esrf_decentralised_controller(), ts_s=ts)
         fb = feedback_controller(kd, gd_v_per_rad=PerAxis(h=gd[0], v=gd[1]), ts_s=ts,
@@ -108,7 +109,6 @@ def running_controller(spec: str | Path | None, *, bench: Bench,
                                  b=np.asarray(kd.B, dtype=float), c=np.asarray(kd.C, dtype=float),
                                  d=np.asarray(kd.D, dtype=float), ts_s=ts, gd_v_per_rad=gd,
                                  name="the ESRF study's controller (9.2)", source=SEED_SPEC)
-    from fsmbench.control.load import load_controllers, select_controller
 
     text = str(spec)
     path, sep, name = text.partition("::")

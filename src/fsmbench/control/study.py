@@ -39,6 +39,7 @@ from fsmbench.control.analysis import (
     analyse_plant,
     control_objective,
 )
+from fsmbench.control.antiwindup_loop import saturating_step
 from fsmbench.control.design import (
     DesignOptions,
     FsmDesign,
@@ -52,6 +53,7 @@ from fsmbench.control.export import (
     write_controllers_mat,
     write_sos_json,
 )
+from fsmbench.control.float32_loop import float32_closed_loop
 from fsmbench.control.freq import evaluate_ss, plain_json
 from fsmbench.control.iff import IffAnalysis, iff_analysis
 from fsmbench.control.loops import LoopAnalysis, LoopOptions, analyse_loop, newport_to_beam
@@ -369,9 +371,6 @@ def design_study(plant: PlantModel, *, bench: Bench,
                                     pade_order=opts.loop.pade_order)
         for name, words in (("seed_controller", "the ESRF study's controller"),
                             ("fsmbench_controller", "fsmbench's controller"))}
-    # The twin runs the controllers here (sim builds on control): imported when used.
-    from fsmbench.control.antiwindup_loop import saturating_step
-    from fsmbench.control.float32_loop import float32_closed_loop
 
     who = (("seed_controller", "the ESRF study's controller"),
            ("fsmbench_controller", "fsmbench's controller"))

@@ -48,6 +48,7 @@ import control as ct
 import numpy as np
 import xarray as xr
 from numpy.typing import NDArray
+from scipy.stats import t as student
 
 from fsmbench.bench.blocks import PlantModel
 from fsmbench.bench.params import BenchParams
@@ -352,8 +353,6 @@ def sampling_z(*scatters: BandPowerScatter, axis: int) -> float:
     Student's t with the Welch–Satterthwaite degrees of freedom of the summed variance
     (each estimate's ``dof``): a std read from 8 periods is itself uncertain, and a
     normal point would cover ~85 %, not 95 %."""
-    from scipy.stats import t as student
-
     var = [float(s.relative_variance[axis]) for s in scatters]
     den = sum(v**2 / max(s.dof, 1.0) for v, s in zip(var, scatters, strict=True))
     dof = sum(var) ** 2 / den if den > 0 else math.inf

@@ -57,6 +57,7 @@ from fsmbench.sim.closed_loop import (
 from fsmbench.sim.discretize import DiscretePlant
 from fsmbench.sim.engine import DiscreteController
 from fsmbench.sim.plant import ADC_CHANNELS, DAC_CHANNELS, bench_discrete
+from fsmbench.twin.draws import PARAMETERS, perturbed_bench
 
 __all__ = ["INJECTION_POINTS", "BeamError", "ClosedLoopLimitReport",
            "check_closed_loop_limits", "closed_loop_peaks", "injection_input", "robust_loops"]
@@ -335,7 +336,6 @@ def robust_loops(bench: Bench, controller: DiscreteController, *,
     the unmoved bench first. Each is the engine's plant of the moved bench
     (:func:`fsmbench.twin.draws.perturbed_bench`), closed as the engine closes it.
     """
-    from fsmbench.twin.draws import PARAMETERS, perturbed_bench
 
     loops = [closed_loop_plant(bench_discrete(bench), controller)]
     for fs in frequency_scales:

@@ -51,6 +51,7 @@ __all__ = [
     "design_multisine",
     "design_noise",
     "grid_lines",
+    "lp_norm_and_gradient",
     "minimise_crest_factor",
     "multisine_period",
     "random_phase_crest_factor",
@@ -308,7 +309,7 @@ def random_phase_crest_factor(*, harmonics: np.ndarray, n_samples: int,
     return float(np.median(factors)), first
 
 
-def _lp_norm_and_gradient(phases: np.ndarray, harmonics: np.ndarray, n_samples: int,
+def lp_norm_and_gradient(phases: np.ndarray, harmonics: np.ndarray, n_samples: int,
                           p: float) -> tuple[float, np.ndarray]:
     """``(mean |u|^p)^(1/p)`` of the unit-rms multisine ``u`` and its gradient on the phases."""
     a = np.sqrt(2.0 / harmonics.size)  # unit rms
@@ -372,7 +373,7 @@ def minimise_crest_factor(*, harmonics: np.ndarray, n_samples: int,
             best, best_cf = phases.copy(), c
     phases = best.copy()
     for p in p_values:
-        res = minimize(_lp_norm_and_gradient, phases, args=(harmonics, n_samples, p), jac=True,
+        res = minimize(lp_norm_and_gradient, phases, args=(harmonics, n_samples, p), jac=True,
                        method="L-BFGS-B", options={"maxiter": lp_iterations})
         phases = np.asarray(res.x)
         c = cf(phases)

@@ -18,6 +18,7 @@ from pathlib import Path
 
 from fsmbench.bench.axes import PerAxis
 from fsmbench.bench.params import BenchParams
+from fsmbench.ident.load import read_identification_json
 from fsmbench.io.errors import RecordingError
 
 __all__ = ["quad_diode_from_identification", "with_identified_quad_diode"]
@@ -42,7 +43,6 @@ def with_identified_quad_diode(params: BenchParams, folder: str | Path, *,
         The folder holds no identification, or its 4QD was not calibrated
         (``data_cal_pd_h``/``data_cal_pd_v`` missing or failed), in one line.
     """
-    from fsmbench.ident.load import read_identification_json
 
     path, ident = read_identification_json(folder, option=option)
     return quad_diode_from_identification(params, ident, path=path, option=option)

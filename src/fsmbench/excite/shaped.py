@@ -35,6 +35,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from fsmbench.bench.params import Bench, BenchParams
+from fsmbench.excite.closed_loop import closed_loop_peaks, injection_input, robust_loops
 from fsmbench.excite.design import (
     ExcitationDesign,
     GridKind,
@@ -45,6 +46,7 @@ from fsmbench.excite.design import (
 from fsmbench.excite.limits import input_response
 from fsmbench.sim.discretize import DiscretePlant
 from fsmbench.sim.engine import DiscreteController
+from fsmbench.sim.plant import bench_discrete
 
 if TYPE_CHECKING:
     from fsmbench.excite.closed_loop import ClosedLoopLimitReport
@@ -411,8 +413,6 @@ def beam_bounded_measurement(*, bench: Bench, params: BenchParams, controller: D
     ValueError
         A bound or fill that is not positive.
     """
-    from fsmbench.excite.closed_loop import closed_loop_peaks, injection_input, robust_loops
-    from fsmbench.sim.plant import bench_discrete
 
     if not (math.isfinite(max_error_rad) and max_error_rad > 0):
         raise ValueError(f"the beam-error bound must be a positive angle, got {max_error_rad!r}")

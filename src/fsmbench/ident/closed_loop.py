@@ -45,6 +45,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal
 
+import control as ct
 import numpy as np
 import xarray as xr
 
@@ -60,12 +61,19 @@ from fsmbench.bench.blocks import (
 )
 from fsmbench.bench.params import Bench
 from fsmbench.checks import Check, Notice, first_failure
+from fsmbench.ident.calibration import current_amp_checks
+from fsmbench.ident.current_amp import calibrate_current_amplifier
 from fsmbench.ident.delay.sampled import SensorLowpass
+from fsmbench.ident.export import write_identification_folder
 from fsmbench.ident.frf.closed_loop import ClosedLoopFrf, ClosedLoopRecord, closed_loop_frf
 from fsmbench.ident.frf.closed_loop_merge import merge_closed_loop_frf
 from fsmbench.ident.frf.estimate import FrfEstimate
-from fsmbench.ident.pipeline import path_keyed_summary
+from fsmbench.ident.frf.periodic import detect_period
+from fsmbench.ident.pipeline import path_keyed_summary, quality_warnings
 from fsmbench.ident.sercalo import SercaloFitOptions, SercaloIdentification, fit_sercalo
+from fsmbench.io.errors import RecordingError
+from fsmbench.io.folder import check_recording
+from fsmbench.io.recording import read_recording
 from fsmbench.jsonutil import plain_json
 from fsmbench.version import __version__
 
@@ -293,8 +301,6 @@ def read_closed_loop_records(folder: str | Path) -> dict[str, xr.Dataset]:
     RecordingError
         A record is missing (named, with what the folder holds) or unreadable.
     """
-    from fsmbench.io.errors import RecordingError
-    from fsmbench.io.recording import read_recording
 
     found = find_closed_loop_records(folder)
     missing = [n for n in CLOSED_LOOP_RECORDS if n not in found]
@@ -330,7 +336,6 @@ def _synchronous_added(e: np.ndarray, x: np.ndarray) -> float | None:
     per-sample variance across periods over their number, is taken off. None when ``x``
     does not repeat at least three times.
     """
-    from fsmbench.ident.frf.periodic import detect_period
 
     n = detect_period(x)
     if n is None or x.size // n < 3:
@@ -400,9 +405,6 @@ def identify_closed_loop(recordings: Mapping[str, xr.Dataset], *, bench: Bench,
         A record missing, failing its checks, without its excitation, or an FRF that
         cannot be estimated (named).
     """
-    from fsmbench.ident.current_amp import calibrate_current_amplifier
-    from fsmbench.ident.pipeline import quality_warnings
-    from fsmbench.io.folder import check_recording
 
     opts = options or ClosedLoopIdentifyOptions()
     nom = bench.nominal
@@ -530,7 +532,6 @@ def _current_amplifiers(recordings: Mapping[str, xr.Dataset], starts: Mapping[st
                         checks: list[Check], notices: list[Notice], skipped: dict[str, str],
                         calibrate: Any) -> tuple[dict[str, float], str]:
     """``Gi`` per axis from the records' coil voltages, else the prior's, else nominal."""
-    from fsmbench.ident.calibration import current_amp_checks
 
     pairs = (("h", "data_cl_uch", "Vch"), ("v", "data_cl_ucv", "Vcv"))
     why = ""
@@ -571,8 +572,6 @@ def _assemble(sid: SercaloIdentification | None, *, bench: Bench, prior: PlantMo
               gi: Mapping[str, float], gi_how: str, source: str
               ) -> tuple[PlantModel | None, dict[str, str]]:
     """The plant: ``Gc`` (and ``Gi``) from here, the rest from ``prior`` or the bench file."""
-    import control as ct
-
     if sid is None:
         return None, {}
     nom = bench.nominal
@@ -596,7 +595,6 @@ def write_closed_loop_identification(result: ClosedLoopIdentification,
                                      out_dir: str | Path) -> list[Path]:
     """Write ``identification.json``, ``plant.mat`` (when a plant was found) and ``frf.mat``
     (:func:`fsmbench.ident.export.write_identification_folder`)."""
-    from fsmbench.ident.export import write_identification_folder
 
     return write_identification_folder(
         out_dir, document=result.to_json(), plant=result.plant,

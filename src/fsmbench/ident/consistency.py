@@ -76,6 +76,7 @@ __all__ = [
     "PathSign",
     "Screening",
     "screen_recordings",
+    "with_records_gains",
 ]
 
 #: Band of the sign estimates [Hz]: below the Sercalo's modes (≥ 250 Hz) and the
@@ -391,7 +392,7 @@ def _measure_calibration(run: _Run, ds: xr.Dataset, params: BenchParams
 _BY_NAME: Final = {r.experiment: r for r in _RUNS}
 
 
-def _with_records_gains(axes: Mapping[str, AxisRatio]) -> dict[str, AxisRatio]:
+def with_records_gains(axes: Mapping[str, AxisRatio]) -> dict[str, AxisRatio]:
     """Each run with its partner's larger coherent response (:attr:`AxisRatio.swap_gain`).
 
     A swapped run's cross output carries the other axis's direct gain, which the partner
@@ -601,7 +602,7 @@ def screen_recordings(recordings: Mapping[str, xr.Dataset], *, params: BenchPara
         except ValueError:
             continue  # too short to read: the step says so itself
         signs[run.experiment], axes[run.experiment], offsets[run.experiment] = found
-    axes = _with_records_gains(axes)
+    axes = with_records_gains(axes)
     res = {a: params.sercalo.resonance_hz[a] for a in "hv"}
     pairs = [(_axis_check(a, axes, res), [exp]) for exp, a in axes.items() if a.judged]
     pairs += closed_loop_runs(recordings, params)

@@ -52,6 +52,7 @@ from dataclasses import replace
 from typing import Any
 
 import numpy as np
+from scipy.signal import welch
 
 from fsmbench.bench.blocks import newport_beam_matrix, physical_plant
 from fsmbench.bench.params import BenchParams
@@ -266,8 +267,6 @@ def floor_checks(recordings: Mapping[str, Any], *, fs_hz: float) -> list[Check]:
     fs_hz : float
         The bench's sampling rate [Hz].
     """
-    from scipy.signal import welch
-
     n_fs = round(fs_hz)
     floors: dict[str, dict[str, float]] = {"Vph": {}, "Vpv": {}}
     for name, ds in recordings.items():

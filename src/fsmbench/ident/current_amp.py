@@ -53,8 +53,15 @@ from fsmbench.ident.frf.periodic import PeriodicOptions, periodic_frf
 from fsmbench.ident.frf.response import spectral_matrix
 from fsmbench.signal.welch import hanning
 
-__all__ = ["AmplifierFit", "amplifier_path", "calibrate_current_amplifier", "fit_amplifier",
-           "identify_current_amplifier", "kink_interval_variance"]
+__all__ = [
+    "AmplifierFit",
+    "amplifier_path",
+    "calibrate_current_amplifier",
+    "fit_amplifier",
+    "hac_factor",
+    "identify_current_amplifier",
+    "kink_interval_variance",
+]
 
 FloatArray = NDArray[np.float64]
 _CURRENT = {"h": ("Uch", "Vch"), "v": ("Ucv", "Vcv")}
@@ -179,9 +186,9 @@ def fit_amplifier(f_hz: FloatArray, h: NDArray[np.complex128], var: FloatArray, 
         # residual's own correlation (HAC), not a nominal one.
         sw = np.sqrt(2.0 * w)
         res = (sw * r.real, sw * r.imag)
-        corr_g = _hac_factor(res, (sw * m.real, sw * m.imag), correlated_lines)
+        corr_g = hac_factor(res, (sw * m.real, sw * m.imag), correlated_lines)
         dm = g * (model(tau + step) - m) / step
-        corr_tau = _hac_factor(res, (sw * dm.real, sw * dm.imag), correlated_lines)
+        corr_tau = hac_factor(res, (sw * dm.real, sw * dm.imag), correlated_lines)
     noise = math.sqrt(corr_g / fisher_g)
     total = noise * math.sqrt(max(chi2, 1.0))
     return AmplifierFit(
@@ -222,7 +229,7 @@ def kink_interval_variance(side_variances: list[float]) -> float:
     return (c / 1.96) ** 2
 
 
-#: Bartlett lags per correlated line in :func:`_hac_factor`. Measured on the default twin
+#: Bartlett lags per correlated line in :func:`hac_factor`. Measured on the default twin
 #: (Welch, 130 seeds in two sets, against the truth): 4 lags per line (10 lags) left the
 #: gain's std 1.1-1.2x pessimistic and the delay's 1.2-1.7x (by seed set); 20 (50 lags),
 #: floored at 1/nominal and t-scaled, calibrates the gain (std(z) 0.89 and 0.98) and
@@ -231,7 +238,7 @@ def kink_interval_variance(side_variances: list[float]) -> float:
 HAC_LAGS_PER_LINE = 20.0
 
 
-def _hac_factor(residual: tuple[FloatArray, FloatArray], jac: tuple[FloatArray, FloatArray],
+def hac_factor(residual: tuple[FloatArray, FloatArray], jac: tuple[FloatArray, FloatArray],
                 nominal: float) -> float:
     """What a parameter's variance is of the independent-lines one, from the residual.
 

@@ -22,9 +22,11 @@ from typing import Any
 import control as ct
 import numpy as np
 
+from fsmbench.atomic import atomic_write_text
 from fsmbench.bench.blocks import PlantModel
 from fsmbench.ident.frf.response import FrequencyResponse
 from fsmbench.io.matwrite import save_mat
+from fsmbench.jsonutil import format_text, stamped
 
 __all__ = ["IDENTIFICATION_FORMAT", "frf_variables", "plant_variables", "ss_struct",
            "write_frf_mat", "write_identification_folder", "write_plant_mat"]
@@ -132,8 +134,6 @@ def write_identification_folder(out_dir: str | Path, *, document: Mapping[str, A
     list of Path
         The files written, in that order.
     """
-    from fsmbench.atomic import atomic_write_text
-    from fsmbench.jsonutil import format_text, stamped
 
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)

@@ -19,6 +19,7 @@ import scipy.io
 from scipy.io.matlab import MatReadError
 
 from fsmbench.bench.blocks import PLANT_INPUTS, PLANT_OUTPUTS, PlantModel
+from fsmbench.ident.noise_model import NoiseModelFit
 from fsmbench.ident.result import PlantChoice, SavedIdentification
 from fsmbench.io.errors import RecordingError
 
@@ -194,7 +195,6 @@ def load_identified_plant(folder: str | Path, *, option: str = "--bench") -> Pla
 def _saved(path: Path, ident: Mapping[str, Any]) -> Any:
     """What the budget reads of ``identification.json`` besides the plant: the fitted noise
     model, the recorded loop's 4QD gains and the checks (as the study has them in memory)."""
-    from fsmbench.ident.noise_model import NoiseModelFit
 
     raw = ident.get("noise_model")
     noise = None

@@ -25,6 +25,7 @@ import xarray as xr
 
 from fsmbench.io.errors import RecordingError
 from fsmbench.io.folder_names import SUFFIXES
+from fsmbench.io.lazy import _matrix_header, _v5_elements
 from fsmbench.io.matfile import detect_format
 from fsmbench.io.signals import SIGNALS, TIME
 
@@ -93,8 +94,6 @@ def _header_lengths(path: Path) -> dict[str, int] | None:
     """Variable name to element count, from the headers only (None when not told cheaply)."""
     fmt = detect_format(path)
     if fmt == "mat5":
-        from fsmbench.io.lazy import _matrix_header, _v5_elements
-
         out = {}
         for _fh, endian, _start, _size, stream in _v5_elements(path):
             var, _class, count = _matrix_header(stream, endian)

@@ -45,6 +45,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Final
 
+import h5py
 import numpy as np
 import xarray as xr
 
@@ -53,6 +54,8 @@ from fsmbench.io.channels import clipped_signals, copied_channels, frozen_segmen
 from fsmbench.io.duplicates import compare_files, other_files
 from fsmbench.io.errors import RecordingError, SaturationWarning
 from fsmbench.io.folder_names import folder_hints, not_a_file
+from fsmbench.io.lazy import open_recording, v5_vectors
+from fsmbench.io.matfile import available_memory_bytes, detect_format
 from fsmbench.io.notes import FILE_CHOICE, READ_NOTES, TIME_JITTER
 from fsmbench.io.recording import find_experiments, read_recording
 from fsmbench.io.signals import ADC_SIGNALS, DAC_SIGNALS, EXPERIMENTS, MIN_DURATION_S, SIGNALS, TIME
@@ -68,6 +71,7 @@ __all__ = [
     "folder_hints",
     "load_recordings",
     "not_a_file",
+    "sample_bytes",
 ]
 
 #: Relative tolerance of the sampling-rate check: a clock off by more than 1 %
@@ -402,13 +406,10 @@ IN_MEMORY_FACTOR: Final = 4.0
 _MEMORY_CHECK_BYTES: Final = 32 << 20
 
 
-def _sample_bytes(path: Path, fmt: str) -> int:
+def sample_bytes(path: Path, fmt: str) -> int:
     """The float64 samples a recording holds [bytes], from its headers (nothing read)."""
     if fmt == "mat5":
-        from fsmbench.io.lazy import _v5_vectors
-
-        return sum(8 * n for _name, n in _v5_vectors(path))
-    import h5py
+        return sum(8 * n for _name, n in v5_vectors(path))
 
     total = 0
 
@@ -425,11 +426,10 @@ def _sample_bytes(path: Path, fmt: str) -> int:
 
 def _refuse_if_too_large(path: Path, name: str, fmt: str, *, out_of_core: bool) -> None:
     """A record whose analysis in memory would not fit: one line, before any allocation."""
-    from fsmbench.io.matfile import available_memory_bytes
 
     if path.stat().st_size <= _MEMORY_CHECK_BYTES:
         return
-    need = _sample_bytes(path, fmt)
+    need = sample_bytes(path, fmt)
     have = available_memory_bytes()
     if IN_MEMORY_FACTOR * need <= have:
         return
@@ -457,7 +457,6 @@ def _read(path: Path, name: str, *, adc_range_v: float, adc_bits: int,
     Read whole, a record too large to analyse in memory (:data:`IN_MEMORY_FACTOR`) is
     refused in one line before anything is allocated, with the way to analyse it.
     """
-    from fsmbench.io.matfile import detect_format
 
     fmt = detect_format(path)
     try:
@@ -469,7 +468,6 @@ def _read(path: Path, name: str, *, adc_range_v: float, adc_bits: int,
     if data_end(path, fmt).end <= lazy_bytes or fmt not in ("hdf5", "mat73") or not out_of_core:
         _refuse_if_too_large(path, name, fmt, out_of_core=out_of_core)
         return read_recording(path, experiment=name, adc_range_v=adc_range_v, adc_bits=adc_bits)
-    from fsmbench.io.lazy import available_memory_bytes, open_recording
 
     # NaN and Inf in the signals are found by check_recording's pass (_signal_stats).
     ds = open_recording(path, check_signals=False, chunk_samples=LAZY_CHUNK_SAMPLES)

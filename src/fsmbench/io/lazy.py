@@ -28,12 +28,14 @@ import h5py
 import numpy as np
 import xarray as xr
 
+from fsmbench.io.dataset import ordered_signals, signal_attrs
 from fsmbench.io.errors import RecordingError
 from fsmbench.io.matfile import available_memory_bytes, detect_format
 from fsmbench.io.nexus import _plain, is_nexus
 from fsmbench.io.nexus_meta import FILE_ATTRS, read_times
 from fsmbench.io.nexus_stream import DEFAULT_CHUNK_SAMPLES, NexusAppender
 from fsmbench.io.notes import READ_NOTES, TIME_JITTER, TRAILING_BYTES, clear_notes
+from fsmbench.io.recording import read_recording
 from fsmbench.io.signals import TIME
 from fsmbench.io.timebase import (
     EXACT_TOLERANCE,
@@ -44,8 +46,15 @@ from fsmbench.io.timebase import (
 )
 from fsmbench.io.trailing import data_end, warn_trailing
 
-__all__ = ["CONVERTED_FROM", "available_memory_bytes", "convert_recording", "converted_from",
-           "open_recording"]
+__all__ = [
+    "CONVERTED_FROM",
+    "available_memory_bytes",
+    "convert_recording",
+    "converted_from",
+    "open_recording",
+    "v5_stream_variable",
+    "v5_vectors",
+]
 
 _READ_BLOCK = 1 << 20  # samples per piece when streaming a conversion (8 MiB of float64)
 
@@ -134,7 +143,6 @@ def _open_mat73(path: Path, chunk_samples: int, fs_hz: float | None) -> xr.Datas
             raise RecordingError(path, "has no time vector", variable=TIME)
         lengths = {k: _vector_length(path, f[k], k, True) for k in names}
     signals = [k for k in names if k != TIME]
-    from fsmbench.io.dataset import ordered_signals, signal_attrs
 
     ds = _lazy_dataset(path, ordered_signals(signals), lengths,
                        {k: signal_attrs(k) for k in signals}, {}, matlab=True,
@@ -178,14 +186,13 @@ def open_recording(path: str | os.PathLike[str], *, chunk_samples: int = DEFAULT
     if fmt == "mat73":
         return _validated(_open_mat73(p, chunk_samples, None), p, check_signals=check_signals)
     if fmt == "mat5":
-        need = sum(8 * n for _name, n in _v5_vectors(p))
+        need = sum(8 * n for _name, n in v5_vectors(p))
         have = available_memory_bytes()
         if need > memory_fraction * have:
             raise RecordingError(p, f"holds {need / 2**30:.1f} GiB of samples in MATLAB v5, "
                                  "which cannot be read in pieces, and this machine has "
                                  f"{have / 2**30:.1f} GiB available: convert it once with "
                                  f"fsmbench convert {p} {p.with_suffix('.h5')} --format nexus")
-    from fsmbench.io.recording import read_recording
 
     return read_recording(p)
 
@@ -339,7 +346,7 @@ def _v5_elements(path: Path) -> Iterator[tuple[Any, str, int, int, _Stream]]:
             fh.seek(start + size + (-size % 8 if outer != _MI_COMPRESSED else 0))
 
 
-def _v5_vectors(path: Path) -> list[tuple[str, int]]:
+def v5_vectors(path: Path) -> list[tuple[str, int]]:
     """(name, samples) of every real double vector of a v5 file (headers only)."""
     out = []
     for _fh, endian, _start, _size, s in _v5_elements(path):
@@ -349,7 +356,7 @@ def _v5_vectors(path: Path) -> list[tuple[str, int]]:
     return out
 
 
-def _v5_stream_variable(path: Path, wanted: str,
+def v5_stream_variable(path: Path, wanted: str,
                         block: int = _READ_BLOCK) -> Iterator[np.ndarray]:
     """The samples of one real double vector of a v5 file, ``block`` at a time."""
     for _fh, endian, _start, _size, s in _v5_elements(path):
@@ -454,18 +461,17 @@ def convert_recording(source: str | os.PathLike[str], dest: str | os.PathLike[st
     RecordingError
         Unreadable input, no usable time base, or ``fs_hz`` contradicting ``t``.
     """
-    from fsmbench.io.dataset import ordered_signals
 
     src, out = Path(source), Path(dest)
     fmt = detect_format(src)
     say = progress or (lambda _msg: None)
     if fmt == "mat5":
-        vectors = dict(_v5_vectors(src))
+        vectors = dict(v5_vectors(src))
         if TIME not in vectors:
             raise RecordingError(src, "has no time vector", variable=TIME)
 
         def pieces(name: str) -> Iterator[np.ndarray]:
-            return _v5_stream_variable(src, name)
+            return v5_stream_variable(src, name)
         n = vectors[TIME]
         signals = ordered_signals([k for k in vectors if k != TIME])
         uneven = [k for k in signals if vectors[k] != n]

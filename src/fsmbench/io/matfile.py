@@ -47,6 +47,7 @@ import scipy.sparse
 from scipy.io import matlab as _matlab
 
 from fsmbench.io.errors import RecordingError
+from fsmbench.io.signals import EXPERIMENTS
 from fsmbench.io.trailing import HDF5_SIGNATURE, PrefixReader, data_end, warn_trailing
 
 __all__ = [
@@ -231,7 +232,6 @@ def load_mat(
 def other_run_words(path: Path, held: Mapping[str, Any]) -> str:
     """Words naming the experiment whose variables a file holds instead of its own (a file
     saved under another run's name), empty when none matches."""
-    from fsmbench.io.signals import EXPERIMENTS
 
     names = set(held)
     own = path.stem

@@ -25,6 +25,7 @@ import scipy.io
 import scipy.sparse
 
 from fsmbench.atomic import atomic_path
+from fsmbench.version import __version__
 
 __all__ = ["FIXED_CREATED_S", "MatVersion", "mat5_header", "mat73_header", "save_mat",
            "wall_clock_headers", "wall_clock_wanted"]
@@ -130,8 +131,6 @@ def mat5_header(*, platform: str | None = None, created: float | None = None) ->
 
 
 def _platform(platform: str | None) -> str:
-    from fsmbench.version import __version__
-
     return platform if platform is not None else f"fsmbench {__version__}"
 
 

@@ -33,6 +33,7 @@ import numpy as np
 import xarray as xr
 
 from fsmbench.atomic import atomic_path
+from fsmbench.bench.params import default_bench
 from fsmbench.io.dataset import as_vector, check_lengths, validate_dataset
 from fsmbench.io.errors import RecordingError
 from fsmbench.io.nexus_meta import (
@@ -129,7 +130,6 @@ def write_nexus(ds: xr.Dataset, path: str | os.PathLike[str], *, compress: bool 
     ValueError
         ``start_time`` or ``end_time`` not ISO 8601 with a UTC offset.
     """
-    from fsmbench.bench.params import default_bench  # the bench layer is above io
 
     dest = Path(path)
     validate_dataset(ds, origin=os.fspath(dest), require=(), adc_range_v=20.0, adc_bits=16,

@@ -27,6 +27,7 @@ import h5py
 import numpy as np
 
 from fsmbench.io.matwrite import wall_clock_wanted
+from fsmbench.version import __version__
 
 if TYPE_CHECKING:
     from fsmbench.bench.params import Bench
@@ -117,7 +118,6 @@ def write_root(f: h5py.File, *, created: float | None,
     extra : mapping, optional
         More root attributes (``fsmbench convert``'s provenance).
     """
-    from fsmbench.version import __version__
 
     f.attrs["default"] = "entry"
     f.attrs["creator"] = f"fsmbench {__version__}"

@@ -23,6 +23,7 @@ import h5py
 import numpy as np
 
 from fsmbench.atomic import atomic_path
+from fsmbench.bench.params import default_bench
 from fsmbench.io.dataset import signal_attrs
 from fsmbench.io.nexus_meta import (
     END_TIME,
@@ -116,8 +117,6 @@ class NexusAppender:
         self._entry: h5py.Group | None = None
 
     def __enter__(self) -> NexusAppender:
-        from fsmbench.bench.params import default_bench  # the bench layer is above io
-
         tmp = self._stack.enter_context(atomic_path(self.path))
         f = self._stack.enter_context(h5py.File(tmp, "w"))
         self._file = f

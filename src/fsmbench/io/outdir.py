@@ -40,7 +40,9 @@ from pathlib import Path
 from types import FrameType
 from typing import Any, Final
 
+from fsmbench.atomic import atomic_write_text
 from fsmbench.jsonutil import format_text
+from fsmbench.version import __version__
 
 __all__ = [
     "MANIFEST",
@@ -353,9 +355,6 @@ def _sha256(path: Path) -> str:
 
 def _write_manifest(staging: Path, *, command: str, arguments: Sequence[str],
                     not_reproducible: Sequence[str], timestamp: bool) -> None:
-    from fsmbench.atomic import atomic_write_text
-    from fsmbench.version import __version__
-
     files = [{"path": p.relative_to(staging).as_posix(), "sha256": _sha256(p),
               "size_bytes": p.stat().st_size}
              for p in sorted(staging.rglob("*")) if p.is_file()]

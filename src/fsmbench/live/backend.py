@@ -21,6 +21,7 @@ from fsmbench.sim.engine import DiscreteController
 from fsmbench.sim.excitation import Excitation
 from fsmbench.sim.plant import ADC_CHANNELS, DAC_CHANNELS, bench_discrete
 from fsmbench.sim.stream import BenchStream, ControllerSwitch
+from fsmbench.twin.closed_loop import drifted_bench
 
 __all__ = ["DRIFT_STEP_PCT", "LIVE_SIGNALS", "MAX_DRIFT_PCT_PER_H", "LiveBlock",
            "PlaybackBackend", "TwinBackend"]
@@ -132,8 +133,6 @@ class TwinBackend:
     def step(self, n: int) -> LiveBlock:
         """The next ``n`` samples."""
         if self.drift_pct_per_h and self.time_s >= self._next_drift_s:
-            from fsmbench.twin.closed_loop import drifted_bench
-
             self.stream.set_plant(bench_discrete(drifted_bench(self.bench,
                                                                resonance_pct=self.drift_pct)))
             self._next_drift_s = self.time_s + self._drift_every_s

@@ -36,13 +36,15 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from fsmbench.bench.blocks import physical_plant
 from fsmbench.control.design import DesignOptions
 from fsmbench.control.load import load_controllers, select_controller
+from fsmbench.control.loops import discrete_axis_margins
 from fsmbench.control.study import CONTROLLERS_MAT, CONTROLLERS_SOS_JSON
 from fsmbench.io.errors import RecordingError
 from fsmbench.live.states import Refused
-from fsmbench.sim.controller import sercalo_feedback
-from fsmbench.sim.plant import ADC_CHANNELS, DAC_CHANNELS
+from fsmbench.sim.controller import closed_loop_spectral_radius, sercalo_feedback
+from fsmbench.sim.plant import ADC_CHANNELS, DAC_CHANNELS, bench_discrete
 
 if TYPE_CHECKING:
     from fsmbench.bench.params import Bench
@@ -351,9 +353,6 @@ class BenchCheck:
         # Built on the first check (~0.1 s), then kept: the bench model does not change.
         with self._lock:
             if self._model is None:
-                from fsmbench.bench.blocks import physical_plant
-                from fsmbench.sim.plant import bench_discrete
-
                 b = self.bench
                 plant = (physical_plant(b.true, source="the device's bench")
                          if b.model is None else b.model.plant)
@@ -370,8 +369,6 @@ class BenchCheck:
             As the loop runs it: ``Vph, Vpv`` [V] in, ``Uch, Ucv`` [V] out, the feedback
             sign and the 4QD gains included.
         """
-        from fsmbench.control.loops import discrete_axis_margins
-        from fsmbench.sim.controller import closed_loop_spectral_radius
 
         if k.adc_inputs != (ADC_CHANNELS.index("Vph"), ADC_CHANNELS.index("Vpv")) or \
                 k.dac_outputs != (DAC_CHANNELS.index("Uch"), DAC_CHANNELS.index("Ucv")):

@@ -53,8 +53,9 @@ from fsmbench.live.attributes import (
 )
 from fsmbench.live.core import LiveBench
 from fsmbench.live.states import Refused, plain
+from fsmbench.twin.identified import identified_bench
 
-__all__ = ["DEFAULT_DEVICE_NAME", "PROPERTY_DEFAULTS", "FsmBench"]
+__all__ = ["DEFAULT_DEVICE_NAME", "EMPTY_TEXT", "PROPERTY_DEFAULTS", "FsmBench"]
 
 DEFAULT_DEVICE_NAME = "fsmbench/bench/1"
 _STATES = {"ON": DevState.ON, "RUNNING": DevState.RUNNING, "MOVING": DevState.MOVING,
@@ -63,7 +64,7 @@ _QUALITY = {"VALID": AttrQuality.ATTR_VALID, "WARNING": AttrQuality.ATTR_WARNING
             "ALARM": AttrQuality.ATTR_ALARM, "INVALID": AttrQuality.ATTR_INVALID}
 _DTYPE: dict[str, Any] = {"float": float, "int": int, "bool": bool, "str": str,
                           "spectrum": (float,), "image": ((float,),)}
-_EMPTY: dict[str, Any] = {"float": float("nan"), "int": 0, "bool": False, "str": "",
+EMPTY_TEXT: dict[str, Any] = {"float": float("nan"), "int": 0, "bool": False, "str": "",
                           "spectrum": np.zeros(0), "image": np.zeros((0, 0))}
 #: Properties an administrator sets, with the defaults written when absent (text).
 PROPERTY_DEFAULTS = {"Backend": "twin", "PlaybackFolder": "", "ParamsFile": "",
@@ -196,8 +197,6 @@ class FsmBench(Device):
         try:
             bench = load_bench(self.ParamsFile) if self.ParamsFile else default_bench()
             if self.BenchFolder:
-                from fsmbench.twin.identified import identified_bench
-
                 bench = identified_bench(self.BenchFolder, bench=bench,
                                          option="the BenchFolder property")
             self.bench = LiveBench(bench, backend=self.Backend,
@@ -279,10 +278,10 @@ class FsmBench(Device):
 
     def _read(self, spec: AttributeSpec) -> tuple[Any, float, AttrQuality]:
         if self.bench is None:
-            return _EMPTY[spec.kind], time.time(), AttrQuality.ATTR_INVALID
+            return EMPTY_TEXT[spec.kind], time.time(), AttrQuality.ATTR_INVALID
         value, quality = evaluate(spec, self.bench, self._latch)
         if quality == "INVALID" or value is None:
-            value = _EMPTY[spec.kind]
+            value = EMPTY_TEXT[spec.kind]
         elif spec.kind == "str":
             value = plain(value) if spec.name != "Excitation" else value
         return value, time.time(), _QUALITY[quality]

@@ -32,6 +32,7 @@ This module imports softioc only when serving: it is the ``fsmbench[epics]`` ext
 from __future__ import annotations
 
 import contextlib
+import ctypes
 import faulthandler
 import functools
 import importlib.util
@@ -50,6 +51,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from fsmbench.bench.params import default_bench, load_bench
 from fsmbench.live.attributes import (
     ATTRIBUTES,
     AttributeSpec,
@@ -58,7 +60,10 @@ from fsmbench.live.attributes import (
     evaluate,
     precision,
 )
+from fsmbench.live.core import FileMemory, LiveBench
 from fsmbench.live.states import STATES, Refused, plain
+from fsmbench.signal.welch import default_nfft
+from fsmbench.twin.identified import identified_bench
 
 if TYPE_CHECKING:
     from fsmbench.live.core import LiveBench
@@ -167,8 +172,6 @@ def _readable_acf(path: Path) -> Path:
 
 def _access_security(path: Path) -> None:
     """Hand the file to EPICS before ``iocInit``, which parses it (``asInit``)."""
-    import ctypes
-
     from softioc import imports
 
     set_filename = imports.dbCore.asSetFilename
@@ -181,8 +184,6 @@ def _access_security(path: Path) -> None:
 def _access_security_active(path: Path) -> None:
     """After ``iocInit``: a file EPICS could not parse leaves the IOC serving nothing (its
     ``asInit`` failed), so the server stops with EPICS's message above ours."""
-    import ctypes
-
     from softioc import imports
 
     if not ctypes.c_int.in_dll(imports.dbCore, "asActive").value:
@@ -237,8 +238,6 @@ class BenchIoc:
                 on_update=self._action(name), DESC=f"put the argument to run {name}")
 
     def _spectrum_points(self) -> int:
-        from fsmbench.signal.welch import default_nfft
-
         return default_nfft(math.ceil(self.bench.fs_hz)) // 2 + 1  # 1 s Hann window
 
     def _make(self, builder: Any, spec: AttributeSpec, n_points: int) -> None:
@@ -483,12 +482,8 @@ def serve_epics(options: ServeOptions, *, ready: str = "") -> int:
                          "choose another --prefix")
     from softioc import asyncio_dispatcher, builder, softioc
 
-    from fsmbench.bench.params import default_bench, load_bench
-    from fsmbench.live.core import FileMemory, LiveBench
     bench = load_bench(options.params_file) if options.params_file else default_bench()
     if options.bench_folder is not None:
-        from fsmbench.twin.identified import identified_bench
-
         bench = identified_bench(options.bench_folder, bench=bench)
     out = options.output_folder.resolve()
     memory = FileMemory(out / f".fsmbench-ioc-{prefix.replace(':', '_')}.json")

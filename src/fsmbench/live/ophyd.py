@@ -41,6 +41,7 @@ import sys
 from collections.abc import Callable
 from typing import Any
 
+import numpy as np
 from ophyd_async.core import (
     DEFAULT_TIMEOUT,
     AsyncStatus,
@@ -238,7 +239,6 @@ class FsmBenchDevice(StandardReadable):
                  signal_rw: Callable[[Any, str], SignalRW[Any]],
                  command: Callable[[str, bool], CommandBackend[..., str]],
                  address: str, name: str = "") -> None:
-        import numpy as np
         from ophyd_async.core import Array1D
 
         self.address = address

@@ -13,7 +13,7 @@ from typing import Any
 
 import bluesky.plan_stubs as bps
 
-from fsmbench.live.ophyd import BenchCommand, BenchState, FsmBenchDevice
+from fsmbench.live.ophyd import BenchCommand, BenchState, CommandRefusedError, FsmBenchDevice
 
 __all__ = ["STALL_S", "Plan", "excitation_start", "execute", "in_thread", "stand_down",
            "wait_bench_time", "wait_until_done"]
@@ -79,8 +79,6 @@ def stand_down(bench: FsmBenchDevice, *, open_loop: bool) -> Plan:
     """After a plan, whether it ended or failed: its experiment or record aborted, its
     excitation stopped and (``open_loop``) the loop it closed opened; a refusal (nothing to
     stop, a FAULT) is no error here."""
-    from fsmbench.live.ophyd import CommandRefusedError
-
     if (yield from bps.rd(bench.state)) == BenchState.MOVING:
         with contextlib.suppress(CommandRefusedError):
             yield from execute(bench.abort)

@@ -42,6 +42,18 @@ import bluesky.plan_stubs as bps
 import bluesky.preprocessors as bpp
 import numpy as np
 
+from fsmbench import api
+from fsmbench.atomic import atomic_write_text
+from fsmbench.bench.params import default_bench
+from fsmbench.control.loaded import running_controller
+from fsmbench.excite.shaped import beam_bounded_measurement
+from fsmbench.ident.closed_loop import (
+    identify_closed_loop,
+    read_closed_loop_records,
+    write_closed_loop_identification,
+)
+from fsmbench.io.recording import make_recording, read_recording, write_recording
+from fsmbench.jsonutil import format_text, stamped
 from fsmbench.live.ophyd import FsmBenchDevice
 from fsmbench.live.plan_stubs import (
     Plan,
@@ -52,6 +64,15 @@ from fsmbench.live.plan_stubs import (
     wait_bench_time,
     wait_until_done,
 )
+from fsmbench.sim.excitation import SampledExcitation, samples_sha256
+from fsmbench.tune.measure import MeasurementOptions, StageRequest, measurement_steps
+from fsmbench.twin.closed_loop import (
+    CLOSED_LOOP_EXPERIMENTS,
+    CLOSED_LOOP_SIGNALS,
+    excitation_variable,
+)
+from fsmbench.twin.experiments import ExperimentSpec
+from fsmbench.twin.simulate import TwinRun
 
 if TYPE_CHECKING:
     from fsmbench.bench.params import Bench
@@ -194,10 +215,6 @@ def design_excitations(*, model: Any = None, controller: str | Path | None = Non
         ``Uch`` and ``Ucv``: one period of commands [V] at the bench's rate
         (:func:`fsmbench.excite.shaped.beam_bounded_measurement`).
     """
-    from fsmbench.bench.params import default_bench
-    from fsmbench.control.loaded import running_controller
-    from fsmbench.excite.shaped import beam_bounded_measurement
-    from fsmbench.twin.closed_loop import CLOSED_LOOP_EXPERIMENTS
 
     bench_model = model if model is not None else default_bench()
     k = running_controller(None if controller is None else str(controller), bench=bench_model)
@@ -219,13 +236,6 @@ def _record_closed_loop(bench: FsmBenchDevice, npy: Path, x: np.ndarray, *, peri
     period of bench time (at least :data:`_SETTLE_S`) ``periods`` whole periods recorded and
     written next to ``npy`` as ``data_cl_<ch>.mat`` with the excitation as it was played
     (placed by the bench time the device's ``Excitation`` says it started); its path."""
-    from fsmbench.io.recording import make_recording, read_recording, write_recording
-    from fsmbench.sim.excitation import samples_sha256
-    from fsmbench.twin.closed_loop import (
-        CLOSED_LOOP_EXPERIMENTS,
-        CLOSED_LOOP_SIGNALS,
-        excitation_variable,
-    )
 
     name = CLOSED_LOOP_EXPERIMENTS[channel]
     np.save(npy, x)
@@ -303,8 +313,6 @@ def closed_loop_experiments(bench: FsmBenchDevice, folder: str | Path, *,
     around them, :func:`fsmbench.tune.measure.measure_closed_loop`) is what brings the
     damping within its target.
     """
-    from fsmbench.bench.params import default_bench
-    from fsmbench.twin.closed_loop import CLOSED_LOOP_EXPERIMENTS
 
     out = Path(folder)
     out.mkdir(parents=True, exist_ok=True)
@@ -387,10 +395,6 @@ def _play_stage(bench: FsmBenchDevice, folder: Path, request: StageRequest, *, f
     """One stage's designs played through the device (:func:`_record_closed_loop`: the
     steady-state period repeated, ``transient + steady`` periods recorded); its records as
     :func:`fsmbench.tune.measure.measurement_steps` takes them."""
-    from fsmbench.ident.closed_loop import read_closed_loop_records
-    from fsmbench.sim.excitation import SampledExcitation
-    from fsmbench.twin.experiments import ExperimentSpec
-    from fsmbench.twin.simulate import TwinRun
 
     folder.mkdir(parents=True, exist_ok=True)
     specs = []
@@ -456,12 +460,6 @@ def closed_loop_identification(bench: FsmBenchDevice, folder: str | Path, *,
     -------
     ClosedLoopIdentificationRun
     """
-    from fsmbench.atomic import atomic_write_text
-    from fsmbench.bench.params import default_bench
-    from fsmbench.control.loaded import running_controller
-    from fsmbench.ident.closed_loop import write_closed_loop_identification
-    from fsmbench.jsonutil import format_text, stamped
-    from fsmbench.tune.measure import MeasurementOptions, StageRequest, measurement_steps
 
     out = Path(folder)
     out.mkdir(parents=True, exist_ok=True)
@@ -533,22 +531,14 @@ def identify_records(records: BenchRecords, *, model: Any = None,
     -------
     Identification or ClosedLoopIdentification
     """
-    from fsmbench.bench.params import default_bench
 
     bench = model if model is not None else default_bench()
     if records.kind == "closed loop":
-        from fsmbench.ident.closed_loop import (
-            identify_closed_loop,
-            read_closed_loop_records,
-            write_closed_loop_identification,
-        )
-
         result = identify_closed_loop(read_closed_loop_records(records.folder), bench=bench,
                                       source=f"{records.folder} ({records.address})")
         if out_dir is not None:
             write_closed_loop_identification(result, Path(out_dir))
         return result
-    from fsmbench import api
 
     loaded = api.load_recordings(records.folder, bench=bench)
     recordings = {k: v for k, v in loaded.recordings.items() if k in records.files}

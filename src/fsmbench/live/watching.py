@@ -35,7 +35,9 @@ from typing import Any
 import control as ct
 import numpy as np
 
+from fsmbench.bench.blocks import physical_plant
 from fsmbench.bench.params import Bench
+from fsmbench.control.validation import tracking_error_spectra
 from fsmbench.sim.engine import DiscreteController
 from fsmbench.tune.watch import LoopWatch, WatchEvent, WatchOptions
 
@@ -87,8 +89,6 @@ def prediction_of(bench: Bench, controller: DiscreteController, *,
     ratio of the two. ``cancelled()`` is asked between chunks of the frequency grid:
     when it says so, None is returned (a new controller, or the bench stopping).
     """
-    from fsmbench.bench.blocks import physical_plant
-    from fsmbench.control.validation import tracking_error_spectra
 
     p = bench.true
     fs = p.converter.fs_hz

@@ -29,6 +29,7 @@ from typing import Any, Literal
 
 from fsmbench.checks import Check, Notice
 from fsmbench.jsonutil import plain_json
+from fsmbench.report.sections.montecarlo import robustness_sentence
 from fsmbench.report.verdict import next_step, verdict_html
 from fsmbench.version import __version__
 
@@ -663,7 +664,6 @@ def _with_montecarlo(reqs: list[Requirement], montecarlo: Mapping[str, Any],
                      findings: list[str]) -> list[Requirement]:
     """The robustness row with the Monte Carlo's sentence added to its explanation (the
     verdict stays the design's robust set's: the draws are another test of the same)."""
-    from fsmbench.report.sections.montecarlo import robustness_sentence
 
     sentence = robustness_sentence(montecarlo)
     if not sentence:

@@ -67,9 +67,13 @@ import numpy as np
 
 from fsmbench.bench.blocks import physical_plant
 from fsmbench.bench.params import Bench, PerAxis
+from fsmbench.control.loops import discrete_axis_margins
 from fsmbench.jsonutil import nested, plain_json, stamped
 from fsmbench.scale.breaches import Limits, RequirementOutcome, requirement_outcomes
+from fsmbench.sim.controller import closed_loop_spectral_radius, sercalo_feedback
 from fsmbench.sim.engine import DiscreteController
+from fsmbench.sim.plant import ADC_CHANNELS, bench_discrete
+from fsmbench.sim.stream import BenchStream
 from fsmbench.twin.draws import (
     PARAMETERS,
     RANGE_OF_PARAMETER,
@@ -79,7 +83,8 @@ from fsmbench.twin.draws import (
     parameter_values,
     perturbed_bench,
 )
-from fsmbench.twin.experiments import REP_FREQ_HZ
+from fsmbench.twin.experiments import REP_FREQ_HZ, esrf_experiments, with_duration
+from fsmbench.version import __version__
 
 __all__ = [
     "METRICS",
@@ -178,7 +183,6 @@ class ControllerChoice:
 
 def discrete_feedback(choice: ControllerChoice) -> DiscreteController:
     """The twin's controller ``u = −K (Vp / Gd)`` (as ``fsmbench.live.core``'s loaded ones)."""
-    from fsmbench.sim.controller import sercalo_feedback
 
     return sercalo_feedback(a=choice.a, b=choice.b, c=choice.c, d=choice.d,
                             gd_v_per_rad=tuple(choice.gd_v_per_rad.as_array()), name=choice.name)
@@ -261,7 +265,6 @@ class DrawResult:
 
 def _margins(bench: Bench, choice: ControllerChoice) -> dict[str, float]:
     """Gain, phase and modulus margins of ``L_ii = (G Kd)_ii`` below Nyquist (exact delays)."""
-    from fsmbench.control.loops import discrete_axis_margins
 
     plant = (physical_plant(bench.true, source="drawn") if bench.model is None
              else bench.model.plant)
@@ -291,10 +294,6 @@ def run_draw(draw: Draw, setup: MonteCarloSetup) -> DrawResult:
     The repeatability experiments run as :func:`fsmbench.twin.simulate.simulate_experiment`
     runs them (same streams, same noise seeds), with the generic loop.
     """
-    from fsmbench.sim.controller import closed_loop_spectral_radius
-    from fsmbench.sim.plant import ADC_CHANNELS, bench_discrete
-    from fsmbench.sim.stream import BenchStream
-    from fsmbench.twin.experiments import esrf_experiments, with_duration
 
     bench = perturbed_bench(setup.bench, draw.factors)
     p = bench.true
@@ -370,7 +369,6 @@ class MonteCarloResult:
 
     def to_json(self) -> dict[str, Any]:
         """``montecarlo.json``'s content: summary, setup and one row per draw."""
-        from fsmbench.version import __version__
 
         name, version = MONTECARLO_FORMAT
         s = summarise(self)

@@ -13,6 +13,24 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+import numpy as np
+
+from fsmbench.bench.blocks import physical_plant
+from fsmbench.bench.esrf import tustin
+from fsmbench.bench.params import PerAxis
+from fsmbench.control.analysis import control_objective
+from fsmbench.control.design import design_controller
+from fsmbench.control.load import load_controllers, select_controller
+from fsmbench.jsonutil import nested
+from fsmbench.scale.breaches import breach_sentence, factors_sentence
+from fsmbench.scale.montecarlo import (
+    METRICS,
+    MONTECARLO_FORMAT,
+    ControllerChoice,
+    Ranges,
+    summarise,
+)
+
 # The command line imports this module to build its parser: the model, numba and Dask load
 # only when a function runs.
 if TYPE_CHECKING:
@@ -36,7 +54,6 @@ def read_ranges(path: str | Path) -> Ranges:
         One line naming the file and the key: not TOML, unknown key, not a
         pair of numbers, or an invalid range.
     """
-    from fsmbench.scale.montecarlo import Ranges
 
     p = Path(path)
     try:
@@ -72,7 +89,6 @@ def read_montecarlo(path: str | Path) -> dict[str, Any]:
         One line naming the file: missing, not JSON, not ``fsmbench.montecarlo``, or a
         version without ``requirements`` (before 3: run ``fsmbench montecarlo`` again).
     """
-    from fsmbench.scale.montecarlo import MONTECARLO_FORMAT
 
     p = Path(path)
     p = p / "montecarlo.json" if p.is_dir() else p
@@ -101,13 +117,6 @@ def designed_controller(bench: Bench, *, plant: Any = None,
     ``fsmbench design`` designs on the plant :func:`fsmbench.stages.choose_plant`
     picks: the identified one when the recordings allow it, else this nominal model.
     """
-    import numpy as np
-
-    from fsmbench.bench.blocks import physical_plant
-    from fsmbench.bench.esrf import tustin
-    from fsmbench.control.analysis import control_objective
-    from fsmbench.control.design import design_controller
-    from fsmbench.scale.montecarlo import ControllerChoice
 
     model = physical_plant(bench.nominal, source=plant_source) if plant is None else plant
     k = design_controller(model, objective=control_objective(bench.nominal)).controller
@@ -127,11 +136,6 @@ def loaded_controller(path: str | Path, *, name: str | None, bench: Bench) -> Co
     ``name`` picks it (default fsmbench's, :func:`fsmbench.control.load.select_controller`);
     its recorded 4QD gain is used if the file has one, else ``bench.nominal``'s.
     """
-    import numpy as np
-
-    from fsmbench.bench.params import PerAxis
-    from fsmbench.control.load import load_controllers, select_controller
-    from fsmbench.scale.montecarlo import ControllerChoice
 
     ts = bench.true.converter.ts_s
     chosen = select_controller(load_controllers(path, ts_s=ts), name)
@@ -187,7 +191,6 @@ _BREACHES_SHOWN = 20
 
 def _requirement_lines(result: Any) -> list[str]:
     """Per requirement: draws meeting it, then every draw that breaks it, named."""
-    from fsmbench.scale.breaches import breach_sentence
 
     n = len(result.draws)
     lines = ["requirements over the draws (a draw passes when both axes do):"]
@@ -210,9 +213,6 @@ def _requirement_lines(result: Any) -> list[str]:
 def format_table(result: Any) -> str:
     """The short table: per requirement the draws that meet it and every draw that breaks
     it (with its factors), quantiles of each metric in display units, the worst draws."""
-    from fsmbench.jsonutil import nested
-    from fsmbench.scale.breaches import factors_sentence
-    from fsmbench.scale.montecarlo import METRICS, summarise
 
     s = summarise(result)
     n = len(result.draws)

@@ -47,6 +47,8 @@ import numpy as np
 from numba import njit
 from numpy.typing import ArrayLike, NDArray
 
+from fsmbench.signal.segments import read_span as read
+
 __all__ = ["AllanRegion", "AllanResult", "allan_deviation", "allan_regions"]
 
 _Read = tuple[list[Any], int, int]  # (chunks, offset in the first, length)
@@ -168,8 +170,6 @@ def _si(value: float, unit: str) -> str:
 # --------------------------------------------------------------------------- tasks
 def _read(pieces: Sequence[NDArray[np.float64]], offset: int,
           length: int) -> NDArray[np.float64]:
-    from fsmbench.signal.segments import read_span as read  # the Dask graph's reader
-
     return read(pieces, offset, length)
 
 

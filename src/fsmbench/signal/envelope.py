@@ -21,6 +21,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from fsmbench.signal.segments import read_span
+
 __all__ = ["Envelope", "minmax_envelope"]
 
 
@@ -53,7 +55,6 @@ def _bins(
     pieces: list[NDArray[np.float64]], offset: int, length: int, local_edges: NDArray[np.int64]
 ) -> NDArray[np.float64]:
     """``(3, bins)``: min, max, mean of ``data[local_edges[i]:local_edges[i+1]]``."""
-    from fsmbench.signal.segments import read_span  # the Dask graph's reader
 
     return _reduce(read_span(pieces, offset, length), local_edges)
 

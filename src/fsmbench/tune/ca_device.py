@@ -38,6 +38,8 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
+import numpy as np
+
 from fsmbench.live.attributes import ATTRIBUTES
 from fsmbench.live.epics import ACTIONS, ARGUMENT_COMMANDS, MAX_ARRAY_BYTES, check_prefix
 from fsmbench.live.states import STATES
@@ -95,7 +97,6 @@ def _convert(kind: str, value: Any) -> Any:
         return float(value)
     if kind == "str":
         return str(value)
-    import numpy as np
 
     return np.asarray(value, dtype=float)
 

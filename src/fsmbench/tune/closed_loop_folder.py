@@ -15,6 +15,14 @@ from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from fsmbench.ident.closed_loop import (
+    ClosedLoopIdentifyOptions,
+    find_closed_loop_records,
+    identify_closed_loop,
+    read_closed_loop_records,
+    write_closed_loop_identification,
+)
+
 if TYPE_CHECKING:  # the identification is imported when a command runs, not with the CLI
     from fsmbench.bench.params import Bench
     from fsmbench.ident.closed_loop import ClosedLoopIdentification
@@ -28,7 +36,6 @@ _SUFFIXES = (".mat", ".h5", ".nxs")
 
 def is_closed_loop_folder(folder: str | Path) -> bool:
     """Both closed-loop records and neither open-loop Sercalo record."""
-    from fsmbench.ident.closed_loop import find_closed_loop_records
 
     root = Path(folder)
     if not root.is_dir() or len(find_closed_loop_records(root)) < 2:
@@ -44,7 +51,6 @@ def check_closed_loop_folder(folder: str | Path) -> None:
     ValueError
         One line: the folder holds no ``data_cl_*`` record (what it holds instead).
     """
-    from fsmbench.ident.closed_loop import find_closed_loop_records
 
     root = Path(folder)
     if root.is_dir() and find_closed_loop_records(root):
@@ -71,12 +77,6 @@ def identify_closed_loop_folder(folder: str | Path, *, bench: Bench, out_dir: Pa
     RecordingError, ValueError
         A record missing, unreadable or failing its checks (named).
     """
-    from fsmbench.ident.closed_loop import (
-        ClosedLoopIdentifyOptions,
-        identify_closed_loop,
-        read_closed_loop_records,
-        write_closed_loop_identification,
-    )
 
     say = progress or (lambda _m: None)
     why = ("identify --closed-loop" if asked

@@ -59,6 +59,7 @@ from typing import Any
 import numpy as np
 
 from fsmbench.bench.params import Bench
+from fsmbench.control.export import InputScaling, write_sos_json
 from fsmbench.control.loaded import RunningController
 from fsmbench.io.recording import make_recording, read_recording
 from fsmbench.sim.excitation import SampledExcitation, samples_sha256
@@ -71,7 +72,7 @@ from fsmbench.twin.closed_loop import CLOSED_LOOP_SIGNALS, ClosedLoopPlay, excit
 from fsmbench.twin.experiments import ExperimentSpec
 from fsmbench.twin.simulate import TwinRun
 
-__all__ = ["DeviceTarget", "device_proxy", "release_proxy"]
+__all__ = ["DeviceTarget", "device_proxy", "device_words", "release_proxy"]
 
 #: Bench time the excitation may start late in its record [s], at least, and in wall clock
 #: at the device's speed [s] (the client's round trips: 20 ms of wall clock is 1 s of bench
@@ -107,7 +108,7 @@ def _restore_requests(source: str | None) -> list[Any]:
     return [doc, "last-good"]
 
 
-def _words(exc: BaseException) -> str:
+def device_words(exc: BaseException) -> str:
     """A device's refusal (its sentence and reason code, on either protocol) or an error, in
     one line."""
     failure = device_failure(exc)
@@ -283,7 +284,6 @@ class DeviceTarget:
 
     def load(self, loop: Loop) -> dict[str, Any]:
         """``LoadController`` of ``loop`` (its SOS file), bumpless in RUNNING."""
-        from fsmbench.control.export import InputScaling, write_sos_json
 
         key = "tuned" if "closed-loop" in loop.name else "controller"
         where = self.controllers / self._name("controller") / "controllers_sos.json"
@@ -341,7 +341,7 @@ class DeviceTarget:
                 self._wait(lambda: str(self.proxy.state()) != "MOVING",
                            "the end of tune's record", 0.0)
         except Exception as exc:  # say what could not be stopped, then what runs
-            stopped.append(f"(stopping failed: {_words(exc)})")
+            stopped.append(f"(stopping failed: {device_words(exc)})")
         holds = self.running_controller()
         closed = bool(self._attr("LoopClosed"))
         what = (f"the device still runs {holds}, as before tune" if closed else
@@ -390,7 +390,7 @@ class DeviceTarget:
                 reply = self.proxy.LoadController(text)
                 self._wait(lambda: self._attr("Task") == "", "the controller's load", 0.0)
             except Exception as exc:  # a refusal: the next way back
-                tried.append(f"LoadController {text!r}: {_words(exc)}")
+                tried.append(f"LoadController {text!r}: {device_words(exc)}")
                 continue
             now = self.running_controller()
             if now == loop.name:

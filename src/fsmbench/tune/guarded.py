@@ -42,7 +42,11 @@ from scipy import signal
 
 from fsmbench.bench.blocks import PlantModel
 from fsmbench.bench.params import Bench
+from fsmbench.control.analysis import control_objective
+from fsmbench.control.design import robustness
 from fsmbench.control.loaded import RunningController
+from fsmbench.control.loops import analyse_loop
+from fsmbench.control.study import design_study
 from fsmbench.sim.stream import BenchStream
 from fsmbench.tune.measure import ClosedLoopMeasurement, measure_closed_loop
 from fsmbench.tune.targets import TwinTarget
@@ -63,17 +67,27 @@ from fsmbench.tune.values import (
 )
 from fsmbench.twin.closed_loop import drifted_bench
 from fsmbench.twin.experiments import REP_AMPLITUDE_V
+from fsmbench.twin.verify import predict_tracking
 
-__all__ = ["MAX_MODE_MOVE", "TUNE_FORMAT", "ControllerFigures", "Loop", "TuneOptions",
-           "TuneResult", "TuneTarget", "implausible_modes", "loop_of", "not_plausible",
-           "tune_guarded", "tune_twin"]
+__all__ = [
+    "MAX_MODE_MOVE",
+    "TUNE_FORMAT",
+    "ControllerFigures",
+    "Loop",
+    "TuneOptions",
+    "TuneResult",
+    "TuneTarget",
+    "implausible_modes",
+    "loop_of",
+    "not_plausible",
+    "refusal_reason",
+    "tune_guarded",
+    "tune_twin",
+]
 # The values (tune.values) are re-exported: the procedure's module is where users look.
 
 def _figures(loop: Loop, *, plant: PlantModel, bench: Bench, objective: Any,
              robust: bool | None, watch_s: float, disturbance_v: float) -> ControllerFigures:
-    from fsmbench.control.loops import analyse_loop
-    from fsmbench.twin.verify import predict_tracking
-
     la = analyse_loop(plant, loop.k, objective=objective, name=loop.name)
     predicted, parts = predict_tracking(plant, loop.k, bench=bench,
                                         gd_used_v_per_rad=loop.gd_v_per_rad,
@@ -223,9 +237,6 @@ def tune_guarded(*, target: TuneTarget, bench: Bench, running: Loop,
     KeyboardInterrupt
         Ctrl-C once the load had started, raised again after the roll-back.
     """
-    from fsmbench.control.analysis import control_objective
-    from fsmbench.control.design import robustness
-    from fsmbench.control.study import design_study
 
     opts = options or TuneOptions()
     log: list[str] = []
@@ -293,7 +304,7 @@ def tune_guarded(*, target: TuneTarget, bench: Bench, running: Loop,
     say(f"verified {candidate.name} on the identified bench: |S(1 Hz)| "
         + ", ".join(f"{a} {v:.3g}" for a, v in cand.sensitivity_at_1hz.items())
         + f"; predicted tracking error {urad_text(cand.predicted_rms_rad)} rms")
-    refusal = _refusal(cand, measured_before, opts)
+    refusal = refusal_reason(cand, measured_before, opts)
     f_asd, asd_before = _asd(e_before, watch.fs_hz)
     if refusal:
         say(f"refused: {refusal}")
@@ -324,7 +335,7 @@ def tune_guarded(*, target: TuneTarget, bench: Bench, running: Loop,
                           journal=journal, say=say, after_load=after_load)
 
 
-def _refusal(cand: ControllerFigures, measured_before: Mapping[str, float],
+def refusal_reason(cand: ControllerFigures, measured_before: Mapping[str, float],
              opts: TuneOptions) -> str:
     """Why the candidate is not loaded, in words ('' when it may be)."""
     if not cand.stable:

@@ -41,6 +41,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from fsmbench.bench.axes import PerAxis
 from fsmbench.bench.params import Bench
 from fsmbench.control.loaded import RunningController
 from fsmbench.excite.closed_loop import robust_loops
@@ -52,7 +53,10 @@ from fsmbench.ident.closed_loop import (
     write_closed_loop_identification,
 )
 from fsmbench.ident.frf.closed_loop import ClosedLoopFrf
-from fsmbench.twin.closed_loop import ClosedLoopPlay, play_closed_loop
+from fsmbench.ident.load import load_identified_plant, read_identification_json
+from fsmbench.twin.closed_loop import CLOSED_LOOP_EXPERIMENTS, ClosedLoopPlay, play_closed_loop
+from fsmbench.twin.draws import PARAMETERS, perturbed_bench
+from fsmbench.twin.identified import bench_from_identification
 from fsmbench.twin.simulate import TwinRun
 
 __all__ = [
@@ -194,8 +198,6 @@ def identified_model(ident: ClosedLoopIdentification, *, bench: Bench,
     ValueError
         The Sercalo was not identified (the reason named).
     """
-    from fsmbench.ident.load import load_identified_plant, read_identification_json
-    from fsmbench.twin.identified import bench_from_identification
 
     if ident.plant is None:
         raise ValueError(f"the Sercalo was not identified in closed loop: "
@@ -219,8 +221,6 @@ def located_bench(model: Bench, ident: ClosedLoopIdentification) -> Bench:
     ValueError
         ``ident`` found no resonance on an axis (named).
     """
-    from fsmbench.bench.axes import PerAxis
-    from fsmbench.twin.draws import PARAMETERS, perturbed_bench
 
     if (why := not_located(ident)):
         raise ValueError(f"stage 1 found {why}")
@@ -251,7 +251,6 @@ def model_excess(ident: ClosedLoopIdentification,
     over the design's worst model's rms; the largest over the commands, at
     least 1. Not measurable (NaN) counts as 1.
     """
-    from fsmbench.twin.closed_loop import CLOSED_LOOP_EXPERIMENTS
 
     ratio = 1.0
     tracking = {t.record: t for t in ident.tracking}

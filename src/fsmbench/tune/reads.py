@@ -8,6 +8,11 @@ had loaded a controller. :func:`read_valid` is the one way :mod:`fsmbench.tune.d
 reads an attribute: an INVALID reading is read again, every :data:`POLL_S`, for a bounded
 wall-clock time; one still INVALID then is a :class:`DeviceReadError` naming the attribute
 and the device, never a ``TypeError``.
+
+A read that PyTango gives up on because the device is busy (``API_CommandTimedOut``: its
+serialization monitor held past the client's timeout by another call, seen on two cores
+each running a busy process) is read again the same way: the device is there and will
+answer; only the wait is bounded.
 """
 
 from __future__ import annotations
@@ -26,7 +31,8 @@ POLL_S = 0.05
 
 
 class DeviceReadError(ValueError):
-    """An attribute stayed INVALID (or without a value) for the whole wait.
+    """An attribute stayed INVALID (or without a value, or the device busy) for the whole
+    wait.
 
     Parameters
     ----------
@@ -45,6 +51,17 @@ class DeviceReadError(ValueError):
                          f"{waited_s:.1f} s of wall clock ({reads} reads; the device gives no "
                          "value when it cannot take its bench's lock, a busy machine, or when "
                          "its loop stalls): tune acts on no value it was not given")
+
+
+#: PyTango's reasons for a read the device was too busy to serve in the client's timeout.
+_BUSY_REASONS = frozenset({"API_CommandTimedOut", "API_DeviceTimedOut"})
+
+
+def _busy(exc: Exception) -> bool:
+    """True for a ``tango.DevFailed`` whose errors say the device was busy (no import of
+    PyTango: its errors are read by their ``reason``)."""
+    errors = exc.args[0] if exc.args and isinstance(exc.args[0], (tuple, list)) else exc.args
+    return any(getattr(e, "reason", None) in _BUSY_REASONS for e in errors)
 
 
 def _invalid(reading: Any) -> bool:
@@ -79,15 +96,20 @@ def read_valid(proxy: Any, attribute: str, *, device: str,
     Raises
     ------
     DeviceReadError
-        Still INVALID after ``wait_s``, naming ``attribute`` and ``device``.
+        Still INVALID (or busy) after ``wait_s``, naming ``attribute`` and ``device``.
     tango.DevFailed or fsmbench.tune.device_errors.DeviceLost
         The read itself failed (the device gone, the connection lost): not retried.
     """
     t0 = time.monotonic()
     reads = 0
     while True:
-        reading = proxy.read_attribute(attribute)
-        if not _invalid(reading):
+        try:
+            reading = proxy.read_attribute(attribute)
+        except Exception as exc:
+            if not _busy(exc):
+                raise
+            reading = None
+        if reading is not None and not _invalid(reading):
             return reading.value
         reads += 1
         waited = time.monotonic() - t0

@@ -48,7 +48,14 @@ from fsmbench.tune.values import (
     with_changes,
 )
 
-__all__ = ["OUTCOMES", "LoopChangeError", "LoopOpenedError", "ctrl_c_held", "load_and_watch"]
+__all__ = [
+    "OUTCOMES",
+    "LoopChangeError",
+    "LoopOpenedError",
+    "ctrl_c_held",
+    "failure_cause",
+    "load_and_watch",
+]
 
 #: What a loop change ends as (``tune.json``'s ``transaction.outcome``).
 OUTCOMES = ("loaded", "rolled_back", "interrupted", "loop_opened")
@@ -93,7 +100,7 @@ class LoopChangeError(ValueError):
 Make = Callable[..., "TuneResult"]
 
 
-def _cause(exc: BaseException) -> str:
+def failure_cause(exc: BaseException) -> str:
     """What cut the change short, in words."""
     if isinstance(exc, KeyboardInterrupt):
         return "interrupted (Ctrl-C)"
@@ -144,7 +151,7 @@ def _recover(target: TuneTarget, running: Loop, point: Mapping[str, Any],
         try:
             now: str | None = target.running_controller()
         except Exception as exc:  # the device gone: try the roll-back all the same
-            now, seen = None, _cause(exc)
+            now, seen = None, failure_cause(exc)
         else:
             seen = ""
         if now == running.name and not load_started:
@@ -154,11 +161,11 @@ def _recover(target: TuneTarget, running: Loop, point: Mapping[str, Any],
         try:
             switch = target.roll_back(running, force=load_started)
         except Exception as exc:
-            why = _cause(exc)
+            why = failure_cause(exc)
             try:
                 now = target.running_controller()
             except Exception as again:
-                now, seen = None, _cause(again)
+                now, seen = None, failure_cause(again)
             hand = _by_hand(point)
             seed = "" if "seed" in point.get("restore_with", ()) else \
                 " (or LoadController 'seed' for the ESRF study's controller)"
@@ -280,7 +287,7 @@ def load_and_watch(*, target: TuneTarget, running: Loop, candidate: Loop,
             result = make("loaded", reason, candidate_figures=cand, after=cand,
                           switches=switches, transaction=tx, e_after=e_after)
     except BaseException as exc:
-        cause = _cause(exc)
+        cause = failure_cause(exc)
         when = (f"after the load of {candidate.name} had started" if tx["load_started"] else
                 f"before {candidate.name} was loaded")
         rollback: dict[str, Any]
@@ -307,7 +314,7 @@ def load_and_watch(*, target: TuneTarget, running: Loop, candidate: Loop,
                 journal(make("interrupted", reason, candidate_figures=cand, after=after,
                              switches=switches, transaction=tx))
         except Exception as again:
-            say(f"the record of the interruption could not be written: {_cause(again)}")
+            say(f"the record of the interruption could not be written: {failure_cause(again)}")
         if isinstance(exc, Exception):
             raise LoopChangeError(f"{cause}; {sentence}", sentence) from exc
         raise

@@ -45,7 +45,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy import signal
+from scipy import signal, stats
 
 __all__ = ["BandCheck", "LoopWatch", "WatchEvent", "WatchOptions"]
 
@@ -164,8 +164,6 @@ def _z(measured: float, reference: float, *, dof: float, baseline: int) -> float
     degrees of freedom (a lightly damped peak is one or two bins) give a skewed ratio
     that a normal scale would raise alarms on.
     """
-    from scipy import stats
-
     if not reference > 0:
         return math.inf
     ratio = measured / reference

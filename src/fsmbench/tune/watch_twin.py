@@ -19,6 +19,7 @@ import numpy as np
 
 from fsmbench.bench.blocks import physical_plant
 from fsmbench.bench.params import Bench
+from fsmbench.control.validation import tracking_error_spectra
 from fsmbench.sim.plant import ADC_CHANNELS, bench_discrete
 from fsmbench.sim.stream import BenchStream
 from fsmbench.tune.values import Loop
@@ -84,7 +85,6 @@ def watch_twin(*, bench: Bench, loop: Loop, drift_pct_per_h: float, duration_s: 
         The drift starts this long into the watch [s]; default when the watch's
         baseline is taken (``baseline_windows`` windows), as after a ``tune``.
     """
-    from fsmbench.control.validation import tracking_error_spectra
 
     opts = options or WatchOptions()
     start = opts.baseline_windows * opts.window_s if drift_start_s is None else drift_start_s

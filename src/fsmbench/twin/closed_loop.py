@@ -39,10 +39,14 @@ import xarray as xr
 
 from fsmbench.bench.params import Bench
 from fsmbench.control.loaded import RunningController
+from fsmbench.excite.files import read_excitation
+from fsmbench.excite.shaped import beam_bounded_measurement
 from fsmbench.io.recording import make_recording
+from fsmbench.sim.controller import closed_loop_spectral_radius
 from fsmbench.sim.excitation import SampledExcitation, samples_sha256
-from fsmbench.sim.plant import bench_discrete
+from fsmbench.sim.plant import ADC_CHANNELS, bench_discrete
 from fsmbench.sim.stream import BenchStream
+from fsmbench.twin.draws import PARAMETERS, perturbed_bench
 from fsmbench.twin.experiments import ExperimentSpec
 from fsmbench.twin.simulate import TwinRun
 from fsmbench.twin.truth import twin_truth
@@ -120,7 +124,6 @@ def drifted_bench(bench: Bench, *, resonance_pct: float) -> Bench:
         raise ValueError(f"a resonance drift must be above -100 %, got {resonance_pct:g} %")
     if resonance_pct == 0.0:
         return bench
-    from fsmbench.twin.draws import PARAMETERS, perturbed_bench
 
     factors = {k: (0.0 if k.endswith("_s") else 1.0) for k in PARAMETERS}
     factors.update({f"resonance_scale.{a}": 1.0 + resonance_pct / 100.0 for a in "hv"})
@@ -181,8 +184,6 @@ def play_closed_loop(plays: Sequence[ClosedLoopPlay], *, bench: Bench,
         Two plays of one command, an unstable loop, a record shorter than the
         settling time, an excitation beyond a converter's range.
     """
-    from fsmbench.sim.controller import closed_loop_spectral_radius
-    from fsmbench.sim.plant import ADC_CHANNELS
 
     names = [p.name for p in plays]
     if len(set(names)) != len(names):
@@ -270,8 +271,6 @@ def simulate_closed_loop(*, bench: Bench, controller: RunningController,
     """
     plays: list[ClosedLoopPlay] = []
     if sources:
-        from fsmbench.excite.files import read_excitation
-
         for src in sources:
             design = read_excitation(src)
             if design.input not in CLOSED_LOOP_EXPERIMENTS:
@@ -283,8 +282,6 @@ def simulate_closed_loop(*, bench: Bench, controller: RunningController,
                                   else None),
                 description=f"the excitation of {src}"))
     else:
-        from fsmbench.excite.shaped import beam_bounded_measurement
-
         for ch in ("Uch", "Ucv"):
             m = beam_bounded_measurement(
                 bench=bench, params=bench.nominal if bench.model is None else bench.true,

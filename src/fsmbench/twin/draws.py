@@ -21,6 +21,7 @@ from fsmbench.bench.params import Bench, BenchParams, PerAxis
 from fsmbench.control.design import DesignOptions
 from fsmbench.jsonutil import plain_json
 from fsmbench.twin.compare import TARGETS
+from fsmbench.twin.identified import perturbed_identified
 
 __all__ = ["PARAMETERS", "RANGE_OF_PARAMETER", "Draw", "Ranges", "draw_parameters",
            "parameter_values", "perturbed_bench"]
@@ -159,8 +160,6 @@ def perturbed_bench(bench: Bench, factors: Mapping[str, float]) -> Bench:
     in its identified plant instead (:func:`fsmbench.twin.identified.perturbed_identified`).
     """
     if bench.model is not None:
-        from fsmbench.twin.identified import perturbed_identified
-
         return perturbed_identified(bench, factors)
     p = bench.true
     ts = p.converter.ts_s

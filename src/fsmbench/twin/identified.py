@@ -37,6 +37,9 @@ from fsmbench.bench.axes import PerAxis
 from fsmbench.bench.blocks import PlantModel, assemble_plant
 from fsmbench.bench.identified import IdentifiedModel, engine_model
 from fsmbench.bench.params import Bench, BenchParams
+from fsmbench.excite.identified import quad_diode_from_identification
+from fsmbench.ident.load import load_identified_plant, read_identification_json
+from fsmbench.ident.noise_model import NoiseModelFit
 from fsmbench.io.errors import RecordingError
 
 __all__ = ["CONTRACTED_KEYS", "bench_from_identification", "identified_bench",
@@ -60,8 +63,6 @@ def _quad_diode(params: BenchParams, ident: Mapping[str, Any], gd: np.ndarray, p
     calibrated = isinstance(diagnostics.get("qd"), dict) and all(
         a in diagnostics["qd"] for a in "hv")
     if calibrated:
-        from fsmbench.excite.identified import quad_diode_from_identification
-
         params = quad_diode_from_identification(params, dict(ident), path=path)
         qd = params.quad_diode
         provenance["4QD gain and compression"] = "measured: data_cal_pd_h, data_cal_pd_v"
@@ -105,7 +106,6 @@ def identified_bench(folder: str | Path, *, bench: Bench, label: str = "",
         The folder is not an identification, its Sercalo was not identified,
         the identification raised warnings, or its files are malformed (one line).
     """
-    from fsmbench.ident.load import load_identified_plant, read_identification_json
 
     ident_path, ident = read_identification_json(folder, option=option)
     plant = load_identified_plant(ident_path.parent, option=option).plant
@@ -142,8 +142,6 @@ def bench_from_identification(ident: Mapping[str, Any], *, plant: PlantModel, be
     noise_fit: dict[str, Any] = {}
     raw = ident.get("noise_model")
     if isinstance(raw, dict) and raw:
-        from fsmbench.ident.noise_model import NoiseModelFit
-
         try:
             fit = NoiseModelFit.from_json(raw)
         except (KeyError, TypeError, ValueError) as exc:

@@ -30,10 +30,12 @@ import xarray as xr
 
 from fsmbench.atomic import atomic_write_text
 from fsmbench.bench.params import Bench, default_bench
+from fsmbench.excite.files import ExcitationFileError, find_description, read_excitation
 from fsmbench.io.recording import RecordingFormat, make_recording, write_recording
 from fsmbench.io.signals import EXPERIMENTS
 from fsmbench.jsonutil import format_text, stamped
 from fsmbench.progress import advance
+from fsmbench.sim.codegen import specialised_kernel
 from fsmbench.sim.controller import closed_loop_spectral_radius
 from fsmbench.sim.discretize import DiscretePlant
 from fsmbench.sim.engine import DiscreteController
@@ -48,6 +50,7 @@ from fsmbench.twin.experiments import (
     played_experiment,
     with_duration,
 )
+from fsmbench.twin.long import stream_experiment
 from fsmbench.twin.truth import TRUTH_FORMAT, twin_truth
 
 __all__ = [
@@ -164,8 +167,6 @@ def stream_bench(bench: Bench | None = None, *, out_dir: str | Path, seed: int =
     :func:`simulate_bench` gives for the same seed, bit for bit. Writes
     ``<name>.h5`` and ``twin_truth.json`` into ``out_dir``; returns the paths.
     """
-    from fsmbench.sim.codegen import specialised_kernel
-    from fsmbench.twin.long import stream_experiment
 
     bench = default_bench() if bench is None else bench
     specs, plant, controller = _prepare_run(bench, duration_s=duration_s,
@@ -221,8 +222,6 @@ def simulate_bench(bench: Bench | None = None, *, seed: int = 0, duration_s: flo
     # experiment and source), so they run on every core; the compiled loop, the random
     # generators and most numpy work release the GIL. The result does not depend on the
     # number of threads.
-    from fsmbench.sim.codegen import specialised_kernel
-
     specialised_kernel(plant)  # load (or build) the loop once, before the threads use it
     with ThreadPoolExecutor(max_workers=max(1, min(len(specs), os.cpu_count() or 1))) as pool:
         futures = [pool.submit(simulate_experiment, bench, spec, seed=seed, plant=plant,
@@ -273,7 +272,6 @@ def simulate_excitation(source: str | Path, bench: Bench | None = None, *, seed:
         The file is invalid (one line naming it), sampled at another rate than
         the bench, or ``duration_s`` is too short for the experiment.
     """
-    from fsmbench.excite.files import ExcitationFileError, find_description, read_excitation
 
     bench = default_bench() if bench is None else bench
     described = find_description(source)
@@ -347,7 +345,6 @@ def play_excitation(sources: str | Path | Sequence[str | Path], bench: Bench | N
     real recordings with ``fsmbench excite``'s JSON beside them. Returns the paths
     written.
     """
-    from fsmbench.excite.files import find_description
 
     items = [sources] if isinstance(sources, (str, Path)) else list(sources)
     played = [simulate_excitation(src, bench, seed=seed, duration_s=duration_s,

@@ -12,11 +12,11 @@ from scipy.integrate import quad
 
 from fsmbench.ident.delay.bode import (
     DelayEstimate,
-    _coherent_band,
-    _kernel_primitive,
     bode_minimum_phase,
+    coherent_band,
     estimate_delay,
     estimate_delay_from_response,
+    kernel_primitive,
     remove_delay,
 )
 from fsmbench.ident.frf.response import FrequencyResponse, spectral_matrix
@@ -37,11 +37,11 @@ def _mode(f_hz: np.ndarray, f0_hz: float, xi: float, gain: float) -> np.ndarray:
 def test_kernel_primitive_matches_quadrature() -> None:
     for v in (1e-3, 0.3, 1.0, 4.0, 12.0):
         ref, _ = quad(lambda t: np.log(1.0 / np.tanh(t / 2.0)), 0.0, v, limit=200)
-        got = _kernel_primitive(np.array([v, -v]))
+        got = kernel_primitive(np.array([v, -v]))
         # 1e-12: closed form (dilogarithms) against adaptive quadrature, both ~1e-14 accurate
         np.testing.assert_allclose(got, [ref, -ref], rtol=1e-12)
     # The whole kernel integrates to pi^2/4 on each side.
-    assert _kernel_primitive(np.array([60.0]))[0] == pytest.approx(np.pi**2 / 4, rel=1e-15)
+    assert kernel_primitive(np.array([60.0]))[0] == pytest.approx(np.pi**2 / 4, rel=1e-15)
 
 
 def test_minimum_phase_of_a_first_order_lag() -> None:
@@ -224,6 +224,6 @@ def test_low_lines_at_the_start_do_not_end_the_coherent_band() -> None:
     coh = np.full(f.size, 0.99)
     coh[1:3] = 0.78
     coh[f > 900.0] = 0.5
-    top = _coherent_band(f, coh, f_lo=10.0, f_max=2500.0, threshold=0.9, width=11)
+    top = coherent_band(f, coh, f_lo=10.0, f_max=2500.0, threshold=0.9, width=11)
     # The last line below 900 Hz, one line's spacing: where the median first fails.
     assert 890.0 < top <= 900.0

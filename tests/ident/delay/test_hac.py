@@ -38,7 +38,7 @@ def test_current_amplifier_factor_is_t_scaled_newey_west(theta: float,
     (t₀.₉₇₅(ν)/1.96)² of ν = 3N/(2L) degrees of freedom."""
     from scipy import stats
 
-    from fsmbench.ident.current_amp import HAC_LAGS_PER_LINE, _hac_factor
+    from fsmbench.ident.current_amp import HAC_LAGS_PER_LINE, hac_factor
 
     e = rng.standard_normal(N + 1)
     x = e[1:] + theta * e[:-1]
@@ -46,7 +46,7 @@ def test_current_amplifier_factor_is_t_scaled_newey_west(theta: float,
     rho = theta / (1 + theta**2)
     t_scale = (stats.t.ppf(0.975, 3 * N / (2 * lags)) / stats.norm.ppf(0.975)) ** 2
     expected = min(max(1 + 2 * (1 - 1 / (lags + 1)) * rho, 1 / 2.5), 2.5) * t_scale
-    got = _hac_factor((x, np.zeros(N)), (np.ones(N), np.zeros(N)), 2.5)
+    got = hac_factor((x, np.zeros(N)), (np.ones(N), np.zeros(N)), 2.5)
     # Bartlett's estimate over 50 lags and 8000 lines has a relative std sqrt(4 L / 3 N),
     # 9 %: 3.5 of it.
     assert got == pytest.approx(expected, rel=3.5 * np.sqrt(4 * lags / (3 * N)))

@@ -234,20 +234,20 @@ def test_the_recorded_loop_fit_is_the_full_least_squares(gain: float, offset: fl
     problem, far above their rounding (~1e-15) and far below any effect on a verdict."""
     import scipy.signal
 
-    from fsmbench.ident.evidence.recorded_loop import SETTLE_S, _esrf_sos, _fit_record
+    from fsmbench.ident.evidence.recorded_loop import SETTLE_S, esrf_sos, fit_record
 
     rng = np.random.default_rng(seed)
     fs = 10_000.0
     n = 20_000
     y = rng.standard_normal(n)
     k0 = round(SETTLE_S * fs)
-    sos = _esrf_sos("h", fs)
+    sos = esrf_sos("h", fs)
     w = scipy.signal.sosfilt(sos, y - y.mean())
     t = np.arange(n - k0) / fs
     t = t / t[-1]
     u = np.zeros(n)
     u[k0:] = gain * w[k0:] + offset * (1.0 + t - t * t) + 0.01 * rng.standard_normal(n - k0)
-    fit = _fit_record("r", u, y, axis="h", fs_hz=fs, step_v=1e-3)
+    fit = fit_record("r", u, y, axis="h", fs_hz=fs, step_v=1e-3)
     lag = fit.lag_samples  # the lag the fit kept, 0 here unless noise decides otherwise
     yl = np.concatenate([np.zeros(lag), y[:n - lag]]) - y.mean()
     x = np.column_stack([scipy.signal.sosfilt(sos, yl)[k0:], np.ones_like(t), t, t * t])

@@ -192,7 +192,7 @@ def test_the_mean_of_telescoping_periods_is_not_overstated() -> None:
     -1/2), so the sum over periods telescopes. The periods' mean's variance, against the
     one simulated (independent check), with each line's statistics averaged over 7 lines
     as joint_periodic does."""
-    from fsmbench.ident.frf.closed_loop import _mean_variance
+    from fsmbench.ident.frf.closed_loop_leakage import mean_variance
 
     rng = np.random.default_rng(24)
     p, n, lines = 6, 42_000, 7
@@ -205,7 +205,7 @@ def test_the_mean_of_telescoping_periods_is_not_overstated() -> None:
         s0 = (np.sum(np.abs(d) ** 2, axis=1) / (p - 1)).reshape(-1, lines).mean(axis=1)
         c1 = np.real(np.sum(d[:, 1:] * np.conj(d[:, :-1]), axis=1)).reshape(-1, lines).mean(1)
         true = float(np.mean(np.abs(v.mean(axis=1)) ** 2))
-        est = float(np.mean(_mean_variance(s0[:, None], c1[:, None], p)))
+        est = float(np.mean(mean_variance(s0[:, None], c1[:, None], p)))
         independent = float(np.mean(s0)) / p
         if edge == 0.0:
             # White periods: the formula is the usual s0 / P (6000 line groups: 3 % scatter).

@@ -56,13 +56,6 @@ from fsmbench.cli.args import default_noted
 from fsmbench.cli.inputs import bench_of, print_document
 from fsmbench.cli.options import add_bench, add_json, add_out, add_params, add_seed, add_timestamp
 from fsmbench.cli.runfolder import check_inputs_first, run_folder
-from fsmbench.scale.montecarlo_run import (
-    dask_client,
-    designed_controller,
-    format_table,
-    loaded_controller,
-    read_ranges,
-)
 
 __all__ = ["register", "run"]
 
@@ -162,6 +155,8 @@ def _drawn_bench(args: argparse.Namespace, bench: Any, say: Any) -> Any:
 
 
 def _controller(args: argparse.Namespace, bench: Any, drawn: Any, say: Any) -> Any:
+    from fsmbench.scale.montecarlo_run import designed_controller, loaded_controller
+
     if args.controller is not None:
         path, _sep, name = str(args.controller).partition("::")
         return loaded_controller(path, name=name or None, bench=bench)
@@ -177,6 +172,7 @@ def run(args: argparse.Namespace) -> int:
     """The draws; the table (or montecarlo.json) is the result."""
     from fsmbench.jsonutil import stamped
     from fsmbench.scale.montecarlo import MonteCarloSetup, Ranges, run_montecarlo
+    from fsmbench.scale.montecarlo_run import dask_client, format_table, read_ranges
 
     given = [x for x in (args.data is not None, args.twin, args.bench_dir is not None) if x]
     if len(given) != 1:

@@ -8,7 +8,6 @@
 from __future__ import annotations
 
 import argparse
-import os
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -28,24 +27,8 @@ from fsmbench.cli.options import (
 )
 from fsmbench.cli.runfolder import check_inputs_first, print_files, progress, run_folder
 
-__all__ = ["SMALL_BYTES", "register", "run", "simulation_memory_bytes", "twin_bytes"]
+__all__ = ["SMALL_BYTES", "register", "run"]
 
-# Bytes a record-second of twin data takes on disk, measured on `fsmbench simulate`
-# (seed 0, the seed's lengths, 737.5 s of records in all): 76.65 MB as compressed
-# MATLAB v5, 313.6 MB of raw float64 (what v7.3 and NeXus store uncompressed).
-_TWIN_BYTES_PER_S = {"mat5": 76.65e6 / 737.5, "mat73": 313.6e6 / 737.5,
-                     "nexus": 313.6e6 / 737.5}
-# Peak memory of `fsmbench simulate` in the mat5/mat73 formats, which simulate every record
-# in memory before writing (measured peak RSS, /usr/bin/time, 10 kHz): 0.33 GB of interpreter,
-# numba and plant; one experiment of d seconds peaks at 0.33 GB + 4.85 MB per record-second
-# (data_uch, data_cal_pd_h, data_huddle_test_1/3, data_rep_h at 200 s: 1.23-1.30 GB; data_rep_h
-# at 400 s: 2.27 GB), i.e. ~61 float64 per sample in flight; the records finished before the
-# others are held at <= 11 float64 per sample (t + the 10 signals of data_rep_*). The model
-# over-estimates the default run (1.78 GB against 1.52 GB measured) and 13 x 60 s (1.49 GB
-# against 1.20 GB).
-_SIM_BASE_BYTES = 0.33e9
-_SIM_WORKING_BYTES_PER_SAMPLE = 4.85e6 / 1e4
-_SIM_HELD_BYTES_PER_SAMPLE = 11 * 8
 #: run.json and the small files beside the records.
 SMALL_BYTES = 1e6
 
@@ -81,43 +64,18 @@ def register(sub: Any) -> None:
     p.set_defaults(func=run)
 
 
-def twin_bytes(args: argparse.Namespace, fmt: str) -> float:
-    """Bytes the twin's records of ``args`` (``experiments``, ``duration``) take as ``fmt``."""
-    from fsmbench.twin.experiments import esrf_experiments
-
-    specs = esrf_experiments()
-    if getattr(args, "experiments", None):
-        specs = tuple(s for s in specs if s.name in set(args.experiments))
-    total_s = sum(args.duration if args.duration is not None else s.duration_s for s in specs)
-    return total_s * _TWIN_BYTES_PER_S[fmt]
-
-
-def simulation_memory_bytes(args: argparse.Namespace, bench: Bench) -> float:
-    """Peak memory of simulating the records in memory (see ``_SIM_BASE_BYTES``)."""
-    from fsmbench.twin.experiments import esrf_experiments
-
-    specs = esrf_experiments()
-    if args.experiments:
-        specs = tuple(s for s in specs if s.name in set(args.experiments))
-    durations = [args.duration if args.duration is not None else s.duration_s for s in specs]
-    if args.duration is not None:  # one record per excitation file
-        durations += [args.duration] * len(args.excitation or ())
-    durations.sort(reverse=True)
-    in_flight = max(1, min(len(durations), os.cpu_count() or 1))  # simulate_bench's threads
-    fs = bench.true.converter.fs_hz
-    return (_SIM_BASE_BYTES + _SIM_WORKING_BYTES_PER_SAMPLE * fs * sum(durations[:in_flight])
-            + _SIM_HELD_BYTES_PER_SAMPLE * fs * sum(durations[in_flight:]))
-
-
 def _check_simulation_memory(args: argparse.Namespace, bench: Bench) -> None:
     """Refuse an in-memory simulation larger than the memory available, with the way out."""
     from fsmbench.io.matfile import available_memory_bytes
+    from fsmbench.twin.sizes import simulation_memory_bytes
 
     if args.excitation is None and args.format == "nexus":
         return  # streamed block by block
     if args.excitation is not None and args.duration is None:
         return  # the files' own lengths, which excite bounds
-    need = simulation_memory_bytes(args, bench)
+    need = simulation_memory_bytes(bench, experiments=args.experiments,
+                                   duration_s=args.duration,
+                                   excitation_files=len(args.excitation or ()))
     have = available_memory_bytes()
     if need <= have:
         return
@@ -139,14 +97,15 @@ def _check_simulation_memory(args: argparse.Namespace, bench: Bench) -> None:
 def run(args: argparse.Namespace) -> int:
     """Simulate and write the records; their paths are the result."""
     from fsmbench.twin.simulate import play_excitation, stream_bench
+    from fsmbench.twin.sizes import twin_bytes
 
     out = out_folder(args)
     assert out is not None  # out_folder raises for a command that needs one
     check_inputs_first(args, out, None)
     bench = sim_bench(args)
     _check_simulation_memory(args, bench)  # before anything is simulated or written
-    with run_folder(args, out, data=None,
-                    need_bytes=twin_bytes(args, args.format) + SMALL_BYTES) as folder:
+    need = twin_bytes(args.format, experiments=args.experiments, duration_s=args.duration)
+    with run_folder(args, out, data=None, need_bytes=need + SMALL_BYTES) as folder:
         say = progress()
         if args.closed_loop is not None:
             paths = _closed_loop_simulation(args, bench, folder.staging, say)

@@ -13,7 +13,6 @@ from typing import Any
 
 from fsmbench.bench.params import Bench
 from fsmbench.cli.args import figure_formats, nanometres, seconds
-from fsmbench.cli.commands.simulate import simulation_memory_bytes, twin_bytes
 from fsmbench.cli.inputs import bench_of, check_data
 from fsmbench.cli.options import (
     add_identify_options,
@@ -64,9 +63,9 @@ def register(sub: Any) -> None:
 def _check_study_memory(args: argparse.Namespace, bench: Bench) -> None:
     """The study simulates every record whole and analyses it in memory: refuse what won't fit."""
     from fsmbench.io.matfile import available_memory_bytes
+    from fsmbench.twin.sizes import simulation_memory_bytes
 
-    need = simulation_memory_bytes(argparse.Namespace(
-        experiments=None, excitation=None, duration=args.duration), bench)
+    need = simulation_memory_bytes(bench, duration_s=args.duration)
     have = available_memory_bytes()
     if need > have:
         length = (f"--duration {args.duration:g} s" if args.duration is not None
@@ -83,6 +82,7 @@ def run(args: argparse.Namespace) -> int:
     """The study; the report's path and the verdict (or summary.json) are the result."""
     from fsmbench.report.summary import Specification
     from fsmbench.study import run_study
+    from fsmbench.twin.sizes import twin_bytes
 
     data = None if args.data is None else Path(args.data)
     if data is not None:
@@ -98,7 +98,7 @@ def run(args: argparse.Namespace) -> int:
         montecarlo = read_montecarlo(args.montecarlo)  # read before --out may be replaced
     need = _STUDY_BYTES + _FIGURE_BYTES * len(args.figures)
     if data is None:
-        need += twin_bytes(args, "mat5")
+        need += twin_bytes("mat5", duration_s=args.duration)
         _check_study_memory(args, bench)
     say = progress()
     with run_folder(args, args.out, data=data, need_bytes=need) as folder:

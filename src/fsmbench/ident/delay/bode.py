@@ -81,8 +81,10 @@ from fsmbench.ident.frf.response import FrequencyResponse
 __all__ = [
     "DelayEstimate",
     "bode_minimum_phase",
+    "coherent_band",
     "estimate_delay",
     "estimate_delay_from_response",
+    "kernel_primitive",
     "remove_delay",
 ]
 
@@ -153,7 +155,7 @@ class DelayEstimate:
 
 
 # --------------------------------------------------------------------------- Bode integral
-def _kernel_primitive(v: NDArray[np.float64]) -> NDArray[np.float64]:
+def kernel_primitive(v: NDArray[np.float64]) -> NDArray[np.float64]:
     """``int_0^v ln coth(|t|/2) dt`` (odd in v), via ``sum_{k odd} 2 e^{-k|v|}/k^2``."""
     a = np.abs(v)
     x = np.exp(-a)
@@ -262,7 +264,7 @@ def bode_minimum_phase(
     phase = np.empty(u_eval.size)
     for start in range(0, u_eval.size, _CHUNK):
         ue = u_eval[start:start + _CHUNK]
-        prim = _kernel_primitive(ug[None, :] - ue[:, None])
+        prim = kernel_primitive(ug[None, :] - ue[:, None])
         inner = (prim[:, 1:] - prim[:, :-1]) @ slopes
         outer = n_lo * (prim[:, 0] + _HALF_PI2) + n_hi * (_HALF_PI2 - prim[:, -1])
         phase[start:start + _CHUNK] = (inner + outer) / np.pi
@@ -407,7 +409,7 @@ def _wls(a: NDArray[np.float64], y: NDArray[np.float64],
     return np.asarray(coef)
 
 
-def _coherent_band(f: NDArray[np.float64], coh: NDArray[np.float64], *, f_lo: float,
+def coherent_band(f: NDArray[np.float64], coh: NDArray[np.float64], *, f_lo: float,
                    f_max: float, threshold: float, width: int) -> float:
     """Top of the band: first frequency above ``f_lo`` where the running-median coherence fails.
 
@@ -489,7 +491,7 @@ def estimate_delay(
         f_max = frf.fs_hz / 4.0 if max_frequency_hz is None else float(max_frequency_hz)
         spacing = float(np.median(np.diff(f))) if f.size > 1 else frf.fs_hz / frf.nfft
         width = max(3, round(max(15.0 * resolution, 15.0) / spacing))
-        f_hi = _coherent_band(f, coh, f_lo=f_lo, f_max=f_max, threshold=min_coherence,
+        f_hi = coherent_band(f, coh, f_lo=f_lo, f_max=f_max, threshold=min_coherence,
                               width=width)
         if f_hi <= 2.0 * f_lo:
             raise ValueError(f"path {input_name}->{output_name}: coherence >= {min_coherence} "

@@ -22,7 +22,7 @@ import numpy as np
 import xarray as xr
 
 from fsmbench.bench.blocks import PlantModel, physical_plant
-from fsmbench.bench.params import BenchParams
+from fsmbench.bench.params import BenchParams, default_bench
 from fsmbench.checks import Check
 from fsmbench.ident.evidence.recorded_loop import RecordedController, closed_loop_in_open_run
 from fsmbench.ident.evidence.signs import SignObservation
@@ -121,7 +121,6 @@ def loop_observations(loops: Mapping[str, RecordedController], plant: PlantModel
 def esrf_loop_signs() -> dict[str, float]:
     """sign(static ``Uc → Vp`` / the 4QD gain divided by) per axis on the ESRF bench (the
     packaged bench's nominal model), for which the study's controller of 9.2 was designed."""
-    from fsmbench.bench.params import default_bench
 
     nominal = default_bench().nominal
     plant = physical_plant(nominal, source="nominal")

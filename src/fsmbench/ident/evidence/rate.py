@@ -27,6 +27,7 @@ import xarray as xr
 
 from fsmbench.bench.params import BenchParams
 from fsmbench.checks import Check, Finding
+from fsmbench.ident.current_amp import identify_current_amplifier
 from fsmbench.ident.evidence.recorded_loop import RateWitness
 
 __all__ = ["AMPLIFIER_RATE_PREFERENCE", "RATE_TOLERANCE", "RateEvidence",
@@ -137,7 +138,6 @@ def current_amplifier_rate_check(recordings: Mapping[str, xr.Dataset], *,
     than ``t``'s, by :data:`AMPLIFIER_RATE_PREFERENCE`, names ``t`` as wrong; without a
     Sercalo run, or when a fit fails, None.
     """
-    from fsmbench.ident.current_amp import identify_current_amplifier
 
     ds = recordings.get("data_uch")
     if ds is None or "Uch" not in ds or "Vch" not in ds:

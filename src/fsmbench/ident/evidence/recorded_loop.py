@@ -49,6 +49,8 @@ __all__ = [
     "RateWitness",
     "RecordedController",
     "closed_loop_in_open_run",
+    "esrf_sos",
+    "fit_record",
     "rate_witness",
     "recorded_controllers",
 ]
@@ -198,7 +200,7 @@ class RecordedController:
                 "fits": [f.to_json() for f in self.fits], "words": self.words()}
 
 
-def _esrf_sos(axis: str, fs_hz: float) -> np.ndarray:
+def esrf_sos(axis: str, fs_hz: float) -> np.ndarray:
     """``K_axis`` by Tustin at ``fs_hz`` as second-order sections (per axis from its zpk: a
     state-space column of the 2×2 block would carry the other axis's poles as round-off)."""
     k = esrf_decentralised_zpk()[axis]
@@ -208,14 +210,14 @@ def _esrf_sos(axis: str, fs_hz: float) -> np.ndarray:
     return sos
 
 
-def _fit_record(record: str, u: np.ndarray, y: np.ndarray, *, axis: str, fs_hz: float,
+def fit_record(record: str, u: np.ndarray, y: np.ndarray, *, axis: str, fs_hz: float,
                 step_v: float) -> ControllerFit:
     k0 = round(SETTLE_S * fs_hz)
     uc = u[k0:]
     rms = float(np.std(uc)) if uc.size else 0.0
     if uc.size < 3 or not rms > 0:
         return ControllerFit(record, 0.0, 0.0, float("nan"), float("nan"), 0.0, 0)
-    sos = _esrf_sos(axis, fs_hz)
+    sos = esrf_sos(axis, fs_hz)
     t = np.arange(uc.size) / fs_hz
     t = t / max(float(t[-1]), 1.0 / fs_hz)  # scaled to [0, 1]: a well-conditioned polynomial
     # The polynomial is the same for every lag: projected out once (Frisch-Waugh-Lovell),
@@ -313,7 +315,7 @@ def rate_witness(recordings: Mapping[str, xr.Dataset], *, fs_hz: float, step_v: 
     axis = command[-1]
     explained = {}
     for fs in (fs_hz, 2.0 * fs_hz, 0.5 * fs_hz):
-        fit = _fit_record(name, u, y, axis=axis, fs_hz=fs, step_v=step_v)
+        fit = fit_record(name, u, y, axis=axis, fs_hz=fs, step_v=step_v)
         explained[fs] = fit.explained
     return RateWitness(name, command, fs_hz, explained)
 
@@ -336,7 +338,7 @@ def closed_loop_in_open_run(ds: xr.Dataset, *, command: str, reading: str, fs_hz
     y = np.asarray(ds[reading].values, dtype=np.float64)
     if u.size != y.size or u.size < round(2 * SETTLE_S * fs_hz):
         return None
-    fit = _fit_record(str(ds.attrs.get("experiment", "")), u, y, axis=command[-1],
+    fit = fit_record(str(ds.attrs.get("experiment", "")), u, y, axis=command[-1],
                       fs_hz=fs_hz, step_v=step_v)
     return fit if fit.explained >= CLOSED_LOOP_EXPLAINED else None
 
@@ -371,7 +373,7 @@ def recorded_controllers(recordings: Mapping[str, xr.Dataset], *, fs_hz: float,
             y = np.asarray(ds[reading].values, dtype=np.float64)
             if u.size != y.size or not (np.all(np.isfinite(u)) and np.all(np.isfinite(y))):
                 continue
-            fits.append(_fit_record(name, u, y, axis=axis, fs_hz=fs_hz, step_v=step_v))
+            fits.append(fit_record(name, u, y, axis=axis, fs_hz=fs_hz, step_v=step_v))
         ran = [f for f in fits if f.verdict == "seed"]
         deciding = [f for f in ran if f.steps_rms >= MIN_STEPS] or ran
         if deciding:

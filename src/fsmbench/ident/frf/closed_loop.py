@@ -59,16 +59,22 @@ from numpy.typing import NDArray
 
 from fsmbench.ident.frf.closed_loop_leakage import (
     LeakageOptions,
-    _mean_variance,
     _smooth,
     leakage_corrected_lines,
+    mean_variance,
 )
 from fsmbench.ident.frf.estimate import FrfEstimate
 from fsmbench.ident.frf.lpm import LpmOptions
 from fsmbench.ident.frf.periodic import detect_period
 
-__all__ = ["ClosedLoopFrf", "ClosedLoopRecord", "closed_loop_frf", "joint_lpm",
-           "joint_periodic", "settled_periods"]
+__all__ = [
+    "ClosedLoopFrf",
+    "ClosedLoopRecord",
+    "closed_loop_frf",
+    "joint_lpm",
+    "joint_periodic",
+    "settled_periods",
+]
 
 COMMANDS = ("Uch", "Ucv")
 # A line of the recorded excitation is excited above this fraction of the strongest line's
@@ -285,7 +291,7 @@ def _period_variance(parts: Sequence[Any], lines: NDArray[np.intp], g: NDArray[n
         noise[:, :, j] = _smooth(np.sum(np.abs(e) ** 2, axis=0) / (periods - 1),
                                  smoothing_lines)
         lag1 = _smooth(np.real(np.sum(e[1:] * np.conj(e[:-1]), axis=0)), smoothing_lines)
-        mean_var[:, :, j] = (_mean_variance(noise[:, :, j], lag1, periods)
+        mean_var[:, :, j] = (mean_variance(noise[:, :, j], lag1, periods)
                              if period_correlation else noise[:, :, j] / periods)
     var = np.einsum("fij,fjl->fil", mean_var, np.abs(_inverse_2x2(u_mean)) ** 2)
     return var, noise
@@ -336,7 +342,7 @@ def joint_periodic(records: Sequence[ClosedLoopRecord], *, period_samples: int |
         default found on each record (:func:`settled_periods`).
     period_correlation : bool
         The variance of the periods' mean from the residual's variance *and* its
-        correlation between consecutive periods (:func:`_mean_variance`); False (the
+        correlation between consecutive periods (:func:`mean_variance`); False (the
         default): the variance over ``P``, as if the periods were independent. True
         gives each line near a notched resonance its right variance (on the twin,
         estimated / true 1.1-3.0 instead of 2.8-8.5) but the errors it then weights are

@@ -33,7 +33,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["LeakageCorrected", "LeakageOptions", "leakage_corrected_lines"]
+__all__ = ["LeakageCorrected", "LeakageOptions", "leakage_corrected_lines", "mean_variance"]
 
 
 @dataclass(frozen=True)
@@ -182,7 +182,7 @@ def _smooth(x: NDArray[Any], width: int) -> NDArray[Any]:
     return (c[hi] - c[lo]) / (hi - lo).reshape(-1, *([1] * (x.ndim - 1)))
 
 
-def _mean_variance(s0: NDArray[np.float64], c1: NDArray[np.float64],
+def mean_variance(s0: NDArray[np.float64], c1: NDArray[np.float64],
                    periods: int) -> NDArray[np.float64]:
     """The variance of the mean of ``P`` periods' noise, consecutive periods correlated.
 
