@@ -60,7 +60,8 @@ def _lines(stream: Any) -> queue.Queue[str]:
     return q
 
 
-def _ready_line(lines: queue.Queue[str], proc: subprocess.Popen[str]) -> str:
+def _ready_line(lines: queue.Queue[str], proc: subprocess.Popen[str], *,
+                starts: str = "fsmbench serve:") -> str:
     deadline = time.monotonic() + WAIT_S
     seen: list[str] = []
     while time.monotonic() < deadline:
@@ -72,9 +73,9 @@ def _ready_line(lines: queue.Queue[str], proc: subprocess.Popen[str]) -> str:
                             f"{''.join(seen)}{proc.stderr.read() if proc.stderr else ''}")
             continue
         seen.append(line)
-        if line.startswith("fsmbench serve:"):
+        if line.startswith(starts):
             return line
-    pytest.fail(f"no 'fsmbench serve:' line within {WAIT_S:g} s; stdout: {''.join(seen)}")
+    pytest.fail(f"no {starts!r} line within {WAIT_S:g} s; stdout: {''.join(seen)}")
 
 
 def _connect(address: str) -> Any:
@@ -117,6 +118,31 @@ def test_serve_nodb_runs_the_twin_for_a_client(tmp_path: Path) -> None:
         assert path.is_file()
         proc.terminate()
         # Tango's own SIGTERM handler shuts the server down cleanly.
+        assert proc.wait(timeout=WAIT_S) == 0
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait(timeout=WAIT_S)
+
+
+def test_serve_json_says_where_it_serves_in_one_document(tmp_path: Path) -> None:
+    # A script starts the server and takes its address from stdout, as tune --device takes it.
+    port = _free_port()
+    proc = subprocess.Popen([*SERVE, "--nodb", "--port", str(port), "--speed", "50", "--json",
+                             "--out", str(tmp_path / "live")], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True, cwd=tmp_path)
+    try:
+        doc = json.loads(_ready_line(_lines(proc.stdout), proc, starts="{"))
+        assert (doc["format"], doc["format_version"]) == ("fsmbench.serve", 1)
+        assert doc["protocol"] == "tango" and doc["backend"] == "twin"
+        assert doc["speed"] == 50.0 and doc["device"] == "fsmbench/bench/1"
+        assert doc["address"].endswith(f":{port}/fsmbench/bench/1#dbase=no"), doc
+        assert doc["output_folder"] == doc["controllers_folder"] == str((tmp_path / "live")
+                                                                        .resolve())
+        proxy = _connect(doc["address"].replace(doc["address"].split("/")[2],
+                                                f"localhost:{port}"))
+        assert proxy.state() == tango.DevState.ON
+        proc.terminate()
         assert proc.wait(timeout=WAIT_S) == 0
     finally:
         if proc.poll() is None:
@@ -248,3 +274,24 @@ def test_without_the_epics_extra_the_core_imports_and_epics_is_one_line(
     lines = done.stderr.strip().splitlines()
     assert done.returncode == 2 and len(lines) == 1, done.stderr
     assert "pip install 'fsmbench[epics]'" in lines[0], lines
+
+
+def test_the_ioc_s_document_names_its_prefix_and_access_file(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    from fsmbench.live.announce import announce
+    from fsmbench.live.serve import ServeOptions
+
+    acf = tmp_path / "bench.acf"
+    options = ServeOptions(backend="twin", playback_folder=None, params_file=None, seed=0,
+                           speed=1.0, nodb=False, port=0, output_folder=tmp_path / "out",
+                           protocol="epics", prefix="BL:FSM", access_security=acf,
+                           controllers_folder=tmp_path / "ctrl", announce_json=True)
+    announce(options, "not printed", address="ca://BL:FSM", prefix="BL:FSM",
+             access_security=str(acf))
+    doc = json.loads(capsys.readouterr().out)
+    assert doc["address"] == "ca://BL:FSM" and doc["protocol"] == "epics"
+    assert doc["controllers_folder"] == str((tmp_path / "ctrl").resolve())
+    assert doc["access_security"] == str(acf)
+    announce(ServeOptions(**{**options.__dict__, "announce_json": False}), "the sentence",
+             address="ca://BL:FSM")
+    assert capsys.readouterr().out == "the sentence\n"

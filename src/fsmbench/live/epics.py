@@ -52,6 +52,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from fsmbench.bench.params import default_bench, load_bench
+from fsmbench.live.announce import announce
 from fsmbench.live.attributes import (
     ATTRIBUTES,
     AttributeSpec,
@@ -518,9 +519,11 @@ def serve_epics(options: ServeOptions, *, ready: str = "") -> int:
         live.log("INFO", live.restore_controller())
         ioc.update()
         ioc.start()
-        print(f"fsmbench serve: IOC {prefix} ({options.backend}, speed {options.speed:g}): "
-              f"{prefix}:BeamAngleH, {prefix}:State, {prefix}:CloseLoop ...{ready}",
-              flush=True)
+        announce(options, f"fsmbench serve: IOC {prefix} ({options.backend}, speed "
+                          f"{options.speed:g}): {prefix}:BeamAngleH, {prefix}:State, "
+                          f"{prefix}:CloseLoop ...{ready}", address=f"ca://{prefix}",
+                 prefix=prefix, access_security=None if options.access_security is None
+                 else str(options.access_security.resolve()))
         # Short waits: the handler runs in this thread between them, whatever else blocks.
         while not stop.wait(0.5):
             pass

@@ -29,6 +29,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from fsmbench.live.announce import announce
+
 __all__ = ["SERVER", "ServeOptions", "file_database", "refuse_second_start", "serve",
            "tango_database"]
 
@@ -71,6 +73,8 @@ class ServeOptions:
         who may put (``UAG``/``HAG`` rules), everyone else reads.
     given : frozenset of str
         Properties the command line set explicitly (checked against the database).
+    announce_json : bool
+        Say where it serves as one JSON document (:func:`announce`) instead of a sentence.
     """
 
     backend: str
@@ -92,6 +96,7 @@ class ServeOptions:
     controllers_folder: Path | None = None
     access_security: Path | None = None
     given: frozenset[str] = field(default_factory=frozenset)
+    announce_json: bool = False
 
     def properties(self) -> dict[str, str]:
         """The device properties, as text."""
@@ -254,8 +259,9 @@ def _serve_tango(options: ServeOptions, ready: str) -> int:
             db_file = file_database(options, Path(tmp))
             where = f"tango://{socket.gethostname()}:{options.port}/{options.device_name}" \
                     "#dbase=no"
-            print(f"fsmbench serve: {options.device_name} ({options.backend}, speed "
-                  f"{options.speed:g}) at {where}{ready}", flush=True)
+            announce(options, f"fsmbench serve: {options.device_name} ({options.backend}, "
+                              f"speed {options.speed:g}) at {where}{ready}", address=where,
+                     device=options.device_name, database=None)
             FsmBench.run_server(args=[options.instance, f"-file={db_file}",
                                       "-ORBendPoint", f"giop:tcp::{options.port}"])
         return 0
@@ -273,10 +279,14 @@ def _serve_tango(options: ServeOptions, ready: str) -> int:
         db.add_device(info)
     if write:
         db.put_device_property(options.device_name, {k: [v] for k, v in write.items()})
-    print(f"fsmbench serve: {options.device_name} ({SERVER}/{options.instance}) "
-          f"{'registered' if not registered else 'found'} in {os.environ['TANGO_HOST']}"
-          f"{'; properties written: ' + ', '.join(sorted(write)) if write else ''}{ready}",
-          flush=True)
+    announce(options, f"fsmbench serve: {options.device_name} ({SERVER}/{options.instance}) "
+                      f"{'registered' if not registered else 'found'} in "
+                      f"{os.environ['TANGO_HOST']}"
+                      f"{'; properties written: ' + ', '.join(sorted(write)) if write else ''}"
+                      f"{ready}",
+             address=f"tango://{os.environ['TANGO_HOST']}/{options.device_name}",
+             device=options.device_name, database=os.environ["TANGO_HOST"],
+             registered=not registered, properties_written=sorted(write))
     FsmBench.run_server(args=[options.instance])
     return 0
 

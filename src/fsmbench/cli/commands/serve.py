@@ -8,7 +8,7 @@ from pathlib import Path
 from typing import Any
 
 from fsmbench.cli.args import drift_rate, factor, port, seconds
-from fsmbench.cli.options import add_bench, add_out, add_params, add_seed
+from fsmbench.cli.options import add_bench, add_json, add_out, add_params, add_seed
 from fsmbench.live.serve import ServeOptions, serve
 
 __all__ = ["register", "run"]
@@ -61,6 +61,8 @@ def register(sub: Any) -> None:
                    dest="access_security",
                    help="EPICS: an access-security file for the IOC's records (ASG DEFAULT: "
                         "the users and hosts that may put; everyone else reads)")
+    add_json(p, help="say where it serves as one JSON line (format fsmbench.serve: protocol, "
+                     "address, backend, speed, folders) instead of a sentence")
     p.set_defaults(func=run)
 
 
@@ -110,4 +112,4 @@ def run(args: argparse.Namespace) -> int:
         drift_start_s=0.0 if args.drift_start is None else args.drift_start,
         controllers_folder=Path(args.controllers) if args.controllers else None,
         access_security=Path(args.access_security) if args.access_security else None,
-        given=frozenset(given)))
+        given=frozenset(given), announce_json=args.json))
