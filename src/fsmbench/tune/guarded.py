@@ -33,6 +33,7 @@ reason (``loading`` in the record written before the load).
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Callable, Mapping, Sequence
 from typing import Any
@@ -197,9 +198,85 @@ def not_plausible(measurement: ClosedLoopMeasurement, *, bench: Bench) -> str:
     return f"the Sercalo's closed-loop identification is not plausible: {why}" if why else ""
 
 
+def _measure(target: TuneTarget, *, bench: Bench, running: Loop, options: TuneOptions,
+             seed: int, say: Callable[[str], None]) -> ClosedLoopMeasurement:
+    """The closed-loop identification of ``target`` around ``running``: measured again once
+    when the records do not carry it; refused when the Sercalo is not identified or its
+    modes are not plausible (nothing loaded)."""
+    rc = RunningController(feedback=running.feedback, a=np.zeros((0, 0)), b=np.zeros((0, 2)),
+                           c=np.zeros((2, 0)), d=np.zeros((2, 2)),
+                           ts_s=bench.true.converter.ts_s, gd_v_per_rad=running.gd_v_per_rad,
+                           name=running.name, source=running.name)
+    measurement = measure_closed_loop(play=target.play, model=bench, controller=rc,
+                                      options=options.measurement, seed=seed + 100,
+                                      progress=say)
+    if (first_why := not_plausible(measurement, bench=bench)):
+        # A measurement the records do not carry (too little excitation at a resonance on
+        # one run: its fit keeps a mode on the wrong axis) is made once again with new noise
+        # before tune gives up, as a user would. Its usual cause, an isolated noisy line
+        # taken for the h peak, is gone from the resonance search (detect_resonances).
+        say(f"{first_why}: measured once again")
+        measurement = measure_closed_loop(play=target.play, model=bench, controller=rc,
+                                          options=options.measurement, seed=seed + 300,
+                                          progress=say)
+    ident = measurement.identification
+    if ident.plant is None:
+        raise ValueError(f"the Sercalo could not be identified in closed loop: "
+                         f"{ident.skipped.get('sercalo', 'no plant')}")
+    sercalo = ident.to_json().get("sercalo", {})
+    say("identified in closed loop: " + "; ".join(
+        f"{a}: resonance {v['resonance_hz']:.2f} Hz, damping {v['damping_ratio']:.2e}"
+        for a, v in sercalo.items())
+        + f" ({measurement.duration_s:g} s of measurement, beam error added "
+          f"{urad_text(measurement.tracking_added_rad())} rms)")
+    if (why := implausible_modes(sercalo, bench=bench)):
+        raise ValueError(f"the Sercalo's closed-loop identification is not plausible: {why}; "
+                         "nothing was loaded. Run tune again with more --periods, or "
+                         "identify the bench in open loop")
+    return measurement
+
+
+def _designed(plant: PlantModel, *, bench: Bench,
+              say: Callable[[str], None]) -> tuple[Loop, bool]:
+    """fsmbench's controller designed on ``plant`` (the same study as ``fsmbench design``),
+    and whether it stabilises the design's whole perturbed set."""
+    say("designing on the identified plant (the same study as fsmbench design)")
+    study = design_study(plant, bench=bench)
+    gd = tuple(float(x) for x in np.diag(np.asarray(plant.blocks["Gd"].D, dtype=float)))
+    loop = loop_of(study.controllers["fsmbench_controller"],
+                   name="fsmbench's controller (designed on the closed-loop identification)",
+                   ts_s=bench.true.converter.ts_s, gd_v_per_rad=(gd[0], gd[1]))
+    return loop, bool(study.robustness.all_stable)
+
+
+def _result(decision: str, reason: str, *, target: TuneTarget, before: ControllerFigures,
+            candidate: Loop, candidate_figures: ControllerFigures, after: ControllerFigures,
+            switches: Sequence[Mapping[str, Any]], objective_bound: float,
+            measurement: ClosedLoopMeasurement, log: list[str], f_asd: np.ndarray,
+            asd_before: np.ndarray, options: TuneOptions,
+            transaction: Mapping[str, Any] | None = None,
+            e_after: np.ndarray | None = None) -> TuneResult:
+    """One record of the step: ``decision`` and ``reason`` with what was measured (the log
+    as it stands), the tracking-error spectrum after the load from ``e_after`` if given."""
+    f, asd_after = (f_asd, asd_before) if e_after is None else _asd(e_after, target.fs_hz)
+    return TuneResult(target=target.label, decision=decision, reason=reason, before=before,
+                      candidate=candidate_figures, after=after, objective_bound=objective_bound,
+                      drift_pct=target.drift_pct, measurement=measurement, log=tuple(log),
+                      psd_f_hz=f, psd_before=asd_before, psd_after=asd_after,
+                      switches=tuple(dict(s) for s in switches), options=options,
+                      candidate_loop=candidate,
+                      transaction=None if transaction is None else dict(transaction))
+
+
+def _say(msg: str, *, log: list[str], progress: Callable[[str], None] | None) -> None:
+    """A step of the log, also given to ``progress``."""
+    log.append(msg)
+    if progress is not None:
+        progress(msg)
+
+
 def tune_guarded(*, target: TuneTarget, bench: Bench, running: Loop,
-                 options: TuneOptions | None = None, seed: int = 0,
-                 candidate: Loop | None = None,
+                 options: TuneOptions | None = None, seed: int = 0, candidate: Loop | None = None,
                  after_load: Callable[[TuneTarget], str] | None = None,
                  progress: Callable[[str], None] | None = None,
                  journal: Callable[[TuneResult], None] | None = None) -> TuneResult:
@@ -219,6 +296,7 @@ def tune_guarded(*, target: TuneTarget, bench: Bench, running: Loop,
     seed : int
         Noise seed of the twin's closed-loop measurement.
     candidate : Loop, optional
+        Default: fsmbench's controller designed on the closed-loop identification.
     after_load : callable, optional
         ``after_load(target)`` when the candidate is loaded; returns the change in words.
     journal : callable, optional
@@ -233,110 +311,54 @@ def tune_guarded(*, target: TuneTarget, bench: Bench, running: Loop,
         The Sercalo cannot be identified in closed loop, or the target refuses (named).
     fsmbench.tune.transaction.LoopChangeError
         An error once the load had started (a lost connection, an attribute that stayed
-        INVALID): rolled back first, the controller the bench is left on in the message.
-    KeyboardInterrupt
-        Ctrl-C once the load had started, raised again after the roll-back.
+        INVALID), or (KeyboardInterrupt) Ctrl-C: rolled back first, the controller the
+        bench is left on in the message; Ctrl-C is raised again after the roll-back.
     """
 
     opts = options or TuneOptions()
     log: list[str] = []
-
-    def say(msg: str) -> None:
-        log.append(msg)
-        if progress is not None:
-            progress(msg)
-
+    say = functools.partial(_say, log=log, progress=progress)
     objective = control_objective(bench.nominal)
-    ts = bench.true.converter.ts_s
-    watch = target
-    drift_pct = target.drift_pct
     say(f"watching {running.name} for {opts.watch_s:g} s on {target.label}")
-    e_before = watch.run(opts.watch_s, settle_s=opts.settle_s)
+    e_before = target.run(opts.watch_s, settle_s=opts.settle_s)
     measured_before = rms_by_axis(e_before)
     say(f"measured tracking error of {running.name}: {urad_text(measured_before)} rms")
 
-    rc = RunningController(feedback=running.feedback, a=np.zeros((0, 0)), b=np.zeros((0, 2)),
-                           c=np.zeros((2, 0)), d=np.zeros((2, 2)), ts_s=ts,
-                           gd_v_per_rad=running.gd_v_per_rad, name=running.name,
-                           source=running.name)
-    measurement = measure_closed_loop(play=target.play, model=bench, controller=rc,
-                                      options=opts.measurement, seed=seed + 100,
-                                      progress=say)
-    if (first_why := not_plausible(measurement, bench=bench)):
-        # A measurement the records do not carry (too little excitation at a resonance on
-        # one run: its fit keeps a mode on the wrong axis) is made once again with new noise
-        # before tune gives up, as a user would. Its usual cause, an isolated noisy line
-        # taken for the h peak, is gone from the resonance search (detect_resonances).
-        say(f"{first_why}: measured once again")
-        measurement = measure_closed_loop(play=target.play, model=bench, controller=rc,
-                                          options=opts.measurement, seed=seed + 300,
-                                          progress=say)
-    ident = measurement.identification
-    if ident.plant is None:
-        raise ValueError(f"the Sercalo could not be identified in closed loop: "
-                         f"{ident.skipped.get('sercalo', 'no plant')}")
-    sercalo = ident.to_json().get("sercalo", {})
-    say("identified in closed loop: " + "; ".join(
-        f"{a}: resonance {v['resonance_hz']:.2f} Hz, damping {v['damping_ratio']:.2e}"
-        for a, v in sercalo.items())
-        + f" ({measurement.duration_s:g} s of measurement, beam error added "
-          f"{urad_text(measurement.tracking_added_rad())} rms)")
-    if (why := implausible_modes(sercalo, bench=bench)):
-        raise ValueError(f"the Sercalo's closed-loop identification is not plausible: {why}; "
-                         "nothing was loaded. Run tune again with more --periods, or "
-                         "identify the bench in open loop")
-    plant = ident.plant
+    measurement = _measure(target, bench=bench, running=running, options=opts, seed=seed,
+                           say=say)
+    plant = measurement.identification.plant
+    assert plant is not None  # _measure raises without one
     if candidate is None:
-        say("designing on the identified plant (the same study as fsmbench design)")
-        study = design_study(plant, bench=bench)
-        gd = tuple(float(x) for x in np.diag(np.asarray(plant.blocks["Gd"].D, dtype=float)))
-        candidate = loop_of(study.controllers["fsmbench_controller"],
-                            name="fsmbench's controller (designed on the closed-loop "
-                                 "identification)", ts_s=ts, gd_v_per_rad=(gd[0], gd[1]))
-        robust = bool(study.robustness.all_stable)
+        candidate, robust = _designed(plant, bench=bench, say=say)
     else:
         robust = bool(robustness(plant, candidate.k, objective=objective).all_stable)
-    before = _figures(running, plant=plant, bench=bench, objective=objective, robust=None,
-                      watch_s=opts.watch_s, disturbance_v=opts.disturbance_v)
-    before = with_changes(before, measured_rms_rad=measured_before)
-    cand = _figures(candidate, plant=plant, bench=bench, objective=objective, robust=robust,
-                    watch_s=opts.watch_s, disturbance_v=opts.disturbance_v)
+    figures = functools.partial(_figures, plant=plant, bench=bench, objective=objective,
+                                watch_s=opts.watch_s, disturbance_v=opts.disturbance_v)
+    before = with_changes(figures(running, robust=None), measured_rms_rad=measured_before)
+    cand = figures(candidate, robust=robust)
     say(f"verified {candidate.name} on the identified bench: |S(1 Hz)| "
         + ", ".join(f"{a} {v:.3g}" for a, v in cand.sensitivity_at_1hz.items())
         + f"; predicted tracking error {urad_text(cand.predicted_rms_rad)} rms")
     refusal = refusal_reason(cand, measured_before, opts)
-    f_asd, asd_before = _asd(e_before, watch.fs_hz)
+    f_asd, asd_before = _asd(e_before, target.fs_hz)
+    # Every record of this step (refused, loading, the outcome) shares what was measured.
+    make = functools.partial(_result, target=target, before=before, candidate=candidate,
+                             objective_bound=objective.sensitivity_bound,
+                             measurement=measurement, log=log, f_asd=f_asd,
+                             asd_before=asd_before, options=opts)
     if refusal:
         say(f"refused: {refusal}")
-        return TuneResult(target=target.label, decision="refused", reason=refusal,
-                          before=before, candidate=cand,
-                          after=before, objective_bound=objective.sensitivity_bound,
-                          drift_pct=drift_pct, measurement=measurement, log=tuple(log),
-                          psd_f_hz=f_asd, psd_before=asd_before, psd_after=asd_before,
-                          switches=(), options=opts, candidate_loop=candidate)
+        return make("refused", refusal, candidate_figures=cand, after=before, switches=())
     why = (f"{candidate.name} predicted {urad_text(cand.predicted_rms_rad)} rms against "
            f"{urad_text(measured_before)} measured with {running.name} (better by more than "
            f"{100 * opts.better_by:g} % on both axes), margins and robust stability met")
-
-    def make(decision: str, reason: str, *, candidate_figures: ControllerFigures,
-             after: ControllerFigures, switches: Sequence[Mapping[str, Any]],
-             transaction: Mapping[str, Any], e_after: np.ndarray | None = None) -> TuneResult:
-        f, asd_after = (f_asd, asd_before) if e_after is None else _asd(e_after, watch.fs_hz)
-        return TuneResult(target=target.label, decision=decision, reason=reason,
-                          before=before, candidate=candidate_figures, after=after,
-                          objective_bound=objective.sensitivity_bound,
-                          drift_pct=drift_pct, measurement=measurement, log=tuple(log),
-                          psd_f_hz=f, psd_before=asd_before, psd_after=asd_after,
-                          switches=tuple(dict(s) for s in switches), options=opts,
-                          candidate_loop=candidate, transaction=dict(transaction))
-
     return load_and_watch(target=target, running=running, candidate=candidate, before=before,
                           candidate_figures=cand, options=opts, why=why, make=make,
                           journal=journal, say=say, after_load=after_load)
 
 
 def refusal_reason(cand: ControllerFigures, measured_before: Mapping[str, float],
-             opts: TuneOptions) -> str:
+                   opts: TuneOptions) -> str:
     """Why the candidate is not loaded, in words ('' when it may be)."""
     if not cand.stable:
         return f"{cand.name} does not stabilise the identified bench"
