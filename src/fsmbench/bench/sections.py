@@ -28,6 +28,7 @@ __all__ = [
     "DiscreteSection",
     "Section",
     "pair_roots",
+    "polynomial_ss",
     "section_prewarp_rad_s",
     "section_response",
     "sections_from_zpk",
@@ -111,8 +112,21 @@ def sections_from_zpk(zeros: Sequence[complex], poles: Sequence[complex],
 def _section_ss(sec: Section) -> ct.StateSpace:
     """Realise one section with states scaled to its pole magnitude."""
     num = np.real(np.poly(sec.zeros)) if sec.zeros else np.array([1.0])
-    den = np.real(np.poly(sec.poles))
-    num = sec.gain * num
+    return polynomial_ss(sec.gain * num, np.real(np.poly(sec.poles)))
+
+
+def polynomial_ss(num: np.ndarray, den: np.ndarray) -> ct.StateSpace:
+    """Realise ``num(s) / den(s)`` (proper, ``den`` of degree 0 to 2) with states scaled to
+    its pole magnitude.
+
+    Parameters
+    ----------
+    num, den : ndarray
+        Coefficients, highest power first (``numpy.polyval``'s order); ``len(num) <=
+        len(den) <= 3`` and ``den[0] != 0``.
+    """
+    num = np.asarray(num, dtype=float) / den[0]
+    den = np.asarray(den, dtype=float) / den[0]
     n = len(den) - 1
     if n == 0:
         return ct.ss([], [], [], [[num[-1] / den[0]]])

@@ -13,14 +13,13 @@ split of that model (``export.siso_zpk``, to write it again) kept some of those 
 dropped others, and returned a complex gain: a retune exported 20 times the controller
 a previous tune had loaded, and it failed that way.
 
-A ``controllers_sos.json`` holds its sections, and their roots are well conditioned
-(three coefficients each). :func:`sections_preimage` maps them root by root:
-
-- a discrete zero within :data:`AT_NYQUIST` of ``-1`` is a zero at infinity;
-- a section's missing zero (``b0 = 0``) is a zero at ``s = 2/T``;
-- each section's gain is matched at one point on the unit circle, away from its roots.
-
-The result is a cascade of scaled sections (:func:`realize.zpk_cascade`).
+A ``controllers_sos.json`` holds its sections. :func:`sections_preimage` substitutes
+Tustin's map into each section's own coefficients (three and three), exact algebra with
+no root to find: Tustin's double zero on ``z = -1`` becomes a constant numerator, a
+missing ``b0`` a zero at ``s = 2/T``. Each section is realised with scaled states
+(:func:`fsmbench.bench.sections.polynomial_ss`) and the sections are cascaded. Roots were
+tried first: a double root near ``z = 1`` (an integrator's neighbour) is located from
+three coefficients only to ``sqrt(eps)``, 1e-4 of a 1 rad/s zero.
 """
 
 from __future__ import annotations
@@ -30,7 +29,7 @@ from collections.abc import Sequence
 import control as ct
 import numpy as np
 
-from fsmbench.bench.sections import zpk_cascade
+from fsmbench.bench.sections import polynomial_ss
 
 __all__ = ["AT_NYQUIST", "nyquist_pole_distance", "sections_preimage", "tustin_preimage"]
 
@@ -38,14 +37,6 @@ __all__ = ["AT_NYQUIST", "nyquist_pole_distance", "sections_preimage", "tustin_p
 #: beyond 4 / (T 1e-6) rad/s (6e5 times the sample rate), no roll-off of a physical loop,
 #: and a double root on -1 is located only to ~sqrt(eps) = 1.5e-8.
 AT_NYQUIST = 1e-6
-
-#: Points on the unit circle a section's gain may be matched at [rad of z's angle]: the
-#: one farthest from its roots is used, so no factor is near zero.
-_MATCH_ANGLES = (0.5, 1.0, 1.7, 2.4)
-
-#: The matched gain's imaginary part, relative, beyond which the roots do not describe
-#: the section [1]: round-off of a quadratic's roots gives ~1e-12.
-_REAL_GAIN = 1e-6
 
 
 def nyquist_pole_distance(a: np.ndarray) -> float:
@@ -55,38 +46,37 @@ def nyquist_pole_distance(a: np.ndarray) -> float:
     return float(np.min(np.abs(1.0 + np.linalg.eigvals(a))))
 
 
-def _to_s(z: np.ndarray, ts_s: float) -> np.ndarray:
-    return (2.0 / ts_s) * (z - 1.0) / (z + 1.0)
+def _in_s(coefficients: np.ndarray, ts_s: float) -> np.ndarray:
+    """A section's numerator or denominator in ``z^-1`` (``c0 + c1 z^-1 [+ c2 z^-2]``) under
+    ``z = (1 + w) / (1 - w)``, times ``(1 - w)^n``, with ``w = s T / 2``: its coefficients
+    in ``s``, highest power first. Exact algebra: a double zero of Tustin on ``z = -1``
+    (``c = g [1, 2, 1]``) gives a constant, not two roots located to ``sqrt(eps)``."""
+    half = ts_s / 2.0
+    if coefficients.size == 2:
+        c0, c1 = coefficients
+        in_w = np.array([c0 - c1, c0 + c1])
+    else:
+        c0, c1, c2 = coefficients
+        in_w = np.array([c0 - c1 + c2, 2.0 * (c0 - c2), c0 + c1 + c2])
+    return in_w * half ** np.arange(in_w.size - 1, -1, -1)
 
 
-def _section(row: np.ndarray, *, ts_s: float) -> tuple[list[complex], list[complex], float]:
-    """One ``[b0, b1, b2, a0, a1, a2]`` section's continuous zeros, poles [rad/s] and
-    leading coefficient."""
+def _section(row: np.ndarray, *, ts_s: float) -> ct.StateSpace:
+    """One ``[b0, b1, b2, a0, a1, a2]`` section's continuous pre-image (at most 2 states)."""
     b, a = row[:3].astype(float), row[3:].astype(float)
-    while b.size > 1 and a.size > 1 and b[-1] == 0.0 and a[-1] == 0.0:
+    while b.size > 1 and b[-1] == 0.0 and a[-1] == 0.0:
         b, a = b[:-1], a[:-1]  # a common root at z = 0: a first-order section
-    if not np.any(b):
-        return [], [], 0.0
-    # z^-k polynomials as polynomials in z of degree len - 1: a leading zero coefficient is
-    # a root at infinity in z, a zero at s = 2/T.
-    lead = int(np.argmax(b != 0.0))
-    zeros_z = np.roots(b[lead:]).astype(complex)
-    poles_z = np.roots(a).astype(complex)
-    if np.any(np.abs(1.0 + poles_z) < AT_NYQUIST):
+    if not np.any(a[1:]) and not np.any(b[1:]):
+        return ct.ss([], [], [], [[b[0] / a[0]]])
+    poles_z = np.roots(a)
+    if poles_z.size and float(np.min(np.abs(1.0 + poles_z))) < AT_NYQUIST:
         raise ValueError("a pole at z = -1 (Nyquist) has no continuous-time equivalent")
-    finite = np.abs(1.0 + zeros_z) >= AT_NYQUIST
-    zeros_s = np.concatenate([_to_s(zeros_z[finite], ts_s),
-                              np.full(lead, 2.0 / ts_s, dtype=complex)])
-    poles_s = _to_s(poles_z, ts_s)
-    roots = np.concatenate([zeros_z, poles_z])
-    z0 = max((np.exp(1j * t) for t in _MATCH_ANGLES),
-             key=lambda q: float(np.min(np.abs(roots - q), initial=np.inf)))
-    h = np.polyval(b, z0) / np.polyval(a, z0)  # the same power of z on both sides
-    s0 = complex(_to_s(np.array([z0]), ts_s)[0])
-    k = h * np.prod(s0 - poles_s) / np.prod(s0 - zeros_s)
-    if abs(k.imag) > _REAL_GAIN * abs(k):
-        raise ValueError(f"a section's roots do not describe it (matched gain {k:.3g})")
-    return list(zeros_s), list(poles_s), float(k.real)
+    num, den = _in_s(b, ts_s), _in_s(a, ts_s)
+    # Leading coefficients zero in s (a pole on z = -1 excluded above: den's is not) are
+    # dropped so that the realisation sees the section's true degree.
+    den = np.trim_zeros(den, "f")
+    num = np.trim_zeros(num, "f")
+    return polynomial_ss(num if num.size else np.zeros(1), den)
 
 
 def sections_preimage(sections: Sequence[np.ndarray], *, ts_s: float,
@@ -114,21 +104,15 @@ def sections_preimage(sections: Sequence[np.ndarray], *, ts_s: float,
     Raises
     ------
     ValueError
-        A pole on ``z = -1``, or a section whose matched gain is not real.
+        A pole on ``z = -1``.
     """
     parts = []
     for rows, i_name, o_name in zip(sections, inputs, outputs, strict=True):
-        zeros: list[complex] = []
-        poles: list[complex] = []
-        gain = 1.0
+        chain = ct.ss([], [], [], [[1.0]])
         for row in np.atleast_2d(np.asarray(rows, dtype=float)):
-            z, p, k = _section(row, ts_s=ts_s)
-            zeros, poles, gain = zeros + z, poles + p, gain * k
-        if gain == 0.0 or not poles:
-            part = ct.ss([], [], [], [[gain]], inputs=[i_name], outputs=[o_name])
-        else:
-            part = zpk_cascade(zeros, poles, gain, input_name=i_name, output_name=o_name)
-        parts.append(part)
+            chain = ct.series(chain, _section(row, ts_s=ts_s))
+        parts.append(ct.ss(chain.A, chain.B, chain.C, chain.D, inputs=[i_name],
+                           outputs=[o_name]))
     sys = ct.append(*parts) if len(parts) > 1 else parts[0]
     return ct.ss(sys.A, sys.B, sys.C, sys.D, inputs=list(inputs), outputs=list(outputs),
                  name=name)
