@@ -41,6 +41,7 @@ import statistics
 import subprocess
 import sys
 import tempfile
+import threading
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -207,29 +208,61 @@ def _sigint_default() -> None:
 
 
 def _tune(device: Device, *, out: Path, running: str, seed: int, env: dict[str, str],
-          interrupt_at_s: float | None) -> tuple[int, str, float]:
-    """One ``tune --device`` run; its exit status, stdout and stderr, and wall time."""
+          interrupt_at_s: float | None, better_by_pct: float | None = None,
+          after_line: tuple[str, float] | None = None) -> tuple[int, str, float, float | None]:
+    """One ``tune --device`` run; its exit status, stdout and stderr, wall time and when
+    SIGINT was sent [s] (None: not sent).
+
+    ``interrupt_at_s``: SIGINT at that wall-clock time. ``after_line``: ``(text, delay_s)``,
+    SIGINT ``delay_s`` after tune's progress (stderr) first shows ``text``: where in the
+    run it lands, whatever the machine's load.
+    """
     cmd = [*PYTHON, "tune", "--device", device.address, "--out", str(out), "--running",
            running, "--watch-s", "6", "--periods", "4", "--seed", str(seed)]
+    if better_by_pct is not None:
+        cmd += ["--better-by-pct", f"{better_by_pct:g}"]
     t0 = time.monotonic()
     # SIGINT as a terminal sends it: a soak started in the background (nohup, cmd &) runs
     # with SIGINT ignored, and its children inherit that; Python then keeps it ignored
     # and no run was ever interrupted (ten runs in a row exited 0 after their SIGINT).
     proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=env,
                             preexec_fn=_sigint_default)
+    err: list[bytes] = []
+    seen = threading.Event()
+
+    def read_err() -> None:
+        assert proc.stderr is not None
+        for line in iter(proc.stderr.readline, b""):
+            err.append(line)
+            if after_line is not None and after_line[0].encode() in line:
+                seen.set()
+
+    reader = threading.Thread(target=read_err, daemon=True)
+    reader.start()
+    sent: float | None = None
     if interrupt_at_s is not None:
         try:
             proc.wait(timeout=interrupt_at_s)
         except subprocess.TimeoutExpired:
             proc.send_signal(signal.SIGINT)
+            sent = time.monotonic() - t0
+    elif after_line is not None:
+        while not seen.wait(0.1) and proc.poll() is None and \
+                time.monotonic() - t0 < RUN_LIMIT_S:
+            pass
+        if seen.is_set():
+            time.sleep(after_line[1])
+            if proc.poll() is None:
+                proc.send_signal(signal.SIGINT)
+                sent = time.monotonic() - t0
     try:
-        stdout, stderr = proc.communicate(timeout=RUN_LIMIT_S)
+        stdout, _ = proc.communicate(timeout=RUN_LIMIT_S)
     except subprocess.TimeoutExpired:
         proc.kill()
-        stdout, stderr = proc.communicate()
-        return -9, (stdout + stderr).decode(errors="replace"), time.monotonic() - t0
-    text = stdout.decode(errors="replace") + "\n" + stderr.decode(errors="replace")
-    return proc.returncode, text, time.monotonic() - t0
+        stdout, _ = proc.communicate()
+    reader.join(timeout=10)
+    text = stdout.decode(errors="replace") + "\n" + b"".join(err).decode(errors="replace")
+    return proc.returncode, text, time.monotonic() - t0, sent
 
 
 def _next_running(tune_json: dict[str, Any], before: str) -> str:
@@ -285,11 +318,19 @@ def _check(device: Device, *, index: int, running: str, status: int, text: str,
 
 def soak(protocol: str, *, runs: int, interrupt: float, busy: int, seed: int, speed: float,
          work: Path, interrupt_at_s: Sequence[float | None] = (),
+         window_s: tuple[float, float] | None = None, better_by_pct: float | None = None,
+         after_text: str = "", after_max_s: float = 3.0,
          say: Callable[[str], None] = print) -> list[RunRow]:
     """The soak (see the module); one row per run.
 
     ``interrupt_at_s``: the first runs' SIGINT times [s of wall clock] (None: not
-    interrupted), given instead of drawn; the later runs' are drawn.
+    interrupted), given instead of drawn; the later runs' are drawn, uniform over
+    ``window_s`` when given (to land around the load), else over the typical run.
+    ``better_by_pct``: tune's ``--better-by-pct`` (0: every candidate that passes its
+    checks is loaded, so that interruptions can land during and after a load).
+    ``after_text``: an interrupted run gets SIGINT a uniform 0 to ``after_max_s`` after its
+    progress shows this text (e.g. ``decision recorded before the load``), instead of at a
+    drawn time.
     """
     rng = random.Random(seed)
     env = dict(os.environ)
@@ -320,16 +361,21 @@ def soak(protocol: str, *, runs: int, interrupt: float, busy: int, seed: int, sp
             typical = statistics.median([r.wall_s for r in rows
                                          if r.interrupted_at_s is None and r.status == 0]
                                         or [60.0])
-            at = rng.uniform(1.0, typical) if rng.random() < interrupt else None
+            lo, hi = window_s if window_s is not None else (1.0, typical)
+            at = rng.uniform(lo, hi) if rng.random() < interrupt else None
             if i <= len(interrupt_at_s):
                 at = interrupt_at_s[i - 1]
             out = work / f"run{i:02d}"
-            status, text, wall = _tune(device, out=out, running=running, seed=seed + i,
-                                       env=env, interrupt_at_s=at)
+            after = None
+            if after_text and at is not None:
+                after, at = (after_text, rng.uniform(0.0, after_max_s)), None
+            status, text, wall, sent = _tune(device, out=out, running=running,
+                                             seed=seed + i, env=env, interrupt_at_s=at,
+                                             better_by_pct=better_by_pct, after_line=after)
             path = out / "tune.json"
             js = json.loads(path.read_text()) if path.exists() else None
             row = _check(device, index=i, running=running, status=status, text=text,
-                         wall_s=wall, interrupted_at_s=at if status == 130 else None,
+                         wall_s=wall, interrupted_at_s=sent if status == 130 else None,
                          tune_json=js, loaded=loaded, seed_name=seed_name)
             rows.append(row)
             say(row.line())
@@ -391,11 +437,26 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--interrupt-at", type=str, default="",
                         help="the first runs' SIGINT times [s], comma-separated, - for none "
                              "(e.g. 8,-,40); the later runs' are drawn")
+    parser.add_argument("--interrupt-window", type=str, default="",
+                        help="draw the SIGINT times uniform in A,B [s of wall clock] (e.g. "
+                             "60,110: around the load) instead of over the typical run")
+    parser.add_argument("--interrupt-after", type=str, default="",
+                        help="SIGINT a uniform 0 to --interrupt-after-max-s after tune's "
+                             "progress shows this text (e.g. 'decision recorded before the "
+                             "load'), wherever that lands in wall-clock time")
+    parser.add_argument("--interrupt-after-max-s", type=float, default=3.0)
+    parser.add_argument("--better-by-pct", type=float, default=None,
+                        help="tune's --better-by-pct (0: load every candidate that passes "
+                             "its checks, so that SIGINT can land during and after a load)")
     args = parser.parse_args(argv)
     times = [None if t.strip() == "-" else float(t) for t in args.interrupt_at.split(",")
              if t.strip()]
+    window = tuple(float(x) for x in args.interrupt_window.split(",")) \
+        if args.interrupt_window else None
     options = {"runs": args.runs, "interrupt": args.interrupt, "busy": args.busy,
-               "seed": args.seed, "speed": args.speed, "interrupt_at_s": times}
+               "seed": args.seed, "speed": args.speed, "interrupt_at_s": times,
+               "window_s": window, "better_by_pct": args.better_by_pct,
+               "after_text": args.interrupt_after, "after_max_s": args.interrupt_after_max_s}
     if args.keep is not None:
         args.keep.mkdir(parents=True, exist_ok=True)
         rows = soak(args.protocol, work=args.keep.resolve(), **options)  # type: ignore[arg-type]

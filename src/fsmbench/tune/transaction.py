@@ -35,6 +35,8 @@ from collections.abc import Callable, Iterator, Mapping
 from types import FrameType
 from typing import Any
 
+import numpy as np
+
 from fsmbench.tune.device_errors import device_failure
 from fsmbench.tune.values import (
     AXES,
@@ -183,6 +185,91 @@ def _recover(target: TuneTarget, running: Loop, point: Mapping[str, Any],
             f"loaded back{how}.")
 
 
+def _loaded(target: TuneTarget, candidate: Loop, sw: Mapping[str, Any], *,
+            after_load: Callable[[TuneTarget], str] | None,
+            say: Callable[[str], None]) -> None:
+    """Say that ``candidate`` was loaded (the switch ``sw``) and what ``after_load`` did."""
+    say(f"loaded {candidate.name} bumplessly ("
+        + (f"command {sw['command_before_v'][:2]} V -> {sw['command_after_v'][:2]} V)"
+           if "command_before_v" in sw else f"the device: {sw.get('reply', '')})"))
+    if after_load is not None:
+        say(f"the bench changed as the controller was loaded: {after_load(target)}")
+
+
+def _judge(target: TuneTarget, *, running: Loop, candidate: Loop, before: ControllerFigures,
+           figures: ControllerFigures, e_after: np.ndarray, options: TuneOptions, why: str,
+           tx: dict[str, Any], switches: list[dict[str, Any]], noun: str, make: Make,
+           say: Callable[[str], None]) -> TuneResult:
+    """The watch's verdict on the loaded candidate: kept, or the running controller loaded
+    back when the measured tracking error exceeds the prediction (``tx`` and ``switches``
+    completed in place)."""
+    measured_after = figures.measured_rms_rad or {}
+    worse = [a for a in AXES if not measured_after[a]
+             <= (1.0 + options.rollback_tolerance) * figures.predicted_rms_rad[a]]
+    if worse:
+        reason = ("the measured tracking error exceeds the prediction by more than "
+                  f"{100 * options.rollback_tolerance:g} % on " + ", ".join(
+                      f"{a} ({1e6 * measured_after[a]:.3g} µrad measured, "
+                      f"{1e6 * figures.predicted_rms_rad[a]:.3g} µrad predicted)"
+                      for a in worse) + f": {running.name} loaded back")
+        switches.append(target.roll_back(running))
+        e_back = target.run(options.watch_s, settle_s=options.settle_s)
+        say(f"rolled back: {reason}; measured again {urad_text(rms_by_axis(e_back))} rms")
+        tx.update(state="done", outcome="rolled_back", left_on=running.name,
+                  sentence=f"{noun} is left on {running.name}, the controller it ran "
+                           "before tune (rolled back).")
+        return make("rolled_back", reason, candidate_figures=figures,
+                    after=with_changes(before, measured_rms_rad=rms_by_axis(e_back)),
+                    switches=switches, transaction=tx, e_after=e_back)
+    reason = (f"{why}; measured {urad_text(measured_after)} after loading, within "
+              f"{100 * options.rollback_tolerance:g} % of the prediction")
+    say(f"kept: {reason}")
+    named = str(switches[0].get("to") or candidate.name)  # the target's name for it
+    tx.update(state="done", outcome="loaded", left_on=named,
+              sentence=f"{noun} is left on {named}"
+                       + ("" if named == candidate.name else f" ({candidate.name})")
+                       + f", loaded and watched for {options.watch_s:g} s.")
+    return make("loaded", reason, candidate_figures=figures, after=figures,
+                switches=switches, transaction=tx, e_after=e_after)
+
+
+def _record_interruption(exc: BaseException, target: TuneTarget, *, running: Loop,
+                         candidate: Loop, point: Mapping[str, Any], before: ControllerFigures,
+                         figures: ControllerFigures, tx: dict[str, Any],
+                         switches: list[dict[str, Any]],
+                         journal: Callable[[TuneResult], None] | None, make: Make,
+                         say: Callable[[str], None]) -> str:
+    """After ``exc`` cut the change short: the bench returned to ``running`` (unless a trip
+    opened the loop), ``tx`` completed and journalled; the message to raise with."""
+    cause = failure_cause(exc)
+    when = (f"after the load of {candidate.name} had started" if tx["load_started"] else
+            f"before {candidate.name} was loaded")
+    rollback: dict[str, Any]
+    if isinstance(exc, LoopOpenedError):
+        # A trip (or an OpenLoop) already took the candidate out; a LoadController now
+        # would be refused in FAULT, and closing the loop is the operator's call.
+        say(f"{cause} {when}")
+        left, rollback, sentence = exc.holds, {"needed": False, "loop": "open"}, exc.sentence
+    else:
+        say(f"{cause} {when}: returning to {running.name}")
+        left, rollback, sentence = _recover(target, running, point, say,
+                                            load_started=bool(tx["load_started"]))
+    if rollback.get("done"):
+        switches.append(rollback["switch"])
+    tx.update(state="done", cause=cause, left_on=left, rollback=rollback, sentence=sentence,
+              outcome="loop_opened" if isinstance(exc, LoopOpenedError) else "interrupted")
+    say(sentence)
+    reason = f"{cause} {when}; {sentence}"
+    after = before if left == running.name else figures
+    try:
+        if journal is not None:
+            journal(make("interrupted", reason, candidate_figures=figures, after=after,
+                         switches=switches, transaction=tx))
+    except Exception as again:
+        say(f"the record of the interruption could not be written: {failure_cause(again)}")
+    return f"{cause}; {sentence}"
+
+
 def load_and_watch(*, target: TuneTarget, running: Loop, candidate: Loop,
                    before: ControllerFigures, candidate_figures: ControllerFigures,
                    options: TuneOptions, why: str, make: Make,
@@ -224,12 +311,10 @@ def load_and_watch(*, target: TuneTarget, running: Loop, candidate: Loop,
     Raises
     ------
     LoopChangeError
-        An ``Exception`` once the record was being written: rolled back first; the
-        message ends with the sentence saying which controller the bench is left on.
-    BaseException
-        ``KeyboardInterrupt`` or SIGTERM's, raised again after the roll-back.
+        An ``Exception`` once the record was being written (``KeyboardInterrupt`` and
+        SIGTERM's are raised again as they are): rolled back first; the message ends with
+        the sentence saying which controller the bench is left on.
     """
-    opts = options
     point = target.checkpoint(running)
     noun = str(point.get("noun", "The bench"))
     tx: dict[str, Any] = {
@@ -237,86 +322,29 @@ def load_and_watch(*, target: TuneTarget, running: Loop, candidate: Loop,
         "running_before": dict(point), "left_on": running.name, "load_started": False,
         "sentence": f"Decided to load {candidate.name}; the bench runs {running.name} until "
                     "it is loaded."}
-    cand = candidate_figures
-    switches: list[dict[str, Any]] = []
+    cand, switches = candidate_figures, []
     try:
         if journal is not None:
             journal(make("loading", why, candidate_figures=cand, after=before, switches=(),
                          transaction=tx))
-            say(f"decision recorded before the load: {candidate.name} to replace "
-                f"{running.name}")
+            say(f"decision recorded before the load: {candidate.name} to replace {running.name}")
         tx["load_started"] = True
         switches.append(target.load(candidate))
-        sw = switches[-1]
-        say(f"loaded {candidate.name} bumplessly ("
-            + (f"command {sw['command_before_v'][:2]} V -> {sw['command_after_v'][:2]} V)"
-               if "command_before_v" in sw else f"the device: {sw.get('reply', '')})"))
-        if after_load is not None:
-            say(f"the bench changed as the controller was loaded: {after_load(target)}")
-        e_after = target.run(opts.watch_s, settle_s=opts.settle_s)
+        _loaded(target, candidate, switches[-1], after_load=after_load, say=say)
+        e_after = target.run(options.watch_s, settle_s=options.settle_s)
         measured_after = rms_by_axis(e_after)
         cand = with_changes(cand, measured_rms_rad=measured_after)
-        say(f"watched {candidate.name} for {opts.watch_s:g} s: {urad_text(measured_after)} rms "
-            f"(predicted {urad_text(cand.predicted_rms_rad)})")
-        worse = [a for a in AXES if not measured_after[a]
-                 <= (1.0 + opts.rollback_tolerance) * cand.predicted_rms_rad[a]]
-        if worse:
-            reason = ("the measured tracking error exceeds the prediction by more than "
-                      f"{100 * opts.rollback_tolerance:g} % on " + ", ".join(
-                          f"{a} ({1e6 * measured_after[a]:.3g} µrad measured, "
-                          f"{1e6 * cand.predicted_rms_rad[a]:.3g} µrad predicted)"
-                          for a in worse) + f": {running.name} loaded back")
-            switches.append(target.roll_back(running))
-            e_back = target.run(opts.watch_s, settle_s=opts.settle_s)
-            say(f"rolled back: {reason}; measured again {urad_text(rms_by_axis(e_back))} rms")
-            tx.update(state="done", outcome="rolled_back", left_on=running.name,
-                      sentence=f"{noun} is left on {running.name}, the controller it ran "
-                               "before tune (rolled back).")
-            result = make("rolled_back", reason, candidate_figures=cand,
-                          after=with_changes(before, measured_rms_rad=rms_by_axis(e_back)),
-                          switches=switches, transaction=tx, e_after=e_back)
-        else:
-            reason = (f"{why}; measured {urad_text(measured_after)} after loading, within "
-                      f"{100 * opts.rollback_tolerance:g} % of the prediction")
-            say(f"kept: {reason}")
-            named = str(switches[0].get("to") or candidate.name)  # the target's name for it
-            tx.update(state="done", outcome="loaded", left_on=named,
-                      sentence=f"{noun} is left on {named}"
-                               + ("" if named == candidate.name else f" ({candidate.name})")
-                               + f", loaded and watched for {opts.watch_s:g} s.")
-            result = make("loaded", reason, candidate_figures=cand, after=cand,
-                          switches=switches, transaction=tx, e_after=e_after)
+        say(f"watched {candidate.name} for {options.watch_s:g} s: {urad_text(measured_after)} "
+            f"rms (predicted {urad_text(cand.predicted_rms_rad)})")
+        result = _judge(target, running=running, candidate=candidate, before=before,
+                        figures=cand, e_after=e_after, options=options, why=why, tx=tx,
+                        switches=switches, noun=noun, make=make, say=say)
     except BaseException as exc:
-        cause = failure_cause(exc)
-        when = (f"after the load of {candidate.name} had started" if tx["load_started"] else
-                f"before {candidate.name} was loaded")
-        rollback: dict[str, Any]
-        if isinstance(exc, LoopOpenedError):
-            # A trip (or an OpenLoop) already took the candidate out; a LoadController now
-            # would be refused in FAULT, and closing the loop is the operator's call.
-            say(f"{cause} {when}")
-            left, rollback, sentence = exc.holds, {"needed": False, "loop": "open"}, \
-                exc.sentence
-        else:
-            say(f"{cause} {when}: returning to {running.name}")
-            left, rollback, sentence = _recover(target, running, point, say,
-                                                   load_started=bool(tx["load_started"]))
-        if rollback.get("done"):
-            switches.append(rollback["switch"])
-        tx.update(state="done", cause=cause, left_on=left, rollback=rollback,
-                  sentence=sentence, outcome="loop_opened" if isinstance(
-                      exc, LoopOpenedError) else "interrupted")
-        say(sentence)
-        reason = f"{cause} {when}; {sentence}"
-        after = before if left == running.name else cand
-        try:
-            if journal is not None:
-                journal(make("interrupted", reason, candidate_figures=cand, after=after,
-                             switches=switches, transaction=tx))
-        except Exception as again:
-            say(f"the record of the interruption could not be written: {failure_cause(again)}")
+        message = _record_interruption(exc, target, running=running, candidate=candidate,
+                                       point=point, before=before, figures=cand, tx=tx,
+                                       switches=switches, journal=journal, make=make, say=say)
         if isinstance(exc, Exception):
-            raise LoopChangeError(f"{cause}; {sentence}", sentence) from exc
+            raise LoopChangeError(message, str(tx["sentence"])) from exc
         raise
     if journal is not None:
         journal(result)
