@@ -154,6 +154,110 @@ def budget_study(recordings: Mapping[str, xr.Dataset], *, bench: Bench,
     return replace(result, notices=result.notices + numeric) if numeric else result
 
 
+def _usable_records(recordings: Mapping[str, xr.Dataset], *, bench: Bench,
+                    params: BenchParams, plant: PlantModel, skipped: dict[str, str],
+                    checks: list[Check], notices: list[Notice]
+                    ) -> tuple[dict[str, xr.Dataset], dict[str, xr.Dataset]]:
+    """The plausible records, and the huddle tests among them that can be compared; what is
+    left out is named in ``skipped``, ``checks`` and ``notices``."""
+    usable = _plausible(recordings, bench=bench, skipped=skipped, checks=checks,
+                        notices=notices)
+    # Copies, a closed-loop test whose loop was not closed, an open-loop test recorded with
+    # the loop closed: named, and left out of every comparison (budget.huddle_screen).
+    # The plant from the commands to the 4QD, flat in the 1–10 Hz band (its value at 5 Hz):
+    # the closed-loop tests then measure how much of that band their loop removed.
+    uc_to_vp = np.real(plant.frequency_response(
+        np.array([5.0]), outputs=("Vph", "Vpv"), inputs=("Uch", "Ucv")).values[0])
+    screen = screen_huddles(usable, fs_hz=params.converter.fs_hz,
+                            step_v=params.converter.lsb_v, uc_to_vp=uc_to_vp)
+    checks.extend(screen.checks)
+    notices.extend(Notice("other", "data_huddle_test_1, 2, 4: Vph, Vpv", n)
+                   for n in screen.notes)
+    for name, why in screen.excluded.items():
+        skipped[name] = f"{why}; the record is left out of the analysis and of every comparison"
+        usable.pop(name, None)
+    return usable, _valid_huddles(usable, skipped)
+
+
+def _huddle_predictions(huddle: HuddleAnalysis, *, params: BenchParams, bench: Bench,
+                        plant: PlantModel, controller: ct.StateSpace,
+                        angles: Callable[[bool], AngleSources], df_hz: float,
+                        checks: list[Check]) -> dict[int, float]:
+    """Each huddle test's Va rms as the budget predicts it [m]; its cross-checks against the
+    bench file's own prediction added to ``checks``."""
+    predicted: dict[int, float] = {}
+    for n, rec in huddle.records.items():
+        closed, comp, alu = HUDDLE_CONFIGS[n]
+        predicted[n] = budget_table(params, angles(closed), compensation_unit=comp,
+                                    shielding=alu, window_s=rec.duration_s).total_rms_m
+    # The cross-check's reference is the bench file alone: a measured input (the 4QD's
+    # noise, the DAC's error) that is itself wrong must not hide, or fake, a wrong Va.
+    nominal = bench.nominal
+    reference: dict[int, float] = {}
+    cache_ref: dict[bool, AngleSources] = {}
+    for n, rec in huddle.records.items():
+        closed, comp, alu = HUDDLE_CONFIGS[n]
+        if closed not in cache_ref:
+            cache_ref[closed] = angle_sources(nominal, plant=plant, controller=controller,
+                                              closed_loop=closed, df_hz=df_hz)
+        reference[n] = budget_table(nominal, cache_ref[closed], compensation_unit=comp,
+                                    shielding=alu, window_s=rec.duration_s).total_rms_m
+    checks.extend(huddle_cross_checks(huddle, predicted_va_rms_m=reference, params=nominal))
+    return predicted
+
+
+def _repeatability(usable: Mapping[str, xr.Dataset], *, params: BenchParams,
+                   skipped: dict[str, str],
+                   progress: Callable[[str], None] | None) -> dict[str, RepeatabilityRecord]:
+    """ESRF study 11: each repeatability record analysed, by direction (what cannot be,
+    named in ``skipped``)."""
+    say = progress or (lambda _msg: None)
+    reps: dict[str, RepeatabilityRecord] = {}
+    for name, direction in _REP.items():
+        if name in skipped:
+            continue
+        if name not in usable:
+            skipped[name] = "not in the recordings (ESRF study 11)"
+            continue
+        say(f"repeatability: {name} (ESRF study 11)")
+        try:
+            reps[direction] = analyse_repeatability(usable[name], params=params, name=name,
+                                                    progress=progress)
+        except ValueError as exc:
+            skipped[name] = str(exc)
+    return reps
+
+
+def _nonrepeatability(reps: Mapping[str, RepeatabilityRecord], *, huddle: HuddleAnalysis | None,
+                      usable: Mapping[str, xr.Dataset], params: BenchParams,
+                      angles: Callable[[bool], AngleSources],
+                      notices: list[Notice]) -> dict[str, NonRepeatability]:
+    """Each direction's non-repeatability against the huddle test's Va and the budget's
+    prediction over the same length (Fig. 50)."""
+    nonrep: dict[str, NonRepeatability] = {}
+    ref = None
+    if huddle is not None:
+        ref = huddle.records.get(5) or huddle.records[max(huddle.records)]
+    window = None
+    if ref is not None and reps and ref.name in usable:
+        # Fig. 50's last panel: the huddle test over the longest record's aligned length.
+        longest = max(r.n_periods * r.period_samples for r in reps.values())
+        try:
+            window = huddle_window(usable[ref.name], name=ref.name, n_max=longest)
+        except ValueError as exc:
+            notices.append(Notice("other", f"{ref.name}: Va", str(exc)))
+    for d, r in reps.items():
+        pred = budget_table(params, angles(True), window_s=r.n_periods * r.period_s)
+        nonrep[d] = NonRepeatability(
+            direction=d, va_nonrep_rms_m=r.nonrep_rms_m,
+            va_nonrep_unbiased_m=r.nonrep_rms_unbiased_m,
+            tracking_nonrep_rms_m=r.tracking_distance_nonrep_rms_m,
+            huddle_test=None if ref is None else ref.name,
+            huddle_va_rms_m=None if ref is None else ref.va_rms_m,
+            predicted_rms_m=pred.total_rms_m, huddle_window=window)
+    return nonrep
+
+
 def _budget_study(recordings: Mapping[str, xr.Dataset], *, bench: Bench,
                   plant: PlantModel | None, controller: ct.StateSpace | None,
                   window_s: float, df_hz: float,
@@ -172,23 +276,8 @@ def _budget_study(recordings: Mapping[str, xr.Dataset], *, bench: Bench,
     skipped: dict[str, str] = {}
     checks: list[Check] = []
     notices: list[Notice] = []
-    usable = _plausible(recordings, bench=bench, skipped=skipped, checks=checks,
-                        notices=notices)
-    # Copies, a closed-loop test whose loop was not closed, an open-loop test recorded with
-    # the loop closed: named, and left out of every comparison (budget.huddle_screen).
-    # The plant from the commands to the 4QD, flat in the 1–10 Hz band (its value at 5 Hz):
-    # the closed-loop tests then measure how much of that band their loop removed.
-    uc_to_vp = np.real(plant.frequency_response(
-        np.array([5.0]), outputs=("Vph", "Vpv"), inputs=("Uch", "Ucv")).values[0])
-    screen = screen_huddles(usable, fs_hz=params.converter.fs_hz,
-                            step_v=params.converter.lsb_v, uc_to_vp=uc_to_vp)
-    checks.extend(screen.checks)
-    notices.extend(Notice("other", "data_huddle_test_1, 2, 4: Vph, Vpv", n)
-                   for n in screen.notes)
-    for name, why in screen.excluded.items():
-        skipped[name] = f"{why}; the record is left out of the analysis and of every comparison"
-        usable.pop(name, None)
-    valid = _valid_huddles(usable, skipped)
+    usable, valid = _usable_records(recordings, bench=bench, params=params, plant=plant,
+                                    skipped=skipped, checks=checks, notices=notices)
     # Records out of core are read twice, in blocks, for everything below (huddle and stability).
     summaries = {name: summarise_long_record(ds, name=name, n_bins=DRIFT_BINS, progress=progress)
                  for name, ds in valid.items() if is_lazy(ds["Va"].data)}
@@ -210,7 +299,6 @@ def _budget_study(recordings: Mapping[str, xr.Dataset], *, bench: Bench,
             "no usable closed-loop huddle test (3, 5) with Uch, Ucv: the white q²/(12 fs) "
             "model is used")
     cache: dict[bool, AngleSources] = {}
-    cache_ref: dict[tuple[bool, str], AngleSources] = {}
 
     def angles(closed: bool) -> AngleSources:
         if closed not in cache:
@@ -234,60 +322,12 @@ def _budget_study(recordings: Mapping[str, xr.Dataset], *, bench: Bench,
         rec_budget = ControllerBudget(
             recommended_name, budget_table(params, rec_angles, window_s=window_s),
             budget_table(params, rec_angles, window_s=None).total_rms_m)
-    predicted: dict[int, float] = {}
-    if huddle is not None:
-        for n, rec in huddle.records.items():
-            closed, comp, alu = HUDDLE_CONFIGS[n]
-            predicted[n] = budget_table(params, angles(closed), compensation_unit=comp,
-                                        shielding=alu, window_s=rec.duration_s).total_rms_m
-        # The cross-check's reference is the bench file alone: a measured input (the 4QD's
-        # noise, the DAC's error) that is itself wrong must not hide, or fake, a wrong Va.
-        nominal = bench.nominal
-        reference: dict[int, float] = {}
-        for n, rec in huddle.records.items():
-            closed, comp, alu = HUDDLE_CONFIGS[n]
-            if (closed, "reference") not in cache_ref:
-                cache_ref[(closed, "reference")] = angle_sources(
-                    nominal, plant=plant, controller=controller, closed_loop=closed,
-                    df_hz=df_hz)
-            reference[n] = budget_table(nominal, cache_ref[(closed, "reference")],
-                                        compensation_unit=comp, shielding=alu,
-                                        window_s=rec.duration_s).total_rms_m
-        checks.extend(huddle_cross_checks(huddle, predicted_va_rms_m=reference, params=nominal))
-    reps: dict[str, RepeatabilityRecord] = {}
-    for name, direction in _REP.items():
-        if name in skipped:
-            continue
-        if name not in usable:
-            skipped[name] = "not in the recordings (ESRF study 11)"
-            continue
-        say(f"repeatability: {name} (ESRF study 11)")
-        try:
-            reps[direction] = analyse_repeatability(usable[name], params=params, name=name,
-                                                    progress=progress)
-        except ValueError as exc:
-            skipped[name] = str(exc)
-    nonrep: dict[str, NonRepeatability] = {}
-    ref = None
-    if huddle is not None:
-        ref = huddle.records.get(5) or huddle.records[max(huddle.records)]
-    window = None
-    if ref is not None and reps and ref.name in usable:
-        # Fig. 50's last panel: the huddle test over the longest record's aligned length.
-        longest = max(r.n_periods * r.period_samples for r in reps.values())
-        try:
-            window = huddle_window(usable[ref.name], name=ref.name, n_max=longest)
-        except ValueError as exc:
-            notices.append(Notice("other", f"{ref.name}: Va", str(exc)))
-    for d, r in reps.items():
-        pred = budget_table(params, angles(True), window_s=r.n_periods * r.period_s)
-        nonrep[d] = NonRepeatability(
-            direction=d, va_nonrep_rms_m=r.nonrep_rms_m,
-            va_nonrep_unbiased_m=r.nonrep_rms_unbiased_m,
-            tracking_nonrep_rms_m=r.tracking_distance_nonrep_rms_m,
-            huddle_test=None if ref is None else ref.name,
-            huddle_va_rms_m=None if ref is None else ref.va_rms_m,
-            predicted_rms_m=pred.total_rms_m, huddle_window=window)
+    predicted = {} if huddle is None else _huddle_predictions(
+        huddle, params=params, bench=bench, plant=plant, controller=controller, angles=angles,
+        df_hz=df_hz, checks=checks)
+    reps = _repeatability(usable, params=params, skipped=skipped, progress=progress)
+    nonrep = _nonrepeatability(reps, huddle=huddle, usable=usable, params=params,
+                               angles=angles, notices=notices)
     return BudgetResult(
         plant_source=plant.source, controller=controller_name,
         noise=noise_sources(params, plant=plant,
