@@ -40,7 +40,7 @@ too few independent lines).
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -48,15 +48,21 @@ import control as ct
 import numpy as np
 import xarray as xr
 from numpy.typing import NDArray
-from scipy.stats import t as student
 
 from fsmbench.bench.blocks import PlantModel
 from fsmbench.bench.params import BenchParams
 from fsmbench.budget.propagation import loop_response
 from fsmbench.checks import Check
-from fsmbench.control.compare import OutputErrorCheck, output_error_check, without_mean_period
+from fsmbench.control.compare import OutputErrorCheck, output_error_check
+from fsmbench.control.tracking_records import (
+    BATCH_PERIODS,
+    SAMPLING_Z,
+    BandPowerScatter,
+    band_power_scatter,
+    sampling_z,
+    tracking_psd,
+)
 from fsmbench.jsonutil import plain_json
-from fsmbench.signal.welch import hanning, pwelch
 from fsmbench.sim.spectra import qd_noise_spectrum
 
 __all__ = [
@@ -80,14 +86,6 @@ FloatArray = NDArray[np.float64]
 #: leaves room for the noise model's fit error (≤ 1.5 dB in any decade, ~±19 % in power
 #: of one decade) without admitting a wrong noise level (a factor 2 in any source).
 MODEL_VALIDATION_LIMITS = (0.8, 1.25)
-#: Periods per batch of :func:`band_power_scatter`: 2 s, five times the Sercalo's
-#: amplitude correlation time (1/(ζω) = 0.43 s at 411 Hz, ζ = 0.0009).
-BATCH_PERIODS = 2
-#: The two-sided 95 % point of a normal law: with a std known exactly, the band above is
-#: widened by this many of the log-ratio's sampling std (:func:`sampling_z`: Student's t
-#: when the std is read from the records' periods).
-SAMPLING_Z = 1.96
-
 _SOURCES = {
     "qd_noise": ("sensor", "4QD noise (white, 1/f, drift)"),
     "adc_quantisation": ("sensor", "ADC quantisation"),
@@ -294,122 +292,6 @@ class ClosedLoopValidation:
         })
 
 
-def _residual(ds: xr.Dataset, name: str, *, fs_hz: float, period_s: float,
-              settle_s: float) -> tuple[FloatArray, int]:
-    """``(Vph, Vpv)`` less their mean period, (n, 2), and the number of periods."""
-    t = np.asarray(ds["t"].values, dtype=float)
-    keep = t >= t[0] + settle_s
-    v = np.column_stack([np.asarray(ds[c].values, dtype=float)[keep] for c in ("Vph", "Vpv")])
-    per = round(period_s * fs_hz)
-    n = v.shape[0] // per
-    if n < 3:
-        # Fewer than 3 periods leave the repeatable part's estimate holding half the noise.
-        raise ValueError(f"{name}: {v.shape[0] / fs_hz:.3g} s after the first {settle_s:g} s "
-                         f"hold {n} whole periods of {period_s:g} s; the model validation "
-                         "needs at least 3")
-    return without_mean_period(v, per)
-
-
-def _measured_psd(recordings: Mapping[str, xr.Dataset], names: list[str], *, gd: FloatArray,
-                  fs_hz: float, period_s: float, settle_s: float
-                  ) -> tuple[FloatArray, FloatArray, int]:
-    """Welch grid, PSD of ``e`` (F, 2) averaged over the records, fewest whole periods."""
-    window = hanning(round(period_s * fs_hz))
-    psds = []
-    periods = []
-    f = np.zeros(0)
-    for name in names:
-        resid, n = _residual(recordings[name], name, fs_hz=fs_hz, period_s=period_s,
-                             settle_s=settle_s)
-        periods.append(n)
-        e = resid / gd[None, :]
-        cols = [pwelch(e[:, i], window=window, fs_hz=fs_hz, nfft=window.size,
-                       x_name=f"{name} {c}") for i, c in enumerate(("Vph", "Vpv"))]
-        f = np.asarray(cols[0].f_hz, dtype=float)
-        psds.append(np.column_stack([c.values for c in cols]))
-    return f, np.mean(psds, axis=0), min(periods)
-
-
-@dataclass(frozen=True)
-class BandPowerScatter:
-    """The sampling scatter of a band power Welch averaged over periods.
-
-    Attributes
-    ----------
-    relative_variance : array (2,)
-        Of the averaged band power, h and v [1].
-    dof : float
-        Degrees of freedom of the variance estimate: the batches less one, the fewest
-        of the records'.
-    """
-
-    relative_variance: FloatArray
-    dof: float
-
-
-def sampling_z(*scatters: BandPowerScatter, axis: int) -> float:
-    """The two-sided 95 % point for a log-ratio whose variance the scatters estimate.
-
-    Student's t with the Welch–Satterthwaite degrees of freedom of the summed variance
-    (each estimate's ``dof``): a std read from 8 periods is itself uncertain, and a
-    normal point would cover ~85 %, not 95 %."""
-    var = [float(s.relative_variance[axis]) for s in scatters]
-    den = sum(v**2 / max(s.dof, 1.0) for v, s in zip(var, scatters, strict=True))
-    dof = sum(var) ** 2 / den if den > 0 else math.inf
-    return SAMPLING_Z if not math.isfinite(dof) else float(student.ppf(0.975, dof))
-
-
-def band_power_scatter(recordings: Mapping[str, xr.Dataset], names: list[str], *,
-                       gd: FloatArray, fs_hz: float, period_s: float, settle_s: float,
-                       band_hz: tuple[float, float]) -> BandPowerScatter:
-    """Relative variance of the band power :func:`_measured_psd` averages, per axis.
-
-    Batch means: the record's whole periods in consecutive batches of
-    ``BATCH_PERIODS``, Welch's band power on each; their scatter over the batches is
-    the average's, with ``batches − 1`` degrees of freedom. A lightly damped resonance
-    in a 1 s window is a few lines whose amplitude persists from one half-overlapping
-    segment to the next, so its rms is known to ~1/√(batches) and no better. The
-    records' averages are independent. On white noise the batches leave out the
-    segments across their edges and read the whole average's variance up to 1.33×
-    high (799 segments against 600 for 400 periods): a conservative error, where
-    reading every segment as independent put a lightly damped mode's rms at two thirds
-    of its spread (coverage 83 % for 95 % on 8 periods; ``tests/control``).
-    """
-    per = round(period_s * fs_hz)
-    half = per // 2
-    window = hanning(per)
-    scale = 1.0 / (fs_hz * float(np.sum(window**2)))
-    f = np.fft.rfftfreq(per, 1.0 / fs_hz)
-    inside = (f >= band_hz[0]) & (f <= band_hz[1])
-    rel = []
-    dofs = []
-    for name in names:
-        resid, n = _residual(recordings[name], name, fs_hz=fs_hz, period_s=period_s,
-                             settle_s=settle_s)
-        e = resid / gd[None, :]
-        # Batch means: Welch's band power on consecutive pairs of periods (its own
-        # half-overlapping segments inside each), the batches independent where one
-        # segment's are not (they share samples, and a line narrower than a bin keeps
-        # its amplitude from one to the next).
-        batches = max(n // BATCH_PERIODS, 2)
-        size = (n // batches) * per
-        powers = []
-        for b in range(batches):
-            x = e[b * size:(b + 1) * size]
-            starts = np.arange(0, x.shape[0] - per + 1, half)
-            segs = np.stack([x[i:i + per] for i in starts])
-            spec = np.abs(np.fft.rfft(segs * window[None, :, None], axis=1)) ** 2 * scale
-            powers.append(spec[:, inside, :].sum(axis=1).mean(axis=0))
-        p = np.asarray(powers)  # (batches, 2)
-        mean = p.mean(axis=0)
-        var_mean = p.var(axis=0, ddof=1) / batches
-        rel.append(np.where(mean > 0, var_mean / np.maximum(mean, 1e-300) ** 2, 0.0))
-        dofs.append(float(batches - 1))
-    # The records' average: independent estimates, equal weights.
-    return BandPowerScatter(np.asarray(np.sum(rel, axis=0) / len(rel) ** 2, dtype=float),
-                            min(dofs))
-
-
 def _dead_band(recorded: Mapping[str, xr.Dataset], names: list[str], *, plant: PlantModel,
                params: BenchParams, gd: FloatArray) -> dict[str, tuple[float, float]]:
     """Axes whose recorded command moves by less than one DAC step per sample.
@@ -429,82 +311,37 @@ def _dead_band(recorded: Mapping[str, xr.Dataset], names: list[str], *, plant: P
     return out
 
 
-def validate_closed_loop(recorded: Mapping[str, xr.Dataset], *,
-                         simulated: Mapping[str, xr.Dataset], plant: PlantModel,
-                         params: BenchParams, controller: ct.StateSpace, controller_name: str,
-                         gd_used_v_per_rad: tuple[float, float], bench_label: str,
-                         period_s: float = 1.0, settle_s: float = 2.0,
-                         band_hz: tuple[float, float] | None = None,
-                         limits: tuple[float, float] = MODEL_VALIDATION_LIMITS
-                         ) -> ClosedLoopValidation:
-    """Compare the recorded ``data_rep_h/v`` tracking error with its prediction.
-
-    Parameters
-    ----------
-    recorded : mapping
-        Needs ``data_rep_h`` and/or ``data_rep_v`` with ``t, Vph, Vpv``.
-    simulated : mapping
-        The same experiments simulated on the bench model with ``controller``.
-    plant : PlantModel
-        The bench model's plant (its ``Gd`` converts volts to radians; the
-        breakdown by source uses it).
-    params : BenchParams
-        Its noise and converters.
-    controller : control.StateSpace
-        The controller the records were taken with, as the target ran it.
-    controller_name : str
-    gd_used_v_per_rad : (float, float)
-        4QD gains the recorded loop divided by [V/rad].
-    bench_label : str
-        The model in words, for the report.
-    period_s, settle_s : float
-        The Newport's period and the start left out [s].
-    band_hz : (float, float), optional
-        Band of the rms comparison; default 2 Hz to the Nyquist frequency.
-    limits : (float, float)
-        Accepted measured / predicted rms.
-
-    Raises
-    ------
-    ValueError
-        Neither record present, a simulated record missing, or a record too
-        short (named).
-    """
-    names = [n for n in ("data_rep_h", "data_rep_v") if n in recorded]
-    if not names:
-        raise ValueError("neither data_rep_h nor data_rep_v is in the recordings")
-    missing = [n for n in names if n not in simulated]
-    if missing:
-        raise ValueError(f"no simulation of {', '.join(missing)} to compare with")
-    fs = params.converter.fs_hz
-    gd = _diag_gain(plant)
-    f, measured, n_periods = _measured_psd(recorded, names, gd=gd, fs_hz=fs,
-                                           period_s=period_s, settle_s=settle_s)
-    f_sim, predicted_psd, _ = _measured_psd(simulated, names, gd=gd, fs_hz=fs,
-                                            period_s=period_s, settle_s=settle_s)
-    lo, hi = (2.0, fs / 2) if band_hz is None else band_hz
-    inside = (f >= lo) & (f <= hi)
-    meas_var = np.asarray(np.trapezoid(measured[inside], f[inside], axis=0))
-    pred_var = np.asarray(np.trapezoid(predicted_psd[inside], f_sim[inside], axis=0))
-    # The breakdown: linear, per source, scaled by the 1 − 1/N the period mean removes.
-    factor = 1.0 - 1.0 / n_periods
+def _breakdown(plant: PlantModel, controller: ct.StateSpace, *, params: BenchParams,
+               gd_used_v_per_rad: tuple[float, float], f_hz: np.ndarray,
+               band_hz: tuple[float, float], factor: float
+               ) -> tuple[TrackingSpectra, TrackingSpectra]:
+    """The predicted tracking error by source: on a 0.1 Hz grid over ``band_hz`` (its band
+    variances), and on the records' own lines ``f_hz``, scaled by ``factor`` (the 1 - 1/N
+    the period mean removes)."""
+    lo, hi = band_hz
     fine = tracking_error_spectra(plant, controller, params=params,
                                   gd_used_v_per_rad=gd_used_v_per_rad,
                                   f_hz=np.linspace(lo, hi, max(2, round((hi - lo) / 0.1) + 1)))
-    parts_var = {k: v * factor for k, v in fine.band_variance((lo, hi)).items()}
+    f = f_hz[f_hz > 0]
     breakdown = TrackingSpectra(
-        f_hz=f[f > 0], parts={k: v * factor for k, v in tracking_error_spectra(
+        f_hz=f, parts={k: v * factor for k, v in tracking_error_spectra(
             plant, controller, params=params, gd_used_v_per_rad=gd_used_v_per_rad,
-            f_hz=f[f > 0]).parts.items()},
+            f_hz=f).parts.items()},
         line_freqs_hz=fine.line_freqs_hz, line_power=fine.line_power * factor, words=fine.words)
-    measured_rms = {a: float(math.sqrt(meas_var[i])) for i, a in enumerate("hv")}
-    predicted_rms = {a: float(math.sqrt(pred_var[i])) for i, a in enumerate("hv")}
-    ratio = {a: measured_rms[a] / predicted_rms[a] if predicted_rms[a] > 0 else math.inf
-             for a in "hv"}
+    return fine, breakdown
+
+
+def _accepted_band(recorded: Mapping[str, xr.Dataset], simulated: Mapping[str, xr.Dataset],
+                   names: Sequence[str], *, gd: Any, fs_hz: float, period_s: float,
+                   settle_s: float, band_hz: tuple[float, float],
+                   limits: tuple[float, float]
+                   ) -> tuple[dict[str, float], dict[str, tuple[float, float]]]:
+    """Per axis, the std of log(rms ratio) from both records' sampling scatter, and the
+    accepted band of the ratio: ``limits`` widened by it."""
     # Both rms are estimates from records of the same finite length: the model's band is
     # widened by their sampling scatter (rms = √power: half the power's relative std).
-    scatter = {src: band_power_scatter(recs, names, gd=gd, fs_hz=fs, period_s=period_s,
-                                       settle_s=settle_s, band_hz=(lo, hi))
+    scatter = {src: band_power_scatter(recs, list(names), gd=gd, fs_hz=fs_hz,
+                                       period_s=period_s, settle_s=settle_s, band_hz=band_hz)
                for src, recs in (("recorded", recorded), ("simulated", simulated))}
     log_std = {a: 0.5 * math.sqrt(float(scatter["recorded"].relative_variance[i]
                                         + scatter["simulated"].relative_variance[i]))
@@ -512,22 +349,73 @@ def validate_closed_loop(recorded: Mapping[str, xr.Dataset], *,
     z = {a: sampling_z(*scatter.values(), axis=i) for i, a in enumerate("hv")}
     accepted = {a: (limits[0] * math.exp(-z[a] * log_std[a]),
                     limits[1] * math.exp(z[a] * log_std[a])) for a in "hv"}
-    ok = all(accepted[a][0] <= ratio[a] <= accepted[a][1] for a in "hv")
-    parts_rms = {a: {k: float(math.sqrt(max(v[i], 0.0))) for k, v in parts_var.items()}
-                 for i, a in enumerate("hv")}
-    plant_check = output_error_check(recorded, names, plant=plant, fs_hz=fs,
-                                     lsb_v=params.converter.lsb_v,
-                                     span_v=params.converter.range_v, period_s=period_s,
-                                     settle_s=settle_s)
+    return log_std, accepted
+
+
+def _experiments(recorded: Mapping[str, xr.Dataset],
+                 simulated: Mapping[str, xr.Dataset]) -> list[str]:
+    """The repeatability records present, each with its simulation (else a ValueError)."""
+    names = [n for n in ("data_rep_h", "data_rep_v") if n in recorded]
+    if not names:
+        raise ValueError("neither data_rep_h nor data_rep_v is in the recordings")
+    missing = [n for n in names if n not in simulated]
+    if missing:
+        raise ValueError(f"no simulation of {', '.join(missing)} to compare with")
+    return names
+
+
+def _rms(psd: np.ndarray, f_hz: np.ndarray, inside: np.ndarray) -> dict[str, float]:
+    """Per axis, the rms of a tracking-error PSD (n, 2) over the lines ``inside`` [rad]."""
+    var = np.asarray(np.trapezoid(psd[inside], f_hz[inside], axis=0))
+    return {a: float(math.sqrt(var[i])) for i, a in enumerate("hv")}
+
+
+def _model_check(*, ok: bool, ratio: Mapping[str, float],
+                 accepted: Mapping[str, tuple[float, float]], limits: tuple[float, float],
+                 names: Sequence[str], reason: str, dead_band: bool) -> Check:
+    """The validation's check: the ratio furthest from 1, against the accepted band."""
+    worst = max(ratio.values(), key=lambda r: abs(math.log(r)) if 0 < r < math.inf
+                else math.inf)
+    band_words = ", ".join(f"{a} {accepted[a][0]:.2f}–{accepted[a][1]:.2f}" for a in "hv")
+    return Check("model_validation", ok, worst,
+                 f"recorded / predicted tracking-error rms within {limits[0]:g}–{limits[1]:g}"
+                 f", widened by the records' own scatter ({band_words})"
+                 + ("; where the DAC's dead band sets the error, the plant's output error "
+                    "within its limit" if dead_band else ""),
+                 subject=", ".join(f"{n}.mat: Vph, Vpv" for n in names),
+                 advice="" if ok else (reason + "; predictions on this model are not trusted "
+                                                "until it is"), unit="×")
+
+
+@dataclass(frozen=True)
+class _Verdict:
+    """The comparison's outcome: accepted or not, why in words, the action it points to,
+    and the axes where the DAC's dead band sets the recorded error."""
+
+    ok: bool
+    reason: str
+    action: str
+    dead_band_axes: tuple[str, ...]
+
+
+def _verdict(recorded: Mapping[str, xr.Dataset], names: Sequence[str], *, ok: bool,
+             accepted: Mapping[str, tuple[float, float]], ratio: Mapping[str, float],
+             measured_rms: Mapping[str, float], predicted_rms: Mapping[str, float],
+             parts_rms: Mapping[str, Mapping[str, float]], words: Mapping[str, str],
+             plant: PlantModel, params: BenchParams, gd: Any,
+             plant_check: Any) -> _Verdict:
+    """Why the recorded rms is outside the accepted band (its largest source, the DAC's
+    dead band where it sets the error, then accepted when the plant predicts the records
+    from their own commands), or why an accepted rms is not (the plant's output error)."""
     reason = action = ""
     dead_band_axes: list[str] = []
     failing = [x for x in "hv" if not accepted[x][0] <= ratio[x] <= accepted[x][1]]
     if not ok:
-        words = []
-        steps = _dead_band(recorded, names, plant=plant, params=params, gd=gd)
+        said_axes = []
+        steps = _dead_band(recorded, list(names), plant=plant, params=params, gd=gd)
         for a in failing:
             top = max(parts_rms[a], key=lambda k: parts_rms[a][k])
-            what = fine.words.get(top, "mains lines")
+            what = words.get(top, "mains lines")
             said = (f"{a}: recorded {measured_rms[a] * 1e6:.3g} µrad rms against "
                     f"{predicted_rms[a] * 1e6:.3g} predicted "
                     f"({'more' if ratio[a] > 1 else 'less'} than the model gives; its "
@@ -546,8 +434,8 @@ def validate_closed_loop(recorded: Mapping[str, xr.Dataset], *,
                           "gain or DAC span): its rounding limit-cycles and sets the recorded "
                           "error, which no model predicts")
                 dead_band_axes.append(a)
-            words.append(said + ")")
-        reason = "; ".join(words)
+            said_axes.append(said + ")")
+        reason = "; ".join(said_axes)
         if (dead_band_axes == failing and plant_check is not None
                 and plant_check.passed):
             # The plant predicts the records from their own commands: the model is right,
@@ -564,23 +452,85 @@ def validate_closed_loop(recorded: Mapping[str, xr.Dataset], *,
         # The rms agrees but the records contradict the plant through their own commands.
         ok = False
         reason = plant_check.check.advice
-    worst = max(ratio.values(), key=lambda r: abs(math.log(r)) if 0 < r < math.inf
-                else math.inf)
-    band_words = ", ".join(f"{a} {accepted[a][0]:.2f}–{accepted[a][1]:.2f}" for a in "hv")
-    check = Check("model_validation", ok, worst,
-                  f"recorded / predicted tracking-error rms within {limits[0]:g}–{limits[1]:g}"
-                  f", widened by the records' own scatter ({band_words})"
-                  + ("; where the DAC's dead band sets the error, the plant's output error "
-                     "within its limit" if dead_band_axes else ""),
-                  subject=", ".join(f"{n}.mat: Vph, Vpv" for n in names),
-                  advice="" if ok else (reason + "; predictions on this model are not trusted "
-                                                 "until it is"), unit="×")
+    return _Verdict(ok=ok, reason=reason, action=action, dead_band_axes=tuple(dead_band_axes))
+
+
+def validate_closed_loop(recorded: Mapping[str, xr.Dataset], *,
+                         simulated: Mapping[str, xr.Dataset], plant: PlantModel,
+                         params: BenchParams, controller: ct.StateSpace, controller_name: str,
+                         gd_used_v_per_rad: tuple[float, float], bench_label: str,
+                         period_s: float = 1.0, settle_s: float = 2.0,
+                         band_hz: tuple[float, float] | None = None,
+                         limits: tuple[float, float] = MODEL_VALIDATION_LIMITS
+                         ) -> ClosedLoopValidation:
+    """Compare the recorded ``data_rep_h/v`` tracking error with its prediction.
+
+    Parameters
+    ----------
+    recorded : mapping
+        Needs ``data_rep_h`` and/or ``data_rep_v`` with ``t, Vph, Vpv``.
+    simulated : mapping
+        The same experiments simulated on the bench model with ``controller``.
+    plant : PlantModel
+        The bench model's plant (its ``Gd`` converts volts to radians; the breakdown by
+        source uses it); ``params`` its noise and converters.
+    params : BenchParams
+    controller : control.StateSpace
+        The controller the records were taken with, as the target ran it.
+    controller_name, bench_label : str
+        The controller and the model in words, for the report.
+    gd_used_v_per_rad : (float, float)
+        4QD gains the recorded loop divided by [V/rad].
+    period_s, settle_s : float
+        The Newport's period and the start left out [s].
+    band_hz : (float, float), optional
+        Band of the rms comparison; default 2 Hz to the Nyquist frequency.
+    limits : (float, float)
+        Accepted measured / predicted rms.
+
+    Raises
+    ------
+    ValueError
+        Neither record present, a simulated record missing, or one too short (named).
+    """
+    names = _experiments(recorded, simulated)
+    fs = params.converter.fs_hz
+    gd = _diag_gain(plant)
+    f, measured, n_periods = tracking_psd(recorded, names, gd=gd, fs_hz=fs,
+                                           period_s=period_s, settle_s=settle_s)
+    f_sim, predicted_psd, _ = tracking_psd(simulated, names, gd=gd, fs_hz=fs,
+                                            period_s=period_s, settle_s=settle_s)
+    lo, hi = (2.0, fs / 2) if band_hz is None else band_hz
+    inside = (f >= lo) & (f <= hi)
+    factor = 1.0 - 1.0 / n_periods  # what the period mean leaves of each source's power
+    fine, breakdown = _breakdown(plant, controller, params=params, factor=factor,
+                                 gd_used_v_per_rad=gd_used_v_per_rad, f_hz=f, band_hz=(lo, hi))
+    parts_var = {k: v * factor for k, v in fine.band_variance((lo, hi)).items()}
+    measured_rms, predicted_rms = _rms(measured, f, inside), _rms(predicted_psd, f_sim, inside)
+    ratio = {a: measured_rms[a] / predicted_rms[a] if predicted_rms[a] > 0 else math.inf
+             for a in "hv"}
+    log_std, accepted = _accepted_band(recorded, simulated, names, gd=gd, fs_hz=fs, limits=limits,
+                                       period_s=period_s, settle_s=settle_s, band_hz=(lo, hi))
+    ok = all(accepted[a][0] <= ratio[a] <= accepted[a][1] for a in "hv")
+    parts_rms = {a: {k: float(math.sqrt(max(v[i], 0.0))) for k, v in parts_var.items()}
+                 for i, a in enumerate("hv")}
+    plant_check = output_error_check(recorded, names, plant=plant, fs_hz=fs,
+                                     lsb_v=params.converter.lsb_v,
+                                     span_v=params.converter.range_v, period_s=period_s,
+                                     settle_s=settle_s)
+    verdict = _verdict(recorded, names, ok=ok, accepted=accepted, ratio=ratio,
+                       measured_rms=measured_rms, predicted_rms=predicted_rms,
+                       parts_rms=parts_rms, words=fine.words, plant=plant, params=params,
+                       gd=gd, plant_check=plant_check)
+    check = _model_check(ok=verdict.ok, ratio=ratio, accepted=accepted, limits=limits,
+                         names=names, reason=verdict.reason,
+                         dead_band=bool(verdict.dead_band_axes))
     return ClosedLoopValidation(
         bench=bench_label, controller=controller_name, experiments=tuple(names),
         gd_used_v_per_rad=(float(gd_used_v_per_rad[0]), float(gd_used_v_per_rad[1])),
         f_hz=f, measured_psd=measured, predicted=breakdown, predicted_psd=predicted_psd,
         band_hz=(float(lo), float(hi)),
         measured_rms_rad=measured_rms, predicted_rms_rad=predicted_rms, ratio=ratio,
-        limits=limits, n_periods=n_periods, check=check, reason=reason,
-        predicted_parts_rms_rad=parts_rms, action=action, log_ratio_std=log_std,
-        accepted=accepted, plant_check=plant_check, dead_band_axes=tuple(dead_band_axes))
+        limits=limits, n_periods=n_periods, check=check, reason=verdict.reason,
+        predicted_parts_rms_rad=parts_rms, action=verdict.action, log_ratio_std=log_std,
+        accepted=accepted, plant_check=plant_check, dead_band_axes=verdict.dead_band_axes)
