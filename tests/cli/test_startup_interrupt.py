@@ -3,6 +3,7 @@ sent SIGINT 2 s into a run and got xarray's import traceback and a process kille
 
 from __future__ import annotations
 
+import json
 import subprocess
 import sys
 from pathlib import Path
@@ -29,3 +30,23 @@ def test_ctrl_c_while_the_command_loads_is_one_line_and_130(tmp_path: Path) -> N
     assert "Traceback" not in done.stderr
     assert "interrupted (Ctrl-C) while starting" in done.stderr
     assert "nothing was changed" in done.stderr
+
+
+def test_a_ctrl_c_after_the_command_has_returned_stops_nothing() -> None:
+    # The console script's teardown (a device proxy's, threads) runs with SIGINT ignored:
+    # a Ctrl-C there killed a tune that had written and said its result (status -2). An
+    # exit handler reads the disposition the interpreter's teardown runs under.
+    code = ("import atexit, os, signal, sys\n"
+            "def at_exit():\n"
+            "    ignored = signal.getsignal(signal.SIGINT) is signal.SIG_IGN\n"
+            "    os.kill(os.getpid(), signal.SIGINT)\n"
+            "    sys.stdout.flush()\n"
+            "    os._exit(0 if ignored else 3)\n"
+            "atexit.register(at_exit)\n"
+            "sys.argv = ['fsmbench', 'params', '--json']\n"
+            "from fsmbench.cli import console\n"
+            "console()\n")
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                          timeout=120, check=False)
+    assert done.returncode == 0, (done.returncode, done.stderr[-2000:])
+    assert json.loads(done.stdout)["format"] == "fsmbench.params"

@@ -52,7 +52,7 @@ then a request to report it).
 
 from __future__ import annotations
 
-from fsmbench.cli.main import build_parser, main
+from fsmbench.cli.main import build_parser, console, main
 from fsmbench.cli.status import (
     EXIT_BROKEN_PIPE,
     EXIT_BUG,
@@ -63,4 +63,4 @@ from fsmbench.cli.status import (
 )
 
 __all__ = ["EXIT_BROKEN_PIPE", "EXIT_BUG", "EXIT_SIGINT", "EXIT_SIGTERM", "EXIT_USER_ERROR",
-           "Terminated", "build_parser", "main"]
+           "Terminated", "build_parser", "console", "main"]

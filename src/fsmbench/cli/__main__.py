@@ -1,7 +1,5 @@
 """``python -m fsmbench.cli``: the ``fsmbench`` command."""
 
-import sys
+from fsmbench.cli.main import console
 
-from fsmbench.cli.main import main
-
-sys.exit(main())
+console()

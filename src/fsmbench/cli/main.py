@@ -39,7 +39,7 @@ except KeyboardInterrupt:
           "wrote any file: nothing was changed", file=sys.stderr)
     raise SystemExit(130) from None
 
-__all__ = ["build_parser", "main"]
+__all__ = ["build_parser", "console", "main"]
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -156,5 +156,20 @@ def main(argv: Sequence[str] | None = None) -> int:
         return EXIT_USER_ERROR
 
 
+def console() -> None:
+    """The ``fsmbench`` console script (and ``python -m fsmbench.cli``): :func:`main`, then
+    the interpreter's exit with SIGINT ignored.
+
+    Once the command has returned, its result is written and said; what remains is the
+    interpreter's teardown (a device proxy's, a server's threads). A Ctrl-C there killed
+    the process by the signal (status -2, no sentence) after a tune had finished and
+    reported (a soak's run): there is nothing left for it to stop. Not in :func:`main`,
+    which a caller's process (a test, a script) keeps its own Ctrl-C around.
+    """
+    status = main()
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    sys.exit(status)
+
+
 if __name__ == "__main__":  # pragma: no cover
-    sys.exit(main())
+    console()
