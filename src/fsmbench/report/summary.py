@@ -551,6 +551,62 @@ class StudyEvidence:
     montecarlo: Mapping[str, Any] | None = None
 
 
+def _reading_stages(e: StudyEvidence) -> list[StageLine]:
+    """The recordings' and the identification's lines of the stages table."""
+    stages = []
+    read = f"{e.n_read} of {e.n_experiments} experiments read"
+    stages.append(StageLine("recordings", "ran" if not e.skipped else "partial",
+                            read + (f"; {len(e.skipped)} not used (listed below)" if e.skipped
+                                    else ""), "#bench"))
+    identification = e.identification
+    if identification is None or not identification.get("ran"):
+        stages.append(StageLine("identification", "skipped",
+                                "not run: none of its experiments is usable", "#identification"))
+        return stages
+    warn = identification.get("warnings") or []
+    part = identification.get("skipped") or {}
+    status = "ran" if not warn and not part else "partial"
+    text = e.identification_headline or "ran"
+    if part:
+        text += "; skipped: " + "; ".join(f"{k} ({v})" for k, v in part.items())
+    if warn:
+        text += f"; {len(warn)} quality warning(s)"
+    stages.append(StageLine("identification", status, text, "#identification"))
+    return stages
+
+
+def _design_requirements(e: StudyEvidence, spec: Specification,
+                         findings: list[str]) -> list[Requirement]:
+    """The loops' requirements and the closed loop's, from ``design.json``; the ESRF study's
+    controller missing its own objective added to ``findings``."""
+    design = e.design
+    assert design is not None
+    reqs = _loop_requirements(design, spec, plant_identified=e.plant_identified,
+                              plant_source=e.plant_source, plant_missing=e.plant_missing)
+    reqs.append(_closed_loop_requirement(design, is_twin=e.is_twin))
+    seed = design["seed_controller"]
+    s_seed = {a: float(seed[a]["sensitivity_at_1hz"]) for a in ("h", "v")}
+    if not seed.get("meets_objective"):
+        findings.append(
+            "The ESRF study's decentralised controller (9.2) misses its own objective: |S(1 "
+            "Hz)| "
+            f"= {_pair(s_seed, '.1e')} against {spec.sensitivity_bound:.0e} (errata E27); "
+            "fsmbench's controller meets it.")
+    return reqs
+
+
+def _design_stage(design: Mapping[str, Any]) -> StageLine:
+    """The design's line of the stages table: fsmbench's controller's |S(1 Hz)| and
+    crossovers."""
+    fsm = design["fsmbench_controller"]
+    s1 = {a: fsm[a]["sensitivity_at_1hz"] for a in "hv"}
+    return StageLine(
+        "design", "ran",
+        f"fsmbench's controller: |S(1 Hz)| {_pair(s1, '.1e')}, crossover "
+        f"{_pair({a: fsm[a]['crossover_hz'] for a in 'hv'}, '.0f')} Hz",
+        "#decentralised-control")
+
+
 def build_summary(evidence: StudyEvidence, *, spec: Specification) -> Summary:
     """The verdict of a study on its evidence, against ``spec``'s requirements.
 
@@ -563,10 +619,9 @@ def build_summary(evidence: StudyEvidence, *, spec: Specification) -> Summary:
     """
     e = evidence
     source, is_twin, skipped, parts_skipped = e.source, e.is_twin, e.skipped, e.parts_skipped
-    n_experiments, n_read, checks, notices = e.n_experiments, e.n_read, e.checks, e.notices
-    identification, identification_headline = e.identification, e.identification_headline
+    checks, notices = e.checks, e.notices
     plant_source, plant_identified = e.plant_source, e.plant_identified
-    budget, design, plant_missing = e.budget, e.design, e.plant_missing
+    budget, design = e.budget, e.design
     disturbance_missing, validation = e.disturbance_missing, e.validation
     validation_skipped, simulated_bench, montecarlo = (e.validation_skipped,
                                                        e.simulated_bench, e.montecarlo)
@@ -574,23 +629,7 @@ def build_summary(evidence: StudyEvidence, *, spec: Specification) -> Summary:
     stages: list[StageLine] = []
     findings: list[str] = []
     fallbacks: list[str] = []
-    read = f"{n_read} of {n_experiments} experiments read"
-    stages.append(StageLine("recordings", "ran" if not skipped else "partial",
-                            read + (f"; {len(skipped)} not used (listed below)" if skipped
-                                    else ""), "#bench"))
-    if identification is None or not identification.get("ran"):
-        stages.append(StageLine("identification", "skipped",
-                                "not run: none of its experiments is usable", "#identification"))
-    else:
-        warn = identification.get("warnings") or []
-        part = identification.get("skipped") or {}
-        status = "ran" if not warn and not part else "partial"
-        text = identification_headline or "ran"
-        if part:
-            text += "; skipped: " + "; ".join(f"{k} ({v})" for k, v in part.items())
-        if warn:
-            text += f"; {len(warn)} quality warning(s)"
-        stages.append(StageLine("identification", status, text, "#identification"))
+    stages += _reading_stages(e)
     if not plant_identified:
         fallbacks.append(f"The budget and the design used the {plant_source}. What to do: "
                          + _plant_advice(plant_source, skipped))
@@ -606,24 +645,8 @@ def build_summary(evidence: StudyEvidence, *, spec: Specification) -> Summary:
         stages.append(StageLine("budget", "skipped", "not run", "#error-budget"))
         limiting = "unknown: the budget did not run"
     if design is not None:
-        reqs += _loop_requirements(design, spec, plant_identified=plant_identified,
-                                   plant_source=plant_source, plant_missing=plant_missing)
-        reqs.append(_closed_loop_requirement(design, is_twin=is_twin))
-        seed = design["seed_controller"]
-        s_seed = {a: float(seed[a]["sensitivity_at_1hz"]) for a in ("h", "v")}
-        if not seed.get("meets_objective"):
-            findings.append(
-                "The ESRF study's decentralised controller (9.2) misses its own objective: |S(1 "
-                "Hz)| "
-                f"= {_pair(s_seed, '.1e')} against {spec.sensitivity_bound:.0e} (errata E27); "
-                "fsmbench's controller meets it.")
-        fsm = design["fsmbench_controller"]
-        s1 = {a: fsm[a]["sensitivity_at_1hz"] for a in "hv"}
-        stages.append(StageLine(
-            "design", "ran",
-            f"fsmbench's controller: |S(1 Hz)| {_pair(s1, '.1e')}, crossover "
-            f"{_pair({a: fsm[a]['crossover_hz'] for a in 'hv'}, '.0f')} Hz",
-            "#decentralised-control"))
+        reqs += _design_requirements(e, spec, findings)
+        stages.append(_design_stage(design))
     else:
         stages.append(StageLine("design", "skipped", "not run", "#decentralised-control"))
     if design is not None or validation is not None:

@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
-from fsmbench.budget.repeatability import SEED_11
+from collections.abc import Mapping
+
+from fsmbench.budget.repeatability import SEED_11, RepeatabilityRecord
 from fsmbench.budget.result import BudgetResult
 from fsmbench.report.figures.budget import huddle_config_words
 from fsmbench.report.figures.repeatability import (
@@ -28,28 +30,9 @@ def _nm(x: float | None) -> str:
     return "-" if x is None else f"{x * NM:.3g}"
 
 
-def repeatability_section(result: BudgetResult) -> Section:
-    """ESRF study section 11: alignment, tracking error, non-repeatable part, with the low pass.
-
-    Parameters
-    ----------
-    result : BudgetResult
-        From :func:`fsmbench.budget.study.budget_study`: every array the chapter
-        draws (the periods' envelopes, the huddle test's window).
-    """
-    reps = result.repeatability
-    intro = ("The Newport moves the beam in a 1 Hz sine (a 1 s period repeated), emulating "
-             "a sample that returns to the same positions, while the Sercalo loop holds the "
-             "beam on the 4QD. What the Attocube reads differently from one period to the next "
-             "is the non-repeatability; every source of section 4 contributes to it.")
-    title = "11. Measurement of the non-repeatability"
-    if not reps:
-        why = "; ".join(f"{n}.mat ({result.skipped[n]})" for n in _NAMES if n in result.skipped)
-        return Section(title=title, anchor="repeatability", blocks=(
-            intro, "No repeatability record could be analysed, so this section has no "
-                   "figure: " + (why or ", ".join(f"{n}.mat" for n in _NAMES)) + "."))
-    recs = list(reps.values())
-    r0 = recs[0]
+def _alignment(result: BudgetResult, reps: Mapping[str, RepeatabilityRecord],
+               recs: list[RepeatabilityRecord]) -> Section:
+    """11.1-11.2: where each record starts, what was not analysed, the time signals."""
     missing = [n for n in _NAMES if n in result.skipped]
     s1: list[Block] = [
         "As the ESRF study's 11.1, each record starts one second after the first non-zero Newport "
@@ -60,6 +43,12 @@ def repeatability_section(result: BudgetResult) -> Section:
         s1.append("Not analysed: " + "; ".join(f"{n} ({result.skipped[n]})" for n in missing)
                   + ".")
     s1.append(repeatability_time_figure(reps))
+    return Section("11.1–11.2 Alignment and time signals", blocks=tuple(s1))
+
+
+def _tracking(result: BudgetResult, reps: Mapping[str, RepeatabilityRecord],
+              recs: list[RepeatabilityRecord]) -> Section:
+    """11.3: the tracking error, in angle and as the distance it makes."""
     gd = result.noise.qd_gain_v_per_rad
     s3: tuple[Block, ...] = (
         "The 4QD measures the beam angle the loop leaves, α = Vp/Gd(0) with Gd(0) = "
@@ -76,6 +65,13 @@ def repeatability_section(result: BudgetResult) -> Section:
         "Compared with the spectrum of the measured distance (ESRF study Fig. 47):",
         tracking_vs_distance_figure(reps),
     )
+    return Section("11.3 Tracking error", blocks=s3)
+
+
+def _parts(reps: Mapping[str, RepeatabilityRecord],
+           recs: list[RepeatabilityRecord]) -> Section:
+    """11.4: the repeatable and non-repeatable parts of Va."""
+    r0 = recs[0]
     s4: tuple[Block, ...] = (
         "Va is cut into its 1 s periods; the mean over periods at each instant is the "
         "repeatable part, the rest the non-repeatable part (ESRF study 11.4). Its rms: "
@@ -88,6 +84,11 @@ def repeatability_section(result: BudgetResult) -> Section:
         + ". The figure shows both parts over the period.",
         periods_figure(reps),
     )
+    return Section("11.4 Repeatable and non-repeatable parts", blocks=s4)
+
+
+def _contributions(result: BudgetResult, reps: Mapping[str, RepeatabilityRecord]) -> Section:
+    """11.5: where the non-repeatability comes from."""
     s5: list[Block] = [
         "Where it comes from (ESRF study 11.5): the non-repeatable part of Va against the "
         "non-repeatable part of the tracking error's distance equivalent and the noise of a "
@@ -112,6 +113,12 @@ def repeatability_section(result: BudgetResult) -> Section:
         s5.append(Note(f"The tracking error's non-repeatable share is at most {share:.0%} of "
                        "the measured rms, and that is an upper bound (the 4QD's own noise is in "
                        f"it): {verdict}.", ref="errata E33"))
+    return Section("11.5 Contributions to the non-repeatability", blocks=tuple(s5))
+
+
+def _low_pass(reps: Mapping[str, RepeatabilityRecord],
+              recs: list[RepeatabilityRecord]) -> Section:
+    """11.6-11.7: the same after the ESRF study's 10 Hz low pass."""
     rows = []
     for r in recs:
         rows.append((direction_words(r), _nm(r.nonrep_rms_m), _nm(r.nonrep_rms_unbiased_m),
@@ -139,10 +146,30 @@ def repeatability_section(result: BudgetResult) -> Section:
               rows=tuple(rows),
               note="The settled value needs at least three periods; '-' otherwise."),
     )
+    return Section("11.6–11.7 With the 10 Hz low pass", blocks=s6)
+
+
+def repeatability_section(result: BudgetResult) -> Section:
+    """ESRF study section 11: alignment, tracking error, non-repeatable part, with the low pass.
+
+    Parameters
+    ----------
+    result : BudgetResult
+        From :func:`fsmbench.budget.study.budget_study`: every array the chapter
+        draws (the periods' envelopes, the huddle test's window).
+    """
+    reps = result.repeatability
+    intro = ("The Newport moves the beam in a 1 Hz sine (a 1 s period repeated), emulating "
+             "a sample that returns to the same positions, while the Sercalo loop holds the "
+             "beam on the 4QD. What the Attocube reads differently from one period to the next "
+             "is the non-repeatability; every source of section 4 contributes to it.")
+    title = "11. Measurement of the non-repeatability"
+    if not reps:
+        why = "; ".join(f"{n}.mat ({result.skipped[n]})" for n in _NAMES if n in result.skipped)
+        return Section(title=title, anchor="repeatability", blocks=(
+            intro, "No repeatability record could be analysed, so this section has no "
+                   "figure: " + (why or ", ".join(f"{n}.mat" for n in _NAMES)) + "."))
+    recs = list(reps.values())
     return Section(title=title, anchor="repeatability", blocks=(intro,), subsections=(
-        Section("11.1–11.2 Alignment and time signals", blocks=tuple(s1)),
-        Section("11.3 Tracking error", blocks=s3),
-        Section("11.4 Repeatable and non-repeatable parts", blocks=s4),
-        Section("11.5 Contributions to the non-repeatability", blocks=tuple(s5)),
-        Section("11.6–11.7 With the 10 Hz low pass", blocks=s6),
-    ))
+        _alignment(result, reps, recs), _tracking(result, reps, recs), _parts(reps, recs),
+        _contributions(result, reps), _low_pass(reps, recs)))
