@@ -337,6 +337,44 @@ class RecordsRejectedError(ValueError):
     """A stage's records failed their checks: the identification could not start."""
 
 
+def _stage_one(*, model: Bench, controller: RunningController, options: MeasurementOptions,
+               seed: int, say: Callable[[str], None]
+               ) -> Generator[StageRequest, TwinRun, tuple[list[_Stage], _Stage, str]]:
+    """Stage 1 (the resonances located in ±5 % bands), measured once again when its records
+    locate nothing; the stages before the one kept, the one kept, and what was repeated
+    (in words, "" if nothing)."""
+
+    def locate(stage_seed: int, label: str) -> Generator[StageRequest, TwinRun, _Stage]:
+        return _stage(model=model, controller=controller,
+                      options=dataclasses.replace(options, fill=options.first_fill),
+                      dense_width=0.05, seed=stage_seed, prior_label="the bench model",
+                      ident_bench=model, label=label)
+
+    stages: list[_Stage] = []
+    repeated = ""
+    attempt: _Stage | None
+    try:
+        attempt = yield from locate(seed, "stage 1")
+        why = not_located(attempt[0])
+    except RecordsRejectedError as exc:  # not the device's errors: those stop tune
+        attempt, why = None, str(exc)
+    if not why and attempt is not None:
+        first = attempt
+    else:
+        # A stage 1 whose records locate no resonance on an axis (before the resonance
+        # search ignored isolated noisy lines, a live stage 1 kept one mode for both axes)
+        # is measured again before tune gives up.
+        repeated = f"stage 1 was measured again: its first records located nothing ({why})"
+        say(repeated)
+        if attempt is not None:
+            stages.append(attempt)
+        first = yield from locate(seed + 2, "stage 1 again")
+        if (again := not_located(first[0])):
+            raise ValueError(f"stage 1 found no Sercalo resonance in two measurements: {why}; "
+                             f"then {again}")
+    return stages, first, repeated
+
+
 def measurement_steps(*, model: Bench, controller: RunningController,
                       options: MeasurementOptions | None = None, seed: int = 0,
                       progress: Callable[[str], None] | None = None) -> MeasurementSteps:
@@ -364,34 +402,8 @@ def measurement_steps(*, model: Bench, controller: RunningController,
     say = progress or (lambda _m: None)
     say("closed-loop measurement, stage 1: locating the resonances (±5 % bands)")
 
-    def locate(stage_seed: int, label: str) -> Generator[StageRequest, TwinRun, _Stage]:
-        return _stage(model=model, controller=controller,
-                      options=dataclasses.replace(opts, fill=opts.first_fill),
-                      dense_width=0.05, seed=stage_seed, prior_label="the bench model",
-                      ident_bench=model, label=label)
-
-    stages = []
-    repeated = ""
-    attempt: _Stage | None
-    try:
-        attempt = yield from locate(seed, "stage 1")
-        why = not_located(attempt[0])
-    except RecordsRejectedError as exc:  # not the device's errors: those stop tune
-        attempt, why = None, str(exc)
-    if not why and attempt is not None:
-        first = attempt
-    else:
-        # A stage 1 whose records locate no resonance on an axis (before the resonance
-        # search ignored isolated noisy lines, a live stage 1 kept one mode for both axes)
-        # is measured again before tune gives up.
-        repeated = f"stage 1 was measured again: its first records located nothing ({why})"
-        say(repeated)
-        if attempt is not None:
-            stages.append(attempt)
-        first = yield from locate(seed + 2, "stage 1 again")
-        if (again := not_located(first[0])):
-            raise ValueError(f"stage 1 found no Sercalo resonance in two measurements: {why}; "
-                             f"then {again}")
+    stages, first, repeated = yield from _stage_one(model=model, controller=controller,
+                                                    options=opts, seed=seed, say=say)
     stages.append(first)
     excess = model_excess(first[0], first[2])
     if opts.refine:

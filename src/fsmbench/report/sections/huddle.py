@@ -94,6 +94,38 @@ def _stability_blocks(result: BudgetResult, recs: list[HuddleRecord]) -> list[Bl
     return out
 
 
+def _tables(result: BudgetResult, recs: list[HuddleRecord]) -> list[Block]:
+    """The rms of every test (with the budget's prediction) and the effect of each
+    configuration change."""
+    h = result.huddle
+    assert h is not None
+    blocks: list[Block] = []
+    rows = []
+    for r in recs:
+        pred = result.predicted_huddle_va_rms_m.get(r.number)
+        rows.append((str(r.number), huddle_config_words(r), f"{r.va_rms_m * NM:.3g}",
+                     f"{r.va_lpf_rms_m * NM:.3g}", f"{r.vph_rms_v * MV:.3g}",
+                     f"{r.vpv_rms_v * MV:.3g}", "-" if pred is None else f"{pred * NM:.3g}"))
+    blocks.append(Table(
+        caption="Huddle tests: rms after the ESRF study's processing (mean removed)",
+        header=("test", "configuration", "Va rms [nm]", "Va rms, 50 Hz low pass [nm]",
+                "Vph rms [mV]", "Vpv rms [mV]", "Va rms predicted by the budget [nm]"),
+        rows=tuple(rows),
+        note="Predicted: the error budget of section 4 for the test's configuration and "
+             "length."))
+    if h.comparisons:
+        bands = list(h.comparisons[0].ratios)
+        blocks.append(Table(
+            caption="Effect of one configuration change on the rms of Va (ratio of rms; * "
+                    "significant at two standard deviations)",
+            header=("change", "tests compared", *(f"ratio, {b}" for b in bands)),
+            rows=tuple((c.effect, f"{c.numerator.rsplit('_', 1)[-1]} / "
+                                  f"{c.denominator.rsplit('_', 1)[-1]}",
+                        *(f"{c.ratios[b]:.2f}{' *' if c.significant.get(b) else ''}"
+                          for b in bands)) for c in h.comparisons)))
+    return blocks
+
+
 def huddle_section(result: BudgetResult, *, recordings: Mapping[str, xr.Dataset]) -> Section:
     """ESRF study section 3: configurations, time plots, spectra, the table and the conclusion.
 
@@ -143,29 +175,7 @@ def huddle_section(result: BudgetResult, *, recordings: Mapping[str, xr.Dataset]
             "of the command drives them: the peak near 411 Hz in the 4QD spectra of the "
             "closed-loop tests. The same rounding, as mirror piston, is the largest source of "
             "the error budget (4.5).", ref="errata E30"))
-    rows = []
-    for r in recs:
-        pred = result.predicted_huddle_va_rms_m.get(r.number)
-        rows.append((str(r.number), huddle_config_words(r), f"{r.va_rms_m * NM:.3g}",
-                     f"{r.va_lpf_rms_m * NM:.3g}", f"{r.vph_rms_v * MV:.3g}",
-                     f"{r.vpv_rms_v * MV:.3g}", "-" if pred is None else f"{pred * NM:.3g}"))
-    blocks.append(Table(
-        caption="Huddle tests: rms after the ESRF study's processing (mean removed)",
-        header=("test", "configuration", "Va rms [nm]", "Va rms, 50 Hz low pass [nm]",
-                "Vph rms [mV]", "Vpv rms [mV]", "Va rms predicted by the budget [nm]"),
-        rows=tuple(rows),
-        note="Predicted: the error budget of section 4 for the test's configuration and "
-             "length."))
-    if h.comparisons:
-        bands = list(h.comparisons[0].ratios)
-        blocks.append(Table(
-            caption="Effect of one configuration change on the rms of Va (ratio of rms; * "
-                    "significant at two standard deviations)",
-            header=("change", "tests compared", *(f"ratio, {b}" for b in bands)),
-            rows=tuple((c.effect, f"{c.numerator.rsplit('_', 1)[-1]} / "
-                                  f"{c.denominator.rsplit('_', 1)[-1]}",
-                        *(f"{c.ratios[b]:.2f}{' *' if c.significant.get(b) else ''}"
-                          for b in bands)) for c in h.comparisons)))
+    blocks += _tables(result, recs)
     blocks.append("Conclusion (ESRF study 3.6). " + h.conclusion)
     blocks += _stability_blocks(result, recs)
     if h.qd_noise is not None:
