@@ -105,6 +105,56 @@ def model_values(p: BenchParams) -> dict[str, Any]:
     }
 
 
+def _noise_rms(p: BenchParams) -> dict[str, Any]:
+    """The twin's noise levels (SI: V, rad, m, K, Pa, %)."""
+    lsb = p.converter.lsb_v
+    env = p.environment
+    return {
+        "qd_noise_v": {"h": p.quad_diode.noise_rms_v.h, "v": p.quad_diode.noise_rms_v.v},
+        "newport_angle_noise_rad": p.newport.angle_noise_rms_rad,
+        "newport_metrology_noise_rad": p.newport.metrology_noise_rms_rad,
+        "vc_noise_v": p.voltage_amplifier.noise_rms_v,
+        "attocube_noise_m": p.attocube.noise_rms_m,
+        "adc_quantisation_v": lsb / np.sqrt(12.0),
+        "dac_quantisation_v": lsb / np.sqrt(12.0),
+        "room_temperature_k": env.room_temperature_rms_k,
+        "room_pressure_pa": env.room_pressure_rms_pa,
+        "room_humidity_pct": env.room_humidity_rms_pct,
+        "beam_path_temperature_k": env.beam_path_temperature_rms_k,
+        "ecu_temperature_error_k": env.ecu_temperature_error_k,
+        "ecu_pressure_error_pa": env.ecu_pressure_error_pa,
+        "ecu_humidity_error_pct": env.ecu_humidity_error_pct,
+    }
+
+
+def _real_bench(p: BenchParams) -> dict[str, Any]:
+    """What a real bench adds to the twin (the bench file's ``[true]``)."""
+    return {
+        "sercalo": {axis: {"mode_shape_angle_rad": p.sercalo.mode_shape_angle_rad[axis],
+                           "second_mode_hz": p.sercalo.second_mode_hz[axis],
+                           "second_mode_damping_ratio":
+                               p.sercalo.second_mode_damping_ratio[axis],
+                           "second_mode_relative_gain":
+                               p.sercalo.second_mode_relative_gain[axis],
+                           "second_mode_shape_angle_rad":
+                               p.sercalo.second_mode_shape_angle_rad[axis]}
+                    for axis in "hv"},
+        "quad_diode": {
+            "bandwidth_hz": p.quad_diode.bandwidth_hz,
+            "bandwidth_order": p.quad_diode.bandwidth_order,
+            "flicker_asd_v_per_rthz": {a: p.quad_diode.flicker_asd_v_per_rthz[a]
+                                       for a in "hv"},
+            "mains_freq_hz": p.quad_diode.mains_freq_hz,
+            "mains_amplitude_v": list(p.quad_diode.mains_amplitude_v),
+            "offset_drift_v_per_s": {a: p.quad_diode.offset_drift_v_per_s[a] for a in "hv"},
+            "offset_random_walk_v_per_rts": {a: p.quad_diode.offset_random_walk_v_per_rts[a]
+                                             for a in "hv"},
+            "nonlinearity_pct": p.quad_diode.nonlinearity_pct,
+            "nonlinearity_full_swing_rad": p.quad_diode.nonlinearity_full_swing_rad,
+        },
+    }
+
+
 def twin_truth(bench: Bench, *, seed: int, experiments: Sequence[ExperimentSpec],
                realized: Mapping[str, Mapping[str, float]],
                controller_name: str | None) -> dict[str, Any]:
@@ -122,8 +172,6 @@ def twin_truth(bench: Bench, *, seed: int, experiments: Sequence[ExperimentSpec]
         plant = bench.model.plant
         values = {"fs_hz": p.converter.fs_hz, **dict(bench.model.values)}
     gc, gn = plant.blocks["Gc"], plant.blocks["Gn"]
-    lsb = p.converter.lsb_v
-    env = p.environment
     return {
         **values,
         "bench": {"kind": "identified" if bench.is_identified else "packaged",
@@ -132,22 +180,7 @@ def twin_truth(bench: Bench, *, seed: int, experiments: Sequence[ExperimentSpec]
                   "provenance": [] if bench.model is None else [
                       {"part": part, "source": source}
                       for part, source in bench.model.provenance.items()]},
-        "noise_rms": {
-            "qd_noise_v": {"h": p.quad_diode.noise_rms_v.h, "v": p.quad_diode.noise_rms_v.v},
-            "newport_angle_noise_rad": p.newport.angle_noise_rms_rad,
-            "newport_metrology_noise_rad": p.newport.metrology_noise_rms_rad,
-            "vc_noise_v": p.voltage_amplifier.noise_rms_v,
-            "attocube_noise_m": p.attocube.noise_rms_m,
-            "adc_quantisation_v": lsb / np.sqrt(12.0),
-            "dac_quantisation_v": lsb / np.sqrt(12.0),
-            "room_temperature_k": env.room_temperature_rms_k,
-            "room_pressure_pa": env.room_pressure_rms_pa,
-            "room_humidity_pct": env.room_humidity_rms_pct,
-            "beam_path_temperature_k": env.beam_path_temperature_rms_k,
-            "ecu_temperature_error_k": env.ecu_temperature_error_k,
-            "ecu_pressure_error_pa": env.ecu_pressure_error_pa,
-            "ecu_humidity_error_pct": env.ecu_humidity_error_pct,
-        },
+        "noise_rms": _noise_rms(p),
         "realized": {name: _nest_axes(values) for name, values in realized.items()},
         "cross_coupling_dc_gain": {
             "Ich_to_Vpv_v_per_a": _dc(gc, 1, 0), "Icv_to_Vph_v_per_a": _dc(gc, 0, 1),
@@ -160,30 +193,7 @@ def twin_truth(bench: Bench, *, seed: int, experiments: Sequence[ExperimentSpec]
             "dac_extra": p.converter.dac_extra_delay_s,
         },
         # What a real bench adds (bench TOML [true]; zeros: the feature is off).
-        "real_bench": {
-            "sercalo": {axis: {"mode_shape_angle_rad": p.sercalo.mode_shape_angle_rad[axis],
-                               "second_mode_hz": p.sercalo.second_mode_hz[axis],
-                               "second_mode_damping_ratio":
-                                   p.sercalo.second_mode_damping_ratio[axis],
-                               "second_mode_relative_gain":
-                                   p.sercalo.second_mode_relative_gain[axis],
-                               "second_mode_shape_angle_rad":
-                                   p.sercalo.second_mode_shape_angle_rad[axis]}
-                        for axis in "hv"},
-            "quad_diode": {
-                "bandwidth_hz": p.quad_diode.bandwidth_hz,
-                "bandwidth_order": p.quad_diode.bandwidth_order,
-                "flicker_asd_v_per_rthz": {a: p.quad_diode.flicker_asd_v_per_rthz[a]
-                                           for a in "hv"},
-                "mains_freq_hz": p.quad_diode.mains_freq_hz,
-                "mains_amplitude_v": list(p.quad_diode.mains_amplitude_v),
-                "offset_drift_v_per_s": {a: p.quad_diode.offset_drift_v_per_s[a] for a in "hv"},
-                "offset_random_walk_v_per_rts": {a: p.quad_diode.offset_random_walk_v_per_rts[a]
-                                                 for a in "hv"},
-                "nonlinearity_pct": p.quad_diode.nonlinearity_pct,
-                "nonlinearity_full_swing_rad": p.quad_diode.nonlinearity_full_swing_rad,
-            },
-        },
+        "real_bench": _real_bench(p),
         "experiments": {s.name: {k: v for k, v in dataclasses.asdict(s).items() if k != "name"}
                         for s in experiments},
         "seed": seed,
