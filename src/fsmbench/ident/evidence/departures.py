@@ -122,6 +122,54 @@ def _mean_std(values: Sequence[tuple[float, float]]) -> tuple[float, float]:
     return float(np.mean(v)), float(np.sqrt(np.nansum(s**2)) / len(values))
 
 
+def _amplifier_keys(js: Mapping[str, Any], *, params: BenchParams) -> list[MeasuredKey]:
+    """The current amplifier's resistances from the identified ``Gi`` (1/Gi − R − Rc)."""
+    out: list[MeasuredKey] = []
+    for a, gi in (js.get("current_amp_gain_a_per_v") or {}).items():
+        amp = params.current_amplifier
+        r_fixed = amp.r_ohm[a] + params.sercalo.r_coil_ohm[a]
+        total = 1.0 / abs(float(gi))
+        std = _std(js, f"current_amp_gain_a_per_v.{a}") / float(gi) ** 2
+        records = f"data_uc{a}.mat"
+        if total - r_fixed >= 0.0:
+            out.append(MeasuredKey(f"nominal.current_amplifier.r_buffer_ohm.{a}",
+                                   total - r_fixed, std, "Ohm", records,
+                                   "the current amplifier's series resistance (1/Gi − R − Rc)"))
+        else:  # less than R + Rc in all: R itself is smaller than the bench file's
+            out.append(MeasuredKey(f"nominal.current_amplifier.r_ohm.{a}",
+                                   total - params.sercalo.r_coil_ohm[a], std, "Ohm", records,
+                                   "the current amplifier's resistor (1/Gi − Rc)"))
+            out.append(MeasuredKey(f"nominal.current_amplifier.r_buffer_ohm.{a}", 0.0, 0.0,
+                                   "Ohm", records, "the current amplifier's series resistance"))
+    return out
+
+
+def _newport_keys(js: Mapping[str, Any], *, params: BenchParams,
+                  gd: Mapping[str, float]) -> list[MeasuredKey]:
+    """The Newport's gain per axis, and its dynamics as the mean of the axes."""
+    out: list[MeasuredKey] = []
+    mn = newport_beam_matrix(params)
+    for a, gn in (js.get("newport_gain_v_per_v") or {}).items():
+        per = gd[a] * mn["hv".index(a), "hv".index(a)]
+        out.append(MeasuredKey(f"nominal.newport.gain_rad_per_v.{a}", float(gn) / per,
+                               abs(_std(js, f"newport_gain_v_per_v.{a}") / per), "rad/V",
+                               f"data_un{a}.mat", "the Newport's gain (mirror angle per "
+                                                  "command volt)"))
+    dyn = js.get("newport") or {}
+    if dyn and all(a in dyn for a in "hv"):
+        for field, unit, what in (("natural_freq_hz", "Hz", "the Newport's natural frequency "
+                                   "(mean of the axes)"),
+                                  ("damping_ratio", "1", "the Newport's damping ratio (mean of "
+                                   "the axes)"),
+                                  ("internal_delay_s", "s", "the Newport's internal lag (mean "
+                                   "of the axes)")):
+            value, std = _mean_std([(float(dyn[a][field]), _std(js, f"newport.{a}.{field}"))
+                                    for a in "hv"])
+            out.append(MeasuredKey(f"nominal.newport.{field}", value, std, unit,
+                                   "data_unh.mat, data_unv.mat", what))
+    return out
+
+
 def measured_keys(js: Mapping[str, Any], *, params: BenchParams) -> list[MeasuredKey]:
     """The identified values of ``identification.json`` as bench-file keys.
 
@@ -146,22 +194,7 @@ def measured_keys(js: Mapping[str, Any], *, params: BenchParams) -> list[Measure
         out.append(MeasuredKey(f"nominal.quad_diode.gain_v_per_rad.{a}", float(qd[a]),
                                _std(js, f"qd_gain_v_per_rad.{a}"), "V/rad",
                                f"data_cal_pd_{a}.mat", "the 4QD gain"))
-    for a, gi in (js.get("current_amp_gain_a_per_v") or {}).items():
-        amp = params.current_amplifier
-        r_fixed = amp.r_ohm[a] + params.sercalo.r_coil_ohm[a]
-        total = 1.0 / abs(float(gi))
-        std = _std(js, f"current_amp_gain_a_per_v.{a}") / float(gi) ** 2
-        records = f"data_uc{a}.mat"
-        if total - r_fixed >= 0.0:
-            out.append(MeasuredKey(f"nominal.current_amplifier.r_buffer_ohm.{a}",
-                                   total - r_fixed, std, "Ohm", records,
-                                   "the current amplifier's series resistance (1/Gi − R − Rc)"))
-        else:  # less than R + Rc in all: R itself is smaller than the bench file's
-            out.append(MeasuredKey(f"nominal.current_amplifier.r_ohm.{a}",
-                                   total - params.sercalo.r_coil_ohm[a], std, "Ohm", records,
-                                   "the current amplifier's resistor (1/Gi − Rc)"))
-            out.append(MeasuredKey(f"nominal.current_amplifier.r_buffer_ohm.{a}", 0.0, 0.0,
-                                   "Ohm", records, "the current amplifier's series resistance"))
+    out += _amplifier_keys(js, params=params)
     beam = params.sercalo.beam_angle_per_mirror_angle
     for a, node in (js.get("sercalo") or {}).items():
         records = f"data_uc{a}.mat"
@@ -179,25 +212,7 @@ def measured_keys(js: Mapping[str, Any], *, params: BenchParams) -> list[Measure
                                abs(_std(js, f"sercalo.{a}.dc_gain_v_per_a") / per), "rad/A",
                                records, "the Sercalo's static gain (mirror angle per coil "
                                         "current)"))
-    mn = newport_beam_matrix(params)
-    for a, gn in (js.get("newport_gain_v_per_v") or {}).items():
-        per = gd[a] * mn["hv".index(a), "hv".index(a)]
-        out.append(MeasuredKey(f"nominal.newport.gain_rad_per_v.{a}", float(gn) / per,
-                               abs(_std(js, f"newport_gain_v_per_v.{a}") / per), "rad/V",
-                               f"data_un{a}.mat", "the Newport's gain (mirror angle per "
-                                                  "command volt)"))
-    dyn = js.get("newport") or {}
-    if dyn and all(a in dyn for a in "hv"):
-        for field, unit, what in (("natural_freq_hz", "Hz", "the Newport's natural frequency "
-                                   "(mean of the axes)"),
-                                  ("damping_ratio", "1", "the Newport's damping ratio (mean of "
-                                   "the axes)"),
-                                  ("internal_delay_s", "s", "the Newport's internal lag (mean "
-                                   "of the axes)")):
-            value, std = _mean_std([(float(dyn[a][field]), _std(js, f"newport.{a}.{field}"))
-                                    for a in "hv"])
-            out.append(MeasuredKey(f"nominal.newport.{field}", value, std, unit,
-                                   "data_unh.mat, data_unv.mat", what))
+    out += _newport_keys(js, params=params, gd=gd)
     pure = (js.get("delay_s") or {}).get("sercalo")
     if pure is not None:
         conv = params.converter
