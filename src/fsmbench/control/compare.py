@@ -168,6 +168,37 @@ def _predicted(ds: xr.Dataset, plant: PlantModel, *, fs_hz: float, lsb_v: float,
     return vp - vp.mean(axis=0), np.fft.irfft(y, n=m, axis=0)[:n], rounded
 
 
+def _huddle_noise(recordings: Mapping[str, xr.Dataset], reference: list[str], *,
+                  fs_hz: float, period: int) -> NDArray[np.float64]:
+    """The 4QD's noise PSD (Vph, Vpv) as the open-loop huddle tests give it: their median."""
+    noise = []
+    for h in reference:
+        v = np.column_stack([np.asarray(recordings[h][c].values, dtype=float)
+                             for c in ("Vph", "Vpv")])
+        noise.append(_psd(v, fs_hz=fs_hz, period=period, name=h)[1])
+    return np.asarray(np.median(noise, axis=0))
+
+
+def _excess_check(excess: Mapping[str, list[float]], *,
+                  bands: tuple[tuple[float, float], ...], usable: list[str]) -> Check:
+    """The largest output error against the huddle noise, over axes and bands."""
+    worst_axis, worst_band = max(((a, k) for a in "hv" for k in range(len(bands))),
+                                 key=lambda ak: excess[ak[0]][ak[1]])
+    worst = excess[worst_axis][worst_band]
+    ok = worst <= MAX_EXCESS
+    lo, hi = bands[worst_band]
+    subject = ", ".join(f"{n}.mat: Vph, Vpv" for n in usable)
+    advice = "" if ok else (
+        f"{worst_axis}: between {lo:g} and {hi:g} Hz the recorded 4QD reading less the "
+        f"identified plant's response to the recorded commands holds {worst:.3g}× the "
+        f"open-loop huddle tests' noise: the plant does not explain its own closed loop's "
+        "records there (a path, delay or resonance of the model not the bench's, or a "
+        "command recorded other than played)")
+    return Check("plant_output_error", ok, worst,
+                 f"≤ {MAX_EXCESS:g}× the open-loop huddle tests' noise in every band",
+                 subject=subject, advice=advice, unit="×")
+
+
 def output_error_check(recordings: Mapping[str, xr.Dataset], names: list[str], *,
                        plant: PlantModel, fs_hz: float, lsb_v: float, span_v: float,
                        period_s: float = 1.0, settle_s: float = 2.0) -> OutputErrorCheck | None:
@@ -204,12 +235,7 @@ def output_error_check(recordings: Mapping[str, xr.Dataset], names: list[str], *
     period = round(period_s * fs_hz)
     left_out = max(settle_s, 10.0 * _slowest_decay_s(plant))
     skip = round(left_out * fs_hz)
-    noise = []
-    for h in reference:
-        v = np.column_stack([np.asarray(recordings[h][c].values, dtype=float)
-                             for c in ("Vph", "Vpv")])
-        noise.append(_psd(v, fs_hz=fs_hz, period=period, name=h)[1])
-    ref = np.median(noise, axis=0)
+    ref = _huddle_noise(recordings, reference, fs_hz=fs_hz, period=period)
     edges = [*(b for b in BANDS_HZ if b < fs_hz / 2), fs_hz / 2]
     bands = tuple((float(lo), float(hi)) for lo, hi in itertools.pairwise(edges))
     excess = {a: [0.0] * len(bands) for a in "hv"}
@@ -235,21 +261,7 @@ def output_error_check(recordings: Mapping[str, xr.Dataset], names: list[str], *
                 num = float(np.trapezoid(p[inside, i], f[inside]))
                 den = float(np.trapezoid(ref[inside, i], f[inside]))
                 excess[a][k] = max(excess[a][k], num / den if den > 0 else math.inf)
-    worst_axis, worst_band = max(((a, k) for a in "hv" for k in range(len(bands))),
-                                 key=lambda ak: excess[ak[0]][ak[1]])
-    worst = excess[worst_axis][worst_band]
-    ok = worst <= MAX_EXCESS
-    lo, hi = bands[worst_band]
-    subject = ", ".join(f"{n}.mat: Vph, Vpv" for n in usable)
-    advice = "" if ok else (
-        f"{worst_axis}: between {lo:g} and {hi:g} Hz the recorded 4QD reading less the "
-        f"identified plant's response to the recorded commands holds {worst:.3g}× the "
-        f"open-loop huddle tests' noise: the plant does not explain its own closed loop's "
-        "records there (a path, delay or resonance of the model not the bench's, or a "
-        "command recorded other than played)")
-    check = Check("plant_output_error", ok, worst,
-                  f"≤ {MAX_EXCESS:g}× the open-loop huddle tests' noise in every band",
-                  subject=subject, advice=advice, unit="×")
+    check = _excess_check(excess, bands=bands, usable=usable)
     return OutputErrorCheck(
         experiments=tuple(usable), reference=tuple(reference), bands_hz=bands,
         excess={a: tuple(v) for a, v in excess.items()}, explained=explained,
