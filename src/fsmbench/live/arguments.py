@@ -212,6 +212,56 @@ def _samples(doc: dict[str, Any], channel: str, start_s: float,
                              samples_v=x, loop_from=loop_from)
 
 
+def _band(doc: dict[str, Any], cmd: str, *, kind: str,
+          fs_hz: float) -> tuple[float, float] | None:
+    """``band_hz`` checked: [low, high] in Hz, below Nyquist, not for a sine."""
+    nyquist = fs_hz / 2
+    band = doc.get("band_hz")
+    if band is not None:
+        if kind == "sine":
+            raise _bad(cmd, "a sine has frequency_hz, not band_hz")
+        numbers = isinstance(band, list) and len(band) == 2 and all(
+            not isinstance(b, bool) and isinstance(b, (int, float)) and math.isfinite(b)
+            for b in band)
+        if not numbers or not 0 <= band[0] < band[1]:
+            raise _bad(cmd, f"band_hz must be [low, high] in Hz with 0 <= low < high, got "
+                            f"{band!r}")
+        if band[1] > nyquist:
+            raise _bad(cmd, f"band_hz {band!r} goes above Nyquist ({nyquist:g} Hz at "
+                            f"{fs_hz:g} Hz sampling)")
+        band = (float(band[0]), float(band[1]))
+    return band
+
+
+def _period(doc: dict[str, Any], cmd: str, *, kind: str,
+            band: tuple[float, float] | None, amp: float, fs_hz: float,
+            half_range_v: float) -> float | None:
+    """A multisine's ``period_s`` checked (default 1 s): a whole number of samples, a line
+    in the band, a peak within the DAC's range; None for another kind."""
+    nyquist = fs_hz / 2
+    period = _number(doc, "period_s")
+    if kind == "multisine":
+        period = 1.0 if period is None else period
+        if not MIN_PERIOD_S <= period <= MAX_PERIOD_S:
+            raise _bad(cmd, f"period_s must be a number of seconds in [{MIN_PERIOD_S:g}, "
+                            f"{MAX_PERIOD_S:g}], got {doc.get('period_s')!r}")
+        n = period * fs_hz
+        if abs(n - round(n)) > 1e-6 * n:
+            raise _bad(cmd, f"period_s {period:g} s is not a whole number of samples at "
+                            f"{fs_hz:g} Hz")
+        lo, hi = band if band is not None else (0.0, nyquist)
+        if math.floor(min(hi, nyquist * (1 - 1e-9)) * period) < max(1, math.ceil(lo * period)):
+            raise _bad(cmd, f"no multisine line (multiples of 1/period_s = {1 / period:g} Hz) "
+                            f"falls in the band [{lo:g}, {hi:g}] Hz")
+        # No phases give a multisine a crest factor below sqrt(2) (one line: a sine).
+        if amp * math.sqrt(2) > half_range_v:
+            raise _bad(cmd, f"a multisine of {amp:g} V rms peaks at least at "
+                            f"{amp * math.sqrt(2):.3g} V, beyond the DAC's +/-{half_range_v:g} V")
+    elif period is not None:
+        raise _bad(cmd, f"period_s is for a multisine, not a {kind}")
+    return period
+
+
 def parse_excitation(argument: str, *, start_s: float, half_range_v: float,
                      fs_hz: float) -> Excitation:
     """An :class:`~fsmbench.sim.excitation.Excitation` from the device's JSON argument.
@@ -249,20 +299,7 @@ def parse_excitation(argument: str, *, start_s: float, half_range_v: float,
     if amp is None or not amp > 0:
         raise _bad(cmd, f"amplitude_v must be a positive number of volts, got "
                         f"{doc.get('amplitude_v')!r}")
-    band = doc.get("band_hz")
-    if band is not None:
-        if kind == "sine":
-            raise _bad(cmd, "a sine has frequency_hz, not band_hz")
-        numbers = isinstance(band, list) and len(band) == 2 and all(
-            not isinstance(b, bool) and isinstance(b, (int, float)) and math.isfinite(b)
-            for b in band)
-        if not numbers or not 0 <= band[0] < band[1]:
-            raise _bad(cmd, f"band_hz must be [low, high] in Hz with 0 <= low < high, got "
-                            f"{band!r}")
-        if band[1] > nyquist:
-            raise _bad(cmd, f"band_hz {band!r} goes above Nyquist ({nyquist:g} Hz at "
-                            f"{fs_hz:g} Hz sampling)")
-        band = (float(band[0]), float(band[1]))
+    band = _band(doc, cmd, kind=kind, fs_hz=fs_hz)
     freq = _number(doc, "frequency_hz")
     if kind == "sine":
         if freq is None or not 0 < freq < nyquist:
@@ -270,26 +307,8 @@ def parse_excitation(argument: str, *, start_s: float, half_range_v: float,
                             f"Nyquist), got {doc.get('frequency_hz')!r}")
     elif freq is not None:
         raise _bad(cmd, f"frequency_hz is for a sine, not a {kind}")
-    period = _number(doc, "period_s")
-    if kind == "multisine":
-        period = 1.0 if period is None else period
-        if not MIN_PERIOD_S <= period <= MAX_PERIOD_S:
-            raise _bad(cmd, f"period_s must be a number of seconds in [{MIN_PERIOD_S:g}, "
-                            f"{MAX_PERIOD_S:g}], got {doc.get('period_s')!r}")
-        n = period * fs_hz
-        if abs(n - round(n)) > 1e-6 * n:
-            raise _bad(cmd, f"period_s {period:g} s is not a whole number of samples at "
-                            f"{fs_hz:g} Hz")
-        lo, hi = band if band is not None else (0.0, nyquist)
-        if math.floor(min(hi, nyquist * (1 - 1e-9)) * period) < max(1, math.ceil(lo * period)):
-            raise _bad(cmd, f"no multisine line (multiples of 1/period_s = {1 / period:g} Hz) "
-                            f"falls in the band [{lo:g}, {hi:g}] Hz")
-        # No phases give a multisine a crest factor below sqrt(2) (one line: a sine).
-        if amp * math.sqrt(2) > half_range_v:
-            raise _bad(cmd, f"a multisine of {amp:g} V rms peaks at least at "
-                            f"{amp * math.sqrt(2):.3g} V, beyond the DAC's +/-{half_range_v:g} V")
-    elif period is not None:
-        raise _bad(cmd, f"period_s is for a multisine, not a {kind}")
+    period = _period(doc, cmd, kind=kind, band=band, amp=amp, fs_hz=fs_hz,
+                     half_range_v=half_range_v)
     ex = Excitation(channel=str(channel), kind=kind, amplitude_v=amp, start_s=start_s,
                     freq_hz=freq or 0.0, band_hz=band, period_s=period or 1.0)
     if ex.kind != "multisine" and ex.peak_v() > half_range_v:
