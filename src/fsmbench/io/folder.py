@@ -485,6 +485,37 @@ def _read(path: Path, name: str, *, adc_range_v: float, adc_bits: int,
     return ds.compute()
 
 
+def _read_one(path: Path, name: str, *, fs_hz: float | None, adc_range_v: float,
+              adc_bits: int, lazy_bytes: int
+              ) -> tuple[xr.Dataset, list[Check], list[Notice]]:
+    """One experiment's record read and checked: the warnings of reading it as notices,
+    other files of the same experiment beside it compared with it (or named in the error)."""
+    others = other_files(path, name)
+
+    def read(p: Path, name: str = name) -> xr.Dataset:
+        return _read(p, name, adc_range_v=adc_range_v, adc_bits=adc_bits,
+                     lazy_bytes=lazy_bytes)
+
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        try:
+            ds = read(path)
+        except RecordingError as exc:
+            if not others:
+                raise
+            raise RecordingError(exc.file, f"{exc.problem}; {others[0].name} beside it "
+                                 f"holds {name} too: remove or rename the file that is "
+                                 "not the record", variable=exc.variable,
+                                 kind=exc.kind) from None
+        if others:  # which file was read, and the others agree with it (or refused)
+            with warnings.catch_warnings(record=True):  # of files not used: dropped
+                ds.attrs[FILE_CHOICE] = compare_files(name, path, ds, others, read=read)
+        found_checks, found_notices = check_recording(
+            ds, name=name, fs_hz=fs_hz, adc_range_v=adc_range_v, adc_bits=adc_bits)
+    notices = [n for w in caught if (n := _notice_of(w, path.name)) is not None]
+    return ds, list(found_checks), notices + list(found_notices)
+
+
 def load_recordings(data_dir: Path, *, fs_hz: float | None = None, adc_range_v: float = 20.0,
                     adc_bits: int = 16, progress: Callable[[str], None] | None = None,
                     lazy_bytes: int = LAZY_BYTES) -> RecordingSet:
@@ -532,36 +563,16 @@ def load_recordings(data_dir: Path, *, fs_hz: float | None = None, adc_range_v: 
             continue
         if progress is not None:
             progress(f"reading {found[name].name}")
-        others = other_files(found[name], name)
-
-        def read(path: Path, name: str = name) -> xr.Dataset:
-            return _read(path, name, adc_range_v=adc_range_v, adc_bits=adc_bits,
-                         lazy_bytes=lazy_bytes)
         try:
-            with warnings.catch_warnings(record=True) as caught:
-                warnings.simplefilter("always")
-                try:
-                    ds = read(found[name])
-                except RecordingError as exc:
-                    if not others:
-                        raise
-                    raise RecordingError(exc.file, f"{exc.problem}; {others[0].name} beside it "
-                                         f"holds {name} too: remove or rename the file that is "
-                                         "not the record", variable=exc.variable,
-                                         kind=exc.kind) from None
-                if others:  # which file was read, and the others agree with it (or refused)
-                    with warnings.catch_warnings(record=True):  # of files not used: dropped
-                        ds.attrs[FILE_CHOICE] = compare_files(name, found[name], ds, others,
-                                                              read=read)
-                found_checks, found_notices = check_recording(
-                    ds, name=name, fs_hz=fs_hz, adc_range_v=adc_range_v, adc_bits=adc_bits)
+            ds, found_checks, found_notices = _read_one(
+                found[name], name, fs_hz=fs_hz, adc_range_v=adc_range_v, adc_bits=adc_bits,
+                lazy_bytes=lazy_bytes)
         except RecordingError as exc:
             skipped[name] = str(exc)
             failures[name] = exc
             continue
         recordings[name] = ds
         checks += found_checks
-        notices += [n for w in caught if (n := _notice_of(w, found[name].name)) is not None]
         notices += found_notices
     if not recordings:
         raise RecordingError(data_dir, _empty_problem(Path(data_dir), found, skipped, hints,
