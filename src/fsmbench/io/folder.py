@@ -50,12 +50,13 @@ import numpy as np
 import xarray as xr
 
 from fsmbench.checks import Check, Notice
+from fsmbench.io import matfile
 from fsmbench.io.channels import clipped_signals, copied_channels, frozen_segments
 from fsmbench.io.duplicates import compare_files, other_files
 from fsmbench.io.errors import RecordingError, SaturationWarning
 from fsmbench.io.folder_names import folder_hints, not_a_file
 from fsmbench.io.lazy import open_recording, v5_vectors
-from fsmbench.io.matfile import available_memory_bytes, detect_format
+from fsmbench.io.matfile import detect_format
 from fsmbench.io.notes import FILE_CHOICE, READ_NOTES, TIME_JITTER
 from fsmbench.io.recording import find_experiments, read_recording
 from fsmbench.io.signals import ADC_SIGNALS, DAC_SIGNALS, EXPERIMENTS, MIN_DURATION_S, SIGNALS, TIME
@@ -426,11 +427,11 @@ def sample_bytes(path: Path, fmt: str) -> int:
 
 def _refuse_if_too_large(path: Path, name: str, fmt: str, *, out_of_core: bool) -> None:
     """A record whose analysis in memory would not fit: one line, before any allocation."""
-
+    # Read through the module: a test gives the machine less memory by patching it there.
     if path.stat().st_size <= _MEMORY_CHECK_BYTES:
         return
     need = sample_bytes(path, fmt)
-    have = available_memory_bytes()
+    have = matfile.available_memory_bytes()
     if IN_MEMORY_FACTOR * need <= have:
         return
     gib = 2.0**30
@@ -478,7 +479,7 @@ def _read(path: Path, name: str, *, adc_range_v: float, adc_bits: int,
     if name in OUT_OF_CORE_EXPERIMENTS:
         return ds
     need = 8 * ds.sizes[TIME] * (len(ds.data_vars) + 1)
-    if need > 0.5 * available_memory_bytes():
+    if need > 0.5 * matfile.available_memory_bytes():
         raise RecordingError(path, f"is {need / 2**30:.1f} GiB of samples: too long to analyse "
                              "in memory, and only the huddle tests and the repeatability "
                              "records run out of core; cut it to the ESRF study's length")
