@@ -107,10 +107,11 @@ def test_the_cycle_finder_finds_a_cycle() -> None:
 
 #: Where a function may import (docs/architecture.md, "Seams"): the command line's
 #: ``run()`` (``fsmbench --help`` loads no numerics), the public API and the package root
-#: (``import fsmbench`` loads none), the server's start (its port and prefix checked before
-#: the bench is built) and tune's device proxy (the device reached before tune's numerics).
+#: (``import fsmbench`` loads none), the server's and the IOC's start (its port and prefix
+#: checked before the bench is built) and tune's device proxy (the device reached before
+#: tune's numerics).
 SEAM_MODULES = ("fsmbench/cli/", "fsmbench/api.py", "fsmbench/__init__.py",
-                "fsmbench/live/serve.py", "fsmbench/tune/proxy.py")
+                "fsmbench/live/serve.py", "fsmbench/live/epics.py", "fsmbench/tune/proxy.py")
 #: The extras: imported where they are used, so that the core imports without them.
 OPTIONAL = {"dask", "distributed", "tango", "softioc", "epics", "aioca", "ophyd_async",
             "bluesky", "matplotlib", "PIL"}
@@ -165,9 +166,11 @@ def test_the_seams_keep_their_promise_of_light_imports() -> None:
     # What the seams are for (docs/architecture.md): the package root and the command
     # line's parser load none of the numerics; tune's proxy and the server's entry module
     # load neither the engine nor python-control before they reach a device or a port.
-    heavy = ("scipy", "control", "xarray", "numba", "h5py", "fsmbench.sim.engine")
+    heavy = ("scipy", "control", "xarray", "numba", "h5py", "fsmbench.sim.engine",
+             "fsmbench.live.core", "fsmbench.ident", "softioc")
     code = ("import sys\n"
             "import fsmbench, fsmbench.cli, fsmbench.tune.proxy, fsmbench.live.serve\n"
+            "import fsmbench.live.epics\n"
             "fsmbench.cli.build_parser()\n"
             f"print([m for m in {heavy!r} if m in sys.modules])")
     done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,

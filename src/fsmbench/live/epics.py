@@ -51,7 +51,6 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from fsmbench.bench.params import default_bench, load_bench
 from fsmbench.live.announce import announce
 from fsmbench.live.attributes import (
     ATTRIBUTES,
@@ -61,10 +60,7 @@ from fsmbench.live.attributes import (
     evaluate,
     precision,
 )
-from fsmbench.live.core import FileMemory, LiveBench
 from fsmbench.live.states import STATES, Refused, plain
-from fsmbench.signal.welch import default_nfft
-from fsmbench.twin.identified import identified_bench
 
 if TYPE_CHECKING:
     from fsmbench.live.core import LiveBench
@@ -239,6 +235,8 @@ class BenchIoc:
                 on_update=self._action(name), DESC=f"put the argument to run {name}")
 
     def _spectrum_points(self) -> int:
+        from fsmbench.signal.welch import default_nfft  # the server's start: see serve_epics
+
         return default_nfft(math.ceil(self.bench.fs_hz)) // 2 + 1  # 1 s Hann window
 
     def _make(self, builder: Any, spec: AttributeSpec, n_points: int) -> None:
@@ -482,6 +480,11 @@ def serve_epics(options: ServeOptions, *, ready: str = "") -> int:
         raise ValueError(f"{prefix}:Heartbeat already answers (an IOC at {host}): stop it, or "
                          "choose another --prefix")
     from softioc import asyncio_dispatcher, builder, softioc
+
+    # After the prefix check: a second IOC is refused before the bench's models load.
+    from fsmbench.bench.params import default_bench, load_bench
+    from fsmbench.live.core import FileMemory, LiveBench
+    from fsmbench.twin.identified import identified_bench
 
     bench = load_bench(options.params_file) if options.params_file else default_bench()
     if options.bench_folder is not None:
