@@ -349,29 +349,7 @@ def calibrate_current_amplifier(ds: xr.Dataset, *, axis: str, nominal: BenchPara
                                 band_hz: tuple[float, float] = (20.0, 200.0),
                                 window_s: float = 1.0,
                                 estimator: str = "welch") -> CurrentAmplifierGain:
-    """Identify ``Gi`` of ``axis`` from ``data_uch``/``data_ucv`` (``Uc → Vc``).
-
-    The sampled path fitted to the estimator's lines (:func:`identify_current_amplifier`):
-    the
-    seed's ratio to the continuous ``|Ga Zc|`` is biased by the hold and the
-    delay by twenty times its noise.
-
-    Parameters
-    ----------
-    ds : xarray.Dataset
-        Recording with ``Uch, Vch`` (h) or ``Ucv, Vcv`` (v) [V].
-    axis : {"h", "v"}
-    nominal : BenchParams
-        Known ``Ga`` (gain, cut-off) and ``Zc`` (``Rc``, ``Lc``), and the
-        resistor ``R`` for the theoretical gain.
-    trim_s : float
-        Seconds removed at the start (the Sercalo is off during the first one).
-    band_hz : (float, float)
-        Band of the lines [Hz], open interval as the seed's ``f>20 & f<200``.
-    window_s : float
-        Hann window length [s] (seed: ``hanning(ceil(1*fs))``), Welch only.
-    estimator : {"welch", "lpm", "periodic"}
-        FRF estimator of the lines.
-    """
+    """:func:`identify_current_amplifier` with the periodic estimator's default options:
+    the name the identification's steps and the public API call it by (ESRF study 2.2)."""
     return identify_current_amplifier(ds, axis=axis, nominal=nominal, trim_s=trim_s,
                                       band_hz=band_hz, window_s=window_s, estimator=estimator)
