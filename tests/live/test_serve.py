@@ -10,6 +10,7 @@ server starts.
 
 from __future__ import annotations
 
+import contextlib
 import json
 import queue
 import socket
@@ -17,7 +18,7 @@ import subprocess
 import sys
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
@@ -92,13 +93,23 @@ def _connect(address: str) -> Any:
     return proxy
 
 
-def test_serve_nodb_runs_the_twin_for_a_client(tmp_path: Path) -> None:
+@contextlib.contextmanager
+def _served(cwd: Path, *args: str) -> Iterator[tuple[subprocess.Popen[str], int]]:
+    """``fsmbench serve --nodb`` on a free port with ``args``; killed if a test leaves it."""
     port = _free_port()
-    out = tmp_path / "live-out"
-    proc = subprocess.Popen([*SERVE, "--nodb", "--port", str(port), "--speed", "50",
-                             "--out", str(out)], stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE, text=True, cwd=tmp_path)
+    proc = subprocess.Popen([*SERVE, "--nodb", "--port", str(port), "--speed", "50", *args],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=cwd)
     try:
+        yield proc, port
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait(timeout=WAIT_S)
+
+
+def test_serve_nodb_runs_the_twin_for_a_client(tmp_path: Path) -> None:
+    out = tmp_path / "live-out"
+    with _served(tmp_path, "--out", str(out)) as (proc, port):
         line = _ready_line(_lines(proc.stdout), proc)
         assert f":{port}/fsmbench/bench/1#dbase=no" in line, line
         assert "twin" in line and "speed 50" in line, line
@@ -119,19 +130,11 @@ def test_serve_nodb_runs_the_twin_for_a_client(tmp_path: Path) -> None:
         proc.terminate()
         # Tango's own SIGTERM handler shuts the server down cleanly.
         assert proc.wait(timeout=WAIT_S) == 0
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-            proc.wait(timeout=WAIT_S)
 
 
 def test_serve_json_says_where_it_serves_in_one_document(tmp_path: Path) -> None:
     # A script starts the server and takes its address from stdout, as tune --device takes it.
-    port = _free_port()
-    proc = subprocess.Popen([*SERVE, "--nodb", "--port", str(port), "--speed", "50", "--json",
-                             "--out", str(tmp_path / "live")], stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE, text=True, cwd=tmp_path)
-    try:
+    with _served(tmp_path, "--json", "--out", str(tmp_path / "live")) as (proc, port):
         doc = json.loads(_ready_line(_lines(proc.stdout), proc, starts="{"))
         assert (doc["format"], doc["format_version"]) == ("fsmbench.serve", 1)
         assert doc["protocol"] == "tango" and doc["backend"] == "twin"
@@ -144,10 +147,6 @@ def test_serve_json_says_where_it_serves_in_one_document(tmp_path: Path) -> None
         assert proxy.state() == tango.DevState.ON
         proc.terminate()
         assert proc.wait(timeout=WAIT_S) == 0
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-            proc.wait(timeout=WAIT_S)
 
 
 def _serve_error(capsys: pytest.CaptureFixture[str], *args: str) -> str:
