@@ -19,6 +19,7 @@ import numpy as np
 import pytest
 
 from fsmbench.bench.params import Bench, default_bench, load_bench
+from fsmbench.bench.perturbed import perturbed_identified
 from fsmbench.cli import main
 from fsmbench.ident.pipeline import identify, write_identification
 from fsmbench.io.errors import RecordingError
@@ -26,7 +27,7 @@ from fsmbench.sim.discretize import zoh_with_delays
 from fsmbench.sim.plant import ADC_CHANNELS, DAC_CHANNELS, bench_discrete
 from fsmbench.twin import simulate_bench
 from fsmbench.twin.compare import TARGETS
-from fsmbench.twin.identified import identified_bench, perturbed_identified
+from fsmbench.twin.identified import identified_bench
 
 STIFF = Path(__file__).resolve().parents[1] / "data" / "benches" / "stiff_bench.toml"
 IDENT = ("data_cal_pd_h", "data_cal_pd_v", "data_uch", "data_ucv", "data_unh", "data_unv")

@@ -27,7 +27,6 @@ of freedom); the sentence reports the ratios either way.
 from __future__ import annotations
 
 import math
-import re
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, fields
 from typing import Any, Final
@@ -40,6 +39,13 @@ from numpy.typing import NDArray
 
 from fsmbench.bench.blocks import newport_beam_matrix
 from fsmbench.bench.esrf import tustin
+from fsmbench.bench.huddle_tests import (
+    HUDDLE_CONFIGS,
+    HUDDLE_NAME,
+    band_id,
+    huddle_number,
+    trim_huddle,
+)
 from fsmbench.bench.params import BenchParams
 from fsmbench.budget.long_record import LongRecordSummary, summarise_long_record
 from fsmbench.budget.signals import block_means, is_lazy, lowpass, trim_record
@@ -70,60 +76,9 @@ __all__ = [
 
 FloatArray = NDArray[np.float64]
 
-#: Seed Table 3: test number → (closed loop, compensation unit, aluminium shielding).
-HUDDLE_CONFIGS: dict[int, tuple[bool, bool, bool]] = {
-    1: (False, False, False), 2: (False, True, False), 3: (True, True, False),
-    4: (False, True, True), 5: (True, True, True),
-}
-_NAME = re.compile(r"^data_huddle_test_(\d+)$")
 # Welch bands start at 3 Hz: the 1 s Hann window's main lobe spans ±2 Hz, so the
 # bins below carry the drift's leakage.
 _BANDS_HZ = ((3.0, 50.0), (50.0, math.inf))
-
-
-def band_id(name: str) -> str:
-    """A band's JSON id: ``"drift"``, ``"total"``, ``"3–50 Hz"`` → ``"band_3_50_hz"``.
-
-    Decimal points become ``p`` (``"0.5–3 Hz"`` → ``"band_0p5_3_hz"``).
-    """
-    slug = re.sub(r"[^0-9a-z]+", "_", name.lower().replace(".", "p")).strip("_")
-    return f"band_{slug}" if slug[:1].isdigit() else slug
-
-
-def huddle_number(name: str) -> int:
-    """Test number of ``data_huddle_test_<n>`` (1–5, ESRF study Table 3); ValueError otherwise."""
-    m = _NAME.match(name)
-    if m is None or int(m.group(1)) not in HUDDLE_CONFIGS:
-        raise ValueError(f"{name!r} is not a huddle test of ESRF study Table 3 "
-                         "(data_huddle_test_1..5)")
-    return int(m.group(1))
-
-
-def trim_huddle(ds: xr.Dataset, *, name: str, t0_s: float = 1.0,
-                duration_s: float | None = None) -> dict[str, FloatArray]:
-    """The ESRF study's 3.2 trimming: drop ``t < t0``, restart t at 0, keep ``tend·fs`` samples.
-
-    ``duration_s`` None keeps the whole rest of the record (the ESRF study's
-    records hold 100 s after the trim, its ``tend``).
-
-    Returns ``t`` [s], ``Vph``, ``Vpv`` [V] and ``Va`` [m] (not mean-removed),
-    each shape (N,). ValueError (naming ``name``) if a signal is missing or
-    fewer than two seconds remain (two of the ESRF study's 1 s Welch windows).
-    """
-    missing = [v for v in ("Vph", "Vpv", "Va") if v not in ds]
-    if missing:
-        raise ValueError(f"{name}: missing {missing} (ESRF study 3.1 loads t, Vph, Vpv, Va)")
-    fs = float(ds.attrs["fs_hz"])
-    t = np.asarray(ds["t"].values, dtype=float)
-    keep = t >= t0_s
-    n = int(keep.sum()) if duration_s is None else min(int(keep.sum()), round(duration_s * fs))
-    if n < 2 * math.ceil(fs):
-        raise ValueError(f"{name}: {n / fs:.3g} s left after removing t < {t0_s:g} s; the "
-                         f"huddle analysis needs at least 2 s (two 1 s Welch windows)")
-    out = {"t": t[keep][:n] - t[keep][0]}
-    for v in ("Vph", "Vpv", "Va"):
-        out[v] = np.asarray(ds[v].values, dtype=float)[keep][:n]
-    return out
 
 
 @dataclass(frozen=True)
@@ -476,7 +431,7 @@ def estimate_dac_noise(recordings: Mapping[str, xr.Dataset], *, controller: ct.S
     gd = params.quad_diode.gain_v_per_rad.as_array()
     used, psds, cmd, skipped, worst = [], [], [], {}, 0.0
     for name in sorted(recordings):
-        m = _NAME.match(name)
+        m = HUDDLE_NAME.match(name)
         if m is None or not HUDDLE_CONFIGS.get(int(m.group(1)), (False,))[0]:
             continue
         ds = recordings[name]
@@ -631,7 +586,7 @@ def analyse_huddle(recordings: Mapping[str, xr.Dataset], *, params: BenchParams,
     ValueError
         If no huddle test is present, or (naming it) if one is unusable.
     """
-    names = sorted((n for n in recordings if _NAME.match(n)), key=huddle_number)
+    names = sorted((n for n in recordings if HUDDLE_NAME.match(n)), key=huddle_number)
     if not names:
         raise ValueError("no huddle test (data_huddle_test_1..5) in the recordings")
     records = {huddle_number(n): analyse_huddle_record(

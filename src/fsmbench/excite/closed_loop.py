@@ -38,6 +38,7 @@ from typing import Any
 import numpy as np
 
 from fsmbench.bench.params import Bench, BenchParams
+from fsmbench.bench.perturbed import PARAMETERS, perturbed_bench
 from fsmbench.excite.design import ExcitationDesign
 from fsmbench.excite.limits import (
     DEFAULT_MAX_QD_COMPRESSION,
@@ -57,7 +58,6 @@ from fsmbench.sim.closed_loop import (
 from fsmbench.sim.discretize import DiscretePlant
 from fsmbench.sim.engine import DiscreteController
 from fsmbench.sim.plant import ADC_CHANNELS, DAC_CHANNELS, bench_discrete
-from fsmbench.twin.draws import PARAMETERS, perturbed_bench
 
 __all__ = ["INJECTION_POINTS", "BeamError", "ClosedLoopLimitReport",
            "check_closed_loop_limits", "closed_loop_peaks", "injection_input", "robust_loops"]
@@ -334,7 +334,7 @@ def robust_loops(bench: Bench, controller: DiscreteController, *,
 
     The design's robust set by default (:class:`fsmbench.control.design.DesignOptions`);
     the unmoved bench first. Each is the engine's plant of the moved bench
-    (:func:`fsmbench.twin.draws.perturbed_bench`), closed as the engine closes it.
+    (:func:`fsmbench.bench.perturbed.perturbed_bench`), closed as the engine closes it.
     """
 
     loops = [closed_loop_plant(bench_discrete(bench), controller)]

@@ -58,8 +58,8 @@ from numpy.typing import NDArray
 
 from fsmbench.bench.axes import AXES, PerAxis
 from fsmbench.bench.blocks import newport_beam_matrix
+from fsmbench.bench.huddle_tests import HUDDLE_CONFIGS, band_id, huddle_number, trim_huddle
 from fsmbench.bench.params import BenchParams
-from fsmbench.budget.huddle import HUDDLE_CONFIGS, band_id, huddle_number, trim_huddle
 from fsmbench.checks import Notice
 from fsmbench.ident.fit.noise_fitting import (
     DB,

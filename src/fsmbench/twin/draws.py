@@ -17,11 +17,11 @@ from typing import Any
 
 import numpy as np
 
-from fsmbench.bench.params import Bench, BenchParams, PerAxis
+from fsmbench.bench.params import BenchParams
+from fsmbench.bench.perturbed import PARAMETERS, perturbed_bench
 from fsmbench.control.design import DesignOptions
 from fsmbench.jsonutil import plain_json
 from fsmbench.twin.compare import TARGETS
-from fsmbench.twin.identified import perturbed_identified
 
 __all__ = ["PARAMETERS", "RANGE_OF_PARAMETER", "Draw", "Ranges", "draw_parameters",
            "parameter_values", "perturbed_bench"]
@@ -37,17 +37,6 @@ _PACKAGED_TS_S = 1e-4
 assert TARGETS["delay_s.sercalo"][0] == TARGETS["delay_s.newport"][0] == "samples"
 _DAC_DELAY_TOLERANCE_S = TARGETS["delay_s.sercalo"][1] * _PACKAGED_TS_S
 _NEWPORT_DELAY_TOLERANCE_S = TARGETS["delay_s.newport"][1] * _PACKAGED_TS_S
-
-#: Drawn factors and offsets, per key: what it multiplies or shifts.
-PARAMETERS: dict[str, str] = {
-    **{f"resonance_scale.{a}": f"Sercalo resonance, {a} axis, × [1]" for a in "hv"},
-    **{f"damping_scale.{a}": f"Sercalo damping ratio, {a} axis, × [1]" for a in "hv"},
-    **{f"qd_gain_scale.{a}": f"4QD gain, {a} axis, × [1]" for a in "hv"},
-    **{f"current_amp_gain_scale.{a}": f"current-amplifier gain, {a} axis, × [1]" for a in "hv"},
-    **{f"newport_gain_scale.{a}": f"Newport gain, {a} axis, × [1]" for a in "hv"},
-    "dac_delay_offset_s": "DAC delay, + [s]",
-    "newport_delay_offset_s": "Newport internal delay, + [s]",
-}
 
 #: The :class:`Ranges` attribute each drawn parameter comes from.
 RANGE_OF_PARAMETER: dict[str, str] = {
@@ -144,52 +133,6 @@ def draw_parameters(*, seed: int, n: int, ranges: Ranges) -> list[Draw]:
         out.append(Draw(index=i, noise_seed=int(noise_ss.generate_state(1, np.uint32)[0]),
                         factors=factors))
     return out
-
-
-def _scaled(value: PerAxis, factors: Mapping[str, float], kind: str) -> PerAxis:
-    return PerAxis(h=value.h * factors[f"{kind}.h"], v=value.v * factors[f"{kind}.v"])
-
-
-def perturbed_bench(bench: Bench, factors: Mapping[str, float]) -> Bench:
-    """``bench`` with its ``true`` plant moved by ``factors`` (:data:`PARAMETERS` keys).
-
-    The current-amplifier gain ``1/(R + R_buffer + Rc)`` is scaled through
-    ``R_buffer`` (the coil's resistance also sets the coil voltage); the DAC
-    delay may become fractional (the twin's discretisation and the plant's
-    delays take it as a float). An identified bench (``bench.model``) is moved
-    in its identified plant instead (:func:`fsmbench.twin.identified.perturbed_identified`).
-    """
-    if bench.model is not None:
-        return perturbed_identified(bench, factors)
-    p = bench.true
-    ts = p.converter.ts_s
-    r_tot = (p.current_amplifier.r_ohm.as_array() + p.current_amplifier.r_buffer_ohm.as_array()
-             + p.sercalo.r_coil_ohm.as_array())
-    gi = np.array([factors["current_amp_gain_scale.h"], factors["current_amp_gain_scale.v"]])
-    # Written as a change, so that a factor of 1 leaves the value bit for bit.
-    r_buffer = p.current_amplifier.r_buffer_ohm.as_array() + r_tot * (1.0 / gi - 1.0)
-    dac = max(0.0, p.converter.dac_delay_samples + factors["dac_delay_offset_s"] / ts)
-    newport_delay = max(0.0, p.newport.internal_delay_s + factors["newport_delay_offset_s"])
-    true = dataclasses.replace(
-        p,
-        sercalo=dataclasses.replace(
-            p.sercalo, resonance_hz=_scaled(p.sercalo.resonance_hz, factors, "resonance_scale"),
-            damping_ratio=_scaled(p.sercalo.damping_ratio, factors, "damping_scale")),
-        current_amplifier=dataclasses.replace(
-            p.current_amplifier, r_buffer_ohm=PerAxis(h=float(r_buffer[0]),
-                                                      v=float(r_buffer[1]))),
-        quad_diode=dataclasses.replace(
-            p.quad_diode, gain_v_per_rad=_scaled(p.quad_diode.gain_v_per_rad, factors,
-                                                 "qd_gain_scale")),
-        newport=dataclasses.replace(
-            p.newport, gain_rad_per_v=_scaled(p.newport.gain_rad_per_v, factors,
-                                              "newport_gain_scale"),
-            internal_delay_s=newport_delay),
-        # A fractional DAC delay (analog lag of the path) in the int field: twin_discrete and
-        # input_delays_s both take it as a float.
-        converter=dataclasses.replace(p.converter, dac_delay_samples=dac),  # type: ignore[arg-type]
-    )
-    return dataclasses.replace(bench, true=true)
 
 
 def parameter_values(p: BenchParams, *,

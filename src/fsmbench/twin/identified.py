@@ -30,11 +30,10 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
-import control as ct
 import numpy as np
 
 from fsmbench.bench.axes import PerAxis
-from fsmbench.bench.blocks import PlantModel, assemble_plant
+from fsmbench.bench.blocks import PlantModel
 from fsmbench.bench.identified import IdentifiedModel, engine_model
 from fsmbench.bench.params import Bench, BenchParams
 from fsmbench.excite.identified import quad_diode_from_identification
@@ -42,8 +41,7 @@ from fsmbench.ident.load import load_identified_plant, read_identification_json
 from fsmbench.ident.noise_model import NoiseModelFit
 from fsmbench.io.errors import RecordingError
 
-__all__ = ["CONTRACTED_KEYS", "bench_from_identification", "identified_bench",
-           "perturbed_identified"]
+__all__ = ["CONTRACTED_KEYS", "bench_from_identification", "identified_bench"]
 
 #: The keys of ``identification.json`` a simulation of the identified bench is the truth of.
 CONTRACTED_KEYS = ("qd_gain_v_per_rad", "current_amp_gain_a_per_v", "sercalo",
@@ -166,88 +164,3 @@ def bench_from_identification(ident: Mapping[str, Any], *, plant: PlantModel, be
         provenance=provenance, noise_fit=noise_fit, label=label)
     return Bench(datasheet=bench.datasheet, nominal=bench.nominal, true=true,
                  origin=str(folder), model=model)
-
-
-def _scaled_modes(block: ct.StateSpace, modes: Mapping[str, tuple[float, float, float]]
-                  ) -> ct.StateSpace:
-    """``block`` with each named mode's frequency and damping scaled, its DC gain kept.
-
-    ``modes``: axis → (identified resonance [Hz], frequency factor, damping factor).
-    The poles within 5 % of a resonance move to ``ω0' = r ω0``, ``ζ' = d ζ``; in modal
-    coordinates each moved pole's input row is scaled by ``λ'/λ``, which keeps the
-    mode's static gain ``−2 Re(res/λ)``. A block without such a pole is returned as is.
-    """
-    a, b = np.asarray(block.A, dtype=float), np.asarray(block.B, dtype=float)
-    lam, vec = np.linalg.eig(a)
-    new = lam.copy()
-    for f0, r, d in modes.values():
-        if r == 1.0 and d == 1.0:
-            continue
-        w0 = 2 * np.pi * f0
-        near = np.abs(np.abs(lam) - w0) < 0.05 * w0
-        for i in np.flatnonzero(near & (lam.imag != 0)):
-            w = abs(lam[i]) * r
-            zeta = min(-lam[i].real / abs(lam[i]) * d, 0.999)
-            new[i] = complex(-zeta * w, np.sign(lam[i].imag) * w * np.sqrt(1 - zeta**2))
-    if np.array_equal(new, lam):
-        return block
-    modal_b = np.linalg.solve(vec, b) * (new / lam)[:, None]
-    a_new = vec @ np.diag(new) @ np.linalg.inv(vec)
-    b_new = vec @ modal_b
-    return ct.ss(np.real(a_new), np.real(b_new), block.C, block.D,
-                 inputs=list(block.input_labels), outputs=list(block.output_labels),
-                 name=block.name)
-
-
-def perturbed_identified(bench: Bench, factors: Mapping[str, float]) -> Bench:
-    """An identified bench moved by Monte-Carlo ``factors`` (``scale.draws.PARAMETERS`` keys).
-
-    The identified blocks are scaled as the physical parameters would scale them:
-    the Sercalo's first mode on each axis in frequency and damping (its static gain
-    kept), the current-amplifier gain (``Gi``), the 4QD gain (``Gd`` and the 4QD's
-    share of ``Gc`` and ``Gn``), the Newport gain (``Gn``); the delays are offset.
-    """
-    model = bench.model
-    if model is None:
-        raise ValueError("perturbed_identified needs an identified bench")
-    plant = model.plant
-    sercalo = model.values.get("sercalo") or {}
-    modes = {a: (float(sercalo[a]["resonance_hz"]), factors[f"resonance_scale.{a}"],
-                 factors[f"damping_scale.{a}"]) for a in ("h", "v") if a in sercalo}
-    qd = np.array([factors["qd_gain_scale.h"], factors["qd_gain_scale.v"]])
-    gi = np.array([factors["current_amp_gain_scale.h"], factors["current_amp_gain_scale.v"]])
-    gn = np.array([factors["newport_gain_scale.h"], factors["newport_gain_scale.v"]])
-
-    def rows(block: ct.StateSpace, scale: np.ndarray) -> ct.StateSpace:
-        if np.all(scale == 1.0):
-            return block
-        return ct.ss(block.A, block.B, np.diag(scale) @ np.asarray(block.C),
-                     np.diag(scale) @ np.asarray(block.D), inputs=list(block.input_labels),
-                     outputs=list(block.output_labels), name=block.name)
-
-    blocks = dict(plant.blocks)
-    blocks["Gi"] = rows(blocks["Gi"], gi)
-    blocks["Gc"] = rows(_scaled_modes(blocks["Gc"], modes), qd)
-    blocks["Gn"] = rows(blocks["Gn"], qd * gn)
-    blocks["Gd"] = rows(blocks["Gd"], qd)
-    dac = factors["dac_delay_offset_s"]
-    newport = factors["newport_delay_offset_s"]
-    delays = {name: max(0.0, tau + dac + (newport if name.startswith("Un") else 0.0))
-              for name, tau in plant.input_delay_s.items()}
-    moved = assemble_plant(gi=blocks["Gi"], zc=blocks["Zc"], ga=blocks["Ga"], gc=blocks["Gc"],
-                           gn=blocks["Gn"], gd=blocks["Gd"], input_delay_s=delays,
-                           source=plant.source + " (perturbed)")
-    gd0 = np.diag(np.asarray(plant.blocks["Gd"].D, dtype=float))
-    true = dataclasses.replace(bench.true, quad_diode=dataclasses.replace(
-        bench.true.quad_diode, gain_v_per_rad=PerAxis(h=float(gd0[0] * qd[0]),
-                                                      v=float(gd0[1] * qd[1]))))
-    sys, engine_delays = engine_model(moved, params=true)
-    values = dict(model.values)
-    if sercalo:
-        values["sercalo"] = {a: {**sercalo[a], "resonance_hz": modes[a][0] * modes[a][1],
-                                 "damping_ratio": float(sercalo[a]["damping_ratio"])
-                                 * modes[a][2]} for a in modes}
-    return dataclasses.replace(bench, true=true, model=dataclasses.replace(
-        model, a=np.asarray(sys.A, dtype=float), b=np.asarray(sys.B, dtype=float),
-        c=np.asarray(sys.C, dtype=float), d=np.asarray(sys.D, dtype=float),
-        input_delay_samples=engine_delays, plant=moved, values=values))
