@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 import scipy.io
 
+from fsmbench.forked import fork_available
 from fsmbench.study import StudyResult, run_study
 from fsmbench.twin import TwinRun, write_twin
 
@@ -82,3 +83,41 @@ def test_study_on_the_twin_writes_its_data_and_report(twin_study: StudyResult) -
     assert report.count("<script>") == 3
     ident = json.loads((out / "identification.json").read_text())
     assert set(ident["sercalo"]) == {"h", "v"}
+
+
+def _same(a: object, b: object) -> bool:
+    """MAT-file values equal, structs and cells included (NaN equal to NaN)."""
+    x, y = np.asarray(a), np.asarray(b)
+    if x.shape != y.shape or x.dtype != y.dtype:
+        return False
+    if x.dtype.names:
+        return all(_same(x[name], y[name]) for name in x.dtype.names)
+    if x.dtype == object:
+        return all(_same(u, v) for u, v in zip(x.ravel(), y.ravel(), strict=True))
+    return bool(np.array_equal(x, y, equal_nan=x.dtype.kind in "fc"))
+
+
+def test_the_design_beside_the_budget_gives_the_serial_study(twin_study: StudyResult,
+                                                             tmp_path: Path) -> None:
+    """The design forked beside the budget and the validation writes, file for file, what
+    the stages one after the other write (all but the timings): no result depends on
+    which process computed it."""
+    out = Path(twin_study.out_dir)
+    timings = json.loads((out / "timings.json").read_text())["seconds"]
+    assert ("waiting for the design" in timings) == fork_available()
+    serial = run_study(out_dir=tmp_path / "serial", duration_s=5.0, parallel=False)
+    assert "waiting for the design" not in json.loads(
+        (Path(serial.out_dir) / "timings.json").read_text())["seconds"]
+    written = sorted(p.relative_to(out) for p in out.rglob("*") if p.is_file()
+                     and p.name != "timings.json")
+    assert written == sorted(p.relative_to(serial.out_dir)
+                             for p in Path(serial.out_dir).rglob("*")
+                             if p.is_file() and p.name != "timings.json")
+    differ = [str(p) for p in written if p.suffix == ".json"
+              and (out / p).read_bytes() != (Path(serial.out_dir) / p).read_bytes()]
+    for p in (p for p in written if p.suffix == ".mat"):  # the header holds the clock
+        forked, alone = (scipy.io.loadmat(root / p) for root in (out, Path(serial.out_dir)))
+        if any(k not in alone or not _same(forked[k], alone[k])
+               for k in forked if not k.startswith("__")):
+            differ.append(str(p))
+    assert differ == []

@@ -39,7 +39,7 @@ from fsmbench.bench.blocks import PlantModel, physical_plant
 from fsmbench.bench.esrf import esrf_decentralised_controller, tustin
 from fsmbench.bench.params import Bench
 from fsmbench.budget.result import BudgetResult
-from fsmbench.budget.study import budget_study
+from fsmbench.budget.study import budget_study, with_recommended
 from fsmbench.control.study import DesignResult, design_study
 from fsmbench.control.validation import ClosedLoopValidation, validate_closed_loop
 from fsmbench.ident.pipeline import (
@@ -63,6 +63,7 @@ __all__ = [
     "IDENT_EXPERIMENTS",
     "RECOMMENDED_SKIPPED",
     "VALIDATION_FORMAT",
+    "BudgetDraft",
     "BudgetStage",
     "DesignStage",
     "IdentifyStage",
@@ -74,9 +75,11 @@ __all__ = [
     "budget_stage",
     "choose_plant",
     "design_stage",
+    "finish_budget",
     "identify_stage",
     "recorded_loop",
     "simulation_bench",
+    "start_budget",
     "validation_stage",
 ]
 
@@ -238,15 +241,24 @@ class BudgetStage:
     files: tuple[Path, ...]
 
 
-def budget_stage(recordings: Mapping[str, xr.Dataset], *, bench: Bench, out_dir: Path,
-                 plant: PlantChoice, progress: Callable[[str], None] | None = None,
-                 recommended: ct.StateSpace | None = None) -> BudgetStage:
-    """ESRF study sections 3, 4, 11: ``budget.json`` (``progress`` hears of long records' reads).
+@dataclass(frozen=True, eq=False)
+class BudgetDraft:
+    """The budget of the records (:func:`start_budget`), before the recommended controller's.
 
-    ``recommended``: fsmbench's controller (continuous), whose budget is computed
-    beside the recorded loop's (the ESRF study's controller of 9.2, on the 4QD gains
-    the closed-loop records show it divided by: :func:`recorded_loop`).
+    ``noise_model``: the measured noise it used (None: the bench file's); the
+    recommended budget uses the same.
     """
+
+    result: BudgetResult
+    noise_model: Any = None
+
+
+def start_budget(recordings: Mapping[str, xr.Dataset], *, bench: Bench, plant: PlantChoice,
+                 progress: Callable[[str], None] | None = None) -> BudgetDraft:
+    """ESRF study sections 3, 4, 11 on the records, with the loop they ran (the ESRF study's
+    controller of 9.2, on the 4QD gains the closed-loop records show it divided by:
+    :func:`recorded_loop`); ``progress`` hears of long records' reads. Nothing is written:
+    :func:`finish_budget` adds the recommended controller's budget and writes the file."""
     ident, saved = plant.identification, plant.saved
     if ident is not None:
         # The measured noise replaces the bench file's only from a trusted identification.
@@ -259,13 +271,25 @@ def budget_stage(recordings: Mapping[str, xr.Dataset], *, bench: Bench, out_dir:
         noise_model = None if saved is None else saved.noise_model
         loop = recorded_loop(None if saved is None else saved.recorded_loops, bench=bench)
     result = budget_study(recordings, bench=bench, plant=plant.plant, progress=progress,
-                          recommended=recommended,
                           controller=_recorded_seed_controller(plant.plant, bench=bench,
                                                                loop=loop),
                           controller_name=("ESRF study 9.2 K, Tustin at 1/fs (9.3), on the 4QD "
                                            f"gains the records ran ({loop.words()})"
                                            if any(loop.measured) else ""),
                           noise_model=noise_model)
+    return BudgetDraft(result, noise_model)
+
+
+def finish_budget(draft: BudgetDraft, *, bench: Bench, out_dir: Path, plant: PlantChoice,
+                  progress: Callable[[str], None] | None = None,
+                  recommended: ct.StateSpace | None = None) -> BudgetStage:
+    """The budget of :func:`start_budget` with fsmbench's controller's (``recommended``,
+    continuous) beside the recorded loop's; ``budget.json`` written."""
+    result = draft.result
+    if recommended is not None:
+        (progress or _quiet)("error budget: the same with fsmbench's controller")
+        result = with_recommended(result, bench=bench, plant=plant.plant,
+                                  recommended=recommended, noise_model=draft.noise_model)
     # The stage's plant source (which blocks were identified, or why nominal) replaces the
     # plant model's own shorter one.
     payload = {**result.to_json(), "plant_source": plant.source}
@@ -274,11 +298,25 @@ def budget_stage(recordings: Mapping[str, xr.Dataset], *, bench: Bench, out_dir:
         payload["recommended_skipped"] = RECOMMENDED_SKIPPED
     if plant.identification is not None:  # the plant's own verdicts travel with it
         payload["plant_checks"] = [c.to_json() for c in plant.identification.checks]
-    elif saved is not None:
-        payload["plant_checks"] = [dict(c) for c in saved.checks]
+    elif plant.saved is not None:
+        payload["plant_checks"] = [dict(c) for c in plant.saved.checks]
     name, version = BUDGET_FORMAT
     return BudgetStage(result, (_write_json(out_dir / "budget.json",
                                             stamped(payload, format=name, version=version)),))
+
+
+def budget_stage(recordings: Mapping[str, xr.Dataset], *, bench: Bench, out_dir: Path,
+                 plant: PlantChoice, progress: Callable[[str], None] | None = None,
+                 recommended: ct.StateSpace | None = None) -> BudgetStage:
+    """ESRF study sections 3, 4, 11: ``budget.json`` (``progress`` hears of long records' reads).
+
+    ``recommended``: fsmbench's controller (continuous), whose budget is computed
+    beside the recorded loop's (the ESRF study's controller of 9.2, on the 4QD gains
+    the closed-loop records show it divided by: :func:`recorded_loop`).
+    """
+    draft = start_budget(recordings, bench=bench, plant=plant, progress=progress)
+    return finish_budget(draft, bench=bench, out_dir=out_dir, plant=plant, progress=progress,
+                         recommended=recommended)
 
 
 def _recorded_seed_controller(plant: PlantModel, *, bench: Bench,

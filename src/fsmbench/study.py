@@ -9,7 +9,8 @@ the summary at the top of the report says so.
 Outputs (all atomic): ``report.html``, ``summary.json`` (the verdict),
 ``study.json`` (what ran; paths relative to the output folder, so the file
 is the same wherever the folder goes), ``timings.json`` (wall time per
-stage: the one output that differs between two identical runs), plus each
+stage, the design's beside the budget's and the validation's: the one output that differs
+between two identical runs), plus each
 stage's files and, with ``figures``, ``figures/<key>.png|pdf``.
 
 Called, ``fsmbench.study(out_dir=...)`` is the public :func:`fsmbench.api.study`.
@@ -28,6 +29,7 @@ from fsmbench.atomic import atomic_write_text
 from fsmbench.bench.blocks import PlantModel
 from fsmbench.bench.params import Bench, default_bench
 from fsmbench.entry import callable_module
+from fsmbench.forked import start_forked
 from fsmbench.ident.pipeline import Identification, IdentifyOptions
 from fsmbench.io.folder import RecordingSet, load_recordings
 from fsmbench.io.outdir import check_out_dir
@@ -60,12 +62,13 @@ from fsmbench.stages import (
     PlantChoice,
     SimulationBench,
     ValidationStage,
-    budget_stage,
     choose_plant,
     design_stage,
+    finish_budget,
     identify_stage,
     recorded_loop,
     simulation_bench,
+    start_budget,
     validation_stage,
 )
 from fsmbench.twin.compare import comparison_rows
@@ -238,9 +241,9 @@ class _StudyRun:
     clock: float = field(default_factory=time.perf_counter)
 
     def lap(self, name: str) -> None:
-        """The wall time since the last lap, as stage ``name``'s [s]."""
+        """The wall time since the last lap, added to stage ``name``'s [s]."""
         now = time.perf_counter()
-        self.timings[name] = round(now - self.clock, 3)
+        self.timings[name] = round(self.timings.get(name, 0.0) + now - self.clock, 3)
         self.clock = now
 
 
@@ -330,36 +333,52 @@ def _identification_step(run: _StudyRun, rec: _Recorded, *, bench: Bench,
     return _Identified(ident, bench, plant, identified, simulated)
 
 
-def _later_stages(run: _StudyRun, rec: _Recorded, found: _Identified, *,
-                  seed: int) -> tuple[DesignStage, BudgetStage, ValidationStage]:
+def _later_stages(run: _StudyRun, rec: _Recorded, found: _Identified, *, seed: int,
+                  parallel: bool) -> tuple[DesignStage, BudgetStage, ValidationStage]:
     """Sections 5-10 (design), 3, 4, 11 (budget, with fsmbench's controller the design
-    recommends) and the model's check on the recorded loop."""
+    recommends) and the model's check on the recorded loop.
+
+    The design needs no record and the records' budget no controller: the design runs in
+    a forked process (:mod:`fsmbench.forked`) while the budget of the records and the
+    validation run here; then the budget gets the recommended controller's part.
+    """
     recordings, bench, plant = rec.loaded.recordings, found.bench, found.plant
-    design = design_stage(bench=bench, out_dir=run.out, plant=plant, seed=seed,
-                          progress=run.say, simulated=found.simulated)
+    design_job = start_forked(
+        lambda say: design_stage(bench=bench, out_dir=run.out, plant=plant, seed=seed,
+                                 progress=say, simulated=found.simulated),
+        progress=run.say, parallel=parallel)
+    try:
+        run.say("noise and error budget, huddle tests, repeatability (ESRF study sections 3, "
+                "4, 11)")
+        # The recorded loop's budget (the ESRF study's controller ran in the huddle tests),
+        # and below the one the verdict recommends (fsmbench's), side by side.
+        draft = start_budget(recordings, bench=bench, plant=plant, progress=run.say)
+        run.lap("budget")
+        identified = found.identified
+        validation = validation_stage(
+            recordings, bench=bench, simulated=identified.bench,
+            plant=None if identified.bench is None else plant.plant, out_dir=run.out,
+            seed=seed, progress=run.say, loop=recorded_loop(found.ident, bench=bench))
+        run.lap("validation")
+        design = design_job.result()
+    finally:
+        design_job.cancel()
+    # The design's own time; what this process waited for it beyond the budget and the
+    # validation is its own line (run here, the wait was the design).
+    run.lap("waiting for the design" if design_job.forked else "design")
+    run.timings["design"] = round(design_job.seconds, 3)
+    budgeted = finish_budget(draft, bench=bench, out_dir=run.out, plant=plant,
+                             progress=run.say,
+                             recommended=design.result.controllers["fsmbench_controller"])
+    run.lap("budget")
     run.stages.append(StageStatus("design", True, outputs=tuple(str(p) for p in design.files),
                                   reason=design.skipped))
-    run.lap("design")
-    run.say("noise and error budget, huddle tests, repeatability (ESRF study sections 3, 4, "
-            "11)")
-    # The recorded loop's budget (the seed's controller ran in the huddle tests) and the
-    # one the verdict recommends (fsmbench's), side by side.
-    budgeted = budget_stage(recordings, bench=bench, out_dir=run.out, plant=plant,
-                            progress=run.say,
-                            recommended=design.result.controllers["fsmbench_controller"])
     run.stages.append(StageStatus(
         "budget", True, outputs=tuple(str(p) for p in budgeted.files),
         reason="; ".join(f"{k}: {v}" for k, v in budgeted.result.skipped.items())))
-    run.lap("budget")
-    identified = found.identified
-    validation = validation_stage(
-        recordings, bench=bench, simulated=identified.bench,
-        plant=None if identified.bench is None else plant.plant, out_dir=run.out, seed=seed,
-        progress=run.say, loop=recorded_loop(found.ident, bench=bench))
     run.stages.append(StageStatus("validation", validation.result is not None,
                                   outputs=tuple(str(p) for p in validation.files),
                                   reason=validation.skipped or identified.reason))
-    run.lap("validation")
     return design, budgeted, validation
 
 
@@ -410,7 +429,8 @@ def run_study(*, out_dir: str | Path, data_dir: str | Path | None = None,
               progress: Progress | None = None, figures: Sequence[str] = (),
               spec: Specification | None = None,
               identify_options: IdentifyOptions | None = None,
-              montecarlo: Mapping[str, Any] | None = None) -> StudyResult:
+              montecarlo: Mapping[str, Any] | None = None,
+              parallel: bool = True) -> StudyResult:
     """Run the study and write its report and results into ``out_dir``.
 
     Parameters
@@ -438,6 +458,10 @@ def run_study(*, out_dir: str | Path, data_dir: str | Path | None = None,
         A ``montecarlo.json``'s content (:func:`fsmbench.scale.montecarlo_run.read_montecarlo`):
         chapter 11 lists its draws that break a requirement, and the robustness row names
         a requirement ≥ 5 % of them break.
+    parallel : bool
+        Run the design beside the budget and the validation, in a forked process
+        (:mod:`fsmbench.forked`; where ``fork`` exists and there are two cores). False
+        runs every stage in this process, one after the other: the same results.
     """
     bench = default_bench() if bench is None else bench
     spec = Specification() if spec is None else spec
@@ -453,7 +477,8 @@ def run_study(*, out_dir: str | Path, data_dir: str | Path | None = None,
     run = _StudyRun(out, progress or (lambda _msg: None))
     rec = _recordings_step(run, data=data, bench=bench, seed=seed, duration_s=duration_s)
     found = _identification_step(run, rec, bench=bench, options=identify_options)
-    design, budget, validation = _later_stages(run, rec, found, seed=seed)
+    design, budget, validation = _later_stages(run, rec, found, seed=seed,
+                                               parallel=parallel)
     summary = build_summary(_evidence(rec, found, design=design, budget=budget,
                                       validation=validation, montecarlo=montecarlo), spec=spec)
     return _write_outputs(run, rec, found, summary=summary, design=design,

@@ -31,6 +31,7 @@ from fsmbench.budget.environment import air_budget, frame_budget
 from fsmbench.budget.huddle import (
     HUDDLE_CONFIGS,
     HuddleAnalysis,
+    QdNoiseEstimate,
     analyse_huddle,
     check_trim,
     estimate_dac_noise,
@@ -53,7 +54,8 @@ from fsmbench.checks import Check, Notice, first_failure
 from fsmbench.io.folder import check_recording
 
 # The result types live in fsmbench.budget.result; named here too, where they were first.
-__all__ = ["BudgetResult", "ControllerBudget", "NonRepeatability", "budget_study"]
+__all__ = ["BudgetResult", "ControllerBudget", "NonRepeatability", "budget_study",
+           "with_recommended"]
 
 _HUDDLE = tuple(f"data_huddle_test_{i}" for i in HUDDLE_CONFIGS)
 _REP = {"data_rep_h": "h", "data_rep_v": "v"}
@@ -314,14 +316,9 @@ def _budget_study(recordings: Mapping[str, xr.Dataset], *, bench: Bench,
     rec_budget = None
     if recommended is not None:
         say(f"error budget: the same with {recommended_name}")
-        k_rec = recommended if recommended.dt else tustin(recommended,
-                                                            ts_s=params.converter.ts_s)
-        rec_angles = angle_sources(params, plant=plant, controller=k_rec, closed_loop=True,
-                                   qd_noise=qd, dac_noise=None, df_hz=df_hz)
-        rec_angles = replace(rec_angles, spectra_origin={**rec_angles.spectra_origin, **measured})
-        rec_budget = ControllerBudget(
-            recommended_name, budget_table(params, rec_angles, window_s=window_s),
-            budget_table(params, rec_angles, window_s=None).total_rms_m)
+        rec_budget = _recommended_budget(params, plant=plant, qd=qd, measured=measured,
+                                         recommended=recommended, name=recommended_name,
+                                         df_hz=df_hz, window_s=window_s)
     predicted = {} if huddle is None else _huddle_predictions(
         huddle, params=params, bench=bench, plant=plant, controller=controller, angles=angles,
         df_hz=df_hz, checks=checks)
@@ -337,6 +334,46 @@ def _budget_study(recordings: Mapping[str, xr.Dataset], *, bench: Bench,
         dac_noise=dac, predicted_huddle_va_rms_m=predicted, repeatability=reps,
         nonrep=nonrep, skipped=skipped, checks=tuple(checks), notices=tuple(notices),
         stability=stability, stationary_total_rms_m=stationary, recommended=rec_budget)
+
+
+def _recommended_budget(params: BenchParams, *, plant: PlantModel, qd: QdNoiseEstimate | None,
+                        measured: Mapping[str, str], recommended: ct.StateSpace, name: str,
+                        df_hz: float, window_s: float) -> ControllerBudget:
+    """The budget of the operating configuration with ``recommended`` in the loop (the
+    Sercalo DAC's error white, ``q²/12``: the huddle tests measured it behind another
+    controller)."""
+    k_rec = recommended if recommended.dt else tustin(recommended, ts_s=params.converter.ts_s)
+    rec_angles = angle_sources(params, plant=plant, controller=k_rec, closed_loop=True,
+                               qd_noise=qd, dac_noise=None, df_hz=df_hz)
+    rec_angles = replace(rec_angles, spectra_origin={**rec_angles.spectra_origin, **measured})
+    return ControllerBudget(name, budget_table(params, rec_angles, window_s=window_s),
+                            budget_table(params, rec_angles, window_s=None).total_rms_m)
+
+
+def with_recommended(result: BudgetResult, *, bench: Bench, plant: PlantModel | None = None,
+                     recommended: ct.StateSpace,
+                     recommended_name: str = "fsmbench's controller",
+                     noise_model: Any = None, window_s: float = 100.0,
+                     df_hz: float = 0.1) -> BudgetResult:
+    """``result`` (a :func:`budget_study` without ``recommended``) with the budget of the
+    controller a verdict recommends added, as :func:`budget_study` computes it.
+
+    The same ``bench``, ``plant``, ``noise_model``, ``window_s`` and ``df_hz`` as the
+    study's: the budget of the records and the recommended one can then be computed at
+    different times (the study computes the records' beside the design).
+    """
+    params, measured = _measured_params(bench.nominal, noise_model)
+    plant = physical_plant(params, source="physical (nominal)") if plant is None else plant
+    params = _with_plant_qd_gain(params, plant)
+    qd = None if result.huddle is None else result.huddle.qd_noise
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        rec = _recommended_budget(params, plant=plant, qd=qd, measured=measured,
+                                  recommended=recommended, name=recommended_name,
+                                  df_hz=df_hz, window_s=window_s)
+    numeric = tuple(Notice("numeric", "budget", f"{w.category.__name__}: {w.message}")
+                    for w in caught)
+    return replace(result, recommended=rec, notices=result.notices + numeric)
 
 
 #: Measured huddle Va rms against the budget's prediction for the same configuration: the

@@ -1,0 +1,235 @@
+"""One computation run beside the caller's, in a forked process: the study's stages side by side.
+
+Two stages of the study that do not need each other's results (the design, and the
+budget of the records) each keep one core busy when one of them runs in a forked
+child. A process, not a thread: the stages are NumPy, SciPy and python-control code
+that holds the GIL for much of its time, and Python's warnings machinery (which the
+stages use to collect numeric notices) is process-wide state that threads would
+share.
+
+The child is a fork of the caller, so it reads the caller's objects as they are (the
+recordings are not copied or pickled); only its result comes back, pickled. What the
+child says on ``progress`` reaches the caller's ``progress`` as it is said (a thread
+forwards it); the warnings it raises are raised again in the caller when the result is
+taken, so the caller's filters and ``catch_warnings`` blocks see them as if the
+computation had run there; an exception it raises is raised again in the caller.
+
+Where ``fork`` is not available, on one core, in a daemonic process, or with
+``parallel`` False, the computation runs in the caller when its result is taken: the same result,
+in the same order as a serial run.
+"""
+
+from __future__ import annotations
+
+import copyreg
+import io
+import multiprocessing as mp
+import os
+import pickle
+import sys
+import threading
+import time
+import traceback
+import warnings
+from collections.abc import Callable
+from dataclasses import dataclass
+from multiprocessing.connection import Connection
+from typing import Any, Generic, TypeVar
+
+import control as ct
+
+from fsmbench.progress import Progress
+
+__all__ = ["ForkedCall", "ForkedError", "fork_available", "start_forked"]
+
+T = TypeVar("T")
+
+
+class ForkedError(RuntimeError):
+    """The child failed with an exception that could not be sent back as itself."""
+
+
+def fork_available() -> bool:
+    """Whether a computation can run beside the caller: ``fork`` exists and there are two
+    cores or more."""
+    # A daemonic process (a worker of a pool) may not have children.
+    return ("fork" in mp.get_all_start_methods() and (os.cpu_count() or 1) > 1
+            and not mp.current_process().daemon)
+
+
+def _state_space(a: Any, b: Any, c: Any, d: Any, dt: Any, inputs: list[str],
+                 outputs: list[str], states: list[str], name: str) -> ct.StateSpace:
+    return ct.ss(a, b, c, d, dt, inputs=inputs, outputs=outputs, states=states, name=name)
+
+
+def _reduce_state_space(sys_: ct.StateSpace) -> tuple[Any, tuple[Any, ...]]:
+    # python-control's StateSpace holds two lambdas (its update and output functions):
+    # it is rebuilt from its matrices, time step and labels, which is all it is.
+    return _state_space, (sys_.A, sys_.B, sys_.C, sys_.D, sys_.dt, list(sys_.input_labels),
+                          list(sys_.output_labels), list(sys_.state_labels), sys_.name)
+
+
+def _dumps(value: Any) -> bytes:
+    buffer = io.BytesIO()
+    pickler = pickle.Pickler(buffer, protocol=pickle.HIGHEST_PROTOCOL)
+    # A dispatch table of this pickler only: no process-wide registration.
+    pickler.dispatch_table = {**copyreg.dispatch_table, ct.StateSpace: _reduce_state_space}
+    pickler.dump(value)
+    return buffer.getvalue()
+
+
+@dataclass(frozen=True)
+class _Caught:
+    """A warning raised in the child, to be raised again in the caller."""
+
+    message: str
+    category: type[Warning]
+    filename: str
+    lineno: int
+
+    def raise_again(self) -> None:
+        """Raised in the caller as at its place in the code: the module it came from is
+        found by its file, so that filters by module and "once per place" apply."""
+        module = next((m for m in list(sys.modules.values())
+                       if getattr(m, "__file__", None) == self.filename), None)
+        registry = (None if module is None
+                    else module.__dict__.setdefault("__warningregistry__", {}))
+        warnings.warn_explicit(self.message, self.category, self.filename, self.lineno,
+                               module=None if module is None else module.__name__,
+                               registry=registry)
+
+
+def _sendable_error(exc: BaseException) -> BaseException:
+    try:
+        pickle.loads(_dumps(exc))
+    except Exception:  # any failure to travel: sent as text
+        text = "".join(traceback.format_exception(exc))
+        return ForkedError(f"{type(exc).__name__}: {exc}\n{text}")
+    return exc
+
+
+def _child(fn: Callable[[Progress], Any], conn: Connection) -> None:
+    def say(msg: str) -> None:
+        conn.send_bytes(_dumps(("progress", msg)))
+
+    start = time.perf_counter()
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")  # every one goes back; the caller's filters decide
+        try:
+            value: Any = ("result", fn(say))
+        except BaseException as exc:  # Ctrl-C included: the caller decides
+            value = ("error", _sendable_error(exc))
+    found = [_Caught(str(w.message), w.category, w.filename, w.lineno) for w in caught]
+    try:
+        payload = _dumps((*value, found, time.perf_counter() - start))
+    except Exception as exc:  # a result that cannot travel is an error
+        payload = _dumps(("error", ForkedError(f"the result could not be sent back: {exc}"),
+                          found, time.perf_counter() - start))
+    conn.send_bytes(payload)
+    conn.close()
+
+
+class ForkedCall(Generic[T]):
+    """A computation started by :func:`start_forked`; :meth:`result` waits for it.
+
+    ``seconds`` is the computation's own wall time [s] once the result is taken.
+    """
+
+    def __init__(self, fn: Callable[[Progress], T], *, progress: Progress,
+                 parallel: bool) -> None:
+        self._fn = fn
+        self._progress = progress
+        self.seconds = 0.0
+        self._done = False
+        self._proc: Any = None
+        self._outcome: tuple[Any, ...] | None = None
+        if not (parallel and fork_available()):
+            return
+        ctx = mp.get_context("fork")
+        recv, send = ctx.Pipe(duplex=False)
+        self._proc = ctx.Process(target=_child, args=(fn, send), daemon=True,
+                                 name="fsmbench-stage")
+        self._proc.start()
+        send.close()
+        self._reader = threading.Thread(target=self._read, args=(recv,), daemon=True,
+                                        name="fsmbench-stage-reader")
+        self._reader.start()
+
+    def _read(self, conn: Connection) -> None:
+        # Progress lines as they come; the last message is the outcome.
+        try:
+            while True:
+                message = pickle.loads(conn.recv_bytes())
+                if message[0] == "progress":
+                    self._progress(message[1])
+                    continue
+                self._outcome = message
+                return
+        except EOFError:  # the child died without an outcome (killed)
+            return
+        finally:
+            conn.close()
+
+    def result(self) -> T:
+        """The computation's value (its warnings raised here first); its exception if it
+        failed."""
+        if self._proc is None:
+            if self._done:
+                raise RuntimeError("the result was already taken")
+            self._done = True
+            start = time.perf_counter()
+            try:
+                return self._fn(self._progress)
+            finally:
+                self.seconds = time.perf_counter() - start
+        try:
+            self._reader.join()
+            self._proc.join()
+        finally:
+            self.cancel()
+        outcome = self._outcome
+        if outcome is None:
+            raise ForkedError(f"the stage's process ended with status {self._proc.exitcode} "
+                              "and no result")
+        kind, value, caught, self.seconds = outcome
+        for w in caught:
+            w.raise_again()
+        if kind == "error":
+            raise value
+        result: T = value
+        return result
+
+    @property
+    def forked(self) -> bool:
+        """Whether the computation runs in a child (False: in the caller, at :meth:`result`)."""
+        return self._proc is not None
+
+    def cancel(self) -> None:
+        """Stop the child if it still runs (the caller failed or was interrupted)."""
+        if self._proc is not None and self._proc.is_alive():
+            self._proc.terminate()
+            self._proc.join()
+
+
+def start_forked(fn: Callable[[Progress], T], *, progress: Progress,
+                 parallel: bool = True) -> ForkedCall[T]:
+    """Start ``fn(progress)`` in a forked child and return at once.
+
+    Parameters
+    ----------
+    fn : callable
+        The computation; it receives a progress callable to speak through. Its
+        value must pickle (python-control state-space systems do here).
+    progress : callable
+        Receives ``fn``'s progress lines, from a reader thread, as they are said.
+    parallel : bool
+        False runs ``fn`` in the caller when the result is taken (also without
+        ``fork`` or on one core).
+
+    Returns
+    -------
+    ForkedCall
+        ``.result()`` waits for the value; ``.cancel()`` stops the child. Use it in a
+        ``try``/``finally`` that cancels, so that a failure of the caller stops the child.
+    """
+    return ForkedCall(fn, progress=progress, parallel=parallel)

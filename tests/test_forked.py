@@ -1,0 +1,110 @@
+"""A computation in a forked child: its value, progress, warnings and errors reach the caller
+as if it had run there."""
+
+from __future__ import annotations
+
+import os
+import time
+import warnings
+
+import control as ct
+import numpy as np
+import pytest
+
+from fsmbench.forked import ForkedError, fork_available, start_forked
+from fsmbench.progress import Progress
+
+needs_fork = pytest.mark.skipif(not fork_available(), reason="fork and two cores needed")
+
+
+class _UnpicklableError(Exception):
+    def __init__(self) -> None:
+        super().__init__("refused")
+        self.handle = lambda: None  # a lambda does not pickle
+
+
+def _system(say: Progress) -> ct.StateSpace:
+    say("building")
+    say("built")
+    return ct.ss([[-1.0, 2.0], [0.0, -3.0]], [[1.0], [0.5]], [[1.0, 0.0]], [[0.25]], 1e-4,
+                 inputs=["Uch"], outputs=["Vph"], states=["x1", "x2"], name="K")
+
+
+@needs_fork
+def test_a_state_space_comes_back_as_itself_with_the_progress_in_order() -> None:
+    said: list[str] = []
+    call = start_forked(_system, progress=said.append)
+    got = call.result()
+    assert call.forked and said == ["building", "built"]
+    want = _system(lambda _msg: None)
+    for name in ("A", "B", "C", "D"):  # pickled float64: bit for bit
+        assert np.array_equal(getattr(got, name), getattr(want, name))
+    assert (got.dt, got.name, got.input_labels, got.output_labels, got.state_labels) == (
+        want.dt, want.name, want.input_labels, want.output_labels, want.state_labels)
+
+
+@needs_fork
+def test_it_runs_in_another_process_beside_the_caller() -> None:
+    call = start_forked(lambda _say: (os.getpid(), time.sleep(0.5))[0], progress=print)
+    assert call.forked  # start_forked returned while the child sleeps
+    assert call.result() != os.getpid()
+    assert call.seconds >= 0.5  # the computation's own time
+
+
+def _warns(_say: Progress) -> int:
+    warnings.warn("ill-conditioned", RuntimeWarning, stacklevel=1)
+    return 3
+
+
+@pytest.mark.parametrize("parallel", [True, False])
+def test_the_child_s_warnings_are_raised_in_the_caller(parallel: bool) -> None:
+    call = start_forked(_warns, progress=print, parallel=parallel)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        assert call.result() == 3
+    assert [(w.category, str(w.message), w.filename) for w in caught] == [
+        (RuntimeWarning, "ill-conditioned", __file__)]
+
+
+def _fails(_say: Progress) -> None:
+    raise ValueError("data_uch.mat: Vph is missing")
+
+
+def _fails_unpicklable(_say: Progress) -> None:
+    raise _UnpicklableError
+
+
+@pytest.mark.parametrize("parallel", [True, False])
+def test_the_child_s_error_is_raised_in_the_caller(parallel: bool) -> None:
+    with pytest.raises(ValueError, match=r"data_uch\.mat: Vph is missing"):
+        start_forked(_fails, progress=print, parallel=parallel).result()
+
+
+@needs_fork
+def test_an_error_that_cannot_travel_comes_back_as_its_text() -> None:
+    with pytest.raises(ForkedError, match="_UnpicklableError: refused"):
+        start_forked(_fails_unpicklable, progress=print).result()
+
+
+@needs_fork
+def test_a_result_that_cannot_travel_is_an_error_not_a_hang() -> None:
+    with pytest.raises(ForkedError, match="could not be sent back"):
+        start_forked(lambda _say: (lambda: None), progress=print).result()
+
+
+@needs_fork
+def test_cancel_stops_the_child() -> None:
+    call = start_forked(lambda _say: time.sleep(60), progress=print)
+    call.cancel()  # the caller failed: the child must not outlive it
+    with pytest.raises(ForkedError, match="no result"):
+        call.result()
+
+
+def test_serial_runs_in_the_caller_when_the_result_is_taken() -> None:
+    said: list[str] = []
+    call = start_forked(lambda say: (say("now"), os.getpid())[1], progress=said.append,
+                        parallel=False)
+    assert not call.forked and said == []  # nothing has run yet
+    assert call.result() == os.getpid() and said == ["now"]
+    with pytest.raises(RuntimeError, match="already taken"):
+        call.result()
