@@ -4,6 +4,7 @@ as if it had run there."""
 from __future__ import annotations
 
 import os
+import threading
 import time
 import warnings
 
@@ -108,3 +109,13 @@ def test_serial_runs_in_the_caller_when_the_result_is_taken() -> None:
     assert call.result() == os.getpid() and said == ["now"]
     with pytest.raises(RuntimeError, match="already taken"):
         call.result()
+
+
+def test_off_the_main_thread_it_runs_in_the_caller() -> None:
+    """A server's command thread (Tango, Dask, the live device's jobs) never forks."""
+    got: list[int] = []
+    thread = threading.Thread(target=lambda: got.append(
+        start_forked(lambda _say: os.getpid(), progress=print).result()))
+    thread.start()
+    thread.join()
+    assert got == [os.getpid()]

@@ -14,9 +14,9 @@ forwards it); the warnings it raises are raised again in the caller when the res
 taken, so the caller's filters and ``catch_warnings`` blocks see them as if the
 computation had run there; an exception it raises is raised again in the caller.
 
-Where ``fork`` is not available, on one core, in a daemonic process, or with
-``parallel`` False, the computation runs in the caller when its result is taken: the same result,
-in the same order as a serial run.
+Where ``fork`` is not available, on one core, off the main thread, in a pool's
+worker, or with ``parallel`` False, the computation runs in the caller when its result
+is taken: the same result, in the order of a serial run.
 """
 
 from __future__ import annotations
@@ -50,11 +50,15 @@ class ForkedError(RuntimeError):
 
 
 def fork_available() -> bool:
-    """Whether a computation can run beside the caller: ``fork`` exists and there are two
-    cores or more."""
-    # A daemonic process (a worker of a pool) may not have children.
+    """Whether a computation can run beside the caller: ``fork`` exists, there are two
+    cores or more, and the caller is the main thread of a process that is not a pool's
+    worker."""
+    # A daemonic process (a worker of a pool) may not have children. Off the main thread
+    # (a Tango command, a Dask task, the live device's jobs) the process is a server
+    # whose other threads may hold locks at the fork: the work stays in the caller.
     return ("fork" in mp.get_all_start_methods() and (os.cpu_count() or 1) > 1
-            and not mp.current_process().daemon)
+            and not mp.current_process().daemon
+            and threading.current_thread() is threading.main_thread())
 
 
 def _state_space(a: Any, b: Any, c: Any, d: Any, dt: Any, inputs: list[str],

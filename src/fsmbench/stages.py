@@ -122,11 +122,13 @@ class IdentifyStage:
 def identify_stage(recordings: Mapping[str, xr.Dataset], *, bench: Bench, out_dir: Path,
                    source: str, progress: Progress | None = None,
                    options: IdentifyOptions | None = None,
-                   unusable: Mapping[str, str] | None = None) -> IdentifyStage:
+                   unusable: Mapping[str, str] | None = None,
+                   parallel: bool = True) -> IdentifyStage:
     """Run ESRF study section 2 and write its files (``options``: the estimator and weights;
-    ``unusable``: files present but unreadable, by experiment, with the loader's reason)."""
+    ``unusable``: files present but unreadable, by experiment, with the loader's reason;
+    ``parallel``: the noise model fitted beside the other steps, :func:`identify`)."""
     result = identify(recordings, bench=bench, options=options, source=source,
-                      progress=progress, unusable=unusable)
+                      progress=progress, unusable=unusable, parallel=parallel)
     return IdentifyStage(result, tuple(write_identification(result, out_dir)))
 
 

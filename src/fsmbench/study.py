@@ -297,7 +297,7 @@ def _recordings_step(run: _StudyRun, *, data: Path | None, bench: Bench, seed: i
 
 
 def _identification_step(run: _StudyRun, rec: _Recorded, *, bench: Bench,
-                         options: IdentifyOptions | None) -> _Identified:
+                         options: IdentifyOptions | None, parallel: bool) -> _Identified:
     """Section 2 when its experiments are there; the plant and the benches that follow."""
     recordings = rec.loaded.recordings
     ident = None
@@ -305,7 +305,7 @@ def _identification_step(run: _StudyRun, rec: _Recorded, *, bench: Bench,
         run.say("identification (ESRF study section 2)")
         stage = identify_stage(recordings, bench=bench, out_dir=run.out, source=rec.source,
                                progress=run.say, options=options,
-                               unusable=rec.loaded.unusable())
+                               unusable=rec.loaded.unusable(), parallel=parallel)
         ident = stage.result
         run.stages.append(StageStatus(
             "identify", True, outputs=tuple(str(p) for p in stage.files),
@@ -333,20 +333,43 @@ def _identification_step(run: _StudyRun, rec: _Recorded, *, bench: Bench,
     return _Identified(ident, bench, plant, identified, simulated)
 
 
+@dataclass(frozen=True, eq=False)
+class _DesignAndValidation:
+    """What the forked process computed: the design, the validation, their times [s]."""
+
+    design: DesignStage
+    validation: ValidationStage
+    seconds: dict[str, float]
+
+
+def _design_and_validation(run: _StudyRun, rec: _Recorded, found: _Identified, *, seed: int,
+                           say: Progress) -> _DesignAndValidation:
+    """Sections 5-10 and the model's check on the recorded loop (neither needs the budget)."""
+    start = time.perf_counter()
+    design = design_stage(bench=found.bench, out_dir=run.out, plant=found.plant, seed=seed,
+                          progress=say, simulated=found.simulated)
+    middle = time.perf_counter()
+    identified = found.identified
+    validation = validation_stage(
+        rec.loaded.recordings, bench=found.bench, simulated=identified.bench,
+        plant=None if identified.bench is None else found.plant.plant, out_dir=run.out,
+        seed=seed, progress=say, loop=recorded_loop(found.ident, bench=found.bench))
+    return _DesignAndValidation(design, validation, {
+        "design": round(middle - start, 3), "validation": round(time.perf_counter() - middle, 3)})
+
+
 def _later_stages(run: _StudyRun, rec: _Recorded, found: _Identified, *, seed: int,
                   parallel: bool) -> tuple[DesignStage, BudgetStage, ValidationStage]:
     """Sections 5-10 (design), 3, 4, 11 (budget, with fsmbench's controller the design
     recommends) and the model's check on the recorded loop.
 
-    The design needs no record and the records' budget no controller: the design runs in
-    a forked process (:mod:`fsmbench.forked`) while the budget of the records and the
-    validation run here; then the budget gets the recommended controller's part.
+    The design and the validation need no budget, and the budget of the records no
+    controller: they run in a forked process (:mod:`fsmbench.forked`) while the budget of
+    the records runs here; then the budget gets the recommended controller's part.
     """
     recordings, bench, plant = rec.loaded.recordings, found.bench, found.plant
-    design_job = start_forked(
-        lambda say: design_stage(bench=bench, out_dir=run.out, plant=plant, seed=seed,
-                                 progress=say, simulated=found.simulated),
-        progress=run.say, parallel=parallel)
+    job = start_forked(lambda say: _design_and_validation(run, rec, found, seed=seed, say=say),
+                       progress=run.say, parallel=parallel)
     try:
         run.say("noise and error budget, huddle tests, repeatability (ESRF study sections 3, "
                 "4, 11)")
@@ -354,19 +377,17 @@ def _later_stages(run: _StudyRun, rec: _Recorded, found: _Identified, *, seed: i
         # and below the one the verdict recommends (fsmbench's), side by side.
         draft = start_budget(recordings, bench=bench, plant=plant, progress=run.say)
         run.lap("budget")
-        identified = found.identified
-        validation = validation_stage(
-            recordings, bench=bench, simulated=identified.bench,
-            plant=None if identified.bench is None else plant.plant, out_dir=run.out,
-            seed=seed, progress=run.say, loop=recorded_loop(found.ident, bench=bench))
-        run.lap("validation")
-        design = design_job.result()
+        forked = job.result()
     finally:
-        design_job.cancel()
-    # The design's own time; what this process waited for it beyond the budget and the
-    # validation is its own line (run here, the wait was the design).
-    run.lap("waiting for the design" if design_job.forked else "design")
-    run.timings["design"] = round(design_job.seconds, 3)
+        job.cancel()
+    # Their own times; what this process waited for them beyond the budget is its own line
+    # (run here, the wait was them).
+    if job.forked:
+        run.lap("waiting for the design and validation")
+    else:
+        run.clock = time.perf_counter()
+    run.timings.update(forked.seconds)
+    design, validation = forked.design, forked.validation
     budgeted = finish_budget(draft, bench=bench, out_dir=run.out, plant=plant,
                              progress=run.say,
                              recommended=design.result.controllers["fsmbench_controller"])
@@ -378,7 +399,7 @@ def _later_stages(run: _StudyRun, rec: _Recorded, found: _Identified, *, seed: i
         reason="; ".join(f"{k}: {v}" for k, v in budgeted.result.skipped.items())))
     run.stages.append(StageStatus("validation", validation.result is not None,
                                   outputs=tuple(str(p) for p in validation.files),
-                                  reason=validation.skipped or identified.reason))
+                                  reason=validation.skipped or found.identified.reason))
     return design, budgeted, validation
 
 
@@ -459,9 +480,10 @@ def run_study(*, out_dir: str | Path, data_dir: str | Path | None = None,
         chapter 11 lists its draws that break a requirement, and the robustness row names
         a requirement ≥ 5 % of them break.
     parallel : bool
-        Run the design beside the budget and the validation, in a forked process
-        (:mod:`fsmbench.forked`; where ``fork`` exists and there are two cores). False
-        runs every stage in this process, one after the other: the same results.
+        Run the design and the validation beside the budget, and the noise model beside
+        the identification's other steps, in forked processes (:mod:`fsmbench.forked`;
+        where ``fork`` exists and there are two cores). False runs everything in this
+        process, one after the other: the same results.
     """
     bench = default_bench() if bench is None else bench
     spec = Specification() if spec is None else spec
@@ -476,7 +498,8 @@ def run_study(*, out_dir: str | Path, data_dir: str | Path | None = None,
     out.mkdir(parents=True, exist_ok=True)
     run = _StudyRun(out, progress or (lambda _msg: None))
     rec = _recordings_step(run, data=data, bench=bench, seed=seed, duration_s=duration_s)
-    found = _identification_step(run, rec, bench=bench, options=identify_options)
+    found = _identification_step(run, rec, bench=bench, options=identify_options,
+                                 parallel=parallel)
     design, budget, validation = _later_stages(run, rec, found, seed=seed,
                                                parallel=parallel)
     summary = build_summary(_evidence(rec, found, design=design, budget=budget,

@@ -39,6 +39,7 @@ import xarray as xr
 
 from fsmbench.bench.params import Bench
 from fsmbench.checks import Notice
+from fsmbench.forked import start_forked
 from fsmbench.ident.compare import compare_records
 from fsmbench.ident.crosscheck import (
     NOISE_CHECKS,
@@ -70,6 +71,7 @@ from fsmbench.ident.steps import (
     assemble_step,
     current_amp_step,
     newport_step,
+    noise_step,
     qd_step,
     sercalo_step,
     start_run,
@@ -97,7 +99,8 @@ _NEWPORT_COLUMNS = (("data_unh", "Unh"), ("data_unv", "Unv"))
 def identify(recordings: Mapping[str, xr.Dataset], *, bench: Bench,
              options: IdentifyOptions | None = None, source: str = "",
              progress: Progress | None = None,
-             unusable: Mapping[str, str] | None = None) -> Identification:
+             unusable: Mapping[str, str] | None = None,
+             parallel: bool = True) -> Identification:
     """Run the seed's section 2 on the recordings present.
 
     Parameters
@@ -116,12 +119,16 @@ def identify(recordings: Mapping[str, xr.Dataset], *, bench: Bench,
     unusable : mapping of experiment name to reason, optional
         Files that were there but could not be read (the loader's reason): a
         step they would feed says so instead of "missing".
+    parallel : bool
+        Fit the noise model in a forked process beside the steps 2.2-2.4
+        (:mod:`fsmbench.forked`); False: every step here, one after the other, with
+        the same result.
     """
     with pywarnings.catch_warnings(record=True) as caught:
         pywarnings.simplefilter("always")
         result = _identify(recordings, bench=bench, opts=options or IdentifyOptions(),
                            source=source, say=progress or (lambda _msg: None),
-                           unusable=dict(unusable or {}))
+                           unusable=dict(unusable or {}), parallel=parallel)
     numeric = [Notice("numeric", "identification", f"{w.category.__name__}: {w.message}")
                for w in caught]
     # The identified values as bench-file keys: the departures from the bench file are
@@ -163,13 +170,22 @@ def identify(recordings: Mapping[str, xr.Dataset], *, bench: Bench,
 
 
 def _identify(recordings: Mapping[str, xr.Dataset], *, bench: Bench, opts: IdentifyOptions,
-              source: str, say: Progress, unusable: Mapping[str, str]) -> Identification:
+              source: str, say: Progress, unusable: Mapping[str, str],
+              parallel: bool) -> Identification:
     """Section 2's steps in order (:mod:`fsmbench.ident.steps`), each on what the ones
     before it found."""
     run = start_run(recordings, bench=bench, opts=opts, say=say, unusable=unusable)
     qd = qd_step(run)
-    gi = current_amp_step(run)
-    sercalo = sercalo_step(run, qd=qd, gi=gi)
-    newport = newport_step(run, qd=qd, gi=gi, sercalo_id=sercalo.sercalo)
+    # The noise model needs only the 4QD's gains: fitted in a forked process beside
+    # 2.2-2.4 (fsmbench.forked), its warnings raised here when it is taken.
+    noise_job = start_forked(lambda said: noise_step(run, qd=qd, say=said), progress=say,
+                             parallel=parallel)
+    try:
+        gi = current_amp_step(run)
+        sercalo = sercalo_step(run, qd=qd, gi=gi)
+        newport = newport_step(run, qd=qd, gi=gi, sercalo_id=sercalo.sercalo)
+        noise = noise_job.result()
+    finally:
+        noise_job.cancel()
     return assemble_step(run, source=source, qd=qd, gi=gi, sercalo_step=sercalo,
-                         newport_step=newport)
+                         newport_step=newport, noise_step=noise)

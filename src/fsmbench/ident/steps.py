@@ -77,7 +77,7 @@ from fsmbench.ident.newport import (
     newport_checks,
     nominal_newport_axis,
 )
-from fsmbench.ident.noise_model import fit_noise_model
+from fsmbench.ident.noise_model import NoiseModelFit, fit_noise_model
 from fsmbench.ident.result import Identification, IdentifyOptions
 from fsmbench.ident.sercalo import (
     SercaloIdentification,
@@ -89,8 +89,9 @@ from fsmbench.ident.totals import qd_amplifier_lag_s, qd_amplifier_lags_by_axis,
 from fsmbench.ident.validate import PathValidation, validate_sercalo
 from fsmbench.io.folder import check_recording
 
-__all__ = ["NOISE_EXPERIMENTS", "SercaloStep", "StepRun", "assemble_step", "current_amp_step",
-           "newport_step", "qd_step", "sercalo_step", "start_run"]
+__all__ = ["NOISE_EXPERIMENTS", "NoiseStep", "SercaloStep", "StepRun", "assemble_step",
+           "current_amp_step", "newport_step", "noise_step", "qd_step", "sercalo_step",
+           "start_run"]
 
 #: The records the noise model is fitted to (open-loop huddle tests, seed 3).
 NOISE_EXPERIMENTS = ("data_huddle_test_1", "data_huddle_test_2", "data_huddle_test_4")
@@ -527,9 +528,31 @@ def _gi_block(gi: Mapping[str, CurrentAmplifierGain]) -> ct.StateSpace:
                  inputs=["Uch", "Ucv"], outputs=["Ich", "Icv"], name="Gi")
 
 
+@dataclass(frozen=True, eq=False)
+class NoiseStep:
+    """The noise model of the open-loop huddle tests: the fit (None: none), or why not."""
+
+    fit: NoiseModelFit | None = None
+    skipped: str = ""
+
+
+def noise_step(run: StepRun, *, qd: Mapping[str, QdCalibration], say: Progress) -> NoiseStep:
+    """The identified bench's noise, fitted to the open-loop huddle tests on the 4QD gains
+    2.1 calibrated (the bench file's without them). It changes nothing in ``run``: it
+    may run in another process beside the steps 2.2-2.4 (:mod:`fsmbench.forked`)."""
+    if not any(n in run.recordings for n in NOISE_EXPERIMENTS):
+        return NoiseStep()
+    say("noise model of the open-loop huddle tests (the identified bench's noise)")
+    try:
+        return NoiseStep(fit_noise_model(run.recordings, params=run.nom, qd_gain_v_per_rad=(
+            (qd["h"].gain_v_per_rad, qd["v"].gain_v_per_rad) if qd else None)))
+    except ValueError as exc:
+        return NoiseStep(skipped=str(exc))
+
+
 def assemble_step(run: StepRun, *, source: str, qd: Mapping[str, QdCalibration],
                   gi: Mapping[str, CurrentAmplifierGain], sercalo_step: SercaloStep,
-                  newport_step: NewportStep) -> Identification:
+                  newport_step: NewportStep, noise_step: NoiseStep) -> Identification:
     """2.5: the identified blocks (the bench file's where a step was skipped) assembled
     into the plant, the noise model of the open-loop huddle tests, the uncertainty tree."""
     nom = run.nom
@@ -557,14 +580,9 @@ def assemble_step(run: StepRun, *, source: str, qd: Mapping[str, QdCalibration],
     plant = assemble_plant(gi=blocks["Gi"][1], zc=blocks["Zc"][1], ga=blocks["Ga"][1],
                            gc=blocks["Gc"][1], gn=blocks["Gn"][1], gd=blocks["Gd"][1],
                            input_delay_s=delays, source=f"identified ({source})")
-    noise = None
-    if any(n in run.recordings for n in NOISE_EXPERIMENTS):
-        run.say("noise model of the open-loop huddle tests (the identified bench's noise)")
-        try:
-            noise = fit_noise_model(run.recordings, params=nom, qd_gain_v_per_rad=(
-                (qd["h"].gain_v_per_rad, qd["v"].gain_v_per_rad) if qd else None))
-        except ValueError as exc:
-            run.skipped["noise_model"] = str(exc)
+    noise = noise_step.fit
+    if noise_step.skipped:
+        run.skipped["noise_model"] = noise_step.skipped
     result = Identification(qd=dict(qd), current_amp=dict(gi), sercalo=sercalo_id,
                             modes=modes, validation=validation, newport=newport_id,
                             plant=plant, plant_blocks={k: v[0] for k, v in blocks.items()},
