@@ -33,7 +33,7 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -212,6 +212,141 @@ def injection_input(controller: DiscreteController, *, channel: str, at: str) ->
                                                              .index(j)]])
 
 
+class _LoopResponse(NamedTuple):
+    """The closed loop's outputs for an excitation, the DAC commands with the excitation in."""
+
+    #: Largest absolute value of each output over the runs (from rest, periodic).
+    peak: np.ndarray
+    #: Rms of each output over the last run: the periodic steady state's when repeated.
+    rms: np.ndarray
+
+
+def _check_peak_options(design: ExcitationDesign, *, fs_hz: float, max_qd_compression: float,
+                        max_error_rad: float | None) -> None:
+    """Raise ValueError on a bound that is not positive or a design sampled at another rate.
+
+    Parameters
+    ----------
+    design : ExcitationDesign
+        The excitation.
+    fs_hz : float
+        The bench's sampling rate [Hz].
+    max_qd_compression : float
+        Largest 4QD compression at a peak [1].
+    max_error_rad : float or None
+        Bound on the rms beam-angle error [rad] (None: not bounded).
+    """
+    if not (math.isfinite(max_qd_compression) and max_qd_compression > 0):
+        raise ValueError(f"the 4QD compression limit must be > 0, got {max_qd_compression!r}")
+    if max_error_rad is not None and not (math.isfinite(max_error_rad) and max_error_rad > 0):
+        raise ValueError(f"the beam-error bound must be a positive angle, got {max_error_rad!r}")
+    if abs(design.fs_hz - fs_hz) > 1e-9 * fs_hz:
+        raise ValueError(f"{design.input}: the excitation is sampled at {design.fs_hz:g} Hz, "
+                         f"the bench at {fs_hz:g} Hz")
+
+
+def _stable_loop(plant: DiscretePlant, controller: DiscreteController, *,
+                 model: str) -> tuple[DiscretePlant, float]:
+    """The loop closed around ``plant`` and its spectral radius [1].
+
+    Raises
+    ------
+    ValueError
+        The controller does not stabilise the plant (``model`` names it).
+    """
+    loop = closed_loop_plant(plant, controller)
+    rho = float(np.max(np.abs(np.linalg.eigvals(loop.a))))
+    if rho >= 1.0:
+        raise ValueError(f"the controller {controller.name!r} does not stabilise the "
+                         f"{model} bench model (closed-loop spectral radius {rho:.6f})")
+    return loop, rho
+
+
+def _loop_response(design: ExcitationDesign, *, loop: DiscretePlant,
+                   controller: DiscreteController, inp: str, at: str,
+                   outputs: tuple[str, ...]) -> _LoopResponse:
+    """Peaks and rms of the closed loop's ``outputs`` for ``design`` entering at ``inp``.
+
+    From rest and, for a repeated excitation, in its periodic steady state.
+    The feedback outputs are the controller's part of each DAC command; the
+    excitation on that command (at the output) or the reference's direct
+    path through the controller (at the reference) is added to it.
+    """
+    x = np.asarray(design.samples_v, dtype=float)
+    runs = [(x, response_from_rest(x, input=inp, plant=loop, outputs=outputs))]
+    if design.after_end == "repeat":
+        one = np.asarray(design.one_period(), dtype=float)
+        runs.append((one, response_from_rest(one, input=inp, plant=loop, outputs=outputs,
+                                             periodic=True)))
+    n_adc = len(ADC_CHANNELS)
+    direct = reference_feedthrough(controller)
+    col = None if at == "output" else list(loop.input_names).index(inp) - len(DAC_CHANNELS)
+    peak = np.zeros(len(outputs))
+    for samples, y in runs:
+        y = y.copy()
+        for i, j in enumerate(controller.dac_outputs):
+            out = n_adc + 2 + i
+            if at == "output" and DAC_CHANNELS[j] == design.input:
+                y[:, out] += samples
+            elif col is not None:
+                y[:, out] += direct[i, col] * samples
+        peak = np.maximum(peak, np.abs(y).max(axis=0))
+        last = y
+    rms = np.sqrt(np.mean(last * last, axis=0))  # the steady state's when repeated
+    return _LoopResponse(peak=peak, rms=rms)
+
+
+def _converter_peaks(design: ExcitationDesign, *, peak: np.ndarray,
+                     controller: DiscreteController, at: str,
+                     limit_v: float) -> list[ConverterPeak]:
+    """The DAC commands' peaks (the controller's and the excitation's), then every ADC
+    channel the loop carries the excitation to.
+
+    Parameters
+    ----------
+    peak : ndarray
+        Largest absolute value of each closed-loop output (ADC channels, beam, feedback).
+    limit_v : float
+        Half the converters' range [V].
+    """
+    n_adc = len(ADC_CHANNELS)
+    dac_peak: dict[str, float] = {}
+    for i, j in enumerate(controller.dac_outputs):
+        dac_peak[DAC_CHANNELS[j]] = float(peak[n_adc + 2 + i])
+    if at == "output" and design.input not in dac_peak:
+        # A channel the controller does not drive carries the excitation alone.
+        x = np.asarray(design.samples_v, dtype=float)
+        dac_peak[design.input] = float(np.max(np.abs(x)))
+    peaks = [ConverterPeak("DAC", ch, p, limit_v) for ch, p in dac_peak.items()]
+    peaks += [ConverterPeak("ADC", name, float(peak[i]), limit_v)
+              for i, name in enumerate(ADC_CHANNELS) if peak[i] > _REACHED_FRACTION * limit_v]
+    return peaks
+
+
+def _quad_diode_peaks(params: BenchParams, *, response: _LoopResponse, limit_v: float,
+                      max_qd_compression: float) -> list[QuadDiodePeak]:
+    """The 4QD's compression at the peak of each 4QD output the excitation reaches.
+
+    Parameters
+    ----------
+    limit_v : float
+        Half the converters' range [V].
+    max_qd_compression : float
+        Largest 4QD compression at a peak [1].
+    """
+    qd = params.quad_diode
+    k = qd.nonlinearity_pct / 100.0
+    quad = []
+    for name, axis in QD_CHANNELS:
+        i = ADC_CHANNELS.index(name)
+        gain = abs(qd.gain_v_per_rad[axis])
+        if response.peak[i] > _REACHED_FRACTION * limit_v:
+            quad.append(QuadDiodePeak(name, float(response.peak[i]), float(response.rms[i]), gain,
+                                      gain * qd.nonlinearity_full_swing_rad, k,
+                                      max_qd_compression))
+    return quad
+
+
 def closed_loop_peaks(design: ExcitationDesign, *, params: BenchParams, plant: DiscretePlant,
                       controller: DiscreteController, controller_name: str = "",
                       at: str = "output", model: str = "nominal",
@@ -245,69 +380,28 @@ def closed_loop_peaks(design: ExcitationDesign, *, params: BenchParams, plant: D
     ValueError
         Rates differ, the loop is unstable, a bound is not positive, ``at`` unknown.
     """
-    if not (math.isfinite(max_qd_compression) and max_qd_compression > 0):
-        raise ValueError(f"the 4QD compression limit must be > 0, got {max_qd_compression!r}")
-    if max_error_rad is not None and not (math.isfinite(max_error_rad) and max_error_rad > 0):
-        raise ValueError(f"the beam-error bound must be a positive angle, got {max_error_rad!r}")
-    fs = params.converter.fs_hz
-    if abs(design.fs_hz - fs) > 1e-9 * fs:
-        raise ValueError(f"{design.input}: the excitation is sampled at {design.fs_hz:g} Hz, "
-                         f"the bench at {fs:g} Hz")
+    _check_peak_options(design, fs_hz=params.converter.fs_hz,
+                        max_qd_compression=max_qd_compression, max_error_rad=max_error_rad)
     inp = injection_input(controller, channel=design.input, at=at)
-    loop = closed_loop_plant(plant, controller)
-    rho = float(np.max(np.abs(np.linalg.eigvals(loop.a))))
-    if rho >= 1.0:
-        raise ValueError(f"the controller {controller.name!r} does not stabilise the "
-                         f"{model} bench model (closed-loop spectral radius {rho:.6f})")
+    loop, rho = _stable_loop(plant, controller, model=model)
     fb = tuple(feedback_name(DAC_CHANNELS[j]) for j in controller.dac_outputs)
     outputs = (*ADC_CHANNELS, "Rh", "Rv", *fb)
-    x = np.asarray(design.samples_v, dtype=float)
-    runs = [(x, response_from_rest(x, input=inp, plant=loop, outputs=outputs))]
-    if design.after_end == "repeat":
-        one = np.asarray(design.one_period(), dtype=float)
-        runs.append((one, response_from_rest(one, input=inp, plant=loop, outputs=outputs,
-                                             periodic=True)))
-    n_adc = len(ADC_CHANNELS)
-    direct = reference_feedthrough(controller)
-    col = None if at == "output" else list(loop.input_names).index(inp) - len(DAC_CHANNELS)
-    peak = np.zeros(len(outputs))
-    dac_peak: dict[str, float] = {}
-    for samples, y in runs:
-        y = y.copy()
-        for i, j in enumerate(controller.dac_outputs):
-            out = n_adc + 2 + i
-            if at == "output" and DAC_CHANNELS[j] == design.input:
-                y[:, out] += samples
-            elif col is not None:
-                y[:, out] += direct[i, col] * samples
-        peak = np.maximum(peak, np.abs(y).max(axis=0))
-        last = y
-    rms = np.sqrt(np.mean(last * last, axis=0))  # the steady state's when repeated
+    response = _loop_response(design, loop=loop, controller=controller, inp=inp, at=at,
+                              outputs=outputs)
     limit = params.converter.range_v / 2
-    for i, j in enumerate(controller.dac_outputs):
-        dac_peak[DAC_CHANNELS[j]] = float(peak[n_adc + 2 + i])
-    if at == "output" and design.input not in dac_peak:
-        dac_peak[design.input] = float(np.max(np.abs(x)))
-    peaks = [ConverterPeak("DAC", ch, p, limit) for ch, p in dac_peak.items()]
-    peaks += [ConverterPeak("ADC", name, float(peak[i]), limit)
-              for i, name in enumerate(ADC_CHANNELS) if peak[i] > _REACHED_FRACTION * limit]
-    qd = params.quad_diode
-    k = qd.nonlinearity_pct / 100.0
-    quad = []
-    for name, axis in QD_CHANNELS:
-        i = ADC_CHANNELS.index(name)
-        gain = abs(qd.gain_v_per_rad[axis])
-        if peak[i] > _REACHED_FRACTION * limit:
-            quad.append(QuadDiodePeak(name, float(peak[i]), float(rms[i]), gain,
-                                      gain * qd.nonlinearity_full_swing_rad, k,
-                                      max_qd_compression))
+    peaks = _converter_peaks(design, peak=response.peak, controller=controller, at=at,
+                             limit_v=limit)
+    quad = _quad_diode_peaks(params, response=response, limit_v=limit,
+                             max_qd_compression=max_qd_compression)
     bound = math.inf if max_error_rad is None else float(max_error_rad)
-    beam = tuple(BeamError(sig, float(rms[n_adc + i]), float(peak[n_adc + i]), bound)
+    n_adc = len(ADC_CHANNELS)
+    beam = tuple(BeamError(sig, float(response.rms[n_adc + i]), float(response.peak[n_adc + i]),
+                           bound)
                  for i, (sig, _axis) in enumerate(_BEAM))
     tau = 1.0 / max(1e-300, -math.log(rho)) * plant.ts_s
     report = LimitReport(input=design.input, model=model, amplitude_rms_v=design.amplitude_rms_v,
                          peaks=tuple(peaks), slowest_time_constant_s=tau, quad_diode=tuple(quad),
-                         qd_nonlinearity_pct=float(qd.nonlinearity_pct),
+                         qd_nonlinearity_pct=float(params.quad_diode.nonlinearity_pct),
                          max_qd_compression=max_qd_compression)
     return ClosedLoopLimitReport(limits=report, at=at,
                                  controller=controller_name or controller.name, beam=beam)

@@ -183,23 +183,8 @@ def _mains_fields(ms: dict[str, Any], js: Path) -> dict[str, Any]:
             "skipped_lines_hz": tuple(float(f) for f in skipped)}
 
 
-def read_excitation(path: str | Path) -> ExcitationDesign:
-    """Load and validate an excitation: folder, ``.json`` or ``.mat`` (:func:`find_description`).
-
-    Returns
-    -------
-    ExcitationDesign
-        As designed: the samples from the MAT-file, the rest from the JSON.
-
-    Raises
-    ------
-    ExcitationFileError
-        One line naming the file and the problem: unreadable, wrong format or
-        version, missing or invalid keys, a MAT-file without ``t`` or the
-        input, lengths or time step not as described, or samples that are not
-        the ones described (SHA-256).
-    """
-    js = find_description(path)
+def _read_description(js: Path) -> dict[str, Any]:
+    """The JSON description at ``js``, checked to be an excitation of this format's version."""
     try:
         meta = json.loads(js.read_text("utf-8"))
     except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
@@ -210,25 +195,26 @@ def read_excitation(path: str | Path) -> ExcitationDesign:
     if meta.get("format_version") != EXCITATION_FORMAT[1]:
         raise ExcitationFileError(js, f"has format version {meta.get('format_version')!r}; "
                                       f"this fsmbench reads version {EXCITATION_FORMAT[1]}")
-    number = (int, float)
-    inp = _get(meta, "input", str, js)
-    if inp not in CHANNELS:
-        raise ExcitationFileError(js, f"input {inp!r} is not a DAC channel "
-                                      f"({', '.join(CHANNELS)})")
-    kind = _get(meta, "kind", str, js)
-    if kind not in ("multisine", "noise", "chirp"):
-        raise ExcitationFileError(js, f"unknown kind {kind!r}")
-    fs = float(_get(meta, "fs_hz", number, js))
-    n = _get(meta, "n_samples", int, js)
-    per = _get(meta, "period_samples", int, js)
-    periods = _get(meta, "periods", int, js)
-    transient = _get(meta, "transient_periods", int, js)
-    if fs <= 0 or per < 1 or periods < 1 or transient < 0 or n != per * (periods + transient):
-        raise ExcitationFileError(js, f"{n} samples are not {periods} + {transient} periods of "
-                                      f"{per} samples at {fs:g} Hz")
-    after_end = _get(meta, "after_end", str, js)
-    if after_end not in ("zero", "repeat"):
-        raise ExcitationFileError(js, f"after_end {after_end!r} is not 'zero' or 'repeat'")
+    return meta
+
+
+def _read_samples(meta: dict[str, Any], js: Path, *, inp: str, n: int,
+                  fs_hz: float) -> np.ndarray:
+    """The samples of ``inp`` [V] from the MAT-file the description names, as described.
+
+    Parameters
+    ----------
+    meta : dict
+        The JSON description, read from ``js``.
+    js : Path
+        Its path (the MAT-file's name is relative to its folder).
+    inp : str
+        The excited DAC channel.
+    n : int
+        Number of samples described.
+    fs_hz : float
+        Sampling rate described [Hz]: ``t`` must be ``k / fs_hz``.
+    """
     mat = js.parent / _get(meta, "mat_file", str, js)
     try:
         data = load_mat(mat, variables=["t", inp])
@@ -241,14 +227,22 @@ def read_excitation(path: str | Path) -> ExcitationDesign:
         raise ExcitationFileError(mat, f"{inp} and t must be vectors of the {n} samples the "
                                        f"description gives, got shapes {x.shape} and {t.shape}")
     t, x = t.ravel(), x.ravel()
-    if not np.allclose(t, np.arange(n) / fs, rtol=0, atol=_T_RTOL * max(n / fs, 1.0)):
-        raise ExcitationFileError(mat, f"t is not 0, 1/{fs:g} Hz, ... as described")
+    if not np.allclose(t, np.arange(n) / fs_hz, rtol=0, atol=_T_RTOL * max(n / fs_hz, 1.0)):
+        raise ExcitationFileError(mat, f"t is not 0, 1/{fs_hz:g} Hz, ... as described")
     if samples_sha256(x) != meta.get("samples_sha256"):
         raise ExcitationFileError(mat, f"{inp} is not the signal {js.name} describes "
                                        "(SHA-256 differs)")
-    band = _get(meta, "band_hz", list, js)
-    if len(band) != 2 or not all(isinstance(b, number) for b in band):
-        raise ExcitationFileError(js, f"band_hz {band!r} is not a pair of frequencies [Hz]")
+    return x
+
+
+def _kind_fields(meta: dict[str, Any], js: Path, *, kind: str) -> dict[str, Any]:
+    """The design's fields that depend on its kind, as keyword arguments.
+
+    A multisine's lines [Hz] and phases [rad] (empty for the other kinds),
+    grid, phase method, line amplitude [V], mains and random-phase crest
+    factor; a chirp's method.
+    """
+    number = (int, float)
     ms = meta.get("multisine")
     lines = np.zeros(0)
     phases = np.zeros(0)
@@ -269,10 +263,55 @@ def read_excitation(path: str | Path) -> ExcitationDesign:
     chirp = meta.get("chirp")
     if kind == "chirp":
         extra["chirp_method"] = _get(chirp if isinstance(chirp, dict) else {}, "method", str, js)
+    return {"lines_hz": lines, "phases_rad": phases, **extra}
+
+
+def read_excitation(path: str | Path) -> ExcitationDesign:
+    """Load and validate an excitation: folder, ``.json`` or ``.mat`` (:func:`find_description`).
+
+    Returns
+    -------
+    ExcitationDesign
+        As designed: the samples from the MAT-file, the rest from the JSON.
+
+    Raises
+    ------
+    ExcitationFileError
+        One line naming the file and the problem: unreadable, wrong format or
+        version, missing or invalid keys, a MAT-file without ``t`` or the
+        input, lengths or time step not as described, or samples that are not
+        the ones described (SHA-256).
+    """
+    js = find_description(path)
+    meta = _read_description(js)
+    number = (int, float)
+    inp = _get(meta, "input", str, js)
+    if inp not in CHANNELS:
+        raise ExcitationFileError(js, f"input {inp!r} is not a DAC channel "
+                                      f"({', '.join(CHANNELS)})")
+    kind = _get(meta, "kind", str, js)
+    if kind not in ("multisine", "noise", "chirp"):
+        raise ExcitationFileError(js, f"unknown kind {kind!r}")
+    fs = float(_get(meta, "fs_hz", number, js))
+    n = _get(meta, "n_samples", int, js)
+    per = _get(meta, "period_samples", int, js)
+    periods = _get(meta, "periods", int, js)
+    transient = _get(meta, "transient_periods", int, js)
+    if fs <= 0 or per < 1 or periods < 1 or transient < 0 or n != per * (periods + transient):
+        raise ExcitationFileError(js, f"{n} samples are not {periods} + {transient} periods of "
+                                      f"{per} samples at {fs:g} Hz")
+    after_end = _get(meta, "after_end", str, js)
+    if after_end not in ("zero", "repeat"):
+        raise ExcitationFileError(js, f"after_end {after_end!r} is not 'zero' or 'repeat'")
+    x = _read_samples(meta, js, inp=inp, n=n, fs_hz=fs)
+    band = _get(meta, "band_hz", list, js)
+    if len(band) != 2 or not all(isinstance(b, number) for b in band):
+        raise ExcitationFileError(js, f"band_hz {band!r} is not a pair of frequencies [Hz]")
+    fields = _kind_fields(meta, js, kind=kind)
     return ExcitationDesign(
         input=inp, kind=kind, fs_hz=fs, samples_v=x, period_samples=per, periods=periods,
         transient_periods=transient,
         amplitude_rms_v=float(_get(meta, "amplitude_rms_v", number, js)),
         band_hz=(float(band[0]), float(band[1])), seed=_get(meta, "seed", int, js),
-        crest_factor=float(_get(meta, "crest_factor", number, js)), lines_hz=lines,
-        phases_rad=phases, after_end=after_end, **extra)
+        crest_factor=float(_get(meta, "crest_factor", number, js)), after_end=after_end,
+        **fields)

@@ -30,7 +30,7 @@ import dataclasses
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -367,6 +367,69 @@ def resonance_bands(bench: Bench, *, width: float = 0.05) -> list[tuple[float, f
     return out
 
 
+def _budgeted_amplitudes(loops: Sequence[DiscretePlant], f_hz: np.ndarray, *, input: str,
+                         bands_hz: Sequence[tuple[float, float]], shift: float,
+                         rms_rad: float) -> np.ndarray:
+    """Line amplitudes [V] whose worst rms beam error over the models and moves is ``rms_rad``.
+
+    Each line's amplitude is inversely proportional to its largest response
+    (within :data:`DEFAULT_DYNAMIC_RANGE`); the budget is shared in squares:
+    :data:`_OUTSIDE_SHARE` for the lines outside the resonance bands, the rest
+    split evenly between the bands the excitation reaches.
+
+    Parameters
+    ----------
+    loops : sequence of DiscretePlant
+        The robust set's closed loops.
+    f_hz : ndarray, shape (L,)
+        The lines [Hz].
+    input : str
+        The loops' input the excitation enters.
+    bands_hz : sequence of (float, float)
+        The resonance bands [Hz].
+    shift : float
+        Largest relative move of a mode [1].
+    rms_rad : float
+        The rms beam error the lines may add together [rad].
+    """
+    gain = beam_response(loops, f_hz, input=input, bands_hz=bands_hz)
+    a = 1.0 / np.maximum(gain, np.max(gain) / DEFAULT_DYNAMIC_RANGE)
+    out_sum, band_sums, masks = _worst_parts(loops, f_hz, a, input=input, bands_hz=bands_hz,
+                                             shift=shift, n_shifts=201)
+    # The budget (the rms squared, x 2 for amplitudes) in shares: half for the lines
+    # outside the resonance bands, the rest split between the bands.
+    budget = 2.0 * rms_rad ** 2
+    band_share = (1.0 - _OUTSIDE_SHARE) / max(1, sum(1 for b in band_sums if b > 0))
+    scale = np.full(f_hz.size,
+                    math.sqrt(_OUTSIDE_SHARE * budget / out_sum) if out_sum > 0 else 0.0)
+    for mask, part in zip(masks, band_sums, strict=True):
+        if part > 0:
+            scale[mask] = math.sqrt(band_share * budget / part)
+    if out_sum == 0:
+        scale[scale == 0] = np.max(scale)
+    return a * scale
+
+
+def _within_closed_loop_limits(design: ExcitationDesign, amplitudes_v: np.ndarray, *,
+                               peaks_options: dict[str, Any]
+                               ) -> tuple[ExcitationDesign, np.ndarray, ClosedLoopLimitReport]:
+    """The design, its line amplitudes [V] and its peaks, scaled down if a converter or the
+    4QD's compression needs it.
+
+    ``peaks_options`` are :func:`fsmbench.excite.closed_loop.closed_loop_peaks`'s
+    keyword arguments (the model's closed loop, its limits).
+    """
+    report = closed_loop_peaks(design, **peaks_options)
+    if not report.fits:
+        factor = report.fitting_amplitude_rms_v() / design.amplitude_rms_v
+        amplitudes_v = amplitudes_v * factor
+        design = dataclasses.replace(design, samples_v=design.samples_v * factor,
+                                     amplitude_rms_v=design.amplitude_rms_v * factor,
+                                     line_amplitude_v=design.line_amplitude_v * factor)
+        report = closed_loop_peaks(design, **peaks_options)
+    return design, amplitudes_v, report
+
+
 def beam_bounded_measurement(*, bench: Bench, params: BenchParams, controller: DiscreteController,
                              channel: str, max_error_rad: float, at: str = "output",
                              band_hz: tuple[float, float] = (0.5, 2000.0),
@@ -425,35 +488,17 @@ def beam_bounded_measurement(*, bench: Bench, params: BenchParams, controller: D
     k, n = _lines(band_hz=band_hz, resolution_hz=resolution_hz, fs_hz=fs, grid="odd",
                   log_grid=True, lines_per_decade=lines_per_decade, dense_bands_hz=dense)
     f = k * (fs / n)
-    gain = beam_response(loops, f, input=inp, bands_hz=dense)
-    a = 1.0 / np.maximum(gain, np.max(gain) / DEFAULT_DYNAMIC_RANGE)
-    out_sum, band_sums, masks = _worst_parts(loops, f, a, input=inp, bands_hz=dense,
-                                             shift=dense_width, n_shifts=201)
-    # The budget (fill x bound, squared, x 2 for amplitudes) in shares: half for the lines
-    # outside the resonance bands, the rest split between the bands.
-    budget = 2.0 * (fill * max_error_rad) ** 2
-    band_share = (1.0 - _OUTSIDE_SHARE) / max(1, sum(1 for b in band_sums if b > 0))
-    scale = np.full(f.size, math.sqrt(_OUTSIDE_SHARE * budget / out_sum) if out_sum > 0 else 0.0)
-    for mask, part in zip(masks, band_sums, strict=True):
-        if part > 0:
-            scale[mask] = math.sqrt(band_share * budget / part)
-    if out_sum == 0:
-        scale[scale == 0] = np.max(scale)
-    amplitudes = a * scale
+    amplitudes = _budgeted_amplitudes(loops, f, input=inp, bands_hz=dense, shift=dense_width,
+                                      rms_rad=fill * max_error_rad)
     design = multisine_of_lines(input=channel, harmonics=k, amplitudes_v=amplitudes,
                                 n_samples=n, fs_hz=fs, band_hz=band_hz, periods=periods,
                                 transient_periods=transient_periods, grid="odd", log_grid=True)
-    kwargs = {"params": params, "plant": bench_discrete(bench), "controller": controller,
-              "controller_name": controller_name, "at": at, "model": model or "bench model",
-              "max_qd_compression": max_qd_compression, "max_error_rad": max_error_rad}
-    report = closed_loop_peaks(design, **kwargs)  # type: ignore[arg-type]
-    if not report.fits:
-        factor = report.fitting_amplitude_rms_v() / design.amplitude_rms_v
-        amplitudes = amplitudes * factor
-        design = dataclasses.replace(design, samples_v=design.samples_v * factor,
-                                     amplitude_rms_v=design.amplitude_rms_v * factor,
-                                     line_amplitude_v=design.line_amplitude_v * factor)
-        report = closed_loop_peaks(design, **kwargs)  # type: ignore[arg-type]
+    peaks_options = {"params": params, "plant": bench_discrete(bench), "controller": controller,
+                     "controller_name": controller_name, "at": at,
+                     "model": model or "bench model", "max_qd_compression": max_qd_compression,
+                     "max_error_rad": max_error_rad}
+    design, amplitudes, report = _within_closed_loop_limits(design, amplitudes,
+                                                            peaks_options=peaks_options)
     worst = worst_beam_rms(loops, f, amplitudes, input=inp, bands_hz=dense, shift=dense_width)
     return BoundedMeasurement(design=design, line_amplitudes_v=amplitudes, report=report,
                               worst_beam_rms_rad=worst)

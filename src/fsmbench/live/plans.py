@@ -33,7 +33,7 @@ from __future__ import annotations
 import functools
 import json
 import shutil
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -266,6 +266,43 @@ def _record_closed_loop(bench: FsmBenchDevice, npy: Path, x: np.ndarray, *, peri
     return write_recording(ds, npy.parent / f"{name}.mat")
 
 
+def _checked_excitations(excitations: Mapping[str, np.ndarray] | None,
+                         design: Mapping[str, Any]) -> Plan:
+    """The closed-loop excitations given, else designed off the RunEngine's loop
+    (:func:`design_excitations` with ``design``); one for each Sercalo command."""
+    if excitations is None:
+        excitations = yield from in_thread(functools.partial(design_excitations, **design))
+    missing = [ch for ch in CLOSED_LOOP_EXPERIMENTS if ch not in excitations]
+    if missing:
+        raise ValueError(f"closed_loop_experiments needs an excitation for {', '.join(missing)}")
+    return excitations
+
+
+def _closed_loop_run(bench: FsmBenchDevice, play: Callable[[str], Plan], *,
+                     md: dict[str, Any]) -> Plan:
+    """One Bluesky run with the loop closed; the device's controller and the bench time the
+    run took [s].
+
+    ``CloseLoop`` when the loop is open, then ``play`` with the name of the device's
+    controller; the bench stood down at the end, whatever happened (``OpenLoop`` when the
+    run closed the loop). ``md`` is the run's start document.
+    """
+    t0 = yield from bps.rd(bench.bench_time)
+    closes = not (yield from bps.rd(bench.loop_closed))
+    running: list[str] = []
+
+    def body() -> Plan:
+        if closes:
+            yield from execute(bench.close_loop)
+        running.append(str((yield from bps.rd(bench.controller))))
+        yield from play(running[0])
+
+    yield from bpp.finalize_wrapper(bpp.run_wrapper(body(), md=md),
+                                    functools.partial(stand_down, bench, open_loop=closes))
+    t1 = yield from bps.rd(bench.bench_time)
+    return running[0], float(t1 - t0)
+
+
 def closed_loop_experiments(bench: FsmBenchDevice, folder: str | Path, *,
                             excitations: Mapping[str, np.ndarray] | None = None,
                             periods: int = 6, md: Mapping[str, Any] | None = None,
@@ -317,38 +354,25 @@ def closed_loop_experiments(bench: FsmBenchDevice, folder: str | Path, *,
     out = Path(folder)
     out.mkdir(parents=True, exist_ok=True)
     fs = float((design.get("model") or default_bench()).true.converter.fs_hz)
-    if excitations is None:
-        excitations = yield from in_thread(functools.partial(design_excitations, **design))
-    missing = [ch for ch in CLOSED_LOOP_EXPERIMENTS if ch not in excitations]
-    if missing:
-        raise ValueError(f"closed_loop_experiments needs an excitation for {', '.join(missing)}")
-    t0 = yield from bps.rd(bench.bench_time)
-    closes = not (yield from bps.rd(bench.loop_closed))
+    played = yield from _checked_excitations(excitations, design)
     files: dict[str, Path] = {}
     npys: dict[str, Path] = {}
-    running: list[str] = []
 
-    def body() -> Plan:
-        if closes:
-            yield from execute(bench.close_loop)
-        running.append(str((yield from bps.rd(bench.controller))))
+    def play(controller: str) -> Plan:
         for ch, name in CLOSED_LOOP_EXPERIMENTS.items():
-            x = np.asarray(excitations[ch], dtype=float)
+            x = np.asarray(played[ch], dtype=float)
             npys[ch] = out / f"excitation_{ch}.npy"
             files[name] = yield from _record_closed_loop(
                 bench, npys[ch], x, periods=periods, fs_hz=fs, channel=ch,
                 source=f"fsmbench Bluesky plan through {bench.address} (loop closed by "
-                       f"{running[0]})")
+                       f"{controller})")
             yield from bps.trigger_and_read([bench], name="experiments")
 
-    yield from bpp.finalize_wrapper(
-        bpp.run_wrapper(body(), md={"plan_name": "fsmbench_closed_loop_experiments",
-                                    "folder": str(out), "device": bench.address,
-                                    "periods": periods, **(md or {})}),
-        functools.partial(stand_down, bench, open_loop=closes))
-    t1 = yield from bps.rd(bench.bench_time)
+    controller, bench_s = yield from _closed_loop_run(
+        bench, play, md={"plan_name": "fsmbench_closed_loop_experiments", "folder": str(out),
+                         "device": bench.address, "periods": periods, **(md or {})})
     return BenchRecords(folder=out, files=files, kind="closed loop", address=bench.address,
-                        controller=running[0], bench_s=float(t1 - t0), excitations=npys)
+                        controller=controller, bench_s=bench_s, excitations=npys)
 
 
 @dataclass(frozen=True, eq=False)
@@ -420,6 +444,40 @@ def _play_stage(bench: FsmBenchDevice, folder: Path, request: StageRequest, *, f
                    experiments=tuple(specs))
 
 
+def _measure_in_stages(bench: FsmBenchDevice, out: Path, steps: MeasurementSteps, *,
+                       fs_hz: float, controller: str, stages: list[Path]) -> Plan:
+    """Each stage the protocol asks for played into ``out/stage_<n>`` (appended to
+    ``stages``) and identified off the RunEngine's loop; the measurement once it returns.
+
+    Parameters
+    ----------
+    steps : MeasurementSteps
+        The protocol (:func:`fsmbench.tune.measure.measurement_steps`), not started.
+    fs_hz : float
+        The bench's sampling rate [Hz].
+    controller : str
+        The device's controller, for the records' source.
+    """
+    step = yield from in_thread(functools.partial(_advance, steps, None))
+    while isinstance(step, StageRequest):
+        stages.append(out / f"stage_{len(stages) + 1}")
+        run = yield from _play_stage(bench, stages[-1], step, fs_hz=fs_hz,
+                                     controller=controller)
+        step = yield from in_thread(functools.partial(_advance, steps, run))
+    return step
+
+
+def _write_measurement(measurement: ClosedLoopMeasurement, out: Path, *, address: str,
+                       controller: str) -> list[Path]:
+    """The identification's files and ``measurement.json`` (each stage's designs and
+    tracking, with the device and its controller) written in ``out``; their paths."""
+    files = write_closed_loop_identification(measurement.identification, out)
+    files.append(atomic_write_text(out / "measurement.json", format_text(stamped(
+        {"device": address, "controller": controller, **measurement.to_json()},
+        format="fsmbench.closed_loop_measurement", version=1))))
+    return files
+
+
 def closed_loop_identification(bench: FsmBenchDevice, folder: str | Path, *,
                                model: Bench | None = None,
                                controller: str | Path | None = None,
@@ -471,43 +529,27 @@ def closed_loop_identification(bench: FsmBenchDevice, folder: str | Path, *,
     fs = float(bench_model.true.converter.fs_hz)
     k = yield from in_thread(functools.partial(
         running_controller, None if controller is None else str(controller), bench=bench_model))
-    t0 = yield from bps.rd(bench.bench_time)
-    closes = not (yield from bps.rd(bench.loop_closed))
     stages: list[Path] = []
-    running: list[str] = []
     done: list[ClosedLoopMeasurement] = []
 
-    def body() -> Plan:
-        if closes:
-            yield from execute(bench.close_loop)
-        running.append(str((yield from bps.rd(bench.controller))))
-        if running[0] != k.name:
-            raise ValueError(f"{bench.address} runs {running[0]}; the excitations would be "
+    def play(running: str) -> Plan:
+        if running != k.name:
+            raise ValueError(f"{bench.address} runs {running}; the excitations would be "
                              f"designed on {k.name} and their beam bound would not hold: "
                              "give controller= the file of the device's controller")
         steps = measurement_steps(model=bench_model, controller=k, options=opts, seed=seed)
-        step = yield from in_thread(functools.partial(_advance, steps, None))
-        while isinstance(step, StageRequest):
-            stages.append(out / f"stage_{len(stages) + 1}")
-            run = yield from _play_stage(bench, stages[-1], step, fs_hz=fs,
-                                         controller=running[0])
-            step = yield from in_thread(functools.partial(_advance, steps, run))
-        done.append(step)
+        done.append((yield from _measure_in_stages(bench, out, steps, fs_hz=fs,
+                                                   controller=running, stages=stages)))
 
-    yield from bpp.finalize_wrapper(
-        bpp.run_wrapper(body(), md={"plan_name": "fsmbench_closed_loop_identification",
-                                    "folder": str(out), "device": bench.address,
-                                    "max_error_rad": opts.max_error_rad, **(md or {})}),
-        functools.partial(stand_down, bench, open_loop=closes))
-    t1 = yield from bps.rd(bench.bench_time)
+    running, bench_s = yield from _closed_loop_run(
+        bench, play, md={"plan_name": "fsmbench_closed_loop_identification",
+                         "folder": str(out), "device": bench.address,
+                         "max_error_rad": opts.max_error_rad, **(md or {})})
     measurement = done[0]
-    files = write_closed_loop_identification(measurement.identification, out)
-    files.append(atomic_write_text(out / "measurement.json", format_text(stamped(
-        {"device": bench.address, "controller": running[0], **measurement.to_json()},
-        format="fsmbench.closed_loop_measurement", version=1))))
+    files = _write_measurement(measurement, out, address=bench.address, controller=running)
     return ClosedLoopIdentificationRun(
         folder=out, stage_folders=tuple(stages), measurement=measurement, files=tuple(files),
-        address=bench.address, controller=running[0], bench_s=float(t1 - t0))
+        address=bench.address, controller=running, bench_s=bench_s)
 
 
 def identify_records(records: BenchRecords, *, model: Any = None,

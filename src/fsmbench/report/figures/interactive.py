@@ -27,6 +27,7 @@ from typing import Any
 
 import numpy as np
 
+from fsmbench.report.figures.interactive_layout import _DASH, _panel_axes, _panel_marks
 from fsmbench.report.figures.spec import (
     PALETTE,
     Bars,
@@ -40,7 +41,6 @@ from fsmbench.report.figures.spec import (
 
 __all__ = ["ZOOM_JS", "figure_json", "plotly_js", "typed_array"]
 
-_DASH = {"solid": "solid", "dash": "dash", "dot": "dot", "dashdot": "dashdot"}
 # Gap between panel columns, as a fraction of the figure's width.
 _H_GAP = 0.08
 # Room between panel rows [px]: always, for the tick labels of the upper panel, for its
@@ -51,10 +51,9 @@ _GAP_X_TITLE_PX = 26
 _GAP_TITLE_PX = 24
 _MARGIN = {"l": 70, "r": 20, "t": 40, "b": 95}
 _MARGIN_TOP_TITLES = 50
-# A line of 12 px text [px], and the widths of its characters on average (measured in
-# Chromium: 6–7 px plain, 7–7.5 px bold): titles longer than their panel are wrapped.
+# A line of 12 px text [px], and the width of its bold characters on average (measured in
+# Chromium: 7–7.5 px): titles longer than their panel are wrapped.
 _LINE_PX = 16
-_CHAR_PX = 7.0
 _BOLD_CHAR_PX = 7.5
 # Plotting width of a one-column figure in the report's page (1180 px less margins).
 _PAGE_PX = 1050
@@ -153,25 +152,6 @@ def _domains(fig: Figure, height_px: int) -> Iterator[tuple[int, tuple[float, fl
             yield r * fig.columns + c, (x0, min(1.0, x0 + col_w)), (bottom, top)
         if r < len(gaps):
             top = bottom - gaps[r]
-
-
-def _margin_of(panel: Panel, axis: str) -> list[float]:
-    """5 % of the data's span beyond each end (what the static renderer's margins give):
-    plotly.js pads no line-only axis, and the outermost lines would sit on the frame."""
-    values = [t.x if axis == "x" else t.y for t in panel.traces if isinstance(t, Line)]
-    values += [np.array([lab.x if axis == "x" else lab.y]) for lab in panel.labels]
-    v = np.concatenate(values) if values else np.zeros(0)
-    v = v[np.isfinite(v)]
-    if not v.size:
-        return []
-    lo, hi = float(v.min()), float(v.max())
-    pad = 0.05 * (hi - lo)
-    return [lo - pad, hi + pad]
-
-
-def _coord(value: float, *, log: bool) -> float:
-    """A data coordinate as plotly.js wants it for an annotation (decades on a log axis)."""
-    return float(np.log10(value)) if log and value > 0 else float(value)
 
 
 def _hover(panel: Panel) -> str:
@@ -379,26 +359,60 @@ def _bars_trace(bars: Bars, refs: tuple[str, str], color: str, show: bool,
     return trace
 
 
-def _axis(label: str, *, log: bool, fixed: tuple[float, float] | None,
-          domain: tuple[float, float], anchor: str, show_title: bool,
-          length_px: float | None = None) -> dict[str, Any]:
-    """An axis; a title longer than ``length_px`` (the axis's length) is wrapped."""
-    text = label if show_title else ""
-    if text and length_px is not None:
-        text = "<br>".join(wrap_words(text, int(length_px / _CHAR_PX)))
-    axis: dict[str, Any] = {
-        "domain": list(domain), "anchor": anchor, "type": "log" if log else "linear",
-        "showline": True, "mirror": True, "linecolor": "#888", "gridcolor": "#e4e4e4",
-        "zeroline": False, "exponentformat": "power" if log else "SI",
-        "title": {"text": text, "font": {"size": 12}},
+class _Legend:
+    """Each trace's colour and legend entry, by its key (its group, else its name).
+
+    The first trace of a key shows it in the legend; a trace without a colour
+    takes its key's, the palette's next at the key's first use.
+    """
+
+    def __init__(self) -> None:
+        self._shown: set[str] = set()
+        self._color_of: dict[str, str] = {}
+
+    def entry(self, trace: Line | Bars) -> tuple[str, bool]:
+        """(the trace's colour, whether it shows its key in the legend)."""
+        key = trace.group or trace.name
+        if trace.color is not None:
+            color = trace.color
+        else:
+            color = self._color_of.setdefault(key, PALETTE[len(self._color_of) % len(PALETTE)])
+        show = key not in self._shown
+        self._shown.add(key)
+        return color, show
+
+
+def _base_layout(fig: Figure, *, height_px: int, area_px: float) -> dict[str, Any]:
+    """The figure's layout before its panels: size, margins, legend, empty mark lists.
+
+    Parameters
+    ----------
+    fig : Figure
+        The figure.
+    height_px : int
+        Its height [px].
+    area_px : float
+        Height of the area the panels share [px] (the legend sits below it).
+    """
+    return {
+        "height": height_px, "margin": {**_MARGIN, "t": _margin_top(fig)},
+        "hovermode": "closest", "font": {"size": 12},
+        # Below the bottom axis title, whatever the figure's height.
+        "legend": {"orientation": "h", "y": -(_GAP_TICKS_PX + _GAP_X_TITLE_PX + 6) / area_px,
+                   "yanchor": "top", "x": 0, "font": {"size": 11}},
+        "paper_bgcolor": "white", "plot_bgcolor": "white",
+        "annotations": [], "shapes": [], "barmode": "group",
     }
-    if fixed is not None:
-        lo, hi = fixed
-        axis["range"] = [float(np.log10(lo)), float(np.log10(hi))] if log else [lo, hi]
-        axis["autorange"] = False
-    else:
-        axis["autorange"] = True
-    return axis
+
+
+def _panel_title(fig: Figure, title: str, *, x_domain: tuple[float, float],
+                 y_domain: tuple[float, float]) -> dict[str, Any]:
+    """A panel's title: bold, centred above it, wrapped to its column."""
+    lines = "<br>".join(wrap_words(title, int(_column_px(fig) / _BOLD_CHAR_PX)))
+    return {
+        "text": f"<b>{lines}</b>", "showarrow": False, "x": (x_domain[0] + x_domain[1]) / 2,
+        "xref": "paper", "y": y_domain[1], "yref": "paper", "yanchor": "bottom",
+        "xanchor": "center", "font": {"size": 12}, "name": "panel title"}
 
 
 def figure_json(fig: Figure) -> dict[str, Any]:
@@ -412,101 +426,38 @@ def figure_json(fig: Figure) -> dict[str, Any]:
     """
     height = fig.default_height_px()
     data: list[dict[str, Any]] = []
-    top = _margin_top(fig)
     area = _plot_height(fig, height)
-    layout: dict[str, Any] = {
-        "height": height, "margin": {**_MARGIN, "t": top},
-        "hovermode": "closest", "font": {"size": 12},
-        # Below the bottom axis title, whatever the figure's height.
-        "legend": {"orientation": "h", "y": -(_GAP_TICKS_PX + _GAP_X_TITLE_PX + 6) / area,
-                   "yanchor": "top", "x": 0, "font": {"size": 11}},
-        "paper_bgcolor": "white", "plot_bgcolor": "white",
-        "annotations": [], "shapes": [], "barmode": "group",
-    }
+    layout = _base_layout(fig, height_px=height, area_px=area)
     arrays = _Arrays()
     pyramids: list[dict[str, Any]] = []
-    shown: set[str] = set()
-    color_of: dict[str, str] = {}
+    legend = _Legend()
     y_owner: dict[str, str] = {}
     for i, xd, yd in _domains(fig, height):
         panel = fig.panels[i]
         refs = _axis_ids(i)
         row, col = divmod(i, fig.columns)
-        titled = _shows_x_title(fig, i)
-        xaxis = _axis(panel.x_label, log=panel.x_log, fixed=panel.x_range, domain=xd,
-                      anchor=refs[1], show_title=titled)
-        if fig.share_x and row > 0:
-            xaxis["matches"] = _axis_ids(col)[0]
-        if not titled:
-            xaxis["showticklabels"] = False
-        yaxis = _axis(panel.y_label, log=panel.y_log, fixed=panel.y_range, domain=yd,
-                      anchor=refs[0], show_title=True, length_px=(yd[1] - yd[0]) * area)
-        if panel.share_y:
-            owner = y_owner.setdefault(panel.share_y, refs[1])
-            if owner != refs[1]:
-                yaxis["matches"] = owner
-        if panel.equal_aspect:
-            # The box shrinks to the data's aspect, so no axis is padded with empty range.
-            yaxis["scaleanchor"] = refs[0]
-            yaxis["scaleratio"] = 1
-            xaxis["constrain"] = yaxis["constrain"] = "domain"
-            for axis, name in ((xaxis, "x"), (yaxis, "y")):
-                if axis["autorange"]:
-                    axis["autorangeoptions"] = {"include": _margin_of(panel, name)}
-        layout[_layout_key(refs[0])] = xaxis
-        layout[_layout_key(refs[1])] = yaxis
+        # The first panel of a share_y key owns its y axis; the others zoom with it.
+        owner = y_owner.setdefault(panel.share_y, refs[1]) if panel.share_y else refs[1]
+        axes = _panel_axes(panel, refs=refs, x_domain=xd, y_domain=yd, area_px=area,
+                           show_x_title=_shows_x_title(fig, i),
+                           x_matches=_axis_ids(col)[0] if fig.share_x and row > 0 else None,
+                           y_matches=owner if owner != refs[1] else None)
+        layout[_layout_key(refs[0])] = axes.x
+        layout[_layout_key(refs[1])] = axes.y
         width_px = max(200, round(_PAGE_PX * (xd[1] - xd[0])))
         for trace in panel.traces:
-            key = trace.group or trace.name
-            if trace.color is not None:
-                color = trace.color
-            else:
-                color = color_of.setdefault(key, PALETTE[len(color_of) % len(PALETTE)])
-            show = key not in shown
-            shown.add(key)
+            color, show = legend.entry(trace)
             if isinstance(trace, Line):
                 data.append(_line_trace(trace, panel, refs, color, show, arrays, width_px,
                                         len(data), pyramids))
             else:
                 data.append(_bars_trace(trace, refs, color, show, arrays))
-        for rule in panel.rules:
-            horizontal = rule.axis == "y"
-            # On a log axis plotly.js (v3+) takes shapes in data units but annotations in
-            # decades (checked in Chromium: tests/report/test_browser.py).
-            at = rule.value
-            at_text = _coord(rule.value, log=panel.y_log if horizontal else panel.x_log)
-            layout["shapes"].append({
-                "type": "line", "layer": "below",
-                "xref": f"{refs[0]} domain" if horizontal else refs[0],
-                "yref": refs[1] if horizontal else f"{refs[1]} domain",
-                "x0": 0 if horizontal else at, "x1": 1 if horizontal else at,
-                "y0": at if horizontal else 0, "y1": at if horizontal else 1,
-                "line": {"color": rule.color, "width": 1, "dash": _DASH[rule.dash]}})
-            if rule.name:
-                layout["annotations"].append({
-                    "text": rule.name, "showarrow": False, "font": {"size": 10,
-                                                                     "color": rule.color},
-                    "xref": f"{refs[0]} domain" if horizontal else refs[0],
-                    "yref": refs[1] if horizontal else f"{refs[1]} domain",
-                    "x": 1 if horizontal else at_text, "xanchor": "right",
-                    "y": at_text if horizontal else 1, "yanchor": "bottom"})
-        if panel.shade is not None:
-            layout["shapes"].append({
-                "type": "rect", "layer": "below", "xref": refs[0], "yref": f"{refs[1]} domain",
-                "x0": panel.shade[0], "x1": panel.shade[1], "y0": 0, "y1": 1,
-                "fillcolor": "#dddddd", "opacity": 0.6, "line": {"width": 0}})
-        for lab in panel.labels:
-            layout["annotations"].append({
-                "text": lab.text, "x": _coord(lab.x, log=panel.x_log),
-                "y": _coord(lab.y, log=panel.y_log), "xref": refs[0], "yref": refs[1],
-                "showarrow": False, "xanchor": "left", "yanchor": "bottom",
-                "font": {"size": 10}})
+        marks = _panel_marks(panel, refs=refs)
+        layout["shapes"].extend(marks.shapes)
+        layout["annotations"].extend(marks.annotations)
         if panel.title:
-            title = "<br>".join(wrap_words(panel.title, int(_column_px(fig) / _BOLD_CHAR_PX)))
-            layout["annotations"].append({
-                "text": f"<b>{title}</b>", "showarrow": False, "x": (xd[0] + xd[1]) / 2,
-                "xref": "paper", "y": yd[1], "yref": "paper", "yanchor": "bottom",
-                "xanchor": "center", "font": {"size": 12}, "name": "panel title"})
+            layout["annotations"].append(_panel_title(fig, panel.title, x_domain=xd,
+                                                      y_domain=yd))
     return {"data": data, "layout": layout, "arrays": arrays.table, "pyramids": pyramids}
 
 

@@ -12,7 +12,6 @@ import math
 from collections.abc import Mapping, Sequence
 from typing import Any
 
-import numpy as np
 import xarray as xr
 
 from fsmbench.bench.params import Bench
@@ -39,6 +38,11 @@ from fsmbench.report.figures.spec import Figure
 from fsmbench.report.figures.time import SEED_TIME_FIGURES, experiment_figure
 from fsmbench.report.html import Block, Note, Section, Table
 from fsmbench.report.sections.delay_tables import sensor_note, sercalo_delay_blocks
+from fsmbench.report.sections.ident_newport import (
+    _newport_constant_gain_note,
+    _newport_dynamics_table,
+    _newport_gains_table,
+)
 from fsmbench.report.sections.ident_uncertainty import total_cells, uncertainty_table
 from fsmbench.twin.compare import TARGETS, ComparisonRow, comparison_rows, quantity
 
@@ -378,6 +382,28 @@ def _sercalo(result: Identification | None, *, recordings: Mapping[str, xr.Datas
     return Section(title="2.3 Sercalo dynamics", blocks=tuple(blocks))
 
 
+def _newport_frf_figure(n: NewportIdentification) -> Figure:
+    """The Newport's frequency-response matrix, with the fitted second order of each axis
+    (or, without the dynamics, the signed constant gains) dashed."""
+    nhow = estimator_description(n.frf)
+    dyn = n.dynamics
+    first = n.identified_axes[0]
+    model_words = ("dashed: each axis's fitted second order with the hold's droop, over the "
+                   f"{dyn.axes[first].band_hz[0]:.3g}–{dyn.axes[first].band_hz[1]:.4g} Hz band it "
+                   "was fitted on" if dyn is not None else
+                   f"dashed: the signed constant gains over the {n.band_hz[0]:g}–"
+                   f"{n.band_hz[1]:g} Hz band they are averaged on")
+    return frf_matrix_figure(
+        n.frf, delay_s=n.delay_s, model=newport_model(n), key="fig26_27_newport_frf",
+        title="Newport: frequency-response matrix Un → Vp",
+        caption=(f"Measured ({nhow}) with the delay of {1e3 * n.delay_s:.4f} ms removed; "
+                 + model_words + ". " + PHASE_WORDS
+                 + (f"; thin lines: {100 * n.frf.confidence:g} % confidence bounds"
+                    if n.frf.frf_variance is not None else "") + "."),
+        seed_ref="Figs. 26, 27",
+        model_name="second order (model)" if dyn is not None else "constant gain (model)")
+
+
 def _newport(result: Identification | None, *, recordings: Mapping[str, xr.Dataset],
              bench: Bench, skipped: Mapping[str, str]) -> Section:
     exps = ("data_unh", "data_unv")
@@ -396,74 +422,20 @@ def _newport(result: Identification | None, *, recordings: Mapping[str, xr.Datas
                       "study uses the nominal block instead.")
         return Section(title="2.4 Newport dynamics", blocks=tuple(blocks))
     n = result.newport
-    nhow = estimator_description(n.frf)
     blocks.append(coherence_figure(
         n.frf, key="fig25_newport_coherence", title="Newport: coherence of Un → Vp",
-        caption=f"Coherence of each element ({nhow}).", seed_ref="Fig. 25"))
-    dyn = n.dynamics
-    first = n.identified_axes[0]
-    model_words = ("dashed: each axis's fitted second order with the hold's droop, over the "
-                   f"{dyn.axes[first].band_hz[0]:.3g}–{dyn.axes[first].band_hz[1]:.4g} Hz band it "
-                   "was fitted on" if dyn is not None else
-                   f"dashed: the signed constant gains over the {n.band_hz[0]:g}–"
-                   f"{n.band_hz[1]:g} Hz band they are averaged on")
-    blocks.append(frf_matrix_figure(
-        n.frf, delay_s=n.delay_s, model=newport_model(n), key="fig26_27_newport_frf",
-        title="Newport: frequency-response matrix Un → Vp",
-        caption=(f"Measured ({nhow}) with the delay of {1e3 * n.delay_s:.4f} ms removed; "
-                 + model_words + ". " + PHASE_WORDS
-                 + (f"; thin lines: {100 * n.frf.confidence:g} % confidence bounds"
-                    if n.frf.frf_variance is not None else "") + "."),
-        seed_ref="Figs. 26, 27",
-        model_name="second order (model)" if dyn is not None else "constant gain (model)"))
+        caption=f"Coherence of each element ({estimator_description(n.frf)}).",
+        seed_ref="Fig. 25"))
+    blocks.append(_newport_frf_figure(n))
     blocks.append(newport_delay_figure(n))
+    dyn = n.dynamics
     if dyn is not None:
-        ds_np = bench.datasheet.newport
-        rows = []
-        for a, inp, out in (("h", "Unh", "Vph"), ("v", "Unv", "Vpv")):
-            if a not in n.identified_axes:
-                continue  # its record was missing: the bench file's model stood in
-            fit = dyn.axes[a]
-            rows.append((
-                f"{inp} → {out}", f"{fit.gain_v_per_v:.5f} ± {fit.gain_std_v_per_v:.1g}",
-                f"{n.seed_gain_v_per_v[a]:.5f}",
-                f"{fit.natural_freq_hz:.1f} ± {fit.natural_freq_std_hz:.1g}",
-                f"{fit.damping_ratio:.3f} ± {fit.damping_std:.1g}",
-                f"{1e3 * fit.delay_s:.4f} ± {1e3 * fit.delay_std_s:.1g}",
-                f"{1e3 * dyn.internal_delay_s(a):.4f}",
-                f"{dyn.amplitude_bandwidth_hz[a]:.0f} ({ds_np.amplitude_bandwidth_hz:g})",
-                f"{dyn.phase_bandwidth_hz[a]:.0f} ({ds_np.phase_bandwidth_hz:g})",
-                f"{dyn.peaking_db[a]:.2f} (≤ {ds_np.peaking_max_db:g})"))
-        blocks.append(Table(
-            caption=("Newport dynamics fitted jointly with the delay (± one standard "
-                     "deviation), against the FSM-300 datasheet in brackets; the phase "
-                     f"bandwidth is where the poles' lag and the internal lag reach "
-                     f"{dyn.phase_lag_deg:g}°, after removing the converter's share of the delay "
-                     f"(the Sercalo path's, {1e3 * dyn.converter_delay_s:.3f} ms)"),
-            header=("path", "static gain [V/V]", "ESRF study's constant gain [V/V]",
-                    "natural frequency [Hz]", "damping ratio", "delay [ms]",
-                    "internal lag [ms]", "−3 dB bandwidth [Hz]", "60° phase bandwidth [Hz]",
-                    "peaking [dB]"),
-            rows=tuple(rows)))
-        at_1k = {a: abs(dyn.axes[a].response(np.array([1000.0]), delay=False)[0])
-                 / abs(n.gain_v_per_v[a]) for a in n.identified_axes}
-        blocks.append(Note(
-            "The ESRF study models the Newport as a constant gain (its mean over 10–100 Hz); the "
-            "fitted response at 1 kHz is "
-            + " and ".join(f"{v:.2f} ({a})" for a, v in at_1k.items())
-            + " of the static gain, so the identified plant carries the Newport's dynamics "
-            "instead.", ref="errata E19"))
-    else:
-        blocks.append(Table(
-            caption="Newport gains (signed)",
-            header=("path", "gain [V/V]", "averaging band [Hz]"),
-            rows=tuple((f"{inp} → {out}", f"{n.gain_v_per_v[a]:.5f}",
-                        f"{n.band_hz[0]:g}–{n.band_hz[1]:g}")
-                       for a, inp, out in (("h", "Unh", "Vph"), ("v", "Unv", "Vpv"))
-                       if a in n.identified_axes)))
-        blocks.append(Note(f"The Newport's dynamics could not be fitted ({n.dynamics_skipped})."))
-    if dyn is not None:
+        blocks.append(_newport_dynamics_table(n, dyn, datasheet=bench.datasheet.newport))
+        blocks.append(_newport_constant_gain_note(n, dyn))
         blocks.append(sensor_note(dyn))
+    else:
+        blocks.append(_newport_gains_table(n))
+        blocks.append(Note(f"The Newport's dynamics could not be fitted ({n.dynamics_skipped})."))
     blocks.append(_delay_table(n, caption="Newport delays estimated from the phase alone "
                                           "(cross-check)"))
     blocks.append(Note("The ESRF study averages |H| and so drops the sign; with a negative 4QD "
