@@ -22,7 +22,9 @@ from dataclasses import dataclass
 from typing import NamedTuple
 
 import numpy as np
-from scipy.linalg import expm
+
+# One matrix exponential of the hold for both samplers (bench.realization's), re-exported.
+from fsmbench.bench.realization import gamma_integral
 
 __all__ = ["DiscretePlant", "gamma_integral", "zoh_with_delays"]
 
@@ -62,16 +64,6 @@ class DiscretePlant:
         lhs = z[:, None, None] * np.eye(n)[None] - self.a[None]
         x = np.linalg.solve(lhs, np.broadcast_to(self.b, (f.size, *self.b.shape)).astype(complex))
         return np.einsum("pn,fnm->fpm", self.c, x)
-
-
-def gamma_integral(a: np.ndarray, b: np.ndarray, h_s: float) -> tuple[np.ndarray, np.ndarray]:
-    """``(e^{A h}, int_0^h e^{A s} ds B)`` from one exponential of ``[[A, B], [0, 0]]``."""
-    n, m = b.shape
-    aug = np.zeros((n + m, n + m))
-    aug[:n, :n] = a * h_s
-    aug[:n, n:] = b * h_s
-    e = expm(aug)
-    return e[:n, :n], e[:n, n:]
 
 
 def zoh_with_delays(a: np.ndarray, b: np.ndarray, c: np.ndarray, *, ts_s: float,
