@@ -373,8 +373,7 @@ def analyse_repeatability(ds: xr.Dataset, *, params: BenchParams, name: str | No
     bins = min(n_bins, n * per)
     signals = {k: ds[k].data for k in (al.channel, "Vph", "Vpv", "Va")}
 
-    def blocks(keys: tuple[str, ...], what: str,
-               ) -> Iterator[tuple[int, dict[str, FloatArray]]]:
+    def blocks(keys: tuple[str, ...], what: str) -> Iterator[tuple[int, dict[str, FloatArray]]]:
         return finite_blocks({k: signals[k] for k in keys}, name=al.name, start=al.start_index,
                              stop=al.stop_index, fs_hz=fs, what=what,
                              block_samples=block_samples, progress=progress)
@@ -385,19 +384,18 @@ def analyse_repeatability(ds: xr.Dataset, *, params: BenchParams, name: str | No
     first = _fold_periods(blocks((al.channel, "Vph", "Vpv", "Va"), "folding the periods"),
                           al=al, params=params, lpf_hz=lpf_hz, shift_m=shift, options=options,
                           bins=bins)
-    second = _nonrepeatable_parts(blocks(("Vph", "Vpv", "Va"),
-                                         "non-repeatable parts and spectra"),
-                                  first, al=al, params=params, lpf_hz=lpf_hz, shift_m=shift,
-                                  bins=bins)
+    read_2 = blocks(("Vph", "Vpv", "Va"), "non-repeatable parts and spectra")
+    second = _nonrepeatable_parts(read_2, first, al=al, params=params, lpf_hz=lpf_hz,
+                                  shift_m=shift, bins=bins)
     return _repeatability_record(al, first, second, shift_m=shift)
 
 
 @dataclass(frozen=True)
 class _FoldedRead:
-    """Read 1's streams, and the means it gives: the repeatable parts (P,) and ``Va``'s mean.
+    """Read 1's streams and means [m]: ``va_mean_m``, the repeatable parts ``rep_*`` (P,).
 
-    ``va_mean_m``, ``rep_m``, ``rep_lpf_m`` are of ``Va − s`` (the first aligned sample
-    ``s`` removed); ``rep_settled_m`` is the low pass's mean over periods 2 … n.
+    ``va_mean_m``, ``rep_m``, ``rep_lpf_m`` are of ``Va − s`` (``s``: the first aligned
+    sample); ``rep_settled_m`` is the low pass's mean over periods 2 … n only.
     """
 
     sums: dict[str, SumStream]
