@@ -35,6 +35,7 @@ __all__ = [
     "DEFAULT_TOL",
     "Delays",
     "balance_states",
+    "gamma_integral",
     "minimal_realization",
     "pade_delays",
     "plant_model",
@@ -280,25 +281,69 @@ def zoh_with_delays(sys: ct.StateSpace, delays_s: Mapping[str, float], *,
     if not dt > 0:
         raise ValueError(f"dt must be positive, got {dt}")
     a, b, c, d = _abcd(sys)
-    n, m = b.shape
-
-    def hold(h: float) -> tuple[np.ndarray, np.ndarray]:
-        """``e^(A h)`` and ``int_0^h e^(A s) ds B``."""
-        big = np.zeros((n + m, n + m))
-        big[:n, :n], big[:n, n:] = a * h, b * h
-        e = linalg.expm(big)
-        return e[:n, :n], e[:n, n:]
-
-    phi, _ = hold(dt)
+    m = b.shape[1]
+    phi, _ = gamma_integral(a, b, dt)
     whole: list[int] = []
     frac: list[float] = []
     for inp in sys.input_labels:
-        tau = float(delays_s.get(inp, 0.0))
-        if tau < 0:
-            raise ValueError(f"input {inp}: negative delay {tau} s after the hold")
-        x = tau / dt
-        whole.append(round(x) if abs(x - round(x)) < _WHOLE_SAMPLE_TOL else math.floor(x))
-        frac.append(0.0 if abs(x - round(x)) < _WHOLE_SAMPLE_TOL else (x - whole[-1]) * dt)
+        w, f = _whole_and_fraction(inp, float(delays_s.get(inp, 0.0)), dt=dt)
+        whole.append(w)
+        frac.append(f)
+    big_a, big_b, big_c = _sampled_with_delay_lines(a, b, c, d, phi=phi, whole=whole, frac=frac,
+                                                    dt=dt)
+    big_d = d * np.array([1.0 if whole[j] == 0 and frac[j] == 0 else 0.0 for j in range(m)])
+    return ct.ss(big_a, big_b, big_c, big_d, dt, inputs=list(sys.input_labels),
+                 outputs=list(sys.output_labels), **({"name": sys.name} if sys.name else {}))
+
+
+def gamma_integral(a: np.ndarray, b: np.ndarray, h_s: float) -> tuple[np.ndarray, np.ndarray]:
+    """``(e^{A h}, int_0^h e^{A s} ds B)`` over a hold of ``h_s`` [s].
+
+    From one exponential of the augmented matrix ``[[A, B], [0, 0]]``.
+    """
+    n, m = b.shape
+    aug = np.zeros((n + m, n + m))
+    aug[:n, :n] = a * h_s
+    aug[:n, n:] = b * h_s
+    e = linalg.expm(aug)
+    return e[:n, :n], e[:n, n:]
+
+
+def _whole_and_fraction(inp: str, tau: float, *, dt: float) -> tuple[int, float]:
+    """One input's delay ``tau`` [s] as whole samples of ``dt`` [s] and the rest [s].
+
+    A delay within :data:`_WHOLE_SAMPLE_TOL` samples of a whole number is that number.
+
+    Raises
+    ------
+    ValueError
+        Naming the input, for a negative delay.
+    """
+    if tau < 0:
+        raise ValueError(f"input {inp}: negative delay {tau} s after the hold")
+    x = tau / dt
+    whole = round(x) if abs(x - round(x)) < _WHOLE_SAMPLE_TOL else math.floor(x)
+    return whole, 0.0 if abs(x - round(x)) < _WHOLE_SAMPLE_TOL else (x - whole) * dt
+
+
+def _sampled_with_delay_lines(a: np.ndarray, b: np.ndarray, c: np.ndarray, d: np.ndarray, *,
+                              phi: np.ndarray, whole: Sequence[int], frac: Sequence[float],
+                              dt: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``(A, B, C)`` sampled at ``dt`` [s]: the plant's states, then each input's delay line.
+
+    Parameters
+    ----------
+    a, b, c, d : arrays (n, n), (n, m), (p, n), (p, m)
+        Continuous system.
+    phi : array (n, n)
+        ``e^(A dt)``.
+    whole, frac : sequences of length m
+        Each input's delay as whole samples and the remaining fraction [s]
+        (:func:`_whole_and_fraction`).
+    dt : float
+        Sample time [s].
+    """
+    n, m = b.shape
     # Delay line of input j: its past samples u[k-1] ... u[k-n_j].
     lengths = [w + (1 if f > 0 else 0) for w, f in zip(whole, frac, strict=True)]
     starts = np.concatenate([[0], np.cumsum(lengths)]).astype(int) + n
@@ -314,28 +359,32 @@ def zoh_with_delays(sys: ct.StateSpace, delays_s: Mapping[str, float], *,
             big_b[s0, j] = 1.0
             for i in range(1, nj):
                 big_a[s0 + i, s0 + i - 1] = 1.0
-        e_late, g_late = hold(dt - frac[j])       # the part of the period after delta
-        _, g_early = hold(frac[j])
+        e_late, g_late = gamma_integral(a, b, dt - frac[j])  # the part of the period after delta
+        _, g_early = gamma_integral(a, b, frac[j])
         g1, g0 = g_late[:, j], e_late @ g_early[:, j]
-
-        def route(lag: int, col: np.ndarray, j: int = j, s0: int = s0) -> None:
-            # u[k - lag] enters through the input itself (lag 0) or its delay line.
-            if lag == 0:
-                big_b[:n, j] += col
-            else:
-                big_a[:n, s0 + lag - 1] += col
-
-        route(whole[j], g1)
+        _route_held_sample(big_a, big_b, g1, j=j, lag=whole[j], start=s0)
         if frac[j] > 0:
-            route(whole[j] + 1, g0)
+            _route_held_sample(big_a, big_b, g0, j=j, lag=whole[j] + 1, start=s0)
         # The output at k dt sees the sample that is on the plant then.
         lag = whole[j] + (1 if frac[j] > 0 else 0)
         if lag == 0:
             continue
         big_c[:, s0 + lag - 1] += d[:, j]
-    big_d = d * np.array([1.0 if whole[j] == 0 and frac[j] == 0 else 0.0 for j in range(m)])
-    return ct.ss(big_a, big_b, big_c, big_d, dt, inputs=list(sys.input_labels),
-                 outputs=list(sys.output_labels), **({"name": sys.name} if sys.name else {}))
+    return big_a, big_b, big_c
+
+
+def _route_held_sample(big_a: np.ndarray, big_b: np.ndarray, col: np.ndarray, *, j: int,
+                       lag: int, start: int) -> None:
+    """Add the gain ``col`` (n,) of input ``j``'s sample ``u[k - lag]`` to the plant's states.
+
+    The sample enters through the input itself (lag 0) or through its delay
+    line, whose first state is ``start``; ``big_a``, ``big_b`` change in place.
+    """
+    n = col.shape[0]
+    if lag == 0:
+        big_b[:n, j] += col
+    else:
+        big_a[:n, start + lag - 1] += col
 
 
 def select(sys: ct.StateSpace, *, outputs: Sequence[str] | None = None,

@@ -155,63 +155,17 @@ def screen_huddles(recordings: Mapping[str, xr.Dataset], *, fs_hz: float, step_v
                          and _same_samples(recordings[o], recordings[name])), None)
         if original is None:
             continue
-        # A closed-loop test holding an open one's samples with its commands at zero: the
-        # loop did not run, whichever file was saved under its name.
-        idle = name in _CLOSED and original in _OPEN and _commands_zero(recordings[name])
-        if name in _CLOSED and original in _OPEN and _ran_the_seed(loops, name):
-            # The samples are a closed-loop record (the ESRF study's controller explains its
-            # commands from these very Vph, Vpv): the open-loop test is the one that does
-            # not hold what its name says. Open-loop samples pasted under a closed-loop
-            # name would leave the commands unexplained: that is the copy below.
-            check = _shared_samples(
-                original, name,
-                f"{original}.mat holds the same samples as {name}.mat (Vph, Vpv, Va), a "
-                f"closed-loop record whose commands Uch, Ucv the ESRF study's controller "
-                f"explains from them: the loop was closed when {original} was recorded, or "
-                f"{name}'s record saved as {original}; {original} is left out, since "
-                f"compared with {name} it would say the loop does nothing: record "
-                f"{original} again with the loop open")
-            checks.append(check)
-            excluded[original] = check.sentence()
-            continue
-        how = (f"; its commands Uch, Ucv are zero throughout: the loop was not closed (the "
-               f"controller off), so the open-loop test {original} stands under the "
-               "closed-loop test's name" if idle else "")
-        check = _shared_samples(
-            name, original,
-            f"{name}.mat holds the same samples as {original}.mat (Vph, Vpv, Va): the same "
-            f"recording saved under two names{how}; it is left out, since compared with "
-            f"{original} it would say the change between the two tests does nothing: "
-            f"record {name} again" + (" with the loop closed" if idle else ""))
+        copy, check = _copy_check(name, original, recordings=recordings, loops=loops)
         checks.append(check)
-        excluded[name] = check.sentence()
+        excluded[copy] = check.sentence()
     for name in _CLOSED:
         if name not in recordings or name in excluded:
             continue
-        verdicts = {a: next((f for f in loops[a].fits if f.record == name), None)
-                    for a in "hv"}
-        bad = {a: f for a, f in verdicts.items() if f is not None and f.verdict != "seed"}
-        if not bad:
-            if any(f is not None for f in verdicts.values()):
-                checks.append(Check("huddle_loop_closed", True, "ran the ESRF study's "
-                                    "controller", "a command the controller explains",
-                                    f"{name}.mat: Uch, Ucv"))
-            continue
-        words = "; ".join(
-            f"{'Uch' if a == 'h' else 'Ucv'} is zero throughout" if f.verdict == "zero" else
-            f"the ESRF study's controller explains {100 * f.explained:.0f} % of "
-            f"{'Uch' if a == 'h' else 'Ucv'}" for a, f in bad.items())
-        zero = all(f.verdict == "zero" for f in bad.values())
-        check = Check(
-            "huddle_loop_closed", False, words, "a command the ESRF study's controller "
-            "explains (≥ 50 % of its variance)", f"{name}.mat: Uch, Ucv",
-            f"{words}: " + ("the loop was not closed while this closed-loop test was "
-                            "recorded (or the commands were not saved)" if zero else
-                            "another controller ran, or an excitation was added") +
-            "; it is left out of the comparisons with the budget and the other tests: "
-            f"record {name} again with the loop closed on the ESRF study's controller")
-        checks.append(check)
-        excluded[name] = check.sentence()
+        judged = _closed_loop_check(name, loops)
+        if judged is not None:
+            checks.append(judged)
+            if not judged.passed:
+                excluded[name] = judged.sentence()
     closed_power = [p for n in _CLOSED if n in recordings and n not in excluded
                     and (p := _band_power(recordings[n])) is not None]
     notes: list[str] = []
@@ -232,23 +186,99 @@ def screen_huddles(recordings: Mapping[str, xr.Dataset], *, fs_hz: float, step_v
             power = _band_power(recordings[name])
             if power is None or reference <= 0:
                 continue
-            ratio = power / reference
-            ok = ratio > CLOSED_LIKE_FACTOR
-            check = Check(
-                "huddle_loop_open", ok, float(ratio),
-                f"> {CLOSED_LIKE_FACTOR:g}× the closed-loop tests' beam motion in "
-                f"{_BAND_HZ[0]:g}–{_BAND_HZ[1]:g} Hz (the loop rejects it there)",
-                f"{name}.mat: Vph, Vpv",
-                "" if ok else (
-                    f"its {_BAND_HZ[0]:g}–{_BAND_HZ[1]:g} Hz beam motion is {ratio:.2g}× the "
-                    "closed-loop tests': the loop was closed while this open-loop test was "
-                    "recorded (or a closed-loop record was saved under its name); it is "
-                    f"left out of the comparisons: record {name} again with the loop open"),
-                unit="×")
+            check = _open_loop_check(name, power / reference)
             checks.append(check)
-            if not ok:
+            if not check.passed:
                 excluded[name] = check.sentence()
     return HuddleScreen(tuple(checks), excluded, tuple(notes))
+
+
+def _copy_check(name: str, original: str, *, recordings: Mapping[str, xr.Dataset],
+                loops: Mapping[str, RecordedController]) -> tuple[str, Check]:
+    """The test left out when ``name`` holds ``original``'s samples, and the failed check.
+
+    Parameters
+    ----------
+    name, original : str
+        The later test and the earlier one holding the same samples.
+    recordings : mapping of experiment name to Dataset
+        The huddle tests.
+    loops : mapping of axis to RecordedController
+        :func:`recorded_controllers` of the closed-loop tests.
+    """
+    # A closed-loop test holding an open one's samples with its commands at zero: the
+    # loop did not run, whichever file was saved under its name.
+    idle = name in _CLOSED and original in _OPEN and _commands_zero(recordings[name])
+    if name in _CLOSED and original in _OPEN and _ran_the_seed(loops, name):
+        # The samples are a closed-loop record (the ESRF study's controller explains its
+        # commands from these very Vph, Vpv): the open-loop test is the one that does
+        # not hold what its name says. Open-loop samples pasted under a closed-loop
+        # name would leave the commands unexplained: that is the copy below.
+        return original, _shared_samples(
+            original, name,
+            f"{original}.mat holds the same samples as {name}.mat (Vph, Vpv, Va), a "
+            f"closed-loop record whose commands Uch, Ucv the ESRF study's controller "
+            f"explains from them: the loop was closed when {original} was recorded, or "
+            f"{name}'s record saved as {original}; {original} is left out, since "
+            f"compared with {name} it would say the loop does nothing: record "
+            f"{original} again with the loop open")
+    how = (f"; its commands Uch, Ucv are zero throughout: the loop was not closed (the "
+           f"controller off), so the open-loop test {original} stands under the "
+           "closed-loop test's name" if idle else "")
+    return name, _shared_samples(
+        name, original,
+        f"{name}.mat holds the same samples as {original}.mat (Vph, Vpv, Va): the same "
+        f"recording saved under two names{how}; it is left out, since compared with "
+        f"{original} it would say the change between the two tests does nothing: "
+        f"record {name} again" + (" with the loop closed" if idle else ""))
+
+
+def _closed_loop_check(name: str, loops: Mapping[str, RecordedController]) -> Check | None:
+    """``huddle_loop_closed`` of the closed-loop test ``name``; None when no fit judged it.
+
+    ``loops``: :func:`recorded_controllers` of the closed-loop tests, by axis.
+    """
+    verdicts = {a: next((f for f in loops[a].fits if f.record == name), None)
+                for a in "hv"}
+    bad = {a: f for a, f in verdicts.items() if f is not None and f.verdict != "seed"}
+    if not bad:
+        if any(f is not None for f in verdicts.values()):
+            return Check("huddle_loop_closed", True, "ran the ESRF study's "
+                         "controller", "a command the controller explains",
+                         f"{name}.mat: Uch, Ucv")
+        return None
+    words = "; ".join(
+        f"{'Uch' if a == 'h' else 'Ucv'} is zero throughout" if f.verdict == "zero" else
+        f"the ESRF study's controller explains {100 * f.explained:.0f} % of "
+        f"{'Uch' if a == 'h' else 'Ucv'}" for a, f in bad.items())
+    zero = all(f.verdict == "zero" for f in bad.values())
+    return Check(
+        "huddle_loop_closed", False, words, "a command the ESRF study's controller "
+        "explains (≥ 50 % of its variance)", f"{name}.mat: Uch, Ucv",
+        f"{words}: " + ("the loop was not closed while this closed-loop test was "
+                        "recorded (or the commands were not saved)" if zero else
+                        "another controller ran, or an excitation was added") +
+        "; it is left out of the comparisons with the budget and the other tests: "
+        f"record {name} again with the loop closed on the ESRF study's controller")
+
+
+def _open_loop_check(name: str, ratio: float) -> Check:
+    """``huddle_loop_open`` of the open-loop test ``name``.
+
+    ``ratio``: its band's beam motion over the closed-loop tests' median, in power.
+    """
+    ok = ratio > CLOSED_LIKE_FACTOR
+    return Check(
+        "huddle_loop_open", ok, float(ratio),
+        f"> {CLOSED_LIKE_FACTOR:g}× the closed-loop tests' beam motion in "
+        f"{_BAND_HZ[0]:g}–{_BAND_HZ[1]:g} Hz (the loop rejects it there)",
+        f"{name}.mat: Vph, Vpv",
+        "" if ok else (
+            f"its {_BAND_HZ[0]:g}–{_BAND_HZ[1]:g} Hz beam motion is {ratio:.2g}× the "
+            "closed-loop tests': the loop was closed while this open-loop test was "
+            "recorded (or a closed-loop record was saved under its name); it is "
+            f"left out of the comparisons: record {name} again with the loop open"),
+        unit="×")
 
 
 def _ran_the_seed(loops: Mapping[str, RecordedController], name: str) -> bool:

@@ -23,15 +23,14 @@ from __future__ import annotations
 
 import math
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterable, Iterator, Mapping
 from dataclasses import dataclass
 
 import numpy as np
 import xarray as xr
 from numpy.typing import NDArray
 
-from fsmbench.budget.signals import LazyTrim, trim_record
-from fsmbench.progress import advance
+from fsmbench.budget.signals import LazyTrim, finite_blocks, trim_record
 from fsmbench.signal.allan import AllanResult
 from fsmbench.signal.envelope import Envelope
 from fsmbench.signal.streaming import (
@@ -42,7 +41,6 @@ from fsmbench.signal.streaming import (
     LowpassStream,
     SumStream,
     WelchStream,
-    read_blocks,
 )
 from fsmbench.signal.welch import SpectrumResult, WelchOptions, hanning
 
@@ -166,35 +164,92 @@ def summarise_long_record(ds: xr.Dataset, *, name: str, t0_s: float = 1.0,
     fine_m, stride = allan_factors(n, fs)
     bins = min(n_bins, n)
 
-    def blocks(what: str):  # type: ignore[no-untyped-def]
-        for offset, block in read_blocks(signals, start=trim.start, stop=trim.start + n,
-                                         block_samples=block_samples):
-            for k, x in block.items():
-                if not np.all(np.isfinite(x)):
-                    first = offset + int(np.flatnonzero(~np.isfinite(x))[0])
-                    raise ValueError(f"{name}.{k} contains NaN or infinite samples (first at "
-                                     f"sample {trim.start + first}); remove or interpolate them")
-            yield block
-            done = offset + len(block["Va"])
-            advance(progress, f"{name}: {what}", done / fs, n / fs, "s")
+    def blocks(what: str) -> Iterator[tuple[int, dict[str, FloatArray]]]:
+        return finite_blocks(signals, name=name, start=trim.start, stop=trim.start + n,
+                             fs_hz=fs, what=what, block_samples=block_samples,
+                             progress=progress)
 
-    # Read 1: the raw signals.
+    raw = _read_raw(blocks("reading the raw signals"), name=name, n=n, fs=fs, fine_m=fine_m,
+                    stride=stride, bins=bins)
+    means = {k: s.mean for k, s in raw.sums.items()}
+    cen = _read_centred(blocks("spectra and low pass"), means=means, name=name, n=n, fs=fs,
+                        lpf_hz=lpf_hz, bins=bins)
+    return LongRecordSummary(
+        name=name, fs_hz=fs, trim=trim, means=means,
+        rms={k: s.rms for k, s in cen.centred.items()},
+        psd={k: w.result() for k, w in cen.welch.items()}, lpf_hz=lpf_hz,
+        va_lowpass_rms_m=cen.low_sums.rms_about_mean, va_second_means_m=raw.seconds.result(),
+        stride_means={k: s.result() for k, s in raw.strided.items()},
+        allan_fine={k: a.result() for k, a in raw.allan.items()},
+        envelopes={**{k: e.result() for k, e in raw.env.items()},
+                   "Va_lowpass": cen.low_env.result()},
+        read_s=time.monotonic() - started)
+
+
+@dataclass(frozen=True)
+class _RawRead:
+    """Read 1's streams over the raw signals (their results are taken at the end)."""
+
+    sums: dict[str, SumStream]
+    allan: dict[str, AllanStream]
+    strided: dict[str, BlockMeanStream]
+    seconds: BlockMeanStream
+    env: dict[str, EnvelopeStream]
+
+
+def _read_raw(blocks: Iterable[tuple[int, dict[str, FloatArray]]], *, name: str, n: int,
+              fs: float, fine_m: NDArray[np.int64], stride: int, bins: int) -> _RawRead:
+    """Read 1: means, fine Allan deviations, stride and 1 s means, envelopes of the raw signals.
+
+    Parameters
+    ----------
+    blocks : iterable of (offset, {signal: block})
+        The trimmed record's blocks (:func:`~fsmbench.budget.signals.finite_blocks`).
+    name : str
+        Experiment name, for messages.
+    n : int
+        Samples read per signal.
+    fs : float
+        Sampling rate [Hz].
+    fine_m, stride : array of int, int
+        :func:`allan_factors`.
+    bins : int
+        Bins of the envelopes.
+    """
     sums = {k: SumStream() for k in SIGNALS}
     allan = {k: AllanStream(n_samples=n, fs_hz=fs, factors=fine_m, unit="m" if k == "Va" else "V",
                             name=f"{name}.{k}") for k in SIGNALS}
     strided = {k: BlockMeanStream(per=stride) for k in SIGNALS}
     seconds = BlockMeanStream(per=round(fs))
     env = {k: EnvelopeStream(n_samples=n, n_bins=bins, fs_hz=fs) for k in SIGNALS}
-    for block in blocks("reading the raw signals"):
+    for _, block in blocks:
         for k, x in block.items():
             sums[k].update(x)
             allan[k].update(x)
             strided[k].update(x)
             env[k].update(x)
         seconds.update(block["Va"])
-    means = {k: s.mean for k, s in sums.items()}
+    return _RawRead(sums=sums, allan=allan, strided=strided, seconds=seconds, env=env)
 
-    # Read 2: the mean-removed signals, as the seed processes them.
+
+@dataclass(frozen=True)
+class _CentredRead:
+    """Read 2's streams over the mean-removed signals and ``Va``'s low pass."""
+
+    welch: dict[str, WelchStream]
+    centred: dict[str, SumStream]
+    low_sums: SumStream
+    low_env: EnvelopeStream
+
+
+def _read_centred(blocks: Iterable[tuple[int, dict[str, FloatArray]]], *,
+                  means: Mapping[str, float], name: str, n: int, fs: float, lpf_hz: float,
+                  bins: int) -> _CentredRead:
+    """Read 2: the mean-removed signals as the seed processes them (Welch, rms, low pass).
+
+    Parameters as :func:`_read_raw`; ``means`` of each signal from read 1 (unit of
+    the signal), ``lpf_hz`` the low pass's corner on ``Va`` [Hz].
+    """
     options = WelchOptions.from_matlab(window=hanning(math.ceil(fs)), noverlap=None, nfft=None,
                                        fs_hz=fs)
     welch = {k: WelchStream(options=options, n_samples=n, name=f"{name}.{k}") for k in SIGNALS}
@@ -202,7 +257,7 @@ def summarise_long_record(ds: xr.Dataset, *, name: str, t0_s: float = 1.0,
     lowpass = LowpassStream(cutoff_hz=lpf_hz, fs_hz=fs)
     low_sums = SumStream()
     low_env = EnvelopeStream(n_samples=n, n_bins=bins, fs_hz=fs)
-    for block in blocks("spectra and low pass"):
+    for _, block in blocks:
         for k, x in block.items():
             d = x - means[k]
             welch[k].update(d)
@@ -211,12 +266,4 @@ def summarise_long_record(ds: xr.Dataset, *, name: str, t0_s: float = 1.0,
                 y = lowpass.filter(d)
                 low_sums.update(y)
                 low_env.update(y)
-    return LongRecordSummary(
-        name=name, fs_hz=fs, trim=trim, means=means,
-        rms={k: s.rms for k, s in centred.items()},
-        psd={k: w.result() for k, w in welch.items()}, lpf_hz=lpf_hz,
-        va_lowpass_rms_m=low_sums.rms_about_mean, va_second_means_m=seconds.result(),
-        stride_means={k: s.result() for k, s in strided.items()},
-        allan_fine={k: a.result() for k, a in allan.items()},
-        envelopes={**{k: e.result() for k, e in env.items()}, "Va_lowpass": low_env.result()},
-        read_s=time.monotonic() - started)
+    return _CentredRead(welch=welch, centred=centred, low_sums=low_sums, low_env=low_env)

@@ -42,7 +42,7 @@ are not lost under the offset; the low pass from rest of ``Va`` is that of
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Iterator, Mapping
+from collections.abc import Callable, Iterable, Iterator, Mapping
 from dataclasses import dataclass, field, fields
 
 import numpy as np
@@ -52,9 +52,8 @@ from numpy.typing import NDArray
 from fsmbench.bench.blocks import rotation
 from fsmbench.bench.params import BenchParams
 from fsmbench.budget.propagation import distance_coefficients
-from fsmbench.budget.signals import trim_record
+from fsmbench.budget.signals import finite_blocks, trim_record
 from fsmbench.jsonutil import hv
-from fsmbench.progress import advance
 from fsmbench.signal.envelope import Envelope
 from fsmbench.signal.streaming import (
     BLOCK_SAMPLES,
@@ -371,39 +370,67 @@ def analyse_repeatability(ds: xr.Dataset, *, params: BenchParams, name: str | No
     al = find_alignment(ds, name=name, align_s=align_s, period_s=period_s,
                         block_samples=block_samples)
     fs, n, per = al.fs_hz, al.n_periods, al.period_samples
-    total = n * per
-    bins = min(n_bins, total)
+    bins = min(n_bins, n * per)
     signals = {k: ds[k].data for k in (al.channel, "Vph", "Vpv", "Va")}
 
-    def blocks(keys: tuple[str, ...], what: str,
-               ) -> Iterator[tuple[int, dict[str, FloatArray]]]:
-        for offset, block in read_blocks({k: signals[k] for k in keys}, start=al.start_index,
-                                         stop=al.stop_index, block_samples=block_samples):
-            for k, x in block.items():
-                if not np.all(np.isfinite(x)):
-                    first = al.start_index + offset + int(np.flatnonzero(~np.isfinite(x))[0])
-                    raise ValueError(f"{al.name}.{k} contains NaN or infinite samples (first "
-                                     f"at sample {first}); remove or interpolate them")
-            yield offset, block
-            done = offset + block["Va"].size
-            advance(progress, f"{al.name}: {what}", done / fs, total / fs, "s")
+    def blocks(keys: tuple[str, ...], what: str) -> Iterator[tuple[int, dict[str, FloatArray]]]:
+        return finite_blocks({k: signals[k] for k in keys}, name=al.name, start=al.start_index,
+                             stop=al.stop_index, fs_hz=fs, what=what,
+                             block_samples=block_samples, progress=progress)
 
     shift = float(np.asarray(signals["Va"][al.start_index]))
     options = WelchOptions.from_matlab(window=hanning(math.ceil(fs)), noverlap=None, nfft=None,
                                        fs_hz=fs)
+    first = _fold_periods(blocks((al.channel, "Vph", "Vpv", "Va"), "folding the periods"),
+                          al=al, params=params, lpf_hz=lpf_hz, shift_m=shift, options=options,
+                          bins=bins)
+    read_2 = blocks(("Vph", "Vpv", "Va"), "non-repeatable parts and spectra")
+    second = _nonrepeatable_parts(read_2, first, al=al, params=params, lpf_hz=lpf_hz,
+                                  shift_m=shift, bins=bins)
+    return _repeatability_record(al, first, second, shift_m=shift)
+
+
+@dataclass(frozen=True)
+class _FoldedRead:
+    """Read 1's streams and means [m]: ``va_mean_m``, the repeatable parts ``rep_*`` (P,).
+
+    ``va_mean_m``, ``rep_m``, ``rep_lpf_m`` are of ``Va − s`` (``s``: the first aligned
+    sample); ``rep_settled_m`` is the low pass's mean over periods 2 … n only.
+    """
+
+    sums: dict[str, SumStream]
+    welch: dict[str, WelchStream]
+    fold_va: _Fold
+    fold_lpf: _Fold
+    env: dict[str, EnvelopeStream]
+    va_mean_m: float
+    rep_m: FloatArray
+    rep_lpf_m: FloatArray
+    rep_settled_m: FloatArray
+    rep_dist_m: FloatArray
+
+
+def _fold_periods(blocks: Iterable[tuple[int, dict[str, FloatArray]]], *,
+                  al: PeriodAlignment, params: BenchParams, lpf_hz: float, shift_m: float,
+                  options: WelchOptions, bins: int) -> _FoldedRead:
+    """Read 1: folds, means, spectra and envelopes of the raw signals.
+
+    ``blocks``: the aligned record's command, ``Vph``, ``Vpv`` [V] and ``Va`` [m]
+    (cut at ``al``); ``params``, ``lpf_hz`` [Hz]: as :func:`analyse_repeatability`;
+    ``shift_m``: ``Va``'s first aligned sample [m], removed from every sample;
+    ``options``: the Welch PSDs' (1 s Hann); ``bins``: of the envelopes.
+    """
+    fs, n, per = al.fs_hz, al.n_periods, al.period_samples
+    total = n * per
     keys_psd = ("rh", "rv", "dist", "seed_h", "seed_v")
-
-    def envelope() -> EnvelopeStream:
-        return EnvelopeStream(n_samples=total, n_bins=bins, fs_hz=fs)
-
-    # Read 1: folds, means, spectra and envelopes of the raw signals.
-    derived = _Signals(params=params, fs_hz=fs, lpf_hz=lpf_hz, shift_m=shift)
+    derived = _Signals(params=params, fs_hz=fs, lpf_hz=lpf_hz, shift_m=shift_m)
     sums = {k: SumStream() for k in ("va", "rh", "rv", "dist", "seed_h", "seed_v")}
     welch = {k: WelchStream(options=options, n_samples=total, name=f"{al.name}.{k}")
              for k in (*keys_psd, "va")}
     fold_va, fold_lpf, fold_dist = _Fold(per), _Fold(per), _Fold(per)
-    env = {k: envelope() for k in ("command", "Vph", "Vpv", "tracking_distance")}
-    for offset, block in blocks((al.channel, "Vph", "Vpv", "Va"), "folding the periods"):
+    env = {k: EnvelopeStream(n_samples=total, n_bins=bins, fs_hz=fs)
+           for k in ("command", "Vph", "Vpv", "tracking_distance")}
+    for offset, block in blocks:
         d = derived.derive(offset, block)
         for k, s in sums.items():
             s.update(d[k])
@@ -416,18 +443,38 @@ def analyse_repeatability(ds: xr.Dataset, *, params: BenchParams, name: str | No
         env["Vph"].update(block["Vph"])
         env["Vpv"].update(block["Vpv"])
         env["tracking_distance"].update(d["dist"])
-    va_mean = sums["va"].mean  # of Va − s
-    rep = fold_va.mean(n)
-    rep_f = fold_lpf.mean(n)
-    rep_settled = fold_lpf.rest_sum / (n - 1)
-    rep_dist = fold_dist.mean(n)
+    return _FoldedRead(sums=sums, welch=welch, fold_va=fold_va, fold_lpf=fold_lpf, env=env,
+                       va_mean_m=sums["va"].mean, rep_m=fold_va.mean(n),
+                       rep_lpf_m=fold_lpf.mean(n), rep_settled_m=fold_lpf.rest_sum / (n - 1),
+                       rep_dist_m=fold_dist.mean(n))
 
-    # Read 2: what needs the repeatable parts and the means.
-    derived = _Signals(params=params, fs_hz=fs, lpf_hz=lpf_hz, shift_m=shift)
+
+@dataclass(frozen=True)
+class _NonRepeatableRead:
+    """Read 2's streams: non-repeatable parts, signals less their means, their envelopes."""
+
+    nonrep: dict[str, SumStream]
+    centred: dict[str, SumStream]
+    env: dict[str, EnvelopeStream]
+
+
+def _nonrepeatable_parts(blocks: Iterable[tuple[int, dict[str, FloatArray]]],
+                         first: _FoldedRead, *, al: PeriodAlignment, params: BenchParams,
+                         lpf_hz: float, shift_m: float, bins: int) -> _NonRepeatableRead:
+    """Read 2: what needs the repeatable parts and the means (read 1's, ``first``).
+
+    ``blocks`` holds ``Vph``, ``Vpv`` [V] and ``Va`` [m]; the other parameters are
+    :func:`_fold_periods`'. Read 1's Welch stream of ``Va`` is fed here.
+    """
+    fs, per = al.fs_hz, al.period_samples
+    total = al.n_periods * per
+    rep, rep_f, rep_settled = first.rep_m, first.rep_lpf_m, first.rep_settled_m
+    derived = _Signals(params=params, fs_hz=fs, lpf_hz=lpf_hz, shift_m=shift_m)
     nonrep = {k: SumStream() for k in ("va", "lpf", "settled", "dist")}
     centred = {k: SumStream() for k in ("dist", "seed_h", "seed_v")}
-    env2 = {k: envelope() for k in ("Va", "Va_nonrep", "tracking_distance_nonrep")}
-    for offset, block in blocks(("Vph", "Vpv", "Va"), "non-repeatable parts and spectra"):
+    env = {k: EnvelopeStream(n_samples=total, n_bins=bins, fs_hz=fs)
+           for k in ("Va", "Va_nonrep", "tracking_distance_nonrep")}
+    for offset, block in blocks:
         d = derived.derive(offset, block)
         pos = np.arange(offset, offset + d["va"].size) % per
         va_nonrep = d["va"] - rep[pos]
@@ -436,17 +483,27 @@ def analyse_repeatability(ds: xr.Dataset, *, params: BenchParams, name: str | No
         later = max(0, per - offset)  # samples of the first period in this block
         if later < pos.size:
             nonrep["settled"].update(d["lpf"][later:] - rep_settled[pos[later:]])
-        dist_nonrep = d["dist"] - rep_dist[pos]
+        dist_nonrep = d["dist"] - first.rep_dist_m[pos]
         nonrep["dist"].update(dist_nonrep)
         for k, s in centred.items():
-            s.update(d[k] - sums[k].mean)
-        va_c = d["va"] - va_mean
-        welch["va"].update(va_c)
-        env2["Va"].update(va_c)
-        env2["Va_nonrep"].update(va_nonrep)
-        env2["tracking_distance_nonrep"].update(dist_nonrep)
-    psd = {k: np.asarray(w.result().values, dtype=float) for k, w in welch.items()}
-    f_hz = np.asarray(welch["va"].result().f_hz, dtype=float)
+            s.update(d[k] - first.sums[k].mean)
+        va_c = d["va"] - first.va_mean_m
+        first.welch["va"].update(va_c)
+        env["Va"].update(va_c)
+        env["Va_nonrep"].update(va_nonrep)
+        env["tracking_distance_nonrep"].update(dist_nonrep)
+    return _NonRepeatableRead(nonrep=nonrep, centred=centred, env=env)
+
+
+def _repeatability_record(al: PeriodAlignment, first: _FoldedRead, second: _NonRepeatableRead,
+                          *, shift_m: float) -> RepeatabilityRecord:
+    """The record's result from both reads (``shift_m``: ``Va``'s first aligned sample [m])."""
+    fs, n, per = al.fs_hz, al.n_periods, al.period_samples
+    sums, nonrep, centred = first.sums, second.nonrep, second.centred
+    rep, rep_f, rep_settled = first.rep_m, first.rep_lpf_m, first.rep_settled_m
+    fold_va, fold_lpf, va_mean = first.fold_va, first.fold_lpf, first.va_mean_m
+    psd = {k: np.asarray(w.result().values, dtype=float) for k, w in first.welch.items()}
+    f_hz = np.asarray(first.welch["va"].result().f_hz, dtype=float)
     nonrep_rms = nonrep["va"].rms
     va_lo = np.minimum(fold_va.first, fold_va.rest_min)
     va_hi = np.maximum(fold_va.first, fold_va.rest_max)
@@ -461,15 +518,15 @@ def analyse_repeatability(ds: xr.Dataset, *, params: BenchParams, name: str | No
         tracking_distance_mean_m=sums["dist"].mean, tracking_distance_std_m=centred["dist"].rms,
         tracking_distance_nonrep_rms_m=nonrep["dist"].rms,
         seed_law_distance_std_m=(centred["seed_h"].rms, centred["seed_v"].rms),
-        repeatable_m=shift + rep, repeatable_lpf_m=shift + rep_f,
+        repeatable_m=shift_m + rep, repeatable_lpf_m=shift_m + rep_f,
         va_min_m=va_lo - va_mean, va_max_m=va_hi - va_mean,
         va_nonrep_min_m=va_lo - rep, va_nonrep_max_m=va_hi - rep,
         va_lpf_settled_nonrep_min_m=fold_lpf.rest_min - rep_settled,
         va_lpf_settled_nonrep_max_m=fold_lpf.rest_max - rep_settled,
         va_lpf_first_nonrep_m=fold_lpf.first - rep_f,
-        tracking_distance_repeatable_m=rep_dist,
-        envelopes={**{k: e.result() for k, e in env.items()},
-                   **{k: e.result() for k, e in env2.items()}},
+        tracking_distance_repeatable_m=first.rep_dist_m,
+        envelopes={**{k: e.result() for k, e in first.env.items()},
+                   **{k: e.result() for k, e in second.env.items()}},
         f_hz=f_hz,
         psd_tracking_rad2_per_hz=np.stack([psd["rh"], psd["rv"]], axis=1),
         psd_distance_m2_per_hz=psd["dist"],

@@ -11,6 +11,7 @@ is reduced by :mod:`fsmbench.budget.long_record` in two sequential reads.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable, Iterator, Mapping
 from dataclasses import dataclass
 from typing import Any
 
@@ -19,10 +20,13 @@ import xarray as xr
 from numpy.typing import NDArray
 
 from fsmbench.filters import first_order_lowpass
+from fsmbench.progress import advance
+from fsmbench.signal.streaming import BLOCK_SAMPLES, read_blocks
 
 __all__ = [
     "LazyTrim",
     "block_means",
+    "finite_blocks",
     "is_lazy",
     "lowpass",
     "lowpass_rms",
@@ -100,3 +104,44 @@ def block_means(x: Any, *, per: int) -> FloatArray:
     if nb == 0:
         return np.zeros(0)
     return np.asarray(x[: nb * per], dtype=float).reshape(nb, per).mean(axis=1)
+
+
+def finite_blocks(signals: Mapping[str, Any], *, name: str, start: int, stop: int,
+                  fs_hz: float, what: str, block_samples: int = BLOCK_SAMPLES,
+                  progress: Callable[[str], None] | None = None,
+                  ) -> Iterator[tuple[int, dict[str, FloatArray]]]:
+    """:func:`~fsmbench.signal.streaming.read_blocks`, each block checked finite, with progress.
+
+    Parameters
+    ----------
+    signals : mapping of str to array_like or dask.array.Array, each shape (N,)
+        The record's signals (one time axis).
+    name : str
+        Experiment name, for messages and progress.
+    start, stop : int
+        Sample range read.
+    fs_hz : float
+        Sampling rate [Hz]: progress is reported in seconds of record.
+    what : str
+        What the read is for, in the progress lines.
+    block_samples : int
+        Samples per block.
+    progress : callable, optional
+        Receives each read's progress (:func:`fsmbench.progress.advance`), once a
+        block has been used.
+
+    Raises
+    ------
+    ValueError
+        Naming the signal and the record's first NaN or infinite sample.
+    """
+    for offset, block in read_blocks(signals, start=start, stop=stop,
+                                     block_samples=block_samples):
+        for k, x in block.items():
+            if not np.all(np.isfinite(x)):
+                first = start + offset + int(np.flatnonzero(~np.isfinite(x))[0])
+                raise ValueError(f"{name}.{k} contains NaN or infinite samples (first at "
+                                 f"sample {first}); remove or interpolate them")
+        yield offset, block
+        done = offset + next(iter(block.values())).size
+        advance(progress, f"{name}: {what}", done / fs_hz, (stop - start) / fs_hz, "s")

@@ -40,7 +40,7 @@ import math
 import os
 import warnings
 import weakref
-from collections.abc import Callable
+from collections.abc import Callable, Collection, Hashable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Final
@@ -265,15 +265,11 @@ def _check_recording(ds: xr.Dataset, *, name: str | None, fs_hz: float | None,
         checks.append(_rate_check(ds, label, float(fs_hz)))
     lsb = adc_range_v / 2**adc_bits
     required = set(EXPERIMENTS[exp].required) if exp in EXPERIMENTS else set(ds.data_vars)
-    t_type = _stored_dtype(ds[TIME])
-    if t_type.kind in "iu":
-        checks.append(Check("integer_samples", False, str(t_type), "floating point, in s",
-                            f"{label}: t", f"t holds {t_type} integers (sample numbers?); "
-                            "t must be the time in seconds: t = double(k)/fs"))
-    elif t_type.itemsize < 8:
-        notices.append(Notice("data_type", f"{label}: t", f"t is stored in single precision "
-                              f"({t_type}); it was uniform enough here, but longer records "
-                              "will not be: save t in double precision"))
+    t_check, t_notice = _time_type_findings(_stored_dtype(ds[TIME]), label)
+    if t_check is not None:
+        checks.append(t_check)
+    if t_notice is not None:
+        notices.append(t_notice)
     # A record shorter than its analysis reads: named for its length, before any signal in
     # it is judged (10 samples of a run whose excitation starts at 1 s are not "zero").
     short = _length_check(ds, exp, label)
@@ -286,66 +282,126 @@ def _check_recording(ds: xr.Dataset, *, name: str | None, fs_hz: float | None,
         v = str(var)
         if v not in SIGNALS:
             continue
-        subject = f"{label}: {v}"
-        stored = _stored_dtype(ds[v])
-        converter = v in ADC_SIGNALS or v in DAC_SIGNALS
-        if stored.kind in "iu":
-            fix = (f"convert before saving: {v} = double({v}) * {adc_range_v:g}/2^{adc_bits} "
-                   f"(1 count = {1e3 * lsb:.3g} mV)" if converter
-                   else f"{v} must be in {SIGNALS[v].units}, as double")
-            checks.append(Check("integer_samples", False, str(stored),
-                                f"floating point, in {SIGNALS[v].units}", subject,
-                                f"{v} holds {stored} integers: raw converter counts, not "
-                                f"{'volts' if converter else SIGNALS[v].units}; {fix}"))
-            continue
-        rail = adc_range_v / 2 - 1.5 * lsb  # as SaturationWarning: both rails, nothing inside
-        try:
-            peak, at_rails, spread, rms, first = _signal_stats(ds[v].data, rail)
-        except _NonFiniteError as exc:
-            count, index = exc.args
-            raise RecordingError(str(ds.encoding.get("source", label)),
-                                 f"holds {count} NaN or Inf value{'s' if count > 1 else ''} "
-                                 f"(first at index {index})", variable=v) from None
-        if converter:
-            # Half a span plus 1 LSB: readings rounded to the converter's codes never exceed it.
-            limit = adc_range_v / 2 + lsb
-            ok = peak <= limit
-            checks.append(Check("converter_range", ok, peak, f"≤ {limit:.6g} V (the converter's "
-                                f"±{adc_range_v / 2:g} V)", subject,
-                                "" if ok else f"{v} exceeds what the converter can deliver: "
-                                "it is not in volts (counts, mV?) or not this bench's signal",
-                                unit="V"))
-            if ok and v in ADC_SIGNALS and at_rails:
-                notices.append(Notice("saturation", subject, str(SaturationWarning(
-                    label, v, at_rails, int(ds[v].shape[0]), rail))))
-        measured = v in ADC_SIGNALS or v == "Va"
-        if v in required and (measured or EXCITATION.get(exp) == v) and (
-                short is None or short.passed):
-            ok = spread > 0.0
-            unit = SIGNALS[v].units
-            if ok:
-                why = ""
-            elif EXCITATION.get(exp) == v:
-                why = (f"{v} is zero throughout: no power in the excitation" if peak == 0
-                       else f"{v} is constant at {first:.6g} {unit}: no power in the excitation")
-                why += "; record it with the excitation on"
-            else:
-                why = (f"{v} is {'zero' if peak == 0 else f'constant at {first:.6g} {unit}'} "
-                       "throughout: the channel is dead or not connected")
-            checks.append(Check("signal_varies", ok, spread, f"> 0 {unit} peak-to-peak",
-                                subject, why, unit=unit))
-        if v == "Va":
-            ok = rms <= MAX_VA_RMS_M
-            checks.append(Check("va_in_metres", ok, rms, f"≤ {MAX_VA_RMS_M:g} m rms (the bench "
-                                "moves by nm to µm)", subject,
-                                "" if ok else va_unit_hint(rms, exp), unit="m rms"))
-            if ok and v in required:  # jumps in a Va that is not in metres say nothing more
-                checks.append(jump_check(ds, subject))
+        found, noted = _signal_findings(ds, v, exp=exp, label=label, required=required,
+                                        long_enough=short is None or short.passed,
+                                        adc_range_v=adc_range_v, adc_bits=adc_bits)
+        checks += found
+        notices += noted
     if short is None or short.passed:
         checks += copied_channels(ds, label)
         checks += clipped_signals(ds, exp, label, lsb)
         checks += frozen_segments(ds, label)
     return checks, notices
+
+
+def _time_type_findings(t_type: np.dtype[Any], label: str) -> tuple[Check | None, Notice | None]:
+    """``t`` stored as integers (a failed check) or in single precision (a notice).
+
+    ``t_type``: ``t``'s dtype in the file; ``label``: the record, for the subject.
+    """
+    if t_type.kind in "iu":
+        return Check("integer_samples", False, str(t_type), "floating point, in s",
+                     f"{label}: t", f"t holds {t_type} integers (sample numbers?); "
+                     "t must be the time in seconds: t = double(k)/fs"), None
+    if t_type.itemsize < 8:
+        return None, Notice("data_type", f"{label}: t", f"t is stored in single precision "
+                            f"({t_type}); it was uniform enough here, but longer records "
+                            "will not be: save t in double precision")
+    return None, None
+
+
+def _signal_findings(ds: xr.Dataset, v: str, *, exp: str, label: str,
+                     required: Collection[Hashable],
+                     long_enough: bool, adc_range_v: float,
+                     adc_bits: int) -> tuple[list[Check], list[Notice]]:
+    """The checks and notices of one signal ``v`` of :data:`~fsmbench.io.signals.SIGNALS`.
+
+    ``exp``, ``label``: the experiment and the record (for subjects and advice);
+    ``required``: the signals its analysis reads; ``long_enough``: the record passed
+    its length check (or has none), so ``signal_varies`` is judged; ``adc_range_v``
+    [V], ``adc_bits`` [bit]: the converters' span and resolution.
+    """
+    subject = f"{label}: {v}"
+    lsb = adc_range_v / 2**adc_bits
+    stored = _stored_dtype(ds[v])
+    converter = v in ADC_SIGNALS or v in DAC_SIGNALS
+    if stored.kind in "iu":
+        return [_integer_samples_check(v, stored, subject=subject, converter=converter,
+                                       adc_range_v=adc_range_v, adc_bits=adc_bits)], []
+    checks: list[Check] = []
+    notices: list[Notice] = []
+    rail = adc_range_v / 2 - 1.5 * lsb  # as SaturationWarning: both rails, nothing inside
+    try:
+        peak, at_rails, spread, rms, first = _signal_stats(ds[v].data, rail)
+    except _NonFiniteError as exc:
+        count, index = exc.args
+        raise RecordingError(str(ds.encoding.get("source", label)),
+                             f"holds {count} NaN or Inf value{'s' if count > 1 else ''} "
+                             f"(first at index {index})", variable=v) from None
+    if converter:
+        # Half a span plus 1 LSB: readings rounded to the converter's codes never exceed it.
+        limit = adc_range_v / 2 + lsb
+        ok = peak <= limit
+        checks.append(Check("converter_range", ok, peak, f"≤ {limit:.6g} V (the converter's "
+                            f"±{adc_range_v / 2:g} V)", subject,
+                            "" if ok else f"{v} exceeds what the converter can deliver: "
+                            "it is not in volts (counts, mV?) or not this bench's signal",
+                            unit="V"))
+        if ok and v in ADC_SIGNALS and at_rails:
+            notices.append(Notice("saturation", subject, str(SaturationWarning(
+                label, v, at_rails, int(ds[v].shape[0]), rail))))
+    measured = v in ADC_SIGNALS or v == "Va"
+    if v in required and (measured or EXCITATION.get(exp) == v) and long_enough:
+        checks.append(_varies_check(v, exp=exp, subject=subject, spread=spread, peak=peak,
+                                    first=first))
+    if v == "Va":
+        ok = rms <= MAX_VA_RMS_M
+        checks.append(Check("va_in_metres", ok, rms, f"≤ {MAX_VA_RMS_M:g} m rms (the bench "
+                            "moves by nm to µm)", subject,
+                            "" if ok else va_unit_hint(rms, exp), unit="m rms"))
+        if ok and v in required:  # jumps in a Va that is not in metres say nothing more
+            checks.append(jump_check(ds, subject))
+    return checks, notices
+
+
+def _integer_samples_check(v: str, stored: np.dtype[Any], *, subject: str, converter: bool,
+                           adc_range_v: float, adc_bits: int) -> Check:
+    """``integer_samples`` failed on signal ``v`` stored as ``stored`` integers.
+
+    A converter's signal (``converter``) is told how to turn counts into volts
+    (``adc_range_v`` [V] over ``2^adc_bits`` codes); another, its unit.
+    """
+    lsb = adc_range_v / 2**adc_bits
+    fix = (f"convert before saving: {v} = double({v}) * {adc_range_v:g}/2^{adc_bits} "
+           f"(1 count = {1e3 * lsb:.3g} mV)" if converter
+           else f"{v} must be in {SIGNALS[v].units}, as double")
+    return Check("integer_samples", False, str(stored),
+                 f"floating point, in {SIGNALS[v].units}", subject,
+                 f"{v} holds {stored} integers: raw converter counts, not "
+                 f"{'volts' if converter else SIGNALS[v].units}; {fix}")
+
+
+def _varies_check(v: str, *, exp: str, subject: str, spread: float, peak: float,
+                  first: float) -> Check:
+    """``signal_varies`` of signal ``v``: its peak-to-peak ``spread`` is above 0.
+
+    ``peak`` (largest magnitude) and ``first`` (first sample), in ``v``'s unit, say
+    whether a constant signal is zero; the experiment's excitation (:data:`EXCITATION`)
+    and a measured channel are advised differently.
+    """
+    ok = spread > 0.0
+    unit = SIGNALS[v].units
+    if ok:
+        why = ""
+    elif EXCITATION.get(exp) == v:
+        why = (f"{v} is zero throughout: no power in the excitation" if peak == 0
+               else f"{v} is constant at {first:.6g} {unit}: no power in the excitation")
+        why += "; record it with the excitation on"
+    else:
+        why = (f"{v} is {'zero' if peak == 0 else f'constant at {first:.6g} {unit}'} "
+               "throughout: the channel is dead or not connected")
+    return Check("signal_varies", ok, spread, f"> 0 {unit} peak-to-peak",
+                 subject, why, unit=unit)
 
 
 def _length_check(ds: xr.Dataset, exp: str, label: str) -> Check | None:

@@ -22,7 +22,7 @@ import struct
 import zlib
 from collections.abc import Callable, Iterator
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
 import h5py
 import numpy as np
@@ -466,36 +466,105 @@ def convert_recording(source: str | os.PathLike[str], dest: str | os.PathLike[st
     fmt = detect_format(src)
     say = progress or (lambda _msg: None)
     if fmt == "mat5":
-        vectors = dict(v5_vectors(src))
-        if TIME not in vectors:
-            raise RecordingError(src, "has no time vector", variable=TIME)
-
-        def pieces(name: str) -> Iterator[np.ndarray]:
-            return v5_stream_variable(src, name)
-        n = vectors[TIME]
-        signals = ordered_signals([k for k in vectors if k != TIME])
-        uneven = [k for k in signals if vectors[k] != n]
-        if uneven:
-            raise RecordingError(src, f"signals of unequal lengths ({', '.join(uneven)} vs "
-                                 f"{TIME})")
-        first_t = next(pieces(TIME))[:2]
-        from_t = _streamed_rate(functools.partial(pieces, TIME), n)
-        attrs = {"experiment": src.stem, "source": str(src)}
+        got = _v5_input(src)
     elif fmt in ("mat73", "hdf5"):
-        ds = open_recording(src)
-        signals = [str(k) for k in ds.data_vars]
-        n = ds.sizes[TIME]
-
-        def pieces(name: str) -> Iterator[np.ndarray]:
-            arr = ds[name].data
-            for k in range(0, n, _READ_BLOCK):
-                yield np.asarray(arr[k:k + _READ_BLOCK].compute())
-        first_t = np.asarray(ds[TIME].data[:2].compute())
-        from_t = float(ds.attrs.get("fs_hz", math.nan))  # fitted to the whole of t (_validated)
-        attrs = {k: v for k, v in ds.attrs.items() if k != "fs_hz" and k not in READ_NOTES}
+        got = _hdf5_input(open_recording(src))
     else:
         raise RecordingError(src, "cannot be converted: MATLAB v4 files are small, read them "
                              "directly")
+    rate = _conversion_rate(src, fs_hz=fs_hz, from_t=got.from_t)
+    signals, n, pieces, first_t = got.signals, got.n, got.pieces, got.first_t
+    # One pass per signal keeps memory at one block: the archive is written column by
+    # column (HDF5 datasets grow independently), time first.
+    with NexusAppender(out, signals=signals, fs_hz=rate, attrs=got.attrs,
+                       t0_s=float(first_t[0]) if first_t.size else 0.0, created=created,
+                       root_attrs={CONVERTED_FROM: str(src.resolve())},
+                       times_unknown=f"not known: {src.name} does not say when it was "
+                                     "taken") as nx:
+        nx.write_columns({TIME: pieces(TIME), **{name: pieces(name) for name in signals}},
+                         n_samples=n)
+        say(f"{src.name}: {n} samples of {', '.join(signals)} into {out}")
+    return out
+
+
+class _ConversionInput(NamedTuple):
+    """What :func:`convert_recording` copies from its source.
+
+    Attributes
+    ----------
+    signals : list of str
+        The signals besides ``t``, in the order written.
+    n : int
+        Samples per signal.
+    pieces : callable
+        A signal's name to its samples, block after block (a new iterator per call).
+    first_t : ndarray
+        ``t``'s first two samples [s] (fewer for a shorter ``t``).
+    from_t : float
+        The rate fitted to the whole of ``t`` [Hz] (nan when there is none).
+    attrs : dict
+        The archive's recording attributes.
+    """
+
+    signals: list[str]
+    n: int
+    pieces: Callable[[str], Iterator[np.ndarray]]
+    first_t: np.ndarray
+    from_t: float
+    attrs: dict[str, Any]
+
+
+def _v5_input(src: Path) -> _ConversionInput:
+    """A MATLAB v5 file's variables, streamed one by one (``t`` inflated once more for its rate).
+
+    Raises
+    ------
+    RecordingError
+        No ``t``, or signals of another length than ``t``.
+    """
+    vectors = dict(v5_vectors(src))
+    if TIME not in vectors:
+        raise RecordingError(src, "has no time vector", variable=TIME)
+
+    def pieces(name: str) -> Iterator[np.ndarray]:
+        return v5_stream_variable(src, name)
+    n = vectors[TIME]
+    signals = ordered_signals([k for k in vectors if k != TIME])
+    uneven = [k for k in signals if vectors[k] != n]
+    if uneven:
+        raise RecordingError(src, f"signals of unequal lengths ({', '.join(uneven)} vs "
+                             f"{TIME})")
+    first_t = next(pieces(TIME))[:2]
+    from_t = _streamed_rate(functools.partial(pieces, TIME), n)
+    attrs = {"experiment": src.stem, "source": str(src)}
+    return _ConversionInput(signals=signals, n=n, pieces=pieces, first_t=first_t,
+                            from_t=from_t, attrs=attrs)
+
+
+def _hdf5_input(ds: xr.Dataset) -> _ConversionInput:
+    """A v7.3 or NeXus recording opened lazily (:func:`open_recording`), read in blocks."""
+    signals = [str(k) for k in ds.data_vars]
+    n = ds.sizes[TIME]
+
+    def pieces(name: str) -> Iterator[np.ndarray]:
+        arr = ds[name].data
+        for k in range(0, n, _READ_BLOCK):
+            yield np.asarray(arr[k:k + _READ_BLOCK].compute())
+    first_t = np.asarray(ds[TIME].data[:2].compute())
+    from_t = float(ds.attrs.get("fs_hz", math.nan))  # fitted to the whole of t (_validated)
+    attrs = {k: v for k, v in ds.attrs.items() if k != "fs_hz" and k not in READ_NOTES}
+    return _ConversionInput(signals=signals, n=n, pieces=pieces, first_t=first_t,
+                            from_t=from_t, attrs=attrs)
+
+
+def _conversion_rate(src: Path, *, fs_hz: float | None, from_t: float) -> float:
+    """The archive's rate [Hz]: ``fs_hz`` if given (within 0.1 % of ``from_t``), else ``from_t``.
+
+    Raises
+    ------
+    RecordingError
+        ``fs_hz`` contradicts the rate fitted to ``t``, or there is no usable rate.
+    """
     if fs_hz is not None and np.isfinite(from_t) and from_t > 0 \
             and abs(fs_hz - from_t) > _FS_TOLERANCE * from_t:
         raise RecordingError(src, f"is sampled at {from_t:.6g} Hz (the rate fitted to t) but "
@@ -506,14 +575,4 @@ def convert_recording(source: str | os.PathLike[str], dest: str | os.PathLike[st
     if not np.isfinite(rate) or rate <= 0:
         raise RecordingError(src, "has no usable time base to take the sampling rate from; "
                              "give --fs", variable=TIME)
-    # One pass per signal keeps memory at one block: the archive is written column by
-    # column (HDF5 datasets grow independently), time first.
-    with NexusAppender(out, signals=signals, fs_hz=rate, attrs=attrs,
-                       t0_s=float(first_t[0]) if first_t.size else 0.0, created=created,
-                       root_attrs={CONVERTED_FROM: str(src.resolve())},
-                       times_unknown=f"not known: {src.name} does not say when it was "
-                                     "taken") as nx:
-        nx.write_columns({TIME: pieces(TIME), **{name: pieces(name) for name in signals}},
-                         n_samples=n)
-        say(f"{src.name}: {n} samples of {', '.join(signals)} into {out}")
-    return out
+    return rate

@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import os
 import warnings
-from collections.abc import Iterable
+from collections.abc import Iterable, Mapping
 from pathlib import Path
 from typing import Any, Final, Literal
 
@@ -41,7 +41,7 @@ from fsmbench.io.errors import RecordingError
 from fsmbench.io.matfile import detect_format, load_mat, other_run_words
 from fsmbench.io.matwrite import save_mat
 from fsmbench.io.signals import EXPERIMENTS, SIGNALS, TIME
-from fsmbench.io.timebase import coarse_double, single_precision
+from fsmbench.io.timebase import TimeBase, coarse_double, single_precision
 from fsmbench.io.trailing import data_end, warn_trailing
 
 __all__ = [
@@ -110,21 +110,56 @@ def read_recording(
     origin = os.fspath(p)
     fmt = detect_format(p)
     if fmt == "hdf5" and nexus.is_nexus(p):
-        end = warn_trailing(data_end(p, fmt), stacklevel=2)
-        ds = nexus.read_nexus(p)
-        if experiment is not None:
-            ds.attrs["experiment"] = experiment
-        req = (_default_require(ds.attrs["experiment"], p.stem)[1] if require is None
-               else tuple(require))
-        grid = validate_dataset(ds, origin=origin, require=req, adc_range_v=adc_range_v,
-                         adc_bits=adc_bits, saturation=True, stacklevel=3)
-        note_reading(ds, grid, end)
-        return ds
+        return _read_nexus_recording(p, fmt=fmt, experiment=experiment, require=require,
+                                     adc_range_v=adc_range_v, adc_bits=adc_bits)
     experiment = p.stem if experiment is None else experiment
     needs, req = _default_require(experiment, p.stem)
     if require is not None:
         needs, req = "the caller", tuple(require)
     raw = load_mat(p, skip_unreadable=True)  # warns of trailing bytes itself
+    _check_required(p, raw, needs=needs, req=req)
+    vectors = _sampled_vectors(raw, origin=origin, req=req)
+    check_lengths(vectors, origin)
+    t = vectors[TIME]
+    base = fitted_time_base(t)
+    ds = assemble(vectors, fs_hz=base.fs_hz if base is not None else float("nan"),
+                  experiment=experiment, source=os.path.abspath(p))
+    for name in vectors:  # what the file held, for the data-type checks (integer counts …)
+        stored = np.asarray(raw[name]).dtype
+        if stored != np.float64:
+            ds[name].attrs["stored_dtype"] = str(stored)
+    _validate_mat_recording(ds, t=t, raw_t=raw[TIME], origin=origin, req=req,
+                            adc_range_v=adc_range_v, adc_bits=adc_bits, base=base)
+    note_reading(ds, base, data_end(p, fmt))
+    return ds
+
+
+def _read_nexus_recording(p: Path, *, fmt: str, experiment: str | None,
+                          require: Iterable[str] | None, adc_range_v: float,
+                          adc_bits: int) -> xr.Dataset:
+    """:func:`read_recording` of a NeXus archive (parameters as there; ``fmt``: "hdf5").
+
+    Its warnings point at :func:`read_recording`'s caller, as the MAT-files' do.
+    """
+    end = warn_trailing(data_end(p, fmt), stacklevel=3)
+    ds = nexus.read_nexus(p)
+    if experiment is not None:
+        ds.attrs["experiment"] = experiment
+    req = (_default_require(ds.attrs["experiment"], p.stem)[1] if require is None
+           else tuple(require))
+    grid = validate_dataset(ds, origin=os.fspath(p), require=req, adc_range_v=adc_range_v,
+                            adc_bits=adc_bits, saturation=True, stacklevel=4)
+    note_reading(ds, grid, end)
+    return ds
+
+
+def _check_required(p: Path, raw: Mapping[str, Any], *, needs: str,
+                    req: tuple[str, ...]) -> None:
+    """Raise a :class:`RecordingError` unless the MAT-file holds ``t`` and all of ``req``.
+
+    ``needs``: who asks for ``req`` (an experiment's name, or "the caller"), for the message.
+    """
+    origin = os.fspath(p)
     if TIME not in raw:
         present = ", ".join(raw) or "nothing"
         raise RecordingError(origin, "is missing: a recording needs its time vector t, in s "
@@ -137,6 +172,16 @@ def read_recording(
             f"(the file holds: {', '.join(raw)}){other_run_words(p, raw)}",
             variable=missing[0], kind="is missing",
         )
+
+
+def _sampled_vectors(raw: Mapping[str, Any], *, origin: str,
+                     req: tuple[str, ...]) -> dict[str, np.ndarray]:
+    """``t`` and the MAT-file's variables sampled on it, as float64 vectors.
+
+    A known or required variable that is not a vector raises; another one is
+    left out with a ``UserWarning`` at :func:`read_recording`'s caller, as is one
+    whose length is not ``t``'s.
+    """
     vectors = {TIME: as_vector(TIME, raw[TIME], origin)}
     n = vectors[TIME].size
     known = [k for k in raw if k == TIME or k in SIGNALS or k in req]
@@ -147,28 +192,30 @@ def read_recording(
             if name in known:
                 raise
             warnings.warn(f"{origin}: variable '{name}' left out: {exc.problem}", UserWarning,
-                          stacklevel=2)
+                          stacklevel=3)
             continue
         if v.size != n and name not in known:
             values = f"{v.size} value{'s' if v.size != 1 else ''}"
             warnings.warn(f"{origin}: variable '{name}' left out: it has {values} and t has "
-                          f"{n}, so it is not sampled on t", UserWarning, stacklevel=2)
+                          f"{n}, so it is not sampled on t", UserWarning, stacklevel=3)
             continue
         vectors[name] = v
-    check_lengths(vectors, origin)
-    t = vectors[TIME]
-    base = fitted_time_base(t)
-    ds = assemble(vectors, fs_hz=base.fs_hz if base is not None else float("nan"),
-                   experiment=experiment, source=os.path.abspath(p))
-    for name in vectors:  # what the file held, for the data-type checks (integer counts …)
-        stored = np.asarray(raw[name]).dtype
-        if stored != np.float64:
-            ds[name].attrs["stored_dtype"] = str(stored)
+    return vectors
+
+
+def _validate_mat_recording(ds: xr.Dataset, *, t: np.ndarray, raw_t: Any, origin: str,
+                            req: tuple[str, ...], adc_range_v: float, adc_bits: int,
+                            base: TimeBase | None) -> None:
+    """:func:`validate_dataset` of a MAT-file's recording (warnings at the reader's caller).
+
+    A problem of ``t`` [s] says, when it is so, that it was stored in single
+    precision (``raw_t``: ``t`` as the file held it) or rounded too coarsely.
+    """
     try:
-        validate_dataset(ds, origin=origin, require=req, adc_range_v=adc_range_v, adc_bits=adc_bits,
-                  saturation=True, stacklevel=3, base=base)
+        validate_dataset(ds, origin=origin, require=req, adc_range_v=adc_range_v,
+                         adc_bits=adc_bits, saturation=True, stacklevel=4, base=base)
     except RecordingError as exc:
-        stored = np.asarray(raw[TIME]).dtype
+        stored = np.asarray(raw_t).dtype
         if exc.variable == TIME and stored.kind == "f" and stored.itemsize < 8:
             raise RecordingError(origin, exc.problem + "; " + single_precision(t, stored),
                                  variable=TIME, kind=exc.kind) from None
@@ -176,8 +223,6 @@ def read_recording(
             raise RecordingError(origin, exc.problem + "; " + coarse, variable=TIME,
                                  kind=exc.kind) from None
         raise
-    note_reading(ds, base, data_end(p, fmt))
-    return ds
 
 
 def write_recording(

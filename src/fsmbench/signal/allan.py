@@ -41,13 +41,16 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any, NamedTuple
 
 import numpy as np
 from numba import njit
 from numpy.typing import ArrayLike, NDArray
 
 from fsmbench.signal.segments import read_span as read
+
+if TYPE_CHECKING:  # welch_dask imports Dask, an extra: imported where the Dask path runs
+    from fsmbench.signal.welch_dask import _TimeChunks
 
 __all__ = ["AllanRegion", "AllanResult", "allan_deviation", "allan_regions"]
 
@@ -288,6 +291,15 @@ def allan_deviation(
     if not type(x).__module__.startswith("dask"):
         return _allan_in_memory(np.asarray(x, dtype=np.float64), fs=fs, taus_s=taus_s,
                                 unit=unit, name=name)
+    return _allan_dask(x, fs=fs, taus_s=taus_s, unit=unit, name=name, task_samples=task_samples)
+
+
+def _allan_dask(x: Any, *, fs: float, taus_s: ArrayLike | None, unit: str, name: str,
+                task_samples: int | None) -> AllanResult:
+    """The module's formula on a Dask array, in tasks of ``task_samples`` (out of core).
+
+    Parameters as :func:`allan_deviation` (``fs`` [Hz] already checked).
+    """
     import dask
     from dask.base import tokenize
 
@@ -307,6 +319,42 @@ def allan_deviation(
     chunks = _TimeChunks(arr)
     gname = "allan-" + tokenize(arr, factors.tobytes(), cell)
     dsk: dict[Any, Any] = {}
+    keys = _cell_tasks(dsk, chunks, gname=gname, n=n, cell=cell)
+    rows = _block_tasks(dsk, chunks, gname=gname, factors=factors, n=n, cell=cell, keys=keys)
+    dsk[(gname, 0)] = (_fsum_rows, rows)
+    dsk[(f"{gname}-bad", 0)] = (_collect, keys.finite)
+    sums_lazy = chunks.array_from(gname, dsk, ((len(rows),),), np.float64)
+    bad_lazy = chunks.array_from(f"{gname}-bad", dsk, ((len(keys.finite),),), np.float64)
+    sums, first_bad = dask.compute(sums_lazy, bad_lazy)
+    bad = [int(i) for i in first_bad if i >= 0]
+    if bad:
+        raise _non_finite_error(name, bad[0])
+    return _allan_result(np.asarray(sums), factors=factors, fs=fs, n=n, unit=unit)
+
+
+class _CellKeys(NamedTuple):
+    """Graph keys of the first sample, of the cells' totals and of each cell's finite check."""
+
+    ref: str
+    totals: str
+    finite: list[tuple[str, int]]
+
+
+def _cell_tasks(dsk: dict[Any, Any], chunks: _TimeChunks, *, gname: str, n: int,
+                cell: int) -> _CellKeys:
+    """Add to ``dsk`` the first sample, each whole cell's total less it, each cell's check.
+
+    Parameters
+    ----------
+    dsk : dict
+        The Dask graph, extended in place.
+    chunks : _TimeChunks
+        The record's chunks along time.
+    gname : str
+        The graph's name (prefix of every key).
+    n, cell : int
+        Samples of the record and of a cell.
+    """
     ref, totals = f"{gname}-ref", f"{gname}-totals"
     dsk[ref] = (_first, chunks.covering(0, 1)[0])
     cells = []
@@ -320,13 +368,29 @@ def allan_deviation(
             _check_finite, *chunks.covering(start, min(start + cell, n)), start
         )
         finite.append((f"{gname}-finite", j))
+    return _CellKeys(ref=ref, totals=totals, finite=finite)
 
-    def anchor(a: int, b: int) -> list[Any]:
-        if b - a <= 2 * cell:
-            return [[chunks.covering(a, b)], [0, 0]]
-        c0, c1 = -(-a // cell), b // cell
-        return [[chunks.covering(a, c0 * cell), chunks.covering(c1 * cell, b)], [c0, c1]]
 
+def _anchor_reads(chunks: _TimeChunks, a: int, b: int, *, cell: int) -> list[Any]:
+    """What :func:`_anchor` sums for ``B`` over samples ``a .. b-1``: reads and a cell range.
+
+    Over at most two cells the samples themselves; longer, the head and the tail
+    read and the whole cells between them taken from their totals.
+    """
+    if b - a <= 2 * cell:
+        return [[chunks.covering(a, b)], [0, 0]]
+    c0, c1 = -(-a // cell), b // cell
+    return [[chunks.covering(a, c0 * cell), chunks.covering(c1 * cell, b)], [c0, c1]]
+
+
+def _block_tasks(dsk: dict[Any, Any], chunks: _TimeChunks, *, gname: str,
+                 factors: NDArray[np.int64], n: int, cell: int,
+                 keys: _CellKeys) -> list[list[tuple[str, int]]]:
+    """Add to ``dsk`` one :func:`_block` task per ``cell`` terms of each ``m``; their keys.
+
+    Parameters as :func:`_cell_tasks`; ``factors`` are the averaging factors
+    ``m`` [samples], ``keys`` the cells' tasks. Returns one row of keys per ``m``.
+    """
     rows = []
     for m in (int(v) for v in factors):
         n_terms = n - 2 * m + 1
@@ -334,29 +398,30 @@ def allan_deviation(
         for k0 in range(0, n_terms, cell):
             k1 = min(k0 + cell, n_terms)
             reads = [chunks.covering(k0 + s, k1 - 1 + s) for s in (0, m, 2 * m)]
-            anchors = [anchor(k0, k0 + m), anchor(k0 + m, k0 + 2 * m)]
+            anchors = [_anchor_reads(chunks, k0, k0 + m, cell=cell),
+                       _anchor_reads(chunks, k0 + m, k0 + 2 * m, cell=cell)]
             key = (f"{gname}-block-{m}", k0 // cell)
-            dsk[key] = (_block, reads, anchors, totals, ref)
+            dsk[key] = (_block, reads, anchors, keys.totals, keys.ref)
             row.append(key)
         rows.append(row)
-    dsk[(gname, 0)] = (_fsum_rows, rows)
-    dsk[(f"{gname}-bad", 0)] = (_collect, finite)
-    sums_lazy = chunks.array_from(gname, dsk, ((len(rows),),), np.float64)
-    bad_lazy = chunks.array_from(f"{gname}-bad", dsk, ((len(finite),),), np.float64)
-    sums, first_bad = dask.compute(sums_lazy, bad_lazy)
-    bad = [int(i) for i in first_bad if i >= 0]
-    if bad:
-        raise ValueError(
-            f"{name} contains NaN or infinite samples (first at index {bad[0]}); remove or "
-            "interpolate them before the Allan deviation"
-        )
-    n_terms_all = n - 2 * factors + 1
-    avar = np.asarray(sums) / (2.0 * factors.astype(np.float64) ** 2
-                                                     * n_terms_all)
-    out = AllanResult(
-        tau_s=factors / fs, adev=np.sqrt(avar), n_terms=n_terms_all.astype(np.int64),
-        m=factors.astype(np.int64), fs_hz=fs, n_samples=n, unit=unit,
+    return rows
+
+
+def _non_finite_error(name: str, index: int) -> ValueError:
+    """The error naming the record and its first NaN or infinite sample (index)."""
+    return ValueError(
+        f"{name} contains NaN or infinite samples (first at index {index}); remove or "
+        "interpolate them before the Allan deviation"
     )
+
+
+def _allan_result(sums: NDArray[np.float64], *, factors: NDArray[np.int64], fs: float, n: int,
+                  unit: str) -> AllanResult:
+    """The read-only result from ``sum (B_{k+m} - B_k)^2`` of each ``m`` (``fs`` in Hz)."""
+    n_terms_all = n - 2 * factors + 1
+    avar = sums / (2.0 * factors.astype(np.float64) ** 2 * n_terms_all)
+    out = AllanResult(tau_s=factors / fs, adev=np.sqrt(avar), n_terms=n_terms_all.astype(np.int64),
+                      m=factors.astype(np.int64), fs_hz=fs, n_samples=n, unit=unit)
     for a in (out.tau_s, out.adev, out.n_terms, out.m):
         a.setflags(write=False)
     return out
@@ -383,20 +448,11 @@ def _allan_in_memory(x: NDArray[np.float64], *, fs: float, taus_s: ArrayLike | N
         raise ValueError(f"{name} has {n} sample(s); the Allan deviation needs at least 2")
     bad = np.flatnonzero(~np.isfinite(x))
     if bad.size:
-        raise ValueError(
-            f"{name} contains NaN or infinite samples (first at index {int(bad[0])}); remove or "
-            "interpolate them before the Allan deviation"
-        )
+        raise _non_finite_error(name, int(bad[0]))
     factors = _factors(taus_s, fs, n)
     c = np.concatenate([[0.0], np.cumsum(x - x[0])])
     sums = _second_difference_energies(c, factors)
-    n_terms_all = n - 2 * factors + 1
-    avar = sums / (2.0 * factors.astype(np.float64) ** 2 * n_terms_all)
-    out = AllanResult(tau_s=factors / fs, adev=np.sqrt(avar), n_terms=n_terms_all.astype(np.int64),
-                      m=factors.astype(np.int64), fs_hz=fs, n_samples=n, unit=unit)
-    for a in (out.tau_s, out.adev, out.n_terms, out.m):
-        a.setflags(write=False)
-    return out
+    return _allan_result(sums, factors=factors, fs=fs, n=n, unit=unit)
 
 
 #: Terms summed into one partial sum before it joins the total: rounding grows

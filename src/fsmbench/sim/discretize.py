@@ -19,9 +19,12 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
-from scipy.linalg import expm
+
+# One matrix exponential of the hold for both samplers (bench.realization's), re-exported.
+from fsmbench.bench.realization import gamma_integral
 
 __all__ = ["DiscretePlant", "gamma_integral", "zoh_with_delays"]
 
@@ -63,16 +66,6 @@ class DiscretePlant:
         return np.einsum("pn,fnm->fpm", self.c, x)
 
 
-def gamma_integral(a: np.ndarray, b: np.ndarray, h_s: float) -> tuple[np.ndarray, np.ndarray]:
-    """``(e^{A h}, int_0^h e^{A s} ds B)`` from one exponential of ``[[A, B], [0, 0]]``."""
-    n, m = b.shape
-    aug = np.zeros((n + m, n + m))
-    aug[:n, :n] = a * h_s
-    aug[:n, n:] = b * h_s
-    e = expm(aug)
-    return e[:n, :n], e[:n, n:]
-
-
 def zoh_with_delays(a: np.ndarray, b: np.ndarray, c: np.ndarray, *, ts_s: float,
                     input_delay_samples: Sequence[float],
                     input_names: Sequence[str], output_names: Sequence[str],
@@ -112,26 +105,86 @@ def zoh_with_delays(a: np.ndarray, b: np.ndarray, c: np.ndarray, *, ts_s: float,
     if any(d < 0 for d in delays):
         raise ValueError(f"input delays must be >= 0 samples, got {delays}")
     phi, _ = gamma_integral(a, b, ts_s)
+    split = _split_delays(delays)
+    ad, bd = _delay_line_system(a, b, phi=phi, split=split, ts_s=ts_s)
+    cd = np.zeros((c.shape[0], ad.shape[0]))
+    cd[:, :n] = c
+    if d is not None:
+        _add_feedthrough(cd, np.asarray(d, dtype=float), n_plant_states=n, lags=split.lags,
+                         input_names=input_names)
+    return DiscretePlant(a=ad, b=bd, c=cd, ts_s=ts_s, input_names=tuple(input_names),
+                         output_names=tuple(output_names), n_plant_states=n,
+                         input_delay_samples=tuple(delays))
 
-    # Split each delay into whole samples and a fraction (rounded to 1e-9 of a
-    # sample so that 3.5000000001 is 3.5, not 4 minus a sliver).
+
+class _DelaySplit(NamedTuple):
+    """Each input's delay as whole samples, a fraction of a sample, and register length."""
+
+    whole: list[int]
+    frac: list[float]
+    lags: list[int]
+
+
+def _split_delays(delays: Sequence[float]) -> _DelaySplit:
+    """Split each delay [samples] into whole samples and a fraction of one.
+
+    The fraction is rounded to 1e-9 of a sample so that 3.5000000001 is 3.5,
+    not 4 minus a sliver; an input keeps ``lags`` past commands (one more than
+    its whole samples when a fraction remains).
+    """
     whole = [int(np.floor(d + 1e-9)) for d in delays]
     frac = [max(0.0, d - w) if d - w > 1e-9 else 0.0 for d, w in zip(delays, whole, strict=True)]
     lags = [w + (1 if f > 0 else 0) for w, f in zip(whole, frac, strict=True)]
+    return _DelaySplit(whole=whole, frac=frac, lags=lags)
+
+
+def _held_input_gains(a: np.ndarray, bj: np.ndarray, *, frac: float,
+                      ts_s: float) -> tuple[np.ndarray, np.ndarray]:
+    """``(Gamma_0, Gamma_1)`` of one input: the newer and the older command's gains.
+
+    Parameters
+    ----------
+    a : array (n, n)
+        Continuous state matrix [1/s].
+    bj : array (n, 1)
+        The input's column of B.
+    frac : float
+        Fractional part of the input's delay [samples], in ``[0, 1)``.
+    ts_s : float
+        Sampling period T [s].
+    """
+    if frac > 0:
+        e_rest, g_new = gamma_integral(a, bj, (1.0 - frac) * ts_s)
+        _, g_old_part = gamma_integral(a, bj, frac * ts_s)
+        return g_new, e_rest @ g_old_part
+    _, g_new = gamma_integral(a, bj, ts_s)
+    return g_new, np.zeros((a.shape[0], 1))
+
+
+def _delay_line_system(a: np.ndarray, b: np.ndarray, *, phi: np.ndarray, split: _DelaySplit,
+                       ts_s: float) -> tuple[np.ndarray, np.ndarray]:
+    """``(Ad, Bd)``: the plant's states, then each input's shift register of past commands.
+
+    Parameters
+    ----------
+    a, b : arrays (n, n), (n, m)
+        Continuous plant.
+    phi : array (n, n)
+        ``e^{A T}``.
+    split : _DelaySplit
+        The inputs' delays (:func:`_split_delays`).
+    ts_s : float
+        Sampling period T [s].
+    """
+    n, m = b.shape
+    whole, frac, lags = split
     nz = n + sum(lags)
     ad = np.zeros((nz, nz))
     bd = np.zeros((nz, m))
     ad[:n, :n] = phi
     offset = n
     for j in range(m):
-        bj = b[:, j:j + 1]
-        if frac[j] > 0:
-            e_rest, g_new = gamma_integral(a, bj, (1.0 - frac[j]) * ts_s)
-            _, g_old_part = gamma_integral(a, bj, frac[j] * ts_s)
-            g_old = e_rest @ g_old_part
-        else:
-            _, g_new = gamma_integral(a, bj, ts_s)
-            g_old = np.zeros((n, 1))
+        g_new, g_old = _held_input_gains(a, b[:, j:j + 1], frac=frac[j], ts_s=ts_s)
         # Register r_j = [u_j[k-1], ..., u_j[k-lags_j]] occupies states offset .. offset+lags-1.
         taps = {whole[j]: g_new}
         if frac[j] > 0:
@@ -146,21 +199,27 @@ def zoh_with_delays(a: np.ndarray, b: np.ndarray, c: np.ndarray, *, ts_s: float,
             for i in range(1, lags[j]):
                 ad[offset + i, offset + i - 1] = 1.0
         offset += lags[j]
-    cd = np.zeros((c.shape[0], nz))
-    cd[:, :n] = c
-    if d is not None:
-        d = np.asarray(d, dtype=float)
-        if d.shape != (c.shape[0], m):
-            raise ValueError(f"d has shape {d.shape}, expected {(c.shape[0], m)}")
-        offset = n
-        for j in range(m):
-            if np.any(d[:, j] != 0.0):
-                if lags[j] == 0:
-                    raise ValueError(f"input {input_names[j]} has a direct feedthrough and no "
-                                     "delay: the sampled loop would have an algebraic loop")
-                # u(kT - tau) with the hold is the command issued lags_j samples ago.
-                cd[:, offset + lags[j] - 1] += d[:, j]
-            offset += lags[j]
-    return DiscretePlant(a=ad, b=bd, c=cd, ts_s=ts_s, input_names=tuple(input_names),
-                         output_names=tuple(output_names), n_plant_states=n,
-                         input_delay_samples=tuple(delays))
+    return ad, bd
+
+
+def _add_feedthrough(cd: np.ndarray, d: np.ndarray, *, n_plant_states: int, lags: Sequence[int],
+                     input_names: Sequence[str]) -> None:
+    """Add the direct feedthrough ``d`` (p, m) to ``cd`` in place, on the register states.
+
+    Raises
+    ------
+    ValueError
+        ``d``'s shape is not (p, m), or an input with feedthrough has no delay.
+    """
+    m = len(lags)
+    if d.shape != (cd.shape[0], m):
+        raise ValueError(f"d has shape {d.shape}, expected {(cd.shape[0], m)}")
+    offset = n_plant_states
+    for j in range(m):
+        if np.any(d[:, j] != 0.0):
+            if lags[j] == 0:
+                raise ValueError(f"input {input_names[j]} has a direct feedthrough and no "
+                                 "delay: the sampled loop would have an algebraic loop")
+            # u(kT - tau) with the hold is the command issued lags_j samples ago.
+            cd[:, offset + lags[j] - 1] += d[:, j]
+        offset += lags[j]
