@@ -263,6 +263,151 @@ def _modes_from(theta: NDArray[np.float64], cov: NDArray[np.float64],
     return tuple(modes)
 
 
+# --------------------------------------------------------------------------- designs
+@dataclass(frozen=True)
+class _Records:
+    """The checked records and options of :func:`estimate_modes`."""
+
+    u: NDArray[np.float64]  # (N, m) inputs
+    y: NDArray[np.float64]  # (N, p) outputs
+    input_names: tuple[str, ...]
+    output_names: tuple[str, ...]
+    guesses: list[tuple[float, float]]  # (f0 [Hz], xi) per mode
+    band: tuple[float, float]  # [Hz]
+
+
+def _checked_records(inputs: ArrayLike, outputs: ArrayLike, *, input_names: Sequence[str],
+                     output_names: Sequence[str], initial: Sequence[tuple[float, float]],
+                     fs_hz: float, band_hz: tuple[float, float] | None,
+                     relative_half_width: float, background_order: int) -> _Records:
+    """:func:`estimate_modes`'s arguments checked (its ``ValueError`` cases but the bins')."""
+    u = _as_matrix(inputs, "inputs")
+    y = _as_matrix(outputs, "outputs")
+    if u.shape[0] != y.shape[0]:
+        raise ValueError(f"inputs have {u.shape[0]} samples, outputs {y.shape[0]}")
+    in_names = _names(input_names, u.shape[1], "input_names")
+    out_names = _names(output_names, y.shape[1], "output_names")
+    guesses = _check_initial(initial)
+    fs = float(fs_hz)
+    band = _band(guesses, band_hz, relative_half_width)
+    if not 0.0 < band[0] < band[1] < fs / 2.0:
+        raise ValueError(f"band_hz must satisfy 0 < lo < hi < fs/2, got {band}")
+    if background_order < 0:
+        raise ValueError(f"background_order must be >= 0, got {background_order}")
+    return _Records(u, y, in_names, out_names, guesses, band)
+
+
+@dataclass(frozen=True, eq=False)
+class _RecordBand:
+    """The records' unitary DFT in the band and the output-error model's columns there."""
+
+    fs: float  # sampling frequency [Hz]
+    n: int  # samples in the records
+    f: NDArray[np.float64]  # the band's bins [Hz]
+    q: NDArray[np.complex128]  # exp(-j 2 pi f / fs)
+    uf: NDArray[np.complex128]  # (K, m) inputs' DFT
+    target: NDArray[np.float64]  # (2K, p) outputs' DFT, real over imaginary parts
+    fixed: NDArray[np.float64]  # the background's columns P(x) U and Q(x)
+
+    @property
+    def per_mode(self) -> int:
+        """Columns of one mode: (b1, b2) per input, then (c0, c1)."""
+        return 2 * self.uf.shape[1] + 2
+
+    def n_linear(self, n_modes: int) -> int:
+        """Linear parameters of the model with ``n_modes`` modes."""
+        return self.fixed.shape[1] + self.per_mode * n_modes
+
+    def variable(self, f0: float, xi: float) -> NDArray[np.float64]:
+        """One mode's columns: ``(b1 q + b2 q²) U / A`` per input, then ``(c0 + c1 q) / A``."""
+        q = self.q
+        a = _discrete_denominator(q, f0, xi, 1.0 / self.fs)
+        cols = [qk * self.uf[:, j] / a for j in range(self.uf.shape[1]) for qk in (q, q * q)]
+        return _real_columns([*cols, 1.0 / a, q / a])
+
+
+def _record_band(u: NDArray[np.float64], y: NDArray[np.float64], *, fs: float,
+                 band: tuple[float, float], background_order: int,
+                 guesses: list[tuple[float, float]]) -> _RecordBand:
+    """The DFT bins of ``u``, ``y`` in ``band`` [Hz] and the model's design (module notes).
+
+    Raises ``ValueError`` when the band holds too few bins for the parameters.
+    """
+    n = u.shape[0]
+    f_all = np.arange(n // 2 + 1) * fs / n
+    sel = (f_all >= band[0]) & (f_all <= band[1])
+    f = f_all[sel]
+    scale = 1.0 / np.sqrt(n)  # unitary DFT: white noise of variance s^2 -> E|E_k|^2 = s^2
+    uf = np.fft.rfft(u, axis=0)[sel] * scale
+    yf = np.fft.rfft(y, axis=0)[sel] * scale
+    q = np.exp(-2j * np.pi * f / fs)
+    x = (f - 0.5 * (band[0] + band[1])) / (0.5 * (band[1] - band[0]))
+    powers = [x**k for k in range(background_order + 1)]
+    fixed = _complex_columns([pk * uf[:, j] for j in range(u.shape[1]) for pk in powers]
+                             + powers)
+    target = np.column_stack([np.concatenate([yf[:, o].real, yf[:, o].imag])
+                              for o in range(y.shape[1])])
+    dft = _RecordBand(fs=fs, n=n, f=f, q=q, uf=uf, target=target, fixed=fixed)
+    n_cols = dft.n_linear(len(guesses))
+    if 2 * f.size < 2 * (n_cols + 2 * len(guesses)):
+        raise ValueError(f"band {band} Hz holds {f.size} bins, too few for {n_cols} "
+                         "parameters; widen it or use a longer record")
+    return dft
+
+
+def _record_noise_levels(res: NDArray[np.float64], dft: _RecordBand,
+                         output_names: tuple[str, ...], *, n_modes: int
+                         ) -> tuple[list[tuple[str, float]], list[tuple[str, float]]]:
+    """Each output's residual PSD [output²/Hz, one-sided] and relative residual norm.
+
+    ``res`` is (2K, p), real over imaginary parts, of the fit of ``n_modes`` modes on ``dft``.
+    """
+    target, fs = dft.target, dft.fs
+    dof = max(dft.f.size * 2 - dft.n_linear(n_modes), 1)
+    # E|E_k|^2 per bin = sum of squares / (dof / 2) complex dof; one-sided PSD = 2 E|E_k|^2 / fs.
+    psd = [(name, float(4.0 * np.sum(res[:, o] ** 2) / dof / fs))
+           for o, name in enumerate(output_names)]
+    rel = [(name, float(np.linalg.norm(res[:, o]) / np.linalg.norm(target[:, o])))
+           for o, name in enumerate(output_names)]
+    return psd, rel
+
+
+@dataclass(frozen=True, eq=False)
+class _FrfColumns:
+    """One mode's columns of :func:`fit_frf_modes`'s model: ``q / A`` and ``q² / A``."""
+
+    q: NDArray[np.complex128]  # exp(-j 2 pi f / fs) of the band's lines
+    fs: float  # sampling frequency [Hz]
+
+    def variable(self, f0: float, xi: float) -> NDArray[np.float64]:
+        """The columns of the mode ``(f0 [Hz], xi)``."""
+        a = _discrete_denominator(self.q, f0, xi, 1.0 / self.fs)
+        return _real_columns([self.q / a, self.q * self.q / a])
+
+
+@dataclass(frozen=True, eq=False)
+class _PeakGains:
+    """``|B/A|`` of each mode's term at its ``f0``, for each path, from the linear fit."""
+
+    fs: float  # sampling frequency [Hz]
+    output_names: tuple[str, ...]
+    input_names: tuple[str, ...]
+    coef: NDArray[np.float64]  # (n_cols, outputs): per mode, (b1, b2) of each input first
+    per_mode: int  # columns of one mode
+
+    def gains(self, i: int, f0: float, xi: float) -> tuple[tuple[str, str, float], ...]:
+        """(output, input, gain) of mode ``i`` at ``f0`` [Hz], damping ``xi``."""
+        q0 = np.exp(-2j * np.pi * f0 / self.fs)
+        a0 = _discrete_denominator(np.array([q0]), f0, xi, 1.0 / self.fs)[0]
+        out = []
+        for o, oname in enumerate(self.output_names):
+            for j, iname in enumerate(self.input_names):
+                k = i * self.per_mode + 2 * j
+                b1, b2 = self.coef[k:k + 2, o]
+                out.append((oname, iname, float(abs((b1 * q0 + b2 * q0 * q0) / a0))))
+        return tuple(out)
+
+
 # --------------------------------------------------------------------------- public API
 def estimate_modes(
     inputs: ArrayLike,
@@ -322,72 +467,28 @@ def estimate_modes(
         A fitted mode lies within two half-power bandwidths of the band's edge
         (the band probably misses the mode).
     """
-    u = _as_matrix(inputs, "inputs")
-    y = _as_matrix(outputs, "outputs")
-    if u.shape[0] != y.shape[0]:
-        raise ValueError(f"inputs have {u.shape[0]} samples, outputs {y.shape[0]}")
-    in_names = _names(input_names, u.shape[1], "input_names")
-    out_names = _names(output_names, y.shape[1], "output_names")
-    guesses = _check_initial(initial)
-    fs = float(fs_hz)
-    band = _band(guesses, band_hz, relative_half_width)
-    if not 0.0 < band[0] < band[1] < fs / 2.0:
-        raise ValueError(f"band_hz must satisfy 0 < lo < hi < fs/2, got {band}")
-    if background_order < 0:
-        raise ValueError(f"background_order must be >= 0, got {background_order}")
-    n = u.shape[0]
-    f_all = np.arange(n // 2 + 1) * fs / n
-    sel = (f_all >= band[0]) & (f_all <= band[1])
-    f = f_all[sel]
-    scale = 1.0 / np.sqrt(n)  # unitary DFT: white noise of variance s^2 -> E|E_k|^2 = s^2
-    uf = np.fft.rfft(u, axis=0)[sel] * scale
-    yf = np.fft.rfft(y, axis=0)[sel] * scale
-    q = np.exp(-2j * np.pi * f / fs)
-    x = (f - 0.5 * (band[0] + band[1])) / (0.5 * (band[1] - band[0]))
-    powers = [x**k for k in range(background_order + 1)]
-    fixed = _complex_columns([pk * uf[:, j] for j in range(u.shape[1]) for pk in powers]
-                             + powers)
-
-    def variable(f0: float, xi: float) -> NDArray[np.float64]:
-        a = _discrete_denominator(q, f0, xi, 1.0 / fs)
-        cols = [qk * uf[:, j] / a for j in range(u.shape[1]) for qk in (q, q * q)]
-        return _real_columns([*cols, 1.0 / a, q / a])
-
-    n_cols = fixed.shape[1] + variable(*guesses[0]).shape[1] * len(guesses)
-    if 2 * f.size < 2 * (n_cols + 2 * len(guesses)):
-        raise ValueError(f"band {band} Hz holds {f.size} bins, too few for {n_cols} "
-                         "parameters; widen it or use a longer record")
-    target = np.column_stack([np.concatenate([yf[:, o].real, yf[:, o].imag])
-                              for o in range(y.shape[1])])
-    problem = _Problem(y=target, fixed=fixed, variable=variable, n_modes=len(guesses))
+    rec = _checked_records(inputs, outputs, input_names=input_names,
+                           output_names=output_names, initial=initial, fs_hz=fs_hz,
+                           band_hz=band_hz, relative_half_width=relative_half_width,
+                           background_order=background_order)
+    fs, guesses, band = float(fs_hz), rec.guesses, rec.band
+    dft = _record_band(rec.u, rec.y, fs=fs, band=band, background_order=background_order,
+                       guesses=guesses)
+    problem = _Problem(y=dft.target, fixed=dft.fixed, variable=dft.variable,
+                       n_modes=len(guesses))
     sol = _solve(problem, guesses, band, search_fraction)
-    theta, cov, nfev, ok = sol.theta, sol.cov, sol.n_evaluations, sol.success
-    lin = problem.linear_fit(theta)
-    coef, res = lin.coef, lin.residual
-    per_mode = variable(*guesses[0]).shape[1]
-
-    def peak(i: int, f0: float, xi: float) -> tuple[tuple[str, str, float], ...]:
-        q0 = np.exp(-2j * np.pi * f0 / fs)
-        a0 = _discrete_denominator(np.array([q0]), f0, xi, 1.0 / fs)[0]
-        out = []
-        for o, oname in enumerate(out_names):
-            for j, iname in enumerate(in_names):
-                b1, b2 = coef[i * per_mode + 2 * j:i * per_mode + 2 * j + 2, o]
-                out.append((oname, iname, float(abs((b1 * q0 + b2 * q0 * q0) / a0))))
-        return tuple(out)
-
-    dof = max(f.size * 2 - n_cols, 1)
-    # E|E_k|^2 per bin = sum of squares / (dof / 2) complex dof; one-sided PSD = 2 E|E_k|^2 / fs.
-    psd = [(name, float(4.0 * np.sum(res[:, o] ** 2) / dof / fs))
-           for o, name in enumerate(out_names)]
-    rel = [(name, float(np.linalg.norm(res[:, o]) / np.linalg.norm(target[:, o])))
-           for o, name in enumerate(out_names)]
+    lin = problem.linear_fit(sol.theta)
+    peaks = _PeakGains(fs=fs, output_names=rec.output_names, input_names=rec.input_names,
+                       coef=lin.coef, per_mode=dft.per_mode)
+    psd, rel = _record_noise_levels(lin.residual, dft, rec.output_names,
+                                    n_modes=len(guesses))
     return ModalEstimate(
-        modes=_modes_from(theta, cov, guesses, band, peak), method="fd-output-error",
-        band_hz=band, n_frequencies=int(f.size), frequency_resolution_hz=fs / n,
-        input_names=in_names, output_names=out_names, background_order=background_order,
-        noise_level=tuple(psd), relative_residual=tuple(rel), n_function_evaluations=nfev,
-        converged=ok)
+        modes=_modes_from(sol.theta, sol.cov, guesses, band, peaks.gains),
+        method="fd-output-error", band_hz=band, n_frequencies=int(dft.f.size),
+        frequency_resolution_hz=fs / dft.n, input_names=rec.input_names,
+        output_names=rec.output_names, background_order=background_order,
+        noise_level=tuple(psd), relative_residual=tuple(rel),
+        n_function_evaluations=sol.n_evaluations, converged=sol.success)
 
 
 def fit_frf_modes(
@@ -444,33 +545,24 @@ def fit_frf_modes(
     q = np.exp(-2j * np.pi * f / fs)
     x = (f - 0.5 * (band[0] + band[1])) / (0.5 * (band[1] - band[0]))
     fixed = _complex_columns([x**k for k in range(background_order + 1)])
-
-    def variable(f0: float, xi: float) -> NDArray[np.float64]:
-        a = _discrete_denominator(q, f0, xi, 1.0 / fs)
-        return _real_columns([q / a, q * q / a])
-
     n_cols = fixed.shape[1] + 2 * len(guesses)
     if f.size < n_cols + 2 * len(guesses):
         raise ValueError(f"band {band} Hz holds {f.size} bins, too few for {n_cols} parameters")
     target = np.concatenate([h.real, h.imag])[:, None]
-    problem = _Problem(y=target, fixed=fixed, variable=variable, n_modes=len(guesses))
+    problem = _Problem(y=target, fixed=fixed, variable=_FrfColumns(q=q, fs=fs).variable,
+                       n_modes=len(guesses))
     sol = _solve(problem, guesses, band, search_fraction)
-    theta, cov, nfev, ok = sol.theta, sol.cov, sol.n_evaluations, sol.success
-    lin = problem.linear_fit(theta)
-    coef, res = lin.coef, lin.residual
-
-    def peak(i: int, f0: float, xi: float) -> tuple[tuple[str, str, float], ...]:
-        q0 = np.exp(-2j * np.pi * f0 / fs)
-        a0 = _discrete_denominator(np.array([q0]), f0, xi, 1.0 / fs)[0]
-        b1, b2 = coef[2 * i:2 * i + 2, 0]
-        return ((output_name, input_name, float(abs((b1 * q0 + b2 * q0 * q0) / a0))),)
-
+    lin = problem.linear_fit(sol.theta)
+    res = lin.residual
+    peaks = _PeakGains(fs=fs, output_names=(output_name,), input_names=(input_name,),
+                       coef=lin.coef, per_mode=2)
     rms = float(np.sqrt(np.sum(res**2) / max(f.size, 1)))
     rel = float(np.linalg.norm(res) / np.linalg.norm(target))
     return ModalEstimate(
-        modes=_modes_from(theta, cov, guesses, band, peak), method="frf-fit", band_hz=band,
-        n_frequencies=int(f.size),
+        modes=_modes_from(sol.theta, sol.cov, guesses, band, peaks.gains), method="frf-fit",
+        band_hz=band, n_frequencies=int(f.size),
         frequency_resolution_hz=float(np.median(np.diff(f))) if f.size > 1 else float("nan"),
         input_names=(input_name,), output_names=(output_name,),
         background_order=background_order, noise_level=((output_name, rms),),
-        relative_residual=((output_name, rel),), n_function_evaluations=nfev, converged=ok)
+        relative_residual=((output_name, rel),), n_function_evaluations=sol.n_evaluations,
+        converged=sol.success)
