@@ -199,7 +199,7 @@ def calibrate_qd(ds: xr.Dataset, *, axis: str, metrology_gain_rad_per_v: float,
     # The ESRF study's straight line without the trend, kept to compare with its numbers.
     seed_slope = float(np.linalg.lstsq(design[:, :2], y, rcond=None)[0][1])
     gain, gain_std = float(a), sandwich2.std(1)
-    cubic = _cubic_compression(x, y, trend)
+    cubic = _cubic_compression(x, y, trend=trend)
     if cubic.significant:
         b, gain, gain_std = cubic.offset_v, cubic.gain_v_per_rad, cubic.gain_std_v_per_rad
         resid = cubic.residual_v
@@ -236,7 +236,7 @@ class _CubicFit:
     residual_v: np.ndarray
 
 
-def _cubic_compression(x: np.ndarray, y: np.ndarray, trend: np.ndarray) -> _CubicFit:
+def _cubic_compression(x: np.ndarray, y: np.ndarray, *, trend: np.ndarray) -> _CubicFit:
     """The cubic fit of a 4QD's compression and whether it replaces the straight line.
 
     Parameters

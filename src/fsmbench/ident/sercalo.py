@@ -506,7 +506,7 @@ def refit_with_poles(sid: SercaloIdentification, *, poles: Mapping[str, complex]
     for target in poles.values():
         w[np.abs(f - abs(target) / (2 * np.pi)) < lobe_hz] = 0.0
     s = 2j * np.pi * f
-    linear = fit_residues(s, h, w, new_poles)
+    linear = fit_residues(s, h, w=w, poles=new_poles)
     residues, d = linear.residues, linear.d
     model = np.einsum("nf,npm->fpm", 1 / (s[None, :] - new_poles[:, None]), residues) + d
     num = np.sqrt(np.sum(np.abs(w * (model - h)) ** 2, axis=0))

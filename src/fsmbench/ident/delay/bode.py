@@ -335,7 +335,7 @@ def estimate_delay_from_response(
         f[band], np.abs(h[band]), at_hz=f[good], fit_mask=bins.fit_mask[band],
         tail_ratio=tail_ratio, low_frequency_slope=low_frequency_slope,
         high_frequency_slope=high_frequency_slope)
-    line = _phase_line(f[good], h[good], phase_min, 1.0 / bins.sigma[good] ** 2)
+    line = _phase_line(f[good], h[good], phase_min=phase_min, w=1.0 / bins.sigma[good] ** 2)
     k = int(np.round(line.coef[0] / np.pi))
     return DelayEstimate(
         delay_s=float(line.coef[1]),
@@ -407,7 +407,7 @@ class _PhaseLine:
     err: NDArray[np.float64]  # the kept bins' residuals [rad]
 
 
-def _phase_line(fg: NDArray[np.float64], hg: NDArray[np.complex128],
+def _phase_line(fg: NDArray[np.float64], hg: NDArray[np.complex128], *,
                 phase_min: NDArray[np.float64], w: NDArray[np.float64]) -> _PhaseLine:
     """Weighted line fit, outliers cut, of ``arg hg - phase_min`` over ``fg`` [Hz].
 

@@ -201,9 +201,9 @@ class _PathModel:
 class _OwnStart:
     """Start, scale and bounds of the pairs' parameters (:class:`_PathModel`'s ``x[:n_own]``)."""
 
-    x: list[float]
-    scale: list[float]
-    lower: FloatArray
+    x: list[float]  # own pair's frequency [Hz] and damping, then every pair's c0
+    scale: list[float]  # their typical magnitudes
+    lower: FloatArray  # their bounds
     upper: FloatArray
     d0: float  # the vector fit's constant term on the path (units of the path)
     scale_gain: float  # scale of the tail's gain or the constant term (units of the path)

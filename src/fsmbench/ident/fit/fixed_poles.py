@@ -34,8 +34,8 @@ class FixedPoleFit:
     d: NDArray[np.float64]
 
 
-def fit_residues(s: NDArray[np.complex128], h: NDArray[np.complex128], w: NDArray[np.float64],
-                 poles: NDArray[np.complex128]) -> FixedPoleFit:
+def fit_residues(s: NDArray[np.complex128], h: NDArray[np.complex128], *,
+                 w: NDArray[np.float64], poles: NDArray[np.complex128]) -> FixedPoleFit:
     """Residues and ``D`` of each element by weighted linear least squares.
 
     Parameters

@@ -153,7 +153,7 @@ def fit_qd_terms(band: QdBand, xs: list[FloatArray], *, qd: QuadDiodeParams) -> 
     return QdTerms(tuple(fits), mask, f_min, f_min_measured, mains, drift, walk, lines, engine)
 
 
-def _line(band: QdBand, ch: int, f0: float, bb: Broadband) -> tuple[float, float, float]:
+def _line(band: QdBand, ch: int, *, f0: float, bb: Broadband) -> tuple[float, float, float]:
     """:func:`line_excess` of the line at ``f0`` [Hz] on the 1 s spectrum over ``bb``."""
     return line_excess(band.s1, ch, f0,
                        lambda fr: bb.psd(fr, np.full_like(fr, band.s1.t_w), band.fs))
@@ -167,7 +167,7 @@ def _mains_family(band: QdBand, fits: list[AxisFit], *,
     for f0, other in ((50.0, 60.0), (60.0, 50.0)):
         for m, ch in ((m, ch) for m in harmonics[f0] for ch in (0, 1)):
             if abs(m * f0 - other * round(m * f0 / other)) > 2 * LINE_HALF_HZ:  # not shared
-                ex, sd0, _ = _line(band, ch, m * f0, fits[ch].broadband)
+                ex, sd0, _ = _line(band, ch, f0=m * f0, bb=fits[ch].broadband)
                 scores[f0] += (ex / sd0) ** 2 if ex > Z_LINE * sd0 else 0.0
     return max(scores, key=lambda k: scores[k]) if max(scores.values()) > 0 else None
 
@@ -222,7 +222,7 @@ def _mains_lines(band: QdBand, fits: list[AxisFit], *, mains: float | None,
     lines: dict[str, tuple[Estimate, ...]] = dict.fromkeys(AXES, ())
     engine: tuple[float, ...] = ()
     if mains:
-        raw = {a: [line_estimate(*_line(band, ch, m * mains, fits[ch].broadband))
+        raw = {a: [line_estimate(*_line(band, ch, f0=m * mains, bb=fits[ch].broadband))
                    for m in harmonics[mains]] for ch, a in enumerate(AXES)}
         top = max((i + 1 for a in AXES for i, e in enumerate(raw[a]) if e.significant), default=0)
         lines = {a: tuple(raw[a][:top]) for a in AXES}
