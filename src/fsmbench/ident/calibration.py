@@ -198,8 +198,56 @@ def calibrate_qd(ds: xr.Dataset, *, axis: str, metrology_gain_rad_per_v: float,
     sandwich2 = spectral_sandwich(design, resid, columns=[1])
     # The ESRF study's straight line without the trend, kept to compare with its numbers.
     seed_slope = float(np.linalg.lstsq(design[:, :2], y, rcond=None)[0][1])
-    gain, gain_std, cubic = float(a), sandwich2.std(1), 0.0
-    cubic_std = 0.0
+    gain, gain_std = float(a), sandwich2.std(1)
+    cubic = _cubic_compression(x, y, trend=trend)
+    if cubic.significant:
+        b, gain, gain_std = cubic.offset_v, cubic.gain_v_per_rad, cubic.gain_std_v_per_rad
+        resid = cubic.residual_v
+    syy = float(np.sum((y - y.mean()) ** 2))
+    cross, cross_std = _cross_slope(rec, design, axis=axis)
+    return QdCalibration(
+        axis=axis, gain_v_per_rad=gain, offset_v=float(b),
+        gain_std_v_per_rad=gain_std, linear_slope_v_per_rad=seed_slope,
+        cubic_v_per_rad3=cubic.cubic_v_per_rad3, cubic_std_v_per_rad3=cubic.cubic_std_v_per_rad3,
+        r_squared=float(1.0 - float(resid @ resid) / syy) if syy > 0 else float("nan"),
+        residual_rms_v=float(np.sqrt(np.mean(resid**2))), n_samples=int(n),
+        beam_angle_range_rad=float(np.ptp(x)), trim_s=float(trim_s),
+        metrology_gain_rad_per_v=float(metrology_gain_rad_per_v),
+        beam_factor=float(beam_factor), experiment=name,
+        cross_slope_v_per_rad=float(cross), cross_slope_std_v_per_rad=float(cross_std))
+
+
+@dataclass(frozen=True)
+class _CubicFit:
+    """``y = b + a x + c x³ (+ trend)`` of a calibration sweep (see :func:`_cubic_compression`).
+
+    ``significant``: the cubic term is kept, and ``offset_v``, ``gain_v_per_rad``,
+    ``gain_std_v_per_rad``, ``residual_v`` replace the straight line's; otherwise
+    ``cubic_v_per_rad3`` is 0 and ``cubic_std_v_per_rad3`` the bound on the
+    compression the record leaves undetected.
+    """
+
+    significant: bool
+    offset_v: float
+    gain_v_per_rad: float
+    gain_std_v_per_rad: float
+    cubic_v_per_rad3: float
+    cubic_std_v_per_rad3: float
+    residual_v: np.ndarray
+
+
+def _cubic_compression(x: np.ndarray, y: np.ndarray, *, trend: np.ndarray) -> _CubicFit:
+    """The cubic fit of a 4QD's compression and whether it replaces the straight line.
+
+    Parameters
+    ----------
+    x : ndarray, shape (N,)
+        Beam angle [rad].
+    y : ndarray, shape (N,)
+        4QD output [V].
+    trend : ndarray, shape (N,)
+        The normalised time ramp fitted with the line (the offset's drift).
+    """
     # A 4QD compresses towards the edges of its range (the spot leaves the quadrants): the
     # seed's straight line then averages the slope over the swing, ~1.5 % low for 2 %
     # compression. Fit y = b + a x + c x^3 as well, and take its small-signal slope a at the
@@ -213,34 +261,28 @@ def calibrate_qd(ds: xr.Dataset, *, axis: str, metrology_gain_rad_per_v: float,
     cov3 = sandwich3.covariance
     # ... and large enough to matter: 1e-4 of the line at full swing (a noise-free line's
     # rounding-level cubic is "significant" against a rounding-level residual).
-    if (n > 3 and abs(coef[2]) > 5 * math.sqrt(max(cov3[2, 2], 0.0))
+    if (x.size > 3 and abs(coef[2]) > 5 * math.sqrt(max(cov3[2, 2], 0.0))
             and abs(coef[2]) > 1e-4 * abs(coef[1])):
-        b, gain, gain_std = float(coef[0]), float(coef[1]) / scale, sandwich3.std(1) / scale
-        cubic = float(coef[2]) / scale**3
-        cubic_std = math.sqrt(cov3[2, 2]) / scale**3
-        resid = resid3
-    else:
-        # Not significant: the line is kept; the cubic term's bound (its std) says how much
-        # compression the record leaves undetected.
-        cubic_std = math.sqrt(max(cov3[2, 2], 0.0)) / scale**3
-    syy = float(np.sum((y - y.mean()) ** 2))
-    cross, cross_std = math.nan, math.nan
+        return _CubicFit(True, float(coef[0]), float(coef[1]) / scale,
+                         sandwich3.std(1) / scale, float(coef[2]) / scale**3,
+                         math.sqrt(cov3[2, 2]) / scale**3, resid3)
+    # Not significant: the line is kept; the cubic term's bound (its std) says how much
+    # compression the record leaves undetected.
+    return _CubicFit(False, math.nan, math.nan, math.nan, 0.0,
+                     math.sqrt(max(cov3[2, 2], 0.0)) / scale**3, resid3)
+
+
+def _cross_slope(rec: xr.Dataset, design: np.ndarray, *, axis: str) -> tuple[float, float]:
+    """Slope of the other axis's 4QD output on this sweep and its std [V/rad] (NaN without it).
+
+    ``design`` holds the straight line's columns (1, beam angle [rad], trend).
+    """
     other = _AXES["v" if axis == "h" else "h"][0]
-    if other in rec:
-        yo = np.asarray(rec[other].values, dtype=float)
-        coef_o, *_ = np.linalg.lstsq(design, yo, rcond=None)
-        cross = float(coef_o[1])
-        cross_std = spectral_sandwich(design, yo - design @ coef_o, columns=[1]).std(1)
-    return QdCalibration(
-        axis=axis, gain_v_per_rad=gain, offset_v=float(b),
-        gain_std_v_per_rad=gain_std, linear_slope_v_per_rad=seed_slope,
-        cubic_v_per_rad3=cubic, cubic_std_v_per_rad3=cubic_std,
-        r_squared=float(1.0 - float(resid @ resid) / syy) if syy > 0 else float("nan"),
-        residual_rms_v=float(np.sqrt(np.mean(resid**2))), n_samples=int(n),
-        beam_angle_range_rad=float(np.ptp(x)), trim_s=float(trim_s),
-        metrology_gain_rad_per_v=float(metrology_gain_rad_per_v),
-        beam_factor=float(beam_factor), experiment=name,
-        cross_slope_v_per_rad=float(cross), cross_slope_std_v_per_rad=float(cross_std))
+    if other not in rec:
+        return math.nan, math.nan
+    yo = np.asarray(rec[other].values, dtype=float)
+    coef_o, *_ = np.linalg.lstsq(design, yo, rcond=None)
+    return float(coef_o[1]), spectral_sandwich(design, yo - design @ coef_o, columns=[1]).std(1)
 
 
 @dataclass(frozen=True)

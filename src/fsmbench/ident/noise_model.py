@@ -64,22 +64,21 @@ from fsmbench.checks import Notice
 from fsmbench.ident.fit.noise_fitting import (
     DB,
     ERROR_BANDS_HZ,
-    LINE_HALF_HZ,
-    LR_TERM,
-    Z_LINE,
     Z_TERM,
-    Broadband,
     Estimate,
     Spectrum,
-    block_cov,
-    broadband,
-    drift_fit,
     groups,
-    line_estimate,
-    line_excess,
     smeared,
-    welch,
     whittle,
+)
+from fsmbench.ident.fit.qd_noise import (
+    MIN_LONG_S,
+    AxisFit,
+    QdBand,
+    QdTerms,
+    fit_qd_terms,
+    near_harmonics,
+    qd_band,
 )
 from fsmbench.jsonutil import plain_json, stamped
 from fsmbench.sim.spectra import flicker_psd, walk_psd
@@ -89,7 +88,7 @@ __all__ = ["ERROR_BANDS_HZ", "BandError", "Estimate", "NoiseModelFit", "fit_nois
 FloatArray = NDArray[np.float64]
 _FORMAT = ("fsmbench.noise_model", 1)
 _SIGNALS = ("Vph", "Vpv", "Va")
-_SPLIT_HZ, _VA_LO_HZ, _MIN_LONG_S = 4.0, 20.0, 8.0
+_VA_LO_HZ = 20.0
 _FLAG_DB = 1.5
 _ASSUMED = "assumed (bench file)"
 _OPEN = {f"data_huddle_test_{k}" for k, (closed, _, _) in HUDDLE_CONFIGS.items() if not closed}
@@ -298,12 +297,6 @@ def _open_tests(recordings: Mapping[str, xr.Dataset], notices: list[Notice]
     return used, xs, (rates[names[0]] if names else None)
 
 
-def _near(f: FloatArray, f0: float | None) -> NDArray[np.bool_]:
-    """Bins within the line half-width of a harmonic of f0 (none when f0 is None)."""
-    k = np.round(f / (f0 or 1.0))
-    return np.asarray((f0 is not None) & (k >= 1) & (np.abs(f - k * (f0 or 1.0)) <= LINE_HALF_HZ))
-
-
 def _errors(signal: str, f: FloatArray, p: FloatArray, s: FloatArray, g: FloatArray,
             src: FloatArray, fs: float) -> list[BandError]:
     """Fit error per band on the groups of :func:`_groups` (module notes)."""
@@ -462,141 +455,109 @@ def fit_noise_model(recordings: Mapping[str, xr.Dataset], *, params: BenchParams
     if fs != fs_eng:
         notices.append(Notice("rate", ", ".join(tests), f"records at {fs:g} Hz, bench file at "
                               f"{fs_eng:g} Hz: white noises are per sample at the file's rate"))
-    s1 = welch(xs, math.ceil(fs), fs)
-    # The long window: half the shortest record, at most 2**21 samples (memory of the FFTs).
-    sl = welch(xs, min(n_min // 2, 2**21), fs) if n_min / fs >= _MIN_LONG_S else None
-    f_hi = fs / 2 - 2.0 / s1.t_w
-    if qd.bandwidth_hz > 0:  # where the file's amplifier attenuates by 0.5 dB
-        f_hi = min(f_hi, qd.bandwidth_hz * (10**0.05 - 1) ** (0.5 / qd.bandwidth_order))
-    f_lo = 4.0 / sl.t_w if sl is not None else _SPLIT_HZ
-    parts = [(sp, np.flatnonzero((sp.f >= lo) & (sp.f < hi))) for sp, lo, hi in
-             ([(sl, f_lo, _SPLIT_HZ)] if sl is not None else []) + [(s1, _SPLIT_HZ, f_hi)]]
-    f, t_w, g, src = (np.concatenate(a) for a in zip(*[
-        (sp.f[i], np.full(i.size, sp.t_w), np.full(i.size, sp.g), np.full(i.size, float(k)))
-        for k, (sp, i) in enumerate(parts)], strict=True))
-    p = np.concatenate([sp.s[i][:, [0, 1], [0, 1]].real for sp, i in parts])  # (F, 2)
-    if sl is None:
+    band = qd_band(xs, fs=fs, qd=qd)
+    if band.sl is None:
         notices.append(Notice("other", "Vph, Vpv", f"records of {n_min / fs:.3g} s, shorter than "
-                              f"the {_MIN_LONG_S:g} s the 1/f fit needs: only the white floor "
+                              f"the {MIN_LONG_S:g} s the 1/f fit needs: only the white floor "
                               "was fitted; the 1/f noise is the bench file's"))
-
-    def axis_fit(ch: int, mask: NDArray[np.bool_], f_min: float,
-                 b2: float = 0.0) -> tuple[Broadband, Estimate]:
-        args = (f[mask], t_w[mask], p[mask, ch], g[mask], src[mask])
-        if sl is None:  # too short: white only, the file's 1/f
-            a = qd.flicker_asd_v_per_rthz[AXES[ch]]
-            return (broadband(*args, fs=fs, f_min=f_min, fit_flicker=False, a2=a * a, b2=b2),
-                    Estimate(a, a))
-        bb = broadband(*args, fs=fs, f_min=f_min, fit_flicker=True, b2=b2)
-        sd2, a = math.sqrt(bb.cov[1, 1]), math.sqrt(bb.a2)
-        est = Estimate(a, a, sd2 / (2 * a) if a else math.sqrt(sd2), bb.a2 > Z_TERM * sd2)
-        if est.significant:
-            return bb, est
-        return (broadband(*args, fs=fs, f_min=f_min, fit_flicker=False, b2=b2),
-                dataclasses.replace(est, value=0.0))
-
-    def line(ch: int, f0: float, bb: Broadband) -> tuple[float, float, float]:
-        return line_excess(s1, ch, f0, lambda fr: bb.psd(fr, np.full_like(fr, s1.t_w), fs))
-
-    # Broadband clear of both mains families, then the family, then refit without its lines.
-    fits = [axis_fit(ch, ~(_near(f, 50.0) | _near(f, 60.0)), qd.flicker_min_hz) for ch in (0, 1)]
-    harmonics = {f0: range(1, int((f_hi - LINE_HALF_HZ) // f0) + 1) for f0 in (50.0, 60.0)}
-    scores = dict.fromkeys(harmonics, 0.0)
-    for f0, other in ((50.0, 60.0), (60.0, 50.0)):
-        for m, ch in ((m, ch) for m in harmonics[f0] for ch in (0, 1)):
-            if abs(m * f0 - other * round(m * f0 / other)) > 2 * LINE_HALF_HZ:  # not shared
-                ex, sd0, _ = line(ch, m * f0, fits[ch][0])
-                scores[f0] += (ex / sd0) ** 2 if ex > Z_LINE * sd0 else 0.0
-    mains = max(scores, key=lambda k: scores[k]) if max(scores.values()) > 0 else None
-    mask, f_min, f_min_measured = ~_near(f, mains), qd.flicker_min_hz, False
-    fits = [axis_fit(ch, mask, f_min) for ch in (0, 1)]
-    if sl is not None and (sig_axes := [ch for ch in (0, 1) if fits[ch][1].significant]):
-        grid = np.geomspace(f_lo / 10, 1.0, max(2, math.ceil(4 * math.log10(10 / f_lo)) + 1))
-        nll = [sum(axis_fit(ch, mask, fm)[0].nll for ch in sig_axes) for fm in grid]
-        if 2 * (sum(fits[ch][0].nll for ch in sig_axes) - min(nll)) > LR_TERM:
-            f_min, f_min_measured = float(grid[int(np.argmin(nll))]), True
-            fits = [axis_fit(ch, mask, f_min) for ch in (0, 1)]
-    # Drift on means over whole seconds (whole mains cycles), at most 400 per test.
-    t_b = float(max(1, math.ceil(n_min / fs / 400)))
-    mb = round(t_b * fs)
-    nb = [x.shape[1] // mb for x in xs]
-    drift: dict[str, Estimate] = {}
-    walk: dict[str, Estimate] = {}
-    for ch, axis in enumerate(AXES):
-        stat = block_cov(max(nb), m=mb, fs=fs, white_var=fits[ch][0].w * fs / 2,
-                          a2=fits[ch][0].a2, f_min=f_min)
-        drift[axis], walk[axis] = drift_fit(
-            [x[ch, :n * mb].reshape(n, mb).mean(axis=1) for x, n in zip(xs, nb, strict=True)],
-            [stat[:n, :n] for n in nb], t_b)
-    if walk["h"].value or walk["v"].value:
-        fits = [axis_fit(ch, mask, f_min, walk[a].value ** 2) for ch, a in enumerate(AXES)]
-    lines: dict[str, tuple[Estimate, ...]] = dict.fromkeys(AXES, ())
-    engine: tuple[float, ...] = ()
-    if mains:
-        raw = {a: [line_estimate(*line(ch, m * mains, fits[ch][0])) for m in harmonics[mains]]
-               for ch, a in enumerate(AXES)}
-        top = max((i + 1 for a in AXES for i, e in enumerate(raw[a]) if e.significant), default=0)
-        lines = {a: tuple(raw[a][:top]) for a in AXES}
-        engine = tuple(math.hypot(lines["h"][i].value, lines["v"][i].value) / math.sqrt(2)
-                       for i in range(top))
-        notices.append(Notice("other", "Vph, Vpv", f"mains at {mains:g} Hz, {top} harmonic(s): "
-                              "the engine shares one amplitude per harmonic between the axes and "
-                              "gets the rms of the two axes' amplitudes (both reported)"))
+    terms = fit_qd_terms(band, xs, qd=qd)
+    if terms.mains:
+        notices.append(Notice("other", "Vph, Vpv", f"mains at {terms.mains:g} Hz, "
+                              f"{len(terms.engine)} harmonic(s): the engine shares one amplitude "
+                              "per harmonic between the axes and gets the rms of the two axes' "
+                              "amplitudes (both reported)"))
     # The Newport's angle noise from the 4QD–Va cross-spectrum (the file's if not resolved),
     # then the 4QD's own white noise: the floor less the ADC and that Newport share.
-    vsel = np.flatnonzero((s1.f >= _VA_LO_HZ) & (s1.f < f_hi) & ~_near(s1.f, mains))
+    s1, f_hi = band.s1, band.f_hi
+    vsel = np.flatnonzero((s1.f >= _VA_LO_HZ) & (s1.f < f_hi) & ~near_harmonics(s1.f, terms.mains))
     check = _newport(s1, vsel, params, gd, notices)
     adc = conv.lsb_v**2 / (6.0 * fs)
     newport = (gd**2 * (newport_beam_matrix(params) ** 2).sum(axis=1) * 2.0
                * check.value**2 / fs)
+    white, undetermined = _qd_white(terms.fits, adc=adc, newport=newport, fs_eng=fs_eng,
+                                    params=params, notices=notices)
+    va, va_floor, piston, s_va = _attocube(s1, vsel, params, check.value, fs_eng, notices)
+    errors = _fit_errors(band, terms, vsel=vsel, s_va=s_va, notices=notices)
+    prov = _provenance(tests, terms=terms, short=band.sl is None, newport=check.significant,
+                       identified=source == "identified", undetermined=undetermined)
+    fits = terms.fits
+    return NoiseModelFit(
+        tuple(tests), "", fs, fs_eng, gains, source, (band.f_lo, f_hi), (_VA_LO_HZ, f_hi), white,
+        {a: fits[ch].broadband.w for ch, a in enumerate(AXES)}, adc,
+        {a: float(newport[ch]) for ch, a in enumerate(AXES)},
+        {a: fits[ch].flicker for ch, a in enumerate(AXES)}, terms.f_min,
+        terms.mains or qd.mains_freq_hz, terms.lines, terms.engine, terms.drift, terms.walk, va,
+        va_floor, piston, check, tuple(errors), tuple(notices), prov)
+
+
+def _qd_white(fits: tuple[AxisFit, ...], *, adc: float, newport: FloatArray, fs_eng: float,
+              params: BenchParams, notices: list[Notice]
+              ) -> tuple[dict[str, Estimate], list[str]]:
+    """The 4QD's own white noise per axis [V rms per sample at ``fs_eng`` Hz] and the axes
+    whose floor does not exceed the ADC's ``adc`` and the Newport's ``newport`` [V²/Hz]."""
     white = {}
     undetermined = []
     for ch, axis in enumerate(AXES):
-        rms = math.sqrt(max(own := fits[ch][0].w - adc - newport[ch], 0.0) * fs_eng / 2)
-        sd = math.sqrt(fits[ch][0].cov[0, 0]) * fs_eng / (4 * rms) if rms else math.nan
+        rms = math.sqrt(max(own := fits[ch].broadband.w - adc - newport[ch], 0.0) * fs_eng / 2)
+        sd = math.sqrt(fits[ch].broadband.cov[0, 0]) * fs_eng / (4 * rms) if rms else math.nan
         white[axis] = Estimate(rms, rms, sd)
         if own <= 0:
             # The floor is all the ADC's and the Newport's (as its angle noise measured at
             # low frequency predicts it there): the records do not separate the 4QD's own
             # noise, which is not zero for that; the engine keeps the bench file's.
-            white[axis] = Estimate(float(qd.noise_rms_v[axis]), 0.0, math.nan,
+            white[axis] = Estimate(float(params.quad_diode.noise_rms_v[axis]), 0.0, math.nan,
                                    significant=False)
             undetermined.append(axis)
             notices.append(Notice(
                 "other", _SIGNALS[ch],
-                f"the white floor ({fits[ch][0].w:.3g} V²/Hz) is not above the ADC's and the "
-                f"Newport's share ({adc + newport[ch]:.3g} V²/Hz): the records do not separate "
-                "the 4QD's own white noise from the Newport's; the bench file's is kept "
-                "(assumed)"))
-    va, va_floor, piston, s_va = _attocube(s1, vsel, params, check.value, fs_eng, notices)
+                f"the white floor ({fits[ch].broadband.w:.3g} V²/Hz) is not above the ADC's and "
+                f"the Newport's share ({adc + newport[ch]:.3g} V²/Hz): the records do not "
+                "separate the 4QD's own white noise from the Newport's; the bench file's is "
+                "kept (assumed)"))
+    return white, undetermined
+
+
+def _fit_errors(band: QdBand, terms: QdTerms, *, vsel: NDArray[np.intp], s_va: FloatArray,
+                notices: list[Notice]) -> list[BandError]:
+    """The fit error per band of Vph, Vpv and Va (``s_va``: Va's model on ``vsel``); a
+    notice for each band flagged."""
+    f, t_w, p, g, src, mask, fs = band.f, band.t_w, band.p, band.g, band.src, terms.mask, band.fs
     errors = [e for ch in (0, 1) for e in _errors(
-        _SIGNALS[ch], f[mask], p[mask, ch], fits[ch][0].psd(f[mask], t_w[mask], fs), g[mask],
-        src[mask], fs)]
+        _SIGNALS[ch], f[mask], p[mask, ch], terms.fits[ch].broadband.psd(f[mask], t_w[mask], fs),
+        g[mask], src[mask], fs)]
+    s1 = band.s1
     errors += _errors("Va", s1.f[vsel], s1.s[vsel, 2, 2].real, s_va, np.full(vsel.size, s1.g),
                       np.zeros(vsel.size), fs)
-    notices += [Notice("other", e.signal, f"model misfit in {e.low_hz:g}–{e.high_hz:g} Hz: "
-                       f"median |error| {e.median_abs_db:.2f} dB (worst {e.worst_abs_db:.2f} "
-                       f"dB, Welch scatter {e.scatter_db:.2f} dB) > {_FLAG_DB:g} dB: a shape "
-                       "the engine cannot simulate (e.g. a resonance in the noise)")
-                for e in errors if e.flagged]
-    why = {"flicker_asd_v_per_rthz": "records too short" if sl is None else "",
-           "flicker_min_hz": "" if f_min_measured else "no flattening in the band",
-           "mains_freq_hz": "" if mains else "no significant mains line"}
+    notices.extend(
+        Notice("other", e.signal, f"model misfit in {e.low_hz:g}–{e.high_hz:g} Hz: median "
+               f"|error| {e.median_abs_db:.2f} dB (worst {e.worst_abs_db:.2f} dB, Welch scatter "
+               f"{e.scatter_db:.2f} dB) > {_FLAG_DB:g} dB: a shape the engine cannot simulate "
+               "(e.g. a resonance in the noise)")
+        for e in errors if e.flagged)
+    return errors
+
+
+def _provenance(tests: list[str], *, terms: QdTerms, short: bool, newport: bool,
+                identified: bool, undetermined: list[str]) -> dict[str, str]:
+    """Parameter → where its value comes from (``NoiseModelFit.provenance``).
+
+    ``short``: records too short for the 1/f fit; ``newport``: the cross-spectrum
+    resolved the Newport's angle noise; ``identified``: the 4QD gains were;
+    ``undetermined``: the axes whose own white noise is the bench file's.
+    """
+    why = {"flicker_asd_v_per_rthz": "records too short" if short else "",
+           "flicker_min_hz": "" if terms.f_min_measured else "no flattening in the band",
+           "mains_freq_hz": "" if terms.mains else "no significant mains line"}
     prov = {f"quad_diode.{k}": f"{_ASSUMED}: {why[k]}" if why.get(k) else
             f"measured ({', '.join(tests)})" for k in _KEYS}
     prov["attocube.noise_rms_m"] = f"measured ({', '.join(tests)})"
     prov |= dict.fromkeys(_INPUTS, _ASSUMED)
-    if check.significant:
+    if newport:
         prov["newport.angle_noise_rms_rad"] = (f"measured ({', '.join(tests)}: the 4QD–Va "
                                                "cross-spectrum)")
-    if source == "identified":
+    if identified:
         prov["quad_diode.gain_v_per_rad"] = "measured (identification)"
     if undetermined:
         prov["quad_diode.noise_rms_v"] = (f"{_ASSUMED}: not separated from the Newport's "
                                           f"noise ({', '.join(undetermined)})")
-    return NoiseModelFit(
-        tuple(tests), "", fs, fs_eng, gains, source, (f_lo, f_hi), (_VA_LO_HZ, f_hi), white,
-        {a: fits[ch][0].w for ch, a in enumerate(AXES)}, adc,
-        {a: float(newport[ch]) for ch, a in enumerate(AXES)},
-        {a: fits[ch][1] for ch, a in enumerate(AXES)}, f_min, mains or qd.mains_freq_hz, lines,
-        engine, drift, walk, va, va_floor, piston, check, tuple(errors), tuple(notices), prov)
+    return prov

@@ -33,6 +33,7 @@ from fsmbench.ident.delay.bode import DelayEstimate, estimate_delay, remove_dela
 from fsmbench.ident.delay.joint import JointFit
 from fsmbench.ident.delay.sampled import SensorLowpass
 from fsmbench.ident.delay.sercalo import joint_path_delays
+from fsmbench.ident.fit.fixed_poles import fit_residues
 from fsmbench.ident.fit.parameter_std import ParameterStd, sercalo_parameter_std
 from fsmbench.ident.fit.vectfit import VectorFit, VectorFitOptions, vector_fit
 from fsmbench.ident.fit.weights import (
@@ -280,6 +281,38 @@ def fit_sercalo(frf: FrequencyResponse, *, gi_a_per_v: Mapping[str, float],
     inputs, outputs = frf.input_names, frf.output_names
     if len(inputs) != 2 or len(outputs) != 2:
         raise ValueError(f"the Sercalo fit needs a 2x2 matrix, got {outputs} x {inputs}")
+    delays, opts = _phase_delays(frf, opts)
+    removed = _delay_to_remove(frf, delays, opts=opts, sensor=sensor)
+    clean = remove_delay(frf, removed.delay_s)
+    fit, resonances, opts = _converged_vector_fit(clean, opts)
+    weights = _weights(clean, resonances, opts)
+    f = clean.frequency_hz
+    h = clean.frf.values
+    keep = f > 0  # vector fitting works on s = j2πf; the DC bin carries no weight anyway
+    w = fit_weights(weights, h, keep, opts.weights)
+    gi = np.array([gi_a_per_v["h"], gi_a_per_v["v"]], dtype=float)
+    gc = _current_to_sensor(fit, gi)
+    model = np.zeros_like(h)
+    model[keep] = fit.response(f[keep])
+    model[~keep] = np.nan
+    err = relative_fit_error(clean, model)
+    pstd = _parameter_std(fit, clean, keep, w, resonances=resonances, gi=gi, fixed_poles=False)
+    return SercaloIdentification(frf=frf, delays=delays, delay_s=removed.delay_s,
+                                 delay_std_s=removed.delay_std_s, resonances_hz=resonances,
+                                 weights=weights, fit=fit,
+                                 gi_a_per_v={"h": float(gi[0]), "v": float(gi[1])}, gc=gc,
+                                 fit_error=err, options=opts, parameter_std=pstd,
+                                 joint_delays=removed.joint,
+                                 joint_delay_skipped=removed.joint_skipped)
+
+
+def _phase_delays(frf: FrequencyResponse, opts: SercaloFitOptions
+                  ) -> tuple[tuple[DelayEstimate, ...], SercaloFitOptions]:
+    """The direct paths' phase-only delays, and ``opts`` (a weak bench's fallback set).
+
+    Where no line reaches ``opts.min_coherence`` the lines down to
+    :data:`LOW_COHERENCE` are used, weighted by their own variances.
+    """
     try:
         delays = path_delays(frf, min_coherence=opts.min_coherence)
     except ValueError as exc:
@@ -293,64 +326,79 @@ def fit_sercalo(frf: FrequencyResponse, *, gi_a_per_v: Mapping[str, float],
             weights_fallback=(f"{exc.args[0].split(';')[0]}: the lines with coherence ≥ "
                               f"{LOW_COHERENCE:g}, weighted by their own variances, are used"))
         delays = path_delays(frf, min_coherence=opts.min_coherence)
+    return delays, opts
+
+
+@dataclass(frozen=True)
+class _RemovedDelay:
+    """The delay removed before the vector fit and how it was found."""
+
+    delay_s: float  # [s]
+    delay_std_s: float  # [s]
+    joint: tuple[JointFit, ...]  # the joint fits of the direct paths (empty: not made)
+    joint_skipped: str  # why there is no joint fit, in words ("" when there is)
+
+
+def _delay_to_remove(frf: FrequencyResponse, delays: tuple[DelayEstimate, ...], *,
+                     opts: SercaloFitOptions, sensor: SensorLowpass) -> _RemovedDelay:
+    """The imposed delay, the phase-only one, or the joint fits' combined effective delay.
+
+    ``delays`` are the direct paths' phase-only estimates; ``sensor`` the 4QD amplifier.
+    """
+    if opts.delay_s is not None:
+        return _RemovedDelay(float(opts.delay_s), 0.0, (), "the delay was imposed")
+    delay, delay_std = combined_delay(delays)
+    if not opts.joint_delay:
+        return _RemovedDelay(delay, delay_std, (), "disabled by option")
+    # The phase-only delay starts a first vector fit; each direct path is then fitted
+    # with its poles, its delay and the 4QD amplifier, and that delay is removed.
+    first = _vector_fit(remove_delay(frf, delay), opts)
+    if not first[0].converged and opts.weights == "seed":
+        retried = _vector_fit(remove_delay(frf, delay), _with_variance_weights(opts))
+        if retried[0].converged:
+            first = retried
     joint: tuple[JointFit, ...] = ()
-    joint_skipped = ""
-    if opts.delay_s is None:
-        delay, delay_std = combined_delay(delays)
-        if opts.joint_delay:
-            # The phase-only delay starts a first vector fit; each direct path is then fitted
-            # with its poles, its delay and the 4QD amplifier, and that delay is removed.
-            first = _vector_fit(remove_delay(frf, delay), opts)
-            if not first[0].converged and opts.weights == "seed":
-                retried = _vector_fit(remove_delay(frf, delay), _with_variance_weights(opts))
-                if retried[0].converged:
-                    first = retried
-            try:
-                joint = joint_path_delays(frf, fit=first[0], starts=delays,
-                                          resonances_hz=first[1], sensor=sensor,
-                                          min_coherence=opts.min_coherence)
-                delay, delay_std = _combined_effective(joint)
-            except ValueError as exc:
-                joint_skipped = f"the phase-only delay is used: {exc}"
-        else:
-            joint_skipped = "disabled by option"
-    else:
-        delay, delay_std = float(opts.delay_s), 0.0
-        joint_skipped = "the delay was imposed"
-    clean = remove_delay(frf, delay)
+    try:
+        joint = joint_path_delays(frf, fit=first[0], starts=delays,
+                                  resonances_hz=first[1], sensor=sensor,
+                                  min_coherence=opts.min_coherence)
+        delay, delay_std = _combined_effective(joint)
+    except ValueError as exc:
+        return _RemovedDelay(delay, delay_std, joint, f"the phase-only delay is used: {exc}")
+    return _RemovedDelay(delay, delay_std, joint, "")
+
+
+def _converged_vector_fit(clean: FrequencyResponse, opts: SercaloFitOptions
+                          ) -> tuple[VectorFit, dict[str, float], SercaloFitOptions]:
+    """The vector fit of the delay-free matrix, its resonances and ``opts`` as used.
+
+    With the seed's weights unconverged, the inverse-variance weights' fit when it
+    converges (``opts`` then says so in ``weights_fallback``).
+    """
     fit, resonances = _vector_fit(clean, opts)
-    if not fit.converged and opts.weights == "seed":
-        # The ESRF study's coherence weights let the poles wander on benches it was not
-        # tuned on (an independent simulator's: a second mode at 1850 Hz, a 4QD amplifier
-        # at 2 kHz gave a 376 Hz mode at 3.5 % damping for 411 Hz at 0.1 %); the lines'
-        # own inverse standard deviations converge there. Used only when they do.
-        alternative, alt_resonances = _vector_fit(clean, _with_variance_weights(opts))
-        if alternative.converged:
-            opts = dataclasses.replace(
-                _with_variance_weights(opts), weights_fallback=(
-                    f"the ESRF study's coherence weights did not converge in "
-                    f"{fit.iterations} iterations: inverse-variance weights used"))
-            fit, resonances = alternative, alt_resonances
-    weights = _weights(clean, resonances, opts)
-    f = clean.frequency_hz
-    h = clean.frf.values
-    keep = f > 0  # vector fitting works on s = j2πf; the DC bin carries no weight anyway
-    w = fit_weights(weights, h, keep, opts.weights)
+    if fit.converged or opts.weights != "seed":
+        return fit, resonances, opts
+    # The ESRF study's coherence weights let the poles wander on benches it was not
+    # tuned on (an independent simulator's: a second mode at 1850 Hz, a 4QD amplifier
+    # at 2 kHz gave a 376 Hz mode at 3.5 % damping for 411 Hz at 0.1 %); the lines'
+    # own inverse standard deviations converge there. Used only when they do.
+    alternative, alt_resonances = _vector_fit(clean, _with_variance_weights(opts))
+    if not alternative.converged:
+        return fit, resonances, opts
+    opts = dataclasses.replace(
+        _with_variance_weights(opts), weights_fallback=(
+            f"the ESRF study's coherence weights did not converge in "
+            f"{fit.iterations} iterations: inverse-variance weights used"))
+    return alternative, alt_resonances, opts
+
+
+def _current_to_sensor(fit: VectorFit, gi: np.ndarray) -> ct.StateSpace:
+    """``Gc``: ``Ich, Icv → Vpch, Vpcv`` [V/A], the fit's inputs divided by the gains ``gi``
+    [A/V] (h, v)."""
     fitted = fit.to_statespace()
-    gi = np.array([gi_a_per_v["h"], gi_a_per_v["v"]], dtype=float)
-    gc = ct.ss(fitted.A, np.asarray(fitted.B) / gi[None, :], fitted.C,
-               np.asarray(fitted.D) / gi[None, :], inputs=["Ich", "Icv"],
-               outputs=["Vpch", "Vpcv"], name="Gc")
-    model = np.zeros_like(h)
-    model[keep] = fit.response(f[keep])
-    model[~keep] = np.nan
-    err = relative_fit_error(clean, model)
-    pstd = _parameter_std(fit, clean, keep, w, resonances=resonances, gi=gi, fixed_poles=False)
-    return SercaloIdentification(frf=frf, delays=delays, delay_s=delay, delay_std_s=delay_std,
-                                 resonances_hz=resonances, weights=weights, fit=fit,
-                                 gi_a_per_v={"h": float(gi[0]), "v": float(gi[1])}, gc=gc,
-                                 fit_error=err, options=opts, parameter_std=pstd,
-                                 joint_delays=joint, joint_delay_skipped=joint_skipped)
+    return ct.ss(fitted.A, np.asarray(fitted.B) / gi[None, :], fitted.C,
+                 np.asarray(fitted.D) / gi[None, :], inputs=["Ich", "Icv"],
+                 outputs=["Vpch", "Vpcv"], name="Gc")
 
 
 #: Adjacent lines one Welch estimate correlates with a Hann window: its equivalent noise
@@ -448,15 +496,7 @@ def refit_with_poles(sid: SercaloIdentification, *, poles: Mapping[str, complex]
         ``fit_error`` recomputed.
     """
     fit = sid.fit
-    new_poles = np.array(fit.poles, dtype=complex)
-    cov = np.array(fit.pole_covariance, dtype=float)
-    for target in poles.values():
-        upper = [k for k in range(new_poles.size) if new_poles[k].imag > 0]
-        k = min(upper, key=lambda i: abs(new_poles[i] - target))
-        j = int(np.flatnonzero(np.isclose(new_poles, np.conj(new_poles[k])))[0])
-        new_poles[k], new_poles[j] = complex(target), complex(np.conj(target))
-        cov[[k, j], :] = np.nan
-        cov[:, [k, j]] = np.nan
+    new_poles, cov = _with_poles(fit, poles)
     f, h, w = _fit_inputs(sid)
     # The Welch estimate is smeared within about the window's main lobe
     # (±2 bins of 1/window_s) of a resonance: the sharper, correct poles
@@ -466,58 +506,16 @@ def refit_with_poles(sid: SercaloIdentification, *, poles: Mapping[str, complex]
     for target in poles.values():
         w[np.abs(f - abs(target) / (2 * np.pi)) < lobe_hz] = 0.0
     s = 2j * np.pi * f
-    cols = []
-    done: set[int] = set()
-    for k, a in enumerate(new_poles):
-        if k in done:
-            continue
-        if abs(a.imag) > 0:
-            j = int(np.flatnonzero(np.isclose(new_poles, np.conj(a)))[0])
-            done.update({k, j})
-            cols.append(1 / (s - a) + 1 / (s - np.conj(a)))
-            cols.append(1j / (s - a) - 1j / (s - np.conj(a)))
-        else:
-            done.add(k)
-            cols.append(1 / (s - a))
-    cols.append(np.ones_like(s))  # D
-    basis = np.column_stack(cols)
-    p, m = h.shape[1], h.shape[2]
-    residues = np.zeros((new_poles.size, p, m), dtype=complex)
-    d = np.zeros((p, m))
-    for i in range(p):
-        for jj in range(m):
-            ww = w[:, i, jj]
-            a_mat = basis * ww[:, None]
-            rhs = h[:, i, jj] * ww
-            x, *_ = np.linalg.lstsq(np.vstack([a_mat.real, a_mat.imag]),
-                                    np.concatenate([rhs.real, rhs.imag]), rcond=None)
-            col = 0
-            done.clear()
-            for k, a in enumerate(new_poles):
-                if k in done:
-                    continue
-                if abs(a.imag) > 0:
-                    j = int(np.flatnonzero(np.isclose(new_poles, np.conj(a)))[0])
-                    done.update({k, j})
-                    residues[k, i, jj] = x[col] + 1j * x[col + 1]
-                    residues[j, i, jj] = x[col] - 1j * x[col + 1]
-                    col += 2
-                else:
-                    done.add(k)
-                    residues[k, i, jj] = x[col]
-                    col += 1
-            d[i, jj] = x[col]
+    linear = fit_residues(s, h, w=w, poles=new_poles)
+    residues, d = linear.residues, linear.d
     model = np.einsum("nf,npm->fpm", 1 / (s[None, :] - new_poles[:, None]), residues) + d
     num = np.sqrt(np.sum(np.abs(w * (model - h)) ** 2, axis=0))
     den = np.sqrt(np.sum(np.abs(w * h) ** 2, axis=0))
     new_fit = dataclasses.replace(fit, poles=new_poles, residues=residues, d=d,
                                   e=np.zeros_like(d), pole_covariance=cov,
                                   rms_error=num / np.where(den > 0, den, 1.0))
-    fitted = new_fit.to_statespace()
     gi = np.array([sid.gi_a_per_v["h"], sid.gi_a_per_v["v"]])
-    gc = ct.ss(fitted.A, np.asarray(fitted.B) / gi[None, :], fitted.C,
-               np.asarray(fitted.D) / gi[None, :], inputs=["Ich", "Icv"],
-               outputs=["Vpch", "Vpcv"], name="Gc")
+    gc = _current_to_sensor(new_fit, gi)
     full = np.full(sid.frf.frf.shape, np.nan, dtype=complex)
     full[sid.frf.frequency_hz > 0] = model
     clean = remove_delay(sid.frf, sid.delay_s)
@@ -525,6 +523,21 @@ def refit_with_poles(sid: SercaloIdentification, *, poles: Mapping[str, complex]
                           resonances=sid.resonances_hz, gi=gi, fixed_poles=True)
     return dataclasses.replace(sid, fit=new_fit, gc=gc, parameter_std=pstd,
                                fit_error=relative_fit_error(clean, full))
+
+
+def _with_poles(fit: VectorFit, poles: Mapping[str, complex]) -> tuple[np.ndarray, np.ndarray]:
+    """The fit's poles with each of ``poles`` [rad/s] replacing the nearest upper one (and
+    its conjugate), and the pole covariance with their rows and columns NaN."""
+    new_poles = np.array(fit.poles, dtype=complex)
+    cov = np.array(fit.pole_covariance, dtype=float)
+    for target in poles.values():
+        upper = [k for k in range(new_poles.size) if new_poles[k].imag > 0]
+        k = min(upper, key=lambda i: abs(new_poles[i] - target))
+        j = int(np.flatnonzero(np.isclose(new_poles, np.conj(new_poles[k])))[0])
+        new_poles[k], new_poles[j] = complex(target), complex(np.conj(target))
+        cov[[k, j], :] = np.nan
+        cov[:, [k, j]] = np.nan
+    return new_poles, cov
 
 
 def with_frf(sid: SercaloIdentification, frf: FrequencyResponse, *,

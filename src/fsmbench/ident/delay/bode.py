@@ -327,6 +327,48 @@ def estimate_delay_from_response(
     """
     f = np.asarray(frequency_hz, dtype=float).ravel()
     h = np.asarray(response, dtype=complex).ravel()
+    bins = _fit_bins(f, h, band_hz=band_hz, coherence=coherence, phase_std_rad=phase_std_rad,
+                     min_coherence=min_coherence, bins_per_independent=bins_per_independent,
+                     max_points=max_points)
+    band, good = bins.band, bins.good
+    phase_min, n_lo, n_hi = bode_minimum_phase(
+        f[band], np.abs(h[band]), at_hz=f[good], fit_mask=bins.fit_mask[band],
+        tail_ratio=tail_ratio, low_frequency_slope=low_frequency_slope,
+        high_frequency_slope=high_frequency_slope)
+    line = _phase_line(f[good], h[good], phase_min=phase_min, w=1.0 / bins.sigma[good] ** 2)
+    k = int(np.round(line.coef[0] / np.pi))
+    return DelayEstimate(
+        delay_s=float(line.coef[1]),
+        std_s=float(np.sqrt(line.cov[1, 1] * bins.bins_per_independent)),
+        band_hz=bins.band_hz, method="bode-gain-phase", phase_offset_rad=float(line.coef[0]),
+        gain_sign=-1 if k % 2 else 1, n_frequencies=int(line.keep.sum()),
+        n_outliers=int((~line.keep).sum()), low_frequency_slope=float(n_lo),
+        high_frequency_slope=float(n_hi),
+        residual_rms_rad=float(np.sqrt(np.mean(line.err**2))), output=output, input=input,
+    )
+
+
+@dataclass(frozen=True)
+class _FitBins:
+    """Which bins of one path enter the Bode integral and the line fit (masks over all bins)."""
+
+    band_hz: tuple[float, float]  # the band [Hz]
+    band: NDArray[np.bool_]  # in the band, finite and non-zero: the Bode integral's bins
+    fit_mask: NDArray[np.bool_]  # usable (coherent, with a phase std): the tail fits' bins
+    good: NDArray[np.bool_]  # usable and thinned to max_points: the line fit's bins
+    sigma: NDArray[np.float64]  # phase std of every bin [rad] (1: equal weights)
+    bins_per_independent: float  # adjacent fitted bins per independent estimate, thinned
+
+
+def _fit_bins(f: NDArray[np.float64], h: NDArray[np.complex128], *,
+              band_hz: tuple[float, float], coherence: ArrayLike | None,
+              phase_std_rad: ArrayLike | None, min_coherence: float,
+              bins_per_independent: float, max_points: int) -> _FitBins:
+    """The checked band and the bins :func:`estimate_delay_from_response` uses (its parameters).
+
+    ``f`` [Hz] and ``h`` are the path's bins, flattened. Raises ``ValueError`` on bad
+    shapes, a bad band or ``bins_per_independent``, or fewer than 8 usable bins.
+    """
     if f.shape != h.shape:
         raise ValueError(f"frequency_hz {f.shape} and response {h.shape} differ in shape")
     lo, hi = (float(b) for b in band_hz)
@@ -352,13 +394,26 @@ def estimate_delay_from_response(
         thinned = np.zeros_like(good)
         thinned[np.flatnonzero(good)[::stride]] = True
         good, bins_per_independent = thinned, max(1.0, bins_per_independent / stride)
-    fb, hb = f[band], h[band]
-    phase_min, n_lo, n_hi = bode_minimum_phase(
-        fb, np.abs(hb), at_hz=f[good], fit_mask=fit_mask[band], tail_ratio=tail_ratio,
-        low_frequency_slope=low_frequency_slope, high_frequency_slope=high_frequency_slope)
-    fg = f[good]
-    resid = np.unwrap(np.angle(h[good] * np.exp(-1j * phase_min)))
-    w = 1.0 / sigma[good] ** 2
+    return _FitBins((lo, hi), band, fit_mask, good, sigma, bins_per_independent)
+
+
+@dataclass(frozen=True)
+class _PhaseLine:
+    """The line ``phi0 - 2 pi f tau`` fitted to the non-minimum phase."""
+
+    coef: NDArray[np.float64]  # (phi0 [rad], tau [s])
+    cov: NDArray[np.float64]  # their covariance, scaled by the reduced chi-square
+    keep: NDArray[np.bool_]  # the fitted bins the outlier cut left
+    err: NDArray[np.float64]  # the kept bins' residuals [rad]
+
+
+def _phase_line(fg: NDArray[np.float64], hg: NDArray[np.complex128], *,
+                phase_min: NDArray[np.float64], w: NDArray[np.float64]) -> _PhaseLine:
+    """Weighted line fit, outliers cut, of ``arg hg - phase_min`` over ``fg`` [Hz].
+
+    ``phase_min`` is the Bode minimum phase [rad] and ``w`` the weights [rad⁻²] at ``fg``.
+    """
+    resid = np.unwrap(np.angle(hg * np.exp(-1j * phase_min)))
     design = np.column_stack([np.ones_like(fg), -2.0 * np.pi * fg])
     keep = np.ones(fg.size, bool)
     for _ in range(3):  # fit, cut outliers, refit (stops when the cut is stable)
@@ -377,22 +432,7 @@ def estimate_delay_from_response(
     dof = max(int(keep.sum()) - 2, 1)
     chi2 = float(np.sum(w[keep] * err**2) / dof)
     cov = np.linalg.inv(design[keep].T @ (w[keep, None] * design[keep])) * chi2
-    k = int(np.round(coef[0] / np.pi))
-    return DelayEstimate(
-        delay_s=float(coef[1]),
-        std_s=float(np.sqrt(cov[1, 1] * bins_per_independent)),
-        band_hz=(lo, hi),
-        method="bode-gain-phase",
-        phase_offset_rad=float(coef[0]),
-        gain_sign=-1 if k % 2 else 1,
-        n_frequencies=int(keep.sum()),
-        n_outliers=int((~keep).sum()),
-        low_frequency_slope=float(n_lo),
-        high_frequency_slope=float(n_hi),
-        residual_rms_rad=float(np.sqrt(np.mean(err**2))),
-        output=output,
-        input=input,
-    )
+    return _PhaseLine(coef, np.asarray(cov, dtype=float), keep, err)
 
 
 def _same_shape(values: ArrayLike, f: NDArray[np.float64], what: str) -> NDArray[np.float64]:

@@ -261,54 +261,25 @@ def fit_jointly(f_hz: FloatArray, response: NDArray[np.complex128], sigma: Float
     stride = max(1, math.ceil(np.size(f_hz) / max_lines))
     f = np.asarray(f_hz, dtype=float)[::stride]
     h = np.asarray(response, dtype=complex)[::stride]
-    sig = np.asarray(sigma, dtype=float)[::stride]
     correlated_lines = max(1.0, correlated_lines / stride)
     t = 1.0 / fs_hz
     n_par = len(start)
-    lo = np.concatenate([lower, [0.5 * t]])
-    hi = np.concatenate([upper, [max(1.0, 100 * delay_start_s)]])
-    xs = np.concatenate([scale, [t]])
-
-    def residual(x: FloatArray, lowpass: SensorLowpass) -> FloatArray:
-        r = (sampled_response(path(x[:n_par]), f_hz=f, fs_hz=fs_hz, delay_s=x[n_par],
-                              sensor=lowpass) - h) / sig
-        return np.concatenate([r.real, r.imag])
-
-    def solve(x0: FloatArray, lowpass: SensorLowpass) -> _Solution:
-        x0 = np.clip(x0, lo, hi)
-        out = least_squares(residual, x0, args=(lowpass,), x_scale=xs, bounds=(lo, hi))
-        return _Solution(x=np.asarray(out.x), cost=float(np.sum(out.fun**2)),
-                         jac=np.asarray(out.jac))
-
+    problem = _PathProblem(path=path, f=f, h=h, sig=np.asarray(sigma, dtype=float)[::stride],
+                           fs_hz=fs_hz, n_par=n_par, lo=np.concatenate([lower, [0.5 * t]]),
+                           hi=np.concatenate([upper, [max(1.0, 100 * delay_start_s)]]),
+                           x_scale=np.concatenate([scale, [t]]))
     x_start = np.concatenate([np.asarray(start, dtype=float), [delay_start_s]])
-    prior = solve(x_start, sensor)
+    prior = problem.solve(x_start, sensor)
     m = 2 * f.size
     chi2 = prior.cost / max(1, m - n_par - 1)
     unit = max(chi2, 1e-300) * max(correlated_lines, 1.0)
     best, estimate = prior, SensorEstimate(order=sensor.order, bandwidth_hz=sensor.bandwidth_hz,
                                            source="bench model" if sensor.limited else "unlimited")
     if resolve_sensor:
-        best, estimate = _resolve(solve, prior=prior, sensor=sensor, fs_hz=fs_hz, unit=unit,
-                                  estimate=estimate, f_max_hz=float(f[-1]))
-    # Standard deviations of the path and the delay with the sensor as concluded; a fitted
-    # bandwidth is one more column (central difference), so that what it correlates with
-    # carries its share.
-    jac = best.jac[:, :n_par + 1]
-    if estimate.source == "fitted":
-        bw, step = estimate.bandwidth_hz, 1e-3 * estimate.bandwidth_hz
-        up = residual(best.x, SensorLowpass(bandwidth_hz=bw + step, order=estimate.order))
-        down = residual(best.x, SensorLowpass(bandwidth_hz=bw - step, order=estimate.order))
-        jac = np.column_stack([jac, (up - down) / (2 * step)])
-    norms = np.linalg.norm(jac, axis=0)
-    norms[norms == 0] = 1.0
-    js = jac / norms
-    final_chi2 = best.cost / max(1, m - jac.shape[1])
-    inv = np.linalg.pinv(js.T @ js)
-    factor = np.full(jac.shape[1], max(correlated_lines, 1.0))
-    if correlated_lines > 1.0:
-        factor = hac_factors(inv @ js.T, residual(best.x, estimate.lowpass), correlated_lines)
-    cov = inv / np.outer(norms, norms) * final_chi2
-    std = np.sqrt(np.clip(np.diag(cov) * factor, 0.0, None))
+        best, estimate = _resolve(problem.solve, prior=prior, sensor=sensor, fs_hz=fs_hz,
+                                  unit=unit, estimate=estimate, f_max_hz=float(f[-1]))
+    std, final_chi2 = _std_as_concluded(problem, best, estimate,
+                                        correlated_lines=correlated_lines)
     model = sampled_response(path(best.x[:n_par]), f_hz=f, fs_hz=fs_hz, delay_s=best.x[n_par],
                              sensor=estimate.lowpass)
     return JointFit(parameters=best.x[:n_par].copy(), parameter_std=std[:n_par],
@@ -318,6 +289,65 @@ def fit_jointly(f_hz: FloatArray, response: NDArray[np.complex128], sigma: Float
                     fit_error=float(np.sqrt(np.mean(np.abs((model - h) / h) ** 2))),
                     weighted_cost=float(best.cost), stride=stride,
                     noise_unit=float(max(final_chi2, 1e-300) * max(correlated_lines, 1.0)))
+
+
+@dataclass(frozen=True, eq=False)
+class _PathProblem:
+    """One path's weighted least squares over its parameters and the delay (last in ``x``)."""
+
+    path: Callable[[FloatArray], StateSpace3]  # path parameters → continuous (A, B, C)
+    f: FloatArray  # lines fitted [Hz]
+    h: NDArray[np.complex128]  # measured H at those lines
+    sig: FloatArray  # standard deviation of each line's complex H
+    fs_hz: float  # converter rate [Hz]
+    n_par: int  # path parameters
+    lo: FloatArray  # bounds of x
+    hi: FloatArray
+    x_scale: FloatArray  # typical magnitudes of x
+
+    def residual(self, x: FloatArray, lowpass: SensorLowpass) -> FloatArray:
+        """Real, then imaginary parts of ``(H_model − H) / sigma`` with the sensor ``lowpass``."""
+        r = (sampled_response(self.path(x[:self.n_par]), f_hz=self.f, fs_hz=self.fs_hz,
+                              delay_s=x[self.n_par], sensor=lowpass) - self.h) / self.sig
+        return np.concatenate([r.real, r.imag])
+
+    def solve(self, x0: FloatArray, lowpass: SensorLowpass) -> _Solution:
+        """The least-squares fit from ``x0`` (clipped to the bounds) with the sensor ``lowpass``."""
+        x0 = np.clip(x0, self.lo, self.hi)
+        out = least_squares(self.residual, x0, args=(lowpass,), x_scale=self.x_scale,
+                            bounds=(self.lo, self.hi))
+        return _Solution(x=np.asarray(out.x), cost=float(np.sum(out.fun**2)),
+                         jac=np.asarray(out.jac))
+
+
+def _std_as_concluded(problem: _PathProblem, best: _Solution, estimate: SensorEstimate, *,
+                      correlated_lines: float) -> tuple[FloatArray, float]:
+    """Standard deviations of the path and the delay with the sensor as concluded.
+
+    Returns them (a fitted bandwidth's last) and the final reduced chi-square.
+    ``correlated_lines``: adjacent fitted lines one estimate correlates (≥ 1).
+    """
+    # A fitted bandwidth is one more column (central difference), so that what it
+    # correlates with carries its share.
+    jac = best.jac[:, :problem.n_par + 1]
+    if estimate.source == "fitted":
+        bw, step = estimate.bandwidth_hz, 1e-3 * estimate.bandwidth_hz
+        up = problem.residual(best.x, SensorLowpass(bandwidth_hz=bw + step,
+                                                    order=estimate.order))
+        down = problem.residual(best.x, SensorLowpass(bandwidth_hz=bw - step,
+                                                      order=estimate.order))
+        jac = np.column_stack([jac, (up - down) / (2 * step)])
+    norms = np.linalg.norm(jac, axis=0)
+    norms[norms == 0] = 1.0
+    js = jac / norms
+    final_chi2 = best.cost / max(1, 2 * problem.f.size - jac.shape[1])
+    inv = np.linalg.pinv(js.T @ js)
+    factor = np.full(jac.shape[1], max(correlated_lines, 1.0))
+    if correlated_lines > 1.0:
+        factor = hac_factors(inv @ js.T, problem.residual(best.x, estimate.lowpass),
+                             correlated_lines)
+    cov = inv / np.outer(norms, norms) * final_chi2
+    return np.sqrt(np.clip(np.diag(cov) * factor, 0.0, None)), final_chi2
 
 
 def hac_factors(influence: FloatArray, residual: FloatArray, nominal: float) -> FloatArray:

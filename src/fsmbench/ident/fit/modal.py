@@ -75,16 +75,17 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from scipy.optimize import least_squares
+
+from fsmbench.ident.fit.modal_core import (
+    _DAMPING_BOUNDS,
+    _complex_columns,
+    _discrete_denominator,
+    _Problem,
+    _real_columns,
+    _solve,
+)
 
 __all__ = ["ModalEstimate", "ModeEstimate", "estimate_modes", "fit_frf_modes"]
-
-_MAX_GRID = 401  # frequency grid points per mode in the initial search
-_DAMPING_GRID = (0.25, 0.5, 1.0, 2.0, 4.0)  # multiples of the initial damping searched
-_DAMPING_BOUNDS = (1e-7, 0.5)
-# Bins each side over which the residual's power is averaged for the covariance: 62 values
-# (real and imaginary parts), a relative std of 13 %, over 1 Hz of a 30 s record's DFT.
-_SMOOTH_BINS = 15
 
 
 @dataclass(frozen=True)
@@ -193,29 +194,6 @@ class ModalEstimate:
 
 
 # --------------------------------------------------------------------------- helpers
-def _discrete_denominator(q: NDArray[np.complex128], f0: float, xi: float,
-                          ts: float) -> NDArray[np.complex128]:
-    """``A(q) = (1 - p q)(1 - p* q)`` with ``p = exp(s T)`` of the mode ``(f0, xi)``."""
-    w0 = 2.0 * np.pi * f0
-    s = complex(-xi * w0, w0 * np.sqrt(max(1.0 - xi * xi, 0.0)))
-    p = np.exp(s * ts)
-    return 1.0 - 2.0 * p.real * q + abs(p) ** 2 * q * q
-
-
-def _real_columns(cols: Sequence[NDArray[np.complex128]]) -> NDArray[np.float64]:
-    """Columns for real coefficients: ``[Re; Im]`` of each complex basis vector."""
-    return np.column_stack([np.concatenate([c.real, c.imag]) for c in cols])
-
-
-def _complex_columns(cols: Sequence[NDArray[np.complex128]]) -> NDArray[np.float64]:
-    """Two real columns per complex coefficient ``a + jb``: ``[Re; Im]`` and ``[-Im; Re]``."""
-    out = []
-    for c in cols:
-        out.append(np.concatenate([c.real, c.imag]))
-        out.append(np.concatenate([-c.imag, c.real]))
-    return np.column_stack(out)
-
-
 def _as_matrix(data: ArrayLike, what: str) -> NDArray[np.float64]:
     arr = np.asarray(data, dtype=float)
     if arr.ndim == 1:
@@ -262,146 +240,6 @@ def _band(guesses: Sequence[tuple[float, float]], band_hz: tuple[float, float] |
     return lo, hi
 
 
-# --------------------------------------------------------------------------- engine
-@dataclass(frozen=True)
-class _Problem:
-    """Separable least squares ``min || (Y - [V(theta) F] C) W ||`` over theta (2 per mode).
-
-    ``y`` is (2K, R): R targets (outputs or paths) stacked real over imaginary
-    parts, sharing one design; ``fixed`` holds the theta-independent columns,
-    ``variable(f0, xi)`` the columns of one mode. ``W`` (per target) is set by :func:`_solve`.
-    """
-
-    y: NDArray[np.float64]
-    fixed: NDArray[np.float64]
-    variable: Callable[[float, float], NDArray[np.float64]]
-    n_modes: int
-
-    def projected(self) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-        qf, _ = np.linalg.qr(self.fixed)
-        return qf, self.y - qf @ (qf.T @ self.y)
-
-    def residual(self, theta: NDArray[np.float64], qf: NDArray[np.float64],
-                 y_perp: NDArray[np.float64]) -> NDArray[np.float64]:
-        """Residual matrix (2K, R) with the linear parameters eliminated."""
-        v = np.column_stack([self.variable(theta[2 * i], theta[2 * i + 1])
-                             for i in range(self.n_modes)])
-        v = v - qf @ (qf.T @ v)
-        norms = np.linalg.norm(v, axis=0)
-        v = v / np.where(norms > 0, norms, 1.0)
-        coef, *_ = np.linalg.lstsq(v, y_perp, rcond=None)
-        return np.asarray(y_perp - v @ coef)
-
-    def linear_fit(self, theta: NDArray[np.float64]) -> tuple[NDArray[np.float64], ...]:
-        """Linear coefficients (variable columns first), shape (n_cols, R), and residual (2K, R)."""
-        design = np.column_stack([*(self.variable(theta[2 * i], theta[2 * i + 1])
-                                    for i in range(self.n_modes)), self.fixed])
-        coef, *_ = np.linalg.lstsq(design, self.y, rcond=None)
-        return np.asarray(coef), np.asarray(self.y - design @ coef)
-
-
-def _solve(problem: _Problem, guesses: list[tuple[float, float]], band: tuple[float, float],
-           search_fraction: float) -> tuple[NDArray[np.float64], NDArray[np.float64],
-                                            NDArray[np.float64], int, bool]:
-    """Grid start, weighted VarPro fit; returns theta (f0, xi)*, cov, weights, nfev, success."""
-    qf, y_perp = problem.projected()
-    n_out = problem.y.shape[1]
-    weights = np.ones(n_out)
-
-    def flat(theta: NDArray[np.float64]) -> NDArray[np.float64]:
-        return (problem.residual(theta, qf, y_perp) * weights).ravel()
-
-    theta = np.array([v for g in guesses for v in g], dtype=float)
-    for i, (f_init, xi_init) in enumerate(guesses):  # coarse search, one mode at a time
-        lo = max(band[0], f_init * (1.0 - search_fraction))
-        hi = min(band[1], f_init * (1.0 + search_fraction))
-        n_grid = int(min(_MAX_GRID, max(3, np.ceil((hi - lo) / (0.5 * xi_init * f_init)) + 1)))
-        best = (np.inf, theta[2 * i], theta[2 * i + 1])
-        for f_try in np.linspace(lo, hi, n_grid):
-            for scale in _DAMPING_GRID:
-                trial = theta.copy()
-                trial[2 * i] = f_try
-                trial[2 * i + 1] = float(np.clip(xi_init * scale, *_DAMPING_BOUNDS))
-                cost = float(np.sum(flat(trial) ** 2))
-                if cost < best[0]:
-                    best = (cost, trial[2 * i], trial[2 * i + 1])
-        theta[2 * i], theta[2 * i + 1] = best[1], best[2]
-
-    def to_x(t: NDArray[np.float64]) -> NDArray[np.float64]:
-        x = t.copy()
-        x[1::2] = np.log(t[1::2])
-        return x
-
-    def to_theta(x: NDArray[np.float64]) -> NDArray[np.float64]:
-        t = x.copy()
-        t[1::2] = np.exp(x[1::2])
-        return t
-
-    lower = np.tile([band[0], np.log(_DAMPING_BOUNDS[0])], problem.n_modes)
-    upper = np.tile([band[1], np.log(_DAMPING_BOUNDS[1])], problem.n_modes)
-    x_scale = np.array([v for i in range(problem.n_modes)
-                        for v in (theta[2 * i] * theta[2 * i + 1], 0.1)])
-    n_lin = problem.fixed.shape[1] + problem.variable(*guesses[0]).shape[1] * problem.n_modes
-    span = upper - lower
-    theta = to_theta(np.clip(to_x(theta), lower + 1e-9 * span, upper - 1e-9 * span))
-    nfev, success = 0, True
-    for _ in range(2):  # second pass: outputs weighted by their residual noise level
-        sol = least_squares(lambda x: flat(to_theta(x)), to_x(theta),
-                            bounds=(lower, upper), x_scale=x_scale, xtol=1e-12, ftol=1e-12,
-                            gtol=1e-12, method="trf")
-        theta, nfev, success = to_theta(sol.x), nfev + int(sol.nfev), success and sol.success
-        res = problem.residual(theta, qf, y_perp)
-        dof_out = max(res.shape[0] - n_lin - theta.size, 1)
-        sigma = np.sqrt(np.sum(res**2, axis=0) / dof_out)
-        weights = 1.0 / np.where(sigma > 0, sigma, 1.0)
-        if n_out == 1:
-            break
-    # Covariance of (f0, xi) from a central-difference Jacobian of the projected residual.
-    steps = np.array([v for i in range(problem.n_modes)
-                      for v in (1e-3 * theta[2 * i] * theta[2 * i + 1], 1e-3 * theta[2 * i + 1])])
-    jac = np.empty((flat(theta).size, theta.size))
-    for j, h in enumerate(steps):
-        dp, dm = theta.copy(), theta.copy()
-        dp[j] += h
-        dm[j] -= h
-        jac[:, j] = (flat(dp) - flat(dm)) / (2.0 * h)
-    r = flat(theta)
-    cov = _sandwich(problem, theta, r, jac)
-    return theta, cov, weights, nfev, bool(success)
-
-
-def _sandwich(problem: _Problem, theta: NDArray[np.float64], r: NDArray[np.float64],
-              jac: NDArray[np.float64]) -> NDArray[np.float64]:
-    """Covariance of ``theta`` with the residual's variance varying over the band.
-
-    ``(JᵀJ)⁻¹ Jᵀ diag(v) J (JᵀJ)⁻¹``, ``v`` each bin's residual power (real and
-    imaginary parts, less the fit's leverage) averaged over ±``_SMOOTH_BINS``
-    bins: the noise is white far from a mode, but a compressing sensor's
-    distortion peaks at it, where the bins that carry ``(f0, xi)`` are (the
-    real-bench twin's 1/f noise, mains and 4QD compression: a constant ``s²``
-    made the stds 1.6x optimistic). For a locally white residual it is
-    ``s² (JᵀJ)⁻¹``.
-    """
-    n_rows, n_out = problem.y.shape
-    k = n_rows // 2
-    res = r.reshape(n_rows, n_out)
-    design = np.column_stack([*(problem.variable(theta[2 * i], theta[2 * i + 1])
-                                for i in range(problem.n_modes)), problem.fixed])
-    qd, _ = np.linalg.qr(design)
-    lev = np.sum(qd**2, axis=1)
-    lev_bin = np.clip(0.5 * (lev[:k] + lev[k:]), 0.0, 0.9)
-    power = 0.5 * (res[:k] ** 2 + res[k:] ** 2) / (1.0 - lev_bin)[:, None]
-    width = min(2 * _SMOOTH_BINS + 1, k)
-    kernel = np.ones(width)
-    norm = np.convolve(np.ones(k), kernel, mode="same")
-    smooth = np.column_stack([np.convolve(power[:, o], kernel, mode="same") / norm
-                              for o in range(n_out)])
-    v = np.concatenate([smooth, smooth], axis=0).ravel()
-    bread = np.linalg.pinv(jac.T @ jac)
-    meat = jac.T @ (jac * v[:, None])
-    return np.asarray(bread @ meat @ bread, dtype=float)
-
-
 def _modes_from(theta: NDArray[np.float64], cov: NDArray[np.float64],
                 guesses: list[tuple[float, float]], band: tuple[float, float],
                 peak: Callable[[int, float, float], tuple[tuple[str, str, float], ...]],
@@ -423,6 +261,151 @@ def _modes_from(theta: NDArray[np.float64], cov: NDArray[np.float64],
             half_power_bandwidth_hz=2.0 * xi * f0, initial_resonance_hz=f_init,
             initial_damping_ratio=xi_init, peak_gain=peak(i, f0, xi)))
     return tuple(modes)
+
+
+# --------------------------------------------------------------------------- designs
+@dataclass(frozen=True)
+class _Records:
+    """The checked records and options of :func:`estimate_modes`."""
+
+    u: NDArray[np.float64]  # (N, m) inputs
+    y: NDArray[np.float64]  # (N, p) outputs
+    input_names: tuple[str, ...]
+    output_names: tuple[str, ...]
+    guesses: list[tuple[float, float]]  # (f0 [Hz], xi) per mode
+    band: tuple[float, float]  # [Hz]
+
+
+def _checked_records(inputs: ArrayLike, outputs: ArrayLike, *, input_names: Sequence[str],
+                     output_names: Sequence[str], initial: Sequence[tuple[float, float]],
+                     fs_hz: float, band_hz: tuple[float, float] | None,
+                     relative_half_width: float, background_order: int) -> _Records:
+    """:func:`estimate_modes`'s arguments checked (its ``ValueError`` cases but the bins')."""
+    u = _as_matrix(inputs, "inputs")
+    y = _as_matrix(outputs, "outputs")
+    if u.shape[0] != y.shape[0]:
+        raise ValueError(f"inputs have {u.shape[0]} samples, outputs {y.shape[0]}")
+    in_names = _names(input_names, u.shape[1], "input_names")
+    out_names = _names(output_names, y.shape[1], "output_names")
+    guesses = _check_initial(initial)
+    fs = float(fs_hz)
+    band = _band(guesses, band_hz, relative_half_width)
+    if not 0.0 < band[0] < band[1] < fs / 2.0:
+        raise ValueError(f"band_hz must satisfy 0 < lo < hi < fs/2, got {band}")
+    if background_order < 0:
+        raise ValueError(f"background_order must be >= 0, got {background_order}")
+    return _Records(u, y, in_names, out_names, guesses, band)
+
+
+@dataclass(frozen=True, eq=False)
+class _RecordBand:
+    """The records' unitary DFT in the band and the output-error model's columns there."""
+
+    fs: float  # sampling frequency [Hz]
+    n: int  # samples in the records
+    f: NDArray[np.float64]  # the band's bins [Hz]
+    q: NDArray[np.complex128]  # exp(-j 2 pi f / fs)
+    uf: NDArray[np.complex128]  # (K, m) inputs' DFT
+    target: NDArray[np.float64]  # (2K, p) outputs' DFT, real over imaginary parts
+    fixed: NDArray[np.float64]  # the background's columns P(x) U and Q(x)
+
+    @property
+    def per_mode(self) -> int:
+        """Columns of one mode: (b1, b2) per input, then (c0, c1)."""
+        return 2 * self.uf.shape[1] + 2
+
+    def n_linear(self, n_modes: int) -> int:
+        """Linear parameters of the model with ``n_modes`` modes."""
+        return self.fixed.shape[1] + self.per_mode * n_modes
+
+    def variable(self, f0: float, xi: float) -> NDArray[np.float64]:
+        """One mode's columns: ``(b1 q + b2 q²) U / A`` per input, then ``(c0 + c1 q) / A``."""
+        q = self.q
+        a = _discrete_denominator(q, f0, xi, 1.0 / self.fs)
+        cols = [qk * self.uf[:, j] / a for j in range(self.uf.shape[1]) for qk in (q, q * q)]
+        return _real_columns([*cols, 1.0 / a, q / a])
+
+
+def _record_band(u: NDArray[np.float64], y: NDArray[np.float64], *, fs: float,
+                 band: tuple[float, float], background_order: int,
+                 guesses: list[tuple[float, float]]) -> _RecordBand:
+    """The DFT bins of ``u``, ``y`` in ``band`` [Hz] and the model's design (module notes).
+
+    Raises ``ValueError`` when the band holds too few bins for the parameters.
+    """
+    n = u.shape[0]
+    f_all = np.arange(n // 2 + 1) * fs / n
+    sel = (f_all >= band[0]) & (f_all <= band[1])
+    f = f_all[sel]
+    scale = 1.0 / np.sqrt(n)  # unitary DFT: white noise of variance s^2 -> E|E_k|^2 = s^2
+    uf = np.fft.rfft(u, axis=0)[sel] * scale
+    yf = np.fft.rfft(y, axis=0)[sel] * scale
+    q = np.exp(-2j * np.pi * f / fs)
+    x = (f - 0.5 * (band[0] + band[1])) / (0.5 * (band[1] - band[0]))
+    powers = [x**k for k in range(background_order + 1)]
+    fixed = _complex_columns([pk * uf[:, j] for j in range(u.shape[1]) for pk in powers]
+                             + powers)
+    target = np.column_stack([np.concatenate([yf[:, o].real, yf[:, o].imag])
+                              for o in range(y.shape[1])])
+    dft = _RecordBand(fs=fs, n=n, f=f, q=q, uf=uf, target=target, fixed=fixed)
+    n_cols = dft.n_linear(len(guesses))
+    if 2 * f.size < 2 * (n_cols + 2 * len(guesses)):
+        raise ValueError(f"band {band} Hz holds {f.size} bins, too few for {n_cols} "
+                         "parameters; widen it or use a longer record")
+    return dft
+
+
+def _record_noise_levels(res: NDArray[np.float64], dft: _RecordBand,
+                         output_names: tuple[str, ...], *, n_modes: int
+                         ) -> tuple[list[tuple[str, float]], list[tuple[str, float]]]:
+    """Each output's residual PSD [output²/Hz, one-sided] and relative residual norm.
+
+    ``res`` is (2K, p), real over imaginary parts, of the fit of ``n_modes`` modes on ``dft``.
+    """
+    target, fs = dft.target, dft.fs
+    dof = max(dft.f.size * 2 - dft.n_linear(n_modes), 1)
+    # E|E_k|^2 per bin = sum of squares / (dof / 2) complex dof; one-sided PSD = 2 E|E_k|^2 / fs.
+    psd = [(name, float(4.0 * np.sum(res[:, o] ** 2) / dof / fs))
+           for o, name in enumerate(output_names)]
+    rel = [(name, float(np.linalg.norm(res[:, o]) / np.linalg.norm(target[:, o])))
+           for o, name in enumerate(output_names)]
+    return psd, rel
+
+
+@dataclass(frozen=True, eq=False)
+class _FrfColumns:
+    """One mode's columns of :func:`fit_frf_modes`'s model: ``q / A`` and ``q² / A``."""
+
+    q: NDArray[np.complex128]  # exp(-j 2 pi f / fs) of the band's lines
+    fs: float  # sampling frequency [Hz]
+
+    def variable(self, f0: float, xi: float) -> NDArray[np.float64]:
+        """The columns of the mode ``(f0 [Hz], xi)``."""
+        a = _discrete_denominator(self.q, f0, xi, 1.0 / self.fs)
+        return _real_columns([self.q / a, self.q * self.q / a])
+
+
+@dataclass(frozen=True, eq=False)
+class _PeakGains:
+    """``|B/A|`` of each mode's term at its ``f0``, for each path, from the linear fit."""
+
+    fs: float  # sampling frequency [Hz]
+    output_names: tuple[str, ...]
+    input_names: tuple[str, ...]
+    coef: NDArray[np.float64]  # (n_cols, outputs): per mode, (b1, b2) of each input first
+    per_mode: int  # columns of one mode
+
+    def gains(self, i: int, f0: float, xi: float) -> tuple[tuple[str, str, float], ...]:
+        """(output, input, gain) of mode ``i`` at ``f0`` [Hz], damping ``xi``."""
+        q0 = np.exp(-2j * np.pi * f0 / self.fs)
+        a0 = _discrete_denominator(np.array([q0]), f0, xi, 1.0 / self.fs)[0]
+        out = []
+        for o, oname in enumerate(self.output_names):
+            for j, iname in enumerate(self.input_names):
+                k = i * self.per_mode + 2 * j
+                b1, b2 = self.coef[k:k + 2, o]
+                out.append((oname, iname, float(abs((b1 * q0 + b2 * q0 * q0) / a0))))
+        return tuple(out)
 
 
 # --------------------------------------------------------------------------- public API
@@ -484,70 +467,28 @@ def estimate_modes(
         A fitted mode lies within two half-power bandwidths of the band's edge
         (the band probably misses the mode).
     """
-    u = _as_matrix(inputs, "inputs")
-    y = _as_matrix(outputs, "outputs")
-    if u.shape[0] != y.shape[0]:
-        raise ValueError(f"inputs have {u.shape[0]} samples, outputs {y.shape[0]}")
-    in_names = _names(input_names, u.shape[1], "input_names")
-    out_names = _names(output_names, y.shape[1], "output_names")
-    guesses = _check_initial(initial)
-    fs = float(fs_hz)
-    band = _band(guesses, band_hz, relative_half_width)
-    if not 0.0 < band[0] < band[1] < fs / 2.0:
-        raise ValueError(f"band_hz must satisfy 0 < lo < hi < fs/2, got {band}")
-    if background_order < 0:
-        raise ValueError(f"background_order must be >= 0, got {background_order}")
-    n = u.shape[0]
-    f_all = np.arange(n // 2 + 1) * fs / n
-    sel = (f_all >= band[0]) & (f_all <= band[1])
-    f = f_all[sel]
-    scale = 1.0 / np.sqrt(n)  # unitary DFT: white noise of variance s^2 -> E|E_k|^2 = s^2
-    uf = np.fft.rfft(u, axis=0)[sel] * scale
-    yf = np.fft.rfft(y, axis=0)[sel] * scale
-    q = np.exp(-2j * np.pi * f / fs)
-    x = (f - 0.5 * (band[0] + band[1])) / (0.5 * (band[1] - band[0]))
-    powers = [x**k for k in range(background_order + 1)]
-    fixed = _complex_columns([pk * uf[:, j] for j in range(u.shape[1]) for pk in powers]
-                             + powers)
-
-    def variable(f0: float, xi: float) -> NDArray[np.float64]:
-        a = _discrete_denominator(q, f0, xi, 1.0 / fs)
-        cols = [qk * uf[:, j] / a for j in range(u.shape[1]) for qk in (q, q * q)]
-        return _real_columns([*cols, 1.0 / a, q / a])
-
-    n_cols = fixed.shape[1] + variable(*guesses[0]).shape[1] * len(guesses)
-    if 2 * f.size < 2 * (n_cols + 2 * len(guesses)):
-        raise ValueError(f"band {band} Hz holds {f.size} bins, too few for {n_cols} "
-                         "parameters; widen it or use a longer record")
-    target = np.column_stack([np.concatenate([yf[:, o].real, yf[:, o].imag])
-                              for o in range(y.shape[1])])
-    problem = _Problem(y=target, fixed=fixed, variable=variable, n_modes=len(guesses))
-    theta, cov, _, nfev, ok = _solve(problem, guesses, band, search_fraction)
-    coef, res = problem.linear_fit(theta)
-    per_mode = variable(*guesses[0]).shape[1]
-
-    def peak(i: int, f0: float, xi: float) -> tuple[tuple[str, str, float], ...]:
-        q0 = np.exp(-2j * np.pi * f0 / fs)
-        a0 = _discrete_denominator(np.array([q0]), f0, xi, 1.0 / fs)[0]
-        out = []
-        for o, oname in enumerate(out_names):
-            for j, iname in enumerate(in_names):
-                b1, b2 = coef[i * per_mode + 2 * j:i * per_mode + 2 * j + 2, o]
-                out.append((oname, iname, float(abs((b1 * q0 + b2 * q0 * q0) / a0))))
-        return tuple(out)
-
-    dof = max(f.size * 2 - n_cols, 1)
-    # E|E_k|^2 per bin = sum of squares / (dof / 2) complex dof; one-sided PSD = 2 E|E_k|^2 / fs.
-    psd = [(name, float(4.0 * np.sum(res[:, o] ** 2) / dof / fs))
-           for o, name in enumerate(out_names)]
-    rel = [(name, float(np.linalg.norm(res[:, o]) / np.linalg.norm(target[:, o])))
-           for o, name in enumerate(out_names)]
+    rec = _checked_records(inputs, outputs, input_names=input_names,
+                           output_names=output_names, initial=initial, fs_hz=fs_hz,
+                           band_hz=band_hz, relative_half_width=relative_half_width,
+                           background_order=background_order)
+    fs, guesses, band = float(fs_hz), rec.guesses, rec.band
+    dft = _record_band(rec.u, rec.y, fs=fs, band=band, background_order=background_order,
+                       guesses=guesses)
+    problem = _Problem(y=dft.target, fixed=dft.fixed, variable=dft.variable,
+                       n_modes=len(guesses))
+    sol = _solve(problem, guesses, band, search_fraction)
+    lin = problem.linear_fit(sol.theta)
+    peaks = _PeakGains(fs=fs, output_names=rec.output_names, input_names=rec.input_names,
+                       coef=lin.coef, per_mode=dft.per_mode)
+    psd, rel = _record_noise_levels(lin.residual, dft, rec.output_names,
+                                    n_modes=len(guesses))
     return ModalEstimate(
-        modes=_modes_from(theta, cov, guesses, band, peak), method="fd-output-error",
-        band_hz=band, n_frequencies=int(f.size), frequency_resolution_hz=fs / n,
-        input_names=in_names, output_names=out_names, background_order=background_order,
-        noise_level=tuple(psd), relative_residual=tuple(rel), n_function_evaluations=nfev,
-        converged=ok)
+        modes=_modes_from(sol.theta, sol.cov, guesses, band, peaks.gains),
+        method="fd-output-error", band_hz=band, n_frequencies=int(dft.f.size),
+        frequency_resolution_hz=fs / dft.n, input_names=rec.input_names,
+        output_names=rec.output_names, background_order=background_order,
+        noise_level=tuple(psd), relative_residual=tuple(rel),
+        n_function_evaluations=sol.n_evaluations, converged=sol.success)
 
 
 def fit_frf_modes(
@@ -604,31 +545,24 @@ def fit_frf_modes(
     q = np.exp(-2j * np.pi * f / fs)
     x = (f - 0.5 * (band[0] + band[1])) / (0.5 * (band[1] - band[0]))
     fixed = _complex_columns([x**k for k in range(background_order + 1)])
-
-    def variable(f0: float, xi: float) -> NDArray[np.float64]:
-        a = _discrete_denominator(q, f0, xi, 1.0 / fs)
-        return _real_columns([q / a, q * q / a])
-
     n_cols = fixed.shape[1] + 2 * len(guesses)
     if f.size < n_cols + 2 * len(guesses):
         raise ValueError(f"band {band} Hz holds {f.size} bins, too few for {n_cols} parameters")
     target = np.concatenate([h.real, h.imag])[:, None]
-    problem = _Problem(y=target, fixed=fixed, variable=variable, n_modes=len(guesses))
-    theta, cov, _, nfev, ok = _solve(problem, guesses, band, search_fraction)
-    coef, res = problem.linear_fit(theta)
-
-    def peak(i: int, f0: float, xi: float) -> tuple[tuple[str, str, float], ...]:
-        q0 = np.exp(-2j * np.pi * f0 / fs)
-        a0 = _discrete_denominator(np.array([q0]), f0, xi, 1.0 / fs)[0]
-        b1, b2 = coef[2 * i:2 * i + 2, 0]
-        return ((output_name, input_name, float(abs((b1 * q0 + b2 * q0 * q0) / a0))),)
-
+    problem = _Problem(y=target, fixed=fixed, variable=_FrfColumns(q=q, fs=fs).variable,
+                       n_modes=len(guesses))
+    sol = _solve(problem, guesses, band, search_fraction)
+    lin = problem.linear_fit(sol.theta)
+    res = lin.residual
+    peaks = _PeakGains(fs=fs, output_names=(output_name,), input_names=(input_name,),
+                       coef=lin.coef, per_mode=2)
     rms = float(np.sqrt(np.sum(res**2) / max(f.size, 1)))
     rel = float(np.linalg.norm(res) / np.linalg.norm(target))
     return ModalEstimate(
-        modes=_modes_from(theta, cov, guesses, band, peak), method="frf-fit", band_hz=band,
-        n_frequencies=int(f.size),
+        modes=_modes_from(sol.theta, sol.cov, guesses, band, peaks.gains), method="frf-fit",
+        band_hz=band, n_frequencies=int(f.size),
         frequency_resolution_hz=float(np.median(np.diff(f))) if f.size > 1 else float("nan"),
         input_names=(input_name,), output_names=(output_name,),
         background_order=background_order, noise_level=((output_name, rms),),
-        relative_residual=((output_name, rel),), n_function_evaluations=nfev, converged=ok)
+        relative_residual=((output_name, rel),), n_function_evaluations=sol.n_evaluations,
+        converged=sol.success)

@@ -1,7 +1,8 @@
 """The fitters of the noise model: Welch cross-spectra, Whittle likelihood, lines, drift.
 
-Used by :mod:`fsmbench.ident.noise_model` (its module notes state the rules). The
-closed-form spectra of the engine's streams come from :mod:`fsmbench.sim.spectra`.
+Used by :mod:`fsmbench.ident.noise_model` and :mod:`fsmbench.ident.fit.qd_noise`
+(the former's module notes state the rules). The closed-form spectra of the engine's
+streams come from :mod:`fsmbench.sim.spectra`.
 """
 
 from __future__ import annotations

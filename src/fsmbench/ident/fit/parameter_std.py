@@ -181,74 +181,139 @@ def sercalo_parameter_std(
     """
     poles0 = np.asarray(fit.poles)
     coef0 = coefficients_from_residues(poles0, np.asarray(fit.residues))  # (n, p, m)
-    n, p, m = coef0.shape
     lin0 = np.concatenate([coef0, np.asarray(fit.d)[None]], axis=0).reshape(-1)  # (n+1)*p*m
     pp0 = _pole_params(poles0)
     theta0 = lin0 if fixed_poles else np.concatenate([pp0, lin0])
-    s = 2j * np.pi * np.asarray(frequency_hz, dtype=float)
     w = np.asarray(weights, dtype=float)
     keep = w > 0.0
-    h = np.asarray(response)
+    problem = _WeightedFit(
+        poles0=poles0, shape=coef0.shape, n_pole_params=pp0.size, fixed_poles=fixed_poles,
+        s=2j * np.pi * np.asarray(frequency_hz, dtype=float), w=w, keep=keep,
+        h=np.asarray(response), resonances_hz=resonances_hz, gi_a_per_v=gi_a_per_v)
+    scale = np.maximum(np.abs(theta0), np.max(np.abs(theta0)) * 1e-9)
+    r0 = problem.residual(theta0)
+    j_mat = _central_jacobian(problem.residual, theta0, scale=scale, size=r0.size)
+    dof = int(r0.size - theta0.size)
+    part_var = _residual_variances(variance_parts, w=w, keep=keep)
+    chi2 = _reduced_chi2(r0, part_var, dof=dof)
+    q0 = problem.quantities(theta0)
+    g = _central_jacobian(problem.quantities, theta0, scale=scale, size=q0.size)
+    part_sd, sd = _propagated_std(j_mat, g, part_var, chi2=chi2,
+                                  correlated_lines=correlated_lines)
+    return _by_axis(q0, sd, part_sd, chi2=chi2, dof=dof, fixed_poles=fixed_poles)
 
-    def split(theta: NDArray[np.float64]) -> tuple[NDArray[np.complex128], NDArray[np.float64]]:
-        if fixed_poles:
-            return poles0, theta.reshape(n + 1, p, m)
-        return _poles_from(theta[: pp0.size], poles0), theta[pp0.size:].reshape(n + 1, p, m)
 
-    def model(theta: NDArray[np.float64], s_val: NDArray[np.complex128]
+@dataclass(frozen=True, eq=False)
+class _WeightedFit:
+    """The vector fit's model as a function of its real parameters, and its weighted residual.
+
+    ``theta`` holds the poles' real and imaginary parts (one per real pole; absent
+    with ``fixed_poles``), then the real partial-fraction coefficients and ``D``,
+    shape ``(n + 1, p, m)`` flattened. ``s`` = j 2π f [rad/s] of the fitted lines;
+    ``w`` their weights (F, p, m) [V/V⁻¹]; ``h`` the FRF fitted [V/V].
+    """
+
+    poles0: NDArray[np.complex128]
+    shape: tuple[int, ...]
+    n_pole_params: int
+    fixed_poles: bool
+    s: NDArray[np.complex128]
+    w: NDArray[np.float64]
+    keep: NDArray[np.bool_]
+    h: NDArray[np.complex128]
+    resonances_hz: Mapping[str, float]
+    gi_a_per_v: Sequence[float] | NDArray[np.float64]
+
+    def split(self, theta: NDArray[np.float64]
+              ) -> tuple[NDArray[np.complex128], NDArray[np.float64]]:
+        """Poles [rad/s] and the coefficients, shape (n + 1, p, m), of ``theta``."""
+        n, p, m = self.shape
+        if self.fixed_poles:
+            return self.poles0, theta.reshape(n + 1, p, m)
+        return (_poles_from(theta[: self.n_pole_params], self.poles0),
+                theta[self.n_pole_params:].reshape(n + 1, p, m))
+
+    def model(self, theta: NDArray[np.float64], s_val: NDArray[np.complex128]
               ) -> NDArray[np.complex128]:
-        poles, lin = split(theta)
+        """The model's response at ``s_val`` [rad/s], shape (S, p, m) [V/V]."""
+        n = self.shape[0]
+        poles, lin = self.split(theta)
         return np.einsum("fn,npm->fpm", real_basis(s_val, poles), lin[:n]) + lin[n][None]
 
-    def residual(theta: NDArray[np.float64]) -> NDArray[np.float64]:
+    def residual(self, theta: NDArray[np.float64]) -> NDArray[np.float64]:
+        """Real and imaginary parts of the weighted residual of the kept lines [1]."""
         # sqrt 2: a circular error of complex variance var puts var/2 on each of its real and
         # imaginary parts, so sqrt(2) w makes every real residual of unit variance
-        r = (np.sqrt(2.0) * w * (model(theta, s) - h))[keep]
+        r = (np.sqrt(2.0) * self.w * (self.model(theta, self.s) - self.h))[self.keep]
         return np.concatenate([r.real, r.imag])
 
-    def quantities(theta: NDArray[np.float64]) -> NDArray[np.float64]:
-        poles, _ = split(theta)
-        dc = model(theta, np.zeros(1, dtype=complex))[0].real
+    def quantities(self, theta: NDArray[np.float64]) -> NDArray[np.float64]:
+        """Resonance [Hz], damping ratio and static gain [V/A] of ``h`` then ``v``."""
+        poles, _ = self.split(theta)
+        dc = self.model(theta, np.zeros(1, dtype=complex))[0].real
         out = []
         for j, inp in enumerate(("Uch", "Ucv")):
             upper = poles[poles.imag > 0]
-            a = upper[np.argmin(np.abs(np.abs(upper) / (2 * np.pi) - resonances_hz[inp]))]
-            out += [abs(a) / (2 * np.pi), -a.real / abs(a), dc[j, j] / gi_a_per_v[j]]
+            a = upper[np.argmin(np.abs(np.abs(upper) / (2 * np.pi) - self.resonances_hz[inp]))]
+            out += [abs(a) / (2 * np.pi), -a.real / abs(a), dc[j, j] / self.gi_a_per_v[j]]
         return np.array(out)
 
-    scale = np.maximum(np.abs(theta0), np.max(np.abs(theta0)) * 1e-9)
 
-    def jac(fun: Callable[[NDArray[np.float64]], NDArray[np.float64]], size: int
-            ) -> NDArray[np.float64]:
-        cols = []
-        for k in range(theta0.size):
-            step = np.zeros_like(theta0)
-            step[k] = _STEP * scale[k]
-            cols.append((fun(theta0 + step) - fun(theta0 - step)) / (2 * step[k]))
-        return np.array(cols).T.reshape(size, theta0.size)
+def _central_jacobian(fun: Callable[[NDArray[np.float64]], NDArray[np.float64]],
+                      theta0: NDArray[np.float64], *, scale: NDArray[np.float64],
+                      size: int) -> NDArray[np.float64]:
+    """``d fun / d theta`` at ``theta0`` by central differences of ``_STEP * scale``.
 
-    r0 = residual(theta0)
-    j_mat = jac(residual, r0.size)
-    dof = int(r0.size - theta0.size)
+    ``size`` is the length of ``fun``'s output; the result has shape (size, theta0.size).
+    """
+    cols = []
+    for k in range(theta0.size):
+        step = np.zeros_like(theta0)
+        step[k] = _STEP * scale[k]
+        cols.append((fun(theta0 + step) - fun(theta0 - step)) / (2 * step[k]))
+    return np.array(cols).T.reshape(size, theta0.size)
+
+
+def _residual_variances(variance_parts: Mapping[str, NDArray[np.float64]] | None, *,
+                        w: NDArray[np.float64], keep: NDArray[np.bool_]
+                        ) -> dict[str, NDArray[np.float64]]:
+    """Each variance part of every real weighted residual (real parts, then imaginary) [1].
+
+    Without ``variance_parts`` the weights are the inverse std: one part, ``noise``.
+    """
     if variance_parts is None:
         with np.errstate(divide="ignore"):
             variance_parts = {"noise": np.where(w > 0, 1.0 / np.where(w > 0, w, 1.0) ** 2, 0.0)}
     # Variance of each real residual per part: (sqrt 2 w)^2 var / 2 = w^2 var.
-    part_var = {k: np.concatenate([np.where(w > 0, w**2 * np.nan_to_num(
+    return {k: np.concatenate([np.where(w > 0, w**2 * np.nan_to_num(
         np.asarray(v, dtype=float)), 0.0)[keep]] * 2) for k, v in variance_parts.items()}
+
+
+def _reduced_chi2(r0: NDArray[np.float64], part_var: Mapping[str, NDArray[np.float64]], *,
+                  dof: int) -> float:
+    """``SSR / dof`` of the residuals normalised by their total variance (NaN for no dof)."""
     total_var = np.sum(list(part_var.values()), axis=0)
     with np.errstate(divide="ignore", invalid="ignore"):
         normalised = np.where(total_var > 0, r0 / np.sqrt(np.where(total_var > 0, total_var,
                                                                     1.0)), 0.0)
     ssr = float(normalised @ normalised)
-    chi2 = ssr / dof if dof > 0 else float("nan")
+    return ssr / dof if dof > 0 else float("nan")
+
+
+def _propagated_std(j_mat: NDArray[np.float64], g: NDArray[np.float64],
+                    part_var: Mapping[str, NDArray[np.float64]], *, chi2: float,
+                    correlated_lines: float
+                    ) -> tuple[dict[str, NDArray[np.float64]], NDArray[np.float64]]:
+    """The quantities' std from each variance part and ``misfit``, and their total.
+
+    ``j_mat`` is the weighted residual's Jacobian (residuals, parameters), ``g`` the
+    quantities' (quantities, parameters); the sandwich ``G A⁻¹ Jᵀ Σ J A⁻¹ Gᵀ`` per part.
+    """
     # columns normalised before the pseudo-inverse: parameters span many decades
     norm = np.linalg.norm(j_mat, axis=0)
     norm[norm == 0.0] = 1.0
     jn = j_mat / norm
     bread = np.linalg.pinv(jn.T @ jn) / np.outer(norm, norm)
-    q0 = quantities(theta0)
-    g = jac(quantities, q0.size)
     gb = g @ bread @ j_mat.T  # (q, residuals): the quantities' sensitivity to each residual
     part_sd = {k: np.sqrt(np.maximum(np.einsum("qr,r,qr->q", gb, v, gb), 0.0)
                           * max(correlated_lines, 1.0))
@@ -256,6 +321,16 @@ def sercalo_parameter_std(
     var = sum(sd**2 for sd in part_sd.values())
     part_sd["misfit"] = np.sqrt(var * max(chi2 - 1.0, 0.0)) if np.isfinite(chi2) else 0 * var
     sd = np.sqrt(var * max(1.0, chi2 if np.isfinite(chi2) else 1.0))
+    return part_sd, sd
+
+
+def _by_axis(q0: NDArray[np.float64], sd: NDArray[np.float64],
+             part_sd: Mapping[str, NDArray[np.float64]], *, chi2: float, dof: int,
+             fixed_poles: bool) -> ParameterStd:
+    """The quantities (``h`` then ``v``, :data:`QUANTITIES` each), their stds and parts by axis.
+
+    With ``fixed_poles`` the resonance and damping stds are NaN (the poles were not fitted).
+    """
     value: dict[str, dict[str, float]] = {}
     std: dict[str, dict[str, float]] = {}
     parts: dict[str, dict[str, dict[str, float]]] = {}
