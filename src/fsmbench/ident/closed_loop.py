@@ -38,7 +38,6 @@ closed-loop part under ``diagnostics.closed_loop``), ``plant.mat`` and
 from __future__ import annotations
 
 import dataclasses
-import math
 import warnings as pywarnings
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
@@ -62,19 +61,18 @@ from fsmbench.bench.blocks import (
 from fsmbench.bench.params import Bench
 from fsmbench.checks import Check, Notice, first_failure
 from fsmbench.ident.calibration import current_amp_checks
+from fsmbench.ident.closed_loop_tracking import TrackingDuringMeasurement, _tracking
 from fsmbench.ident.current_amp import calibrate_current_amplifier
 from fsmbench.ident.delay.sampled import SensorLowpass
 from fsmbench.ident.export import write_identification_folder
 from fsmbench.ident.frf.closed_loop import ClosedLoopFrf, ClosedLoopRecord, closed_loop_frf
 from fsmbench.ident.frf.closed_loop_merge import merge_closed_loop_frf
 from fsmbench.ident.frf.estimate import FrfEstimate
-from fsmbench.ident.frf.periodic import detect_period
 from fsmbench.ident.pipeline import path_keyed_summary, quality_warnings
 from fsmbench.ident.sercalo import SercaloFitOptions, SercaloIdentification, fit_sercalo
 from fsmbench.io.errors import RecordingError
 from fsmbench.io.folder import check_recording
 from fsmbench.io.recording import read_recording
-from fsmbench.jsonutil import plain_json
 from fsmbench.version import __version__
 
 __all__ = ["CLOSED_LOOP_RECORDS", "EXCITATION_VARIABLES", "MODE_ASSIGNMENT_TOLERANCE",
@@ -90,11 +88,6 @@ _REQUIRED = ("t", "Uch", "Ucv", "Vph", "Vpv")
 _SUFFIXES = (".mat", ".h5", ".nxs")
 # The coil-voltage channels: a failure there only leaves the current amplifiers unmeasured.
 _COIL = (": Vch", ": Vcv")
-# The loop's own error is read on the record before the excitation starts, after the
-# closing transient; shorter than this it is not measured.
-_MIN_BEFORE_S = 0.5
-# The loop's closing transient left out of the "before" window [s].
-_SETTLE_S = 0.2
 
 
 @dataclass(frozen=True)
@@ -139,46 +132,6 @@ class ClosedLoopIdentifyOptions:
                 "sercalo": dict(self.sercalo.__dict__), "max_error_rad": self.max_error_rad,
                 "current_amp_band_hz": list(self.current_amp_band_hz),
                 "fit_min_hz": self.fit_min_hz}
-
-
-@dataclass(frozen=True)
-class TrackingDuringMeasurement:
-    """The 4QD's beam-angle error in one record: the loop's own, and with the excitation.
-
-    Attributes
-    ----------
-    record : str
-    before_rms_rad, during_rms_rad, added_rms_rad : dict axis -> float
-        Rms (mean removed) before the excitation and while excited [rad]; what the
-        excitation added [rad]: for a repeated excitation the rms of the
-        synchronous average over its periods (noise share removed), else
-        ``sqrt(during² - before²)``. ``before`` is NaN when the record holds less
-        than 0.5 s of loop before the excitation (and then ``added`` too, for an
-        excitation that does not repeat).
-    bound_rad : float or None
-        The user's bound on the added rms.
-    """
-
-    record: str
-    before_rms_rad: dict[str, float]
-    during_rms_rad: dict[str, float]
-    added_rms_rad: dict[str, float]
-    bound_rad: float | None = None
-
-    @property
-    def within_bound(self) -> bool | None:
-        """Every axis's added rms within the bound (None: no bound or not measurable)."""
-        if self.bound_rad is None or any(not math.isfinite(v)
-                                         for v in self.added_rms_rad.values()):
-            return None
-        return all(v <= self.bound_rad for v in self.added_rms_rad.values())
-
-    def to_json(self) -> dict[str, Any]:
-        """Plain values."""
-        return plain_json({"record": self.record, "before_rms_rad": self.before_rms_rad,
-                           "during_rms_rad": self.during_rms_rad,
-                           "added_rms_rad": self.added_rms_rad, "bound_rms_rad": self.bound_rad,
-                           "within_bound": self.within_bound})
 
 
 @dataclass(frozen=True, eq=False)
@@ -326,48 +279,6 @@ def _excitation(ds: xr.Dataset, name: str) -> tuple[str, str]:
                          f"output) or {ref_var} (added to the reference), exactly one; found "
                          f"{', '.join(have) or 'neither'}")
     return have[0], "output" if have[0] == out_var else "reference"
-
-
-def _synchronous_added(e: np.ndarray, x: np.ndarray) -> float | None:
-    """Rms of the part of ``e`` that repeats with the excitation ``x`` [same unit as e].
-
-    The synchronous average over whole periods (the first dropped: the loop's transient)
-    keeps what the excitation causes and averages the rest down; its noise share, the
-    per-sample variance across periods over their number, is taken off. None when ``x``
-    does not repeat at least three times.
-    """
-
-    n = detect_period(x)
-    if n is None or x.size // n < 3:
-        return None
-    periods = x.size // n - 1
-    seg = e[n: n + periods * n].reshape(periods, n)
-    seg = seg - seg.mean()
-    mean = seg.mean(axis=0)
-    noise = float(np.mean(np.var(seg, axis=0, ddof=1))) / periods
-    return float(np.sqrt(max(0.0, float(np.mean(mean**2)) - noise)))
-
-
-def _tracking(ds: xr.Dataset, name: str, start: int, gd: tuple[float, float],
-              bound: float | None, excitation: np.ndarray) -> TrackingDuringMeasurement:
-    fs = float(ds.attrs["fs_hz"])
-    before: dict[str, float] = {}
-    during: dict[str, float] = {}
-    added: dict[str, float] = {}
-    first = round(_SETTLE_S * fs)
-    for i, (axis, sig) in enumerate((("h", "Vph"), ("v", "Vpv"))):
-        e = np.asarray(ds[sig].values, dtype=float) / gd[i]
-        during[axis] = float(np.std(e[start:]))
-        before[axis] = (float(np.std(e[first:start])) if start - first >= _MIN_BEFORE_S * fs
-                        else float("nan"))
-        # A repeated excitation's share is measured by the synchronous average (the loop's
-        # own error, 1/f and drift included, averages out); else the quadrature difference
-        # of the rms with and before it, which a short "before" window makes noisy.
-        sync = _synchronous_added(e[start:], excitation)
-        added[axis] = sync if sync is not None else (
-            float(np.sqrt(max(0.0, during[axis] ** 2 - before[axis] ** 2)))
-            if math.isfinite(before[axis]) else float("nan"))
-    return TrackingDuringMeasurement(name, before, during, added, bound)
 
 
 def identify_closed_loop(recordings: Mapping[str, xr.Dataset], *, bench: Bench,
