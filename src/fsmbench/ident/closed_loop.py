@@ -42,7 +42,7 @@ import warnings as pywarnings
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Literal
+from typing import Any, Literal, NamedTuple
 
 import control as ct
 import numpy as np
@@ -318,17 +318,72 @@ def identify_closed_loop(recordings: Mapping[str, xr.Dataset], *, bench: Bench,
     """
 
     opts = options or ClosedLoopIdentifyOptions()
-    nom = bench.nominal
-    conv = nom.converter
     missing = [n for n in CLOSED_LOOP_RECORDS if n not in recordings]
     if missing:
         raise ValueError(f"a closed-loop identification needs {', '.join(CLOSED_LOOP_RECORDS)}; "
                          f"{', '.join(missing)} missing")
+    skipped: dict[str, str] = {}
+    gd_block = prior.blocks["Gd"] if prior is not None else quad_diode(bench.nominal)
+    gd = tuple(float(x) for x in np.diag(np.asarray(gd_block.D, dtype=float)))
+    excited = _excited_records(recordings, bench=bench, gd_v_per_rad=(gd[0], gd[1]),
+                               bound_rad=opts.max_error_rad)
+    checks, notices = list(excited.checks), list(excited.notices)
+    fit = _fit_records(excited, recordings, bench=bench, prior=prior, options=opts,
+                       merge_with=merge_with, checks=checks, notices=notices, skipped=skipped)
+    notices += fit.notices
+    sid = fit.sercalo
+    warnings = quality_warnings(sercalo=sid, modes=None, validation=())
+    plant, blocks = _assemble(sid, bench=bench, prior=prior, gi=fit.gi, gi_how=fit.gi_how,
+                              source=source)
+    return ClosedLoopIdentification(
+        frf=fit.frf, sercalo=sid, plant=plant, plant_blocks=blocks, current_amp_a_per_v=fit.gi,
+        tracking=tuple(excited.tracking), at=excited.at, source=source,
+        prior_source=prior_source or ("the bench file (no previous identification given)"
+                                      if prior is None else "a previous identification"),
+        skipped=skipped, warnings=warnings, checks=tuple(checks), notices=tuple(notices),
+        options=opts)
+
+
+class _ExcitedRecords(NamedTuple):
+    """The closed-loop records checked and cut where their excitation starts.
+
+    Attributes
+    ----------
+    records : list of ClosedLoopRecord
+        What the joint estimator takes, in the order of :data:`CLOSED_LOOP_RECORDS`.
+    tracking : list of TrackingDuringMeasurement
+    at : {"output", "reference"}
+        Where the excitation is added.
+    starts : dict record -> int
+        The excitation's first sample in each record.
+    checks : list of Check
+    notices : list of Notice
+        What the records' checks found.
+    """
+
+    records: list[ClosedLoopRecord]
+    tracking: list[TrackingDuringMeasurement]
+    at: str
+    starts: dict[str, int]
+    checks: list[Check]
+    notices: list[Notice]
+
+
+def _excited_records(recordings: Mapping[str, xr.Dataset], *, bench: Bench,
+                     gd_v_per_rad: tuple[float, float],
+                     bound_rad: float | None) -> _ExcitedRecords:
+    """Each record checked, its excitation found and the tracking error measured with the
+    4QD gains ``gd_v_per_rad`` [V/rad] against the user's ``bound_rad`` [rad].
+
+    Raises
+    ------
+    ValueError
+        A check failed (the coil voltages' aside), no excitation or one of zeros, or the
+        records excite at different places.
+    """
+    conv = bench.nominal.converter
     checks: list[Check] = []
     notices: list[Notice] = []
-    skipped: dict[str, str] = {}
-    gd_block = prior.blocks["Gd"] if prior is not None else quad_diode(nom)
-    gd = tuple(float(x) for x in np.diag(np.asarray(gd_block.D, dtype=float)))
     records: list[ClosedLoopRecord] = []
     tracking: list[TrackingDuringMeasurement] = []
     places: set[str] = set()
@@ -350,8 +405,7 @@ def identify_closed_loop(recordings: Mapping[str, xr.Dataset], *, bench: Bench,
             raise ValueError(f"{name}: the excitation {var} is zero throughout")
         start = int(on[0])
         starts[name] = start
-        tracking.append(_tracking(ds, name, start, (gd[0], gd[1]), opts.max_error_rad,
-                                  x[start:]))
+        tracking.append(_tracking(ds, name, start, gd_v_per_rad, bound_rad, x[start:]))
         records.append(ClosedLoopRecord(
             excitation=x[start:],
             commands=np.column_stack([ds["Uch"].values, ds["Ucv"].values])[start:],
@@ -360,39 +414,55 @@ def identify_closed_loop(recordings: Mapping[str, xr.Dataset], *, bench: Bench,
     if len(places) != 1:
         raise ValueError("data_cl_uch and data_cl_ucv excite at different places (one at the "
                          "output, one at the reference); play both the same way")
-    at = places.pop()
+    return _ExcitedRecords(records=records, tracking=tracking, at=places.pop(), starts=starts,
+                           checks=checks, notices=notices)
+
+
+class _RecordsFit(NamedTuple):
+    """What the records give: the joint ``frf`` (merged with earlier stages), the
+    ``sercalo`` fit (None when it failed), the current amplifiers' gains ``gi`` [A/V] and
+    how they were found (``gi_how``), and the numeric warnings meanwhile as ``notices``."""
+
+    frf: ClosedLoopFrf
+    sercalo: SercaloIdentification | None
+    gi: dict[str, float]
+    gi_how: str
+    notices: list[Notice]
+
+
+def _fit_records(excited: _ExcitedRecords, recordings: Mapping[str, xr.Dataset], *,
+                 bench: Bench, prior: PlantModel | None, options: ClosedLoopIdentifyOptions,
+                 merge_with: Sequence[ClosedLoopFrf], checks: list[Check],
+                 notices: list[Notice], skipped: dict[str, str]) -> _RecordsFit:
+    """The joint FRF, the current amplifiers and the Sercalo's fit (module notes, steps 2-4).
+
+    The current amplifiers' checks are added to ``checks``, what was not done to
+    ``skipped``; the warnings raised are caught and returned as notices.
+    """
+    nom = bench.nominal
     with pywarnings.catch_warnings(record=True) as caught:
         pywarnings.simplefilter("always")
-        frf = closed_loop_frf(records, estimator=opts.frf,
-                              transient_periods=opts.transient_periods)
+        frf = closed_loop_frf(excited.records, estimator=options.frf,
+                              transient_periods=options.transient_periods)
         if merge_with:
             frf = merge_closed_loop_frf([*merge_with, frf])
-        gi, gi_how = _current_amplifiers(recordings, starts, bench=bench, prior=prior,
-                                         band_hz=opts.current_amp_band_hz, checks=checks,
+        gi, gi_how = _current_amplifiers(recordings, excited.starts, bench=bench, prior=prior,
+                                         band_hz=options.current_amp_band_hz, checks=checks,
                                          notices=notices, skipped=skipped,
                                          calibrate=calibrate_current_amplifier)
         sid: SercaloIdentification | None = None
         try:
-            sid = fit_sercalo(_from(frf.plant, opts.fit_min_hz).to_frequency_response(),
+            sid = fit_sercalo(_from(frf.plant, options.fit_min_hz).to_frequency_response(),
                               gi_a_per_v=gi,
-                              options=opts.sercalo, sensor=SensorLowpass.from_params(nom))
+                              options=options.sercalo, sensor=SensorLowpass.from_params(nom))
         except ValueError as exc:
             skipped["sercalo"] = f"failed (data_cl_uch, data_cl_ucv): {exc}"
         if sid is not None and (lost := unassigned_modes(sid)):
             skipped["sercalo"] = f"failed (data_cl_uch, data_cl_ucv): {lost}"
             sid = None
-    notices += [Notice("numeric", "closed-loop identification",
-                       f"{w.category.__name__}: {w.message}") for w in caught]
-    warnings = quality_warnings(sercalo=sid, modes=None, validation=())
-    plant, blocks = _assemble(sid, bench=bench, prior=prior, gi=gi, gi_how=gi_how,
-                              source=source)
-    return ClosedLoopIdentification(
-        frf=frf, sercalo=sid, plant=plant, plant_blocks=blocks, current_amp_a_per_v=gi,
-        tracking=tuple(tracking), at=at, source=source,
-        prior_source=prior_source or ("the bench file (no previous identification given)"
-                                      if prior is None else "a previous identification"),
-        skipped=skipped, warnings=warnings, checks=tuple(checks), notices=tuple(notices),
-        options=opts)
+    numeric = [Notice("numeric", "closed-loop identification",
+                      f"{w.category.__name__}: {w.message}") for w in caught]
+    return _RecordsFit(frf=frf, sercalo=sid, gi=gi, gi_how=gi_how, notices=numeric)
 
 
 #: A fitted mode is an axis's when it lies within this fraction of the axis's peak (the
