@@ -304,7 +304,8 @@ def _period_variance(parts: Sequence[_PeriodicRecord], lines: NDArray[np.intp],
 
 
 def _leakage_free(parts: Sequence[_PeriodicRecord], lines: NDArray[np.intp],
-                  options: LeakageOptions) -> tuple[NDArray[np.complex128], NDArray[np.complex128],
+                  options: LeakageOptions
+                  ) -> tuple[NDArray[np.complex128], NDArray[np.complex128],
                              NDArray[np.complex128], NDArray[np.float64], NDArray[np.float64],
                              NDArray[np.complex128]]:
     """``S_yr``, ``S_ur``, ``G``, ``var G``, the residual noise (per period's line) and the
@@ -465,7 +466,7 @@ def _periodic_plant(parts: Sequence[_PeriodicRecord], lines: NDArray[np.intp],
     method and noise options added here.
     """
     fs, n = parts[0].record.fs_hz, parts[0].period
-    p_used = options["periods_used"]
+    p_used = [p.periods for p in parts]
     means = _mean_responses(parts, lines)
     if leakage is not None:
         s_yr, s_ur, g, var, noise, u_cols = _leakage_free(parts, lines, leakage)
