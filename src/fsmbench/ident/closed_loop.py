@@ -8,7 +8,7 @@ outputs. :func:`identify_closed_loop`:
    move), finds where its excitation starts, and measures the **tracking error
    during the measurement**: the 4QD's beam angle rms while excited, before it
    (the loop's own), and what the excitation added (their quadrature difference),
-   against the user's bound when one is given;
+   against the user's bound when one is given (:mod:`fsmbench.ident.closed_loop_tracking`);
 2. estimates the 2×2 FRF matrix ``Uch, Ucv → Vph, Vpv`` by the joint
    input–output method with the excitation as the instrument
    (:mod:`fsmbench.ident.frf.closed_loop`: periodic averaging when the excitation
