@@ -400,18 +400,8 @@ def spectral_matrix(
 
 
 class _SpectralMatrix(NamedTuple):
-    """An experiment's cross-spectral matrix and what it was averaged from.
-
-    Attributes
-    ----------
-    s : ndarray, complex, shape (F, m + p, m + p)
-        Cross-spectra of the inputs, then the outputs [U_a U_b/Hz].
-    input_names, output_names : list of str
-    segments : int
-        Segments averaged.
-    n_d : float
-        Welch's equivalent independent averages.
-    """
+    """An experiment's cross-spectra ``s`` (F, m + p, m + p), the inputs first [U_a U_b/Hz],
+    its channels' names, the ``segments`` averaged and Welch's equivalent averages ``n_d``."""
 
     s: NDArray[np.complex128]
     input_names: list[str]
@@ -422,13 +412,8 @@ class _SpectralMatrix(NamedTuple):
 
 def _checked_spectra(inputs: ArrayLike, outputs: ArrayLike, *, input_names: Sequence[str],
                      output_names: Sequence[str], options: WelchOptions) -> _SpectralMatrix:
-    """Every channel checked (finite, long enough, with power), then their cross-spectra.
-
-    Raises
-    ------
-    ValueError
-        As :func:`spectral_matrix`, naming the channel; too few segments for the inputs.
-    """
+    """Every channel checked (finite, long enough, with power), then their cross-spectra;
+    a ValueError names the channel (:func:`spectral_matrix`) or says the segments are few."""
     u = _as_matrix(inputs, "inputs")
     y = _as_matrix(outputs, "outputs")
     in_names = _names(input_names, u.shape[1], "input_names")
@@ -475,12 +460,13 @@ def _frequency_response(sm: _SpectralMatrix, *, h: NDArray[np.complex128],
         return out
 
     shape = (f.size, p, m)
-    pxx, pyy = input_psd, output_psd
     return FrequencyResponse(
         frf=da(h, "frf", "output/input"),
         coherence=da(coherence, "coherence", "1"),
-        input_psd=da(np.broadcast_to(pxx[:, None, :], shape).copy(), "input_psd", "input^2/Hz"),
-        output_psd=da(np.broadcast_to(pyy[:, :, None], shape).copy(), "output_psd", "output^2/Hz"),
+        input_psd=da(np.broadcast_to(input_psd[:, None, :], shape).copy(), "input_psd",
+                     "input^2/Hz"),
+        output_psd=da(np.broadcast_to(output_psd[:, :, None], shape).copy(), "output_psd",
+                      "output^2/Hz"),
         cross_psd=da(sm.s[:, m:, :m].copy(), "cross_psd", "output*input/Hz"),
         random_error=da(eps, "random_error", "1"),
         magnitude_lower=da(bounds[0], "magnitude_lower", "output/input"),
