@@ -51,7 +51,7 @@ from fsmbench.budget.signals import is_lazy
 from fsmbench.budget.stability import DRIFT_BINS, StabilityRecord, analyse_stability
 from fsmbench.budget.table import AngleSources, angle_sources, budget_table
 from fsmbench.checks import Check, Notice, first_failure
-from fsmbench.io.folder import check_recording
+from fsmbench.io.record_checks import check_recording
 
 # The result types live in fsmbench.budget.result; named here too, where they were first.
 __all__ = ["BudgetResult", "ControllerBudget", "NonRepeatability", "budget_study",

@@ -8,7 +8,7 @@ outputs. :func:`identify_closed_loop`:
    move), finds where its excitation starts, and measures the **tracking error
    during the measurement**: the 4QD's beam angle rms while excited, before it
    (the loop's own), and what the excitation added (their quadrature difference),
-   against the user's bound when one is given;
+   against the user's bound when one is given (:mod:`fsmbench.ident.closed_loop_tracking`);
 2. estimates the 2×2 FRF matrix ``Uch, Ucv → Vph, Vpv`` by the joint
    input–output method with the excitation as the instrument
    (:mod:`fsmbench.ident.frf.closed_loop`: periodic averaging when the excitation
@@ -38,12 +38,11 @@ closed-loop part under ``diagnostics.closed_loop``), ``plant.mat`` and
 from __future__ import annotations
 
 import dataclasses
-import math
 import warnings as pywarnings
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Literal
+from typing import Any, Literal, NamedTuple
 
 import control as ct
 import numpy as np
@@ -62,19 +61,18 @@ from fsmbench.bench.blocks import (
 from fsmbench.bench.params import Bench
 from fsmbench.checks import Check, Notice, first_failure
 from fsmbench.ident.calibration import current_amp_checks
+from fsmbench.ident.closed_loop_tracking import TrackingDuringMeasurement, _tracking
 from fsmbench.ident.current_amp import calibrate_current_amplifier
 from fsmbench.ident.delay.sampled import SensorLowpass
 from fsmbench.ident.export import write_identification_folder
 from fsmbench.ident.frf.closed_loop import ClosedLoopFrf, ClosedLoopRecord, closed_loop_frf
 from fsmbench.ident.frf.closed_loop_merge import merge_closed_loop_frf
 from fsmbench.ident.frf.estimate import FrfEstimate
-from fsmbench.ident.frf.periodic import detect_period
 from fsmbench.ident.pipeline import path_keyed_summary, quality_warnings
 from fsmbench.ident.sercalo import SercaloFitOptions, SercaloIdentification, fit_sercalo
 from fsmbench.io.errors import RecordingError
-from fsmbench.io.folder import check_recording
+from fsmbench.io.record_checks import check_recording
 from fsmbench.io.recording import read_recording
-from fsmbench.jsonutil import plain_json
 from fsmbench.version import __version__
 
 __all__ = ["CLOSED_LOOP_RECORDS", "EXCITATION_VARIABLES", "MODE_ASSIGNMENT_TOLERANCE",
@@ -90,11 +88,6 @@ _REQUIRED = ("t", "Uch", "Ucv", "Vph", "Vpv")
 _SUFFIXES = (".mat", ".h5", ".nxs")
 # The coil-voltage channels: a failure there only leaves the current amplifiers unmeasured.
 _COIL = (": Vch", ": Vcv")
-# The loop's own error is read on the record before the excitation starts, after the
-# closing transient; shorter than this it is not measured.
-_MIN_BEFORE_S = 0.5
-# The loop's closing transient left out of the "before" window [s].
-_SETTLE_S = 0.2
 
 
 @dataclass(frozen=True)
@@ -139,46 +132,6 @@ class ClosedLoopIdentifyOptions:
                 "sercalo": dict(self.sercalo.__dict__), "max_error_rad": self.max_error_rad,
                 "current_amp_band_hz": list(self.current_amp_band_hz),
                 "fit_min_hz": self.fit_min_hz}
-
-
-@dataclass(frozen=True)
-class TrackingDuringMeasurement:
-    """The 4QD's beam-angle error in one record: the loop's own, and with the excitation.
-
-    Attributes
-    ----------
-    record : str
-    before_rms_rad, during_rms_rad, added_rms_rad : dict axis -> float
-        Rms (mean removed) before the excitation and while excited [rad]; what the
-        excitation added [rad]: for a repeated excitation the rms of the
-        synchronous average over its periods (noise share removed), else
-        ``sqrt(during² - before²)``. ``before`` is NaN when the record holds less
-        than 0.5 s of loop before the excitation (and then ``added`` too, for an
-        excitation that does not repeat).
-    bound_rad : float or None
-        The user's bound on the added rms.
-    """
-
-    record: str
-    before_rms_rad: dict[str, float]
-    during_rms_rad: dict[str, float]
-    added_rms_rad: dict[str, float]
-    bound_rad: float | None = None
-
-    @property
-    def within_bound(self) -> bool | None:
-        """Every axis's added rms within the bound (None: no bound or not measurable)."""
-        if self.bound_rad is None or any(not math.isfinite(v)
-                                         for v in self.added_rms_rad.values()):
-            return None
-        return all(v <= self.bound_rad for v in self.added_rms_rad.values())
-
-    def to_json(self) -> dict[str, Any]:
-        """Plain values."""
-        return plain_json({"record": self.record, "before_rms_rad": self.before_rms_rad,
-                           "during_rms_rad": self.during_rms_rad,
-                           "added_rms_rad": self.added_rms_rad, "bound_rms_rad": self.bound_rad,
-                           "within_bound": self.within_bound})
 
 
 @dataclass(frozen=True, eq=False)
@@ -328,48 +281,6 @@ def _excitation(ds: xr.Dataset, name: str) -> tuple[str, str]:
     return have[0], "output" if have[0] == out_var else "reference"
 
 
-def _synchronous_added(e: np.ndarray, x: np.ndarray) -> float | None:
-    """Rms of the part of ``e`` that repeats with the excitation ``x`` [same unit as e].
-
-    The synchronous average over whole periods (the first dropped: the loop's transient)
-    keeps what the excitation causes and averages the rest down; its noise share, the
-    per-sample variance across periods over their number, is taken off. None when ``x``
-    does not repeat at least three times.
-    """
-
-    n = detect_period(x)
-    if n is None or x.size // n < 3:
-        return None
-    periods = x.size // n - 1
-    seg = e[n: n + periods * n].reshape(periods, n)
-    seg = seg - seg.mean()
-    mean = seg.mean(axis=0)
-    noise = float(np.mean(np.var(seg, axis=0, ddof=1))) / periods
-    return float(np.sqrt(max(0.0, float(np.mean(mean**2)) - noise)))
-
-
-def _tracking(ds: xr.Dataset, name: str, start: int, gd: tuple[float, float],
-              bound: float | None, excitation: np.ndarray) -> TrackingDuringMeasurement:
-    fs = float(ds.attrs["fs_hz"])
-    before: dict[str, float] = {}
-    during: dict[str, float] = {}
-    added: dict[str, float] = {}
-    first = round(_SETTLE_S * fs)
-    for i, (axis, sig) in enumerate((("h", "Vph"), ("v", "Vpv"))):
-        e = np.asarray(ds[sig].values, dtype=float) / gd[i]
-        during[axis] = float(np.std(e[start:]))
-        before[axis] = (float(np.std(e[first:start])) if start - first >= _MIN_BEFORE_S * fs
-                        else float("nan"))
-        # A repeated excitation's share is measured by the synchronous average (the loop's
-        # own error, 1/f and drift included, averages out); else the quadrature difference
-        # of the rms with and before it, which a short "before" window makes noisy.
-        sync = _synchronous_added(e[start:], excitation)
-        added[axis] = sync if sync is not None else (
-            float(np.sqrt(max(0.0, during[axis] ** 2 - before[axis] ** 2)))
-            if math.isfinite(before[axis]) else float("nan"))
-    return TrackingDuringMeasurement(name, before, during, added, bound)
-
-
 def identify_closed_loop(recordings: Mapping[str, xr.Dataset], *, bench: Bench,
                          prior: PlantModel | None = None, prior_source: str = "",
                          options: ClosedLoopIdentifyOptions | None = None,
@@ -407,17 +318,72 @@ def identify_closed_loop(recordings: Mapping[str, xr.Dataset], *, bench: Bench,
     """
 
     opts = options or ClosedLoopIdentifyOptions()
-    nom = bench.nominal
-    conv = nom.converter
     missing = [n for n in CLOSED_LOOP_RECORDS if n not in recordings]
     if missing:
         raise ValueError(f"a closed-loop identification needs {', '.join(CLOSED_LOOP_RECORDS)}; "
                          f"{', '.join(missing)} missing")
+    skipped: dict[str, str] = {}
+    gd_block = prior.blocks["Gd"] if prior is not None else quad_diode(bench.nominal)
+    gd = tuple(float(x) for x in np.diag(np.asarray(gd_block.D, dtype=float)))
+    excited = _excited_records(recordings, bench=bench, gd_v_per_rad=(gd[0], gd[1]),
+                               bound_rad=opts.max_error_rad)
+    checks, notices = list(excited.checks), list(excited.notices)
+    fit = _fit_records(excited, recordings, bench=bench, prior=prior, options=opts,
+                       merge_with=merge_with, checks=checks, notices=notices, skipped=skipped)
+    notices += fit.notices
+    sid = fit.sercalo
+    warnings = quality_warnings(sercalo=sid, modes=None, validation=())
+    plant, blocks = _assemble(sid, bench=bench, prior=prior, gi=fit.gi, gi_how=fit.gi_how,
+                              source=source)
+    return ClosedLoopIdentification(
+        frf=fit.frf, sercalo=sid, plant=plant, plant_blocks=blocks, current_amp_a_per_v=fit.gi,
+        tracking=tuple(excited.tracking), at=excited.at, source=source,
+        prior_source=prior_source or ("the bench file (no previous identification given)"
+                                      if prior is None else "a previous identification"),
+        skipped=skipped, warnings=warnings, checks=tuple(checks), notices=tuple(notices),
+        options=opts)
+
+
+class _ExcitedRecords(NamedTuple):
+    """The closed-loop records checked and cut where their excitation starts.
+
+    Attributes
+    ----------
+    records : list of ClosedLoopRecord
+        What the joint estimator takes, in the order of :data:`CLOSED_LOOP_RECORDS`.
+    tracking : list of TrackingDuringMeasurement
+    at : {"output", "reference"}
+        Where the excitation is added.
+    starts : dict record -> int
+        The excitation's first sample in each record.
+    checks : list of Check
+    notices : list of Notice
+        What the records' checks found.
+    """
+
+    records: list[ClosedLoopRecord]
+    tracking: list[TrackingDuringMeasurement]
+    at: str
+    starts: dict[str, int]
+    checks: list[Check]
+    notices: list[Notice]
+
+
+def _excited_records(recordings: Mapping[str, xr.Dataset], *, bench: Bench,
+                     gd_v_per_rad: tuple[float, float],
+                     bound_rad: float | None) -> _ExcitedRecords:
+    """Each record checked, its excitation found and the tracking error measured with the
+    4QD gains ``gd_v_per_rad`` [V/rad] against the user's ``bound_rad`` [rad].
+
+    Raises
+    ------
+    ValueError
+        A check failed (the coil voltages' aside), no excitation or one of zeros, or the
+        records excite at different places.
+    """
+    conv = bench.nominal.converter
     checks: list[Check] = []
     notices: list[Notice] = []
-    skipped: dict[str, str] = {}
-    gd_block = prior.blocks["Gd"] if prior is not None else quad_diode(nom)
-    gd = tuple(float(x) for x in np.diag(np.asarray(gd_block.D, dtype=float)))
     records: list[ClosedLoopRecord] = []
     tracking: list[TrackingDuringMeasurement] = []
     places: set[str] = set()
@@ -439,8 +405,7 @@ def identify_closed_loop(recordings: Mapping[str, xr.Dataset], *, bench: Bench,
             raise ValueError(f"{name}: the excitation {var} is zero throughout")
         start = int(on[0])
         starts[name] = start
-        tracking.append(_tracking(ds, name, start, (gd[0], gd[1]), opts.max_error_rad,
-                                  x[start:]))
+        tracking.append(_tracking(ds, name, start, gd_v_per_rad, bound_rad, x[start:]))
         records.append(ClosedLoopRecord(
             excitation=x[start:],
             commands=np.column_stack([ds["Uch"].values, ds["Ucv"].values])[start:],
@@ -449,39 +414,55 @@ def identify_closed_loop(recordings: Mapping[str, xr.Dataset], *, bench: Bench,
     if len(places) != 1:
         raise ValueError("data_cl_uch and data_cl_ucv excite at different places (one at the "
                          "output, one at the reference); play both the same way")
-    at = places.pop()
+    return _ExcitedRecords(records=records, tracking=tracking, at=places.pop(), starts=starts,
+                           checks=checks, notices=notices)
+
+
+class _RecordsFit(NamedTuple):
+    """What the records give: the joint ``frf`` (merged with earlier stages), the
+    ``sercalo`` fit (None when it failed), the current amplifiers' gains ``gi`` [A/V] and
+    how they were found (``gi_how``), and the numeric warnings meanwhile as ``notices``."""
+
+    frf: ClosedLoopFrf
+    sercalo: SercaloIdentification | None
+    gi: dict[str, float]
+    gi_how: str
+    notices: list[Notice]
+
+
+def _fit_records(excited: _ExcitedRecords, recordings: Mapping[str, xr.Dataset], *,
+                 bench: Bench, prior: PlantModel | None, options: ClosedLoopIdentifyOptions,
+                 merge_with: Sequence[ClosedLoopFrf], checks: list[Check],
+                 notices: list[Notice], skipped: dict[str, str]) -> _RecordsFit:
+    """The joint FRF, the current amplifiers and the Sercalo's fit (module notes, steps 2-4).
+
+    The current amplifiers' checks are added to ``checks``, what was not done to
+    ``skipped``; the warnings raised are caught and returned as notices.
+    """
+    nom = bench.nominal
     with pywarnings.catch_warnings(record=True) as caught:
         pywarnings.simplefilter("always")
-        frf = closed_loop_frf(records, estimator=opts.frf,
-                              transient_periods=opts.transient_periods)
+        frf = closed_loop_frf(excited.records, estimator=options.frf,
+                              transient_periods=options.transient_periods)
         if merge_with:
             frf = merge_closed_loop_frf([*merge_with, frf])
-        gi, gi_how = _current_amplifiers(recordings, starts, bench=bench, prior=prior,
-                                         band_hz=opts.current_amp_band_hz, checks=checks,
+        gi, gi_how = _current_amplifiers(recordings, excited.starts, bench=bench, prior=prior,
+                                         band_hz=options.current_amp_band_hz, checks=checks,
                                          notices=notices, skipped=skipped,
                                          calibrate=calibrate_current_amplifier)
         sid: SercaloIdentification | None = None
         try:
-            sid = fit_sercalo(_from(frf.plant, opts.fit_min_hz).to_frequency_response(),
+            sid = fit_sercalo(_from(frf.plant, options.fit_min_hz).to_frequency_response(),
                               gi_a_per_v=gi,
-                              options=opts.sercalo, sensor=SensorLowpass.from_params(nom))
+                              options=options.sercalo, sensor=SensorLowpass.from_params(nom))
         except ValueError as exc:
             skipped["sercalo"] = f"failed (data_cl_uch, data_cl_ucv): {exc}"
         if sid is not None and (lost := unassigned_modes(sid)):
             skipped["sercalo"] = f"failed (data_cl_uch, data_cl_ucv): {lost}"
             sid = None
-    notices += [Notice("numeric", "closed-loop identification",
-                       f"{w.category.__name__}: {w.message}") for w in caught]
-    warnings = quality_warnings(sercalo=sid, modes=None, validation=())
-    plant, blocks = _assemble(sid, bench=bench, prior=prior, gi=gi, gi_how=gi_how,
-                              source=source)
-    return ClosedLoopIdentification(
-        frf=frf, sercalo=sid, plant=plant, plant_blocks=blocks, current_amp_a_per_v=gi,
-        tracking=tuple(tracking), at=at, source=source,
-        prior_source=prior_source or ("the bench file (no previous identification given)"
-                                      if prior is None else "a previous identification"),
-        skipped=skipped, warnings=warnings, checks=tuple(checks), notices=tuple(notices),
-        options=opts)
+    numeric = [Notice("numeric", "closed-loop identification",
+                      f"{w.category.__name__}: {w.message}") for w in caught]
+    return _RecordsFit(frf=frf, sercalo=sid, gi=gi, gi_how=gi_how, notices=numeric)
 
 
 #: A fitted mode is an axis's when it lies within this fraction of the axis's peak (the

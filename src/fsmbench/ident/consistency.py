@@ -63,7 +63,7 @@ from fsmbench.ident.evidence.observations import (
 )
 from fsmbench.ident.evidence.recorded_loop import RecordedController, recorded_controllers
 from fsmbench.ident.evidence.signs import SignDiagnosis, SignObservation
-from fsmbench.io.folder import check_recording
+from fsmbench.io.record_checks import check_recording
 
 __all__ = [
     "AXIS_RATIO_MIN",

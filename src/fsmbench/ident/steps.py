@@ -87,7 +87,7 @@ from fsmbench.ident.sercalo import (
 )
 from fsmbench.ident.totals import qd_amplifier_lag_s, qd_amplifier_lags_by_axis, uncertainty_tree
 from fsmbench.ident.validate import PathValidation, validate_sercalo
-from fsmbench.io.folder import check_recording
+from fsmbench.io.record_checks import check_recording
 
 __all__ = ["NOISE_EXPERIMENTS", "NoiseStep", "SercaloStep", "StepRun", "assemble_step",
            "current_amp_step", "newport_step", "noise_step", "qd_step", "sercalo_step",

@@ -137,21 +137,8 @@ def decide_amplifier(frf: FrequencyResponse, dyn: NewportDynamics, *, lag_s: flo
         return AmplifierDecision(lag_s, lag_std_s, None, False)
     # The axes these lines give (an axis whose record is missing is the bench file's).
     fitted = [a for a in dyn.axes if f"Un{a}" in frf.input_names]
-    claimed = [fit for a in fitted if (fit := dyn.axes[a]).sensor is not None
-               and fit.sensor.source == "fitted"]
     if lag_s <= LAG_SIGMAS * lag_std_s:
-        if not claimed:
-            return AmplifierDecision(lag_s, lag_std_s, None, False)
-        # The lines want a pole the delays do not show: the mirror's own, not the 4QD's.
-        lines = "; ".join(f"{_ORDER_WORDS[a.sensor.order]} at {a.sensor.bandwidth_hz:.4g} Hz "
-                          f"({a.axis})" for a in claimed if a.sensor is not None)
-        return AmplifierDecision(
-            lag_s, lag_std_s, model, False,
-            words=(f"the Newport's lines fit better with another low pass ({lines}), but the "
-                   f"delays measure no 4QD amplifier lag ({lag_s * 1e6:+.3g} ± "
-                   f"{lag_std_s * 1e6:.2g} µs): that pole is the Newport's own, which its "
-                   "second-order model leaves out; no 4QD amplifier is reported, and the "
-                   "Newport is fitted without it"))
+        return _no_measured_lag(dyn, fitted, lag_s=lag_s, lag_std_s=lag_std_s, model=model)
     by_order = {o: {axis: fit_newport_axis(frf, axis, sensor=SensorLowpass(
         bandwidth_hz=_bandwidth(lag_s, o), order=o), resolve_sensor=False)
         for axis in fitted} for o in (1, 2)}
@@ -164,28 +151,78 @@ def decide_amplifier(frf: FrequencyResponse, dyn: NewportDynamics, *, lag_s: flo
                  f"{lag_std_s * 1e6:.2g} µs (the Sercalo's effective delay less the pure one "
                  "of Uc → Vc and the coil's lag)")
     if lr <= RESOLVED_LR:
-        shifts = {a: SensorShift(axis=a, lag_s=lag_s,
-                                 half_width={k: abs(v) for k, v in _shift(
-                                     by_order[other][a], by_order[best][a]).items()},
-                                 by_order={o: _shift(by_order[o][a], by_order[best][a])
-                                           for o in (1, 2)})
-                  for a in fitted}
-        return AmplifierDecision(
-            lag_s, lag_std_s, SensorLowpass(bandwidth_hz=_bandwidth(lag_s, best), order=best),
-            False, lr, shifts,
-            words=(f"{lag_words}; the Newport's lines cannot tell its order (a "
-                   f"{_ORDER_WORDS[other]} low pass of that lag fits only {lr:.3g} noise units "
-                   f"worse, under {RESOLVED_LR:.3g}): no amplifier is reported on its own; the "
-                   "Newport is fitted with the better order and carries the other's difference "
-                   "as a bound; state the amplifier in the bench file to remove it"))
+        return _undecided_order(by_order, fitted, best=best, lr=lr, lag_s=lag_s,
+                                lag_std_s=lag_std_s, lag_words=lag_words)
     sensor = SensorLowpass(bandwidth_hz=_bandwidth(lag_s, best), order=best)
+    shifts = _lag_std_shifts(frf, fitted, by_order[best], best=best, lag_s=lag_s,
+                             lag_std_s=lag_std_s)
+    bw = sensor.bandwidth_hz
+    bw_std = bw * lag_std_s / lag_s
+    findings = _amplifier_findings(model, best=best, bw=bw, bw_std=bw_std, lr=lr,
+                                   lag_words=lag_words)
+    return AmplifierDecision(
+        lag_s, lag_std_s, sensor, True, lr, shifts,
+        words=(f"{lag_words}; the Newport's lines choose a {_ORDER_WORDS[best]} low pass "
+               f"(the other order fits {lr:.3g} noise units worse): the 4QD amplifier is a "
+               f"{_ORDER_WORDS[best]} low pass at {bw:.4g} ± {bw_std:.2g} Hz, and the "
+               "Newport's parameters carry the lag's std"),
+        findings=tuple(findings))
+
+
+def _no_measured_lag(dyn: NewportDynamics, fitted: list[str], *, lag_s: float,
+                     lag_std_s: float, model: SensorLowpass) -> AmplifierDecision:
+    """No lag above :data:`LAG_SIGMAS` of its std (``lag_s``, ``lag_std_s`` [s]): no
+    amplifier, and a low pass the lines of the ``fitted`` axes claim is the Newport's own."""
+    claimed = [fit for a in fitted if (fit := dyn.axes[a]).sensor is not None
+               and fit.sensor.source == "fitted"]
+    if not claimed:
+        return AmplifierDecision(lag_s, lag_std_s, None, False)
+    # The lines want a pole the delays do not show: the mirror's own, not the 4QD's.
+    lines = "; ".join(f"{_ORDER_WORDS[a.sensor.order]} at {a.sensor.bandwidth_hz:.4g} Hz "
+                      f"({a.axis})" for a in claimed if a.sensor is not None)
+    return AmplifierDecision(
+        lag_s, lag_std_s, model, False,
+        words=(f"the Newport's lines fit better with another low pass ({lines}), but the "
+               f"delays measure no 4QD amplifier lag ({lag_s * 1e6:+.3g} ± "
+               f"{lag_std_s * 1e6:.2g} µs): that pole is the Newport's own, which its "
+               "second-order model leaves out; no 4QD amplifier is reported, and the "
+               "Newport is fitted without it"))
+
+
+def _undecided_order(by_order: dict[int, dict[str, NewportAxisFit]], fitted: list[str], *,
+                     best: int, lr: float, lag_s: float, lag_std_s: float,
+                     lag_words: str) -> AmplifierDecision:
+    """The lag measured (``lag_s``, ``lag_std_s`` [s]) but not the order: the Newport with
+    the ``best`` order, the other's difference a bound (``lr`` noise units apart)."""
+    other = 3 - best
+    shifts = {a: SensorShift(axis=a, lag_s=lag_s,
+                             half_width={k: abs(v) for k, v in _shift(
+                                 by_order[other][a], by_order[best][a]).items()},
+                             by_order={o: _shift(by_order[o][a], by_order[best][a])
+                                       for o in (1, 2)})
+              for a in fitted}
+    return AmplifierDecision(
+        lag_s, lag_std_s, SensorLowpass(bandwidth_hz=_bandwidth(lag_s, best), order=best),
+        False, lr, shifts,
+        words=(f"{lag_words}; the Newport's lines cannot tell its order (a "
+               f"{_ORDER_WORDS[other]} low pass of that lag fits only {lr:.3g} noise units "
+               f"worse, under {RESOLVED_LR:.3g}): no amplifier is reported on its own; the "
+               "Newport is fitted with the better order and carries the other's difference "
+               "as a bound; state the amplifier in the bench file to remove it"))
+
+
+def _lag_std_shifts(frf: FrequencyResponse, fitted: list[str],
+                    at_lag: dict[str, NewportAxisFit], *, best: int, lag_s: float,
+                    lag_std_s: float) -> dict[str, SensorShift]:
+    """The Newport's parameters moved by the lag's std: refits at ``lag_s ± lag_std_s``
+    [s] (the ``best`` order), their rms shift from the fits at the lag (``at_lag``)."""
     lo, hi = lag_s - lag_std_s, lag_s + lag_std_s
     edges = {lag: {a: fit_newport_axis(frf, a, sensor=SensorLowpass(
         bandwidth_hz=_bandwidth(lag, best), order=best), resolve_sensor=False) for a in fitted}
         for lag in (lo, hi) if lag > 0}
     shifts = {}
     for a in fitted:
-        moved = [_shift(e[a], by_order[best][a]) for e in edges.values()]
+        moved = [_shift(e[a], at_lag[a]) for e in edges.values()]
         # The lag is measured on the Sercalo's records, with their noise: its std moves the
         # Newport's parameters at random from run to run. The two sigma points' rms shift is
         # that one-sigma part (a bound's uniform 1/sqrt(3) understated it: the Newport's
@@ -197,11 +234,17 @@ def decide_amplifier(frf: FrequencyResponse, dyn: NewportDynamics, *, lag_s: flo
                                 by_order={best: moved[-1] if moved else dict.fromkeys(_SHIFTED,
                                                                                     0.0)},
                                 measured=True)
-    bw = sensor.bandwidth_hz
-    bw_std = bw * lag_std_s / lag_s
+    return shifts
+
+
+def _amplifier_findings(model: SensorLowpass, *, best: int, bw: float, bw_std: float,
+                        lr: float, lag_words: str) -> list[Finding]:
+    """Findings on the bench file's amplifier (``model``) when the resolved one, the
+    ``best`` order at ``bw`` ± ``bw_std`` [Hz], differs from it."""
     findings: list[Finding] = []
     if not (model.limited and model.order == best
             and abs(model.bandwidth_hz - bw) <= 2 * bw_std):
+        other = 3 - best
         records = "data_uch.mat, data_ucv.mat, data_unh.mat, data_unv.mat"
         findings = [
             Finding("nominal.quad_diode.bandwidth_hz", model.bandwidth_hz, bw, "Hz", records,
@@ -212,13 +255,7 @@ def decide_amplifier(frf: FrequencyResponse, dyn: NewportDynamics, *, lag_s: flo
             findings.append(Finding(
                 "nominal.quad_diode.bandwidth_order", float(model.order), float(best), "1",
                 records, f"the 4QD amplifier's order ({_ORDER_WORDS[best]})"))
-    return AmplifierDecision(
-        lag_s, lag_std_s, sensor, True, lr, shifts,
-        words=(f"{lag_words}; the Newport's lines choose a {_ORDER_WORDS[best]} low pass "
-               f"(the other order fits {lr:.3g} noise units worse): the 4QD amplifier is a "
-               f"{_ORDER_WORDS[best]} low pass at {bw:.4g} ± {bw_std:.2g} Hz, and the "
-               "Newport's parameters carry the lag's std"),
-        findings=tuple(findings))
+    return findings
 
 
 def with_decided_sensor(dyn: NewportDynamics, decision: AmplifierDecision, *,

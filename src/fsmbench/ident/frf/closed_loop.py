@@ -63,6 +63,18 @@ from fsmbench.ident.frf.closed_loop_leakage import (
     leakage_corrected_lines,
     mean_variance,
 )
+from fsmbench.ident.frf.closed_loop_spectra import (
+    _CrossSpectra,
+    _excited_lines,
+    _lpm_lines,
+    _mean_responses,
+    _period_blocks,
+    _period_spectra,
+    _PeriodicRecord,
+    _record_dft,
+    _shared_lines,
+    _window_spectra,
+)
 from fsmbench.ident.frf.estimate import FrfEstimate
 from fsmbench.ident.frf.lpm import LpmOptions
 from fsmbench.ident.frf.periodic import detect_period
@@ -77,10 +89,6 @@ __all__ = [
 ]
 
 COMMANDS = ("Uch", "Ucv")
-# A line of the recorded excitation is excited above this fraction of the strongest line's
-# power: the excitation is the commanded one, exact, whose FFT holds round-off at ~1e-32 of
-# its lines elsewhere; a shaped multisine's lines span at most 1e6 in power.
-_EXCITED_RELATIVE_POWER = 1e-12
 OUTPUTS = ("Vph", "Vpv")
 
 
@@ -222,14 +230,18 @@ def _g_and_variance(s_yr: NDArray[np.complex128], s_ur: NDArray[np.complex128],
     return g, var, resid
 
 
-def _direct(f: NDArray[np.float64], phi_yu: np.ndarray,
-            phi_uu: np.ndarray, phi_yy: np.ndarray, n_blocks: float, *,
+def _direct(f: NDArray[np.float64], spectra: _CrossSpectra, *,
             fs_hz: float, resolution_hz: float, block: int, estimator: str) -> FrfEstimate:
     """``Φ_yu Φ_uu^-1`` with the variance open-loop theory gives it, ``Φ_ee,i (Φ_uu^-1)_ll / n``.
 
-    ``Φ_ee`` is what the direct model leaves of ``Φ_yy``; the bias the feedback adds is
-    not in that variance (it is what the comparison shows).
+    ``Φ`` are ``spectra``'s sums over their ``n`` blocks. ``Φ_ee`` is what the direct model
+    leaves of ``Φ_yy``; the bias the feedback adds is not in that variance (it is what the
+    comparison shows).
     """
+    n_blocks = float(spectra.blocks)
+    phi_yu = spectra.phi_yu / spectra.blocks
+    phi_uu = spectra.phi_uu / spectra.blocks
+    phi_yy = spectra.phi_yy / spectra.blocks
     inv = _inverse_2x2(phi_uu)
     g = phi_yu @ inv
     explained = np.real(np.einsum("fij,fjk,fik->fi", g, phi_uu, np.conj(g)))
@@ -240,13 +252,6 @@ def _direct(f: NDArray[np.float64], phi_yu: np.ndarray,
                      noise_var=np.broadcast_to(res[:, :, None], g.shape).copy(), fs_hz=fs_hz,
                      resolution_hz=resolution_hz, block=block, estimator=estimator,
                      options={"method": "direct (y against u, the excitation ignored)"})
-
-
-def _period_blocks(x: NDArray[np.float64], n: int, first: int, periods: int
-                   ) -> NDArray[np.complex128]:
-    """Normalised DFT of each period, (periods, n//2 + 1, ...)."""
-    seg = x[first: first + periods * n].reshape(periods, n, *x.shape[1:])
-    return np.fft.rfft(seg, axis=1) / math.sqrt(n)
 
 
 def settled_periods(z: NDArray[np.complex128], *, smoothing_lines: int = 7,
@@ -277,15 +282,16 @@ def settled_periods(z: NDArray[np.complex128], *, smoothing_lines: int = 7,
     return p - 2
 
 
-def _period_variance(parts: Sequence[Any], lines: NDArray[np.intp], g: NDArray[np.complex128],
-                     u_mean: NDArray[np.complex128], *, smoothing_lines: int,
-                     period_correlation: bool
+def _period_variance(parts: Sequence[_PeriodicRecord], lines: NDArray[np.intp],
+                     g: NDArray[np.complex128], u_mean: NDArray[np.complex128], *,
+                     smoothing_lines: int, period_correlation: bool
                      ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """``var G`` and the residual noise per line and column from the periods' scatter."""
     # Residual of each period, e_p = (Y_p - Y) - G (U_p - U): the noise G sees [V per line].
     noise = np.empty((lines.size, 2, 2))
     mean_var = np.empty((lines.size, 2, 2))  # the variance of its mean over the periods
-    for j, (_rec, _n, periods, _r, z, _rm, _lines, _first) in enumerate(parts):
+    for j, part in enumerate(parts):
+        z, periods = part.blocks, part.periods
         dz = z[:, lines, :] - z[:, lines, :].mean(axis=0)[None]
         e = dz[:, :, :2] - np.einsum("fab,pfb->pfa", g, dz[:, :, 2:])
         noise[:, :, j] = _smooth(np.sum(np.abs(e) ** 2, axis=0) / (periods - 1),
@@ -297,7 +303,8 @@ def _period_variance(parts: Sequence[Any], lines: NDArray[np.intp], g: NDArray[n
     return var, noise
 
 
-def _leakage_free(parts: Sequence[Any], lines: NDArray[np.intp], options: LeakageOptions
+def _leakage_free(parts: Sequence[_PeriodicRecord], lines: NDArray[np.intp],
+                  options: LeakageOptions
                   ) -> tuple[NDArray[np.complex128], NDArray[np.complex128],
                              NDArray[np.complex128], NDArray[np.float64], NDArray[np.float64],
                              NDArray[np.complex128]]:
@@ -308,8 +315,9 @@ def _leakage_free(parts: Sequence[Any], lines: NDArray[np.intp], options: Leakag
     s_ur = np.empty((lines.size, 2, 2), dtype=complex)
     u_cols = np.empty((lines.size, 2), dtype=complex)
     cov, noise_cov = [], []
-    for j, (rec, n, periods, _r, _z, _rm, _lines, first) in enumerate(parts):
-        seg = slice(first, first + periods * n)
+    for j, part in enumerate(parts):
+        rec, periods = part.record, part.periods
+        seg = slice(part.first, part.first + periods * part.period)
         lc = leakage_corrected_lines(rec.excitation[seg],
                                      np.hstack([rec.outputs, rec.commands])[seg],
                                      periods=periods, lines=lines, options=options)
@@ -380,86 +388,106 @@ def joint_periodic(records: Sequence[ClosedLoopRecord], *, period_samples: int |
         raise ValueError(f"the 2x2 plant needs two closed-loop records (one per command), got "
                          f"{len(records)}")
     fs = records[0].fs_hz
-    parts = []
-    dropped: list[int] = []
-    for rec in records:
-        if abs(rec.fs_hz - fs) > 1e-9 * fs:
-            raise ValueError(f"{rec.name} is sampled at {rec.fs_hz:g} Hz, {records[0].name} at "
-                             f"{fs:g} Hz")
-        n = period_samples or detect_period(rec.excitation)
-        if n is None:
-            raise ValueError(f"{rec.name}: the excitation is not periodic; use the LPM")
-        total = rec.excitation.size // n
-        if total < (3 if transient_periods is None else transient_periods + 2):
-            raise ValueError(f"{rec.name}: {total} whole period(s) of {n} samples; after "
-                             f"{transient_periods or 1} transient period(s) at least 2 are "
-                             "needed")
-        offset = rec.excitation.size - total * n
-        r = _period_blocks(rec.excitation, n, offset, total)
-        z = _period_blocks(np.hstack([rec.outputs, rec.commands]), n, offset, total)
-        power = np.abs(r.mean(axis=0)) ** 2
-        # The excitation is recorded as commanded (digital, exact): every line it holds
-        # above round-off is excited, however the lines are shaped.
-        lines = np.flatnonzero(power > _EXCITED_RELATIVE_POWER * power[1:].max())
-        lines = lines[lines > 0]
-        drop = (settled_periods(z[:, lines, :2], smoothing_lines=smoothing_lines)
-                if transient_periods is None else transient_periods)
-        r, z = r[drop:], z[drop:]
-        periods = total - drop
-        dropped.append(drop)
-        parts.append((rec, n, periods, r, z, r.mean(axis=0), lines, offset + drop * n))
-    if parts[0][1] != parts[1][1]:
-        raise ValueError(f"{records[0].name} repeats every {parts[0][1]} samples, "
-                         f"{records[1].name} every {parts[1][1]}: play both on the same grid")
-    n = parts[0][1]
-    lines = np.intersect1d(parts[0][6], parts[1][6])
-    if lines.size == 0:
-        raise ValueError(f"no line is excited in both {records[0].name} and {records[1].name}: "
-                         "excite both commands on the same grid")
+    parts = [_periodic_record(rec, reference=records[0], period_samples=period_samples,
+                              transient_periods=transient_periods,
+                              smoothing_lines=smoothing_lines) for rec in records]
+    lines = _shared_lines(parts)
+    n = parts[0].period
     f = lines * fs / n
-    s_yr = np.empty((lines.size, 2, 2), dtype=complex)
-    s_ur = np.empty((lines.size, 2, 2), dtype=complex)
-    u_mean = np.empty((lines.size, 2, 2), dtype=complex)  # columns: the mean commands
-    phi_yu = np.zeros((lines.size, 2, 2), dtype=complex)
-    phi_uu = np.zeros((lines.size, 2, 2), dtype=complex)
-    phi_yy = np.zeros((lines.size, 2, 2), dtype=complex)
-    blocks = 0
-    for j, (_rec, _n, periods, _r, z, rm, _lines, _first) in enumerate(parts):
-        zm = z[:, lines, :].mean(axis=0)  # (F, 4): [y; u], averaged over the periods
-        s_yr[:, :, j] = zm[:, :2] / rm[lines, None]
-        s_ur[:, :, j] = zm[:, 2:] / rm[lines, None]
-        u_mean[:, :, j] = zm[:, 2:]
-        yl, ul = z[:, lines, :2], z[:, lines, 2:]
-        phi_yu += np.einsum("pfa,pfb->fab", yl, np.conj(ul))
-        phi_uu += np.einsum("pfa,pfb->fab", ul, np.conj(ul))
-        phi_yy += np.einsum("pfa,pfb->fab", yl, np.conj(yl))
-        blocks += periods
-    p_used = [p[2] for p in parts]
-    opts: dict[str, Any] = {"period_samples": int(n), "periods_used": p_used,
-                            "transient_periods": dropped,
+    opts: dict[str, Any] = {"period_samples": int(n), "periods_used": [p.periods for p in parts],
+                            "transient_periods": [p.dropped for p in parts],
                             "transient_periods_found": transient_periods is None,
                             "n_lines": int(lines.size)}
+    plant, s_yr, s_ur = _periodic_plant(parts, lines, f, options=opts, leakage=leakage,
+                                        smoothing_lines=smoothing_lines,
+                                        period_correlation=period_correlation)
+    direct = _direct(f, _period_spectra(parts, lines), fs_hz=fs, resolution_hz=fs / n, block=n,
+                     estimator="periodic")
+    return ClosedLoopFrf(plant=plant, s_ur=s_ur, s_yr=s_yr, direct=direct,
+                         method="joint input-output, periodic averaging")
+
+
+def _periodic_record(rec: ClosedLoopRecord, *, reference: ClosedLoopRecord,
+                     period_samples: int | None, transient_periods: int | None,
+                     smoothing_lines: int) -> _PeriodicRecord:
+    """One record cut into whole periods, its transient dropped, with its excited lines.
+
+    Parameters
+    ----------
+    rec : ClosedLoopRecord
+    reference : ClosedLoopRecord
+        The first record: ``rec`` must share its sampling rate [Hz].
+    period_samples : int or None
+        The excitation's period [samples]; None: detected on ``rec``.
+    transient_periods : int or None
+        Whole periods dropped at the start; None: :func:`settled_periods`.
+    smoothing_lines : int
+        Excited lines the transient test's noise variance is averaged over.
+
+    Raises
+    ------
+    ValueError
+        Another rate, no period found, or fewer than two periods left.
+    """
+    fs = reference.fs_hz
+    if abs(rec.fs_hz - fs) > 1e-9 * fs:
+        raise ValueError(f"{rec.name} is sampled at {rec.fs_hz:g} Hz, {reference.name} at "
+                         f"{fs:g} Hz")
+    n = period_samples or detect_period(rec.excitation)
+    if n is None:
+        raise ValueError(f"{rec.name}: the excitation is not periodic; use the LPM")
+    total = rec.excitation.size // n
+    if total < (3 if transient_periods is None else transient_periods + 2):
+        raise ValueError(f"{rec.name}: {total} whole period(s) of {n} samples; after "
+                         f"{transient_periods or 1} transient period(s) at least 2 are "
+                         "needed")
+    offset = rec.excitation.size - total * n
+    r = _period_blocks(rec.excitation, n, offset, total)
+    z = _period_blocks(np.hstack([rec.outputs, rec.commands]), n, offset, total)
+    lines = _excited_lines(r)
+    drop = (settled_periods(z[:, lines, :2], smoothing_lines=smoothing_lines)
+            if transient_periods is None else transient_periods)
+    r, z = r[drop:], z[drop:]
+    return _PeriodicRecord(record=rec, period=n, periods=total - drop, blocks=z,
+                           excitation_mean=r.mean(axis=0), lines=lines,
+                           first=offset + drop * n, dropped=drop)
+
+
+def _periodic_plant(parts: Sequence[_PeriodicRecord], lines: NDArray[np.intp],
+                    f: NDArray[np.float64], *, options: dict[str, Any],
+                    leakage: LeakageOptions | None, smoothing_lines: int,
+                    period_correlation: bool
+                    ) -> tuple[FrfEstimate, NDArray[np.complex128], NDArray[np.complex128]]:
+    """``G = S_yr S_ur^-1`` with its variance on ``lines`` (``f`` [Hz]), and the ``S_yr``,
+    ``S_ur`` it comes from.
+
+    From the periods' mean and scatter, or with ``leakage`` from the whole records with the
+    noise's leakage removed (:func:`joint_periodic`). ``options`` are the estimate's, its
+    method and noise options added here.
+    """
+    fs, n = parts[0].record.fs_hz, parts[0].period
+    p_used = [p.periods for p in parts]
+    means = _mean_responses(parts, lines)
     if leakage is not None:
         s_yr, s_ur, g, var, noise, u_cols = _leakage_free(parts, lines, leakage)
         dof = [leakage.dof * leakage.smoothing_lines] * 2
-        opts.update(leakage=leakage.to_json(),
-                    method="joint input-output (G = S_yr S_ur^-1), periodic averaging, the "
-                           "noise's leakage across lines removed")
+        opts = {**options, "leakage": leakage.to_json(),
+                "method": "joint input-output (G = S_yr S_ur^-1), periodic averaging, the "
+                          "noise's leakage across lines removed"}
     else:
+        s_yr, s_ur = means.s_yr, means.s_ur
         g = s_yr @ _inverse_2x2(s_ur)
-        var, noise = _period_variance(parts, lines, g, u_mean, smoothing_lines=smoothing_lines,
+        var, noise = _period_variance(parts, lines, g, means.u_mean,
+                                      smoothing_lines=smoothing_lines,
                                       period_correlation=period_correlation)
-        u_cols = np.stack([u_mean[:, j, j] for j in range(2)], axis=1)
+        u_cols = np.stack([means.u_mean[:, j, j] for j in range(2)], axis=1)
         dof = [(p - 1.0) * smoothing_lines for p in p_used]
-        opts.update(noise_smoothing_lines=smoothing_lines,
-                    method="joint input-output (G = S_yr S_ur^-1), periodic averaging")
+        opts = {**options, "noise_smoothing_lines": smoothing_lines,
+                "method": "joint input-output (G = S_yr S_ur^-1), periodic averaging"}
     plant = _estimate(f, g, var, dof, n_blocks=[float(p) for p in p_used], u_cols=u_cols,
                       noise_var=noise, fs_hz=fs, resolution_hz=fs / n, block=n,
                       estimator="periodic", options=opts)
-    direct = _direct(f, phi_yu / blocks, phi_uu / blocks, phi_yy / blocks, float(blocks),
-                     fs_hz=fs, resolution_hz=fs / n, block=n, estimator="periodic")
-    return ClosedLoopFrf(plant=plant, s_ur=s_ur, s_yr=s_yr, direct=direct,
-                         method="joint input-output, periodic averaging")
+    return plant, s_yr, s_ur
 
 
 def _lpm_columns(r: NDArray[np.complex128], z: NDArray[np.complex128],
@@ -492,12 +520,6 @@ def _lpm_columns(r: NDArray[np.complex128], z: NDArray[np.complex128],
     return theta[:, 0, :] / scale[:, None], c_v * inv00[:, None, None], c_v
 
 
-def _record_dft(rec: ClosedLoopRecord, length: int) -> NDArray[np.complex128]:
-    """Normalised DFT of ``[y, u]`` over the record's last ``length`` samples, (L/2 + 1, 4)."""
-    z = np.hstack([rec.outputs, rec.commands])[-length:]
-    return np.fft.rfft(z, axis=0) / math.sqrt(length)
-
-
 def joint_lpm(records: Sequence[ClosedLoopRecord], *, options: LpmOptions | None = None
               ) -> ClosedLoopFrf:
     """``G = S_yr S_ur^-1`` by the local polynomial method, any excitation (module notes).
@@ -526,19 +548,8 @@ def joint_lpm(records: Sequence[ClosedLoopRecord], *, options: LpmOptions | None
                          f"{records[0].name} at {fs:g} Hz")
     length = min(rec.excitation.size for rec in records)
     n = opts.n
-    n_lines = length // 2 + 1
-    if n_lines < 2 * n + 1:
-        raise ValueError(f"{length} samples give {n_lines} lines, fewer than the LPM window of "
-                         f"{2 * n + 1}; use longer records")
-    f_all = np.arange(n_lines) * fs / length
-    keep = f_all > 0
-    if opts.f_min_hz is not None:
-        keep &= f_all >= opts.f_min_hz
-    if opts.f_max_hz is not None:
-        keep &= f_all <= opts.f_max_hz
-    lines = np.flatnonzero(keep)[:: opts.stride]
-    if lines.size == 0:
-        raise ValueError(f"no line in the band [{opts.f_min_hz}, {opts.f_max_hz}] Hz")
+    lines = _lpm_lines(length, fs_hz=fs, options=opts)
+    f = lines * fs / length
     s_yr = np.empty((lines.size, 2, 2), dtype=complex)
     s_ur = np.empty((lines.size, 2, 2), dtype=complex)
     cov: list[NDArray[np.complex128]] = []
@@ -560,27 +571,13 @@ def joint_lpm(records: Sequence[ClosedLoopRecord], *, options: LpmOptions | None
     options_json = {"degree": opts.degree, "half_width": n, "stride": opts.stride,
                     "record_samples": int(length),
                     "method": "joint input-output (G = S_yr S_ur^-1), local polynomial method"}
-    plant = _estimate(f_all[lines], g, var, (float(dof),) * 2, n_blocks=(1.0, 1.0),
+    plant = _estimate(f, g, var, (float(dof),) * 2, n_blocks=(1.0, 1.0),
                       u_cols=u_cols, noise_var=noise,
                       fs_hz=fs, resolution_hz=fs / length, block=length, estimator="lpm",
                       options=options_json)
     # The direct method on the same lines: spectra summed over each line's window, both records.
-    width = 2 * n + 1
-    start = np.clip(lines - n, 0, n_lines - width)
-    idx = start[:, None] + np.arange(width)[None, :]
-    phi_yu = np.zeros((lines.size, 2, 2), dtype=complex)
-    phi_uu = np.zeros((lines.size, 2, 2), dtype=complex)
-    phi_yy = np.zeros((lines.size, 2, 2), dtype=complex)
-    for rec in records:
-        z = _record_dft(rec, length)
-        zw = z[idx]  # (F, W, 4)
-        y, u = zw[:, :, :2], zw[:, :, 2:]
-        phi_yu += np.einsum("fwa,fwb->fab", y, np.conj(u))
-        phi_uu += np.einsum("fwa,fwb->fab", u, np.conj(u))
-        phi_yy += np.einsum("fwa,fwb->fab", y, np.conj(y))
-    blocks = 2.0 * width
-    direct = _direct(f_all[lines], phi_yu / blocks, phi_uu / blocks, phi_yy / blocks, blocks,
-                     fs_hz=fs, resolution_hz=fs / length, block=length, estimator="lpm")
+    direct = _direct(f, _window_spectra(records, lines, length=length, half_width=n), fs_hz=fs,
+                     resolution_hz=fs / length, block=length, estimator="lpm")
     return ClosedLoopFrf(plant=plant, s_ur=s_ur, s_yr=s_yr, direct=direct,
                          method="joint input-output, local polynomial method")
 

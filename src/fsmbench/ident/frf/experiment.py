@@ -12,10 +12,11 @@ from __future__ import annotations
 
 import dataclasses
 from collections.abc import Mapping, Sequence
-from typing import Literal
+from typing import Literal, NamedTuple
 
 import numpy as np
 import xarray as xr
+from numpy.typing import NDArray
 
 from fsmbench.ident.calibration import require_signals, trim_recording
 from fsmbench.ident.frf.estimate import FrfEstimate, combine_estimates
@@ -96,6 +97,38 @@ def experiment_frf(recordings: Mapping[str, xr.Dataset], *, columns: Sequence[tu
             recordings, columns=columns, trims_s=trims_s) == "periodic" else "welch"
     if estimator not in ("welch", "lpm", "periodic"):
         raise ValueError(f"estimator must be auto, welch, lpm or periodic, got {estimator!r}")
+    data = _column_records(recordings, columns=columns, trims_s=trims_s)
+    if estimator == "welch":
+        return combine_columns([spectral_matrix(
+            u, y, input_names=[signal], output_names=list(OUTPUTS),
+            window=hanning(int(np.ceil(window_s * fs))), fs_hz=fs)
+            for _, signal, fs, u, y in data])
+    parts = (_lpm_estimates(data) if estimator == "lpm"
+             else _periodic_estimates(data, transient_periods=transient_periods))
+    return combine_estimates(parts).to_frequency_response()
+
+
+class _ColumnRecord(NamedTuple):
+    """One column's record: its input ``u`` (L,) and the outputs ``y`` (L, 2) [V], trimmed
+    and their means removed, sampled at ``fs_hz`` [Hz]."""
+
+    experiment: str
+    signal: str
+    fs_hz: float
+    u: NDArray[np.float64]
+    y: NDArray[np.float64]
+
+
+def _column_records(recordings: Mapping[str, xr.Dataset], *,
+                    columns: Sequence[tuple[str, str]],
+                    trims_s: Mapping[str, float]) -> list[_ColumnRecord]:
+    """Each column's record, trimmed, its means removed (:func:`experiment_frf`'s Notes).
+
+    Raises
+    ------
+    ValueError
+        An experiment or one of its signals missing.
+    """
     data = []
     for experiment, signal in columns:
         if experiment not in recordings:
@@ -105,36 +138,37 @@ def experiment_frf(recordings: Mapping[str, xr.Dataset], *, columns: Sequence[tu
         ds = trim_recording(recordings[experiment], t0_s=trims_s.get(experiment, 0.0))
         u = np.asarray(ds[signal].values, dtype=float)  # means removed (Notes)
         y = np.column_stack([ds[o].values for o in OUTPUTS]).astype(float)
-        data.append((experiment, signal, float(ds.attrs["fs_hz"]), u - u.mean(),
-                     y - y.mean(axis=0)))
-    if estimator == "welch":
-        return combine_columns([spectral_matrix(
-            u, y, input_names=[signal], output_names=list(OUTPUTS),
-            window=hanning(int(np.ceil(window_s * fs))), fs_hz=fs)
-            for _, signal, fs, u, y in data])
-    parts: list[FrfEstimate] = []
-    if estimator == "lpm":
-        length = min(u.size for *_, u, _y in data)
-        # The noise variance smoothed over 7 estimated lines (LpmOptions.noise_smoothing):
-        # one line's 7 dof made the weighted fits' stds optimistic (in95 0.75-0.85).
-        opts = LpmOptions(stride=2 * LpmOptions().n + 1, noise_smoothing=LPM_NOISE_SMOOTHING)
-        parts = [local_polynomial_frf(u[-length:], y[-length:], fs_hz=fs, input_name=signal,
-                                      output_names=list(OUTPUTS), options=opts,
-                                      source=f"{exp}.mat")
-                 for exp, signal, fs, u, y in data]
-    else:
-        least = dict(transient_periods or {})
-        parts = [periodic_frf(u, y, fs_hz=fs, input_name=signal, output_names=list(OUTPUTS),
-                              options=PeriodicOptions(
-                                  min_transient_periods=int(least.get(exp, 1))),
-                              source=f"{exp}.mat")
-                 for exp, signal, fs, u, y in data]
-        # Columns on the lines they share (a line excited in one record only is dropped).
-        common = set(parts[0].frequency_hz.tolist())
-        for part in parts[1:]:
-            common &= set(part.frequency_hz.tolist())
-        parts = [_on_lines(part, common) for part in parts]
-    return combine_estimates(parts).to_frequency_response()
+        data.append(_ColumnRecord(experiment, signal, float(ds.attrs["fs_hz"]), u - u.mean(),
+                                  y - y.mean(axis=0)))
+    return data
+
+
+def _lpm_estimates(data: Sequence[_ColumnRecord]) -> list[FrfEstimate]:
+    """The LPM on each column's record, all cut to the shortest one (kept from its end)."""
+    length = min(u.size for *_, u, _y in data)
+    # The noise variance smoothed over 7 estimated lines (LpmOptions.noise_smoothing):
+    # one line's 7 dof made the weighted fits' stds optimistic (in95 0.75-0.85).
+    opts = LpmOptions(stride=2 * LpmOptions().n + 1, noise_smoothing=LPM_NOISE_SMOOTHING)
+    return [local_polynomial_frf(u[-length:], y[-length:], fs_hz=fs, input_name=signal,
+                                 output_names=list(OUTPUTS), options=opts,
+                                 source=f"{exp}.mat")
+            for exp, signal, fs, u, y in data]
+
+
+def _periodic_estimates(data: Sequence[_ColumnRecord], *,
+                      transient_periods: Mapping[str, int] | None) -> list[FrfEstimate]:
+    """Periodic averaging of each column's record, on the lines every column excites."""
+    least = dict(transient_periods or {})
+    parts = [periodic_frf(u, y, fs_hz=fs, input_name=signal, output_names=list(OUTPUTS),
+                          options=PeriodicOptions(
+                              min_transient_periods=int(least.get(exp, 1))),
+                          source=f"{exp}.mat")
+             for exp, signal, fs, u, y in data]
+    # Columns on the lines they share (a line excited in one record only is dropped).
+    common = set(parts[0].frequency_hz.tolist())
+    for part in parts[1:]:
+        common &= set(part.frequency_hz.tolist())
+    return [_on_lines(part, common) for part in parts]
 
 
 def _on_lines(est: FrfEstimate, keep: set[float]) -> FrfEstimate:

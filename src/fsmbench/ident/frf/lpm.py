@@ -52,6 +52,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -217,16 +218,52 @@ def local_polynomial_frf(
         raise ValueError(f"{source}: {length} samples give {uf.size} lines, fewer than the "
                          f"LPM window of {2 * n + 1}; use a longer record")
     f_all = np.arange(uf.size) * fs_hz / length
-    keep = np.ones(uf.size, dtype=bool)
-    if opts.f_min_hz is not None:
-        keep &= f_all >= opts.f_min_hz
-    if opts.f_max_hz is not None:
-        keep &= f_all <= opts.f_max_hz
-    lines = np.flatnonzero(keep)[:: opts.stride]
+    lines = _band_lines(f_all, opts, input_name=input_name, source=source)
+    fits = _local_fits(uf, yf, lines, options=opts)
+    return _lpm_estimate(fits, lines, frequency_hz=f_all[lines], length=length, fs_hz=fs_hz,
+                         input_name=input_name, output_names=names, options=opts)
+
+
+class _LocalFits(NamedTuple):
+    """The LPM at each estimated line: ``g`` and the transient ``t`` (B, p), the noise
+    variance ``s2v`` (B, p) with its ``dof``, ``[(K^H K)^-1]_00`` ``inv00`` (B,) and
+    ``|U|^2`` ``pu`` (B,) (module notes; normalised DFT)."""
+
+    g: NDArray[np.complex128]
+    t: NDArray[np.complex128]
+    s2v: NDArray[np.float64]
+    inv00: NDArray[np.float64]
+    pu: NDArray[np.float64]
+    dof: float
+
+
+def _band_lines(f_all: NDArray[np.float64], options: LpmOptions, *, input_name: str,
+                source: str) -> NDArray[np.intp]:
+    """Every ``stride``-th line of ``f_all`` [Hz] within the band.
+
+    Raises
+    ------
+    ValueError
+        No line in the band.
+    """
+    keep = np.ones(f_all.size, dtype=bool)
+    if options.f_min_hz is not None:
+        keep &= f_all >= options.f_min_hz
+    if options.f_max_hz is not None:
+        keep &= f_all <= options.f_max_hz
+    lines = np.flatnonzero(keep)[:: options.stride]
     if lines.size == 0:
         raise ValueError(f"{source}: no line of {input_name} in the band "
-                         f"[{opts.f_min_hz}, {opts.f_max_hz}] Hz")
-    p = y.shape[1]
+                         f"[{options.f_min_hz}, {options.f_max_hz}] Hz")
+    return lines
+
+
+def _local_fits(uf: NDArray[np.complex128], yf: NDArray[np.complex128],
+                lines: NDArray[np.intp], *, options: LpmOptions) -> _LocalFits:
+    """The LPM on ``lines`` of the input's and outputs' DFTs, by blocks of lines, and the
+    noise variance (smoothed when ``options.noise_smoothing``) with its dof."""
+    n = options.n
+    p = yf.shape[1]
     g = np.empty((lines.size, p), dtype=complex)
     t = np.empty((lines.size, p), dtype=complex)
     s2v = np.empty((lines.size, p))
@@ -235,26 +272,37 @@ def local_polynomial_frf(
     for lo in range(0, lines.size, _BLOCK_LINES):
         sl = slice(lo, lo + _BLOCK_LINES)
         g[sl], t[sl], s2v[sl], inv00[sl], pu[sl] = _solve_block(
-            uf, yf, lines[sl], n, opts.degree, opts.transient)
-    n_par = (2 if opts.transient else 1) * (opts.degree + 1)
+            uf, yf, lines[sl], n, options.degree, options.transient)
+    n_par = (2 if options.transient else 1) * (options.degree + 1)
     dof = float(2 * n + 1 - n_par)
-    if opts.noise_smoothing:
-        s2v, dof = _smoothed(s2v, opts.noise_smoothing, dof)
-    var = s2v * inv00[:, None]
+    if options.noise_smoothing:
+        s2v, dof = _smoothed(s2v, options.noise_smoothing, dof)
+    return _LocalFits(g=g, t=t, s2v=s2v, inv00=inv00, pu=pu, dof=dof)
+
+
+def _lpm_estimate(fits: _LocalFits, lines: NDArray[np.intp], *,
+                  frequency_hz: NDArray[np.float64], length: int, fs_hz: float,
+                  input_name: str, output_names: Sequence[str],
+                  options: LpmOptions) -> FrfEstimate:
+    """The :class:`FrfEstimate` of :func:`local_polynomial_frf` from its fits on ``lines``
+    (``frequency_hz`` [Hz]) of a record of ``length`` samples at ``fs_hz`` [Hz]."""
+    g, s2v, pu = fits.g, fits.s2v, fits.pu
+    var = s2v * fits.inv00[:, None]
     with np.errstate(divide="ignore", invalid="ignore"):
         snr = np.abs(g) ** 2 * pu[:, None] / s2v
     one_sided = np.where((lines == 0) | (2 * lines == length), 1.0, 2.0)
     return FrfEstimate(
-        frequency_hz=f_all[lines], frf=g[:, :, None], frf_variance=var[:, :, None],
+        frequency_hz=frequency_hz, frf=g[:, :, None], frf_variance=var[:, :, None],
         output_noise_psd=(one_sided[:, None] * s2v / fs_hz)[:, :, None],
         input_psd=(one_sided * pu / fs_hz)[:, None], snr=snr[:, :, None],
-        input_names=(str(input_name),), output_names=tuple(names), fs_hz=float(fs_hz),
+        input_names=(str(input_name),), output_names=tuple(output_names), fs_hz=float(fs_hz),
         resolution_hz=float(fs_hz) / length, estimator="lpm",
-        options={"degree": opts.degree, "half_width": n, "stride": opts.stride,
-                 "transient": opts.transient, "record_samples": int(length),
-                 "noise_smoothing": opts.noise_smoothing},
-        dof=(dof,),
-        transient=t[:, :, None] if opts.transient else None, confidence=opts.confidence)
+        options={"degree": options.degree, "half_width": options.n, "stride": options.stride,
+                 "transient": options.transient, "record_samples": int(length),
+                 "noise_smoothing": options.noise_smoothing},
+        dof=(fits.dof,),
+        transient=fits.t[:, :, None] if options.transient else None,
+        confidence=options.confidence)
 
 
 #: The identification's half width of the noise variance's running median (7 estimated

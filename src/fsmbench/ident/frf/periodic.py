@@ -37,6 +37,7 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -435,23 +436,71 @@ def periodic_frf(
     if n is None:
         raise ValueError(f"{source}: the input {input_name} is not periodic (no lag with "
                          f"correlation >= {_PERIODIC_CORRELATION}); use the LPM or Welch")
+    steady = _steady_periods(u, y, n, options=opts, input_name=input_name, source=source)
+    stats = _period_statistics(u, y, n, first=steady.first, periods=steady.periods)
+    lines = _analysed_lines(stats, n, options=opts, periods=steady.periods,
+                            input_name=input_name, source=source)
+    dist = _output_distortion(stats, lines, periods=steady.periods)
+    return _line_estimate(stats, lines, dist, n=n, steady=steady, fs_hz=fs_hz,
+                          input_name=input_name, output_names=names,
+                          confidence=opts.confidence)
+
+
+class _SteadyPeriods(NamedTuple):
+    """A record's whole periods kept for the average: ``periods`` of them from sample
+    ``first``, after ``dropped`` transient ones (``detected`` in the data, or given)."""
+
+    first: int
+    periods: int
+    dropped: int
+    detected: bool
+
+
+class _PeriodStatistics(NamedTuple):
+    """Each line's means over the periods, ``um`` (K,) [U_in] and ``ym`` (K, p) [U_out], and
+    sample (co)variances ``s2u`` [U_in²], ``s2y`` [U_out²] and ``syu`` [U_out U_in] (module
+    notes; normalised DFT, lines ``0 .. N/2``)."""
+
+    um: NDArray[np.complex128]
+    ym: NDArray[np.complex128]
+    s2u: NDArray[np.float64]
+    s2y: NDArray[np.float64]
+    syu: NDArray[np.complex128]
+
+
+def _steady_periods(u: NDArray[np.float64], y: NDArray[np.float64], n: int, *,
+                    options: PeriodicOptions, input_name: str, source: str) -> _SteadyPeriods:
+    """The record's last whole periods of ``n`` samples, its transient dropped.
+
+    Raises
+    ------
+    ValueError
+        Fewer than two periods, before or after the transient.
+    """
     total = u.size // n
     if total < 2:
         raise ValueError(f"{source}: {input_name} holds {total} whole period(s) of {n} samples; "
                          "at least 2 are needed for a noise estimate")
     head = u.size - total * n  # keep the record's end
-    if opts.transient_periods is None:
+    if options.transient_periods is None:
         dropped = detect_transient(_blocks(y, n, head, total),
-                                   minimum=opts.min_transient_periods)
+                                   minimum=options.min_transient_periods)
         detected = True
     else:
-        dropped, detected = opts.transient_periods, False
+        dropped, detected = options.transient_periods, False
     periods = total - dropped
     if periods < 2:
         raise ValueError(f"{source}: {input_name} holds {total} whole period(s) of {n} samples; "
                          f"after dropping {dropped} transient period(s) at least "
                          "2 are needed for a noise estimate")
-    first = head + dropped * n
+    return _SteadyPeriods(first=head + dropped * n, periods=periods, dropped=dropped,
+                          detected=detected)
+
+
+def _period_statistics(u: NDArray[np.float64], y: NDArray[np.float64], n: int, *,
+                       first: int, periods: int) -> _PeriodStatistics:
+    """Means and sample (co)variances over ``periods`` periods of ``n`` samples from
+    ``first`` (module notes)."""
     ub = _blocks(u, n, first, periods)  # (P, K)
     yb = _blocks(y, n, first, periods)  # (P, K, p)
     um, ym = ub.mean(axis=0), yb.mean(axis=0)
@@ -459,15 +508,36 @@ def periodic_frf(
     s2u = np.sum(np.abs(du) ** 2, axis=0) / (periods - 1)  # (K,)
     s2y = np.sum(np.abs(dy) ** 2, axis=0) / (periods - 1)  # (K, p)
     syu = np.einsum("pkc,pk->kc", dy, du.conj()) / (periods - 1)  # (K, p)
-    if opts.lines is None:
-        lines = excited_lines(np.abs(um) ** 2, s2u / periods)
+    return _PeriodStatistics(um=um, ym=ym, s2u=s2u, s2y=s2y, syu=syu)
+
+
+def _analysed_lines(stats: _PeriodStatistics, n: int, *, options: PeriodicOptions,
+                    periods: int, input_name: str, source: str) -> NDArray[np.intp]:
+    """The lines estimated: ``options.lines``, else those the input excites.
+
+    Raises
+    ------
+    ValueError
+        A given line outside ``0 .. n/2``, or no line.
+    """
+    um = stats.um
+    if options.lines is None:
+        lines = excited_lines(np.abs(um) ** 2, stats.s2u / periods)
     else:
-        lines = np.asarray(sorted({int(k) for k in opts.lines}), dtype=np.intp)
+        lines = np.asarray(sorted({int(k) for k in options.lines}), dtype=np.intp)
         if lines.size and (lines.min() < 0 or lines.max() >= um.size):
             raise ValueError(f"{source}: lines must be in [0, {um.size - 1}] for a period of "
                              f"{n} samples")
     if lines.size == 0:
         raise ValueError(f"{source}: no excited line in the input {input_name}")
+    return lines
+
+
+def _output_distortion(stats: _PeriodStatistics, lines: NDArray[np.intp], *,
+                       periods: int) -> Distortion:
+    """:func:`distortion` of the output beyond the response to the input's own content."""
+    um, ym = stats.um, stats.ym
+    s2u, s2y, syu = stats.s2u, stats.s2y, stats.syu
     # The distortion is what the output holds at the non-excited lines beyond the input's
     # own content there (the DAC's quantisation of a periodic command is periodic too) times
     # the response, interpolated between the excited lines.
@@ -480,8 +550,17 @@ def periodic_frf(
     resid = ym - g_all * um[:, None]
     resid_var = np.maximum(s2y + np.abs(g_all) ** 2 * s2u[:, None]
                            - 2.0 * np.real(g_all.conj() * syu), 0.0) / periods
-    dist = distortion(resid, resid_var, lines, output_power=np.abs(ym[lines]) ** 2)
-    uk, yk = um[lines], ym[lines]
+    return distortion(resid, resid_var, lines, output_power=np.abs(ym[lines]) ** 2)
+
+
+def _line_estimate(stats: _PeriodStatistics, lines: NDArray[np.intp], dist: Distortion, *,
+                   n: int, steady: _SteadyPeriods, fs_hz: float, input_name: str,
+                   output_names: Sequence[str], confidence: float) -> FrfEstimate:
+    """``G = Y / U`` on ``lines`` with its first-order variance (module notes), as the
+    :class:`FrfEstimate` of :func:`periodic_frf` (period ``n`` samples, ``fs_hz`` [Hz])."""
+    periods = steady.periods
+    s2u, s2y, syu = stats.s2u, stats.s2y, stats.syu
+    uk, yk = stats.um[lines], stats.ym[lines]
     g = yk / uk[:, None]
     var = (s2y[lines] + np.abs(g) ** 2 * s2u[lines, None]
            - 2.0 * np.real(g.conj() * syu[lines])) / (periods * np.abs(uk[:, None]) ** 2)
@@ -494,10 +573,11 @@ def periodic_frf(
         frequency_hz=lines * fs_hz / n, frf=g[:, :, None], frf_variance=var[:, :, None],
         output_noise_psd=(one_sided[:, None] * s2y[lines] / fs_hz)[:, :, None],
         input_psd=(one_sided * np.abs(uk) ** 2 / fs_hz)[:, None], snr=snr[:, :, None],
-        input_names=(str(input_name),), output_names=tuple(names), fs_hz=float(fs_hz),
+        input_names=(str(input_name),), output_names=tuple(output_names), fs_hz=float(fs_hz),
         resolution_hz=float(fs_hz) / n, estimator="periodic",
         options={"period_samples": int(n), "periods_used": int(periods),
-                 "transient_periods": int(dropped), "transient_detected": detected,
+                 "transient_periods": int(steady.dropped),
+                 "transient_detected": steady.detected,
                  "n_lines": int(lines.size), "distortion": dist.summary()},
-        dof=(float(periods - 1),), confidence=opts.confidence,
+        dof=(float(periods - 1),), confidence=confidence,
         distortion_variance=dist_var[:, :, None])

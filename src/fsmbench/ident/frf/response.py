@@ -17,7 +17,7 @@ import warnings
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from statistics import NormalDist
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 import xarray as xr
@@ -378,11 +378,47 @@ def spectral_matrix(
     options = WelchOptions.from_matlab(window=window, noverlap=noverlap, nfft=nfft, fs_hz=fs_hz)
     if not 0.0 < float(confidence) < 1.0:
         raise ValueError(f"confidence must be in (0, 1), got {confidence!r}")
+    sm = _checked_spectra(inputs, outputs, input_names=input_names, output_names=output_names,
+                          options=options)
+    m = len(sm.input_names)
+    sxx, syx = sm.s[:, :m, :m], sm.s[:, m:, :m]
+    pxx = np.diagonal(sxx, axis1=1, axis2=2).real  # (F, m)
+    pyy = np.diagonal(sm.s[:, m:, m:], axis1=1, axis2=2).real  # (F, p)
+    coh = np.abs(syx) ** 2 / (pyy[:, :, None] * pxx[:, None, :])
+
+    with np.errstate(divide="ignore", invalid="ignore"):
+        if m == 1:
+            h = syx / pxx[:, None, :]  # exactly tfestimate's Pyx./Pxx
+            # B&P: eps = sqrt(1 - g^2) / (|g| sqrt(2 n_d)); clip g^2 > 1 by rounding (1 ulp).
+            eps = np.sqrt(np.clip(1.0 - coh, 0.0, None) / (coh * 2.0 * sm.n_d))
+        else:
+            # Called from here: its warning names this function's caller (stacklevel).
+            h, eps = _multi_input(sxx, syx, pyy, sm.n_d, sm.input_names)
+    bounds = _bounds(h, eps, float(confidence), max(sm.n_d - m, 1.0))
+    return _frequency_response(sm, h=h, eps=eps, coherence=coh, input_psd=pxx, output_psd=pyy,
+                               bounds=bounds, options=options, confidence=float(confidence))
+
+
+class _SpectralMatrix(NamedTuple):
+    """An experiment's cross-spectra ``s`` (F, m + p, m + p), the inputs first [U_a U_b/Hz],
+    its channels' names, the ``segments`` averaged and Welch's equivalent averages ``n_d``."""
+
+    s: NDArray[np.complex128]
+    input_names: list[str]
+    output_names: list[str]
+    segments: int
+    n_d: float
+
+
+def _checked_spectra(inputs: ArrayLike, outputs: ArrayLike, *, input_names: Sequence[str],
+                     output_names: Sequence[str], options: WelchOptions) -> _SpectralMatrix:
+    """Every channel checked (finite, long enough, with power), then their cross-spectra;
+    a ValueError names the channel (:func:`spectral_matrix`) or says the segments are few."""
     u = _as_matrix(inputs, "inputs")
     y = _as_matrix(outputs, "outputs")
     in_names = _names(input_names, u.shape[1], "input_names")
     out_names = _names(output_names, y.shape[1], "output_names")
-    m, p = len(in_names), len(out_names)
+    m = len(in_names)
     checked = [
         (_label(name, role), _as_signal(data[:, j], name=name, role=role))
         for data, names, role in ((u, in_names, "input"), (y, out_names, "output"))
@@ -396,23 +432,24 @@ def spectral_matrix(
     n_d = effective_averages(options.window, options.noverlap, k_seg)
     if n_d - m + 1 <= 0:
         raise ValueError(f"{k_seg} segments (n_d = {n_d:.3g}) are too few to estimate {m} inputs")
-    sxx, syx = s[:, :m, :m], s[:, m:, :m]
-    pxx = np.diagonal(sxx, axis1=1, axis2=2).real  # (F, m)
-    pyy = np.diagonal(s[:, m:, m:], axis1=1, axis2=2).real  # (F, p)
-    coh = np.abs(syx) ** 2 / (pyy[:, :, None] * pxx[:, None, :])
+    return _SpectralMatrix(s, in_names, out_names, k_seg, n_d)
 
-    with np.errstate(divide="ignore", invalid="ignore"):
-        if m == 1:
-            h = syx / pxx[:, None, :]  # exactly tfestimate's Pyx./Pxx
-            # B&P: eps = sqrt(1 - g^2) / (|g| sqrt(2 n_d)); clip g^2 > 1 by rounding (1 ulp).
-            eps = np.sqrt(np.clip(1.0 - coh, 0.0, None) / (coh * 2.0 * n_d))
-        else:
-            h, eps = _multi_input(sxx, syx, pyy, n_d, in_names)
-    bounds = _bounds(h, eps, float(confidence), max(n_d - m, 1.0))
 
+def _frequency_response(sm: _SpectralMatrix, *, h: NDArray[np.complex128],
+                        eps: NDArray[np.float64], coherence: NDArray[np.float64],
+                        input_psd: NDArray[np.float64], output_psd: NDArray[np.float64],
+                        bounds: tuple[NDArray[np.float64], ...], options: WelchOptions,
+                        confidence: float) -> FrequencyResponse:
+    """The estimates as one :class:`FrequencyResponse`, every array on the same coordinates.
+
+    ``input_psd`` (F, m) [U_in²/Hz] and ``output_psd`` (F, p) [U_out²/Hz] are spread over
+    the (F, p, m) matrix; ``bounds`` are :func:`_bounds`'s four arrays.
+    """
+    m, p = len(sm.input_names), len(sm.output_names)
     f = options.frequencies_hz
     coords = {
-        "frequency": ("frequency", f, {"units": "Hz"}), "output": out_names, "input": in_names
+        "frequency": ("frequency", f, {"units": "Hz"}), "output": sm.output_names,
+        "input": sm.input_names,
     }
 
     template = xr.DataArray(h, dims=DIMS, coords=coords)  # coordinates/indexes built once
@@ -425,22 +462,24 @@ def spectral_matrix(
     shape = (f.size, p, m)
     return FrequencyResponse(
         frf=da(h, "frf", "output/input"),
-        coherence=da(coh, "coherence", "1"),
-        input_psd=da(np.broadcast_to(pxx[:, None, :], shape).copy(), "input_psd", "input^2/Hz"),
-        output_psd=da(np.broadcast_to(pyy[:, :, None], shape).copy(), "output_psd", "output^2/Hz"),
-        cross_psd=da(syx.copy(), "cross_psd", "output*input/Hz"),
+        coherence=da(coherence, "coherence", "1"),
+        input_psd=da(np.broadcast_to(input_psd[:, None, :], shape).copy(), "input_psd",
+                     "input^2/Hz"),
+        output_psd=da(np.broadcast_to(output_psd[:, :, None], shape).copy(), "output_psd",
+                      "output^2/Hz"),
+        cross_psd=da(sm.s[:, m:, :m].copy(), "cross_psd", "output*input/Hz"),
         random_error=da(eps, "random_error", "1"),
         magnitude_lower=da(bounds[0], "magnitude_lower", "output/input"),
         magnitude_upper=da(bounds[1], "magnitude_upper", "output/input"),
         phase_lower_rad=da(bounds[2], "phase_lower_rad", "rad"),
         phase_upper_rad=da(bounds[3], "phase_upper_rad", "rad"),
-        confidence=float(confidence),
+        confidence=confidence,
         window_length=options.window_length,
         noverlap=options.noverlap,
         nfft=options.nfft,
         fs_hz=options.fs_hz,
-        n_segments=(k_seg,) * m,
-        effective_averages=(n_d,) * m,
+        n_segments=(sm.segments,) * m,
+        effective_averages=(sm.n_d,) * m,
     )
 
 
