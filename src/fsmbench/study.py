@@ -25,6 +25,8 @@ from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
+from threadpoolctl import threadpool_limits
+
 from fsmbench.atomic import atomic_write_text
 from fsmbench.bench.blocks import PlantModel
 from fsmbench.bench.params import Bench, default_bench
@@ -497,16 +499,20 @@ def run_study(*, out_dir: str | Path, data_dir: str | Path | None = None,
         raise FileNotFoundError(f"data folder {data} does not exist")
     out.mkdir(parents=True, exist_ok=True)
     run = _StudyRun(out, progress or (lambda _msg: None))
-    rec = _recordings_step(run, data=data, bench=bench, seed=seed, duration_s=duration_s)
-    found = _identification_step(run, rec, bench=bench, options=identify_options,
-                                 parallel=parallel)
-    design, budget, validation = _later_stages(run, rec, found, seed=seed,
-                                               parallel=parallel)
-    summary = build_summary(_evidence(rec, found, design=design, budget=budget,
-                                      validation=validation, montecarlo=montecarlo), spec=spec)
-    return _write_outputs(run, rec, found, summary=summary, design=design,
-                          budget=budget, validation=validation, figures=figures,
-                          montecarlo=montecarlo)
+    # One BLAS thread for the study (restored after): its matrices are small, and BLAS
+    # threads spinning beside the twin's threads and the forked stages slow all of them.
+    with threadpool_limits(limits=1, user_api="blas"):
+        rec = _recordings_step(run, data=data, bench=bench, seed=seed, duration_s=duration_s)
+        found = _identification_step(run, rec, bench=bench, options=identify_options,
+                                     parallel=parallel)
+        design, budget, validation = _later_stages(run, rec, found, seed=seed,
+                                                   parallel=parallel)
+        summary = build_summary(_evidence(rec, found, design=design, budget=budget,
+                                          validation=validation, montecarlo=montecarlo),
+                                spec=spec)
+        return _write_outputs(run, rec, found, summary=summary, design=design,
+                              budget=budget, validation=validation, figures=figures,
+                              montecarlo=montecarlo)
 
 
 def _write_outputs(run: _StudyRun, rec: _Recorded, found: _Identified, *, summary: Summary,
