@@ -5,7 +5,9 @@ against its peer, in one run.
 
 Runs ``fsmbench study`` on the twin ``--repeats`` times (after one warm-up
 run that fills the compiled-kernel cache) and prints the median wall time
-of each stage (``timings.json``) and of the whole study. Then, on the same
+of each stage (``timings.json``) and of the whole study; then the same study with
+its stages one after the other in one process (``run_study(parallel=False)``, the
+peer of the forked stages) and the ratio. Then, on the same
 figures, times the interactive report (figure specs → plotly.js JSON → one
 HTML file) against the peer it replaced: matplotlib drawing every figure to
 a PNG (``report.static.export_figures``), and prints the ratio.
@@ -48,6 +50,14 @@ def main() -> None:
         for name, values in stages.items():
             print(f"  {name:<12s} {statistics.median(values):7.2f} s")
         print(f"  {'whole study':<12s} {statistics.median(walls):7.2f} s")
+        serial = []
+        for i in range(args.repeats):
+            t0 = time.perf_counter()
+            run_study(out_dir=root / f"serial{i}", duration_s=args.duration, parallel=False)
+            serial.append(time.perf_counter() - t0)
+        print(f"  {'one after the other':<12s} {statistics.median(serial):7.2f} s "
+              f"(run_study(parallel=False)); side by side "
+              f"{statistics.median(serial) / statistics.median(walls):.2f}x faster")
         report = Path(result.report)
         print(f"report.html: {report.stat().st_size / 1e6:.2f} MB")
 
