@@ -104,9 +104,9 @@ def test_the_design_beside_the_budget_gives_the_serial_study(twin_study: StudyRe
     which process computed it."""
     out = Path(twin_study.out_dir)
     timings = json.loads((out / "timings.json").read_text())["seconds"]
-    assert ("waiting for the design and validation" in timings) == fork_available()
+    assert ("design_wait" in timings) == fork_available()
     serial = run_study(out_dir=tmp_path / "serial", duration_s=5.0, parallel=False)
-    assert "waiting for the design and validation" not in json.loads(
+    assert "design_wait" not in json.loads(
         (Path(serial.out_dir) / "timings.json").read_text())["seconds"]
     written = sorted(p.relative_to(out) for p in out.rglob("*") if p.is_file()
                      and p.name != "timings.json")

@@ -385,7 +385,7 @@ def _later_stages(run: _StudyRun, rec: _Recorded, found: _Identified, *, seed: i
     # Their own times; what this process waited for them beyond the budget is its own line
     # (run here, the wait was them).
     if job.forked:
-        run.lap("waiting for the design and validation")
+        run.lap("design_wait")
     else:
         run.clock = time.perf_counter()
     run.timings.update(forked.seconds)

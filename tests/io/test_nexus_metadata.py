@@ -190,7 +190,10 @@ def test_a_live_record_is_timed_by_its_samples_and_describes_the_bench(tmp_path:
     with h5py.File(plan.path, "r") as f:
         entry = f["entry"]
         start, end = (_time(entry[k][()]) for k in ("start_time", "end_time"))
-        assert start.utcoffset() is not None and before <= start <= end <= handed
+        # 1 µs: the file's time is time.time() as ISO text, to the microsecond, and
+        # datetime.now() rounds the same instant to the microsecond on its own.
+        tick = datetime.timedelta(microseconds=1)
+        assert start.utcoffset() is not None and before - tick <= start <= end <= handed + tick
         assert entry.attrs["ended"] == "complete"
         assert entry["instrument"].attrs["bench_file"] == "real_bench.toml"
         assert entry["data/Vpv"].compression == "gzip"
