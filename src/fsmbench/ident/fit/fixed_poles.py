@@ -50,6 +50,7 @@ def fit_residues(s: NDArray[np.complex128], h: NDArray[np.complex128], *,
         The poles [rad/s], pairs with both members.
     """
     basis = _pole_basis(s, poles)
+    groups = _pole_groups(poles)  # the basis's column order
     p, m = h.shape[1], h.shape[2]
     residues = np.zeros((poles.size, p, m), dtype=complex)
     d = np.zeros((p, m))
@@ -61,18 +62,12 @@ def fit_residues(s: NDArray[np.complex128], h: NDArray[np.complex128], *,
             x, *_ = np.linalg.lstsq(np.vstack([a_mat.real, a_mat.imag]),
                                     np.concatenate([rhs.real, rhs.imag]), rcond=None)
             col = 0
-            done: set[int] = set()
-            for k, a in enumerate(poles):
-                if k in done:
-                    continue
-                if abs(a.imag) > 0:
-                    j = int(np.flatnonzero(np.isclose(poles, np.conj(a)))[0])
-                    done.update({k, j})
+            for k, j in groups:
+                if j is not None:
                     residues[k, i, jj] = x[col] + 1j * x[col + 1]
                     residues[j, i, jj] = x[col] - 1j * x[col + 1]
                     col += 2
                 else:
-                    done.add(k)
                     residues[k, i, jj] = x[col]
                     col += 1
             d[i, jj] = x[col]
@@ -87,6 +82,21 @@ def _pole_basis(s: NDArray[np.complex128], poles: NDArray[np.complex128]
     imaginary parts of its residue), a real pole ``1/(s−a)``; shape (F, columns).
     """
     cols = []
+    for k, j in _pole_groups(poles):
+        a = poles[k]
+        if j is not None:
+            cols.append(1 / (s - a) + 1 / (s - np.conj(a)))
+            cols.append(1j / (s - a) - 1j / (s - np.conj(a)))
+        else:
+            cols.append(1 / (s - a))
+    cols.append(np.ones_like(s))  # D
+    return np.column_stack(cols)
+
+
+def _pole_groups(poles: NDArray[np.complex128]) -> list[tuple[int, int | None]]:
+    """The poles in model order: ``(k, j)`` for a pair (``j`` the conjugate's index),
+    ``(k, None)`` for a real pole; the basis's columns and the residues read this order."""
+    groups: list[tuple[int, int | None]] = []
     done: set[int] = set()
     for k, a in enumerate(poles):
         if k in done:
@@ -94,10 +104,8 @@ def _pole_basis(s: NDArray[np.complex128], poles: NDArray[np.complex128]
         if abs(a.imag) > 0:
             j = int(np.flatnonzero(np.isclose(poles, np.conj(a)))[0])
             done.update({k, j})
-            cols.append(1 / (s - a) + 1 / (s - np.conj(a)))
-            cols.append(1j / (s - a) - 1j / (s - np.conj(a)))
+            groups.append((k, j))
         else:
             done.add(k)
-            cols.append(1 / (s - a))
-    cols.append(np.ones_like(s))  # D
-    return np.column_stack(cols)
+            groups.append((k, None))
+    return groups
