@@ -74,7 +74,7 @@ from fsmbench.stages import (
     validation_stage,
 )
 from fsmbench.twin.compare import comparison_rows
-from fsmbench.twin.simulate import simulate_bench, write_twin
+from fsmbench.twin.simulate import simulate_bench
 from fsmbench.version import __version__
 
 __all__ = ["FIGURE_FORMATS", "StageStatus", "StudyResult", "run_study"]
@@ -273,16 +273,16 @@ class _Identified:
 
 
 def _recordings_step(run: _StudyRun, *, data: Path | None, bench: Bench, seed: int,
-                     duration_s: float | None) -> _Recorded:
+                     duration_s: float | None, parallel: bool) -> _Recorded:
     """The twin's records simulated and written (no ``data``), then every record read."""
     is_twin = data is None
     if data is None:
-        run.say("simulating the bench with the digital twin")
-        simulated = simulate_bench(bench, seed=seed, duration_s=duration_s, progress=run.say)
         data = run.out / "twin-data"
-        run.say(f"writing the twin's records to {data}")
-        written = write_twin(simulated, data)
-        run.stages.append(StageStatus("simulate", True, outputs=tuple(str(p) for p in written)))
+        run.say(f"simulating the bench with the digital twin, writing its records to {data}")
+        simulated = simulate_bench(bench, seed=seed, duration_s=duration_s, progress=run.say,
+                                   write_dir=data)
+        run.stages.append(StageStatus("simulate", True,
+                                      outputs=tuple(str(p) for p in simulated.files)))
         source = f"digital twin, random seed {seed}"
         run.lap("simulate")
     else:
@@ -291,7 +291,7 @@ def _recordings_step(run: _StudyRun, *, data: Path | None, bench: Bench, seed: i
     # The records' rate is judged against each other and then the bench file, by the
     # identification (ident.evidence.rate): the loader does not hold t to the bench file.
     loaded = load_recordings(data, progress=run.say, fs_hz=None, adc_range_v=conv.range_v,
-                             adc_bits=conv.bits)
+                             adc_bits=conv.bits, parallel=parallel)
     run.stages.append(StageStatus("recordings", True, outputs=tuple(loaded.recordings)))
     truth = read_twin_truth(data / "twin_truth.json")
     run.lap("recordings")
@@ -482,10 +482,10 @@ def run_study(*, out_dir: str | Path, data_dir: str | Path | None = None,
         chapter 11 lists its draws that break a requirement, and the robustness row names
         a requirement ≥ 5 % of them break.
     parallel : bool
-        Run the design and the validation beside the budget, and the noise model beside
-        the identification's other steps, in forked processes (:mod:`fsmbench.forked`;
-        where ``fork`` exists and there are two cores). False runs everything in this
-        process, one after the other: the same results.
+        Read half the records, run the design and the validation beside the budget, and
+        the noise model beside the identification's other steps, in forked processes
+        (:mod:`fsmbench.forked`; where ``fork`` exists and there are two cores). False
+        runs everything in this process, one after the other: the same results.
     """
     bench = default_bench() if bench is None else bench
     spec = Specification() if spec is None else spec
@@ -502,7 +502,8 @@ def run_study(*, out_dir: str | Path, data_dir: str | Path | None = None,
     # One BLAS thread for the study (restored after): its matrices are small, and BLAS
     # threads spinning beside the twin's threads and the forked stages slow all of them.
     with threadpool_limits(limits=1, user_api="blas"):
-        rec = _recordings_step(run, data=data, bench=bench, seed=seed, duration_s=duration_s)
+        rec = _recordings_step(run, data=data, bench=bench, seed=seed, duration_s=duration_s,
+                               parallel=parallel)
         found = _identification_step(run, rec, bench=bench, options=identify_options,
                                      parallel=parallel)
         design, budget, validation = _later_stages(run, rec, found, seed=seed,

@@ -65,6 +65,21 @@ def test_same_seed_gives_identical_files_other_seed_differs(tmp_path: Path) -> N
             assert pa.read_bytes() != pc.read_bytes(), pa.name
 
 
+@pytest.mark.parametrize("fmt", ["mat5", "nexus"])
+def test_records_written_as_simulated_are_write_twins_files(tmp_path: Path, fmt: str) -> None:
+    # Written by the simulating threads as each record is done, or after by write_twin:
+    # the same files, byte for byte (a fixed creation time makes a file a function of it).
+    names = ["data_uch", "data_huddle_test_3", "data_cal_pd_h"]
+    run = simulate_bench(seed=3, duration_s=3.0, experiments=names,
+                         write_dir=tmp_path / "as-simulated", format=fmt)  # type: ignore[arg-type]
+    after = write_twin(run, tmp_path / "after", format=fmt)  # type: ignore[arg-type]
+    assert [p.name for p in run.files] == [p.name for p in after]
+    for written, reference in zip(run.files, after, strict=True):
+        assert written.parent == tmp_path / "as-simulated"
+        assert written.read_bytes() == reference.read_bytes(), written.name
+    assert simulate_bench(seed=3, duration_s=3.0, experiments=names).files == ()
+
+
 def test_truth_has_the_contracted_keys_and_derived_values(short_twin: TwinRun,
                                                           bench: Bench) -> None:
     truth = short_twin.truth

@@ -22,7 +22,7 @@ that loops or points nowhere) is named as what it is, not as missing.
 from __future__ import annotations
 
 import warnings
-from collections.abc import Callable
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Final
@@ -31,6 +31,7 @@ import h5py
 import xarray as xr
 
 from fsmbench.checks import Check, Notice
+from fsmbench.forked import fork_available, start_forked
 from fsmbench.io import matfile
 from fsmbench.io.duplicates import compare_files, other_files
 from fsmbench.io.errors import RecordingError, SaturationWarning
@@ -38,7 +39,15 @@ from fsmbench.io.folder_names import folder_hints, not_a_file
 from fsmbench.io.lazy import open_recording, v5_vectors
 from fsmbench.io.matfile import detect_format
 from fsmbench.io.notes import FILE_CHOICE
-from fsmbench.io.record_checks import EXCITATION, MAX_VA_RMS_M, RATE_TOLERANCE, check_recording
+from fsmbench.io.record_checks import (
+    EXCITATION,
+    MAX_VA_RMS_M,
+    RATE_TOLERANCE,
+    CarriedChecks,
+    carried_checks,
+    carry_checks,
+    check_recording,
+)
 from fsmbench.io.recording import find_experiments, read_recording
 from fsmbench.io.signals import EXPERIMENTS, TIME
 from fsmbench.io.trailing import TrailingBytesWarning, data_end
@@ -244,9 +253,84 @@ def _read_one(path: Path, name: str, *, fs_hz: float | None, adc_range_v: float,
     return ds, list(found_checks), notices + list(found_notices)
 
 
+@dataclass(frozen=True, eq=False)
+class _Read:
+    """One record read and checked (:func:`_read_one`), and its checks to carry with it."""
+
+    name: str
+    ds: xr.Dataset
+    checks: list[Check]
+    notices: list[Notice]
+    carried: CarriedChecks | None = None
+
+
+def _read_some(found: Mapping[str, Path], names: Sequence[str], *,
+               progress: Callable[[str], None] | None,
+               **options: Any) -> dict[str, _Read | RecordingError]:
+    """The records of ``names`` read and checked, or the error refusing each."""
+    out: dict[str, _Read | RecordingError] = {}
+    for name in names:
+        if progress is not None:
+            progress(f"reading {found[name].name}")
+        try:
+            ds, checks, notices = _read_one(found[name], name, **options)
+        except RecordingError as exc:
+            out[name] = exc
+            continue
+        out[name] = _Read(name, ds, checks, notices, carried_checks(
+            ds, name=name, adc_range_v=options["adc_range_v"], adc_bits=options["adc_bits"]))
+    return out
+
+
+def _child_share(found: Mapping[str, Path]) -> list[str]:
+    """The records a forked process reads: about half of the MAT v5 files' bytes (read
+    whole, they travel back pickled in milliseconds; a lazy record holds an open file)."""
+    sizes: dict[str, int] = {}
+    for name, path in found.items():
+        try:
+            if detect_format(path) == "mat5":
+                sizes[name] = path.stat().st_size
+        except (OSError, RecordingError):
+            continue  # read here, where its problem is said
+    here, there, share = 0, 0, []
+    for name in sorted(sizes, key=lambda n: -sizes[n]):
+        if there < here:
+            share.append(name)
+            there += sizes[name]
+        else:
+            here += sizes[name]
+    return share
+
+
+def _read_all(found: Mapping[str, Path], *, progress: Callable[[str], None] | None,
+              parallel: bool, **options: Any) -> dict[str, _Read | RecordingError]:
+    """Every record of ``found`` read and checked, or the error refusing it.
+
+    With ``parallel`` a forked process (:mod:`fsmbench.forked`) reads about half of them
+    while this one reads the rest: the same datasets, checks and notices, with each
+    record's checks kept for the stages that ask for them again.
+    """
+    share = _child_share(found) if parallel and fork_available() else []
+    job = start_forked(lambda say: _read_some(found, share,
+                                              progress=None if progress is None else say,
+                                              **options),
+                       progress=progress or (lambda _msg: None), parallel=True) if share else None
+    try:
+        done = _read_some(found, [n for n in found if n not in share], progress=progress,
+                          **options)
+        theirs = job.result() if job is not None else {}
+    finally:
+        if job is not None:
+            job.cancel()
+    for outcome in theirs.values():
+        if isinstance(outcome, _Read) and outcome.carried is not None:
+            carry_checks(outcome.ds, outcome.carried)
+    return {**done, **theirs}
+
+
 def load_recordings(data_dir: Path, *, fs_hz: float | None = None, adc_range_v: float = 20.0,
                     adc_bits: int = 16, progress: Callable[[str], None] | None = None,
-                    lazy_bytes: int = LAZY_BYTES) -> RecordingSet:
+                    lazy_bytes: int = LAZY_BYTES, parallel: bool = False) -> RecordingSet:
     """Read every seed experiment present in ``data_dir`` and check it.
 
     Parameters
@@ -265,6 +349,10 @@ def load_recordings(data_dir: Path, *, fs_hz: float | None = None, adc_range_v: 
         HDF5 files larger than this [bytes] are read lazily (Dask arrays);
         the huddle tests and the repeatability records stay lazy and are
         analysed out of core, other experiments are loaded into memory if they fit.
+    parallel : bool
+        Read about half of the MAT v5 files in a forked process (:mod:`fsmbench.forked`,
+        where ``fork`` exists and there are two cores) while this one reads the rest:
+        the same result.
 
     Raises
     ------
@@ -284,24 +372,22 @@ def load_recordings(data_dir: Path, *, fs_hz: float | None = None, adc_range_v: 
     odd = {name: why for name in EXPERIMENTS if name not in found
            and (why := not_a_file(Path(data_dir), name)) is not None}
     failures: dict[str, RecordingError] = {}
+    read = _read_all({name: found[name] for name in EXPERIMENTS if name in found},
+                     progress=progress, parallel=parallel, fs_hz=fs_hz,
+                     adc_range_v=adc_range_v, adc_bits=adc_bits, lazy_bytes=lazy_bytes)
     for name in EXPERIMENTS:
         if name not in found:
             skipped[name] = odd.get(name) or f"no {name}.mat (or .h5/.nxs) in {data_dir}" + (
                 f"; {hints[name]}" if name in hints else "")
             continue
-        if progress is not None:
-            progress(f"reading {found[name].name}")
-        try:
-            ds, found_checks, found_notices = _read_one(
-                found[name], name, fs_hz=fs_hz, adc_range_v=adc_range_v, adc_bits=adc_bits,
-                lazy_bytes=lazy_bytes)
-        except RecordingError as exc:
-            skipped[name] = str(exc)
-            failures[name] = exc
+        outcome = read[name]
+        if isinstance(outcome, RecordingError):
+            skipped[name] = str(outcome)
+            failures[name] = outcome
             continue
-        recordings[name] = ds
-        checks += found_checks
-        notices += found_notices
+        recordings[name] = outcome.ds
+        checks += outcome.checks
+        notices += outcome.notices
     if not recordings:
         raise RecordingError(data_dir, _empty_problem(Path(data_dir), found, skipped, hints,
                                                       odd, failures))

@@ -25,6 +25,7 @@ import math
 import os
 import weakref
 from collections.abc import Collection, Hashable
+from dataclasses import dataclass
 from typing import Any, Final
 
 import numpy as np
@@ -37,7 +38,8 @@ from fsmbench.io.notes import READ_NOTES, TIME_JITTER
 from fsmbench.io.signals import ADC_SIGNALS, DAC_SIGNALS, EXPERIMENTS, MIN_DURATION_S, SIGNALS, TIME
 from fsmbench.io.va_jumps import jump_check, va_unit_hint
 
-__all__ = ["EXCITATION", "MAX_VA_RMS_M", "RATE_TOLERANCE", "check_recording"]
+__all__ = ["EXCITATION", "MAX_VA_RMS_M", "RATE_TOLERANCE", "CarriedChecks", "carried_checks",
+           "carry_checks", "check_recording"]
 
 #: Relative tolerance of the sampling-rate check: a clock off by more than 1 %
 #: is another rate (or ``t`` in another unit), not a crystal's ppm error.
@@ -141,6 +143,35 @@ def _finite_rms(x: np.ndarray) -> tuple[float, float]:
 # out of core takes minutes; over the study's in-memory records, a second of its wall).
 # A dataset is never modified in place (inputs are not), and its entry goes with it.
 _CHECKED: dict[tuple[Any, ...], tuple[list[Check], list[Notice]]] = {}
+
+
+@dataclass(frozen=True, eq=False)
+class CarriedChecks:
+    """A record's rate-free checks as :func:`check_recording` keeps them, to travel with a
+    copy of the record to another process (:func:`carried_checks`, :func:`carry_checks`)."""
+
+    name: str | None
+    adc_range_v: float
+    adc_bits: int
+    checks: tuple[Check, ...]
+    notices: tuple[Notice, ...]
+
+
+def carried_checks(ds: xr.Dataset, *, name: str | None, adc_range_v: float,
+                   adc_bits: int) -> CarriedChecks | None:
+    """What :func:`check_recording` keeps for ``ds`` (None: not checked yet)."""
+    found = _CHECKED.get((id(ds), name, adc_range_v, adc_bits))
+    return None if found is None else CarriedChecks(name, adc_range_v, adc_bits,
+                                                     tuple(found[0]), tuple(found[1]))
+
+
+def carry_checks(ds: xr.Dataset, carried: CarriedChecks) -> None:
+    """Keep ``carried`` as ``ds``'s checks: ``ds`` is a copy of the record they were made on
+    (read in a forked process and sent back), so they are not made again."""
+    key = (id(ds), carried.name, carried.adc_range_v, carried.adc_bits)
+    if key not in _CHECKED:
+        _CHECKED[key] = (list(carried.checks), list(carried.notices))
+        weakref.finalize(ds, _CHECKED.pop, key, None)
 
 
 def check_recording(ds: xr.Dataset, *, name: str | None = None, fs_hz: float | None = None,

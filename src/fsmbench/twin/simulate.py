@@ -21,7 +21,7 @@ import json
 import os
 from collections.abc import Callable, Mapping, Sequence
 from concurrent.futures import ThreadPoolExecutor
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -90,6 +90,9 @@ class TwinRun:
     truth: Mapping[str, Any]
     seed: int
     experiments: tuple[ExperimentSpec, ...] = field(default=())
+    #: The files written as the records were simulated (``simulate_bench(write_dir=...)``):
+    #: each record's, then ``twin_truth.json``; empty when nothing was written.
+    files: tuple[Path, ...] = field(default=())
 
 
 def simulate_experiment(bench: Bench, spec: ExperimentSpec, *, seed: int,
@@ -197,7 +200,9 @@ def stream_bench(bench: Bench | None = None, *, out_dir: str | Path, seed: int =
 def simulate_bench(bench: Bench | None = None, *, seed: int = 0, duration_s: float | None = None,
                    experiments: Sequence[str] | None = None,
                    controller: DiscreteController | None = None,
-                   progress: Callable[[str], None] | None = None) -> TwinRun:
+                   progress: Callable[[str], None] | None = None,
+                   write_dir: str | Path | None = None,
+                   format: RecordingFormat = "mat5") -> TwinRun:
     """Run the seed's experiments on the twin.
 
     Parameters
@@ -214,18 +219,34 @@ def simulate_bench(bench: Bench | None = None, *, seed: int = 0, duration_s: flo
         Closed-loop controller; default the seed's of 9.2 (checked stable).
     progress : callable, optional
         Called with a short message before each experiment.
+    write_dir : path, optional
+        Also write each record there as soon as it is simulated (the files of
+        :func:`write_twin`, in ``format``, and ``twin_truth.json`` last); the paths are
+        the run's ``files``. Writing beside the next simulations keeps every core busy.
+    format : {"mat5", "mat73", "nexus"}
+        The files' format when ``write_dir`` is given (see :func:`write_twin`).
     """
     bench = default_bench() if bench is None else bench
     specs, plant, controller = _prepare_run(bench, duration_s=duration_s,
                                             experiments=experiments, controller=controller)
+    out = None if write_dir is None else Path(write_dir)
+    if out is not None:
+        out.mkdir(parents=True, exist_ok=True)
+
+    def one(spec: ExperimentSpec) -> ExperimentResult:
+        result = simulate_experiment(bench, spec, seed=seed, plant=plant, controller=controller)
+        if out is not None:  # zlib and the file's write release the GIL
+            write_recording(result.recording, out / f"{spec.name}{_suffix(format)}",
+                            format=format, created=TWIN_CREATED_S)
+        return result
+
     # The experiments are independent (each noise source has its own stream, keyed by
     # experiment and source), so they run on every core; the compiled loop, the random
     # generators and most numpy work release the GIL. The result does not depend on the
     # number of threads.
     specialised_kernel(plant)  # load (or build) the loop once, before the threads use it
     with ThreadPoolExecutor(max_workers=max(1, min(len(specs), os.cpu_count() or 1))) as pool:
-        futures = [pool.submit(simulate_experiment, bench, spec, seed=seed, plant=plant,
-                               controller=controller) for spec in specs]
+        futures = [pool.submit(one, spec) for spec in specs]
         results = []
         for i, (spec, future) in enumerate(zip(specs, futures, strict=True), start=1):
             results.append(future.result())
@@ -237,7 +258,11 @@ def simulate_bench(bench: Bench | None = None, *, seed: int = 0, duration_s: flo
                                                                                strict=True)}
     truth = twin_truth(bench, seed=seed, experiments=specs, realized=realized,
                        controller_name=None if controller is None else controller.name)
-    return TwinRun(recordings=recordings, truth=truth, seed=seed, experiments=specs)
+    run = TwinRun(recordings=recordings, truth=truth, seed=seed, experiments=specs)
+    if out is None:
+        return run
+    files = (*(out / f"{s.name}{_suffix(format)}" for s in specs), _write_truth(run, out))
+    return replace(run, files=files)
 
 
 def simulate_excitation(source: str | Path, bench: Bench | None = None, *, seed: int = 0,
@@ -314,18 +339,27 @@ def write_twin(run: TwinRun, out_dir: str | Path, *,
     """
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    suffix = ".h5" if format == "nexus" else ".mat"
     paths = []
     for name, ds in run.recordings.items():
-        path = out / f"{name}{suffix}"
+        path = out / f"{name}{_suffix(format)}"
         write_recording(ds, path, format=format, created=TWIN_CREATED_S)
         paths.append(path)
+    paths.append(_write_truth(run, out))
+    return paths
+
+
+def _suffix(format: RecordingFormat) -> str:
+    """A record's file suffix in ``format``."""
+    return ".h5" if format == "nexus" else ".mat"
+
+
+def _write_truth(run: TwinRun, out: Path) -> Path:
+    """``out/twin_truth.json``: ``run.truth`` with its format and version."""
     truth_path = out / "twin_truth.json"
     name, version = TRUTH_FORMAT
     atomic_write_text(truth_path, format_text(stamped(run.truth, format=name, version=version),
                                               sort_keys=True))
-    paths.append(truth_path)
-    return paths
+    return truth_path
 
 
 def play_excitation(sources: str | Path | Sequence[str | Path], bench: Bench | None = None, *,

@@ -28,6 +28,8 @@ at least :data:`MIN_STEPS` steps rms decide the gain when there are any.
 
 from __future__ import annotations
 
+import functools
+import weakref
 from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any, Final, Literal
@@ -210,21 +212,53 @@ def esrf_sos(axis: str, fs_hz: float) -> np.ndarray:
     return sos
 
 
+@functools.lru_cache(maxsize=2)
+def _polynomial_basis(n: int, fs_hz: float) -> np.ndarray:
+    """Orthonormal ``[1, t, t^2]`` over ``n`` samples at ``fs_hz``, shape (n, 3), read-only.
+
+    The same for every record of one length (the closed-loop records share theirs): its
+    QR of a 1e6 x 3 matrix was half of a record's fit.
+    """
+    t = np.arange(n) / fs_hz
+    t = t / max(float(t[-1]), 1.0 / fs_hz)  # scaled to [0, 1]: a well-conditioned polynomial
+    poly = np.column_stack([np.ones_like(t), t, t * t])
+    q, _ = np.linalg.qr(poly / np.linalg.norm(poly, axis=0))
+    q.setflags(write=False)
+    return q
+
+
+# A record's fit by dataset identity: the rate's witness, the records' screening and the
+# budget's huddle screen each fit the same closed-loop records (a second of the study's
+# CPU). A dataset is never modified in place, and its entries go with it.
+_FITTED: dict[tuple[Any, ...], ControllerFit] = {}
+
+
+def _record_fit(ds: xr.Dataset, *, record: str, command: str, reading: str, axis: str,
+                fs_hz: float, step_v: float) -> ControllerFit:
+    """:func:`fit_record` of ``ds``'s ``command`` on its ``reading``, each fit once."""
+    key = (id(ds), record, command, reading, axis, float(fs_hz), float(step_v))
+    fit = _FITTED.get(key)
+    if fit is None:
+        fit = fit_record(record, np.asarray(ds[command].values, dtype=np.float64),
+                         np.asarray(ds[reading].values, dtype=np.float64), axis=axis,
+                         fs_hz=fs_hz, step_v=step_v)
+        _FITTED[key] = fit
+        weakref.finalize(ds, _FITTED.pop, key, None)
+    return fit
+
+
 def fit_record(record: str, u: np.ndarray, y: np.ndarray, *, axis: str, fs_hz: float,
-                step_v: float) -> ControllerFit:
+               step_v: float) -> ControllerFit:
     k0 = round(SETTLE_S * fs_hz)
     uc = u[k0:]
     rms = float(np.std(uc)) if uc.size else 0.0
     if uc.size < 3 or not rms > 0:
         return ControllerFit(record, 0.0, 0.0, float("nan"), float("nan"), 0.0, 0)
     sos = esrf_sos(axis, fs_hz)
-    t = np.arange(uc.size) / fs_hz
-    t = t / max(float(t[-1]), 1.0 / fs_hz)  # scaled to [0, 1]: a well-conditioned polynomial
     # The polynomial is the same for every lag: projected out once (Frisch-Waugh-Lovell),
     # the controller's coefficient and the residual are those of the full least squares
     # on [K y, 1, t, t^2], at a third of its cost (a 1e6 x 4 lstsq per lag).
-    poly = np.column_stack([np.ones_like(t), t, t * t])
-    q, _ = np.linalg.qr(poly / np.linalg.norm(poly, axis=0))
+    q = _polynomial_basis(uc.size, fs_hz)
     u_perp = uc - q @ (q.T @ uc)
     var_u = float(np.var(uc))
     mean_y = float(np.mean(y))
@@ -310,12 +344,10 @@ def rate_witness(recordings: Mapping[str, xr.Dataset], *, fs_hz: float, step_v: 
         return None
     _, name, command, reading = best
     ds = recordings[name]
-    u = np.asarray(ds[command].values, dtype=np.float64)
-    y = np.asarray(ds[reading].values, dtype=np.float64)
-    axis = command[-1]
     explained = {}
     for fs in (fs_hz, 2.0 * fs_hz, 0.5 * fs_hz):
-        fit = fit_record(name, u, y, axis=axis, fs_hz=fs, step_v=step_v)
+        fit = _record_fit(ds, record=name, command=command, reading=reading,
+                          axis=command[-1], fs_hz=fs, step_v=step_v)
         explained[fs] = fit.explained
     return RateWitness(name, command, fs_hz, explained)
 
@@ -373,7 +405,8 @@ def recorded_controllers(recordings: Mapping[str, xr.Dataset], *, fs_hz: float,
             y = np.asarray(ds[reading].values, dtype=np.float64)
             if u.size != y.size or not (np.all(np.isfinite(u)) and np.all(np.isfinite(y))):
                 continue
-            fits.append(fit_record(name, u, y, axis=axis, fs_hz=fs_hz, step_v=step_v))
+            fits.append(_record_fit(ds, record=name, command=command, reading=reading,
+                                    axis=axis, fs_hz=fs_hz, step_v=step_v))
         ran = [f for f in fits if f.verdict == "seed"]
         deciding = [f for f in ran if f.steps_rms >= MIN_STEPS] or ran
         if deciding:
