@@ -110,9 +110,9 @@ class Controller:
     def __post_init__(self) -> None:
         for key in "abcd":
             object.__setattr__(self, key, _read_only(getattr(self, key)))
-        n, (p, m) = self.a.shape[0], self.d.shape
-        if (self.a.shape != (n, n) or self.b.shape != (n, m) or self.c.shape != (p, n)
-                or self.d.ndim != 2):
+        n, (p, m) = self.a.shape[0] if self.a.ndim else -1, np.shape(np.atleast_2d(self.d))
+        if (self.d.ndim != 2 or self.a.shape != (n, n) or self.b.shape != (n, m)
+                or self.c.shape != (p, n)):
             raise ValueError(f"controller {self.name!r}: inconsistent sizes, A {self.a.shape}, "
                              f"B {self.b.shape}, C {self.c.shape}, D {self.d.shape}")
         if self.gd_v_per_rad is not None:
