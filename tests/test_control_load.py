@@ -12,6 +12,7 @@ import pytest
 from fsmbench.bench.blocks import PlantModel, ss_response
 from fsmbench.bench.esrf import esrf_decentralised_controller, newport_controller
 from fsmbench.bench.params import Bench
+from fsmbench.control.controller import Controller
 from fsmbench.control.design import AxisShape, DesignOptions
 from fsmbench.control.export import (
     DEFAULT_DISCRETISATION,
@@ -22,7 +23,6 @@ from fsmbench.control.export import (
 )
 from fsmbench.control.load import (
     DEFAULT_CONTROLLER,
-    LoadedController,
     load_controllers,
     select_controller,
 )
@@ -73,7 +73,7 @@ def _write_both(folder: Path, controllers: dict[str, ct.StateSpace], *,
     return mat, sos
 
 
-def _response(k: LoadedController) -> np.ndarray:
+def _response(k: Controller) -> np.ndarray:
     """The loaded matrices' response through the bench's own evaluator, shape (F, 2, 2)."""
     return ss_response(ct.ss(k.a, k.b, k.c, k.d, k.ts_s), Z)
 
@@ -110,11 +110,11 @@ def test_loaded_controllers_reproduce_the_discretised_design(tmp_path: Path,
             assert loaded.input_names == tuple(k.input_labels)
             assert loaded.output_names == tuple(k.output_labels)
             assert loaded.description == DESCRIPTIONS.get(name, "")
-            assert loaded.qd_gain_v_per_rad == (-31.0, 36.3)
+            assert loaded.gd_v_per_rad == (-31.0, 36.3)
             assert loaded.discretisation == method
             assert not loaded.a.flags.writeable and not loaded.d.flags.writeable
             # Its own evaluator: the same formula as the bench's, batched the same way.
-            np.testing.assert_allclose(loaded.frequency_response(F_HZ), _response(loaded),
+            np.testing.assert_allclose(loaded.response(F_HZ), _response(loaded),
                                        rtol=1e-12, atol=0)
         assert m.source_path == mat and j.source_path == sos
     assert from_json["static_gain"].n_states == 0
@@ -161,7 +161,7 @@ def test_design_output_folder_loads_fsmbench_controller_by_default(design: Desig
     for loaded in (from_folder, from_json):
         chosen = select_controller(loaded)
         assert chosen.name == DEFAULT_CONTROLLER == "fsmbench_controller"
-        assert chosen.qd_gain_v_per_rad == design.qd_gain_v_per_rad
+        assert chosen.gd_v_per_rad == design.qd_gain_v_per_rad
         ref = ss_response(discretise(design.controllers[DEFAULT_CONTROLLER], ts_s=ts), Z)
         _assert_same_response(_response(chosen), ref)
     assert "iff_controller" in from_folder and "iff_controller" not in from_json

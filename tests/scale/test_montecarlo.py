@@ -17,17 +17,16 @@ from fsmbench.bench.blocks import physical_plant
 from fsmbench.bench.params import Bench, default_bench
 from fsmbench.cli import main
 from fsmbench.control.analysis import control_objective
+from fsmbench.control.controller import Controller
 from fsmbench.control.export import InputScaling, write_controllers_mat
 from fsmbench.control.loops import LoopOptions, analyse_loop
 from fsmbench.scale.montecarlo import (
     METRICS,
     PARAMETERS,
     RANGE_OF_PARAMETER,
-    ControllerChoice,
     DrawResult,
     MonteCarloSetup,
     Ranges,
-    discrete_feedback,
     draw_parameters,
     run_draw,
     run_montecarlo,
@@ -52,12 +51,12 @@ def bench() -> Bench:
 
 
 @pytest.fixture(scope="module")
-def controller(bench: Bench) -> ControllerChoice:
+def controller(bench: Bench) -> Controller:
     return designed_controller(bench)
 
 
 @pytest.fixture(scope="module")
-def setup(bench: Bench, controller: ControllerChoice) -> MonteCarloSetup:
+def setup(bench: Bench, controller: Controller) -> MonteCarloSetup:
     return MonteCarloSetup(bench=bench, controller=controller, duration_s=DURATION_S,
                            settle_s=SETTLE_S)
 
@@ -129,12 +128,12 @@ def test_defaults_are_the_design_robust_set_and_identification_targets() -> None
     assert r.dac_delay_s == r.newport_delay_s == (-1e-4, 1e-4)
 
 
-def test_nominal_draw_is_verify_on_twin(bench: Bench, controller: ControllerChoice) -> None:
+def test_nominal_draw_is_verify_on_twin(bench: Bench, controller: Controller) -> None:
     nominal = MonteCarloSetup(bench=bench, controller=controller, ranges=Ranges.nominal(),
                               duration_s=DURATION_S, settle_s=SETTLE_S)
     draw = draw_parameters(seed=3, n=1, ranges=nominal.ranges)[0]
     row = run_draw(draw, nominal)
-    gd = bench.nominal.quad_diode.gain_v_per_rad  # what discrete_feedback divides by
+    gd = bench.nominal.quad_diode.gain_v_per_rad  # what controller.feedback divides by
     check = verify_on_twin(controller.continuous, bench=bench, plant=physical_plant(bench.true),
                            name="fsmbench controller", seed=draw.noise_seed,
                            duration_s=DURATION_S, settle_s=SETTLE_S, gd_v_per_rad=(gd.h, gd.v))
@@ -147,7 +146,7 @@ def test_nominal_draw_is_verify_on_twin(bench: Bench, controller: ControllerChoi
     ref = feedback_controller(controller.continuous,
                               gd_v_per_rad=bench.nominal.quad_diode.gain_v_per_rad,
                               ts_s=bench.true.converter.ts_s)
-    mine = discrete_feedback(controller)
+    mine = controller.feedback
     for m in "abcd":
         assert np.array_equal(getattr(mine, m), getattr(ref, m))
     # Margins against the design study's discrete-loop margins (analyse_loop), on its own
@@ -172,7 +171,7 @@ def test_nominal_draw_is_verify_on_twin(bench: Bench, controller: ControllerChoi
 
 
 def test_loaded_controller_runs_like_the_design(tmp_path: Path, bench: Bench,
-                                                controller: ControllerChoice) -> None:
+                                                controller: Controller) -> None:
     gd = bench.nominal.quad_diode.gain_v_per_rad
     path = write_controllers_mat(tmp_path / "controllers.mat",
                                  {"fsmbench_controller": controller.continuous}, ts_s=1e-4,
@@ -194,7 +193,7 @@ def test_loaded_controller_runs_like_the_design(tmp_path: Path, bench: Bench,
 
 
 def test_destabilising_range_marks_draws_unstable(bench: Bench,
-                                                  controller: ControllerChoice) -> None:
+                                                  controller: Controller) -> None:
     # Current-amplifier gain ×20 (26 dB) exceeds the ~14 dB gain margin.
     ranges = Ranges(current_amp_gain_scale=(20.0, 20.0))
     setup = MonteCarloSetup(bench=bench, controller=controller, ranges=ranges,

@@ -22,8 +22,9 @@ tango = pytest.importorskip("tango")
 from fsmbench.bench.esrf import esrf_decentralised_controller  # noqa: E402
 from fsmbench.bench.params import Bench  # noqa: E402
 from fsmbench.cli import main  # noqa: E402
+from fsmbench.control.controller import controller_of  # noqa: E402
 from fsmbench.tune.device import DeviceTarget  # noqa: E402
-from fsmbench.tune.guarded import TuneOptions, loop_of, tune_guarded  # noqa: E402
+from fsmbench.tune.guarded import TuneOptions, tune_guarded  # noqa: E402
 from fsmbench.tune.measure import MeasurementOptions  # noqa: E402
 
 SEED_NAME = "the ESRF study's controller (9.2)"  # what the device calls it
@@ -33,8 +34,8 @@ def _seed_loop(bench: Bench, gain: float, name: str) -> Any:
     gd = bench.nominal.quad_diode.gain_v_per_rad
     k = esrf_decentralised_controller()
     k = ct.ss(k.A, k.B, gain * k.C, gain * k.D, inputs=["Rh", "Rv"], outputs=["Uch", "Ucv"])
-    return loop_of(k, name=name, ts_s=bench.true.converter.ts_s,
-                   gd_v_per_rad=(float(gd.h), float(gd.v)))
+    return controller_of(k, name=name, ts_s=bench.true.converter.ts_s,
+                         gd_v_per_rad=(float(gd.h), float(gd.v)))
 
 
 def test_a_worse_candidate_is_refused_through_the_device(device: tuple[Any, str],

@@ -387,7 +387,7 @@ from fsmbench.bench.params import default_bench
 from fsmbench.tune.running import running_loop
 from fsmbench.tune.device import DeviceTarget, device_proxy, release_proxy
 from fsmbench.tune.device_errors import DeviceRefused
-from fsmbench.tune.guarded import loop_of
+from fsmbench.control.controller import controller_of
 from fsmbench.tune.transaction import failure_cause
 
 address, running, folder = sys.argv[1:4]
@@ -401,10 +401,10 @@ try:
     out["restore_with"] = target.checkpoint(loop)["restore_with"]
     e = target.run(4.0, settle_s=1.0)
     out["run"] = [list(e.shape), float(abs(e).max())]
-    k = loop.k
-    x20 = loop_of(ct.ss(k.A, k.B, 20.0 * k.C, 20.0 * k.D, inputs=["Rh", "Rv"],
-                        outputs=["Uch", "Ucv"]), name="20 times the previous run's",
-                  ts_s=bench.true.converter.ts_s, gd_v_per_rad=loop.gd_v_per_rad)
+    k = loop.continuous
+    x20 = controller_of(ct.ss(k.A, k.B, 20.0 * k.C, 20.0 * k.D, inputs=["Rh", "Rv"],
+                              outputs=["Uch", "Ucv"]), name="20 times the previous run's",
+                        ts_s=bench.true.converter.ts_s, gd_v_per_rad=loop.gd)
     try:
         target.load(x20)
     except DeviceRefused as exc:

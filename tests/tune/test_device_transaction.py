@@ -23,8 +23,9 @@ pytest.importorskip("tango")
 from fsmbench.bench.esrf import esrf_decentralised_controller
 from fsmbench.bench.params import Bench
 from fsmbench.cli import EXIT_SIGINT, EXIT_SIGTERM, Terminated, main
+from fsmbench.control.controller import Controller, controller_of
 from fsmbench.tune.device import DeviceTarget
-from fsmbench.tune.guarded import Loop, TuneOptions, TuneResult, loop_of, tune_guarded
+from fsmbench.tune.guarded import TuneOptions, TuneResult, tune_guarded
 from fsmbench.tune.measure import MeasurementOptions
 from fsmbench.tune.reads import DeviceReadError
 from fsmbench.tune.transaction import LoopChangeError
@@ -43,16 +44,16 @@ OPTIONS = TuneOptions(watch_s=6.0, settle_s=1.5, disturbance_v=0.0, better_by=0.
                       min_phase_margin_deg=25.0, measurement=MeasurementOptions(periods=4))
 
 
-def _seed(bench: Bench) -> Loop:
+def _seed(bench: Bench) -> Controller:
     gd = bench.nominal.quad_diode.gain_v_per_rad
     k = esrf_decentralised_controller()
     k = ct.ss(k.A, k.B, k.C, k.D, inputs=["Rh", "Rv"], outputs=["Uch", "Ucv"])
-    return loop_of(k, name=SEED_NAME, ts_s=bench.true.converter.ts_s,
-                   gd_v_per_rad=(float(gd.h), float(gd.v)))
+    return controller_of(k, name=SEED_NAME, ts_s=bench.true.converter.ts_s,
+                         gd_v_per_rad=(float(gd.h), float(gd.v)))
 
 
 def test_invalid_readings_are_read_again_and_tune_goes_on(
-        device: tuple[Any, str], invalid_reads: Any, bench: Bench, fsmbench_loop: Loop,
+        device: tuple[Any, str], invalid_reads: Any, bench: Bench, fsmbench_loop: Controller,
         tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     proxy, address = device
     # Three INVALID answers to the first reads of each attribute tune checks the device
@@ -63,7 +64,7 @@ def test_invalid_readings_are_read_again_and_tune_goes_on(
                           address=address, running_source="seed")
     load = target.load
 
-    def load_then_invalid(loop: Loop) -> dict[str, Any]:
+    def load_then_invalid(loop: Controller) -> dict[str, Any]:
         switch = load(loop)
         invalid_reads.arm("SpeedFactor", 3)
         return switch
@@ -83,7 +84,7 @@ def test_invalid_readings_are_read_again_and_tune_goes_on(
 
 
 def test_an_attribute_invalid_beyond_the_bound_is_named_and_rolled_back(
-        device: tuple[Any, str], invalid_reads: Any, bench: Bench, fsmbench_loop: Loop,
+        device: tuple[Any, str], invalid_reads: Any, bench: Bench, fsmbench_loop: Controller,
         tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     proxy, address = device
     # A 1 s bound (twenty reads) instead of 10 s: the test's time, not asserted.
@@ -92,7 +93,7 @@ def test_an_attribute_invalid_beyond_the_bound_is_named_and_rolled_back(
     load = target.load
     in_loop: list[str] = []
 
-    def load_then_invalid(loop: Loop) -> dict[str, Any]:
+    def load_then_invalid(loop: Controller) -> dict[str, Any]:
         switch = load(loop)
         in_loop.append(proxy.Controller)
         invalid_reads.forever("SpeedFactor")  # the attribute of the TypeError
@@ -137,7 +138,7 @@ def test_tune_device_interrupted_after_the_load_returns_to_the_previous_controll
     load = DeviceTarget.load
     seen: dict[str, Any] = {}
 
-    def load_then_interrupt(self: DeviceTarget, loop: Loop) -> dict[str, Any]:
+    def load_then_interrupt(self: DeviceTarget, loop: Controller) -> dict[str, Any]:
         seen["record"] = json.loads((out / "tune.json").read_text())  # before the load
         seen["switch"] = load(self, loop)
         seen["in_loop"] = proxy.Controller
@@ -166,7 +167,7 @@ def test_tune_device_interrupted_after_the_load_returns_to_the_previous_controll
 
 
 def test_a_trip_under_the_watch_is_said_and_nothing_is_loaded_on_a_faulted_device(
-        device: tuple[Any, str], bench: Bench, fsmbench_loop: Loop, tmp_path: Path,
+        device: tuple[Any, str], bench: Bench, fsmbench_loop: Controller, tmp_path: Path,
         monkeypatch: pytest.MonkeyPatch) -> None:
     # The protection trips the candidate while tune watches it (a 3 V sine at the h mode
     # added to its command, as the live trip tests do). The device opens the loop itself;
@@ -178,7 +179,7 @@ def test_a_trip_under_the_watch_is_said_and_nothing_is_loaded_on_a_faulted_devic
     load = target.load
     loads: list[str] = []
 
-    def load_then_trip(loop: Loop) -> dict[str, Any]:
+    def load_then_trip(loop: Controller) -> dict[str, Any]:
         switch = load(loop)
         proxy.StartExcitation(json.dumps({"input": "Uch", "kind": "sine", "amplitude_v": 3.0,
                                           "frequency_hz": 411.5}))

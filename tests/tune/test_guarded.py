@@ -10,9 +10,10 @@ import pytest
 
 from fsmbench.bench.esrf import esrf_decentralised_controller
 from fsmbench.bench.params import Bench
+from fsmbench.control.controller import controller_of
 from fsmbench.sim.excitation import Excitation
 from fsmbench.sim.stream import BenchStream
-from fsmbench.tune.guarded import TuneOptions, TuneResult, loop_of, tune_twin
+from fsmbench.tune.guarded import TuneOptions, TuneResult, tune_twin
 from fsmbench.tune.measure import MeasurementOptions
 
 # Short watches and one measured stage of 4 periods: what the guards need, in ~a minute.
@@ -24,9 +25,9 @@ def _seed_loop(bench: Bench, gain: float = 1.0):
     gd = bench.nominal.quad_diode.gain_v_per_rad
     k = esrf_decentralised_controller()
     k = ct.ss(k.A, k.B, gain * k.C, gain * k.D, inputs=["Rh", "Rv"], outputs=["Uch", "Ucv"])
-    return loop_of(k,
-                   name=f"the ESRF study's controller x{gain:g}", ts_s=bench.true.converter.ts_s,
-                   gd_v_per_rad=(float(gd.h), float(gd.v)))
+    return controller_of(k,
+                         name=f"the ESRF study's controller x{gain:g}",
+                         ts_s=bench.true.converter.ts_s, gd_v_per_rad=(float(gd.h), float(gd.v)))
 
 
 @pytest.fixture(scope="module")

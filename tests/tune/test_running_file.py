@@ -17,10 +17,10 @@ import pytest
 from fsmbench.bench.esrf import esrf_decentralised_controller
 from fsmbench.bench.params import Bench
 from fsmbench.cli import main
+from fsmbench.control.controller import controller_of
 from fsmbench.control.export import InputScaling, write_sos_json
 from fsmbench.control.load import load_controllers, select_controller
 from fsmbench.sim.controller import sercalo_feedback
-from fsmbench.tune.guarded import loop_of
 from fsmbench.tune.running import loop_from_file
 
 
@@ -50,7 +50,7 @@ def test_running_controller_from_a_file_is_the_device_s(bench: Bench, tuned_file
     ts = bench.true.converter.ts_s
     chosen = select_controller(load_controllers(path, ts_s=ts), None)
     device = sercalo_feedback(a=chosen.a, b=chosen.b, c=chosen.c, d=chosen.d,
-                              gd_v_per_rad=chosen.qd_gain_v_per_rad, name="device")
+                              gd_v_per_rad=chosen.gd_v_per_rad, name="device")
     f = np.array([0.1, 1.0, 10.0, 100.0, 251.2, 411.5, 1000.0, 4000.0])
     ours, theirs = _response(loop.feedback, f, ts), _response(device, f, ts)
     # The exact pre-image under Tustin: equal to round-off (the realisations differ).
@@ -94,7 +94,7 @@ def test_fsmbench_s_own_files_can_be_the_running_controller(bench: Bench, design
     ts = bench.true.converter.ts_s
     chosen = select_controller(load_controllers(path, ts_s=ts), "fsmbench_controller")
     device = sercalo_feedback(a=chosen.a, b=chosen.b, c=chosen.c, d=chosen.d,
-                              gd_v_per_rad=chosen.qd_gain_v_per_rad, name="device")
+                              gd_v_per_rad=chosen.gd_v_per_rad, name="device")
     f = np.array([0.1, 1.0, 10.0, 100.0, 251.2, 411.5, 1000.0, 4000.0])
     ours, theirs = _response(loop.feedback, f, ts), _response(device, f, ts)
     # The exact pre-image under Tustin, through 1e12-sized entries: round-off (measured
@@ -120,7 +120,7 @@ def test_a_pole_on_nyquist_is_refused_and_one_just_inside_is_not(
     ts = bench.true.converter.ts_s
     chosen = select_controller(load_controllers(path, ts_s=ts), "tuned")
     device = sercalo_feedback(a=chosen.a, b=chosen.b, c=chosen.c, d=chosen.d,
-                              gd_v_per_rad=chosen.qd_gain_v_per_rad, name="device")
+                              gd_v_per_rad=chosen.gd_v_per_rad, name="device")
     f = np.array([1.0, 100.0, 411.5, 4000.0])
     ours, theirs = _response(loop.feedback, f, ts), _response(device, f, ts)
     # The pre-image's pole at ~4e7 rad/s and back: round-off times (2/T)/|1 + z| = 2e7.
@@ -155,7 +155,7 @@ def test_a_device_running_a_file_s_controller_is_accepted(bench: Bench, tmp_path
         assert read_valid(proxy, "Controller", device="fsmbench/bench/1") == loop.name
         target = DeviceTarget(proxy, bench=bench, running=loop, folder=tmp_path / "files",
                               address=ctx.get_device_access())
-        assert target.gd == loop.gd_v_per_rad
+        assert target.gd == loop.gd
 
 
 def test_a_controller_tune_loaded_is_retuned_from(bench: Bench, fsmbench_loop: Any,
@@ -166,8 +166,8 @@ def test_a_controller_tune_loaded_is_retuned_from(bench: Bench, fsmbench_loop: A
     # stage-1 multisine repeats every 40000 samples but nearly repeats 140 earlier, and
     # the controller read back is biproper: the two made a retune fail before a decision.
     path = tmp_path / "controllers_sos.json"
-    write_sos_json(path, {"tuned": fsmbench_loop.k},
-                   scaling=InputScaling(qd_gain_v_per_rad=fsmbench_loop.gd_v_per_rad,
+    write_sos_json(path, {"tuned": fsmbench_loop.continuous},
+                   scaling=InputScaling(qd_gain_v_per_rad=fsmbench_loop.gd,
                                         plant_source="identified (a previous tune)"),
                    ts_s=bench.true.converter.ts_s, descriptions={"tuned": fsmbench_loop.name})
     out = tmp_path / "retuned"
@@ -191,15 +191,15 @@ def test_a_controller_read_from_a_file_can_be_scaled_and_written_again(
 
     loop = loop_from_file(f"{RETUNED}::tuned", bench)
     ts = bench.true.converter.ts_s
-    k = loop.k
+    k = loop.continuous
     x20 = ct.ss(k.A, k.B, 20.0 * k.C, 20.0 * k.D, inputs=["Rh", "Rv"], outputs=["Uch", "Ucv"])
-    scaling = InputScaling(qd_gain_v_per_rad=loop.gd_v_per_rad, plant_source="a test")
+    scaling = InputScaling(qd_gain_v_per_rad=loop.gd, plant_source="a test")
     write_sos_json(tmp_path / "prewarped.json", {"x20": x20}, scaling=scaling, ts_s=ts)
     plain = write_sos_json(tmp_path / "plain.json", {"x20": x20}, scaling=scaling, ts_s=ts,
                            method="tustin")
     f = np.array([0.1, 1.0, 10.0, 100.0, 251.2, 411.5, 1000.0, 4000.0])
-    again = select_controller(load_controllers(plain, ts_s=ts), "x20").frequency_response(f)
-    file = select_controller(load_controllers(RETUNED, ts_s=ts), "tuned").frequency_response(f)
+    again = select_controller(load_controllers(plain, ts_s=ts), "x20").response(f)
+    file = select_controller(load_controllers(RETUNED, ts_s=ts), "tuned").response(f)
     # Plain Tustin of the pre-image is the file, so 20 times it is 20 times the file:
     # round-off (measured 9e-13), with room.
     scale = np.max(np.abs(file), axis=(1, 2))[:, None, None]
@@ -235,10 +235,10 @@ def test_a_retune_s_scaled_controller_is_refused_by_the_device_not_by_tune(
         loop = loop_from_file(f"{path}::tuned", bench)
         target = DeviceTarget(proxy, bench=bench, running=loop, folder=folder / "tune",
                               address=ctx.get_device_access())
-        k = loop.k
-        x20 = loop_of(ct.ss(k.A, k.B, 20.0 * k.C, 20.0 * k.D, inputs=["Rh", "Rv"],
-                            outputs=["Uch", "Ucv"]), name="20 times the previous run's",
-                      ts_s=bench.true.converter.ts_s, gd_v_per_rad=loop.gd_v_per_rad)
+        k = loop.continuous
+        x20 = controller_of(ct.ss(k.A, k.B, 20.0 * k.C, 20.0 * k.D, inputs=["Rh", "Rv"],
+                                  outputs=["Uch", "Ucv"]), name="20 times the previous run's",
+                            ts_s=bench.true.converter.ts_s, gd_v_per_rad=loop.gd)
         with pytest.raises(tango.DevFailed) as refused:
             target.load(x20)
         error = refused.value.args[0]

@@ -103,8 +103,7 @@ def test_an_unstable_controller_is_refused(bench: Bench) -> None:
     ctrl = running_controller(None, bench=bench)
     import dataclasses
 
-    fb = ctrl.feedback
-    wrong = dataclasses.replace(ctrl, feedback=dataclasses.replace(fb, c=-50 * fb.c, d=-50 * fb.d))
+    wrong = dataclasses.replace(ctrl, c=50 * ctrl.c, d=50 * ctrl.d)  # its feedback follows
     play = ClosedLoopPlay(channel="Uch", samples_v=_multisine(2000, 0))
     with pytest.raises(ValueError, match="does not stabilise"):
         play_closed_loop([play], bench=bench, controller=wrong)

@@ -16,13 +16,14 @@ Messages name the file, the key or variable and what is wrong, never the file's 
 (a value, a decoder's excerpt, a header): the live device answers its clients with them,
 and a file that is not a controllers file must not reach them through its words.
 
-Both give a :class:`LoadedController`: ``x[k+1] = a x[k] + b r[k]``,
+Both give a :class:`~fsmbench.control.controller.Controller`: ``x[k+1] = a x[k] + b r[k]``,
 ``v[k] = c x[k] + d r[k]``, from the beam angle ``r = [Rh, Rv]`` [rad] to
 ``v = [Uch, Ucv]`` [V] for the bench's feedback controllers. The sign
 convention is the design's: the loop is closed as ``u = -K y``, i.e. the
 command applied is ``-v``; the matrices are ``K``'s, the sign is the user's to
 apply. The measured 4QD voltage ``Vp`` [V] becomes ``r = Vp / Gd`` with
-``Gd = qd_gain_v_per_rad``.
+``Gd = gd_v_per_rad``, the file's (None when it records none). Each is named as in the
+file, its ``source`` is the file's path.
 """
 
 from __future__ import annotations
@@ -31,13 +32,13 @@ import json
 import math
 import os
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
-from numpy.typing import ArrayLike, NDArray
+from numpy.typing import NDArray
 
+from fsmbench.control.controller import BEAM_ANGLES, SERCALO_COMMANDS, Controller
 from fsmbench.control.export import SOS_FORMAT, SOS_FORMAT_VERSION
 from fsmbench.control.study import CONTROLLERS_MAT, CONTROLLERS_SOS_JSON
 from fsmbench.io.errors import RecordingError
@@ -47,17 +48,12 @@ __all__ = [
     "BEAM_ANGLES",
     "DEFAULT_CONTROLLER",
     "SERCALO_COMMANDS",
-    "LoadedController",
     "load_controllers",
     "select_controller",
 ]
 
 #: The controller :func:`select_controller` picks when none is named: fsmbench's own design.
 DEFAULT_CONTROLLER = "fsmbench_controller"
-#: Inputs of the bench's feedback controllers: the 4QD beam angle [rad].
-BEAM_ANGLES = ("Rh", "Rv")
-#: Outputs of the Sercalo loop's controllers: the DAC commands [V].
-SERCALO_COMMANDS = ("Uch", "Ucv")
 _AXES = ("h", "v")
 # Sample times are doubles written by fsmbench; a caller's 1/fs computed another way
 # may differ from the stored value by rounding only.
@@ -66,94 +62,9 @@ _TS_RTOL = 1e-9
 FloatArray = NDArray[np.float64]
 
 
-@dataclass(frozen=True, eq=False)
-class LoadedController:
-    """A discrete controller read from a design output file.
-
-    ``x[k+1] = a x[k] + b r[k]``, ``v[k] = c x[k] + d r[k]``: for the bench's
-    feedback controllers ``r = [Rh, Rv]`` is the 4QD beam angle [rad] and
-    ``v = [Uch, Ucv]`` the Sercalo commands [V] (see ``input_names`` and
-    ``output_names``). The matrices are ``K``'s: the loop is closed as
-    ``u = -K y`` (the ESRF study's ``connect(sys, -K, ...)``), so the command applied
-    is ``-v``; that sign is the user's to apply. Arrays are read-only.
-
-    Attributes
-    ----------
-    name : str
-        Controller name in the file, e.g. ``"fsmbench_controller"``.
-    description : str
-        The file's description of it ("" if none).
-    ts_s : float
-        Sample time, s.
-    a : ndarray, shape (n, n)
-        State matrix (dimensionless).
-    b : ndarray, shape (n, 2)
-        Input matrix, state units per input unit (rad for the beam angle).
-    c : ndarray, shape (2, n)
-        Output matrix, output unit (V) per state unit.
-    d : ndarray, shape (2, 2)
-        Feedthrough, output unit per input unit (V/rad).
-    input_names, output_names : tuple of str
-        Signal names of ``r`` and ``v``, e.g. ``("Rh", "Rv")`` and ``("Uch", "Ucv")``.
-    source_path : Path
-        The file it was read from.
-    qd_gain_v_per_rad : tuple of 2 floats or None
-        The 4QD gain ``Gd`` (h, v) [V/rad], sign included, of the plant the
-        controller was designed on, if the file records it: ``r = Vp / Gd``.
-    discretisation : str
-        How the file says it was discretised, e.g. ``"tustin_prewarp"`` ("" if not said).
-    sections : tuple of ndarray, shape (n_sections, 6), or None
-        A ``controllers_sos.json``'s own cascades, one per axis (input ``i`` to output
-        ``i``), ``[b0, b1, b2, a0, a1, a2]``; None for a MAT-file.
-    """
-
-    name: str
-    description: str
-    ts_s: float
-    a: FloatArray
-    b: FloatArray
-    c: FloatArray
-    d: FloatArray
-    input_names: tuple[str, ...]
-    output_names: tuple[str, ...]
-    source_path: Path
-    qd_gain_v_per_rad: tuple[float, float] | None
-    discretisation: str
-    sections: tuple[FloatArray, ...] | None = None
-
-    @property
-    def n_states(self) -> int:
-        """Number of states ``n``."""
-        return int(self.a.shape[0])
-
-    def frequency_response(self, f_hz: ArrayLike) -> NDArray[np.complex128]:
-        """``c (zI - a)^-1 b + d`` at ``z = exp(j 2 pi f ts_s)``.
-
-        Parameters
-        ----------
-        f_hz : array_like, shape (F,)
-            Frequencies, Hz.
-
-        Returns
-        -------
-        ndarray, complex, shape (F, 2, 2)
-            Output unit per input unit (V/rad); ``[:, i, j]`` from input ``j`` to output ``i``.
-        """
-        z = np.exp(2j * np.pi * np.asarray(f_hz, dtype=float).ravel() * self.ts_s)
-        if self.n_states == 0:
-            return np.broadcast_to(self.d, (z.size, *self.d.shape)).astype(complex)
-        lhs = z[:, None, None] * np.eye(self.n_states)[None] - self.a[None]
-        x = np.linalg.solve(lhs, np.broadcast_to(self.b, (z.size, *self.b.shape)).astype(complex))
-        return np.asarray(np.einsum("pn,fnm->fpm", self.c, x) + self.d[None])
-
-    def maps(self, inputs: Sequence[str], outputs: Sequence[str]) -> bool:
-        """Whether the controller goes from exactly ``inputs`` to exactly ``outputs``, in order."""
-        return self.input_names == tuple(inputs) and self.output_names == tuple(outputs)
-
-
 # --------------------------------------------------------------------------- reading
 def load_controllers(path: str | os.PathLike[str], *, ts_s: float | None = None,
-                     max_states: int | None = None) -> dict[str, LoadedController]:
+                     max_states: int | None = None) -> dict[str, Controller]:
     """Every controller of a ``controllers.mat`` or ``controllers_sos.json``.
 
     Parameters
@@ -171,7 +82,7 @@ def load_controllers(path: str | os.PathLike[str], *, ts_s: float | None = None,
 
     Returns
     -------
-    dict of str to LoadedController
+    dict of str to Controller
         In the file's own order (``controllers.mat`` also holds the IFF
         controller, ``Vch, Vcv -> Uch, Ucv``, and the Newport one,
         ``Rh, Rv -> Unh, Unv``; see :func:`select_controller`).
@@ -201,14 +112,14 @@ def load_controllers(path: str | os.PathLike[str], *, ts_s: float | None = None,
     return out
 
 
-def select_controller(controllers: Mapping[str, LoadedController], name: str | None = None,
+def select_controller(controllers: Mapping[str, Controller], name: str | None = None,
                       *, inputs: Sequence[str] = BEAM_ANGLES,
-                      outputs: Sequence[str] = SERCALO_COMMANDS) -> LoadedController:
+                      outputs: Sequence[str] = SERCALO_COMMANDS) -> Controller:
     """The controller to run: the one named, or by default fsmbench's own design.
 
     Parameters
     ----------
-    controllers : mapping of str to LoadedController
+    controllers : mapping of str to Controller
         As :func:`load_controllers` returns them (the file's order).
     name : str, optional
         The controller wanted. None picks :data:`DEFAULT_CONTROLLER`
@@ -221,7 +132,7 @@ def select_controller(controllers: Mapping[str, LoadedController], name: str | N
 
     Returns
     -------
-    LoadedController
+    Controller
 
     Raises
     ------
@@ -233,7 +144,7 @@ def select_controller(controllers: Mapping[str, LoadedController], name: str | N
     if not controllers:
         raise ValueError("no controllers to choose from")
     first = next(iter(controllers.values()))
-    src = first.source_path
+    src = Path(first.source)  # the file, as load_controllers names it
     want = f"{', '.join(inputs)} to {', '.join(outputs)}"
     if name is not None:
         if name not in controllers:
@@ -292,13 +203,8 @@ def _check_states(p: Path, n: int, name: str, max_states: int | None) -> None:
                              f"{max_states} this loop takes")
 
 
-def _freeze(*arrays: FloatArray) -> None:
-    for arr in arrays:
-        arr.setflags(write=False)
-
-
 # --------------------------------------------------------------------------- controllers.mat
-def _from_mat(p: Path, max_states: int | None) -> dict[str, LoadedController]:
+def _from_mat(p: Path, max_states: int | None) -> dict[str, Controller]:
     try:
         data = load_mat(p)
     except RecordingError as exc:
@@ -320,7 +226,7 @@ def _from_mat(p: Path, max_states: int | None) -> dict[str, LoadedController]:
     if isinstance(gd, dict) and all(a in gd for a in _AXES):
         gain = (float(np.squeeze(gd["h"])), float(np.squeeze(gd["v"])))
     method = meta.get("discretisation", "")
-    out: dict[str, LoadedController] = {}
+    out: dict[str, Controller] = {}
     for name in names:
         entry = data.get(name)
         kd = entry.get("Kd") if isinstance(entry, dict) else None
@@ -332,10 +238,10 @@ def _from_mat(p: Path, max_states: int | None) -> dict[str, LoadedController]:
         ins = _names(p, kd.get("InputName"), b.shape[1], f"{name}.Kd.InputName")
         outs = _names(p, kd.get("OutputName"), c.shape[0], f"{name}.Kd.OutputName")
         desc = kd.get("Description", "")
-        out[name] = LoadedController(
+        out[name] = Controller(
             name=name, description=desc if isinstance(desc, str) else "",
             ts_s=_positive_ts(p, kd.get("Ts"), f"{name}.Kd"), a=a, b=b, c=c, d=d,
-            input_names=ins, output_names=outs, source_path=p, qd_gain_v_per_rad=gain,
+            input_names=ins, output_names=outs, source_path=p, source=str(p), gd_v_per_rad=gain,
             discretisation=method if isinstance(method, str) else "")
     return out
 
@@ -359,8 +265,7 @@ def _mat_matrices(p: Path, kd: dict[str, Any],
             f"D {d.shape}")
     if not all(np.all(np.isfinite(x)) for x in (a, b, c, d)):
         raise RecordingError(p, f"{name}.Kd holds NaN or infinite values")
-    _freeze(a, b, c, d)
-    return a, b, c, d
+    return a, b, c, d  # Controller keeps read-only copies
 
 
 def _names(p: Path, value: Any, count: int, where: str) -> tuple[str, ...]:
@@ -372,7 +277,7 @@ def _names(p: Path, value: Any, count: int, where: str) -> tuple[str, ...]:
 
 
 # --------------------------------------------------------------------------- controllers_sos.json
-def _from_sos_json(p: Path, max_states: int | None) -> dict[str, LoadedController]:
+def _from_sos_json(p: Path, max_states: int | None) -> dict[str, Controller]:
     # Where a document fails, never the decoder's excerpt of it (module notes).
     try:
         doc = json.loads(p.read_bytes().decode("utf-8"))
@@ -408,7 +313,7 @@ def _from_sos_json(p: Path, max_states: int | None) -> dict[str, LoadedControlle
     entries = doc.get("controllers")
     if not isinstance(entries, dict):
         raise RecordingError(p, "has no 'controllers' object")
-    out: dict[str, LoadedController] = {}
+    out: dict[str, Controller] = {}
     for name, entry in entries.items():
         if max_states is not None and isinstance(entry, dict):
             # At most two states a section: counted before anything is realised.
@@ -426,11 +331,10 @@ def _from_sos_json(p: Path, max_states: int | None) -> dict[str, LoadedControlle
             ins.append(_signal_name(chan.get("input_signal")))
             outs.append(_signal_name(chan.get("output_signal")))
         a, b, c, d = (_block_diag([x[i] for x in parts]) for i in range(4))
-        _freeze(a, b, c, d)
-        out[str(name)] = LoadedController(
+        out[str(name)] = Controller(
             name=str(name), description=str(entry.get("description", "")), ts_s=ts, a=a, b=b,
             c=c, d=d, input_names=tuple(ins), output_names=tuple(outs), source_path=p,
-            qd_gain_v_per_rad=gain, discretisation=str(method), sections=tuple(rows))
+            source=str(p), gd_v_per_rad=gain, discretisation=str(method), sections=tuple(rows))
     return out
 
 

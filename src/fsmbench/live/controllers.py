@@ -24,6 +24,7 @@ any other error while reading is reported by its type alone.
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 import os
@@ -43,7 +44,7 @@ from fsmbench.control.loops import discrete_axis_margins
 from fsmbench.control.study import CONTROLLERS_MAT, CONTROLLERS_SOS_JSON
 from fsmbench.io.errors import RecordingError
 from fsmbench.live.states import Refused
-from fsmbench.sim.controller import closed_loop_spectral_radius, sercalo_feedback
+from fsmbench.sim.controller import closed_loop_spectral_radius
 from fsmbench.sim.plant import ADC_CHANNELS, DAC_CHANNELS, bench_discrete
 
 if TYPE_CHECKING:
@@ -225,7 +226,7 @@ def read_controller_file(path: Path, *, typed: str, name: str | None, ts_s: floa
     Returns
     -------
     DiscreteController
-        ``u = -K Vp / Gd`` (:func:`~fsmbench.sim.controller.sercalo_feedback`), named
+        ``u = -K Vp / Gd`` (:attr:`~fsmbench.control.controller.Controller.feedback`), named
         ``"NAME (FILE)"``.
     str
         ``NAME``, the controller's name in the file.
@@ -249,12 +250,12 @@ def read_controller_file(path: Path, *, typed: str, name: str | None, ts_s: floa
         raise _refuse(f"{where}: is not a controllers file fsmbench reads (a "
                       f"{CONTROLLERS_SOS_JSON} or {CONTROLLERS_MAT} from fsmbench design; "
                       f"reading it raised {type(exc).__name__})") from None
-    gd = chosen.qd_gain_v_per_rad or gd_v_per_rad
+    gd = chosen.gd_v_per_rad or gd_v_per_rad
     if not all(math.isfinite(g) and g != 0.0 for g in gd):
         raise _refuse(f"{where}: controller {chosen.name!r} records a 4QD gain of "
                       f"({gd[0]:g}, {gd[1]:g}) V/rad; the readings cannot be divided by it")
-    return sercalo_feedback(a=chosen.a, b=chosen.b, c=chosen.c, d=chosen.d, gd_v_per_rad=gd,
-                            name=f"{chosen.name} ({path.name})"), chosen.name
+    running = dataclasses.replace(chosen, gd_v_per_rad=gd, name=f"{chosen.name} ({path.name})")
+    return running.feedback, chosen.name
 
 
 # ------------------------------------------------------------------------------ whether

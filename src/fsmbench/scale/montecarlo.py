@@ -66,12 +66,12 @@ from typing import Any
 import numpy as np
 
 from fsmbench.bench.blocks import physical_plant
-from fsmbench.bench.params import Bench, PerAxis
+from fsmbench.bench.params import Bench
+from fsmbench.control.controller import Controller
 from fsmbench.control.loops import discrete_axis_margins
 from fsmbench.jsonutil import nested, plain_json, stamped
 from fsmbench.scale.breaches import Limits, RequirementOutcome, requirement_outcomes
-from fsmbench.sim.controller import closed_loop_spectral_radius, sercalo_feedback
-from fsmbench.sim.engine import DiscreteController
+from fsmbench.sim.controller import closed_loop_spectral_radius
 from fsmbench.sim.plant import ADC_CHANNELS, bench_discrete
 from fsmbench.sim.stream import BenchStream
 from fsmbench.twin.draws import (
@@ -92,7 +92,6 @@ __all__ = [
     "PARAMETERS",
     "RANGE_OF_PARAMETER",
     "SETTLED_TIME_CONSTANTS",
-    "ControllerChoice",
     "Draw",
     "DrawResult",
     "Limits",
@@ -100,7 +99,7 @@ __all__ = [
     "MonteCarloSetup",
     "Ranges",
     "RequirementOutcome",
-    "discrete_feedback",
+    "controller_json",
     "draw_parameters",
     "perturbed_bench",
     "run_draw",
@@ -143,49 +142,12 @@ SETTLED_TIME_CONSTANTS = 10.0
 # ----------------------------------------------------------------------------- controllers
 
 
-@dataclass(frozen=True, eq=False)
-class ControllerChoice:
-    """The discrete controller of every draw, in the design's convention ``u = −K y``.
-
-    ``x[k+1] = a x[k] + b r[k]``, ``v[k] = c x[k] + d r[k]`` from the beam
-    angle ``r = [Rh, Rv]`` [rad] to ``v = [Uch, Ucv]`` [V]; the command is ``−v``.
-
-    Attributes
-    ----------
-    name : str
-    a, b, c, d : ndarray, shapes (n, n), (n, 2), (2, n), (2, 2)
-    ts_s : float
-        Sample time [s].
-    gd_v_per_rad : PerAxis
-        The 4QD gains the real-time code divides ``Vp`` by (the calibrated ones).
-    source : str
-        Where it comes from, in words.
-    continuous : control.StateSpace or None
-        The continuous ``K`` it was discretised from, when known (a design).
-    """
-
-    name: str
-    a: np.ndarray
-    b: np.ndarray
-    c: np.ndarray
-    d: np.ndarray
-    ts_s: float
-    gd_v_per_rad: PerAxis
-    source: str
-    continuous: Any = None
-
-    def to_json(self) -> dict[str, Any]:
-        """Name, source, order, sample time, 4QD gains."""
-        return plain_json({"name": self.name, "source": self.source,
-                           "states": int(self.a.shape[0]), "ts_s": self.ts_s,
-                           "gd_v_per_rad": {"h": self.gd_v_per_rad.h, "v": self.gd_v_per_rad.v}})
-
-
-def discrete_feedback(choice: ControllerChoice) -> DiscreteController:
-    """The twin's controller ``u = −K (Vp / Gd)`` (as ``fsmbench.live.core``'s loaded ones)."""
-
-    return sercalo_feedback(a=choice.a, b=choice.b, c=choice.c, d=choice.d,
-                            gd_v_per_rad=tuple(choice.gd_v_per_rad.as_array()), name=choice.name)
+def controller_json(controller: Controller) -> dict[str, Any]:
+    """``montecarlo.json``'s controller: name, source, order, sample time, 4QD gains."""
+    gd = controller.gd
+    return plain_json({"name": controller.name, "source": controller.source,
+                       "states": controller.n_states, "ts_s": controller.ts_s,
+                       "gd_v_per_rad": {"h": gd[0], "v": gd[1]}})
 
 
 # ----------------------------------------------------------------------------- one draw
@@ -200,7 +162,8 @@ class MonteCarloSetup:
     bench : Bench
         The bench the draws move: the packaged twin (its ``true`` physics) or an
         identified bench (its identified plant).
-    controller : ControllerChoice
+    controller : Controller
+        The discrete controller of every draw, with its 4QD gains (``u = -K Vp / Gd``).
     ranges : Ranges
     duration_s, settle_s : float
         Record length and the start left out of the metrics [s]. Default 6 s
@@ -215,7 +178,7 @@ class MonteCarloSetup:
     """
 
     bench: Bench
-    controller: ControllerChoice
+    controller: Controller
     ranges: Ranges = field(default_factory=Ranges)
     duration_s: float = 6.0
     settle_s: float = 2.0
@@ -226,7 +189,7 @@ class MonteCarloSetup:
         return plain_json({"bench": self.bench.label,
                            "bench_kind": "identified" if self.bench.is_identified
                            else "packaged",
-                           "controller": self.controller.to_json(),
+                           "controller": controller_json(self.controller),
                            "ranges": self.ranges.to_json(), "duration_s": self.duration_s,
                            "settle_s": self.settle_s, "limits": self.limits.to_json()})
 
@@ -263,7 +226,7 @@ class DrawResult:
                            "metrics": nested(self.metrics)})
 
 
-def _margins(bench: Bench, choice: ControllerChoice) -> dict[str, float]:
+def _margins(bench: Bench, choice: Controller) -> dict[str, float]:
     """Gain, phase and modulus margins of ``L_ii = (G Kd)_ii`` below Nyquist (exact delays)."""
 
     plant = (physical_plant(bench.true, source="drawn") if bench.model is None
@@ -298,7 +261,7 @@ def run_draw(draw: Draw, setup: MonteCarloSetup) -> DrawResult:
     bench = perturbed_bench(setup.bench, draw.factors)
     p = bench.true
     plant = bench_discrete(bench)
-    dk = discrete_feedback(setup.controller)
+    dk = setup.controller.feedback
     rho = closed_loop_spectral_radius(plant, dk, n_adc=len(ADC_CHANNELS))
     metrics = dict.fromkeys(METRICS, math.nan)
     metrics["spectral_radius"] = rho

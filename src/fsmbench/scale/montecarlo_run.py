@@ -13,12 +13,9 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-import numpy as np
-
 from fsmbench.bench.blocks import physical_plant
-from fsmbench.bench.esrf import tustin
-from fsmbench.bench.params import PerAxis
 from fsmbench.control.analysis import control_objective
+from fsmbench.control.controller import Controller, controller_of
 from fsmbench.control.design import design_controller
 from fsmbench.control.load import load_controllers, select_controller
 from fsmbench.jsonutil import nested
@@ -26,7 +23,6 @@ from fsmbench.scale.breaches import breach_sentence, factors_sentence
 from fsmbench.scale.montecarlo import (
     METRICS,
     MONTECARLO_FORMAT,
-    ControllerChoice,
     Ranges,
     summarise,
 )
@@ -35,7 +31,7 @@ from fsmbench.scale.montecarlo import (
 # only when a function runs.
 if TYPE_CHECKING:
     from fsmbench.bench.params import Bench
-    from fsmbench.scale.montecarlo import ControllerChoice, Ranges
+    from fsmbench.scale.montecarlo import Ranges
 
 __all__ = ["dask_client", "designed_controller", "format_table", "loaded_controller",
            "read_montecarlo", "read_ranges"]
@@ -110,7 +106,7 @@ def read_montecarlo(path: str | Path) -> dict[str, Any]:
 
 
 def designed_controller(bench: Bench, *, plant: Any = None,
-                        plant_source: str = "physical (nominal)") -> ControllerChoice:
+                        plant_source: str = "physical (nominal)") -> Controller:
     """fsmbench's controller designed on ``plant`` (default the nominal physical plant),
     with the 6.1 objective of ``bench.nominal``, Tustin at the converter rate.
 
@@ -121,16 +117,12 @@ def designed_controller(bench: Bench, *, plant: Any = None,
     model = physical_plant(bench.nominal, source=plant_source) if plant is None else plant
     k = design_controller(model, objective=control_objective(bench.nominal)).controller
     ts = bench.true.converter.ts_s
-    kd = tustin(k, ts_s=ts)
-    return ControllerChoice(name="fsmbench controller", a=np.asarray(kd.A, dtype=float),
-                            b=np.asarray(kd.B, dtype=float), c=np.asarray(kd.C, dtype=float),
-                            d=np.asarray(kd.D, dtype=float), ts_s=ts,
-                            gd_v_per_rad=bench.nominal.quad_diode.gain_v_per_rad,
-                            source=f"designed on the {plant_source} plant, Tustin at {1/ts:g} Hz",
-                            continuous=k)
+    gd = bench.nominal.quad_diode.gain_v_per_rad
+    return controller_of(k, name="fsmbench controller", ts_s=ts, gd_v_per_rad=(gd.h, gd.v),
+                         source=f"designed on the {plant_source} plant, Tustin at {1/ts:g} Hz")
 
 
-def loaded_controller(path: str | Path, *, name: str | None, bench: Bench) -> ControllerChoice:
+def loaded_controller(path: str | Path, *, name: str | None, bench: Bench) -> Controller:
     """A controller of a ``controllers.mat`` / ``controllers_sos.json`` / design folder.
 
     ``name`` picks it (default fsmbench's, :func:`fsmbench.control.load.select_controller`);
@@ -139,11 +131,8 @@ def loaded_controller(path: str | Path, *, name: str | None, bench: Bench) -> Co
 
     ts = bench.true.converter.ts_s
     chosen = select_controller(load_controllers(path, ts_s=ts), name)
-    gd = chosen.qd_gain_v_per_rad
-    gains = bench.nominal.quad_diode.gain_v_per_rad if gd is None else PerAxis(h=gd[0], v=gd[1])
-    return ControllerChoice(name=chosen.name, a=np.asarray(chosen.a), b=np.asarray(chosen.b),
-                            c=np.asarray(chosen.c), d=np.asarray(chosen.d), ts_s=chosen.ts_s,
-                            gd_v_per_rad=gains, source=str(chosen.source_path))
+    nominal = bench.nominal.quad_diode.gain_v_per_rad
+    return dataclasses.replace(chosen, gd_v_per_rad=chosen.gd_v_per_rad or (nominal.h, nominal.v))
 
 
 @contextlib.contextmanager

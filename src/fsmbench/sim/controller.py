@@ -13,7 +13,8 @@ from fsmbench.sim.discretize import DiscretePlant
 from fsmbench.sim.engine import DiscreteController
 from fsmbench.sim.plant import ADC_CHANNELS, DAC_CHANNELS
 
-__all__ = ["closed_loop_spectral_radius", "feedback_controller", "sercalo_feedback"]
+__all__ = ["closed_loop_spectral_radius", "feedback_controller", "sercalo_discrete",
+           "sercalo_feedback"]
 
 
 def feedback_controller(k: ct.StateSpace, *, gd_v_per_rad: PerAxis, ts_s: float,
@@ -31,17 +32,28 @@ def feedback_controller(k: ct.StateSpace, *, gd_v_per_rad: PerAxis, ts_s: float,
     ts_s : float
         Controller sampling period [s].
     """
+    kd = sercalo_discrete(k, ts_s=ts_s)
+    return sercalo_feedback(a=kd.A, b=kd.B, c=kd.C, d=kd.D,
+                            gd_v_per_rad=tuple(gd_v_per_rad.as_array()), name=name)
+
+
+def sercalo_discrete(k: ct.StateSpace, *, ts_s: float) -> ct.StateSpace:
+    """``K: [Rh, Rv] -> [Uch, Ucv]`` discrete at ``ts_s``: Tustin of a continuous ``k``,
+    or ``k`` itself when it is sampled at ``ts_s`` already.
+
+    Raises
+    ------
+    ValueError
+        ``k`` maps other signals, or is sampled at another rate.
+    """
     if list(k.input_labels) != ["Rh", "Rv"] or list(k.output_labels) != ["Uch", "Ucv"]:
         raise ValueError(f"controller must map Rh, Rv to Uch, Ucv; got {k.input_labels} -> "
                          f"{k.output_labels}")
     if k.dt == 0 or k.dt is None:
-        kd = tustin(k, ts_s=ts_s)
-    elif not np.isclose(k.dt, ts_s):
+        return tustin(k, ts_s=ts_s)
+    if not np.isclose(k.dt, ts_s):
         raise ValueError(f"controller sampled at {k.dt} s, twin runs at {ts_s} s")
-    else:
-        kd = k
-    return sercalo_feedback(a=kd.A, b=kd.B, c=kd.C, d=kd.D,
-                            gd_v_per_rad=tuple(gd_v_per_rad.as_array()), name=name)
+    return k
 
 
 def sercalo_feedback(*, a: np.ndarray, b: np.ndarray, c: np.ndarray, d: np.ndarray,

@@ -59,15 +59,14 @@ from typing import Any
 import numpy as np
 
 from fsmbench.bench.params import Bench
+from fsmbench.control.controller import Controller
 from fsmbench.control.export import InputScaling, write_sos_json
-from fsmbench.control.loaded import RunningController
 from fsmbench.io.recording import make_recording, read_recording
 from fsmbench.sim.excitation import SampledExcitation, samples_sha256
 from fsmbench.tune.device_errors import device_failure
 from fsmbench.tune.proxy import device_proxy, release_proxy
 from fsmbench.tune.reads import INVALID_WAIT_S, read_valid
 from fsmbench.tune.transaction import LoopOpenedError
-from fsmbench.tune.values import Loop
 from fsmbench.twin.closed_loop import CLOSED_LOOP_SIGNALS, ClosedLoopPlay, excitation_variable
 from fsmbench.twin.experiments import ExperimentSpec
 from fsmbench.twin.simulate import TwinRun
@@ -124,7 +123,7 @@ class DeviceTarget:
         The ``FsmBench`` device, or its EPICS IOC (:func:`device_proxy`).
     bench : Bench
         The bench file (the converter rate, the 4QD gains).
-    running : Loop
+    running : Controller
         The controller the device runs; its name must be the device's ``Controller``.
     folder : Path
         Where the excitations and controllers played through the device are written
@@ -147,7 +146,7 @@ class DeviceTarget:
         An attribute stayed INVALID for ``invalid_wait_s``.
     """
 
-    def __init__(self, proxy: Any, *, bench: Bench, running: Loop, folder: Path,
+    def __init__(self, proxy: Any, *, bench: Bench, running: Controller, folder: Path,
                  address: str, running_source: str | None = None,
                  invalid_wait_s: float = INVALID_WAIT_S) -> None:
         self.proxy = proxy
@@ -161,7 +160,7 @@ class DeviceTarget:
         where = (str(self._attr("ControllersPath"))
                  if "ControllersPath" in proxy.get_attribute_list() else None)
         self.controllers = _controllers_folder(where, self.folder)
-        self.gd = running.gd_v_per_rad
+        self.gd = running.gd
         self.restore_requests = _restore_requests(running_source)
         self._n = 0
         state = str(proxy.state())
@@ -282,14 +281,14 @@ class DeviceTarget:
         e = e[round(settle_s * self.fs_hz):]
         return e - e.mean(axis=0)
 
-    def load(self, loop: Loop) -> dict[str, Any]:
+    def load(self, loop: Controller) -> dict[str, Any]:
         """``LoadController`` of ``loop`` (its SOS file), bumpless in RUNNING."""
 
         key = "tuned" if "closed-loop" in loop.name else "controller"
         where = self.controllers / self._name("controller") / "controllers_sos.json"
         where.parent.mkdir(parents=True, exist_ok=True)
-        write_sos_json(where, {key: loop.k},
-                       scaling=InputScaling(qd_gain_v_per_rad=loop.gd_v_per_rad,
+        write_sos_json(where, {key: loop.continuous},
+                       scaling=InputScaling(qd_gain_v_per_rad=loop.gd,
                                             plant_source=f"identified ({loop.name})"),
                        ts_s=1.0 / self.fs_hz, descriptions={key: loop.name})
         before = self._attr("Controller")
@@ -309,7 +308,7 @@ class DeviceTarget:
                              f"the device replied {reply!r} but its Controller reads "
                              f"{self._attr('Controller')!r} ({self.proxy.status()})") from None
         now = self._attr("Controller")
-        self.gd = loop.gd_v_per_rad
+        self.gd = loop.gd
         return {"bench_time_s": float(self._attr("BenchTime")), "from": before, "to": now,
                 "file": str(where), "reply": reply}
 
@@ -354,7 +353,7 @@ class DeviceTarget:
         """The device's ``Controller``."""
         return str(self._attr("Controller"))
 
-    def checkpoint(self, loop: Loop) -> dict[str, Any]:
+    def checkpoint(self, loop: Controller) -> dict[str, Any]:
         """``loop``, running now: the device's name for it and how :meth:`roll_back` asks
         ``LoadController`` for it again."""
         return {"name": loop.name, "device": self.label, "noun": "The device",
@@ -362,7 +361,7 @@ class DeviceTarget:
                            "bench when it was loaded (or it is the ESRF study's seed)",
                 "restore_with": list(self.restore_requests)}
 
-    def roll_back(self, loop: Loop, *, force: bool = False) -> dict[str, Any]:
+    def roll_back(self, loop: Controller, *, force: bool = False) -> dict[str, Any]:
         """Return the device to ``loop``, the controller it ran when tune started (module notes).
 
         Returns
@@ -394,12 +393,12 @@ class DeviceTarget:
                 continue
             now = self.running_controller()
             if now == loop.name:
-                self.gd = loop.gd_v_per_rad
+                self.gd = loop.gd
                 return {"from": before, "to": now, "request": text, "reply": reply}
             tried.append(f"LoadController {text!r} loaded {now!r}")
         raise ValueError(f"{self.label}: could not load {loop.name} back: {'; '.join(tried)}")
 
-    def play(self, plays: Sequence[ClosedLoopPlay], *, controller: RunningController,
+    def play(self, plays: Sequence[ClosedLoopPlay], *, controller: Controller,
              settle_s: float, seed: int,
              progress: Callable[[str], None] | None) -> TwinRun:
         """Each excitation played through the device with the loop closed (module notes)."""

@@ -44,8 +44,8 @@ from scipy import signal
 from fsmbench.bench.blocks import PlantModel
 from fsmbench.bench.params import Bench
 from fsmbench.control.analysis import control_objective
+from fsmbench.control.controller import Controller, controller_of
 from fsmbench.control.design import robustness
-from fsmbench.control.loaded import RunningController
 from fsmbench.control.loops import analyse_loop
 from fsmbench.control.study import design_study
 from fsmbench.sim.stream import BenchStream
@@ -57,11 +57,9 @@ from fsmbench.tune.values import (
     MAX_MODE_MOVE,
     TUNE_FORMAT,
     ControllerFigures,
-    Loop,
     TuneOptions,
     TuneResult,
     TuneTarget,
-    loop_of,
     rms_by_axis,
     urad_text,
     with_changes,
@@ -74,12 +72,10 @@ __all__ = [
     "MAX_MODE_MOVE",
     "TUNE_FORMAT",
     "ControllerFigures",
-    "Loop",
     "TuneOptions",
     "TuneResult",
     "TuneTarget",
     "implausible_modes",
-    "loop_of",
     "not_plausible",
     "refusal_reason",
     "tune_guarded",
@@ -87,11 +83,11 @@ __all__ = [
 ]
 # The values (tune.values) are re-exported: the procedure's module is where users look.
 
-def _figures(loop: Loop, *, plant: PlantModel, bench: Bench, objective: Any,
+def _figures(loop: Controller, *, plant: PlantModel, bench: Bench, objective: Any,
              robust: bool | None, watch_s: float, disturbance_v: float) -> ControllerFigures:
-    la = analyse_loop(plant, loop.k, objective=objective, name=loop.name)
-    predicted, parts = predict_tracking(plant, loop.k, bench=bench,
-                                        gd_used_v_per_rad=loop.gd_v_per_rad,
+    la = analyse_loop(plant, loop.continuous, objective=objective, name=loop.name)
+    predicted, parts = predict_tracking(plant, loop.continuous, bench=bench,
+                                        gd_used_v_per_rad=loop.gd,
                                         f_min_hz=1.0 / watch_s)
     # predict_tracking plays the Newport's sine at the ESRF study's 1 V: scaled to what the
     # target plays (none on the live device, which measures what runs).
@@ -121,9 +117,9 @@ def _asd(e: np.ndarray, fs_hz: float) -> tuple[np.ndarray, np.ndarray]:
     return f, p
 
 
-def tune_twin(*, bench: Bench, running: Loop, drift_pct: float = 0.0,
+def tune_twin(*, bench: Bench, running: Controller, drift_pct: float = 0.0,
               options: TuneOptions | None = None, seed: int = 0,
-              candidate: Loop | None = None,
+              candidate: Controller | None = None,
               after_load: Callable[[BenchStream], str] | None = None,
               progress: Callable[[str], None] | None = None) -> TuneResult:
     """One guarded tuning step on the twin (see the module notes).
@@ -133,13 +129,13 @@ def tune_twin(*, bench: Bench, running: Loop, drift_pct: float = 0.0,
     bench : Bench
         The bench file: the model the measurement is designed on, the noise the
         predictions use, the blocks a closed-loop measurement does not see.
-    running : Loop
+    running : Controller
         The controller running when ``tune`` starts.
     drift_pct : float
         The twin's Sercalo resonance moved by this much from the bench file [%].
     options : TuneOptions, optional
     seed : int
-    candidate : Loop, optional
+    candidate : Controller, optional
         Offer this controller instead of designing one (its ``k`` is verified the same way).
     after_load : callable, optional
         Changes the running twin when the candidate is loaded (a plant that moves, a new
@@ -198,16 +194,12 @@ def not_plausible(measurement: ClosedLoopMeasurement, *, bench: Bench) -> str:
     return f"the Sercalo's closed-loop identification is not plausible: {why}" if why else ""
 
 
-def _measure(target: TuneTarget, *, bench: Bench, running: Loop, options: TuneOptions,
+def _measure(target: TuneTarget, *, bench: Bench, running: Controller, options: TuneOptions,
              seed: int, say: Callable[[str], None]) -> ClosedLoopMeasurement:
     """The closed-loop identification of ``target`` around ``running``: measured again once
     when the records do not carry it; refused when the Sercalo is not identified or its
     modes are not plausible (nothing loaded)."""
-    rc = RunningController(feedback=running.feedback, a=np.zeros((0, 0)), b=np.zeros((0, 2)),
-                           c=np.zeros((2, 0)), d=np.zeros((2, 2)),
-                           ts_s=bench.true.converter.ts_s, gd_v_per_rad=running.gd_v_per_rad,
-                           name=running.name, source=running.name)
-    measurement = measure_closed_loop(play=target.play, model=bench, controller=rc,
+    measurement = measure_closed_loop(play=target.play, model=bench, controller=running,
                                       options=options.measurement, seed=seed + 100,
                                       progress=say)
     if (first_why := not_plausible(measurement, bench=bench)):
@@ -216,7 +208,7 @@ def _measure(target: TuneTarget, *, bench: Bench, running: Loop, options: TuneOp
         # before tune gives up, as a user would. Its usual cause, an isolated noisy line
         # taken for the h peak, is gone from the resonance search (detect_resonances).
         say(f"{first_why}: measured once again")
-        measurement = measure_closed_loop(play=target.play, model=bench, controller=rc,
+        measurement = measure_closed_loop(play=target.play, model=bench, controller=running,
                                           options=options.measurement, seed=seed + 300,
                                           progress=say)
     ident = measurement.identification
@@ -237,20 +229,22 @@ def _measure(target: TuneTarget, *, bench: Bench, running: Loop, options: TuneOp
 
 
 def _designed(plant: PlantModel, *, bench: Bench,
-              say: Callable[[str], None]) -> tuple[Loop, bool]:
+              say: Callable[[str], None]) -> tuple[Controller, bool]:
     """fsmbench's controller designed on ``plant`` (the same study as ``fsmbench design``),
     and whether it stabilises the design's whole perturbed set."""
     say("designing on the identified plant (the same study as fsmbench design)")
     study = design_study(plant, bench=bench)
     gd = tuple(float(x) for x in np.diag(np.asarray(plant.blocks["Gd"].D, dtype=float)))
-    loop = loop_of(study.controllers["fsmbench_controller"],
-                   name="fsmbench's controller (designed on the closed-loop identification)",
-                   ts_s=bench.true.converter.ts_s, gd_v_per_rad=(gd[0], gd[1]))
+    loop = controller_of(study.controllers["fsmbench_controller"],
+                         name="fsmbench's controller (designed on the closed-loop "
+                         "identification)", ts_s=bench.true.converter.ts_s,
+                         gd_v_per_rad=(gd[0], gd[1]))
     return loop, bool(study.robustness.all_stable)
 
 
 def _result(decision: str, reason: str, *, target: TuneTarget, before: ControllerFigures,
-            candidate: Loop, candidate_figures: ControllerFigures, after: ControllerFigures,
+            candidate: Controller, candidate_figures: ControllerFigures,
+            after: ControllerFigures,
             switches: Sequence[Mapping[str, Any]], objective_bound: float,
             measurement: ClosedLoopMeasurement, log: list[str], f_asd: np.ndarray,
             asd_before: np.ndarray, options: TuneOptions,
@@ -275,8 +269,9 @@ def _say(msg: str, *, log: list[str], progress: Callable[[str], None] | None) ->
         progress(msg)
 
 
-def tune_guarded(*, target: TuneTarget, bench: Bench, running: Loop,
-                 options: TuneOptions | None = None, seed: int = 0, candidate: Loop | None = None,
+def tune_guarded(*, target: TuneTarget, bench: Bench, running: Controller,
+                 options: TuneOptions | None = None, seed: int = 0,
+                 candidate: Controller | None = None,
                  after_load: Callable[[TuneTarget], str] | None = None,
                  progress: Callable[[str], None] | None = None,
                  journal: Callable[[TuneResult], None] | None = None) -> TuneResult:
@@ -289,13 +284,13 @@ def tune_guarded(*, target: TuneTarget, bench: Bench, running: Loop,
         :class:`fsmbench.tune.device.DeviceTarget`.
     bench : Bench
         The bench file (see :func:`tune_twin`).
-    running : Loop
+    running : Controller
         The controller running on ``target`` when ``tune`` starts.
     options : TuneOptions, optional
         Its ``disturbance_v`` must be what ``target`` plays during the watches.
     seed : int
         Noise seed of the twin's closed-loop measurement.
-    candidate : Loop, optional
+    candidate : Controller, optional
         Default: fsmbench's controller designed on the closed-loop identification.
     after_load : callable, optional
         ``after_load(target)`` when the candidate is loaded; returns the change in words.
@@ -331,7 +326,7 @@ def tune_guarded(*, target: TuneTarget, bench: Bench, running: Loop,
     if candidate is None:
         candidate, robust = _designed(plant, bench=bench, say=say)
     else:
-        robust = bool(robustness(plant, candidate.k, objective=objective).all_stable)
+        robust = bool(robustness(plant, candidate.continuous, objective=objective).all_stable)
     figures = functools.partial(_figures, plant=plant, bench=bench, objective=objective,
                                 watch_s=opts.watch_s, disturbance_v=opts.disturbance_v)
     before = with_changes(figures(running, robust=None), measured_rms_rad=measured_before)

@@ -43,7 +43,7 @@ from typing import Any
 
 from fsmbench.bench.axes import PerAxis
 from fsmbench.bench.params import Bench
-from fsmbench.control.loaded import RunningController
+from fsmbench.control.controller import Controller
 from fsmbench.excite.closed_loop import robust_loops
 from fsmbench.excite.shaped import BoundedMeasurement, beam_bounded_measurement
 from fsmbench.ident.closed_loop import (
@@ -295,7 +295,7 @@ MeasurementSteps = Generator[StageRequest, TwinRun, ClosedLoopMeasurement]
 _Stage = tuple[ClosedLoopIdentification, TwinRun, tuple[BoundedMeasurement, ...]]
 
 
-def _stage_request(*, model: Bench, controller: RunningController, options: MeasurementOptions,
+def _stage_request(*, model: Bench, controller: Controller, options: MeasurementOptions,
                    dense_width: float, seed: int, prior_label: str, label: str) -> StageRequest:
     scales = (1.0 - dense_width, 1.0, 1.0 + dense_width)
     loops = robust_loops(model, controller.feedback, frequency_scales=scales)
@@ -315,7 +315,7 @@ def _stage_request(*, model: Bench, controller: RunningController, options: Meas
                         label=label)
 
 
-def _stage(*, model: Bench, controller: RunningController, options: MeasurementOptions,
+def _stage(*, model: Bench, controller: Controller, options: MeasurementOptions,
            dense_width: float, seed: int, prior_label: str, ident_bench: Bench, label: str,
            merge_with: Sequence[ClosedLoopFrf] = ()) -> Generator[StageRequest, TwinRun, _Stage]:
     request = _stage_request(model=model, controller=controller, options=options,
@@ -337,7 +337,7 @@ class RecordsRejectedError(ValueError):
     """A stage's records failed their checks: the identification could not start."""
 
 
-def _stage_one(*, model: Bench, controller: RunningController, options: MeasurementOptions,
+def _stage_one(*, model: Bench, controller: Controller, options: MeasurementOptions,
                seed: int, say: Callable[[str], None]
                ) -> Generator[StageRequest, TwinRun, tuple[list[_Stage], _Stage, str]]:
     """Stage 1 (the resonances located in ±5 % bands), measured once again when its records
@@ -375,7 +375,7 @@ def _stage_one(*, model: Bench, controller: RunningController, options: Measurem
     return stages, first, repeated
 
 
-def measurement_steps(*, model: Bench, controller: RunningController,
+def measurement_steps(*, model: Bench, controller: Controller,
                       options: MeasurementOptions | None = None, seed: int = 0,
                       progress: Callable[[str], None] | None = None) -> MeasurementSteps:
     """The two-stage measurement as a protocol: what to play, then what was recorded.
@@ -434,7 +434,7 @@ def measurement_steps(*, model: Bench, controller: RunningController,
                                  model_excess=excess)
 
 
-def measure_closed_loop(*, model: Bench, controller: RunningController,
+def measure_closed_loop(*, model: Bench, controller: Controller,
                         true_bench: Bench | None = None, play: Player | None = None,
                         options: MeasurementOptions | None = None, seed: int = 0,
                         progress: Callable[[str], None] | None = None) -> ClosedLoopMeasurement:
@@ -449,7 +449,7 @@ def measure_closed_loop(*, model: Bench, controller: RunningController,
         (:meth:`fsmbench.tune.guarded.TuneTarget.play`: the twin's or the live device's).
     model : Bench
         What the excitation is designed on (the bench file, or an identified bench).
-    controller : RunningController
+    controller : Controller
         The loop's running controller.
     options : MeasurementOptions, optional
     seed : int
@@ -465,7 +465,7 @@ def measure_closed_loop(*, model: Bench, controller: RunningController,
             raise ValueError("measure_closed_loop needs the twin (true_bench) or a player")
         twin = true_bench
 
-        def play(plays: Sequence[ClosedLoopPlay], *, controller: RunningController,
+        def play(plays: Sequence[ClosedLoopPlay], *, controller: Controller,
                  settle_s: float, seed: int,
                  progress: Callable[[str], None] | None) -> TwinRun:
             return play_closed_loop(plays, bench=twin, controller=controller, seed=seed,

@@ -10,6 +10,7 @@ from fsmbench.atomic import atomic_write_text
 from fsmbench.bench.blocks import physical_plant
 from fsmbench.bench.esrf import esrf_decentralised_controller
 from fsmbench.bench.params import Bench
+from fsmbench.control.controller import Controller, controller_of
 from fsmbench.control.load import load_controllers, select_controller
 from fsmbench.control.preimage import (
     AT_NYQUIST,
@@ -19,11 +20,10 @@ from fsmbench.control.preimage import (
 )
 from fsmbench.control.study import design_study
 from fsmbench.jsonutil import format_text
-from fsmbench.tune.values import Loop, loop_of
 
 __all__ = ["loop_from_file", "running_loop", "write_tune_json"]
 
-def running_loop(kind: str, bench: Bench) -> Loop:
+def running_loop(kind: str, bench: Bench) -> Controller:
     """The controller running when ``tune`` starts, as ``--running`` names it.
 
     Parameters
@@ -40,19 +40,20 @@ def running_loop(kind: str, bench: Bench) -> Loop:
     if kind not in ("seed", "fsmbench"):
         return loop_from_file(kind, bench)
     if kind == "seed":
-        return loop_of(esrf_decentralised_controller(), name="the ESRF study's controller (9.2)",
-                       ts_s=ts, gd_v_per_rad=(float(gd.h), float(gd.v)))
+        return controller_of(esrf_decentralised_controller(),
+                             name="the ESRF study's controller (9.2)", ts_s=ts,
+                             gd_v_per_rad=(float(gd.h), float(gd.v)))
     study = design_study(physical_plant(bench.nominal, source="the bench file"), bench=bench)
-    return loop_of(study.controllers["fsmbench_controller"],
-                   name="fsmbench's controller (designed on the bench file)", ts_s=ts,
-                   gd_v_per_rad=(float(gd.h), float(gd.v)))
+    return controller_of(study.controllers["fsmbench_controller"],
+                         name="fsmbench's controller (designed on the bench file)", ts_s=ts,
+                         gd_v_per_rad=(float(gd.h), float(gd.v)))
 
 
-def loop_from_file(spec: str, bench: Bench) -> Loop:
+def loop_from_file(spec: str, bench: Bench) -> Controller:
     """The controller ``PATH[::NAME]`` of a controllers file, as the device runs it.
 
     The file holds it discrete at the converter rate (Tustin per section, prewarped);
-    ``Loop.k`` is its continuous pre-image under plain Tustin
+    ``Controller.continuous`` is its continuous pre-image under plain Tustin
     (:func:`fsmbench.control.preimage.tustin_preimage`; ``z = -1`` is no pole of it), so
     that the loop the twin and the predictions run is the file's, line for line. Named
     ``'NAME (FILE)'``, as ``LoadController`` names it on the device.
@@ -80,9 +81,9 @@ def loop_from_file(spec: str, bench: Bench) -> Loop:
         k = tustin_preimage(chosen.a, chosen.b, chosen.c, chosen.d, ts_s=ts,
                             inputs=["Rh", "Rv"], outputs=["Uch", "Ucv"], name=chosen.name)
     nominal = bench.nominal.quad_diode.gain_v_per_rad
-    gd = chosen.qd_gain_v_per_rad or (float(nominal.h), float(nominal.v))
-    return loop_of(k, name=f"{chosen.name} ({Path(chosen.source_path).name})", ts_s=ts,
-                   gd_v_per_rad=(float(gd[0]), float(gd[1])))
+    gd = chosen.gd_v_per_rad or (float(nominal.h), float(nominal.v))
+    return controller_of(k, name=f"{chosen.name} ({Path(chosen.source).name})", ts_s=ts,
+                         gd_v_per_rad=(float(gd[0]), float(gd[1])))
 
 
 def write_tune_json(path: Path, payload: dict[str, Any]) -> Path:

@@ -16,11 +16,10 @@ from typing import Any
 import numpy as np
 
 from fsmbench.bench.params import Bench
-from fsmbench.control.loaded import RunningController
+from fsmbench.control.controller import Controller
 from fsmbench.sim.excitation import Excitation
 from fsmbench.sim.plant import ADC_CHANNELS, bench_discrete
 from fsmbench.sim.stream import BenchStream
-from fsmbench.tune.values import Loop
 from fsmbench.twin.closed_loop import ClosedLoopPlay, play_closed_loop
 from fsmbench.twin.experiments import REP_FREQ_HZ
 from fsmbench.twin.simulate import TwinRun
@@ -38,7 +37,7 @@ class TwinTarget:
     ----------
     true_bench : Bench
         What the twin simulates (the bench file, drifted or identified).
-    loop : Loop
+    loop : Controller
         The controller running at the start.
     seed : int
     amplitude_v : float
@@ -47,7 +46,7 @@ class TwinTarget:
         How far ``true_bench``'s resonance was moved from the bench file [%] (reported).
     """
 
-    def __init__(self, true_bench: Bench, loop: Loop, *, seed: int, amplitude_v: float,
+    def __init__(self, true_bench: Bench, loop: Controller, *, seed: int, amplitude_v: float,
                  drift_pct: float = 0.0) -> None:
         sines = tuple(Excitation(ch, "sine", amplitude_v, 0.0, REP_FREQ_HZ)
                       for ch in ("Unh", "Unv"))
@@ -56,7 +55,7 @@ class TwinTarget:
                                   controller=loop.feedback, excitations=sines,
                                   plant=bench_discrete(true_bench), specialise=False)
         self.fs_hz = self.stream.fs_hz
-        self.gd = loop.gd_v_per_rad
+        self.gd = loop.gd
         self.label = true_bench.label
         self.drift_pct = float(drift_pct)
 
@@ -71,15 +70,15 @@ class TwinTarget:
         e = np.vstack(parts)[round(settle_s * self.fs_hz):]
         return e - e.mean(axis=0)
 
-    def load(self, loop: Loop) -> dict[str, Any]:
+    def load(self, loop: Controller) -> dict[str, Any]:
         """Swap ``loop`` in bumplessly; the switch (sample, names, commands around it [V])."""
         sw = self.stream.set_controller(loop.feedback)
-        self.gd = loop.gd_v_per_rad
+        self.gd = loop.gd
         return {"sample": int(sw.sample), "from": sw.previous, "to": sw.current,
                 "command_before_v": [float(x) for x in sw.command_before_v],
                 "command_after_v": [float(x) for x in sw.command_after_v]}
 
-    def roll_back(self, loop: Loop, *, force: bool = False) -> dict[str, Any]:
+    def roll_back(self, loop: Controller, *, force: bool = False) -> dict[str, Any]:
         """Swap ``loop`` (the controller that ran before) back in bumplessly: :meth:`load`
         (always: the twin's reading is exact, ``force`` changes nothing)."""
         return self.load(loop)
@@ -89,12 +88,12 @@ class TwinTarget:
         k = self.stream.controller
         return "none (loop open)" if k is None else str(k.name)
 
-    def checkpoint(self, loop: Loop) -> dict[str, Any]:
+    def checkpoint(self, loop: Controller) -> dict[str, Any]:
         """``loop`` as the record names it (the twin swaps the same controller back)."""
         return {"name": loop.name, "device": self.label, "noun": "The twin",
                 "checked": "running when tune started", "restore_with": []}
 
-    def play(self, plays: Sequence[ClosedLoopPlay], *, controller: RunningController,
+    def play(self, plays: Sequence[ClosedLoopPlay], *, controller: Controller,
              settle_s: float, seed: int,
              progress: Callable[[str], None] | None) -> TwinRun:
         """The closed-loop records on the twin (each from a fresh loop, as the ESRF study's)."""

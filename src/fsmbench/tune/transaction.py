@@ -37,11 +37,11 @@ from typing import Any
 
 import numpy as np
 
+from fsmbench.control.controller import Controller
 from fsmbench.tune.device_errors import device_failure
 from fsmbench.tune.values import (
     AXES,
     ControllerFigures,
-    Loop,
     TuneOptions,
     TuneResult,
     TuneTarget,
@@ -138,7 +138,7 @@ def _by_hand(point: Mapping[str, Any]) -> str:
     return " or ".join(f"LoadController {w!r}" for w in ways)
 
 
-def _recover(target: TuneTarget, running: Loop, point: Mapping[str, Any],
+def _recover(target: TuneTarget, running: Controller, point: Mapping[str, Any],
              say: Callable[[str], None], *, load_started: bool
              ) -> tuple[str | None, dict[str, Any], str]:
     """Roll back to ``running`` unless the target runs it: (left on, roll-back, sentence).
@@ -185,7 +185,7 @@ def _recover(target: TuneTarget, running: Loop, point: Mapping[str, Any],
             f"loaded back{how}.")
 
 
-def _loaded(target: TuneTarget, candidate: Loop, sw: Mapping[str, Any], *,
+def _loaded(target: TuneTarget, candidate: Controller, sw: Mapping[str, Any], *,
             after_load: Callable[[TuneTarget], str] | None,
             say: Callable[[str], None]) -> None:
     """Say that ``candidate`` was loaded (the switch ``sw``) and what ``after_load`` did."""
@@ -196,9 +196,10 @@ def _loaded(target: TuneTarget, candidate: Loop, sw: Mapping[str, Any], *,
         say(f"the bench changed as the controller was loaded: {after_load(target)}")
 
 
-def _judge(target: TuneTarget, *, running: Loop, candidate: Loop, before: ControllerFigures,
-           figures: ControllerFigures, e_after: np.ndarray, options: TuneOptions, why: str,
-           tx: dict[str, Any], switches: list[dict[str, Any]], noun: str, make: Make,
+def _judge(target: TuneTarget, *, running: Controller, candidate: Controller,
+           before: ControllerFigures, figures: ControllerFigures, e_after: np.ndarray,
+           options: TuneOptions, why: str, tx: dict[str, Any],
+           switches: list[dict[str, Any]], noun: str, make: Make,
            say: Callable[[str], None]) -> TuneResult:
     """The watch's verdict on the loaded candidate: kept, or the running controller loaded
     back when the measured tracking error exceeds the prediction (``tx`` and ``switches``
@@ -233,8 +234,8 @@ def _judge(target: TuneTarget, *, running: Loop, candidate: Loop, before: Contro
                 switches=switches, transaction=tx, e_after=e_after)
 
 
-def _record_interruption(exc: BaseException, target: TuneTarget, *, running: Loop,
-                         candidate: Loop, point: Mapping[str, Any], before: ControllerFigures,
+def _record_interruption(exc: BaseException, target: TuneTarget, *, running: Controller,
+                         candidate: Controller, point: Mapping[str, Any], before: ControllerFigures,
                          figures: ControllerFigures, tx: dict[str, Any],
                          switches: list[dict[str, Any]],
                          journal: Callable[[TuneResult], None] | None, make: Make,
@@ -270,7 +271,7 @@ def _record_interruption(exc: BaseException, target: TuneTarget, *, running: Loo
     return f"{cause}; {sentence}"
 
 
-def load_and_watch(*, target: TuneTarget, running: Loop, candidate: Loop,
+def load_and_watch(*, target: TuneTarget, running: Controller, candidate: Controller,
                    before: ControllerFigures, candidate_figures: ControllerFigures,
                    options: TuneOptions, why: str, make: Make,
                    journal: Callable[[TuneResult], None] | None,
@@ -282,9 +283,9 @@ def load_and_watch(*, target: TuneTarget, running: Loop, candidate: Loop,
     ----------
     target : TuneTarget
         The running bench, on ``running`` now.
-    running : Loop
+    running : Controller
         The controller running (measured as ``before``).
-    candidate : Loop
+    candidate : Controller
         The controller to load (its figures ``candidate_figures``, predicted).
     before, candidate_figures : ControllerFigures
     options : TuneOptions

@@ -1,4 +1,4 @@
-"""The values a tune passes around: its options, the loop it runs, a controller's figures,
+"""The values a tune passes around: its options, a controller's figures,
 its result, and the target it tunes (:class:`TuneTarget`, the twin or a device).
 
 Apart from the procedure (:mod:`fsmbench.tune.guarded`) so that the targets and the
@@ -12,22 +12,18 @@ from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any, Protocol
 
-import control as ct
 import numpy as np
 
-from fsmbench.bench.axes import PerAxis
-from fsmbench.control.loaded import RunningController
+from fsmbench.control.controller import Controller
 from fsmbench.jsonutil import plain_json
-from fsmbench.sim.controller import feedback_controller
-from fsmbench.sim.engine import DiscreteController
 from fsmbench.tune.measure import ClosedLoopMeasurement, MeasurementOptions
 from fsmbench.twin.closed_loop import ClosedLoopPlay
 from fsmbench.twin.experiments import REP_AMPLITUDE_V
 from fsmbench.twin.simulate import TwinRun
 from fsmbench.version import __version__
 
-__all__ = ["AXES", "MAX_MODE_MOVE", "TUNE_FORMAT", "ControllerFigures", "Loop", "TuneOptions",
-           "TuneResult", "TuneTarget", "loop_of", "rms_by_axis", "urad_text", "with_changes"]
+__all__ = ["AXES", "MAX_MODE_MOVE", "TUNE_FORMAT", "ControllerFigures", "TuneOptions",
+           "TuneResult", "TuneTarget", "rms_by_axis", "urad_text", "with_changes"]
 
 #: A resonance further than this from the model's is not a drift a tune follows (the drift
 #: scenarios move it by a few %): a mode assigned to the wrong axis, or another bench.
@@ -87,36 +83,6 @@ class TuneOptions:
                 "min_phase_margin_deg": self.min_phase_margin_deg,
                 "disturbance_v": self.disturbance_v,
                 "measurement": self.measurement.to_json()}
-
-
-@dataclass(frozen=True, eq=False)
-class Loop:
-    """A controller as designed (continuous ``K``) and as the bench runs it.
-
-    Attributes
-    ----------
-    name : str
-        In words.
-    k : control.StateSpace
-        Continuous ``Rh, Rv → Uch, Ucv`` (the loop is ``u = -K y``).
-    feedback : DiscreteController
-        Tustin at the converter rate, dividing the 4QD readings by ``gd_v_per_rad``.
-    gd_v_per_rad : (float, float)
-    """
-
-    name: str
-    k: ct.StateSpace
-    feedback: DiscreteController
-    gd_v_per_rad: tuple[float, float]
-
-
-def loop_of(k: ct.StateSpace, *, name: str, ts_s: float,
-            gd_v_per_rad: tuple[float, float]) -> Loop:
-    """``k`` wired as the real-time code runs it (Tustin, readings divided by the 4QD gains)."""
-    fb = feedback_controller(k, gd_v_per_rad=PerAxis(h=gd_v_per_rad[0], v=gd_v_per_rad[1]),
-                             ts_s=ts_s, name=name)
-    return Loop(name=name, k=k, feedback=fb,
-                gd_v_per_rad=(float(gd_v_per_rad[0]), float(gd_v_per_rad[1])))
 
 
 @dataclass(frozen=True)
@@ -186,8 +152,9 @@ class TuneResult:
     switches : tuple of dict
         Each controller switch: sample, from, to, command before and after [V].
     options : TuneOptions
-    candidate_loop : Loop
-        The candidate as designed and wired (to offer it again, or export it).
+    candidate_loop : Controller
+        The candidate as designed (``continuous``) and wired (to offer it again, or export
+        it).
     target : str
         What was tuned, in words (the twin, or the device's address).
     transaction : dict or None
@@ -212,7 +179,7 @@ class TuneResult:
     psd_after: np.ndarray
     switches: tuple[dict[str, Any], ...]
     options: TuneOptions
-    candidate_loop: Loop
+    candidate_loop: Controller
     target: str = "the digital twin"
     transaction: Mapping[str, Any] | None = None
 
@@ -253,10 +220,10 @@ class TuneTarget(Protocol):
         """The running loop's tracking error after ``settle_s`` of ``duration_s`` [rad],
         (n, 2), mean removed."""
 
-    def load(self, loop: Loop) -> dict[str, Any]:
+    def load(self, loop: Controller) -> dict[str, Any]:
         """Load ``loop`` bumplessly in the running loop; the switch, JSON-ready."""
 
-    def roll_back(self, loop: Loop, *, force: bool = False) -> dict[str, Any]:
+    def roll_back(self, loop: Controller, *, force: bool = False) -> dict[str, Any]:
         """Return to ``loop``, the controller that ran when tune started, by the means that
         put it there (the device: its own ``LoadController``); the switch, JSON-ready.
         ``force``: load it even when the target reads it as running already."""
@@ -264,11 +231,11 @@ class TuneTarget(Protocol):
     def running_controller(self) -> str:
         """The name of the controller the bench runs now."""
 
-    def checkpoint(self, loop: Loop) -> dict[str, Any]:
+    def checkpoint(self, loop: Controller) -> dict[str, Any]:
         """``loop`` (running now) as the record names it: its name, what checked it and how
         :meth:`roll_back` returns to it, JSON-ready."""
 
-    def play(self, plays: Sequence[ClosedLoopPlay], *, controller: RunningController,
+    def play(self, plays: Sequence[ClosedLoopPlay], *, controller: Controller,
              settle_s: float, seed: int,
              progress: Callable[[str], None] | None) -> TwinRun:
         """Play each excitation with the loop closed; the records (data_cl_* layout)."""

@@ -19,10 +19,10 @@ import numpy as np
 
 from fsmbench.bench.blocks import physical_plant
 from fsmbench.bench.params import Bench
+from fsmbench.control.controller import Controller
 from fsmbench.control.validation import tracking_error_spectra
 from fsmbench.sim.plant import ADC_CHANNELS, bench_discrete
 from fsmbench.sim.stream import BenchStream
-from fsmbench.tune.values import Loop
 from fsmbench.tune.watch import LoopWatch, WatchEvent, WatchOptions
 from fsmbench.twin.closed_loop import drifted_bench
 
@@ -59,7 +59,7 @@ class WatchRun:
     drift_start_s: float = 0.0
 
 
-def watch_twin(*, bench: Bench, loop: Loop, drift_pct_per_h: float, duration_s: float,
+def watch_twin(*, bench: Bench, loop: Controller, drift_pct_per_h: float, duration_s: float,
                options: WatchOptions | None = None, seed: int = 0, update_s: float = 1.0,
                settle_s: float = 5.0, drift_start_s: float | None = None,
                progress: Callable[[str], None] | None = None) -> WatchRun:
@@ -69,7 +69,7 @@ def watch_twin(*, bench: Bench, loop: Loop, drift_pct_per_h: float, duration_s: 
     ----------
     bench : Bench
         The packaged bench (its ``true`` parameters are the twin before the drift).
-    loop : Loop
+    loop : Controller
         The loaded controller.
     drift_pct_per_h : float
         Resonance drift rate [%/h] (both axes).
@@ -92,8 +92,8 @@ def watch_twin(*, bench: Bench, loop: Loop, drift_pct_per_h: float, duration_s: 
     f = np.linspace(0.05, fs / 2, 50_000)
     spectra = tracking_error_spectra(physical_plant(bench.true, source="the twin before the "
                                                                        "drift"),
-                                     loop.k, params=bench.true,
-                                     gd_used_v_per_rad=loop.gd_v_per_rad, f_hz=f)
+                                     loop.continuous, params=bench.true,
+                                     gd_used_v_per_rad=loop.gd, f_hz=f)
     lines = {float(fl): np.asarray(spectra.line_power[i], dtype=float)
              for i, fl in enumerate(spectra.line_freqs_hz)}
     res = [float(bench.true.sercalo.resonance_hz[a]) for a in ("h", "v")]
@@ -102,7 +102,7 @@ def watch_twin(*, bench: Bench, loop: Loop, drift_pct_per_h: float, duration_s: 
     stream = BenchStream(bench.true, seed=seed, name="watch", controller=loop.feedback,
                          plant=bench_discrete(bench), specialise=False)
     stream.step(round(settle_s * fs))
-    gd = np.asarray(loop.gd_v_per_rad, dtype=float)
+    gd = np.asarray(loop.gd, dtype=float)
     n_upd = round(update_s * fs)
     t = 0.0
     events: list[WatchEvent] = []

@@ -38,7 +38,7 @@ import numpy as np
 import xarray as xr
 
 from fsmbench.bench.params import Bench
-from fsmbench.control.loaded import RunningController
+from fsmbench.control.controller import Controller
 from fsmbench.excite.files import read_excitation
 from fsmbench.excite.shaped import beam_bounded_measurement
 from fsmbench.io.recording import make_recording
@@ -158,7 +158,7 @@ def _played_samples(play: ClosedLoopPlay, n: int) -> np.ndarray:
 
 
 def play_closed_loop(plays: Sequence[ClosedLoopPlay], *, bench: Bench,
-                     controller: RunningController, seed: int = 0, settle_s: float = 1.0,
+                     controller: Controller, seed: int = 0, settle_s: float = 1.0,
                      duration_s: float | None = None,
                      progress: Callable[[str], None] | None = None) -> TwinRun:
     """Run each closed-loop experiment on ``bench`` and return its records and truth.
@@ -169,7 +169,7 @@ def play_closed_loop(plays: Sequence[ClosedLoopPlay], *, bench: Bench,
         At most one per command.
     bench : Bench
         Packaged or identified (its engine plant, :func:`fsmbench.sim.plant.bench_discrete`).
-    controller : RunningController
+    controller : Controller
         The loop's controller (checked stable on the bench first).
     seed : int
         Noise seed (each experiment's streams named after it).
@@ -234,12 +234,12 @@ def play_closed_loop(plays: Sequence[ClosedLoopPlay], *, bench: Bench,
                                  "at": play.at}
     truth["closed_loop"] = {"controller": controller.name, "controller_source": controller.source,
                             "settle_s": settle_s,
-                            "gd_used_v_per_rad": dict(zip("hv", controller.gd_v_per_rad,
+                            "gd_used_v_per_rad": dict(zip("hv", controller.gd,
                                                           strict=True))}
     return TwinRun(recordings=recordings, truth=truth, seed=seed, experiments=tuple(specs))
 
 
-def simulate_closed_loop(*, bench: Bench, controller: RunningController,
+def simulate_closed_loop(*, bench: Bench, controller: Controller,
                          sources: Sequence[str] | None = None, at: str = "output",
                          max_error_rad: float = 30e-6, seed: int = 0, settle_s: float = 1.0,
                          duration_s: float | None = None,
@@ -249,7 +249,7 @@ def simulate_closed_loop(*, bench: Bench, controller: RunningController,
     Parameters
     ----------
     bench : Bench
-    controller : RunningController
+    controller : Controller
         Closes the loop (:func:`fsmbench.control.loaded.running_controller`).
     sources : sequence of str, optional
         ``fsmbench excite`` outputs (folder, ``.json`` or ``.mat``), one per command
