@@ -3,13 +3,14 @@
 from __future__ import annotations
 
 import math
-from dataclasses import replace
+from dataclasses import asdict, replace
 
 import numpy as np
 import pytest
 from scipy.optimize import brentq
 
 from fsmbench.bench.params import default_bench, real_bench
+from fsmbench.forked import fork_available
 from fsmbench.ident.delay.joint import fit_jointly
 from fsmbench.ident.delay.sampled import SensorLowpass, second_order
 from fsmbench.ident.evidence.amplifier import decide_amplifier
@@ -63,11 +64,24 @@ def test_phase_bandwidth_is_where_the_lag_reaches_60_degrees() -> None:
 
 
 @pytest.fixture(scope="module")
-def twin_fit():  # type: ignore[no-untyped-def]
+def twin_frf() -> FrequencyResponse:
     run = simulate_bench(BENCH, seed=1, experiments=["data_unh", "data_unv"])
-    frf = experiment_frf(run.recordings, columns=[("data_unh", "Unh"), ("data_unv", "Unv")],
-                         trims_s=ESRF_TRIMS_S)
-    return fit_newport_dynamics(frf)
+    return experiment_frf(run.recordings, columns=[("data_unh", "Unh"), ("data_unv", "Unv")],
+                          trims_s=ESRF_TRIMS_S)
+
+
+@pytest.fixture(scope="module")
+def twin_fit(twin_frf: FrequencyResponse):  # type: ignore[no-untyped-def]
+    return fit_newport_dynamics(twin_frf)
+
+
+@pytest.mark.skipif(not fork_available(), reason="needs fork and two cores")
+def test_the_paths_fitted_side_by_side_are_the_fits_one_after_the_other(
+        twin_fit, twin_frf: FrequencyResponse) -> None:  # type: ignore[no-untyped-def]
+    forked = fit_newport_dynamics(twin_frf, parallel=True)
+    for axis in "hv":  # the v fit came back pickled from the forked process: bit for bit
+        np.testing.assert_equal(asdict(forked.axes[axis]), asdict(twin_fit.axes[axis]))
+    assert forked.phase_bandwidth_hz == twin_fit.phase_bandwidth_hz
 
 
 def test_twin_newport_is_recovered(twin_fit) -> None:  # type: ignore[no-untyped-def]

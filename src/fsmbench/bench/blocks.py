@@ -40,6 +40,12 @@ import xarray as xr
 
 from fsmbench.bench.params import BenchParams
 from fsmbench.bench.realization import DEFAULT_TOL, Delays, plant_model
+from fsmbench.bench.response import (
+    ResponseEvaluator,
+    solve_response,
+    ss_frequency_response,
+    ss_response,
+)
 
 __all__ = [
     "PLANT_INPUTS",
@@ -293,125 +299,6 @@ def input_delays_s(p: BenchParams) -> dict[str, float]:
     dac = (p.converter.dac_delay_samples + 0.5) * ts + p.converter.dac_extra_delay_s
     return {"Uch": dac, "Ucv": dac, "Unh": dac + p.newport.internal_delay_s,
             "Unv": dac + p.newport.internal_delay_s}
-
-
-#: Below this many points one batched solve is cheaper than diagonalising ``A``.
-_MODAL_MIN_POINTS = 64
-#: The modal sum is kept only if it agrees with the direct solve to this relative
-#: error at its check points (the direct solve is backward stable; the modal sum
-#: loses ``cond(V)`` and cancellation between residues far above the poles).
-_MODAL_RTOL = 1e-10
-
-
-def solve_response(a: np.ndarray, b: np.ndarray, c: np.ndarray, d: np.ndarray,
-                    s: np.ndarray) -> np.ndarray:
-    n = a.shape[0]
-    lhs = s[:, None, None] * np.eye(n)[None] - a[None]
-    x = np.linalg.solve(lhs, np.broadcast_to(b, (s.size, *b.shape)).astype(complex))
-    return np.einsum("pn,fnm->fpm", c, x) + d[None]
-
-
-def _modal_response(a: np.ndarray, b: np.ndarray, c: np.ndarray, d: np.ndarray,
-                    s: np.ndarray) -> np.ndarray | None:
-    """``sum_i (C v_i)(w_i B) / (s - lambda_i) + D``, or None when not accurate.
-
-    O(n) per point instead of an O(n^3) solve: the budget's 0.1 Hz grids (50 000
-    points) cost 60x less. Checked against the solve at the grid's extremes and
-    a few points between, where cancellation and ill-conditioning show first.
-    """
-    try:
-        lam, v = np.linalg.eig(a)
-        wb = np.linalg.solve(v, b.astype(complex))
-    except np.linalg.LinAlgError:
-        return None
-    if not np.all(np.isfinite(wb)):
-        return None
-    cv = c @ v
-    h = (cv[None, :, :] / (s[:, None] - lam[None, :])[:, None, :]) @ wb + d[None]
-    order = np.argsort(np.abs(s))
-    probe = np.unique(np.concatenate([order[:2], order[-2:],
-                                      order[np.linspace(0, s.size - 1, 8).astype(int)]]))
-    exact = solve_response(a, b, c, d, s[probe])
-    scale = np.maximum(np.abs(exact), np.max(np.abs(exact), axis=(1, 2), keepdims=True) * 1e-6)
-    if not np.all(np.abs(h[probe] - exact) <= _MODAL_RTOL * scale):
-        return None
-    h[probe] = exact
-    return h
-
-
-class ResponseEvaluator:
-    """``C (xI - A)^-1 B + D`` of one system at any points ``x``, many calls over.
-
-    Root finding asks for one point at a time, thousands of times: the modal sum
-    costs O(n) per point against a solve's O(n^3) plus its overhead. The eigen-
-    decomposition is made once and kept only if it matches the direct solve at
-    ``check_points`` (see :func:`_modal_response`); otherwise each call solves.
-
-    Parameters
-    ----------
-    sys : control.StateSpace
-        Continuous (``x`` = s [rad/s]) or discrete (``x`` = z).
-    check_points : array of complex, shape (k,)
-        Points spanning where the evaluator will be used (e.g. the frequency axis
-        from the lowest to the highest frequency of interest).
-    """
-
-    def __init__(self, sys: ct.StateSpace, *, check_points: np.ndarray) -> None:
-        self._abcd = tuple(np.asarray(x, dtype=float) for x in (sys.A, sys.B, sys.C, sys.D))
-        a, b, c, d = self._abcd
-        self._modal: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
-        if a.shape[0] == 0:
-            return
-        try:
-            lam, v = np.linalg.eig(a)
-            wb = np.linalg.solve(v, b.astype(complex))
-        except np.linalg.LinAlgError:
-            return
-        x = np.asarray(check_points, dtype=complex).ravel()
-        modal = (lam, c @ v, wb)
-        exact = solve_response(a, b, c, d, x)
-        scale = np.maximum(np.abs(exact), np.max(np.abs(exact), axis=(1, 2), keepdims=True) * 1e-6)
-        if np.all(np.isfinite(wb)) and np.all(
-                np.abs(self._sum(modal, x) - exact) <= _MODAL_RTOL * scale):
-            self._modal = modal
-
-    def _sum(self, modal: tuple[np.ndarray, np.ndarray, np.ndarray], x: np.ndarray) -> np.ndarray:
-        lam, cv, wb = modal
-        return (cv[None, :, :] / (x[:, None] - lam[None, :])[:, None, :]) @ wb + self._abcd[3][None]
-
-    def __call__(self, x: np.ndarray) -> np.ndarray:
-        """The response at ``x``, shape (k, p, m)."""
-        x = np.asarray(x, dtype=complex).ravel()
-        a, b, c, d = self._abcd
-        if a.shape[0] == 0:
-            return np.broadcast_to(d, (x.size, *d.shape)).astype(complex)
-        if self._modal is None:
-            return solve_response(a, b, c, d, x)
-        return self._sum(self._modal, x)
-
-
-def ss_response(sys: ct.StateSpace, s: np.ndarray) -> np.ndarray:
-    """``C (sI - A)^-1 B + D`` at complex ``s`` [rad/s] (or ``z`` for a discrete
-    system), shape (n, p, m); ``s`` must not hit a pole of ``sys``.
-
-    Many points: the modal sum when it matches the direct solve (see
-    :func:`_modal_response`); otherwise one batched solve over all points.
-    """
-    s = np.asarray(s, dtype=complex).ravel()
-    a, b, c, d = (np.asarray(x, dtype=float) for x in (sys.A, sys.B, sys.C, sys.D))
-    n = a.shape[0]
-    if n == 0:
-        return np.broadcast_to(d, (s.size, *d.shape)).astype(complex)
-    if s.size >= _MODAL_MIN_POINTS:
-        h = _modal_response(a, b, c, d, s)
-        if h is not None:
-            return h
-    return solve_response(a, b, c, d, s)
-
-
-def ss_frequency_response(sys: ct.StateSpace, f_hz: np.ndarray) -> np.ndarray:
-    """Continuous response at ``s = j 2 pi f``, ``f_hz`` [Hz], shape (nf, p, m)."""
-    return ss_response(sys, 2j * np.pi * np.asarray(f_hz, dtype=float).ravel())
 
 
 @dataclass(frozen=True)

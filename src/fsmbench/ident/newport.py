@@ -52,6 +52,7 @@ from scipy.optimize import brentq
 from fsmbench.bench.blocks import newport_beam_matrix
 from fsmbench.bench.params import BenchParams
 from fsmbench.checks import Check
+from fsmbench.forked import start_forked
 from fsmbench.ident.delay.bode import DelayEstimate, remove_delay
 from fsmbench.ident.delay.joint import SensorEstimate, fit_jointly, line_std
 from fsmbench.ident.delay.sampled import SensorLowpass, StateSpace3, second_order
@@ -333,7 +334,8 @@ def fit_newport_dynamics(frf: FrequencyResponse, *, dac_delay_samples: float = 1
                          phase_lag_deg: float = 60.0,
                          sensor: SensorLowpass | None = None,
                          resolve_sensor: bool = True,
-                         fill: Mapping[str, NewportAxisFit] | None = None) -> NewportDynamics:
+                         fill: Mapping[str, NewportAxisFit] | None = None,
+                         parallel: bool = False) -> NewportDynamics:
     """Fit both Newport paths (see the module) and derive their bandwidths.
 
     Parameters
@@ -357,6 +359,9 @@ def fit_newport_dynamics(frf: FrequencyResponse, *, dac_delay_samples: float = 1
     fill : mapping of axis to NewportAxisFit, optional
         The axes whose path the matrix lacks (its record missing or unusable), as the
         bench file models them (:func:`nominal_newport_axis`).
+    parallel : bool
+        Fit the v path in a forked process (:mod:`fsmbench.forked`) while this one fits
+        the h path: the same fits.
 
     Raises
     ------
@@ -371,9 +376,18 @@ def fit_newport_dynamics(frf: FrequencyResponse, *, dac_delay_samples: float = 1
                              f"FRF has {frf.input_names} → {frf.output_names}")
     fs = float(frf.fs_hz)
     sensor = sensor or SensorLowpass()
-    axes = {axis: fill[axis] if axis in fill else
-            _fit_axis(frf, axis, fs=fs, sensor=sensor, resolve_sensor=resolve_sensor)
-            for axis in "hv"}
+
+    def fit(axis: str) -> NewportAxisFit:
+        return _fit_axis(frf, axis, fs=fs, sensor=sensor, resolve_sensor=resolve_sensor)
+
+    # The two joint fits are independent and each most of a second: side by side.
+    job = start_forked(lambda _say: fit("v"), progress=lambda _msg: None,
+                       parallel=parallel and not fill)
+    try:
+        h_fit = fill["h"] if "h" in fill else fit("h")
+        axes = {"h": h_fit, "v": fill["v"] if "v" in fill else job.result()}
+    finally:
+        job.cancel()
     converter = ((dac_delay_samples + 0.5) / fs + sensor.group_delay_s
                  if converter_delay_s is None else float(converter_delay_s))
     return NewportDynamics(
@@ -531,7 +545,8 @@ def identify_newport(frf: FrequencyResponse, *, band_hz: tuple[float, float] = (
                      converter_delay_s: float | None = None,
                      sensor: SensorLowpass | None = None,
                      resolve_sensor: bool = True,
-                     fill: Mapping[str, NewportAxisFit] | None = None) -> NewportIdentification:
+                     fill: Mapping[str, NewportAxisFit] | None = None,
+                     parallel: bool = False) -> NewportIdentification:
     """The Newport paths (seed 2.4) from the ``Un → Vp`` matrix: dynamics, delays, gains.
 
     Parameters
@@ -554,6 +569,8 @@ def identify_newport(frf: FrequencyResponse, *, band_hz: tuple[float, float] = (
     fill : mapping of axis to NewportAxisFit, optional
         The axes whose column the matrix lacks, as the bench file models them: the
         other axis is identified alone (:attr:`NewportIdentification.assumed_axes`).
+    parallel : bool
+        The two paths' fits side by side (see :func:`fit_newport_dynamics`).
     """
     inputs, outputs = frf.input_names, frf.output_names
     fill = dict(fill or {})
@@ -574,7 +591,7 @@ def identify_newport(frf: FrequencyResponse, *, band_hz: tuple[float, float] = (
     try:
         dyn: NewportDynamics | None = fit_newport_dynamics(
             frf, dac_delay_samples=dac_delay_samples, converter_delay_s=converter_delay_s,
-            sensor=sensor, resolve_sensor=resolve_sensor, fill=fill)
+            sensor=sensor, resolve_sensor=resolve_sensor, fill=fill, parallel=parallel)
         why = ""
     except ValueError as exc:
         dyn, why = None, f"the constant gains are used: {exc}"

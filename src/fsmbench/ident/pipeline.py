@@ -120,9 +120,9 @@ def identify(recordings: Mapping[str, xr.Dataset], *, bench: Bench,
         Files that were there but could not be read (the loader's reason): a
         step they would feed says so instead of "missing".
     parallel : bool
-        Fit the noise model in a forked process beside the steps 2.2-2.4
-        (:mod:`fsmbench.forked`); False: every step here, one after the other, with
-        the same result.
+        Fit the noise model in a forked process beside the steps 2.2-2.4, and the Newport's
+        two paths side by side (:mod:`fsmbench.forked`); False: every step here, one after
+        the other, with the same result.
     """
     with pywarnings.catch_warnings(record=True) as caught:
         pywarnings.simplefilter("always")
@@ -175,6 +175,7 @@ def _identify(recordings: Mapping[str, xr.Dataset], *, bench: Bench, opts: Ident
     """Section 2's steps in order (:mod:`fsmbench.ident.steps`), each on what the ones
     before it found."""
     run = start_run(recordings, bench=bench, opts=opts, say=say, unusable=unusable)
+    run.parallel = parallel
     qd = qd_step(run)
     # The noise model needs only the 4QD's gains: fitted in a forked process beside
     # 2.2-2.4 (fsmbench.forked), its warnings raised here when it is taken.

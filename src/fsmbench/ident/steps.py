@@ -133,6 +133,8 @@ class StepRun:
     seen: dict[str, list[Check]] = field(default_factory=dict)
     compression: dict[str, CompressionFactors] = field(default_factory=dict)
     loops: dict[str, RecordedController] = field(default_factory=dict)
+    #: Independent fits within a step may run in a forked process (:mod:`fsmbench.forked`).
+    parallel: bool = False
 
     def missing(self, *names: str) -> list[str]:
         """The named records that are not among the recordings."""
@@ -433,7 +435,7 @@ def _newport_fit(run: StepRun, state: _NewportState, *, columns: tuple[tuple[str
         return identify_newport(
             nfrf, band_hz=opts.newport_band_hz, dac_delay_samples=conv.dac_delay_samples,
             converter_delay_s=None if sid is None else sid.delay_s, sensor=sensor,
-            resolve_sensor=resolve, fill=fill)
+            resolve_sensor=resolve, fill=fill, parallel=run.parallel)
 
     state.newport = fit(run.sensor)
     decision, (lag_s, lag_std_s) = _decide_amplifier(run, state, nfrf, gi=gi, fit=fit)
