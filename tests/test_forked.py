@@ -12,6 +12,7 @@ import control as ct
 import numpy as np
 import pytest
 
+from fsmbench import forked
 from fsmbench.forked import ForkedError, fork_available, start_forked
 from fsmbench.progress import Progress
 
@@ -119,3 +120,27 @@ def test_off_the_main_thread_it_runs_in_the_caller() -> None:
     thread.start()
     thread.join()
     assert got == [os.getpid()]
+
+
+def _large(_say: Progress) -> dict[str, np.ndarray]:
+    rng = np.random.default_rng(5)
+    return {"record": rng.standard_normal((3, 400_000)),  # 9.6 MB: beside the pickle
+            "small": np.arange(10.0)}  # in it
+
+
+@needs_fork
+@pytest.mark.parametrize("shared_memory", [True, False])
+def test_large_arrays_come_back_whole_and_writable(shared_memory: bool,
+                                                   monkeypatch: pytest.MonkeyPatch) -> None:
+    """Through a file in shared memory, removed once mapped; without room there, in the
+    pipe: the same arrays either way, writable as the caller's own."""
+    if not shared_memory:
+        monkeypatch.setattr(forked, "_SHM", forked.Path("/nonexistent-shm"))
+    before = set(os.listdir("/dev/shm")) if os.path.isdir("/dev/shm") else set()
+    got = start_forked(_large, progress=print).result()
+    want = _large(print)
+    for key, value in want.items():
+        np.testing.assert_array_equal(got[key], value, strict=True)
+        got[key][0] = -1.0  # the caller may change its copy
+    after = set(os.listdir("/dev/shm")) if os.path.isdir("/dev/shm") else set()
+    assert after <= before  # nothing left behind

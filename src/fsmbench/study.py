@@ -482,10 +482,11 @@ def run_study(*, out_dir: str | Path, data_dir: str | Path | None = None,
         chapter 11 lists its draws that break a requirement, and the robustness row names
         a requirement ≥ 5 % of them break.
     parallel : bool
-        Read half the records, run the design and the validation beside the budget, and
-        the noise model beside the identification's other steps, in forked processes
-        (:mod:`fsmbench.forked`; where ``fork`` exists and there are two cores). False
-        runs everything in this process, one after the other: the same results.
+        Read half the records, run the design and the validation beside the budget, the
+        noise model beside the identification's other steps, the Newport's two fits and
+        the report's figures two by two, in forked processes (:mod:`fsmbench.forked`;
+        where ``fork`` exists and there are two cores). False runs everything in this
+        process, one after the other: the same results.
     """
     bench = default_bench() if bench is None else bench
     spec = Specification() if spec is None else spec
@@ -513,13 +514,13 @@ def run_study(*, out_dir: str | Path, data_dir: str | Path | None = None,
                                 spec=spec)
         return _write_outputs(run, rec, found, summary=summary, design=design,
                               budget=budget, validation=validation, figures=figures,
-                              montecarlo=montecarlo)
+                              montecarlo=montecarlo, parallel=parallel)
 
 
 def _write_outputs(run: _StudyRun, rec: _Recorded, found: _Identified, *, summary: Summary,
                    design: DesignStage, budget: BudgetStage, validation: ValidationStage,
-                   figures: Sequence[str],
-                   montecarlo: Mapping[str, Any] | None) -> StudyResult:
+                   figures: Sequence[str], montecarlo: Mapping[str, Any] | None,
+                   parallel: bool) -> StudyResult:
     """The report, summary.json, the figures asked for, study.json and timings.json."""
     out, say, source = run.out, run.say, rec.source
     say("writing the report")
@@ -535,7 +536,8 @@ def _write_outputs(run: _StudyRun, rec: _Recorded, found: _Identified, *, summar
         verdict_html=verdict_html(summary), summary=summary_json,
         meta=(f"fsmbench {__version__}. Data: {source}. The chapters follow the ESRF Sercalo "
               "test bench study (ESRF, 2020), called \"the ESRF study\" below; its sections, "
-              "figures and tables are cited as (ESRF study 2.1), (ESRF study Fig. 8).",))
+              "figures and tables are cited as (ESRF study 2.1), (ESRF study Fig. 8).",),
+        parallel=parallel)
     atomic_write_text(out / "summary.json",
                       json.dumps(summary_json, indent=2, allow_nan=False) + "\n")
     run.lap("report")

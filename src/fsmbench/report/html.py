@@ -20,9 +20,10 @@ from pathlib import Path
 from typing import Any
 
 from fsmbench.atomic import atomic_write_text
+from fsmbench.forked import start_forked
 from fsmbench.report.errata import cited_errata, errata_appendix, link_citations
 from fsmbench.report.figures.interactive import ZOOM_JS, figure_json, plotly_js
-from fsmbench.report.figures.spec import Figure
+from fsmbench.report.figures.spec import Figure, Line
 
 __all__ = ["ERRATA_TITLE", "Block", "Note", "Section", "Table", "export_stem", "iter_figures",
            "render_report", "visible_text", "write_report"]
@@ -241,14 +242,51 @@ def _table(tab: Table, out: list[str]) -> None:
         out.append(f'<div class="note">{_text(tab.note)}</div>')
 
 
-def _figure(fig: Figure, number: int, out: list[str]) -> None:
+@dataclass(frozen=True)
+class _Spec:
+    """A figure's plotly spec as the page embeds it, and its height [px]."""
+
+    text: str
+    height_px: int
+
+
+def _spec(fig: Figure) -> _Spec:
     spec = figure_json(fig)
+    return _Spec(_script_json(spec), spec["layout"]["height"])
+
+
+def _points(fig: Figure) -> int:
+    """A figure's samples: what its spec costs (decimation, bands, encoding)."""
+    return sum(t.x.size for p in fig.panels for t in p.traces if isinstance(t, Line))
+
+
+def _specs(figures: Sequence[Figure], *, parallel: bool) -> dict[str, _Spec]:
+    """Each figure's spec, by key; with ``parallel`` about half of the samples' figures are
+    encoded in a forked process (:mod:`fsmbench.forked`): the same text."""
+    here, there, share = 0, 0, set()
+    for fig in sorted(figures, key=_points, reverse=True):
+        if there < here:
+            share.add(fig.key)
+            there += _points(fig)
+        else:
+            here += _points(fig)
+    job = start_forked(lambda _say: {f.key: _spec(f) for f in figures if f.key in share},
+                       progress=lambda _msg: None, parallel=parallel and bool(share))
+    try:
+        # Run here, the job makes its share when its result is taken: every spec once.
+        mine = {f.key: _spec(f) for f in figures if not job.forked or f.key not in share}
+        theirs = job.result() if job.forked else {}
+    finally:
+        job.cancel()
+    return {**mine, **theirs}
+
+
+def _figure(fig: Figure, number: int, out: list[str], spec: _Spec) -> None:
     ref = f" (ESRF study {fig.seed_ref})" if fig.seed_ref else ""
     out.append(f'<figure id="fig-{fig.key}">')
     out.append(f'<div class="fsm-plot pending" id="plot-{fig.key}" data-spec="spec-{fig.key}" '
-               f'style="height:{spec["layout"]["height"]}px"></div>')
-    out.append(f'<script type="application/json" id="spec-{fig.key}">{_script_json(spec)}'
-               "</script>")
+               f'style="height:{spec.height_px}px"></div>')
+    out.append(f'<script type="application/json" id="spec-{fig.key}">{spec.text}</script>')
     out.append(f"<figcaption><b>Figure {number}. {html.escape(fig.title)}</b>"
                f"{html.escape(ref)}. {_text(fig.caption)}</figcaption>")
     if fig.note:
@@ -256,7 +294,8 @@ def _figure(fig: Figure, number: int, out: list[str]) -> None:
     out.append("</figure>")
 
 
-def _section(sec: Section, level: int, out: list[str], counter: list[int]) -> None:
+def _section(sec: Section, level: int, out: list[str], counter: list[int],
+             specs: Mapping[str, _Spec]) -> None:
     anchor = sec.anchor or _slug(sec.title)
     out.append(f'<h{level} id="{html.escape(anchor)}">{html.escape(sec.title)}</h{level}>')
     for block in sec.blocks:
@@ -269,13 +308,14 @@ def _section(sec: Section, level: int, out: list[str], counter: list[int]) -> No
             out.append(f'<div class="note">{_text(block.text)}{_text(ref)}</div>')
         else:
             counter[0] += 1
-            _figure(block, counter[0], out)
+            _figure(block, counter[0], out, specs[block.key])
     for sub in sec.subsections:
-        _section(sub, min(level + 1, 6), out, counter)
+        _section(sub, min(level + 1, 6), out, counter, specs)
 
 
 def render_report(*, title: str, sections: Sequence[Section], verdict_html: str = "",
-                  summary: Mapping[str, Any] | None = None, meta: Sequence[str] = ()) -> str:
+                  summary: Mapping[str, Any] | None = None, meta: Sequence[str] = (),
+                  parallel: bool = False) -> str:
     """The whole report as one HTML string.
 
     Parameters
@@ -289,6 +329,9 @@ def render_report(*, title: str, sections: Sequence[Section], verdict_html: str 
         Embedded as ``<script type="application/json" id="fsmbench-summary">``.
     meta : sequence of str
         Lines under the title (source, version).
+    parallel : bool
+        Encode about half of the figures in a forked process (:mod:`fsmbench.forked`):
+        the same page.
     """
     keys = [f.key for f in _figures(sections)]
     dup = sorted({k for k in keys if keys.count(k) > 1})
@@ -307,8 +350,9 @@ def render_report(*, title: str, sections: Sequence[Section], verdict_html: str 
     out.append(verdict)
     counter = [0]
     body: list[str] = []
+    specs = _specs(list(_figures(sections)), parallel=parallel)
     for sec in sections:
-        _section(sec, 2, body, counter)
+        _section(sec, 2, body, counter, specs)
     # The appendix of the errata the report cites (each citation links to its entry).
     cited = cited_errata([re.sub(r"<[^>]+>", "", "".join([verdict, *body]))])
     toc = [(sec.anchor or _slug(sec.title), sec.title) for sec in sections]
@@ -331,7 +375,8 @@ def render_report(*, title: str, sections: Sequence[Section], verdict_html: str 
 
 def write_report(path: str | Path, *, title: str, sections: Sequence[Section],
                  verdict_html: str = "", summary: Mapping[str, Any] | None = None,
-                 meta: Sequence[str] = ()) -> Path:
-    """Render and write the report atomically; returns its path."""
+                 meta: Sequence[str] = (), parallel: bool = False) -> Path:
+    """Render and write the report atomically (see :func:`render_report`); returns its path."""
     return atomic_write_text(Path(path), render_report(
-        title=title, sections=sections, verdict_html=verdict_html, summary=summary, meta=meta))
+        title=title, sections=sections, verdict_html=verdict_html, summary=summary, meta=meta,
+        parallel=parallel))
