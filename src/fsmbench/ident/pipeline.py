@@ -120,9 +120,10 @@ def identify(recordings: Mapping[str, xr.Dataset], *, bench: Bench,
         Files that were there but could not be read (the loader's reason): a
         step they would feed says so instead of "missing".
     parallel : bool
-        Fit the noise model in a forked process beside the steps 2.2-2.4, and the Newport's
-        two paths side by side (:mod:`fsmbench.forked`); False: every step here, one after
-        the other, with the same result.
+        Fit the noise model in a forked process beside the steps 2.2-2.4, and the closed-loop
+        records' controllers, the Newport's two paths, the comparison with the records and
+        the Bode band two by two (:mod:`fsmbench.forked`); False: every step here, one
+        after the other, with the same result.
     """
     with pywarnings.catch_warnings(record=True) as caught:
         pywarnings.simplefilter("always")
@@ -144,12 +145,19 @@ def identify(recordings: Mapping[str, xr.Dataset], *, bench: Bench,
     if result.plant is not None and result.matching is not None and (
             result.sercalo is not None or result.newport is not None):
         # The model's dynamics against the records (MATLAB's compare) and its Bode band
-        # from the parameters' stds (bode(sys, 'sd', 3)): ident.compare, ident.model_band.
-        result = replace(result, comparison=compare_records(
-            recordings, plant=result.plant, trims_s=result.options.trims_s),
-            bode_band=model_band(result.plant, params=result.matching.nominal,
-                                 measured=measured, f_hz=np.geomspace(
-                                     1.0, 0.5 * used.converter.fs_hz, 300)))
+        # from the parameters' stds (bode(sys, 'sd', 3)): ident.compare, ident.model_band,
+        # side by side.
+        plant, nominal = result.plant, result.matching.nominal
+        band_job = start_forked(lambda _say: model_band(
+            plant, params=nominal, measured=measured,
+            f_hz=np.geomspace(1.0, 0.5 * used.converter.fs_hz, 300)),
+            progress=lambda _msg: None, parallel=parallel)
+        try:
+            comparison = compare_records(recordings, plant=plant,
+                                         trims_s=result.options.trims_s)
+            result = replace(result, comparison=comparison, bode_band=band_job.result())
+        finally:
+            band_job.cancel()
     # Records against each other and against the physical model (ident.crosscheck): a
     # failed one makes the identification untrusted, as a quality warning does.
     crossed = [*cross_checks(result.to_json(), params=used,
@@ -174,8 +182,8 @@ def _identify(recordings: Mapping[str, xr.Dataset], *, bench: Bench, opts: Ident
               parallel: bool) -> Identification:
     """Section 2's steps in order (:mod:`fsmbench.ident.steps`), each on what the ones
     before it found."""
-    run = start_run(recordings, bench=bench, opts=opts, say=say, unusable=unusable)
-    run.parallel = parallel
+    run = start_run(recordings, bench=bench, opts=opts, say=say, unusable=unusable,
+                    parallel=parallel)
     qd = qd_step(run)
     # The noise model needs only the 4QD's gains: fitted in a forked process beside
     # 2.2-2.4 (fsmbench.forked), its warnings raised here when it is taken.

@@ -162,8 +162,9 @@ class StepRun:
 
 
 def start_run(recordings: Mapping[str, xr.Dataset], *, bench: Bench, opts: IdentifyOptions,
-              say: Progress, unusable: Mapping[str, str]) -> StepRun:
-    """The records' rate and their screening against each other: the run the steps share."""
+              say: Progress, unusable: Mapping[str, str], parallel: bool = False) -> StepRun:
+    """The records' rate and their screening against each other: the run the steps share
+    (``parallel``: independent fits within a step side by side, :mod:`fsmbench.forked`)."""
     nom = bench.nominal
     # The records' rate is the bench's (ident.evidence.rate): a bench file that states
     # another is a finding, a record at another rate than the others is named.
@@ -175,7 +176,7 @@ def start_run(recordings: Mapping[str, xr.Dataset], *, bench: Bench, opts: Ident
     # joint delay fits keep its lag apart from the paths' delays.
     run = StepRun(recordings=recordings, bench=bench, nom=nom, opts=opts, say=say,
                   unusable=unusable, sensor=SensorLowpass.from_params(nom),
-                  checks=[*rate.checks])
+                  checks=[*rate.checks], parallel=parallel)
     witness = rate_witness(recordings, fs_hz=conv.fs_hz, step_v=conv.lsb_v)
     # Two witnesses of the real rate in the physics the records carry: the controller the
     # closed-loop records ran, and the coil path's analog corners (ident.evidence).
@@ -201,7 +202,7 @@ def start_run(recordings: Mapping[str, xr.Dataset], *, bench: Bench, opts: Ident
             run.data_failure(name)
             run.seen[name] = [*run.seen[name], wrong_rate]
     screen = screen_recordings(recordings, params=nom, trims_s=opts.trims_s,
-                               failure=run.data_failure)
+                               failure=run.data_failure, parallel=parallel)
     for name, extra in screen.by_experiment.items():
         if name in recordings:
             run.data_failure(name)  # a closed-loop record the signs name: its own checks first

@@ -39,6 +39,7 @@ import scipy.signal
 import xarray as xr
 
 from fsmbench.bench.esrf import esrf_decentralised_zpk
+from fsmbench.forked import start_forked
 
 __all__ = [
     "CLOSED_LOOP_EXPLAINED",
@@ -212,6 +213,15 @@ def esrf_sos(axis: str, fs_hz: float) -> np.ndarray:
     return sos
 
 
+def _fittable(ds: xr.Dataset, *, command: str, reading: str) -> bool:
+    """The record has the command and the reading, of one length, every sample finite."""
+    if command not in ds or reading not in ds:
+        return False
+    u = np.asarray(ds[command].values, dtype=np.float64)
+    y = np.asarray(ds[reading].values, dtype=np.float64)
+    return u.size == y.size and bool(np.all(np.isfinite(u)) and np.all(np.isfinite(y)))
+
+
 @functools.lru_cache(maxsize=2)
 def _polynomial_basis(n: int, fs_hz: float) -> np.ndarray:
     """Orthonormal ``[1, t, t^2]`` over ``n`` samples at ``fs_hz``, shape (n, 3), read-only.
@@ -233,18 +243,56 @@ def _polynomial_basis(n: int, fs_hz: float) -> np.ndarray:
 _FITTED: dict[tuple[Any, ...], ControllerFit] = {}
 
 
+def _fit_key(ds: xr.Dataset, *, record: str, command: str, reading: str, axis: str,
+             fs_hz: float, step_v: float) -> tuple[Any, ...]:
+    return (id(ds), record, command, reading, axis, float(fs_hz), float(step_v))
+
+
+def _keep_fit(ds: xr.Dataset, key: tuple[Any, ...], fit: ControllerFit) -> None:
+    _FITTED[key] = fit
+    weakref.finalize(ds, _FITTED.pop, key, None)
+
+
 def _record_fit(ds: xr.Dataset, *, record: str, command: str, reading: str, axis: str,
                 fs_hz: float, step_v: float) -> ControllerFit:
     """:func:`fit_record` of ``ds``'s ``command`` on its ``reading``, each fit once."""
-    key = (id(ds), record, command, reading, axis, float(fs_hz), float(step_v))
+    key = _fit_key(ds, record=record, command=command, reading=reading, axis=axis,
+                   fs_hz=fs_hz, step_v=step_v)
     fit = _FITTED.get(key)
     if fit is None:
         fit = fit_record(record, np.asarray(ds[command].values, dtype=np.float64),
                          np.asarray(ds[reading].values, dtype=np.float64), axis=axis,
                          fs_hz=fs_hz, step_v=step_v)
-        _FITTED[key] = fit
-        weakref.finalize(ds, _FITTED.pop, key, None)
+        _keep_fit(ds, key, fit)
     return fit
+
+
+def _fit_side_by_side(wanted: list[tuple[xr.Dataset, str, str, str, str]], *, fs_hz: float,
+                      step_v: float) -> None:
+    """Every fit of ``wanted`` (record, name, command, reading, axis) made and kept, about
+    half of those not made yet in a forked process (:mod:`fsmbench.forked`)."""
+    todo = [w for w in wanted if _fit_key(w[0], record=w[1], command=w[2], reading=w[3],
+                                          axis=w[4], fs_hz=fs_hz, step_v=step_v)
+            not in _FITTED]
+    share = todo[1::2]
+
+    def fits(items: list[tuple[xr.Dataset, str, str, str, str]]) -> list[ControllerFit]:
+        return [_record_fit(ds, record=name, command=command, reading=reading, axis=axis,
+                            fs_hz=fs_hz, step_v=step_v)
+                for ds, name, command, reading, axis in items]
+
+    job = start_forked(lambda _say: fits(share), progress=lambda _msg: None,
+                       parallel=len(todo) > 1)
+    try:
+        fits(todo[0::2])
+        done = job.result()
+    finally:
+        job.cancel()
+    for (ds, name, command, reading, axis), fit in zip(share, done, strict=True):
+        key = _fit_key(ds, record=name, command=command, reading=reading, axis=axis,
+                       fs_hz=fs_hz, step_v=step_v)
+        if key not in _FITTED:  # made in the forked process: kept here
+            _keep_fit(ds, key, fit)
 
 
 def fit_record(record: str, u: np.ndarray, y: np.ndarray, *, axis: str, fs_hz: float,
@@ -376,7 +424,7 @@ def closed_loop_in_open_run(ds: xr.Dataset, *, command: str, reading: str, fs_hz
 
 
 def recorded_controllers(recordings: Mapping[str, xr.Dataset], *, fs_hz: float,
-                         step_v: float) -> dict[str, RecordedController]:
+                         step_v: float, parallel: bool = False) -> dict[str, RecordedController]:
     """The controller each axis's closed-loop records ran (see the module notes).
 
     Parameters
@@ -389,24 +437,26 @@ def recorded_controllers(recordings: Mapping[str, xr.Dataset], *, fs_hz: float,
     step_v : float
         One converter step [V] (20 V / 2^16 on the ESRF bench).
 
+    parallel : bool
+        Fit about half of the records in a forked process (:mod:`fsmbench.forked`): the
+        same fits.
+
     Returns
     -------
     dict of axis to RecordedController
         ``"h"`` and ``"v"``, each with its verdict (``absent`` without records).
     """
+    wanted = {axis: [(ds, name, command, reading, axis) for name in CLOSED_LOOP_RECORDS
+                     if (ds := recordings.get(name)) is not None
+                     and _fittable(ds, command=command, reading=reading)]
+              for axis, (command, reading) in _AXES.items()}
+    if parallel:
+        _fit_side_by_side([w for ws in wanted.values() for w in ws], fs_hz=fs_hz,
+                          step_v=step_v)
     out: dict[str, RecordedController] = {}
     for axis, (command, reading) in _AXES.items():
-        fits = []
-        for name in CLOSED_LOOP_RECORDS:
-            ds = recordings.get(name)
-            if ds is None or command not in ds or reading not in ds:
-                continue
-            u = np.asarray(ds[command].values, dtype=np.float64)
-            y = np.asarray(ds[reading].values, dtype=np.float64)
-            if u.size != y.size or not (np.all(np.isfinite(u)) and np.all(np.isfinite(y))):
-                continue
-            fits.append(_record_fit(ds, record=name, command=command, reading=reading,
-                                    axis=axis, fs_hz=fs_hz, step_v=step_v))
+        fits = [_record_fit(ds, record=name, command=command, reading=reading, axis=axis,
+                            fs_hz=fs_hz, step_v=step_v) for ds, name, *_ in wanted[axis]]
         ran = [f for f in fits if f.verdict == "seed"]
         deciding = [f for f in ran if f.steps_rms >= MIN_STEPS] or ran
         if deciding:
