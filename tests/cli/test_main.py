@@ -126,15 +126,13 @@ def test_stage_commands_refuse_a_missing_folder(command: str, tmp_path: Path,
     assert "nope" in capsys.readouterr().err
 
 
-def test_the_distance_target_is_read_in_nanometres_and_checked() -> None:
-    from fsmbench.cli import build_parser
-
-    args = build_parser().parse_args(["study", "--out", "x", "--distance-target", "2.5"])
-    assert args.distance_target_m == pytest.approx(2.5e-9)
-    assert build_parser().parse_args(["study", "--out", "x"]).distance_target_m == 5e-9
-    for bad in ("-1", "0", "inf", "nan", "five"):
-        with pytest.raises(SystemExit):
-            build_parser().parse_args(["study", "--out", "x", "--distance-target", bad])
+@pytest.mark.parametrize("bad", ["-1", "0", "inf", "nan", "five"])
+def test_a_distance_target_that_is_not_a_length_is_refused(
+        bad: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["study", "--out", str(tmp_path / "out"), "--distance-target", bad]) == 2
+    err = capsys.readouterr().err
+    assert "--distance-target" in err and bad in err and "Traceback" not in err
+    assert not (tmp_path / "out").exists()  # refused before anything ran
 
 
 @pytest.mark.parametrize("rate", ["2e4", "nan", "fast"])

@@ -3,36 +3,57 @@ once, the result on stdout and, with ``--json``, as JSON."""
 
 from __future__ import annotations
 
-import argparse
 import ast
+import contextlib
+import io
 import json
+import re
 from pathlib import Path
 
 import pytest
 import scipy.io
 
 import fsmbench
-from fsmbench.cli import build_parser, main
-from fsmbench.cli.commands import COMMANDS
+from fsmbench.cli import main
 
 SRC = Path(fsmbench.__file__).parent
+COMMANDS_DIR = SRC / "cli" / "commands"
 SHARED = ("--params", "--bench", "--seed", "--timestamp", "--out", "--json", "--max-error-urad",
           "--at")
 
 
-def _subparsers() -> dict[str, argparse.ArgumentParser]:
-    parser = build_parser()
-    action = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
-    return dict(action.choices)
+def _help(argv: list[str]) -> str:
+    """What ``fsmbench ARGV --help`` prints, with its exit status 0."""
+    text = io.StringIO()
+    with contextlib.redirect_stdout(text):
+        assert main([*argv, "--help"]) == 0
+    return text.getvalue()
+
+
+def _commands() -> list[str]:
+    """The sub-commands ``fsmbench --help`` lists."""
+    listed = re.search(r"\{([a-z,]+)\}", _help([]))
+    assert listed is not None
+    return listed.group(1).split(",")
+
+
+def _functions(path: Path) -> dict[str, ast.FunctionDef]:
+    tree = ast.parse(path.read_text(encoding="utf-8"))
+    return {n.name: n for n in tree.body if isinstance(n, ast.FunctionDef)}
 
 
 def test_every_command_is_a_module_with_register_and_run() -> None:
-    names = {m.__name__.rsplit(".", 1)[-1] for m in COMMANDS}
-    assert set(_subparsers()) == names  # no command registered another way
-    for module in COMMANDS:
-        assert {"register", "run"} <= set(module.__all__), module.__name__
-        parser = _subparsers()[module.__name__.rsplit(".", 1)[-1]]
-        assert parser.get_default("func") is module.run
+    modules = {p.stem: p for p in COMMANDS_DIR.glob("*.py") if p.stem != "__init__"}
+    assert set(_commands()) == set(modules)  # no command registered another way
+    for name, path in modules.items():
+        functions = _functions(path)
+        assert {"register", "run"} <= set(functions), name
+        # register wires the command to its own run, and nothing else does.
+        wired = [kw.value.id for node in ast.walk(functions["register"])
+                 if isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute)
+                 and node.func.attr == "set_defaults"
+                 for kw in node.keywords if kw.arg == "func" and isinstance(kw.value, ast.Name)]
+        assert wired == ["run"], name
 
 
 def _option_strings_added(path: Path) -> list[str]:
@@ -57,11 +78,10 @@ def test_the_shared_options_are_defined_once() -> None:
     assert {o for o, files in where.items() if files} == set(SHARED) - {"--bench"}
 
 
-@pytest.mark.parametrize("command", sorted(_subparsers()))
+@pytest.mark.parametrize("command", _commands())
 def test_every_command_has_json(command: str) -> None:
     # serve runs until it is stopped: its result is where it serves, said once it does.
-    options = {s for a in _subparsers()[command]._actions for s in a.option_strings}
-    assert "--json" in options
+    assert re.search(r"^\s+--json\b", _help([command]), flags=re.MULTILINE), command
 
 
 def test_simulate_json_lists_the_files_it_wrote(tmp_path: Path,
