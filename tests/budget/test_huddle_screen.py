@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+import scipy.signal
 import xarray as xr
 
 from fsmbench.budget import huddle_screen
@@ -119,3 +120,15 @@ def test_shared_samples_name_the_test_whose_name_they_do_not_fit(
     assert other not in screen.excluded
     if named == "data_huddle_test_1":
         assert "the loop was closed when data_huddle_test_1 was recorded" in copy.advice
+
+
+@pytest.mark.parametrize("n", [2, 3, 40_000])
+def test_the_projection_detrend_is_scipys_linear_detrend(n: int) -> None:
+    rng = np.random.default_rng(n)
+    ramp = np.arange(n) * 3e-4 - 2.0  # a large trend: what there is to remove
+    segments = rng.standard_normal((3, n)) + ramp
+    ours = huddle_screen._linear_detrend(n)(segments)
+    theirs = scipy.signal.detrend(segments, axis=-1, type="linear")
+    # Both remove the least-squares line; they differ in rounding only (a few ulp of the
+    # segment's size, which the residual carries).
+    np.testing.assert_allclose(ours, theirs, rtol=0, atol=1e-13 * np.max(np.abs(segments)))

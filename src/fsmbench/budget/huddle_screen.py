@@ -36,7 +36,8 @@ left out of every comparison (a failed check, attached to the record):
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+import functools
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import Final
 
@@ -107,6 +108,29 @@ def _removed(ds: xr.Dataset, uc_to_vp: np.ndarray) -> dict[str, np.ndarray] | No
     return {"Vph": d[0], "Vpv": d[1]}
 
 
+@functools.lru_cache(maxsize=4)
+def _line(n: int) -> np.ndarray:
+    """The unit vector along a centred ramp of ``n`` samples, read-only."""
+    t = np.arange(n, dtype=float)
+    t -= t.mean()
+    q: np.ndarray = t / np.linalg.norm(t)
+    q.setflags(write=False)
+    return q
+
+
+def _linear_detrend(n: int) -> Callable[[np.ndarray], np.ndarray]:
+    """Each segment less its least-squares line (scipy's ``detrend="linear"``) as a
+    projection on the constant and the centred ramp, which are orthogonal: half the time
+    of scipy's least squares per segment, the same result to a few ulp (2e-15 relative)."""
+    q = _line(n)
+
+    def detrend(seg: np.ndarray) -> np.ndarray:
+        seg = seg - seg.mean(axis=-1, keepdims=True)
+        return seg - (seg @ q)[..., None] * q
+
+    return detrend
+
+
 def _band_power(ds: xr.Dataset, signals: Mapping[str, np.ndarray] | None = None
                 ) -> float | None:
     """Mean PSD of the two 4QD outputs in :data:`_BAND_HZ` [V²/Hz], None if too short."""
@@ -121,7 +145,7 @@ def _band_power(ds: xr.Dataset, signals: Mapping[str, np.ndarray] | None = None
         x = np.asarray(ds[s].values if signals is None else signals[s], dtype=float)
         if x.size < 2 * n:
             return None
-        f, p = scipy.signal.welch(x - x.mean(), fs=fs, nperseg=n, detrend="linear")
+        f, p = scipy.signal.welch(x - x.mean(), fs=fs, nperseg=n, detrend=_linear_detrend(n))
         band = (f >= _BAND_HZ[0]) & (f <= _BAND_HZ[1])
         total.append(float(np.mean(p[band])))
     return float(np.mean(total)) if total else None
