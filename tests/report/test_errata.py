@@ -7,6 +7,8 @@ from pathlib import Path
 from typing import Any
 
 import pytest
+from hypothesis import given
+from hypothesis import strategies as st
 
 from fsmbench.report.errata import cited_errata, link_citations, load_errata
 from fsmbench.report.html import ERRATA_TITLE, Note, Section, render_report
@@ -35,6 +37,19 @@ def test_the_errata_are_one_table_in_the_docs_and_the_package() -> None:
 ])
 def test_citations_are_found_in_the_errata_order(text: str, ids: list[str]) -> None:
     assert cited_errata([text]) == ids
+
+
+@pytest.mark.parametrize("text", [
+    "errata E2", "xerrata E2 errata E3", "errata errata E4", "errata E5errata E6",
+    "_errata E7 (errata E8–E9), errata", "erratum E10 and E11 errata E1 – E2",
+    "errata\nerrata E12", "noerrata E3, errata E1,E2"])
+def test_citations_found_from_each_errat_are_the_regex_s_own(text: str) -> None:
+    """The search starts at each "errat" only: the same matches as the regex scanning
+    every position (word boundaries included)."""
+    from fsmbench.report import errata
+
+    assert ([m.span() for m in errata._citations(text)]
+            == [m.span() for m in errata._CITATION.finditer(text)])
 
 
 def test_each_citation_links_to_its_entry_and_only_cited_entries_are_listed() -> None:
@@ -67,3 +82,14 @@ def test_clicking_a_citation_shows_its_entry(browser: Any, twin_study: StudyResu
     assert row.is_visible() and row.bounding_box()["y"] < 900  # scrolled into view
     assert row.inner_text().startswith(target.removeprefix("#erratum-"))
     pg.close()
+
+
+@given(st.lists(st.sampled_from(["errata", "erratum", " ", "E", "1", "27", ",", "–", "-",
+                                 "and", "x", "_", "\n", "(", "errat"]), max_size=30))
+def test_citations_found_from_each_errat_are_the_regex_s_own_on_any_text(
+        parts: list[str]) -> None:
+    from fsmbench.report import errata
+
+    text = "".join(parts)
+    assert ([m.span() for m in errata._citations(text)]
+            == [m.span() for m in errata._CITATION.finditer(text)])

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import html
 import re
-from collections.abc import Iterable, Mapping
+from collections.abc import Iterable, Iterator, Mapping
 from dataclasses import dataclass
 from functools import cache
 from importlib import resources
@@ -66,10 +66,23 @@ def _expand(ids: str) -> list[str]:
     return out
 
 
+def _citations(text: str) -> Iterator[re.Match[str]]:
+    """``_CITATION.finditer(text)``, found from each "errat" ``str.find`` gives: the regex
+    tried at every position of a 16 MB page took a second, this takes milliseconds."""
+    pos = text.find("errat")
+    while pos != -1:
+        found = _CITATION.match(text, pos)  # its \b still sees the character before pos
+        if found is not None:
+            yield found
+            pos = text.find("errat", found.end())
+        else:
+            pos = text.find("errat", pos + 1)
+
+
 def cited_errata(texts: Iterable[str]) -> list[str]:
     """The ids cited in ``texts``, each once, in the errata's own order."""
     known = load_errata()
-    cited = {e for t in texts for m in _CITATION.finditer(t) for e in _expand(m.group(1))}
+    cited = {e for t in texts for m in _citations(t) for e in _expand(m.group(1))}
     return [e for e in known if e in cited]
 
 
