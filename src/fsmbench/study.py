@@ -23,7 +23,7 @@ import time
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
-from typing import Any
+from typing import Any, Generic, TypeVar
 
 from threadpoolctl import threadpool_limits
 
@@ -335,29 +335,38 @@ def _identification_step(run: _StudyRun, rec: _Recorded, *, bench: Bench,
     return _Identified(ident, bench, plant, identified, simulated)
 
 
+_T = TypeVar("_T")
+
+
 @dataclass(frozen=True, eq=False)
-class _DesignAndValidation:
-    """What the forked process computed: the design, the validation, their times [s]."""
+class _Timed(Generic[_T]):
+    """What a forked process computed, and its own wall time [s]."""
 
-    design: DesignStage
-    validation: ValidationStage
-    seconds: dict[str, float]
+    value: _T
+    seconds: float
 
 
-def _design_and_validation(run: _StudyRun, rec: _Recorded, found: _Identified, *, seed: int,
-                           say: Progress) -> _DesignAndValidation:
-    """Sections 5-10 and the model's check on the recorded loop (neither needs the budget)."""
+def _timed(compute: Callable[[], _T]) -> _Timed[_T]:
     start = time.perf_counter()
-    design = design_stage(bench=found.bench, out_dir=run.out, plant=found.plant, seed=seed,
-                          progress=say, simulated=found.simulated)
-    middle = time.perf_counter()
+    value = compute()
+    return _Timed(value, round(time.perf_counter() - start, 3))
+
+
+def _design(run: _StudyRun, found: _Identified, *, seed: int,
+            say: Progress) -> _Timed[DesignStage]:
+    """Sections 5-10 (they need no budget)."""
+    return _timed(lambda: design_stage(bench=found.bench, out_dir=run.out, plant=found.plant,
+                                       seed=seed, progress=say, simulated=found.simulated))
+
+
+def _validation(run: _StudyRun, rec: _Recorded, found: _Identified, *, seed: int,
+                say: Progress) -> _Timed[ValidationStage]:
+    """The model's check on the recorded loop (it needs neither the design nor the budget)."""
     identified = found.identified
-    validation = validation_stage(
+    return _timed(lambda: validation_stage(
         rec.loaded.recordings, bench=found.bench, simulated=identified.bench,
         plant=None if identified.bench is None else found.plant.plant, out_dir=run.out,
-        seed=seed, progress=say, loop=recorded_loop(found.ident, bench=found.bench))
-    return _DesignAndValidation(design, validation, {
-        "design": round(middle - start, 3), "validation": round(time.perf_counter() - middle, 3)})
+        seed=seed, progress=say, loop=recorded_loop(found.ident, bench=found.bench)))
 
 
 def _later_stages(run: _StudyRun, rec: _Recorded, found: _Identified, *, seed: int,
@@ -366,12 +375,16 @@ def _later_stages(run: _StudyRun, rec: _Recorded, found: _Identified, *, seed: i
     recommends) and the model's check on the recorded loop.
 
     The design and the validation need no budget, and the budget of the records no
-    controller: they run in a forked process (:mod:`fsmbench.forked`) while the budget of
-    the records runs here; then the budget gets the recommended controller's part.
+    controller: each runs in a forked process (:mod:`fsmbench.forked`) while the budget of
+    the records runs here, the three sharing the cores; then the budget gets the
+    recommended controller's part.
     """
     recordings, bench, plant = rec.loaded.recordings, found.bench, found.plant
-    job = start_forked(lambda say: _design_and_validation(run, rec, found, seed=seed, say=say),
-                       progress=run.say, parallel=parallel)
+    design_job = start_forked(lambda say: _design(run, found, seed=seed, say=say),
+                              progress=run.say, parallel=parallel)
+    validation_job = start_forked(
+        lambda say: _validation(run, rec, found, seed=seed, say=say), progress=run.say,
+        parallel=parallel)
     try:
         run.say("noise and error budget, huddle tests, repeatability (ESRF study sections 3, "
                 "4, 11)")
@@ -379,17 +392,19 @@ def _later_stages(run: _StudyRun, rec: _Recorded, found: _Identified, *, seed: i
         # and below the one the verdict recommends (fsmbench's), side by side.
         draft = start_budget(recordings, bench=bench, plant=plant, progress=run.say)
         run.lap("budget")
-        forked = job.result()
+        designed = design_job.result()
+        validated = validation_job.result()
     finally:
-        job.cancel()
+        design_job.cancel()
+        validation_job.cancel()
     # Their own times; what this process waited for them beyond the budget is its own line
     # (run here, the wait was them).
-    if job.forked:
+    if design_job.forked:
         run.lap("design_wait")
     else:
         run.clock = time.perf_counter()
-    run.timings.update(forked.seconds)
-    design, validation = forked.design, forked.validation
+    run.timings.update({"design": designed.seconds, "validation": validated.seconds})
+    design, validation = designed.value, validated.value
     budgeted = finish_budget(draft, bench=bench, out_dir=run.out, plant=plant,
                              progress=run.say,
                              recommended=design.result.controllers["fsmbench_controller"])
