@@ -9,8 +9,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from fsmbench.forked import fork_available
 from fsmbench.report.figures.spec import Figure, Line, Panel
 from fsmbench.report.html import Note, Section, Table, iter_figures, render_report, write_report
+from fsmbench.study import StudyResult
 
 
 def _figure(key: str = "fig8_test") -> Figure:
@@ -75,3 +77,14 @@ def test_table_rows_must_match_the_header() -> None:
 def test_render_is_a_pure_function() -> None:
     sec = _section()
     assert render_report(title="T", sections=[sec]) == render_report(title="T", sections=[sec])
+
+
+@pytest.mark.skipif(not fork_available(), reason="needs fork and two cores")
+def test_figures_encoded_two_by_two_make_the_same_page(twin_study: StudyResult) -> None:
+    """About half of the figures' samples are encoded in a forked process: the page is the
+    one encoded here, byte for byte."""
+    pages = [render_report(title="study", sections=twin_study.sections, summary={"a": 1},
+                           parallel=parallel) for parallel in (False, True)]
+    assert pages[0] == pages[1]
+    assert pages[0].count('type="application/json" id="spec-') == len(
+        list(iter_figures(twin_study.sections)))
