@@ -22,6 +22,7 @@ is taken: the same result, in the order of a serial run.
 from __future__ import annotations
 
 import copyreg
+import importlib
 import io
 import mmap
 import multiprocessing as mp
@@ -37,8 +38,6 @@ from dataclasses import dataclass
 from multiprocessing.connection import Connection
 from pathlib import Path
 from typing import Any, Generic, TypeVar
-
-import control as ct
 
 from fsmbench.progress import Progress
 
@@ -64,15 +63,28 @@ def fork_available() -> bool:
 
 
 def _state_space(a: Any, b: Any, c: Any, d: Any, dt: Any, inputs: list[str],
-                 outputs: list[str], states: list[str], name: str) -> ct.StateSpace:
+                 outputs: list[str], states: list[str], name: str) -> Any:
+    # python-control is loaded by whoever made the system; here only when one comes back
+    # (a core module: the command line's parser imports it and must not load python-control).
+    ct = sys.modules.get("control") or importlib.import_module("control")
     return ct.ss(a, b, c, d, dt, inputs=inputs, outputs=outputs, states=states, name=name)
 
 
-def _reduce_state_space(sys_: ct.StateSpace) -> tuple[Any, tuple[Any, ...]]:
+def _reduce_state_space(sys_: Any) -> tuple[Any, tuple[Any, ...]]:
     # python-control's StateSpace holds two lambdas (its update and output functions):
     # it is rebuilt from its matrices, time step and labels, which is all it is.
     return _state_space, (sys_.A, sys_.B, sys_.C, sys_.D, sys_.dt, list(sys_.input_labels),
                           list(sys_.output_labels), list(sys_.state_labels), sys_.name)
+
+
+def _dispatch_table() -> dict[type, Any]:
+    """copyreg's table, with python-control's StateSpace when it is loaded (without it no
+    system exists to send)."""
+    table: dict[type, Any] = dict(copyreg.dispatch_table)
+    ct = sys.modules.get("control")
+    if ct is not None:
+        table[ct.StateSpace] = _reduce_state_space
+    return table
 
 
 #: Arrays at least this large [bytes] travel beside the pickle, through shared memory.
@@ -93,7 +105,7 @@ def _dumps(value: Any, out_of_band: list[pickle.PickleBuffer] | None = None) -> 
     pickler = pickle.Pickler(buffer, protocol=pickle.HIGHEST_PROTOCOL,
                              buffer_callback=in_band)
     # A dispatch table of this pickler only: no process-wide registration.
-    pickler.dispatch_table = {**copyreg.dispatch_table, ct.StateSpace: _reduce_state_space}
+    pickler.dispatch_table = _dispatch_table()
     pickler.dump(value)
     return buffer.getvalue()
 
