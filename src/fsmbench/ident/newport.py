@@ -38,6 +38,7 @@ peaking, against the FSM-300 datasheet (600 Hz, 250 Hz, ≤ 3 dB).
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field
@@ -376,16 +377,13 @@ def fit_newport_dynamics(frf: FrequencyResponse, *, dac_delay_samples: float = 1
                              f"FRF has {frf.input_names} → {frf.output_names}")
     fs = float(frf.fs_hz)
     sensor = sensor or SensorLowpass()
-
-    def fit(axis: str) -> NewportAxisFit:
-        return _fit_axis(frf, axis, fs=fs, sensor=sensor, resolve_sensor=resolve_sensor)
-
+    fit = functools.partial(_fit_axis, frf, fs=fs, sensor=sensor, resolve_sensor=resolve_sensor)
     # The two joint fits are independent and each most of a second: side by side.
     job = start_forked(lambda _say: fit("v"), progress=lambda _msg: None,
                        parallel=parallel and not fill)
     try:
-        h_fit = fill["h"] if "h" in fill else fit("h")
-        axes = {"h": h_fit, "v": fill["v"] if "v" in fill else job.result()}
+        axes = {"h": fill["h"] if "h" in fill else fit("h"),
+                "v": fill["v"] if "v" in fill else job.result()}
     finally:
         job.cancel()
     converter = ((dac_delay_samples + 0.5) / fs + sensor.group_delay_s

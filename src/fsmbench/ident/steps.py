@@ -133,8 +133,7 @@ class StepRun:
     seen: dict[str, list[Check]] = field(default_factory=dict)
     compression: dict[str, CompressionFactors] = field(default_factory=dict)
     loops: dict[str, RecordedController] = field(default_factory=dict)
-    #: Independent fits within a step may run in a forked process (:mod:`fsmbench.forked`).
-    parallel: bool = False
+    parallel: bool = False  # independent fits of a step side by side (fsmbench.forked)
 
     def missing(self, *names: str) -> list[str]:
         """The named records that are not among the recordings."""

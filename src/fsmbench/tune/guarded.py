@@ -309,7 +309,6 @@ def tune_guarded(*, target: TuneTarget, bench: Bench, running: Controller,
         INVALID), or (KeyboardInterrupt) Ctrl-C: rolled back first, the controller the
         bench is left on in the message; Ctrl-C is raised again after the roll-back.
     """
-
     opts = options or TuneOptions()
     log: list[str] = []
     say = functools.partial(_say, log=log, progress=progress)
