@@ -28,6 +28,7 @@ import mmap
 import multiprocessing as mp
 import os
 import pickle
+import secrets
 import sys
 import threading
 import time
@@ -110,15 +111,16 @@ def _dumps(value: Any, out_of_band: list[pickle.PickleBuffer] | None = None) -> 
     return buffer.getvalue()
 
 
-def _stash_path(pid: int) -> Path:
-    return _SHM / f"fsmbench-forked-{pid}.bin"
+def _stash_path(token: str) -> Path:
+    return _SHM / f"fsmbench-forked-{token}.bin"
 
 
-def _stash(buffers: list[pickle.PickleBuffer]) -> tuple[str, list[tuple[int, int]]] | None:
+def _stash(buffers: list[pickle.PickleBuffer], *,
+           token: str) -> tuple[str, list[tuple[int, int]]] | None:
     """The large buffers written one after the other to a file in shared memory (its path
     and each one's offset and length), or None where there is no room (they go in-band)."""
     total = sum(b.raw().nbytes for b in buffers)
-    path = _stash_path(os.getpid())
+    path = _stash_path(token)
     try:
         room = os.statvfs(_SHM)
         if room.f_bavail * room.f_frsize < 2 * total:
@@ -177,7 +179,7 @@ def _sendable_error(exc: BaseException) -> BaseException:
     return exc
 
 
-def _child(fn: Callable[[Progress], Any], conn: Connection) -> None:
+def _child(fn: Callable[[Progress], Any], conn: Connection, token: str) -> None:
     def say(msg: str) -> None:
         conn.send_bytes(_dumps(("progress", msg)))
 
@@ -196,7 +198,7 @@ def _child(fn: Callable[[Progress], Any], conn: Connection) -> None:
         # moved 150 MB of records in 0.35 s, the mapped file in a tenth of it.
         large: list[pickle.PickleBuffer] = []
         payload = _dumps(outcome, large)
-        where = _stash(large) if large else None
+        where = _stash(large, token=token) if large else None
         if large and where is None:
             payload = _dumps(outcome)
     except Exception as exc:  # a result that cannot travel is an error
@@ -225,7 +227,10 @@ class ForkedCall(Generic[T]):
             return
         ctx = mp.get_context("fork")
         recv, send = ctx.Pipe(duplex=False)
-        self._proc = ctx.Process(target=_child, args=(fn, send), daemon=True,
+        # The shared-memory file's own name: a process id can be another process's by
+        # the time the caller cleans up after a child it stopped.
+        self._token = f"{os.getpid()}-{secrets.token_hex(8)}"
+        self._proc = ctx.Process(target=_child, args=(fn, send, self._token), daemon=True,
                                  name="fsmbench-stage")
         self._proc.start()
         send.close()
@@ -290,7 +295,7 @@ class ForkedCall(Generic[T]):
             self._proc.terminate()
             self._proc.join()
         if self._proc is not None:  # a child stopped between its stash and its message
-            _stash_path(self._proc.pid).unlink(missing_ok=True)
+            _stash_path(self._token).unlink(missing_ok=True)
 
 
 def start_forked(fn: Callable[[Progress], T], *, progress: Progress,
