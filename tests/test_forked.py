@@ -11,6 +11,8 @@ import warnings
 import control as ct
 import numpy as np
 import pytest
+from hypothesis import given
+from hypothesis import strategies as st
 
 from fsmbench import forked
 from fsmbench.forked import ForkedError, fork_available, start_forked
@@ -144,3 +146,18 @@ def test_large_arrays_come_back_whole_and_writable(shared_memory: bool,
         got[key][0] = -1.0  # the caller may change its copy
     after = set(os.listdir("/dev/shm")) if os.path.isdir("/dev/shm") else set()
     assert after <= before  # nothing left behind
+
+
+@given(st.dictionaries(st.integers(0, 50), st.floats(0.0, 1e6), max_size=20))
+def test_the_child_s_share_leaves_the_two_loads_within_one_item(costs: dict[int, float]) -> None:
+    # Largest first, each to the lighter side: the loads never differ by more than the
+    # largest item (the greedy rule's bound), and every item is on one side.
+    share = forked.child_share(costs)
+    assert share <= set(costs)
+    theirs = sum(costs[k] for k in share)
+    mine = sum(v for k, v in costs.items() if k not in share)
+    assert abs(mine - theirs) <= max(costs.values(), default=0.0) * (1 + 1e-12)
+
+
+def test_equal_costs_alternate_the_caller_first() -> None:
+    assert forked.child_share(dict.fromkeys("abcde", 1.0)) == {"b", "d"}

@@ -34,7 +34,7 @@ import threading
 import time
 import traceback
 import warnings
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from multiprocessing.connection import Connection
 from pathlib import Path
@@ -42,9 +42,10 @@ from typing import Any, Generic, TypeVar
 
 from fsmbench.progress import Progress
 
-__all__ = ["ForkedCall", "ForkedError", "fork_available", "start_forked"]
+__all__ = ["ForkedCall", "ForkedError", "child_share", "fork_available", "start_forked"]
 
 T = TypeVar("T")
+K = TypeVar("K")
 
 
 class ForkedError(RuntimeError):
@@ -296,6 +297,20 @@ class ForkedCall(Generic[T]):
             self._proc.join()
         if self._proc is not None:  # a child stopped between its stash and its message
             _stash_path(self._token).unlink(missing_ok=True)
+
+
+def child_share(costs: Mapping[K, float]) -> set[K]:
+    """The items a forked child takes so that it and the caller carry about half the cost
+    each: largest first, each to the lighter side, the caller's on a tie (equal costs
+    alternate, the caller first)."""
+    here, there, share = 0.0, 0.0, set()
+    for key in sorted(costs, key=lambda k: -costs[k]):
+        if there < here:
+            share.add(key)
+            there += costs[key]
+        else:
+            here += costs[key]
+    return share
 
 
 def start_forked(fn: Callable[[Progress], T], *, progress: Progress,

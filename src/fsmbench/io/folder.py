@@ -31,7 +31,7 @@ import h5py
 import xarray as xr
 
 from fsmbench.checks import Check, Notice
-from fsmbench.forked import fork_available, start_forked
+from fsmbench.forked import child_share, fork_available, start_forked
 from fsmbench.io import matfile
 from fsmbench.io.duplicates import compare_files, other_files
 from fsmbench.io.errors import RecordingError, SaturationWarning
@@ -282,24 +282,17 @@ def _read_some(found: Mapping[str, Path], names: Sequence[str], *,
     return out
 
 
-def _child_share(found: Mapping[str, Path]) -> list[str]:
+def _child_share(found: Mapping[str, Path]) -> set[str]:
     """The records a forked process reads: about half of the MAT v5 files' bytes (read
     whole, they travel back pickled in milliseconds; a lazy record holds an open file)."""
-    sizes: dict[str, int] = {}
+    sizes: dict[str, float] = {}
     for name, path in found.items():
         try:
             if detect_format(path) == "mat5":
                 sizes[name] = path.stat().st_size
         except (OSError, RecordingError):
             continue  # read here, where its problem is said
-    here, there, share = 0, 0, []
-    for name in sorted(sizes, key=lambda n: -sizes[n]):
-        if there < here:
-            share.append(name)
-            there += sizes[name]
-        else:
-            here += sizes[name]
-    return share
+    return child_share(sizes)
 
 
 def _read_all(found: Mapping[str, Path], *, progress: Callable[[str], None] | None,
@@ -310,8 +303,8 @@ def _read_all(found: Mapping[str, Path], *, progress: Callable[[str], None] | No
     while this one reads the rest: the same datasets, checks and notices, with each
     record's checks kept for the stages that ask for them again.
     """
-    share = _child_share(found) if parallel and fork_available() else []
-    job = start_forked(lambda say: _read_some(found, share,
+    share = _child_share(found) if parallel and fork_available() else set()
+    job = start_forked(lambda say: _read_some(found, [n for n in found if n in share],
                                               progress=None if progress is None else say,
                                               **options),
                        progress=progress or (lambda _msg: None), parallel=True) if share else None

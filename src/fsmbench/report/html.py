@@ -20,7 +20,7 @@ from pathlib import Path
 from typing import Any
 
 from fsmbench.atomic import atomic_write_text
-from fsmbench.forked import start_forked
+from fsmbench.forked import child_share, start_forked
 from fsmbench.report.errata import cited_errata, errata_appendix, link_citations
 from fsmbench.report.figures.interactive import ZOOM_JS, figure_json, plotly_js
 from fsmbench.report.figures.spec import Figure, Line
@@ -263,13 +263,7 @@ def _points(fig: Figure) -> int:
 def _specs(figures: Sequence[Figure], *, parallel: bool) -> dict[str, _Spec]:
     """Each figure's spec, by key; with ``parallel`` about half of the samples' figures are
     encoded in a forked process (:mod:`fsmbench.forked`): the same text."""
-    here, there, share = 0, 0, set()
-    for fig in sorted(figures, key=_points, reverse=True):
-        if there < here:
-            share.add(fig.key)
-            there += _points(fig)
-        else:
-            here += _points(fig)
+    share = child_share({f.key: _points(f) for f in figures})
     job = start_forked(lambda _say: {f.key: _spec(f) for f in figures if f.key in share},
                        progress=lambda _msg: None, parallel=parallel and bool(share))
     try:

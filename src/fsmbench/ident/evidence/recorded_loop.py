@@ -39,7 +39,7 @@ import scipy.signal
 import xarray as xr
 
 from fsmbench.bench.esrf import esrf_decentralised_zpk
-from fsmbench.forked import start_forked
+from fsmbench.forked import child_share, start_forked
 
 __all__ = [
     "CLOSED_LOOP_EXPLAINED",
@@ -274,7 +274,8 @@ def _fit_side_by_side(wanted: list[tuple[xr.Dataset, str, str, str, str]], *, fs
     todo = [w for w in wanted if _fit_key(w[0], record=w[1], command=w[2], reading=w[3],
                                           axis=w[4], fs_hz=fs_hz, step_v=step_v)
             not in _FITTED]
-    share = todo[1::2]
+    picked = child_share({i: 1.0 for i in range(len(todo))})  # records of one length
+    share = [w for i, w in enumerate(todo) if i in picked]
 
     def fits(items: list[tuple[xr.Dataset, str, str, str, str]]) -> list[ControllerFit]:
         return [_record_fit(ds, record=name, command=command, reading=reading, axis=axis,
@@ -284,7 +285,7 @@ def _fit_side_by_side(wanted: list[tuple[xr.Dataset, str, str, str, str]], *, fs
     job = start_forked(lambda _say: fits(share), progress=lambda _msg: None,
                        parallel=len(todo) > 1)
     try:
-        fits(todo[0::2])
+        fits([w for i, w in enumerate(todo) if i not in picked])
         done = job.result()
     finally:
         job.cancel()
