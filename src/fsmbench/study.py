@@ -276,6 +276,7 @@ def _recordings_step(run: _StudyRun, *, data: Path | None, bench: Bench, seed: i
                      duration_s: float | None, parallel: bool) -> _Recorded:
     """The twin's records simulated and written (no ``data``), then every record read."""
     is_twin = data is None
+    written = None
     if data is None:
         data = run.out / "twin-data"
         run.say(f"simulating the bench with the digital twin, writing its records to {data}")
@@ -284,6 +285,8 @@ def _recordings_step(run: _StudyRun, *, data: Path | None, bench: Bench, seed: i
         run.stages.append(StageStatus("simulate", True,
                                       outputs=tuple(str(p) for p in simulated.files)))
         source = f"digital twin, random seed {seed}"
+        # Read as written: decoding the files just compressed gives the same records.
+        written = simulated.written()
         run.lap("simulate")
     else:
         source = f"recorded data in {data}"
@@ -291,7 +294,7 @@ def _recordings_step(run: _StudyRun, *, data: Path | None, bench: Bench, seed: i
     # The records' rate is judged against each other and then the bench file, by the
     # identification (ident.evidence.rate): the loader does not hold t to the bench file.
     loaded = load_recordings(data, progress=run.say, fs_hz=None, adc_range_v=conv.range_v,
-                             adc_bits=conv.bits, parallel=parallel)
+                             adc_bits=conv.bits, parallel=parallel, written=written)
     run.stages.append(StageStatus("recordings", True, outputs=tuple(loaded.recordings)))
     truth = read_twin_truth(data / "twin_truth.json")
     run.lap("recordings")

@@ -21,6 +21,7 @@ that loops or points nowhere) is named as what it is, not as missing.
 
 from __future__ import annotations
 
+import os
 import warnings
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
@@ -28,6 +29,7 @@ from pathlib import Path
 from typing import Any, Final
 
 import h5py
+import numpy as np
 import xarray as xr
 
 from fsmbench.checks import Check, Notice
@@ -48,7 +50,7 @@ from fsmbench.io.record_checks import (
     carry_checks,
     check_recording,
 )
-from fsmbench.io.recording import find_experiments, read_recording
+from fsmbench.io.recording import find_experiments, read_recording, recording_as_read
 from fsmbench.io.signals import EXPERIMENTS, TIME
 from fsmbench.io.trailing import TrailingBytesWarning, data_end
 
@@ -188,14 +190,19 @@ def _refuse_if_too_large(path: Path, name: str, fmt: str, *, out_of_core: bool) 
 
 
 def _read(path: Path, name: str, *, adc_range_v: float, adc_bits: int,
-          lazy_bytes: int) -> xr.Dataset:
+          lazy_bytes: int, written: Mapping[Path, Mapping[str, np.ndarray]]) -> xr.Dataset:
     """The recording, lazily (Dask) when it is a large HDF5 file (see :data:`LAZY_BYTES`).
 
     Read whole, a record too large to analyse in memory (:data:`IN_MEMORY_FACTOR`) is
-    refused in one line before anything is allocated, with the way to analyse it.
+    refused in one line before anything is allocated, with the way to analyse it. A
+    MAT-file this process wrote (``written``) is taken as read from what was written.
     """
 
     fmt = detect_format(path)
+    wrote = written.get(Path(os.path.abspath(path)))
+    if wrote is not None and fmt in ("mat5", "mat73"):
+        return recording_as_read(path, wrote, experiment=name,
+                                 adc_range_v=adc_range_v, adc_bits=adc_bits)
     try:
         import dask  # noqa: F401
         out_of_core = True
@@ -223,7 +230,7 @@ def _read(path: Path, name: str, *, adc_range_v: float, adc_bits: int,
 
 
 def _read_one(path: Path, name: str, *, fs_hz: float | None, adc_range_v: float,
-              adc_bits: int, lazy_bytes: int
+              adc_bits: int, lazy_bytes: int, written: Mapping[Path, Mapping[str, np.ndarray]]
               ) -> tuple[xr.Dataset, list[Check], list[Notice]]:
     """One experiment's record read and checked: the warnings of reading it as notices,
     other files of the same experiment beside it compared with it (or named in the error)."""
@@ -231,7 +238,7 @@ def _read_one(path: Path, name: str, *, fs_hz: float | None, adc_range_v: float,
 
     def read(p: Path, name: str = name) -> xr.Dataset:
         return _read(p, name, adc_range_v=adc_range_v, adc_bits=adc_bits,
-                     lazy_bytes=lazy_bytes)
+                     lazy_bytes=lazy_bytes, written=written)
 
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
@@ -323,7 +330,9 @@ def _read_all(found: Mapping[str, Path], *, progress: Callable[[str], None] | No
 
 def load_recordings(data_dir: Path, *, fs_hz: float | None = None, adc_range_v: float = 20.0,
                     adc_bits: int = 16, progress: Callable[[str], None] | None = None,
-                    lazy_bytes: int = LAZY_BYTES, parallel: bool = False) -> RecordingSet:
+                    lazy_bytes: int = LAZY_BYTES, parallel: bool = False,
+                    written: Mapping[Path, Mapping[str, np.ndarray]] | None = None
+                    ) -> RecordingSet:
     """Read every seed experiment present in ``data_dir`` and check it.
 
     Parameters
@@ -346,6 +355,12 @@ def load_recordings(data_dir: Path, *, fs_hz: float | None = None, adc_range_v: 
         Read about half of the MAT v5 files in a forked process (:mod:`fsmbench.forked`,
         where ``fork`` exists and there are two cores) while this one reads the rest:
         the same result.
+    written : mapping of Path to mapping of str to numpy.ndarray, optional
+        MAT-files of ``data_dir`` this process has just written, each with the
+        variables written to it (:func:`~fsmbench.io.recording.mat_variables`): taken
+        as read from them, the reader's own checks and notes included, without
+        decoding the files again (:func:`~fsmbench.io.recording.recording_as_read`;
+        the same datasets, tested).
 
     Raises
     ------
@@ -367,7 +382,8 @@ def load_recordings(data_dir: Path, *, fs_hz: float | None = None, adc_range_v: 
     failures: dict[str, RecordingError] = {}
     read = _read_all({name: found[name] for name in EXPERIMENTS if name in found},
                      progress=progress, parallel=parallel, fs_hz=fs_hz,
-                     adc_range_v=adc_range_v, adc_bits=adc_bits, lazy_bytes=lazy_bytes)
+                     adc_range_v=adc_range_v, adc_bits=adc_bits, lazy_bytes=lazy_bytes,
+                     written={Path(os.path.abspath(p)): v for p, v in (written or {}).items()})
     for name in EXPERIMENTS:
         if name not in found:
             skipped[name] = odd.get(name) or f"no {name}.mat (or .h5/.nxs) in {data_dir}" + (

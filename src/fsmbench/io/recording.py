@@ -48,7 +48,9 @@ __all__ = [
     "RecordingFormat",
     "find_experiments",
     "make_recording",
+    "mat_variables",
     "read_recording",
+    "recording_as_read",
     "validate_recording",
     "write_recording",
 ]
@@ -107,7 +109,6 @@ def read_recording(
         Any problem of the file or its content (see :func:`validate_recording`).
     """
     p = Path(path)
-    origin = os.fspath(p)
     fmt = detect_format(p)
     if fmt == "hdf5" and nexus.is_nexus(p):
         return _read_nexus_recording(p, fmt=fmt, experiment=experiment, require=require,
@@ -117,6 +118,57 @@ def read_recording(
     if require is not None:
         needs, req = "the caller", tuple(require)
     raw = load_mat(p, skip_unreadable=True)  # warns of trailing bytes itself
+    return _recording_of(p, raw, fmt=fmt, experiment=experiment, needs=needs, req=req,
+                         adc_range_v=adc_range_v, adc_bits=adc_bits)
+
+
+def recording_as_read(
+    path: str | os.PathLike[str],
+    variables: Mapping[str, np.ndarray],
+    *,
+    experiment: str,
+    adc_range_v: float = 20.0,
+    adc_bits: int = 16,
+) -> xr.Dataset:
+    """The recording :func:`read_recording` gives of a MAT-file this process just wrote,
+    from the variables written, without decoding the file again.
+
+    The reader's own steps run on ``variables`` (required variables, lengths, time
+    base, checks, notes, ``source``), so the result is identical to reading the file
+    back: MAT-files hold float64 columns losslessly (tested).
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The MAT-file (v5/v7 or v7.3) :func:`write_recording` wrote ``variables`` to.
+    variables : mapping of str to numpy.ndarray
+        What was written (:func:`mat_variables`), each shape (N,), float64.
+    experiment : str
+        Experiment name (``"data_uch"`` …).
+    adc_range_v, adc_bits : float, int
+        As :func:`read_recording`.
+
+    Raises
+    ------
+    RecordingError
+        As :func:`read_recording`; also a file that is not a MAT-file.
+    """
+    p = Path(path)
+    fmt = detect_format(p)
+    if fmt not in ("mat5", "mat73"):
+        raise RecordingError(p, f"is a {fmt} file, not the MAT-file its records were "
+                                "written to")
+    needs, req = _default_require(experiment, p.stem)
+    # MATLAB's shapes, as load_mat gives them: N×1 columns.
+    raw = {name: np.asarray(v).reshape(-1, 1) for name, v in variables.items()}
+    return _recording_of(p, raw, fmt=fmt, experiment=experiment, needs=needs, req=req,
+                         adc_range_v=adc_range_v, adc_bits=adc_bits)
+
+
+def _recording_of(p: Path, raw: Mapping[str, Any], *, fmt: str, experiment: str, needs: str,
+                  req: tuple[str, ...], adc_range_v: float, adc_bits: int) -> xr.Dataset:
+    """:func:`read_recording` of a MAT-file once its variables are read (``raw``)."""
+    origin = os.fspath(p)
     _check_required(p, raw, needs=needs, req=req)
     vectors = _sampled_vectors(raw, origin=origin, req=req)
     check_lengths(vectors, origin)
@@ -192,12 +244,12 @@ def _sampled_vectors(raw: Mapping[str, Any], *, origin: str,
             if name in known:
                 raise
             warnings.warn(f"{origin}: variable '{name}' left out: {exc.problem}", UserWarning,
-                          stacklevel=3)
+                          stacklevel=4)
             continue
         if v.size != n and name not in known:
             values = f"{v.size} value{'s' if v.size != 1 else ''}"
             warnings.warn(f"{origin}: variable '{name}' left out: it has {values} and t has "
-                          f"{n}, so it is not sampled on t", UserWarning, stacklevel=3)
+                          f"{n}, so it is not sampled on t", UserWarning, stacklevel=4)
             continue
         vectors[name] = v
     return vectors
@@ -213,7 +265,7 @@ def _validate_mat_recording(ds: xr.Dataset, *, t: np.ndarray, raw_t: Any, origin
     """
     try:
         validate_dataset(ds, origin=origin, require=req, adc_range_v=adc_range_v,
-                         adc_bits=adc_bits, saturation=True, stacklevel=4, base=base)
+                         adc_bits=adc_bits, saturation=True, stacklevel=5, base=base)
     except RecordingError as exc:
         stored = np.asarray(raw_t).dtype
         if exc.variable == TIME and stored.kind == "f" and stored.itemsize < 8:
@@ -265,11 +317,17 @@ def write_recording(
     if format not in ("mat5", "mat73"):
         raise ValueError(f"{dest}: unknown recording format {format!r}; "
                          "use 'mat5', 'mat73' or 'nexus'")
-    variables: dict[str, Any] = {TIME: np.asarray(ds[TIME].values, dtype=np.float64)}
+    return save_mat(dest, mat_variables(ds), version="5" if format == "mat5" else "7.3",
+                    compress=compress, created=created)
+
+
+def mat_variables(ds: xr.Dataset) -> dict[str, np.ndarray]:
+    """The variables :func:`write_recording` stores in a MAT-file: ``t`` [s], then each
+    signal, float64 of shape (N,) (written as N×1 columns)."""
+    variables = {TIME: np.asarray(ds[TIME].values, dtype=np.float64)}
     for name in ds.data_vars:
         variables[str(name)] = np.asarray(ds[name].values, dtype=np.float64)
-    return save_mat(dest, variables, version="5" if format == "mat5" else "7.3",
-                    compress=compress, created=created)
+    return variables
 
 
 def find_experiments(folder: str | os.PathLike[str]) -> dict[str, Path]:

@@ -31,7 +31,12 @@ import xarray as xr
 from fsmbench.atomic import atomic_write_text
 from fsmbench.bench.params import Bench, default_bench
 from fsmbench.excite.files import ExcitationFileError, find_description, read_excitation
-from fsmbench.io.recording import RecordingFormat, make_recording, write_recording
+from fsmbench.io.recording import (
+    RecordingFormat,
+    make_recording,
+    mat_variables,
+    write_recording,
+)
 from fsmbench.io.signals import EXPERIMENTS
 from fsmbench.jsonutil import format_text, stamped
 from fsmbench.progress import advance
@@ -93,6 +98,12 @@ class TwinRun:
     #: The files written as the records were simulated (``simulate_bench(write_dir=...)``):
     #: each record's, then ``twin_truth.json``; empty when nothing was written.
     files: tuple[Path, ...] = field(default=())
+
+    def written(self) -> dict[Path, dict[str, np.ndarray]]:
+        """Each MAT-file written and the variables in it (``load_recordings(written=)``);
+        empty when nothing was written or the files are NeXus archives."""
+        return {path: mat_variables(self.recordings[path.stem]) for path in self.files
+                if path.suffix == ".mat" and path.stem in self.recordings}
 
 
 def simulate_experiment(bench: Bench, spec: ExperimentSpec, *, seed: int,
