@@ -17,6 +17,7 @@ from hypothesis import strategies as st
 
 from fsmbench.bench.blocks import replace_params
 from fsmbench.bench.params import Bench, default_bench, real_bench
+from fsmbench.ident.delay import sampled
 from fsmbench.ident.delay.joint import BOUND_LR, fit_jointly
 from fsmbench.ident.delay.sampled import (
     SensorLowpass,
@@ -89,6 +90,28 @@ def test_a_repeated_pole_takes_the_exact_line_by_line_path() -> None:
                                          damping_ratio=1.0 + 1e-6), f_hz=f, fs_hz=FS,
                             delay_s=3.3e-4)
     np.testing.assert_allclose(crit, near, rtol=1e-5)  # dζ = 1e-6 moves |H| by ~1e-6
+
+
+@settings(max_examples=30, deadline=None)
+@given(st.floats(min_value=0.5, max_value=6.0), st.floats(min_value=300.0, max_value=3000.0))
+def test_a_path_asked_again_answers_from_its_kept_modes(delay_samples: float,
+                                                         natural_freq_hz: float) -> None:
+    """The modes are kept by A's bytes: the second call is the first, bit for bit, and a
+    matrix changed in place afterwards is a new path, not the kept one."""
+    f = np.linspace(1.0, 0.45 * FS, 60)
+    path = second_order(gain=0.3, natural_freq_hz=natural_freq_hz, damping_ratio=0.05)
+    sampled._modes.cache_clear()
+    first = sampled_response(path, f_hz=f, fs_hz=FS, delay_s=delay_samples / FS)
+    again = sampled_response(path, f_hz=f, fs_hz=FS, delay_s=delay_samples / FS)
+    assert sampled._modes.cache_info().hits >= 1
+    np.testing.assert_array_equal(again, first)
+    a, b, c = path
+    a[1, 0] *= 1.5  # the same array object, another resonance
+    moved = sampled_response((a, b, c), f_hz=f, fs_hz=FS, delay_s=delay_samples / FS)
+    sampled._modes.cache_clear()
+    np.testing.assert_array_equal(moved, sampled_response((a, b, c), f_hz=f, fs_hz=FS,
+                                                          delay_s=delay_samples / FS))
+    assert not np.array_equal(moved, first)
 
 
 def test_sensor_group_delay_is_the_low_frequency_phase_slope() -> None:

@@ -17,6 +17,7 @@ sample, ``τ_p = delay_s − T/2``.
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 from typing import Any
@@ -191,11 +192,9 @@ def sampled_response(path: StateSpace3, *, f_hz: FloatArray, fs_hz: float, delay
     frac = min(max(pure / t - whole, 0.0), 1.0)
     theta = 2 * np.pi * np.asarray(f_hz, dtype=float) * t
     z = np.exp(1j * theta)
-    # Balanced first: a series of a mode (numerators ~1e7) and a fast sensor puts
-    # entries 1e15 apart in A, and the eigenvectors' conditioning with them.
-    a_bal, (scale, _) = matrix_balance(a, permute=False, separate=True)
-    lam, vec = np.linalg.eig(a_bal)
-    if np.linalg.cond(vec) < _MAX_EIGENVECTOR_CONDITION:
+    modes = _modes(np.ascontiguousarray(a, dtype=float).tobytes(), a.shape[0])
+    if modes is not None:
+        scale, lam, vec = modes
         b, c = b / scale, c * scale
         # Modal form: Φ, Γ0 and Γ1 are diagonal in closed form and C (zI − Φ)^-1 g
         # at every line is a weighted sum of 1/(z − e^{λT}); no matrix exponential.
@@ -213,6 +212,27 @@ def sampled_response(path: StateSpace3, *, f_hz: FloatArray, fs_hz: float, delay
         lhs = z[:, None, None] * np.eye(a.shape[0])[None] - phi[None]
         h = np.linalg.solve(lhs, g[..., None])[..., 0] @ c
     return np.asarray(h * np.exp(-1j * whole * theta), dtype=np.complex128)
+
+
+@functools.lru_cache(maxsize=256)
+def _modes(a_bytes: bytes, n: int
+           ) -> tuple[FloatArray, NDArray[np.complex128], NDArray[np.complex128]] | None:
+    """The balanced ``A``'s scaling, eigenvalues and eigenvectors, or None when they are
+    too ill-conditioned for the modal form (repeated poles).
+
+    Kept by ``A``'s bytes: a delay's fit asks again for the same path at every delay
+    tried (the same arithmetic on the same matrix, so the same values).
+    """
+    a = np.frombuffer(a_bytes, dtype=float).reshape(n, n)
+    # Balanced first: a series of a mode (numerators ~1e7) and a fast sensor puts
+    # entries 1e15 apart in A, and the eigenvectors' conditioning with them.
+    a_bal, (scale, _) = matrix_balance(a, permute=False, separate=True)
+    lam, vec = np.linalg.eig(a_bal)
+    if not np.linalg.cond(vec) < _MAX_EIGENVECTOR_CONDITION:
+        return None
+    for arr in (scale, lam, vec):
+        arr.flags.writeable = False  # shared by every call with this A
+    return scale, lam, vec
 
 
 def _phi(lam: NDArray[np.complex128], h_s: float) -> NDArray[np.complex128]:
