@@ -9,7 +9,10 @@ from fractions import Fraction
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
+from fsmbench.bench import geometry
 from fsmbench.bench.geometry import (
     angle_error_table,
     beam_path_figure_data,
@@ -333,3 +336,16 @@ def test_seed_formula_needs_nonzero_angle_and_mirror_name_is_checked() -> None:
         esrf_beam_path([0.0, 1e-6], h_m=0.05, l_m=0.05)
     with pytest.raises(ValueError, match="mirror"):
         perpendicular_motion(1e-9, mirror="attocube", h_m=0.05, l_m=0.05)  # type: ignore[arg-type]
+
+
+@settings(max_examples=25, deadline=None)
+@given(st.integers(min_value=1, max_value=3 * geometry._BLOCK + 7),
+       st.sampled_from([(), (2,), (3,)]))
+def test_the_path_error_of_a_record_in_blocks_is_the_whole_expression(
+        n: int, trailing: tuple[int, ...]) -> None:
+    """A long record is evaluated in blocks (cache-sized temporaries): the same arithmetic
+    on every element, so the same bits as one expression, whatever the shape."""
+    theta = 1e-4 * np.random.default_rng(n).standard_normal((n, *trailing))
+    blocks = closed_form_path_error(theta, h_m=0.12, l_m=0.45)
+    assert blocks.shape == theta.shape
+    np.testing.assert_array_equal(blocks, geometry._path_error(theta, 0.12, 0.45))

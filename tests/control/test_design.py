@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from fsmbench.bench.blocks import PlantModel, physical_plant, replace_params
 from fsmbench.bench.params import Bench, PerAxis
@@ -14,6 +16,7 @@ from fsmbench.control.design import (
     design_controller,
     perturb_modes,
     perturbed_plants,
+    phase_travel,
     robustness,
 )
 from fsmbench.control.freq import evaluate_ss
@@ -169,3 +172,25 @@ def test_design_on_the_identified_plant_holds_on_the_truth(identified_plant: Pla
     la = analyse_loop(true_plant, design.controller, objective=objective)
     assert la.stable and la.nyquist.stable
     assert la.meets_objective and la.meets_margins
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.integers(min_value=1, max_value=12), st.integers(min_value=2, max_value=2000),
+       st.integers(min_value=0, max_value=2**32 - 1))
+def test_the_phase_travel_is_unwrap_s_without_the_unwrapped_rows(rows: int, points: int,
+                                                                 seed: int) -> None:
+    """The design counts half-turns of 1 + L from the phase's travel: numpy's unwrap is the
+    reference, on smooth loops (few wraps) and on noise (a wrap at most points)."""
+    rng = np.random.default_rng(seed)
+    w = np.logspace(-2, 4, points)
+    smooth = np.angle(1.0 - rng.uniform(0.1, 1e3, (rows, 1))
+                      / (1j * w / rng.uniform(1.0, 500.0, (rows, 1)) + 1.0) ** 3)
+    noise = np.angle(rng.standard_normal((rows, points))
+                     + 1j * rng.standard_normal((rows, points)))
+    for angle in (smooth, noise):
+        ref = np.unwrap(angle, axis=1)
+        travel = phase_travel(angle)
+        # The same steps summed in another order: round-off of ~points × eps × π.
+        np.testing.assert_allclose(travel, ref[:, -1] - ref[:, 0], rtol=0, atol=1e-11)
+        np.testing.assert_array_equal(np.rint(travel / np.pi),
+                                      np.rint((ref[:, -1] - ref[:, 0]) / np.pi))

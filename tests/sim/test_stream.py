@@ -77,6 +77,26 @@ def test_fixed_blocks_of_100(whole) -> None:
     _same(_stream(closed=closed, excitations=EXCITATIONS).run(N, block=100), reference)
 
 
+@pytest.mark.parametrize("cut", [0, 1234])
+def test_without_the_attocube_every_other_signal_is_the_same(whole, cut: int) -> None:
+    """A record that holds no Va runs the bench without its Attocube: the Attocube reads the
+    loop, never acts on it, and its noises have their own generators."""
+    closed, reference = whole
+    stream = BenchStream(P, seed=7, name="test", plant=PLANT,
+                         controller=_controller() if closed else None,
+                         excitations=EXCITATIONS, distance=False)
+    stream.set_environment(compensation_unit=False, shielding=True)  # nothing to switch
+    blocks = [stream.step(cut), stream.step(N - cut)]
+    without = concatenate_blocks(blocks)
+    assert without.va is None
+    for field in ("dac", "adc", "internal"):
+        np.testing.assert_array_equal(getattr(without, field), getattr(reference, field))
+    for key in reference.noise:
+        np.testing.assert_array_equal(without.noise[key], reference.noise[key])
+    with pytest.raises(KeyError, match="without the Attocube"):
+        without.signal("Va")
+
+
 def test_generic_loop_equals_specialised() -> None:
     a = BenchStream(P, seed=1, name="x", plant=PLANT, controller=_controller(),
                     excitations=EXCITATIONS, specialise=False).step(500)

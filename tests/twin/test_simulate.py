@@ -113,6 +113,8 @@ def test_truth_has_the_contracted_keys_and_derived_values(short_twin: TwinRun,
     for name, realized in truth["realized"].items():
         assert realized["qd_noise_v"]["h"] == pytest.approx(p.quad_diode.noise_rms_v.h,
                                                             rel=0.02), name
+        # The Attocube's parts are realised where the record holds Va, and only there.
+        assert ("va_total" in realized) == ("Va" in EXPERIMENTS[name].required), name
 
 
 def test_too_short_duration_is_refused_with_the_experiments_named() -> None:

@@ -79,7 +79,7 @@ trip (``−√2·δd`` measured); the Newport once at normal incidence: ``−2δ
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Literal
+from typing import Final, Literal
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -375,6 +375,22 @@ def closed_form_path_error(theta_rad: ArrayLike, *, h_m: float, l_m: float) -> F
     h = _check_length("h_m", h_m)
     length = _check_length("l_m", l_m)
     th = np.asarray(theta_rad, dtype=float)
+    if th.size <= _BLOCK:
+        return _path_error(th, h, length)
+    # A record's angles (10^6 samples) in blocks: the expression's dozen temporaries then
+    # stay in the cache, a third faster; every element's arithmetic is the same.
+    flat = th.reshape(-1)
+    out = np.empty_like(flat)
+    for start in range(0, flat.size, _BLOCK):
+        out[start:start + _BLOCK] = _path_error(flat[start:start + _BLOCK], h, length)
+    return out.reshape(th.shape)
+
+
+_BLOCK: Final = 16384  # elements per block of closed_form_path_error (128 kB per temporary)
+
+
+def _path_error(th: FloatArray, h: float, length: float) -> FloatArray:
+    """:func:`closed_form_path_error` of ``th`` [rad] (any shape) for checked H, L [m]."""
     s, c2, c4 = np.sin(2 * th), np.cos(2 * th), np.cos(4 * th)
     sin2 = np.sin(th) ** 2
     legs_tilt = 2 * h * sin2 / c2 + 2 * h * sin2 / ((1 + 2 * s) * c2) + 2 * length * s**2 / c4

@@ -139,7 +139,7 @@ class TwinBackend:
         b = self.stream.step(n)
         signals = {name: b.dac[:, i] for i, name in enumerate(DAC_CHANNELS)}
         signals.update({name: b.adc[:, i] for i, name in enumerate(ADC_CHANNELS)})
-        signals["Va"] = b.va.total_m
+        signals["Va"] = b.signal("Va")  # the live bench's stream runs its Attocube
         return LiveBlock(start_sample=b.start_sample, fs_hz=b.fs_hz, signals=signals,
                          source="twin")
 

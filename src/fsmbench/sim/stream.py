@@ -62,8 +62,9 @@ class BenchBlock:
         ADC readings, :data:`ADC_CHANNELS` order.
     internal : array (n, 6) [rad]
         Noise-free mirror and beam angles, :data:`INTERNAL_SIGNALS` order.
-    va : VaComponents
-        The Attocube's distance and its parts [m].
+    va : VaComponents or None
+        The Attocube's distance and its parts [m]; None from a stream built without
+        the Attocube (``BenchStream(distance=False)``).
     noise : dict of str to array (n, 2)
         The injected noises, h and v columns: ``newport_angle`` [rad],
         ``metrology`` [rad], ``qd`` [V] (white), ``vc`` [V], and
@@ -76,7 +77,7 @@ class BenchBlock:
     dac: np.ndarray
     adc: np.ndarray
     internal: np.ndarray
-    va: VaComponents
+    va: VaComponents | None
     noise: dict[str, np.ndarray]
 
     @property
@@ -97,6 +98,9 @@ class BenchBlock:
         if name in INTERNAL_SIGNALS:
             return self.internal[:, INTERNAL_SIGNALS.index(name)]
         if name == "Va":
+            if self.va is None:
+                raise KeyError("no Va: this bench ran without the Attocube "
+                               "(BenchStream(distance=False))")
             return self.va.total_m
         if name == "t":
             return self.t_s()
@@ -153,13 +157,17 @@ class BenchStream:
         :func:`~fsmbench.sim.plant.twin_discrete` of ``params`` (computed if not given).
     specialise : bool
         Run the loop compiled for this plant (:mod:`fsmbench.sim.codegen`).
+    distance : bool
+        Simulate the Attocube (``Va`` and its parts). False leaves it out (a record
+        that holds no ``Va``): it reads the loop, never acts on it, and its noise
+        sources have their own generators, so every other signal is the same bit for bit.
     """
 
     def __init__(self, params: BenchParams, *, seed: int, name: str,
                  compensation_unit: bool = True, shielding: bool = True,
                  controller: DiscreteController | None = None,
                  excitations: Sequence[Excitation] = (), plant: DiscretePlant | None = None,
-                 specialise: bool = True) -> None:
+                 specialise: bool = True, distance: bool = True) -> None:
         p = params
         self.params = p
         self.seed = seed
@@ -197,7 +205,7 @@ class BenchStream:
         self._gd = np.diag(p.quad_diode.gain_v_per_rad.as_array()).T
         self._attocube = AttocubeStream(p, compensation_unit=compensation_unit,
                                         shielding=shielding, fs_hz=self.fs_hz,
-                                        rng_for=self.rng_for)
+                                        rng_for=self.rng_for) if distance else None
 
     def _qd_disturbances(self, p: BenchParams) -> list[tuple[Any, Any]] | None:
         """The 4QD's 1/f noise, mains and drift streams (h, v), or None when all are off."""
@@ -335,7 +343,9 @@ class BenchStream:
 
     def set_environment(self, *, compensation_unit: bool, shielding: bool) -> None:
         """Switch the Attocube's compensation unit and the beam path's shielding (Table 3)."""
-        self._attocube.set_environment(compensation_unit=compensation_unit, shielding=shielding)
+        if self._attocube is not None:
+            self._attocube.set_environment(compensation_unit=compensation_unit,
+                                           shielding=shielding)
 
     def clear_excitations(self) -> None:
         """Stop every excitation (and reference) from the next sample."""
@@ -461,7 +471,8 @@ class BenchStream:
                                INTERNAL_SIGNALS.index("theta_cv")]]
         theta_n = internal[:, [INTERNAL_SIGNALS.index("theta_nh"),
                                INTERNAL_SIGNALS.index("theta_nv")]] + n_theta
-        va = self._attocube.next(theta_c_rad=theta_c, theta_n_rad=theta_n)
+        va = (None if self._attocube is None
+              else self._attocube.next(theta_c_rad=theta_c, theta_n_rad=theta_n))
         self._k += n
         return BenchBlock(start_sample=k0, fs_hz=self.fs_hz, dac=loop.dac, adc=adc,
                           internal=internal, va=va,
@@ -494,9 +505,9 @@ def concatenate_blocks(blocks: Sequence[BenchBlock]) -> BenchBlock:
     def cat(arrays: list[np.ndarray]) -> np.ndarray:
         return np.concatenate(arrays, axis=0)
 
-    va = VaComponents(**{f: cat([getattr(b.va, f) for b in blocks]) for f in
-                         ("geometric_m", "perpendicular_m", "air_m", "frame_m", "noise_m",
-                          "total_m")})
+    va = None if first.va is None else VaComponents(
+        **{f: cat([getattr(b.va, f) for b in blocks]) for f in
+           ("geometric_m", "perpendicular_m", "air_m", "frame_m", "noise_m", "total_m")})
     return BenchBlock(start_sample=first.start_sample, fs_hz=first.fs_hz,
                       dac=cat([b.dac for b in blocks]), adc=cat([b.adc for b in blocks]),
                       internal=cat([b.internal for b in blocks]), va=va,

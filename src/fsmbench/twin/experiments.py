@@ -30,6 +30,7 @@ import numpy as np
 
 from fsmbench.bench.esrf import esrf_decentralised_controller
 from fsmbench.bench.params import Bench
+from fsmbench.io.signals import EXPERIMENTS
 from fsmbench.io.signals import MIN_DURATION_S as SIGNAL_MIN_DURATION_S
 from fsmbench.sim.controller import feedback_controller
 from fsmbench.sim.discretize import DiscretePlant
@@ -246,6 +247,7 @@ def experiment_stream(bench: Bench, spec: ExperimentSpec, *, seed: int,
     """The twin's bench set up for one experiment (loop, environment, excitations).
 
     ``controller`` closes the loop when ``spec.closed_loop`` (default: :func:`esrf_feedback`).
+    The Attocube is simulated unless the ESRF study's record of that name holds no ``Va``.
     """
     if spec.closed_loop and controller is None:
         controller = esrf_feedback(bench)
@@ -253,4 +255,6 @@ def experiment_stream(bench: Bench, spec: ExperimentSpec, *, seed: int,
                        compensation_unit=spec.compensation_unit, shielding=spec.shielding,
                        controller=controller if spec.closed_loop else None,
                        excitations=spec.excitations,
-                       plant=bench_discrete(bench) if plant is None else plant)
+                       plant=bench_discrete(bench) if plant is None else plant,
+                       distance=spec.name not in EXPERIMENTS
+                       or "Va" in EXPERIMENTS[spec.name].required)

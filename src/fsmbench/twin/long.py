@@ -102,6 +102,8 @@ class _Realized:
             for i, axis in enumerate("hv"):
                 self.moments.setdefault(f"{key}.{axis}", RunningMoments()).add(
                     block.noise[part][:, i])
+        if block.va is None:  # a record without Va: the Attocube did not run
+            return
         for name in ("geometric", "perpendicular", "air", "frame", "noise", "total"):
             self.moments.setdefault(f"va_{name}", RunningMoments()).add(
                 getattr(block.va, f"{name}_m"))
