@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import gc
 import math
 
 import control as ct
@@ -19,6 +20,7 @@ from fsmbench.budget import (
     esrf_welch,
     loop_response,
     propagate,
+    propagation,
     quadratic_distance,
 )
 from fsmbench.budget.propagation import controller_response
@@ -116,6 +118,31 @@ def test_loop_matches_python_control_responses(nominal, plant):
     # The loop rejects at 1 Hz (crossover ~27 Hz). The sign (U = −K R) is checked end to end
     # against the twin's closed loop in test_twin.py.
     assert np.abs(loop.s[0, 0, 0]) < 1e-2
+
+
+def test_a_loop_asked_again_reuses_its_responses_and_lets_them_go(nominal):
+    """The budget asks for the same plant's and controller's responses on the same grid for
+    each configuration: computed once per plant and controller (the same values as a fresh
+    computation), read-only, and dropped with them."""
+    plant = physical_plant(nominal, source="nominal")
+    k = tustin(esrf_decentralised_controller(), ts_s=nominal.converter.ts_s)
+    f = budget_grid(fs_hz=1e4, df_hz=25.0)
+    first = loop_response(plant, params=nominal, f_hz=f, controller=k)
+    again = loop_response(plant, params=nominal, f_hz=f, controller=k)
+    assert again.g_ru.base is first.g_ru.base and again.k is first.k
+    assert not first.k.flags.writeable and not first.g_ru.flags.writeable
+    other_grid = loop_response(plant, params=nominal, f_hz=f[::2], controller=k)
+    np.testing.assert_array_equal(other_grid.k, first.k[::2])  # a new grid, computed anew
+    fresh_plant = physical_plant(nominal, source="nominal")  # equal, but another object
+    fresh = loop_response(fresh_plant, params=nominal, f_hz=f,
+                          controller=tustin(esrf_decentralised_controller(),
+                                            ts_s=nominal.converter.ts_s))
+    for name in ("g_ru", "g_rn", "k", "s", "si"):
+        np.testing.assert_array_equal(getattr(fresh, name), getattr(first, name))
+    held = len(propagation._KEPT)
+    del fresh, fresh_plant
+    gc.collect()
+    assert len(propagation._KEPT) < held  # the other plant's and controller's are gone
 
 
 def test_open_loop_transfers(nominal, plant):
