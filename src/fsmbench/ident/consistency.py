@@ -561,8 +561,8 @@ def _offset_notices(offsets: Mapping[str, Mapping[str, float]], params: BenchPar
 
 
 def screen_recordings(recordings: Mapping[str, xr.Dataset], *, params: BenchParams,
-                      trims_s: Mapping[str, float], failure: Callable[[str], Check | None],
-                      parallel: bool = False) -> Screening:
+                      trims_s: Mapping[str, float],
+                      failure: Callable[[str], Check | None]) -> Screening:
     """Check the identification records against each other and the bench file.
 
     Parameters
@@ -578,8 +578,6 @@ def screen_recordings(recordings: Mapping[str, xr.Dataset], *, params: BenchPara
     failure : callable
         The first failed plausibility check of a record, or None
         (``check_recording``'s): a record that fails one is not read here.
-    parallel : bool
-        Fit the closed-loop records' controllers two by two (:mod:`fsmbench.forked`).
 
     Returns
     -------
@@ -610,8 +608,10 @@ def screen_recordings(recordings: Mapping[str, xr.Dataset], *, params: BenchPara
     pairs += closed_loop_runs(recordings, params)
     judged = {exp: [p for p in signs[exp] if p.verdict != 0] for exp in signs
               if axes[exp].passed}
+    # In this process: forking the four fits cost more than it saved (the copy-on-write of
+    # the caller's heap; docs/architecture.md, Processes).
     loops = recorded_controllers(recordings, fs_hz=params.converter.fs_hz,
-                                 step_v=params.converter.lsb_v, parallel=parallel)
+                                 step_v=params.converter.lsb_v)
     outcome = diagnose_signs([*_path_observations(judged),
                               *rep_observations(recordings, params),
                               *loop_observations(loops, plant)], params=params)

@@ -201,7 +201,7 @@ def start_run(recordings: Mapping[str, xr.Dataset], *, bench: Bench, opts: Ident
             run.data_failure(name)
             run.seen[name] = [*run.seen[name], wrong_rate]
     screen = screen_recordings(recordings, params=nom, trims_s=opts.trims_s,
-                               failure=run.data_failure, parallel=parallel)
+                               failure=run.data_failure)
     for name, extra in screen.by_experiment.items():
         if name in recordings:
             run.data_failure(name)  # a closed-loop record the signs name: its own checks first
