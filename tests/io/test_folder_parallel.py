@@ -67,5 +67,5 @@ def test_the_checks_come_back_with_the_records(twin_folder: Path,
     for name, ds in loaded.recordings.items():
         check_recording(ds, name=name)
     assert made == []
-    share = folder._child_share({n: twin_folder / f"{n}.mat" for n in loaded.recordings})
+    share = folder._child_share({n: twin_folder / f"{n}.mat" for n in loaded.recordings}, {})
     assert share and set(share) < set(loaded.recordings)  # both processes read some

@@ -10,6 +10,7 @@ import pytest
 import xarray as xr
 
 from fsmbench.forked import fork_available
+from fsmbench.io import folder as folder_module
 from fsmbench.io.errors import RecordingError, SaturationWarning
 from fsmbench.io.folder import load_recordings
 from fsmbench.io.recording import (
@@ -56,6 +57,18 @@ def test_what_was_written_is_what_reading_it_gives(
         assert taken.recordings[name].attrs["source"] == str((folder / f"{name}.mat").resolve())
     assert taken.checks == read.checks and taken.notices == read.notices
     assert taken.skipped == read.skipped
+
+
+def test_only_files_to_decode_go_to_a_forked_reader(
+        written_folder: tuple[Path, dict[Path, dict[str, np.ndarray]]]) -> None:
+    """A forked reader is worth its fork for decoding: a record taken from memory stays here
+    (its checks cost less than the fork's copy-on-write)."""
+    _, written = written_folder
+    found = {p.stem: p for p in written}
+    assert folder_module._child_share(found, written) == set()
+    half = dict(list(written.items())[::2])
+    share = folder_module._child_share(found, half)
+    assert share and not share & {p.stem for p in half}
 
 
 def test_a_file_not_written_here_is_read(written_folder: tuple[Path, dict[Path, dict[

@@ -289,11 +289,16 @@ def _read_some(found: Mapping[str, Path], names: Sequence[str], *,
     return out
 
 
-def _child_share(found: Mapping[str, Path]) -> set[str]:
+def _child_share(found: Mapping[str, Path],
+                 written: Mapping[Path, Mapping[str, np.ndarray]]) -> set[str]:
     """The records a forked process reads: about half of the MAT v5 files' bytes (read
-    whole, they travel back pickled in milliseconds; a lazy record holds an open file)."""
+    whole, they travel back pickled in milliseconds; a lazy record holds an open file).
+    A file this process wrote is not decoded (``written``): the fork would cost more
+    than its share of the checks (measured: the same read time, more copy-on-write)."""
     sizes: dict[str, float] = {}
     for name, path in found.items():
+        if Path(os.path.abspath(path)) in written:
+            continue
         try:
             if detect_format(path) == "mat5":
                 sizes[name] = path.stat().st_size
@@ -310,7 +315,8 @@ def _read_all(found: Mapping[str, Path], *, progress: Callable[[str], None] | No
     while this one reads the rest: the same datasets, checks and notices, with each
     record's checks kept for the stages that ask for them again.
     """
-    share = _child_share(found) if parallel and fork_available() else set()
+    share = (_child_share(found, options["written"]) if parallel and fork_available()
+             else set())
     job = start_forked(lambda say: _read_some(found, [n for n in found if n in share],
                                               progress=None if progress is None else say,
                                               **options),
