@@ -500,7 +500,7 @@ def run_study(*, out_dir: str | Path, data_dir: str | Path | None = None,
         chapter 11 lists its draws that break a requirement, and the robustness row names
         a requirement ≥ 5 % of them break.
     parallel : bool
-        Read half the records, run the design and the validation beside the budget, the
+        Decode half of the recorded files, run the design and the validation beside the budget, the
         noise model beside the identification's other steps, the Newport's two fits and
         the report's figures two by two, in forked processes (:mod:`fsmbench.forked`;
         where ``fork`` exists and there are two cores). False runs everything in this

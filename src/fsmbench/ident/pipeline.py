@@ -120,10 +120,10 @@ def identify(recordings: Mapping[str, xr.Dataset], *, bench: Bench,
         Files that were there but could not be read (the loader's reason): a
         step they would feed says so instead of "missing".
     parallel : bool
-        Fit the noise model in a forked process beside the steps 2.2-2.4, and the closed-loop
-        records' controllers, the Newport's two paths, the comparison with the records and
-        the Bode band two by two (:mod:`fsmbench.forked`); False: every step here, one
-        after the other, with the same result.
+        Fit the noise model in a forked process beside the steps 2.2-2.4, and the
+        Newport's two paths, the comparison with the records and the Bode band two by two
+        (:mod:`fsmbench.forked`); False: every step here, one after the other, with the
+        same result.
     """
     with pywarnings.catch_warnings(record=True) as caught:
         pywarnings.simplefilter("always")

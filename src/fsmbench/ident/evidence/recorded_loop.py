@@ -39,7 +39,6 @@ import scipy.signal
 import xarray as xr
 
 from fsmbench.bench.esrf import esrf_decentralised_zpk
-from fsmbench.forked import child_share, start_forked
 
 __all__ = [
     "CLOSED_LOOP_EXPLAINED",
@@ -267,35 +266,6 @@ def _record_fit(ds: xr.Dataset, *, record: str, command: str, reading: str, axis
     return fit
 
 
-def _fit_side_by_side(wanted: list[tuple[xr.Dataset, str, str, str, str]], *, fs_hz: float,
-                      step_v: float) -> None:
-    """Every fit of ``wanted`` (record, name, command, reading, axis) made and kept, about
-    half of those not made yet in a forked process (:mod:`fsmbench.forked`)."""
-    todo = [w for w in wanted if _fit_key(w[0], record=w[1], command=w[2], reading=w[3],
-                                          axis=w[4], fs_hz=fs_hz, step_v=step_v)
-            not in _FITTED]
-    picked = child_share({i: 1.0 for i in range(len(todo))})  # records of one length
-    share = [w for i, w in enumerate(todo) if i in picked]
-
-    def fits(items: list[tuple[xr.Dataset, str, str, str, str]]) -> list[ControllerFit]:
-        return [_record_fit(ds, record=name, command=command, reading=reading, axis=axis,
-                            fs_hz=fs_hz, step_v=step_v)
-                for ds, name, command, reading, axis in items]
-
-    job = start_forked(lambda _say: fits(share), progress=lambda _msg: None,
-                       parallel=len(todo) > 1)
-    try:
-        fits([w for i, w in enumerate(todo) if i not in picked])
-        done = job.result()
-    finally:
-        job.cancel()
-    for (ds, name, command, reading, axis), fit in zip(share, done, strict=True):
-        key = _fit_key(ds, record=name, command=command, reading=reading, axis=axis,
-                       fs_hz=fs_hz, step_v=step_v)
-        if key not in _FITTED:  # made in the forked process: kept here
-            _keep_fit(ds, key, fit)
-
-
 def fit_record(record: str, u: np.ndarray, y: np.ndarray, *, axis: str, fs_hz: float,
                step_v: float) -> ControllerFit:
     k0 = round(SETTLE_S * fs_hz)
@@ -425,7 +395,7 @@ def closed_loop_in_open_run(ds: xr.Dataset, *, command: str, reading: str, fs_hz
 
 
 def recorded_controllers(recordings: Mapping[str, xr.Dataset], *, fs_hz: float,
-                         step_v: float, parallel: bool = False) -> dict[str, RecordedController]:
+                         step_v: float) -> dict[str, RecordedController]:
     """The controller each axis's closed-loop records ran (see the module notes).
 
     Parameters
@@ -438,10 +408,6 @@ def recorded_controllers(recordings: Mapping[str, xr.Dataset], *, fs_hz: float,
     step_v : float
         One converter step [V] (20 V / 2^16 on the ESRF bench).
 
-    parallel : bool
-        Fit about half of the records in a forked process (:mod:`fsmbench.forked`): the
-        same fits.
-
     Returns
     -------
     dict of axis to RecordedController
@@ -451,9 +417,6 @@ def recorded_controllers(recordings: Mapping[str, xr.Dataset], *, fs_hz: float,
                      if (ds := recordings.get(name)) is not None
                      and _fittable(ds, command=command, reading=reading)]
               for axis, (command, reading) in _AXES.items()}
-    if parallel:
-        _fit_side_by_side([w for ws in wanted.values() for w in ws], fs_hz=fs_hz,
-                          step_v=step_v)
     out: dict[str, RecordedController] = {}
     for axis, (command, reading) in _AXES.items():
         fits = [_record_fit(ds, record=name, command=command, reading=reading, axis=axis,
