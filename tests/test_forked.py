@@ -7,6 +7,7 @@ import os
 import threading
 import time
 import warnings
+from pathlib import Path
 
 import control as ct
 import numpy as np
@@ -15,7 +16,7 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from fsmbench import forked
-from fsmbench.forked import ForkedError, fork_available, start_forked
+from fsmbench.forked import ForkedError, fork_available, start_forked, start_forked_series
 from fsmbench.progress import Progress
 
 needs_fork = pytest.mark.skipif(not fork_available(), reason="fork and two cores needed")
@@ -161,3 +162,82 @@ def test_the_child_s_share_leaves_the_two_loads_within_one_item(costs: dict[int,
 
 def test_equal_costs_alternate_the_caller_first() -> None:
     assert forked.child_share(dict.fromkeys("abcde", 1.0)) == {"b", "d"}
+
+
+# --------------------------------------------------------------------------- series
+def _wait_for(path: Path) -> str:
+    for _ in range(3000):  # 30 s at most: a hang would fail the test, not block it
+        if path.exists():
+            return "the caller had the first value"
+        time.sleep(0.01)
+    return "timed out"
+
+
+@needs_fork
+def test_a_series_hands_each_value_over_while_the_next_runs(tmp_path: Path) -> None:
+    """The second computation waits for a file the caller writes only once it holds the
+    first value: the first came back before the second ended, from the same child."""
+    flag = tmp_path / "first-taken"
+    series = start_forked_series([lambda _say: os.getpid(), lambda _say: (
+        os.getpid(), _wait_for(flag))], progress=print)
+    try:
+        first = series.result(0)
+        flag.touch()
+        second = series.result(1)
+    finally:
+        series.cancel()
+    assert series.forked and first != os.getpid()
+    assert second == (first, "the caller had the first value")
+
+
+@pytest.mark.parametrize("parallel", [True, False])
+def test_a_series_after_a_failure_runs_nothing_more(parallel: bool) -> None:
+    ran: list[int] = []  # in the caller only: a child's list is its own
+    series = start_forked_series([_fails, lambda _say: ran.append(1)], progress=print,
+                                 parallel=parallel)
+    with pytest.raises(ValueError, match="Vph is missing"):
+        series.result(0)
+    with pytest.raises(ForkedError, match="computation 1 was not run: computation 0"):
+        series.result(1)
+    assert ran == []
+
+
+@pytest.mark.parametrize("parallel", [True, False])
+def test_a_series_raises_each_computation_s_warnings_with_its_value(parallel: bool) -> None:
+    series = start_forked_series([_warns, lambda _say: 4], progress=print, parallel=parallel)
+    with warnings.catch_warnings(record=True) as second:
+        warnings.simplefilter("always")
+        if not parallel:  # run here, in order: the first one's warning is said now
+            with warnings.catch_warnings(record=True) as first:
+                warnings.simplefilter("always")
+                assert series.result(0) == 3
+            assert series.result(1) == 4
+        else:
+            assert series.result(1) == 4
+            with warnings.catch_warnings(record=True) as first:
+                warnings.simplefilter("always")
+                assert series.result(0) == 3
+    assert [str(w.message) for w in first] == ["ill-conditioned"]
+    assert second == []
+
+
+def test_a_serial_series_runs_each_computation_once_in_order() -> None:
+    calls: list[str] = []
+    series = start_forked_series([lambda _say: calls.append("a") or "a",
+                                  lambda _say: calls.append("b") or "b"], progress=print,
+                                 parallel=False)
+    assert not series.forked and calls == []
+    assert series.result(1) == "b" and calls == ["a", "b"]  # the first ran before it
+    assert series.result(0) == "a" and calls == ["a", "b"]  # and is not run again
+    with pytest.raises(RuntimeError, match="already taken"):
+        series.result(0)
+
+
+@needs_fork
+def test_cancelling_a_series_stops_its_child() -> None:
+    series = start_forked_series([lambda _say: 1, lambda _say: time.sleep(60)],
+                                 progress=print)
+    assert series.result(0) == 1
+    series.cancel()  # the caller failed while the second ran
+    with pytest.raises(ForkedError, match="no result"):
+        series.result(1)

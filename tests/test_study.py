@@ -104,7 +104,7 @@ def test_the_design_beside_the_budget_gives_the_serial_study(twin_study: StudyRe
     which process computed it."""
     out = Path(twin_study.out_dir)
     timings = json.loads((out / "timings.json").read_text())["seconds"]
-    assert ("design_wait" in timings) == fork_available()
+    assert ("design_wait" in timings) == ("validation_wait" in timings) == fork_available()
     serial = run_study(out_dir=tmp_path / "serial", duration_s=5.0, parallel=False)
     assert "design_wait" not in json.loads(
         (Path(serial.out_dir) / "timings.json").read_text())["seconds"]

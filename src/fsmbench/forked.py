@@ -34,7 +34,7 @@ import threading
 import time
 import traceback
 import warnings
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from multiprocessing.connection import Connection
 from pathlib import Path
@@ -42,7 +42,8 @@ from typing import Any, Generic, TypeVar
 
 from fsmbench.progress import Progress
 
-__all__ = ["ForkedCall", "ForkedError", "child_share", "fork_available", "start_forked"]
+__all__ = ["ForkedCall", "ForkedError", "ForkedSeries", "child_share", "fork_available",
+           "start_forked", "start_forked_series"]
 
 T = TypeVar("T")
 K = TypeVar("K")
@@ -180,10 +181,8 @@ def _sendable_error(exc: BaseException) -> BaseException:
     return exc
 
 
-def _child(fn: Callable[[Progress], Any], conn: Connection, token: str) -> None:
-    def say(msg: str) -> None:
-        conn.send_bytes(_dumps(("progress", msg)))
-
+def _run_one(fn: Callable[[Progress], Any], say: Progress) -> tuple[Any, ...]:
+    """``fn``'s outcome: (kind, value or error, warnings, its wall time [s])."""
     start = time.perf_counter()
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")  # every one goes back; the caller's filters decide
@@ -192,7 +191,10 @@ def _child(fn: Callable[[Progress], Any], conn: Connection, token: str) -> None:
         except BaseException as exc:  # Ctrl-C included: the caller decides
             value = ("error", _sendable_error(exc))
     found = [_Caught(str(w.message), w.category, w.filename, w.lineno) for w in caught]
-    outcome = (*value, found, time.perf_counter() - start)
+    return (*value, found, time.perf_counter() - start)
+
+
+def _send_outcome(conn: Connection, outcome: tuple[Any, ...], *, token: str) -> None:
     where = None
     try:
         # Large arrays (a record's samples) beside the pickle, in shared memory: a pipe
@@ -204,10 +206,148 @@ def _child(fn: Callable[[Progress], Any], conn: Connection, token: str) -> None:
             payload = _dumps(outcome)
     except Exception as exc:  # a result that cannot travel is an error
         payload = _dumps(("error", ForkedError(f"the result could not be sent back: {exc}"),
-                          found, time.perf_counter() - start))
+                          outcome[2], outcome[3]))
     conn.send_bytes(_dumps(("outcome", where)))
     conn.send_bytes(payload)
+
+
+def _child(fns: Sequence[Callable[[Progress], Any]], conn: Connection, token: str) -> None:
+    def say(msg: str) -> None:
+        conn.send_bytes(_dumps(("progress", msg)))
+
+    # One after the other, each outcome sent as soon as it is known: the caller takes a
+    # value while the next computation runs. After a failure the rest are not run (as in
+    # the caller, where the exception would have stopped them).
+    for index, fn in enumerate(fns):
+        outcome = _run_one(fn, say)
+        _send_outcome(conn, outcome, token=f"{token}-{index}")
+        if outcome[0] == "error":
+            break
     conn.close()
+
+
+class ForkedSeries:
+    """Computations started by :func:`start_forked_series`, run one after the other in one
+    child; :meth:`result` waits for one of them.
+
+    ``seconds[i]`` is computation ``i``'s own wall time [s] once its result is taken.
+    """
+
+    def __init__(self, fns: Sequence[Callable[[Progress], Any]], *, progress: Progress,
+                 parallel: bool) -> None:
+        self._fns = list(fns)
+        self._progress = progress
+        self.seconds = [0.0] * len(self._fns)
+        self._taken = [False] * len(self._fns)
+        self._outcomes: list[tuple[Any, ...] | None] = [None] * len(self._fns)
+        self._ended = False  # the child's pipe closed: no more outcomes
+        self._arrived = threading.Condition()
+        self._proc: Any = None
+        if not (parallel and fork_available()) or not self._fns:
+            return
+        ctx = mp.get_context("fork")
+        recv, send = ctx.Pipe(duplex=False)
+        # The shared-memory files' own names: a process id can be another process's by
+        # the time the caller cleans up after a child it stopped.
+        self._token = f"{os.getpid()}-{secrets.token_hex(8)}"
+        self._proc = ctx.Process(target=_child, args=(self._fns, send, self._token),
+                                 daemon=True, name="fsmbench-stage")
+        self._proc.start()
+        send.close()
+        self._reader = threading.Thread(target=self._read, args=(recv,), daemon=True,
+                                        name="fsmbench-stage-reader")
+        self._reader.start()
+
+    def _read(self, conn: Connection) -> None:
+        # Progress lines as they come; each outcome in the order of the computations.
+        index = 0
+        try:
+            while index < len(self._fns):
+                message = pickle.loads(conn.recv_bytes())
+                if message[0] == "progress":
+                    self._progress(message[1])
+                    continue
+                payload = conn.recv_bytes()
+                buffers = None if message[1] is None else _unstash(message[1])
+                outcome = pickle.loads(payload, buffers=buffers)
+                with self._arrived:
+                    self._outcomes[index] = outcome
+                    self._arrived.notify_all()
+                index += 1
+        except EOFError:  # the child died without an outcome (killed), or after a failure
+            pass
+        finally:
+            conn.close()
+            with self._arrived:
+                self._ended = True
+                self._arrived.notify_all()
+
+    def _run_here(self, index: int) -> Any:
+        # In the caller: every computation before ``index`` not run yet runs first, in order,
+        # and keeps its value (or error) for its own result.
+        for k in range(index + 1):
+            outcome = self._outcomes[k]
+            if outcome is None:
+                start = time.perf_counter()
+                try:
+                    outcome = ("result", self._fns[k](self._progress))
+                except Exception as exc:
+                    outcome = ("error", exc)
+                self._outcomes[k] = outcome
+                self.seconds[k] = time.perf_counter() - start
+            if outcome[0] == "error" and k < index:
+                raise ForkedError(f"computation {index} was not run: computation {k} "
+                                  "before it failed") from outcome[1]
+        assert outcome is not None  # the loop ran at least once: k = index
+        kind, value = outcome[:2]
+        if kind == "error":
+            raise value
+        return value
+
+    def result(self, index: int) -> Any:
+        """Computation ``index``'s value (its warnings raised here first); its exception if
+        it failed. Where it ran in the caller, it runs now (with those before it)."""
+        if self._taken[index]:
+            raise RuntimeError("the result was already taken")
+        self._taken[index] = True
+        if self._proc is None:
+            return self._run_here(index)
+        with self._arrived:
+            self._arrived.wait_for(lambda: self._outcomes[index] is not None or self._ended)
+            outcome = self._outcomes[index]
+        if outcome is None:
+            self.cancel()
+            earlier = next((k for k, o in enumerate(self._outcomes[:index])
+                            if o is not None and o[0] == "error"), None)
+            raise ForkedError(f"the stage's process ended with status {self._proc.exitcode} "
+                              "and no result" if earlier is None else
+                              f"computation {index} was not run: computation {earlier} "
+                              "before it failed")
+        if all(self._taken) or outcome[0] == "error":
+            self.cancel()
+        kind, value, caught, self.seconds[index] = outcome
+        for w in caught:
+            w.raise_again()
+        if kind == "error":
+            raise value
+        return value
+
+    @property
+    def forked(self) -> bool:
+        """Whether the computations run in a child (False: in the caller, at :meth:`result`)."""
+        return self._proc is not None
+
+    def cancel(self) -> None:
+        """Stop the child if it still runs (the caller failed or was interrupted), or wait
+        for it to end once every result is in."""
+        if self._proc is None:
+            return
+        if self._proc.is_alive() and not all(o is not None for o in self._outcomes):
+            self._proc.terminate()
+        self._proc.join()
+        self._reader.join()
+        for index in range(len(self._fns)):  # a child stopped between its stash and its message
+            _stash_path(f"{self._token}-{index}").unlink(missing_ok=True)
 
 
 class ForkedCall(Generic[T]):
@@ -218,85 +358,27 @@ class ForkedCall(Generic[T]):
 
     def __init__(self, fn: Callable[[Progress], T], *, progress: Progress,
                  parallel: bool) -> None:
-        self._fn = fn
-        self._progress = progress
-        self.seconds = 0.0
-        self._done = False
-        self._proc: Any = None
-        self._outcome: tuple[Any, ...] | None = None
-        if not (parallel and fork_available()):
-            return
-        ctx = mp.get_context("fork")
-        recv, send = ctx.Pipe(duplex=False)
-        # The shared-memory file's own name: a process id can be another process's by
-        # the time the caller cleans up after a child it stopped.
-        self._token = f"{os.getpid()}-{secrets.token_hex(8)}"
-        self._proc = ctx.Process(target=_child, args=(fn, send, self._token), daemon=True,
-                                 name="fsmbench-stage")
-        self._proc.start()
-        send.close()
-        self._reader = threading.Thread(target=self._read, args=(recv,), daemon=True,
-                                        name="fsmbench-stage-reader")
-        self._reader.start()
-
-    def _read(self, conn: Connection) -> None:
-        # Progress lines as they come; the last message is the outcome.
-        try:
-            while True:
-                message = pickle.loads(conn.recv_bytes())
-                if message[0] == "progress":
-                    self._progress(message[1])
-                    continue
-                payload = conn.recv_bytes()
-                buffers = None if message[1] is None else _unstash(message[1])
-                self._outcome = pickle.loads(payload, buffers=buffers)
-                return
-        except EOFError:  # the child died without an outcome (killed)
-            return
-        finally:
-            conn.close()
+        self._series = ForkedSeries([fn], progress=progress, parallel=parallel)
 
     def result(self) -> T:
         """The computation's value (its warnings raised here first); its exception if it
         failed."""
-        if self._proc is None:
-            if self._done:
-                raise RuntimeError("the result was already taken")
-            self._done = True
-            start = time.perf_counter()
-            try:
-                return self._fn(self._progress)
-            finally:
-                self.seconds = time.perf_counter() - start
-        try:
-            self._reader.join()
-            self._proc.join()
-        finally:
-            self.cancel()
-        outcome = self._outcome
-        if outcome is None:
-            raise ForkedError(f"the stage's process ended with status {self._proc.exitcode} "
-                              "and no result")
-        kind, value, caught, self.seconds = outcome
-        for w in caught:
-            w.raise_again()
-        if kind == "error":
-            raise value
-        result: T = value
-        return result
+        value: T = self._series.result(0)
+        return value
+
+    @property
+    def seconds(self) -> float:
+        """The computation's own wall time [s] (0 before its result is taken)."""
+        return self._series.seconds[0]
 
     @property
     def forked(self) -> bool:
         """Whether the computation runs in a child (False: in the caller, at :meth:`result`)."""
-        return self._proc is not None
+        return self._series.forked
 
     def cancel(self) -> None:
         """Stop the child if it still runs (the caller failed or was interrupted)."""
-        if self._proc is not None and self._proc.is_alive():
-            self._proc.terminate()
-            self._proc.join()
-        if self._proc is not None:  # a child stopped between its stash and its message
-            _stash_path(self._token).unlink(missing_ok=True)
+        self._series.cancel()
 
 
 def child_share(costs: Mapping[K, float]) -> set[K]:
@@ -335,3 +417,31 @@ def start_forked(fn: Callable[[Progress], T], *, progress: Progress,
         ``try``/``finally`` that cancels, so that a failure of the caller stops the child.
     """
     return ForkedCall(fn, progress=progress, parallel=parallel)
+
+
+def start_forked_series(fns: Sequence[Callable[[Progress], Any]], *, progress: Progress,
+                        parallel: bool = True) -> ForkedSeries:
+    """Start the computations ``fns`` one after the other in one forked child, and return
+    at once.
+
+    One child for dependent work beside the caller's: the caller takes the first value
+    as soon as it is computed, while the child goes on with the next (one process
+    beside the caller's, where a child per computation would crowd two cores).
+
+    Parameters
+    ----------
+    fns : sequence of callables
+        The computations, each as for :func:`start_forked`; after one fails the rest
+        are not run.
+    progress : callable
+        Receives their progress lines, from a reader thread, as they are said.
+    parallel : bool
+        False runs them in the caller, in order, as their results are taken.
+
+    Returns
+    -------
+    ForkedSeries
+        ``.result(i)`` waits for computation ``i``; ``.cancel()`` stops the child. Use it
+        in a ``try``/``finally`` that cancels.
+    """
+    return ForkedSeries(fns, progress=progress, parallel=parallel)
