@@ -30,6 +30,8 @@ from threadpoolctl import threadpool_limits
 from fsmbench.atomic import atomic_write_text
 from fsmbench.bench.blocks import PlantModel
 from fsmbench.bench.params import Bench, default_bench
+from fsmbench.budget.result import BudgetResult
+from fsmbench.control.validation import ClosedLoopValidation
 from fsmbench.entry import callable_module
 from fsmbench.forked import start_forked_series
 from fsmbench.ident.pipeline import Identification, IdentifyOptions
@@ -39,7 +41,7 @@ from fsmbench.io.signals import EXPERIMENTS
 from fsmbench.io.truth import read_twin_truth
 from fsmbench.jsonutil import plain_json
 from fsmbench.report.figures.static import export_figures
-from fsmbench.report.html import Section, iter_figures, write_report
+from fsmbench.report.html import EncodedFigures, Section, encode_figures, iter_figures, write_report
 from fsmbench.report.sections.bench import bench_section, parameters_appendix
 from fsmbench.report.sections.budget import budget_section
 from fsmbench.report.sections.control import control_sections
@@ -199,17 +201,16 @@ def _loop_blocks_missing(ident: Identification | None) -> str:
             if gone else "")
 
 
-def _sections(*, bench: Bench, loaded: RecordingSet, source: str, is_twin: bool,
+def _chapters(*, bench: Bench, loaded: RecordingSet, source: str, is_twin: bool,
               ident: Identification | None, truth: Mapping[str, Any] | None,
-              budget: Any, design: Any, plant_source: str, validation: Any = None,
-              validation_skipped: str = "",
-              montecarlo: Mapping[str, Any] | None = None) -> list[Section]:
-    """Every chapter in the ESRF study's order (1–11), then the parameters appendix."""
+              budget: BudgetResult, design: DesignStage, plant_source: str) -> list[Section]:
+    """Every chapter in the ESRF study's order (1–11), then the parameters appendix;
+    chapter 11 without the model's check on the recorded loop and the Monte Carlo
+    draws, which :func:`_completed` adds."""
 
     rec = loaded.recordings
     chapter2 = identification_section(ident, recordings=rec, bench=bench, truth=truth,
                                       skipped=loaded.skipped)
-    chapter11 = repeatability_section(budget)
     sections = [
         bench_section(bench, recordings=rec, skipped=loaded.skipped, source=source,
                       is_twin=is_twin),
@@ -219,14 +220,23 @@ def _sections(*, bench: Bench, loaded: RecordingSet, source: str, is_twin: bool,
         budget_section(budget, plant_source=plant_source),
         *control_sections(design.result, twin_check=design.twin_check, skipped=design.skipped,
                           plant_source=plant_source),
-        replace(chapter11, subsections=(*chapter11.subsections, validation_subsection(
-            validation, skipped=validation_skipped),
-            *(() if montecarlo is None else (montecarlo_section(montecarlo),)))),
+        repeatability_section(budget),
         parameters_appendix(bench, is_twin=is_twin),
     ]
     if len(sections) != len(_ANCHORS):
         raise RuntimeError(f"the report has {len(sections)} chapters, expected {len(_ANCHORS)}")
     return [replace(s, anchor=a) for s, a in zip(sections, _ANCHORS, strict=True)]
+
+
+def _completed(chapters: Sequence[Section], *, validation: ClosedLoopValidation | None,
+               validation_skipped: str,
+               montecarlo: Mapping[str, Any] | None) -> list[Section]:
+    """:func:`_chapters` with chapter 11's last parts: the model's check on the recorded
+    loop and the Monte Carlo draws (when given)."""
+    *before, chapter11, appendix = chapters
+    return [*before, replace(chapter11, subsections=(
+        *chapter11.subsections, validation_subsection(validation, skipped=validation_skipped),
+        *(() if montecarlo is None else (montecarlo_section(montecarlo),)))), appendix]
 
 
 @dataclass(eq=False)
@@ -372,17 +382,31 @@ def _validation(run: _StudyRun, rec: _Recorded, found: _Identified, *, seed: int
         seed=seed, progress=say, loop=recorded_loop(found.ident, bench=found.bench)))
 
 
+@dataclass(frozen=True, eq=False)
+class _Later:
+    """The stages after the identification, and the report's chapters drafted from all
+    but the validation (:func:`_chapters`), their figures encoded."""
+
+    design: DesignStage
+    budget: BudgetStage
+    validation: ValidationStage
+    chapters: list[Section]
+    encoded: EncodedFigures
+
+
 def _later_stages(run: _StudyRun, rec: _Recorded, found: _Identified, *, seed: int,
-                  parallel: bool) -> tuple[DesignStage, BudgetStage, ValidationStage]:
+                  parallel: bool) -> _Later:
     """Sections 5-10 (design), 3, 4, 11 (budget, with fsmbench's controller the design
-    recommends) and the model's check on the recorded loop.
+    recommends) and the model's check on the recorded loop; the report's chapters that
+    need no validation.
 
     The design and the validation need no budget, and the budget of the records no
     controller: one forked process (:mod:`fsmbench.forked`) runs the design, then the
     validation, while this one runs the budget of the records; the budget gets the
-    recommended controller's part as soon as the design is done, beside the validation.
-    Two processes on two cores: a third (the design and the validation each in its own)
-    measured 0.7 s slower, the three crowding the cores.
+    recommended controller's part as soon as the design is done, then the report's
+    chapters are drafted, beside the validation. Two processes on two cores: a third
+    (the design and the validation each in its own) measured 0.7 s slower, the three
+    crowding the cores.
     """
     recordings, bench, plant = rec.loaded.recordings, found.bench, found.plant
     later = start_forked_series(
@@ -408,6 +432,13 @@ def _later_stages(run: _StudyRun, rec: _Recorded, found: _Identified, *, seed: i
                                  progress=run.say,
                                  recommended=design.result.controllers["fsmbench_controller"])
         run.lap("budget")
+        run.say("writing the report's chapters")
+        chapters = _chapters(bench=found.bench, loaded=rec.loaded, source=rec.source,
+                             is_twin=rec.is_twin, ident=found.ident, truth=rec.truth,
+                             budget=budgeted.result, design=design,
+                             plant_source=found.plant.source)
+        encoded = encode_figures(chapters)
+        run.lap("report")
         validated: _Timed[ValidationStage] = later.result(1)
         if later.forked:
             run.lap("validation_wait")
@@ -425,7 +456,7 @@ def _later_stages(run: _StudyRun, rec: _Recorded, found: _Identified, *, seed: i
     run.stages.append(StageStatus("validation", validation.result is not None,
                                   outputs=tuple(str(p) for p in validation.files),
                                   reason=validation.skipped or found.identified.reason))
-    return design, budgeted, validation
+    return _Later(design, budgeted, validation, chapters, encoded)
 
 
 def _evidence(rec: _Recorded, found: _Identified, *, design: DesignStage,
@@ -530,29 +561,24 @@ def run_study(*, out_dir: str | Path, data_dir: str | Path | None = None,
                                parallel=parallel)
         found = _identification_step(run, rec, bench=bench, options=identify_options,
                                      parallel=parallel)
-        design, budget, validation = _later_stages(run, rec, found, seed=seed,
-                                                   parallel=parallel)
-        summary = build_summary(_evidence(rec, found, design=design, budget=budget,
-                                          validation=validation, montecarlo=montecarlo),
+        later = _later_stages(run, rec, found, seed=seed, parallel=parallel)
+        summary = build_summary(_evidence(rec, found, design=later.design, budget=later.budget,
+                                          validation=later.validation, montecarlo=montecarlo),
                                 spec=spec)
-        return _write_outputs(run, rec, found, summary=summary, design=design,
-                              budget=budget, validation=validation, figures=figures,
+        return _write_outputs(run, rec, found, summary=summary, later=later, figures=figures,
                               montecarlo=montecarlo, parallel=parallel)
 
 
 def _write_outputs(run: _StudyRun, rec: _Recorded, found: _Identified, *, summary: Summary,
-                   design: DesignStage, budget: BudgetStage, validation: ValidationStage,
-                   figures: Sequence[str], montecarlo: Mapping[str, Any] | None,
+                   later: _Later, figures: Sequence[str], montecarlo: Mapping[str, Any] | None,
                    parallel: bool) -> StudyResult:
     """The report, summary.json, the figures asked for, study.json and timings.json."""
     out, say, source = run.out, run.say, rec.source
     say("writing the report")
-    sections = _sections(bench=found.bench, loaded=rec.loaded, source=source,
-                         is_twin=rec.is_twin, ident=found.ident, truth=rec.truth,
-                         budget=budget.result, design=design, plant_source=found.plant.source,
-                         validation=validation.result,
-                         validation_skipped=validation.skipped or found.identified.reason,
-                         montecarlo=montecarlo)
+    validation = later.validation
+    sections = _completed(later.chapters, validation=validation.result,
+                          validation_skipped=validation.skipped or found.identified.reason,
+                          montecarlo=montecarlo)
     summary_json = summary.to_json()
     report_path = write_report(
         out / "report.html", title="Sercalo test bench study", sections=sections,
@@ -560,7 +586,7 @@ def _write_outputs(run: _StudyRun, rec: _Recorded, found: _Identified, *, summar
         meta=(f"fsmbench {__version__}. Data: {source}. The chapters follow the ESRF Sercalo "
               "test bench study (ESRF, 2020), called \"the ESRF study\" below; its sections, "
               "figures and tables are cited as (ESRF study 2.1), (ESRF study Fig. 8).",),
-        parallel=parallel)
+        parallel=parallel, encoded=later.encoded)
     atomic_write_text(out / "summary.json",
                       json.dumps(summary_json, indent=2, allow_nan=False) + "\n")
     run.lap("report")
@@ -575,7 +601,7 @@ def _write_outputs(run: _StudyRun, rec: _Recorded, found: _Identified, *, summar
                          experiments=tuple(rec.loaded.recordings),
                          skipped_experiments=dict(rec.loaded.skipped), summary=summary,
                          timings_s=run.timings, figures=tuple(str(p) for p in exported),
-                         sections=tuple(sections), design=design, plant=found.plant.plant)
+                         sections=tuple(sections), design=later.design, plant=found.plant.plant)
     atomic_write_text(out / "study.json", json.dumps(plain_json(result.to_json()), indent=2)
                       + "\n")
     atomic_write_text(out / "timings.json", json.dumps(

@@ -25,8 +25,9 @@ from fsmbench.report.errata import cited_errata, errata_appendix, link_citations
 from fsmbench.report.figures.interactive import ZOOM_JS, figure_json, plotly_js
 from fsmbench.report.figures.spec import Figure, Line
 
-__all__ = ["ERRATA_TITLE", "Block", "Note", "Section", "Table", "export_stem", "iter_figures",
-           "render_report", "visible_text", "write_report"]
+__all__ = ["ERRATA_TITLE", "Block", "EncodedFigures", "Note", "Section", "Table",
+           "encode_figures", "export_stem", "iter_figures", "render_report", "visible_text",
+           "write_report"]
 
 #: The errata appendix's title (after the report's own Appendix A).
 ERRATA_TITLE = "Appendix B. Errata of the ESRF study"
@@ -275,6 +276,33 @@ def _specs(figures: Sequence[Figure], *, parallel: bool) -> dict[str, _Spec]:
     return {**mine, **theirs}
 
 
+@dataclass(frozen=True, eq=False)
+class EncodedFigures:
+    """Figures encoded for the page ahead of it (:func:`encode_figures`), each kept with
+    the figure it encodes: :func:`render_report` uses a spec only for that same figure
+    object, and encodes any other."""
+
+    _specs: Mapping[str, tuple[Figure, _Spec]]
+
+    def spec(self, fig: Figure) -> _Spec | None:
+        """``fig``'s spec when it was encoded here (the same object), else None."""
+        hit = self._specs.get(fig.key)
+        return hit[1] if hit is not None and hit[0] is fig else None
+
+
+def encode_figures(sections: Sequence[Section]) -> EncodedFigures:
+    """The figures of ``sections`` encoded as :func:`render_report` embeds them, in this
+    process, for a page whose other parts are not known yet (the study encodes its
+    chapters while its last stage runs elsewhere).
+
+    Parameters
+    ----------
+    sections : sequence of Section
+        Sections that will be on the page, unchanged (their figures, the same objects).
+    """
+    return EncodedFigures({f.key: (f, _spec(f)) for f in _figures(sections)})
+
+
 def _figure(fig: Figure, number: int, out: list[str], spec: _Spec) -> None:
     ref = f" (ESRF study {fig.seed_ref})" if fig.seed_ref else ""
     out.append(f'<figure id="fig-{fig.key}">')
@@ -309,7 +337,7 @@ def _section(sec: Section, level: int, out: list[str], counter: list[int],
 
 def render_report(*, title: str, sections: Sequence[Section], verdict_html: str = "",
                   summary: Mapping[str, Any] | None = None, meta: Sequence[str] = (),
-                  parallel: bool = False) -> str:
+                  parallel: bool = False, encoded: EncodedFigures | None = None) -> str:
     """The whole report as one HTML string.
 
     Parameters
@@ -326,6 +354,9 @@ def render_report(*, title: str, sections: Sequence[Section], verdict_html: str 
     parallel : bool
         Encode about half of the figures in a forked process (:mod:`fsmbench.forked`):
         the same page.
+    encoded : EncodedFigures, optional
+        Figures of ``sections`` already encoded (:func:`encode_figures`): the same page,
+        the others encoded now.
     """
     keys = [f.key for f in _figures(sections)]
     dup = sorted({k for k in keys if keys.count(k) > 1})
@@ -344,7 +375,10 @@ def render_report(*, title: str, sections: Sequence[Section], verdict_html: str 
     out.append(verdict)
     counter = [0]
     body: list[str] = []
-    specs = _specs(list(_figures(sections)), parallel=parallel)
+    ready = {f.key: spec for f in _figures(sections)
+             if encoded is not None and (spec := encoded.spec(f)) is not None}
+    specs = {**ready, **_specs([f for f in _figures(sections) if f.key not in ready],
+                               parallel=parallel)}
     for sec in sections:
         _section(sec, 2, body, counter, specs)
     # The appendix of the errata the report cites (each citation links to its entry).
@@ -369,8 +403,9 @@ def render_report(*, title: str, sections: Sequence[Section], verdict_html: str 
 
 def write_report(path: str | Path, *, title: str, sections: Sequence[Section],
                  verdict_html: str = "", summary: Mapping[str, Any] | None = None,
-                 meta: Sequence[str] = (), parallel: bool = False) -> Path:
+                 meta: Sequence[str] = (), parallel: bool = False,
+                 encoded: EncodedFigures | None = None) -> Path:
     """Render and write the report atomically (see :func:`render_report`); returns its path."""
     return atomic_write_text(Path(path), render_report(
         title=title, sections=sections, verdict_html=verdict_html, summary=summary, meta=meta,
-        parallel=parallel))
+        parallel=parallel, encoded=encoded))
