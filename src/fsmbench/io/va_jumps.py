@@ -53,8 +53,8 @@ from typing import Any, Final
 
 import numpy as np
 import xarray as xr
+from numba import njit
 from numpy.typing import NDArray
-from scipy.ndimage import median_filter
 
 from fsmbench.checks import Check
 
@@ -168,6 +168,75 @@ def _block_scales(r: NDArray[np.float64], steps: NDArray[np.intp], n_steps: int
     return scale
 
 
+@njit(cache=True, nogil=True, inline="always")
+def _median9(a0: float, a1: float, a2: float, a3: float, a4: float, a5: float, a6: float,
+             a7: float, a8: float) -> float:  # pragma: no cover  (compiled)
+    """The median of nine values: a selection network of 19 compare-exchanges (Paeth's,
+    as Devillard's ``opt_med9``); the result is one of the values itself."""
+    a1, a2 = min(a1, a2), max(a1, a2)
+    a4, a5 = min(a4, a5), max(a4, a5)
+    a7, a8 = min(a7, a8), max(a7, a8)
+    a0, a1 = min(a0, a1), max(a0, a1)
+    a3, a4 = min(a3, a4), max(a3, a4)
+    a6, a7 = min(a6, a7), max(a6, a7)
+    a1, a2 = min(a1, a2), max(a1, a2)
+    a4, a5 = min(a4, a5), max(a4, a5)
+    a7, a8 = min(a7, a8), max(a7, a8)
+    a3 = max(a0, a3)
+    a5 = min(a5, a8)
+    a4, a7 = min(a4, a7), max(a4, a7)
+    a6 = max(a3, a6)
+    a4 = max(a1, a4)
+    a2 = min(a2, a5)
+    a4 = min(a4, a7)
+    a4, a2 = min(a4, a2), max(a4, a2)
+    a4 = max(a6, a4)
+    return min(a4, a2)
+
+
+@njit(cache=True, nogil=True)
+def _increment_residuals(x: NDArray[np.float64]
+                         ) -> tuple[NDArray[np.intp], NDArray[np.float64]]:  # pragma: no cover
+    """The non-zero increments' indices ``k`` (``x[k+1] != x[k]``) and their residuals
+    ``r = d − median(d[i−4 … i+4])`` over those increments, the window mirrored at the
+    ends (``scipy.ndimage.median_filter(d, 9, mode="mirror")``, which the tests compare).
+    One pass where numpy's diff, nonzero, take and scipy's rank filter made five."""
+    n = x.size
+    count = 0
+    for k in range(n - 1):
+        if x[k + 1] - x[k] != 0.0:
+            count += 1
+    steps = np.empty(count, dtype=np.intp)
+    d = np.empty(count)
+    m = 0
+    for k in range(n - 1):
+        step = x[k + 1] - x[k]
+        if step != 0.0:
+            steps[m] = k
+            d[m] = step
+            m += 1
+    r = np.empty(count)
+    half = MEDIAN_HALF_WIDTH  # the network is for nine values
+    if count < 2 * half + 1:
+        return steps, r
+    for i in range(count):
+        if half <= i < count - half:
+            med = _median9(d[i - 4], d[i - 3], d[i - 2], d[i - 1], d[i], d[i + 1], d[i + 2],
+                           d[i + 3], d[i + 4])
+        else:  # the ends: indices mirrored about the first and last values (not repeated)
+            w = np.empty(9)
+            for j in range(-half, half + 1):
+                at = i + j
+                if at < 0:
+                    at = -at
+                elif at >= count:
+                    at = 2 * (count - 1) - at
+                w[j + half] = d[at]
+            med = _median9(w[0], w[1], w[2], w[3], w[4], w[5], w[6], w[7], w[8])
+        r[i] = d[i] - med
+    return steps, r
+
+
 @dataclass(frozen=True)
 class _Scanned:
     """One stretch's candidates: its isolated residuals above :data:`JUMP_THRESHOLD`
@@ -194,12 +263,9 @@ def _scan(x: NDArray[np.float64], offset: int, own: tuple[int, int], n_samples: 
     stretch's tail, so a record read whole and in chunks gives the same jumps.
     """
     lo, hi = own
-    d = np.diff(x)
-    steps = np.flatnonzero(d != 0.0)
+    steps, r = _increment_residuals(x)
     if hi <= lo or steps.size < 2 * MEDIAN_HALF_WIDTH + 1:
         return _EMPTY
-    dn = d[steps]
-    r = dn - median_filter(dn, size=2 * MEDIAN_HALF_WIDTH + 1, mode="mirror")
     mine = np.flatnonzero((steps >= lo - offset) & (steps < hi - offset))
     if not mine.size:
         return _EMPTY
