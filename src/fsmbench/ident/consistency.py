@@ -48,6 +48,7 @@ from dataclasses import dataclass, field, replace
 from typing import Final
 
 import numpy as np
+import scipy.fft
 import scipy.signal
 import xarray as xr
 
@@ -287,10 +288,26 @@ def _welch_h1(u: np.ndarray, ys: list[np.ndarray], fs: float
     """Frequencies [Hz], the H1 estimate and γ² of each output (1 s Hann, means removed),
     and the bins the input excites (its PSD within 30 dB of its band median's; a multisine
     on a coarser grid than 1 Hz leaves bins with round-off for input, whose ratio means
-    nothing)."""
+    nothing).
+
+    scipy's ``welch`` and ``csd`` (periodic Hann, half overlap, each segment less its
+    mean, one-sided density), every segment of every signal in one FFT: scipy detrends
+    and transforms them one by one (0.21 s against 0.03 s for the six Sercalo and Newport
+    runs; the tests compare the two to 1e-12).
+    """
     n = min(round(fs), u.size // 2)
-    kw = {"fs": fs, "window": "hann", "nperseg": n, "noverlap": n // 2, "detrend": "constant"}
-    f, puu = scipy.signal.welch(u, **kw)
+    window = scipy.signal.get_window("hann", n)
+    hop = n - n // 2
+    signals = np.stack([u, *ys])
+    segments = np.lib.stride_tricks.sliding_window_view(signals, n, axis=1)[:, ::hop]
+    spectra = scipy.fft.rfft((segments - segments.mean(axis=-1, keepdims=True)) * window,
+                             axis=-1)  # (signal, segment, bin)
+    scale = np.full(spectra.shape[-1], 2.0 / (fs * float(np.sum(window**2))))
+    scale[0] /= 2.0
+    if n % 2 == 0:
+        scale[-1] /= 2.0
+    f = scipy.fft.rfftfreq(n, 1.0 / fs)
+    puu = np.mean(spectra[0].real ** 2 + spectra[0].imag ** 2, axis=0) * scale
     band = (f >= SIGN_BAND_HZ[0]) & (f <= SIGN_BAND_HZ[1])
     typical = float(np.median(puu[band])) if band.any() else 0.0
     top = float(np.max(puu[band])) if band.any() else 0.0
@@ -298,9 +315,9 @@ def _welch_h1(u: np.ndarray, ys: list[np.ndarray], fs: float
     excited = puu > _EXCITED_OF_TOP * max(typical, top * _EXCITED_OF_TOP)
     puu = np.where(puu > 0, puu, np.inf)
     h, coh = [], []
-    for y in ys:
-        _, puy = scipy.signal.csd(u, y, **kw)
-        _, pyy = scipy.signal.welch(y, **kw)
+    for y in spectra[1:]:
+        puy = np.mean(spectra[0].conj() * y, axis=0) * scale
+        pyy = np.mean(y.real ** 2 + y.imag ** 2, axis=0) * scale
         h.append(puy / puu)
         coh.append(np.abs(puy) ** 2 / (puu * np.where(pyy > 0, pyy, np.inf)))
     return f, h, coh, excited
