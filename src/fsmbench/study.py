@@ -30,8 +30,6 @@ from threadpoolctl import threadpool_limits
 from fsmbench.atomic import atomic_write_text
 from fsmbench.bench.blocks import PlantModel
 from fsmbench.bench.params import Bench, default_bench
-from fsmbench.budget.result import BudgetResult
-from fsmbench.control.validation import ClosedLoopValidation
 from fsmbench.entry import callable_module
 from fsmbench.forked import start_forked_series
 from fsmbench.ident.pipeline import Identification, IdentifyOptions
@@ -42,15 +40,7 @@ from fsmbench.io.truth import read_twin_truth
 from fsmbench.jsonutil import plain_json
 from fsmbench.report.figures.static import export_figures
 from fsmbench.report.html import EncodedFigures, Section, encode_figures, iter_figures, write_report
-from fsmbench.report.sections.bench import bench_section, parameters_appendix
-from fsmbench.report.sections.budget import budget_section
-from fsmbench.report.sections.control import control_sections
-from fsmbench.report.sections.huddle import huddle_section
-from fsmbench.report.sections.ident import identification_section
-from fsmbench.report.sections.montecarlo import montecarlo_section
-from fsmbench.report.sections.noise import noise_subsection
-from fsmbench.report.sections.repeatability import repeatability_section
-from fsmbench.report.sections.validation import validation_subsection
+from fsmbench.report.sections.study import study_chapters, with_recorded_loop_check
 from fsmbench.report.summary import (
     PartSkipped,
     Specification,
@@ -84,12 +74,6 @@ __all__ = ["FIGURE_FORMATS", "StageStatus", "StudyResult", "run_study"]
 Progress = Callable[[str], None]
 FIGURE_FORMATS = ("png", "pdf")
 STUDY_FORMAT = ("fsmbench.study", 1)
-
-# Each chapter's anchor: the summary links to them.
-_ANCHORS = ("bench", "identification", "huddle-test", "error-budget", "plant-uncertainty",
-            "plant-scaling", "plant-analysis", "active-damping", "decentralised-control",
-            "newport-control", "non-repeatability", "parameters")
-
 
 @dataclass(frozen=True)
 class StageStatus:
@@ -199,44 +183,6 @@ def _loop_blocks_missing(ident: Identification | None) -> str:
             if ident.plant_blocks.get(block) != "identified"]
     return ("identified " + ", ".join(gone) + " (the plant used the bench file's)"
             if gone else "")
-
-
-def _chapters(*, bench: Bench, loaded: RecordingSet, source: str, is_twin: bool,
-              ident: Identification | None, truth: Mapping[str, Any] | None,
-              budget: BudgetResult, design: DesignStage, plant_source: str) -> list[Section]:
-    """Every chapter in the ESRF study's order (1–11), then the parameters appendix;
-    chapter 11 without the model's check on the recorded loop and the Monte Carlo
-    draws, which :func:`_completed` adds."""
-
-    rec = loaded.recordings
-    chapter2 = identification_section(ident, recordings=rec, bench=bench, truth=truth,
-                                      skipped=loaded.skipped)
-    sections = [
-        bench_section(bench, recordings=rec, skipped=loaded.skipped, source=source,
-                      is_twin=is_twin),
-        replace(chapter2, subsections=(*chapter2.subsections, noise_subsection(
-            None if ident is None else ident.noise_model))),
-        huddle_section(budget, recordings=rec),
-        budget_section(budget, plant_source=plant_source),
-        *control_sections(design.result, twin_check=design.twin_check, skipped=design.skipped,
-                          plant_source=plant_source),
-        repeatability_section(budget),
-        parameters_appendix(bench, is_twin=is_twin),
-    ]
-    if len(sections) != len(_ANCHORS):
-        raise RuntimeError(f"the report has {len(sections)} chapters, expected {len(_ANCHORS)}")
-    return [replace(s, anchor=a) for s, a in zip(sections, _ANCHORS, strict=True)]
-
-
-def _completed(chapters: Sequence[Section], *, validation: ClosedLoopValidation | None,
-               validation_skipped: str,
-               montecarlo: Mapping[str, Any] | None) -> list[Section]:
-    """:func:`_chapters` with chapter 11's last parts: the model's check on the recorded
-    loop and the Monte Carlo draws (when given)."""
-    *before, chapter11, appendix = chapters
-    return [*before, replace(chapter11, subsections=(
-        *chapter11.subsections, validation_subsection(validation, skipped=validation_skipped),
-        *(() if montecarlo is None else (montecarlo_section(montecarlo),)))), appendix]
 
 
 @dataclass(eq=False)
@@ -385,7 +331,8 @@ def _validation(run: _StudyRun, rec: _Recorded, found: _Identified, *, seed: int
 @dataclass(frozen=True, eq=False)
 class _Later:
     """The stages after the identification, and the report's chapters drafted from all
-    but the validation (:func:`_chapters`), their figures encoded."""
+    but the validation (:func:`~fsmbench.report.sections.study.study_chapters`), their
+    figures encoded."""
 
     design: DesignStage
     budget: BudgetStage
@@ -433,10 +380,11 @@ def _later_stages(run: _StudyRun, rec: _Recorded, found: _Identified, *, seed: i
                                  recommended=design.result.controllers["fsmbench_controller"])
         run.lap("budget")
         run.say("writing the report's chapters")
-        chapters = _chapters(bench=found.bench, loaded=rec.loaded, source=rec.source,
-                             is_twin=rec.is_twin, ident=found.ident, truth=rec.truth,
-                             budget=budgeted.result, design=design,
-                             plant_source=found.plant.source)
+        chapters = study_chapters(
+            bench=found.bench, recordings=rec.loaded.recordings, skipped=rec.loaded.skipped,
+            source=rec.source, is_twin=rec.is_twin, ident=found.ident, truth=rec.truth,
+            budget=budgeted.result, design=design.result, twin_check=design.twin_check,
+            design_skipped=design.skipped, plant_source=found.plant.source)
         encoded = encode_figures(chapters)
         run.lap("report")
         validated: _Timed[ValidationStage] = later.result(1)
@@ -576,9 +524,9 @@ def _write_outputs(run: _StudyRun, rec: _Recorded, found: _Identified, *, summar
     out, say, source = run.out, run.say, rec.source
     say("writing the report")
     validation = later.validation
-    sections = _completed(later.chapters, validation=validation.result,
-                          validation_skipped=validation.skipped or found.identified.reason,
-                          montecarlo=montecarlo)
+    sections = with_recorded_loop_check(
+        later.chapters, validation=validation.result,
+        skipped=validation.skipped or found.identified.reason, montecarlo=montecarlo)
     summary_json = summary.to_json()
     report_path = write_report(
         out / "report.html", title="Sercalo test bench study", sections=sections,

@@ -11,7 +11,15 @@ import pytest
 
 from fsmbench.forked import fork_available
 from fsmbench.report.figures.spec import Figure, Line, Panel
-from fsmbench.report.html import Note, Section, Table, iter_figures, render_report, write_report
+from fsmbench.report.html import (
+    Note,
+    Section,
+    Table,
+    encode_figures,
+    iter_figures,
+    render_report,
+    write_report,
+)
 from fsmbench.study import StudyResult
 
 
@@ -88,3 +96,20 @@ def test_figures_encoded_two_by_two_make_the_same_page(twin_study: StudyResult) 
     assert pages[0] == pages[1]
     assert pages[0].count('type="application/json" id="spec-') == len(
         list(iter_figures(twin_study.sections)))
+
+
+def test_figures_encoded_ahead_make_the_same_page() -> None:
+    """The study encodes its chapters while its last stage runs, then adds one: the page
+    is the one encoded at once, and a figure that is not the object encoded (the same key,
+    other data) is encoded anew, never given another's spec."""
+    first, later = _section(), Section(title="Later", blocks=(_figure("fig10_later"),))
+    ahead = encode_figures([first])
+    whole = render_report(title="T", sections=[first, later])
+    assert render_report(title="T", sections=[first, later], encoded=ahead) == whole
+    changed = Figure(key="fig8_test", title="A <figure>", caption="x & y", seed_ref="Fig. 8",
+                     panels=(Panel(traces=(Line(np.arange(3.0), np.arange(3.0) + 1.0,
+                                                name="a</script>"),),
+                                   x_label="Time [s]", y_label="Vph [V]"),))
+    other = Section(title=first.title, blocks=(changed,))
+    assert (render_report(title="T", sections=[other], encoded=ahead)
+            == render_report(title="T", sections=[other]))
