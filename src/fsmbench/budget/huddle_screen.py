@@ -190,10 +190,19 @@ def screen_huddles(recordings: Mapping[str, xr.Dataset], *, fs_hz: float, step_v
             checks.append(judged)
             if not judged.passed:
                 excluded[name] = judged.sentence()
+    # Each record's band power once: the injection and the open-loop checks both read
+    # the open-loop tests' (six Welch estimates of a 100 s record, 0.12 s).
+    powers: dict[str, float | None] = {}
+
+    def band_power(name: str) -> float | None:
+        if name not in powers:
+            powers[name] = _band_power(recordings[name])
+        return powers[name]
+
     closed_power = [p for n in _CLOSED if n in recordings and n not in excluded
-                    and (p := _band_power(recordings[n])) is not None]
+                    and (p := band_power(n)) is not None]
     notes: list[str] = []
-    injection = _injection(recordings, excluded, uc_to_vp)
+    injection = _injection(recordings, excluded, uc_to_vp, band_power=band_power)
     if closed_power and injection is not None and injection >= MAX_INJECTION:
         notes.append(
             f"open-loop huddle tests not checked for a loop left closed: in "
@@ -207,7 +216,7 @@ def screen_huddles(recordings: Mapping[str, xr.Dataset], *, fs_hz: float, step_v
         for name in _OPEN:
             if name not in recordings or name in excluded:
                 continue
-            power = _band_power(recordings[name])
+            power = band_power(name)
             if power is None or reference <= 0:
                 continue
             check = _open_loop_check(name, power / reference)
@@ -325,11 +334,12 @@ def _commands_zero(ds: xr.Dataset) -> bool:
 
 
 def _injection(recordings: Mapping[str, xr.Dataset], excluded: Mapping[str, str],
-               uc_to_vp: np.ndarray | None) -> float | None:
+               uc_to_vp: np.ndarray | None, *,
+               band_power: Callable[[str], float | None]) -> float | None:
     """What the closed-loop tests' loop faced over the largest open-loop test, in the band.
 
     The largest open test: one recorded with the loop closed among them does not hide
-    the others.
+    the others. ``band_power``: a record's :func:`_band_power`, by name.
     """
     if uc_to_vp is None:
         return None
@@ -342,7 +352,7 @@ def _injection(recordings: Mapping[str, xr.Dataset], excluded: Mapping[str, str]
         if power is not None:
             faced.append(power)
     opened = [p for n in _OPEN if n in recordings and n not in excluded
-              and (p := _band_power(recordings[n])) is not None and p > 0]
+              and (p := band_power(n)) is not None and p > 0]
     if not faced or not opened:
         return None
     return float(np.median(faced)) / max(opened)

@@ -20,7 +20,7 @@ from __future__ import annotations
 import json
 import os
 from collections.abc import Callable, Mapping, Sequence
-from concurrent.futures import ThreadPoolExecutor
+from concurrent.futures import ThreadPoolExecutor, as_completed
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
@@ -258,12 +258,17 @@ def simulate_bench(bench: Bench | None = None, *, seed: int = 0, duration_s: flo
     # number of threads.
     specialised_kernel(plant)  # load (or build) the loop once, before the threads use it
     with ThreadPoolExecutor(max_workers=max(1, min(len(specs), os.cpu_count() or 1))) as pool:
-        futures = [pool.submit(one, spec) for spec in specs]
-        results = []
-        for i, (spec, future) in enumerate(zip(specs, futures, strict=True), start=1):
-            results.append(future.result())
+        # Longest first: the last ones to end are short, so no thread idles long at the end
+        # while the other finishes a 100 s record.
+        futures = {pool.submit(one, spec): spec for spec in sorted(
+            specs, key=lambda s: -s.duration_s)}
+        for i, future in enumerate(as_completed(futures), start=1):
+            spec = futures[future]
+            future.result()  # its exception now, and the pool stops at the block's end
             advance(progress, "simulating the experiments", i, len(specs), "experiments",
                     line=f"[{i}/{len(specs)}] simulated {spec.name} ({spec.duration_s:g} s)")
+        by_name = {futures[f].name: f.result() for f in futures}
+    results = [by_name[s.name] for s in specs]
     recordings: dict[str, xr.Dataset] = {s.name: r.recording for s, r in zip(specs, results,
                                                                              strict=True)}
     realized: dict[str, dict[str, float]] = {s.name: r.realized for s, r in zip(specs, results,
