@@ -202,6 +202,15 @@ def test_a_series_after_a_failure_runs_nothing_more(parallel: bool) -> None:
     assert ran == []
 
 
+@needs_fork
+def test_a_series_stops_when_a_value_cannot_travel() -> None:
+    series = start_forked_series([lambda _say: (lambda: None), lambda _say: 2], progress=print)
+    with pytest.raises(ForkedError, match="could not be sent back"):
+        series.result(0)
+    with pytest.raises(ForkedError, match="computation 1 was not run: computation 0"):
+        series.result(1)
+
+
 @pytest.mark.parametrize("parallel", [True, False])
 def test_a_series_raises_each_computation_s_warnings_with_its_value(parallel: bool) -> None:
     series = start_forked_series([_warns, lambda _say: 4], progress=print, parallel=parallel)

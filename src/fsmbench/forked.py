@@ -194,7 +194,10 @@ def _run_one(fn: Callable[[Progress], Any], say: Progress) -> tuple[Any, ...]:
     return (*value, found, time.perf_counter() - start)
 
 
-def _send_outcome(conn: Connection, outcome: tuple[Any, ...], *, token: str) -> None:
+def _send_outcome(conn: Connection, outcome: tuple[Any, ...], *, token: str) -> bool:
+    """Send ``outcome`` (:func:`_run_one`'s); True when what was sent is an error (the
+    computation's own, or a value that could not travel)."""
+    failed = outcome[0] == "error"
     where = None
     try:
         # Large arrays (a record's samples) beside the pickle, in shared memory: a pipe
@@ -207,8 +210,10 @@ def _send_outcome(conn: Connection, outcome: tuple[Any, ...], *, token: str) -> 
     except Exception as exc:  # a result that cannot travel is an error
         payload = _dumps(("error", ForkedError(f"the result could not be sent back: {exc}"),
                           outcome[2], outcome[3]))
+        failed = True
     conn.send_bytes(_dumps(("outcome", where)))
     conn.send_bytes(payload)
+    return failed
 
 
 def _child(fns: Sequence[Callable[[Progress], Any]], conn: Connection, token: str) -> None:
@@ -219,9 +224,7 @@ def _child(fns: Sequence[Callable[[Progress], Any]], conn: Connection, token: st
     # value while the next computation runs. After a failure the rest are not run (as in
     # the caller, where the exception would have stopped them).
     for index, fn in enumerate(fns):
-        outcome = _run_one(fn, say)
-        _send_outcome(conn, outcome, token=f"{token}-{index}")
-        if outcome[0] == "error":
+        if _send_outcome(conn, _run_one(fn, say), token=f"{token}-{index}"):
             break
     conn.close()
 

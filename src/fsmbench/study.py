@@ -31,7 +31,7 @@ from fsmbench.atomic import atomic_write_text
 from fsmbench.bench.blocks import PlantModel
 from fsmbench.bench.params import Bench, default_bench
 from fsmbench.entry import callable_module
-from fsmbench.forked import start_forked_series
+from fsmbench.forked import ForkedSeries, start_forked_series
 from fsmbench.ident.pipeline import Identification, IdentifyOptions
 from fsmbench.io.folder import RecordingSet, load_recordings
 from fsmbench.io.outdir import check_out_dir
@@ -328,6 +328,17 @@ def _validation(run: _StudyRun, rec: _Recorded, found: _Identified, *, seed: int
         seed=seed, progress=say, loop=recorded_loop(found.ident, bench=found.bench)))
 
 
+def _waited_for(run: _StudyRun, later: ForkedSeries, index: int, *, lap: str) -> Any:
+    """``later``'s value ``index``. The computation keeps its own time; what this process
+    waited for it is the line ``lap`` (run here, the wait was the computation itself)."""
+    value = later.result(index)
+    if later.forked:
+        run.lap(lap)
+    else:
+        run.clock = time.perf_counter()
+    return value
+
+
 @dataclass(frozen=True, eq=False)
 class _Later:
     """The stages after the identification, and the report's chapters drafted from all
@@ -367,13 +378,7 @@ def _later_stages(run: _StudyRun, rec: _Recorded, found: _Identified, *, seed: i
         # then the one the verdict recommends (fsmbench's).
         draft = start_budget(recordings, bench=bench, plant=plant, progress=run.say)
         run.lap("budget")
-        designed: _Timed[DesignStage] = later.result(0)
-        # Its own time; what this process waited for it beyond the budget is its own line
-        # (run here, the wait was it).
-        if later.forked:
-            run.lap("design_wait")
-        else:
-            run.clock = time.perf_counter()
+        designed: _Timed[DesignStage] = _waited_for(run, later, 0, lap="design_wait")
         design = designed.value
         budgeted = finish_budget(draft, bench=bench, out_dir=run.out, plant=plant,
                                  progress=run.say,
@@ -387,11 +392,8 @@ def _later_stages(run: _StudyRun, rec: _Recorded, found: _Identified, *, seed: i
             design_skipped=design.skipped, plant_source=found.plant.source)
         encoded = encode_figures(chapters)
         run.lap("report")
-        validated: _Timed[ValidationStage] = later.result(1)
-        if later.forked:
-            run.lap("validation_wait")
-        else:
-            run.clock = time.perf_counter()
+        validated: _Timed[ValidationStage] = _waited_for(run, later, 1,
+                                                         lap="validation_wait")
     finally:
         later.cancel()
     run.timings.update({"design": designed.seconds, "validation": validated.seconds})
@@ -484,10 +486,10 @@ def run_study(*, out_dir: str | Path, data_dir: str | Path | None = None,
         chapter 11 lists its draws that break a requirement, and the robustness row names
         a requirement ≥ 5 % of them break.
     parallel : bool
-        Decode half of the recorded files, run the design and the validation beside the budget, the
-        noise model beside the identification's other steps, the Newport's two fits and
-        the report's figures two by two, in forked processes (:mod:`fsmbench.forked`;
-        where ``fork`` exists and there are two cores). False runs everything in this
+        Decode half of the recorded files, run the design then the validation beside the
+        budget, the noise model beside the identification's other steps, the Newport's two
+        fits and the report's figures two by two, in forked processes
+        (:mod:`fsmbench.forked`; where ``fork`` exists and there are two cores). False runs everything in this
         process, one after the other: the same results.
     """
     bench = default_bench() if bench is None else bench
